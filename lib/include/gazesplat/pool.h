@@ -1,0 +1,37 @@
+/* gs_pool: a fixed set of worker threads running parallel-for loops.
+ *
+ * Determinism is the caller's contract: a task must write only to outputs it
+ * owns, so results do not depend on which worker ran which task or on the
+ * thread count. The pool hands out tasks dynamically (an atomic counter). */
+#ifndef GAZESPLAT_POOL_H
+#define GAZESPLAT_POOL_H
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct gs_pool gs_pool;
+
+/* Largest thread count a pool accepts. */
+#define GS_POOL_MAX_THREADS 256
+
+/* Creates a pool of nthreads workers (the calling thread counts as one).
+ * nthreads <= 0 means one per online CPU. Returns NULL when out of memory
+ * or when threads cannot be started. */
+gs_pool *gs_pool_create(int nthreads);
+void gs_pool_destroy(gs_pool *pool);
+
+/* Number of threads, including the caller. A NULL pool has 1. */
+int gs_pool_threads(const gs_pool *pool);
+
+/* fn(ctx, task, worker) for task in [0, ntasks); worker in [0, threads).
+ * Returns when every task has finished. A NULL pool runs the loop inline.
+ * Calls from several threads on one pool are serialized. Not re-entrant:
+ * fn must not call gs_pool_for on the same pool. */
+typedef void (*gs_pool_fn)(void *ctx, int task, int worker);
+void gs_pool_for(gs_pool *pool, int ntasks, gs_pool_fn fn, void *ctx);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

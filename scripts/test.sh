@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# Sets everything up on a fresh Debian 12 machine and runs every test tier:
+#   1. cppcheck over the sources
+#   2. an ASan+UBSan build running the unit, numeric, hard and fuzz tiers
+#   3. short libFuzzer runs (clang) over each fuzz target
+#   4. the release build (-O2, -Werror) running every tier; its ctest
+#      summary ends the output.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/install-deps.sh
+
+echo "== cppcheck"
+cppcheck --quiet --error-exitcode=1 --std=c11 --inline-suppr \
+  --enable=warning,performance,portability \
+  --suppress=missingIncludeSystem \
+  -I lib/include lib clients daemon
+
+echo "== ASan+UBSan build: unit, numeric, hard and fuzz tiers"
+scripts/build.sh build-asan -DCMAKE_BUILD_TYPE=Debug -DGS_SANITIZE=ON
+(cd build-asan && ctest --output-on-failure -j2 -L 'unit|numeric|hard|fuzz')
+
+if [ -x scripts/fuzz.sh ]; then
+  echo "== libFuzzer runs"
+  scripts/fuzz.sh build-fuzz "${GS_FUZZ_SECONDS:-15}"
+fi
+
+echo "== release build: all tiers"
+scripts/build.sh build -DCMAKE_BUILD_TYPE=Release
+cd build && ctest --output-on-failure -j2
