@@ -251,21 +251,33 @@ static void tile_forward(void *vctx, int t, int worker)
     }
 
     atomic_fetch_add_explicit(&ctx->contributions, contributions, memory_order_relaxed);
+    /* Write out row by row: acc holds each channel as a 16 x 16 block. */
     const float *bg = ctx->bg;
-    for (int row = 0; row < ti.h; row++)
-        for (int col = 0; col < ti.w; col++) {
-            int p = row * TS + col, v = p / L, j = p % L;
-            size_t pix = (size_t)(ti.y0 + row) * W + (size_t)(ti.x0 + col);
-            float T = Tv[v][j];
-            for (int ch = 0; ch < C; ch++)
-                ctx->out_f[ch * HW + pix] =
-                    acc[(size_t)ch * (TPIX / L) + v][j] + (bg ? T * bg[ch * HW + pix] : 0.0f);
-            ctx->out_alpha[pix] = 1.0f - T;
-            if (ctx->out_depth)
-                ctx->out_depth[pix] = dep[v][j];
-            r->t_final[pix] = T;
-            r->last[pix] = (uint32_t)last[v][j];
+    const float *accf = (const float *)acc, *Tf = (const float *)Tv;
+    const float *depf = (const float *)dep;
+    const int32_t *lastf = (const int32_t *)last;
+    for (int row = 0; row < ti.h; row++) {
+        size_t pix0 = (size_t)(ti.y0 + row) * W + (size_t)ti.x0;
+        const float *Trow = Tf + row * TS;
+        for (int ch = 0; ch < C; ch++) {
+            const float *a = accf + (size_t)ch * TPIX + row * TS;
+            float *o = ctx->out_f + ch * HW + pix0;
+            if (bg) {
+                const float *b = bg + ch * HW + pix0;
+                for (int col = 0; col < ti.w; col++)
+                    o[col] = a[col] + Trow[col] * b[col];
+            } else {
+                memcpy(o, a, (size_t)ti.w * sizeof *o);
+            }
         }
+        for (int col = 0; col < ti.w; col++) {
+            ctx->out_alpha[pix0 + col] = 1.0f - Trow[col];
+            r->t_final[pix0 + col] = Trow[col];
+            r->last[pix0 + col] = (uint32_t)lastf[row * TS + col];
+        }
+        if (ctx->out_depth)
+            memcpy(ctx->out_depth + pix0, depf + row * TS, (size_t)ti.w * sizeof(float));
+    }
 }
 
 static size_t fwd_scratch_floats(int C)
@@ -351,25 +363,33 @@ static void tile_backward(void *vctx, int task, int worker)
         Tv[v] = tfin[v] = vres[v] = vdep[v] = bufd[v] = splat(0.0f);
         last[v] = (vi){0};
     }
+    /* Load the tile row by row; vpix holds each channel as a 16 x 16 block. */
     const float *bg = r->background;
-    for (int row = 0; row < ti.h; row++)
+    float *vpf = (float *)vpix, *Tf = (float *)Tv, *tff = (float *)tfin;
+    float *vrf = (float *)vres, *vdf = (float *)vdep;
+    int32_t *lastf = (int32_t *)last;
+    for (int row = 0; row < ti.h; row++) {
+        size_t pix0 = (size_t)(ti.y0 + row) * W + (size_t)ti.x0;
+        float bg_dot[TS] = {0};
         for (int col = 0; col < ti.w; col++) {
-            int p = row * TS + col, v = p / L, j = p % L;
-            size_t pix = (size_t)(ti.y0 + row) * W + (size_t)(ti.x0 + col);
-            float T = r->t_final[pix], bg_dot = 0.0f;
-            for (int ch = 0; ch < C; ch++) {
-                float g = ctx->v_f[ch * HW + pix];
-                vpix[(size_t)ch * NV + v][j] = g;
-                if (bg)
-                    bg_dot += bg[ch * HW + pix] * g;
-                if (ctx->v_bg)
-                    ctx->v_bg[ch * HW + pix] += T * g;
-            }
-            Tv[v][j] = tfin[v][j] = T;
-            vres[v][j] = (ctx->v_alpha ? ctx->v_alpha[pix] : 0.0f) - bg_dot;
-            vdep[v][j] = ctx->v_depth ? ctx->v_depth[pix] : 0.0f;
-            last[v][j] = (int32_t)r->last[pix];
+            float T = r->t_final[pix0 + col];
+            Tf[row * TS + col] = tff[row * TS + col] = T;
+            vdf[row * TS + col] = ctx->v_depth ? ctx->v_depth[pix0 + col] : 0.0f;
+            lastf[row * TS + col] = (int32_t)r->last[pix0 + col];
         }
+        for (int ch = 0; ch < C; ch++) {
+            const float *g = ctx->v_f + ch * HW + pix0;
+            memcpy(vpf + (size_t)ch * TPIX + row * TS, g, (size_t)ti.w * sizeof *g);
+            if (bg)
+                for (int col = 0; col < ti.w; col++)
+                    bg_dot[col] += bg[ch * HW + pix0 + col] * g[col];
+            if (ctx->v_bg)
+                for (int col = 0; col < ti.w; col++)
+                    ctx->v_bg[ch * HW + pix0 + col] += Tf[row * TS + col] * g[col];
+        }
+        for (int col = 0; col < ti.w; col++)
+            vrf[row * TS + col] = (ctx->v_alpha ? ctx->v_alpha[pix0 + col] : 0.0f) - bg_dot[col];
+    }
 
     for (uint32_t k = ti.e; k-- > ti.s;) {
         uint32_t i = r->isect[k];
