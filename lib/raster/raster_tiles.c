@@ -225,6 +225,8 @@ static void tile_forward(void *vctx, int t, int worker)
             float dy = my - ((float)row + 0.5f);
             for (int gi = g0; gi <= g1; gi++) {
                 int v = row * GROUPS + gi;
+                if (!any(alive[v]))
+                    continue; /* every pixel here has stopped */
                 group_eval ge = eval_group(mx, dy, q[0], q[1], q[2], op, (float)(gi * L));
                 vi valid = ge.ok & alive[v];
                 if (!any(valid))
@@ -409,8 +411,11 @@ static void tile_backward(void *vctx, int task, int worker)
             float dy = my - ((float)row + 0.5f);
             for (int gi = g0; gi <= g1; gi++) {
                 int v = row * GROUPS + gi;
+                vi before_last = pos < last[v];
+                if (!any(before_last))
+                    continue; /* behind every pixel's last contributor */
                 group_eval ge = eval_group(mx, dy, q[0], q[1], q[2], op, (float)(gi * L));
-                vi valid = ge.ok & (pos < last[v]);
+                vi valid = ge.ok & before_last;
                 if (!any(valid))
                     continue;
                 touched = 1;
@@ -420,14 +425,16 @@ static void tile_backward(void *vctx, int task, int worker)
                 vf T = Tv[v] * ra;
                 Tv[v] = T;
                 vf fac = vsel(valid, ge.alpha * T, splat(0.0f));
-                vf va = splat(0.0f);
+                /* Four running sums break the dependency chain over channels. */
+                vf va4[4] = {splat(0.0f), splat(0.0f), splat(0.0f), splat(0.0f)};
                 for (int ch = 0; ch < C; ch++) {
                     vf fc = splat(f[ch]), vp = vpix[(size_t)ch * NV + v];
                     vf *bc = &buf[(size_t)ch * NV + v];
-                    va += (fc * T - *bc * ra) * vp;
+                    va4[ch & 3] += (fc * T - *bc * ra) * vp;
                     *bc += fc * fac;
                     part[GS_SLOT_HEAD + ch] += fac * vp;
                 }
+                vf va = (va4[0] + va4[1]) + (va4[2] + va4[3]);
                 va += tfin[v] * ra * vres[v] + vdep[v] * (splat(z) * T - bufd[v] * ra);
                 bufd[v] += splat(z) * fac;
                 part[6] += fac * vdep[v];
