@@ -161,7 +161,7 @@ static inline void rt_random_scene(rt_scene *s, uint64_t seed, int n, int C,
         rt_place(s, i, rt_uniform(&r, -0.15, 1.15) * W,
                  rt_uniform(&r, -0.15, 1.15) * H, z);
         for (int k = 0; k < 3; k++)
-            s->log_scales[3 * i + k] = (float)rt_uniform(&r, log(0.01), log(0.12));
+            s->log_scales[3 * i + k] = (float)rt_uniform(&r, log(0.015), log(0.2));
         for (int k = 0; k < 4; k++)
             s->quats[4 * i + k] = (float)rt_normal(&r);
         s->opacity_logits[i] = (float)rt_uniform(&r, -2.0, 7.0);
@@ -394,6 +394,7 @@ typedef struct rt_proj {
 
 static inline int rt_project_one(const rt_scene *s, int i, rt_proj *p)
 {
+    memset(p, 0, sizeof *p);
     const gs_camera *cam = &s->cam;
     const float *V = cam->viewmat;
     const float *q = s->quats + 4 * i, *ls = s->log_scales + 3 * i;

@@ -78,7 +78,7 @@ static void check_smooth(const rt_scene *s)
     int W = s->cam.width, H = s->cam.height;
     double minT = 1.0;
     for (int i = 0; i < s->g.n; i++) {
-        rt_proj p;
+        rt_proj p = {0};
         CHECK_MSG(rt_project_one(s, i, &p), "Gaussian %d culled", i);
         double amin = 1.0;
         for (int y = 0; y < H; y++) {
@@ -170,12 +170,12 @@ static void run_case(int antialiased, gs_raster_path path, gs_pool *pool)
     float *f = rt_alloc(np * C, sizeof(float)), *a = rt_alloc(np, sizeof(float));
     float *d = rt_alloc(np, sizeof(float));
     gs_raster *r = gs_raster_create();
-    fd_array("means", s.means, (size_t)n * 3, 1, 5e-3, o.g_means, &s, path, pool, &u, r, f, a, d);
-    fd_array("log_scales", s.log_scales, (size_t)n * 3, 1, 5e-3, o.g_log_scales, &s, path,
+    fd_array("means", s.means, (size_t)n * 3, 1, 1e-2, o.g_means, &s, path, pool, &u, r, f, a, d);
+    fd_array("log_scales", s.log_scales, (size_t)n * 3, 1, 1e-2, o.g_log_scales, &s, path,
              pool, &u, r, f, a, d);
-    fd_array("quats", s.quats, (size_t)n * 4, 1, 5e-3, o.g_quats, &s, path, pool, &u, r, f,
+    fd_array("quats", s.quats, (size_t)n * 4, 1, 1e-2, o.g_quats, &s, path, pool, &u, r, f,
              a, d);
-    fd_array("opacity", s.opacity_logits, (size_t)n, 1, 5e-3, o.g_opacity, &s, path, pool,
+    fd_array("opacity", s.opacity_logits, (size_t)n, 1, 1e-2, o.g_opacity, &s, path, pool,
              &u, r, f, a, d);
     fd_array("features", s.features, (size_t)n * C, 1, 0.1, o.g_features, &s, path, pool,
              &u, r, f, a, d);

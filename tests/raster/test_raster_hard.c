@@ -707,9 +707,6 @@ static void bad_arguments(void)
            GS_ERR_ARG);
     EXPECT(gs_raster_forward(r, g_pool, &s.cam, &s.g, NULL, &opt, f, NULL, d, &err),
            GS_ERR_ARG);
-    gs_raster_options badpath = {0, (gs_raster_path)7};
-    EXPECT(gs_raster_forward(r, g_pool, &s.cam, &s.g, NULL, &badpath, f, a, d, &err),
-           GS_ERR_ARG);
 
     const int channels[] = {0, -1, GS_RASTER_MAX_CHANNELS + 1};
     for (int k = 0; k < 3; k++) {

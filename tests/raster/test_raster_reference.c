@@ -7,7 +7,10 @@
  *   gradients: |diff| <= GRAD_ATOL x max|ref| + GRAD_RTOL |ref|, with
  *           gsplat's boundary band: entries below 1e-5 max|ref| may fail
  *           in at most 0.1% of the entries of an array.
- *   stats: visible Gaussians and (tile, Gaussian) pairs exact.
+ *   stats: contributing (pixel, Gaussian) pairs exact on both paths;
+ *          visible Gaussians and (tile, Gaussian) pairs exact on the
+ *          scalar path, at most the reference's on the fast path (it also
+ *          culls tiles and Gaussians that cannot reach alpha 1/255).
  * The scenes are nudged off every discrete threshold by the script, so
  * float32 rounding flips no decision; any band use is reported. */
 #include "rt_util.h"
@@ -184,15 +187,22 @@ static void check_scene(const rt_file *f, int k, gs_raster_path path, gs_pool *p
     CHECK_EQ_INT(o.bwd_status, GS_OK);
     const float *rf = need(f, k, "out_features", np * C);
     const float *ra = need(f, k, "out_alpha", np), *rd = need(f, k, "out_depth", np);
-    const float *st = need(f, k, "stats", 2);
+    const float *st = need(f, k, "stats", 3);
     if (o.fwd_status == GS_OK && rf && ra && rd && st) {
         rt_compare_image("features", o.features, rf, np * C, 1e-5, 1e-5);
         rt_compare_image("alpha", o.alpha, ra, np, 1e-5, 1e-5);
         rt_compare_image("depth", o.depth, rd, np, 2e-5, 1e-5);
-        printf("    stats: visible %d (ref %.0f), intersections %zu (ref %.0f)\n",
-               o.stats.visible, st[0], o.stats.intersections, st[1]);
-        CHECK_EQ_INT(o.stats.visible, (int)st[0]);
-        CHECK_EQ_INT(o.stats.intersections, (long long)st[1]);
+        printf("    stats: visible %d (ref %.0f), intersections %zu (ref %.0f), "
+               "contributions %zu (ref %.0f)\n", o.stats.visible, st[0],
+               o.stats.intersections, st[1], o.stats.contributions, st[2]);
+        CHECK_EQ_INT(o.stats.contributions, (long long)st[2]);
+        if (path == GS_RASTER_SCALAR) {
+            CHECK_EQ_INT(o.stats.visible, (int)st[0]);
+            CHECK_EQ_INT(o.stats.intersections, (long long)st[1]);
+        } else {
+            CHECK(o.stats.visible <= (int)st[0]);
+            CHECK(o.stats.intersections <= (size_t)st[1]);
+        }
     }
     if (o.bwd_status == GS_OK) {
         struct {
