@@ -2,16 +2,19 @@
  * L = sum v_f . features + sum v_a . alpha + sum v_d . depth, evaluated in
  * double from float32 forwards, on both paths, plain and antialiased.
  *
- * The scenes avoid every discontinuity of the forward pass: few large
- * Gaussians whose alpha stays above 2/255 on every pixel and whose radius
- * box covers the image (so the 1/255 skip, tile binning and culling never
- * switch), opacities 0.18..0.62 (no 0.99 clamp, and T stays above 1e-3, so
- * no early stop), depths 0.4 apart (no reordering). One Gaussian sits past
- * the left border beyond the Jacobian's frustum clamp.
+ * The scenes avoid every discontinuity of the forward pass: few Gaussians,
+ * large for the image, whose alpha stays above 2/255 on every pixel and
+ * whose radius box covers the image (so the 1/255 skip, tile binning and
+ * culling never switch; check_smooth asserts it), opacities 0.18..0.62 (no
+ * 0.99 clamp, and T stays above 1e-3, so no early stop), depths 0.4 apart
+ * (no reordering). In the 24x20 scene one Gaussian sits past the left
+ * border beyond the Jacobian's frustum clamp; the 6x5 scene has 2 px
+ * Gaussians, whose antialiasing compensation has a sizeable gradient.
  *
  * Tolerance: |fd - analytic| <= FD_ATOL x max|analytic| of the array +
  * FD_RTOL |analytic|. The float32 forward makes L noisy at ~1e-6, so the
- * steps are 5e-3 (0.1 for the linear features and background). */
+ * steps are 1e-2 (2e-3 for the means of the small scene, whose Gaussians
+ * are 0.15 world units wide; 0.1 for the linear features and background). */
 #include "rt_util.h"
 
 #define FD_ATOL 2e-3
@@ -36,26 +39,28 @@ static double loss(const rt_scene *s, gs_raster_path path, gs_pool *pool,
     return L;
 }
 
-static void build_scene(rt_scene *s, int antialiased, uint64_t seed)
+/* small = 0: 24x20 image, Gaussians 10..20 px wide, one past the
+ * Jacobian's frustum clamp. small = 1: 6x5 image, Gaussians 1.6..2.6 px
+ * wide, so that the antialiasing compensation (~0.9) has a real gradient. */
+static void build_scene(rt_scene *s, int antialiased, int small, uint64_t seed)
 {
-    enum { N = 6, C = 3, W = 24, H = 20 };
+    const int N = 6, C = 3, W = small ? 6 : 24, H = small ? 5 : 20;
     rt_rng r = {seed};
     rt_scene_init(s, N, C, W, H);
     s->antialiased = antialiased;
     s->cam.fx = 30.0f;
     s->cam.fy = 31.0f;
-    s->cam.cx = 11.7f;
-    s->cam.cy = 10.2f;
+    s->cam.cx = 0.49f * (float)W;
+    s->cam.cy = 0.51f * (float)H;
     rt_set_view(s, 0.25, -0.15, 3.0);
     for (int i = 0; i < N; i++) {
         double z = 2.0 + 0.4 * i;
-        double std = rt_uniform(&r, 10.0, 15.0); /* pixels */
-        if (i == 2) { /* past the Jacobian clamp at -3.6 px */
+        double std = small ? rt_uniform(&r, 1.6, 2.0) : rt_uniform(&r, 10.0, 15.0);
+        if (i == 2 && !small) { /* past the Jacobian clamp at -3.6 px */
             rt_place(s, i, -4.5, 9.0, z);
             std = 20.0;
-        }
-        else {
-            rt_place(s, i, rt_uniform(&r, 9, 15), rt_uniform(&r, 7, 13), z);
+        } else {
+            rt_place(s, i, rt_uniform(&r, 0.4, 0.6) * W, rt_uniform(&r, 0.4, 0.6) * H, z);
         }
         for (int k = 0; k < 3; k++)
             s->log_scales[3 * i + k] =
@@ -90,7 +95,9 @@ static void check_smooth(const rt_scene *s)
         }
         CHECK_MSG(amin > 2.0 / 255 && p.opacity < 0.9, "Gaussian %d: alpha %g..%g", i,
                   amin, p.opacity);
-        CHECK_MSG(p.tx0 == 0 && p.ty0 == 0 && p.tx1 == 2 && p.ty1 == 2,
+        int tw = (W + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
+        int th = (H + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
+        CHECK_MSG(p.tx0 == 0 && p.ty0 == 0 && p.tx1 == tw && p.ty1 == th,
                   "Gaussian %d binned to tiles [%d,%d)x[%d,%d)", i, p.tx0, p.tx1,
                   p.ty0, p.ty1);
         minT *= 1.0 - p.opacity;
@@ -153,14 +160,15 @@ static void fd_array(const char *what, float *x, size_t count, size_t stride,
     free(fd);
 }
 
-static void run_case(int antialiased, gs_raster_path path, gs_pool *pool)
+static void run_case(int antialiased, int small, gs_raster_path path, gs_pool *pool)
 {
     rt_scene s;
-    build_scene(&s, antialiased, 1234 + (uint64_t)antialiased);
+    build_scene(&s, antialiased, small, 1234 + (uint64_t)antialiased);
     check_smooth(&s);
     rt_upstream u;
     rt_upstream_random(&u, &s, 99);
-    printf("  %s path, %s\n", rt_path_name(path), antialiased ? "antialiased" : "plain");
+    printf("  %s path, %dx%d, %s\n", rt_path_name(path), s.cam.width, s.cam.height,
+           antialiased ? "antialiased" : "plain");
     rt_result o;
     rt_run(&s, path, pool, &u, &o);
     CHECK_EQ_INT(o.fwd_status, GS_OK);
@@ -170,7 +178,7 @@ static void run_case(int antialiased, gs_raster_path path, gs_pool *pool)
     float *f = rt_alloc(np * C, sizeof(float)), *a = rt_alloc(np, sizeof(float));
     float *d = rt_alloc(np, sizeof(float));
     gs_raster *r = gs_raster_create();
-    fd_array("means", s.means, (size_t)n * 3, 1, 1e-2, o.g_means, &s, path, pool, &u, r, f, a, d);
+    fd_array("means", s.means, (size_t)n * 3, 1, small ? 2e-3 : 1e-2, o.g_means, &s, path, pool, &u, r, f, a, d);
     fd_array("log_scales", s.log_scales, (size_t)n * 3, 1, 1e-2, o.g_log_scales, &s, path,
              pool, &u, r, f, a, d);
     fd_array("quats", s.quats, (size_t)n * 4, 1, 1e-2, o.g_quats, &s, path, pool, &u, r, f,
@@ -195,8 +203,10 @@ int main(void)
     gs_pool *pool = gs_pool_create(2);
     CHECK(pool != NULL);
     for (int aa = 0; aa <= 1; aa++) {
-        run_case(aa, GS_RASTER_SCALAR, NULL);
-        run_case(aa, GS_RASTER_FAST, pool);
+        for (int small = 0; small <= 1; small++) {
+            run_case(aa, small, GS_RASTER_SCALAR, NULL);
+            run_case(aa, small, GS_RASTER_FAST, pool);
+        }
     }
     gs_pool_destroy(pool);
     GS_TEST_END();
