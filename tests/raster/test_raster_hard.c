@@ -249,7 +249,9 @@ static void quaternions(void)
     run(&base, &ref);
     CHECK(ref.fwd_status == GS_OK && ref.bwd_status == GS_OK);
     size_t np = 40 * 30, nf = np * 3;
-    const double lam[] = {1e-3, 0.37, 6.5, 1e3};
+    /* 1e-21 and 1e21: |q|^2 under- or overflows float32 although q and
+     * q / |q| are representable; raster.h accepts "any norm". */
+    const double lam[] = {1e-3, 0.37, 6.5, 1e3, 1e-21, 1e21, 1e-30};
     for (size_t k = 0; k < sizeof lam / sizeof lam[0]; k++) {
         rt_scene s;
         rt_scene_copy(&s, &base);

@@ -1,7 +1,7 @@
 /* Fast path against scalar path on bigger random scenes, and determinism:
  * the fast path gives bit-identical outputs and gradients for pools of
- * 1, 2 and 3 threads (and no pool), the scalar path ignores the pool, and
- * a reused gs_raster gives the bytes of a fresh one.
+ * 1, 2 and 3 threads (and no pool), and a reused gs_raster gives the
+ * bytes of a fresh one (scalar path: whatever pool it is handed).
  *
  * Tolerances fast vs scalar: images |diff| <= 1e-5 + 1e-5 |ref|;
  * gradients |diff| <= 1e-4 max|ref| + 1e-3 |ref| with the boundary band
@@ -69,11 +69,65 @@ static void compare_paths(const rt_result *fast, const rt_result *ref)
     CHECK(fast->stats.intersections <= ref->stats.intersections);
 }
 
-static void run_config(uint64_t seed, int n, int C, int W, int H, int aa, int bg)
+/* The fast path with pools of t0..3 threads against no pool. */
+static void check_threads(const rt_scene *s, const rt_upstream *u, const rt_result *fast0,
+                          int t0)
+{
+    for (int t = t0; t <= 3; t++) {
+        gs_pool *pool = gs_pool_create(t);
+        CHECK(pool != NULL);
+        rt_result o;
+        rt_run(s, GS_RASTER_FAST, pool, u, &o);
+        char what[64];
+        snprintf(what, sizeof what, "fast, %d thread(s) vs no pool", t);
+        if (same_bytes(what, &o, fast0))
+            printf("  %s: bit-identical\n", what);
+        rt_result_free(&o);
+        gs_pool_destroy(pool);
+    }
+}
+
+/* A reused gs_raster (its buffers grown by a bigger render in between)
+ * gives the bytes of a fresh one; the scalar path ignores the pool. */
+static void check_reuse(const rt_scene *s, const rt_upstream *u, gs_raster_path path,
+                        const rt_result *fresh, uint64_t seed)
+{
+    rt_scene big;
+    rt_random_scene(&big, seed, s->g.n + 200, s->g.channels, s->cam.width + 24,
+                    s->cam.height + 16);
+    rt_upstream ubig;
+    rt_upstream_random(&ubig, &big, seed + 1);
+    gs_pool *pool = gs_pool_create(3);
+    gs_raster *r = gs_raster_create();
+    rt_result first, mid, again;
+    rt_run_with(r, s, path, pool, u, &first);
+    rt_run_with(r, &big, path, pool, &ubig, &mid);
+    rt_run_with(r, s, path, pool, u, &again);
+    char what[64];
+    snprintf(what, sizeof what, "%s, reused gs_raster, 3 threads", rt_path_name(path));
+    if (same_bytes(what, &first, fresh) && same_bytes(what, &again, fresh))
+        printf("  %s: bit-identical\n", what);
+    rt_result_free(&first);
+    rt_result_free(&mid);
+    rt_result_free(&again);
+    gs_raster_destroy(r);
+    gs_pool_destroy(pool);
+    rt_upstream_free(&ubig);
+    rt_scene_free(&big);
+}
+
+/* scale_mul multiplies every scale: large Gaussians make many (tile,
+ * Gaussian) pairs, enough to split the fast backward into several batches
+ * (its scratch budget is 4M floats: 58k pairs at C = 64). reuse: also
+ * check reuse of a gs_raster (1: fast path, 2: both paths). */
+static void run_config(uint64_t seed, int n, int C, int W, int H, int aa, int bg,
+                       double scale_mul, int reuse)
 {
     rt_scene s;
     rt_random_scene(&s, seed, n, C, W, H);
     s.antialiased = aa;
+    for (int i = 0; i < 3 * n; i++)
+        s.log_scales[i] += (float)log(scale_mul);
     if (bg) {
         rt_rng r = {seed + 7};
         rt_scene_add_background(&s);
@@ -85,8 +139,7 @@ static void run_config(uint64_t seed, int n, int C, int W, int H, int aa, int bg
     printf("scene: %d Gaussians, %dx%d, C=%d%s%s\n", n, W, H, C, aa ? ", antialiased" : "",
            bg ? ", background" : "");
 
-    rt_result scalar, scalar3, fast0, fast[3];
-    gs_pool *pools[3];
+    rt_result scalar, fast0;
     rt_run(&s, GS_RASTER_SCALAR, NULL, &u, &scalar);
     CHECK(scalar.fwd_status == GS_OK && scalar.bwd_status == GS_OK);
     double mean_alpha = 0.0;
@@ -99,62 +152,23 @@ static void run_config(uint64_t seed, int n, int C, int W, int H, int aa, int bg
     CHECK(fast0.fwd_status == GS_OK && fast0.bwd_status == GS_OK);
     printf("  fast vs scalar:\n");
     compare_paths(&fast0, &scalar);
-
-    for (int t = 0; t < 3; t++) {
-        pools[t] = gs_pool_create(t + 1);
-        CHECK(pools[t] != NULL);
-        rt_run(&s, GS_RASTER_FAST, pools[t], &u, &fast[t]);
-        char what[64];
-        snprintf(what, sizeof what, "fast, %d thread(s) vs no pool", t + 1);
-        if (same_bytes(what, &fast[t], &fast0))
-            printf("  %s: bit-identical\n", what);
-    }
-    rt_run(&s, GS_RASTER_SCALAR, pools[2], &u, &scalar3);
-    if (same_bytes("scalar, 3 threads vs no pool", &scalar3, &scalar))
-        printf("  scalar, 3 threads vs no pool: bit-identical\n");
-
-    /* A reused gs_raster (its buffers grown by a bigger render in
-     * between) must give the bytes of a fresh one. */
-    rt_scene big;
-    rt_random_scene(&big, seed + 1, n * 2, C, W + 40, H + 24);
-    rt_upstream ubig;
-    rt_upstream_random(&ubig, &big, seed + 2);
-    gs_raster *r = gs_raster_create();
-    rt_result first, mid, again;
-    rt_run_with(r, &s, GS_RASTER_FAST, pools[1], &u, &first);
-    rt_run_with(r, &big, GS_RASTER_FAST, pools[1], &ubig, &mid);
-    rt_run_with(r, &s, GS_RASTER_FAST, pools[1], &u, &again);
-    if (same_bytes("fast, reused gs_raster", &again, &fast0) &&
-        same_bytes("fast, first use", &first, &fast0))
-        printf("  fast, reused gs_raster: bit-identical\n");
-    rt_result_free(&first);
-    rt_result_free(&mid);
-    rt_result_free(&again);
-    rt_run_with(r, &big, GS_RASTER_SCALAR, NULL, &ubig, &mid);
-    rt_run_with(r, &s, GS_RASTER_SCALAR, NULL, &u, &again);
-    if (same_bytes("scalar, reused gs_raster", &again, &scalar))
-        printf("  scalar, reused gs_raster: bit-identical\n");
-    rt_result_free(&mid);
-    rt_result_free(&again);
-    gs_raster_destroy(r);
-    rt_upstream_free(&ubig);
-    rt_scene_free(&big);
-
-    for (int t = 0; t < 3; t++) {
-        rt_result_free(&fast[t]);
-        gs_pool_destroy(pools[t]);
-    }
+    check_threads(&s, &u, &fast0, n > 50000 ? 3 : 1);
+    if (reuse >= 1)
+        check_reuse(&s, &u, GS_RASTER_FAST, &fast0, seed + 1);
+    if (reuse >= 2)
+        check_reuse(&s, &u, GS_RASTER_SCALAR, &scalar, seed + 3);
     rt_result_free(&fast0);
     rt_result_free(&scalar);
-    rt_result_free(&scalar3);
     rt_upstream_free(&u);
     rt_scene_free(&s);
 }
 
 int main(void)
 {
-    run_config(1001, 2000, 32, 128, 96, 0, 1);
-    run_config(2002, 1500, 3, 100, 75, 1, 0);
-    run_config(3003, 800, 64, 61, 47, 0, 1);
+    run_config(1001, 2000, 32, 128, 96, 0, 1, 1.0, 1);
+    run_config(2002, 1500, 3, 100, 75, 1, 0, 1.0, 1);
+    run_config(3003, 800, 64, 61, 47, 0, 1, 1.0, 2);
+    run_config(4004, 5000, 64, 96, 96, 0, 1, 6.0, 0); /* 2 batches */
+    run_config(5005, 90000, 64, 16, 16, 1, 1, 1.0, 0); /* 1 tile over budget */
     GS_TEST_END();
 }
