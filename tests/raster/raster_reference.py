@@ -141,12 +141,12 @@ def tile_ranges(mean2d, radius, W, H):
 
 # ---------------------------------------------------------------- compositing
 
-def composite_tile(p, idx, feats, px, py):
+def composite_tile(p, idx, px, py):
     """Dense compositing of one tile.
 
-    idx: K Gaussian indices sorted by (depth, index); feats N x C;
-    px, py: P pixel centres. Returns (w P x K, a P x K, Tin P x K,
-    stop mask P x K) where w are the compositing weights."""
+    idx: K Gaussian indices sorted by (depth, index); px, py: the P pixel
+    centres. Returns a dict of P x K tensors: w, the compositing weights
+    (differentiable), and detached masks and values for diagnostics."""
     m = p["mean2d"][idx]
     cn = p["conic"][idx]
     dx = m[None, :, 0] - px[:, None]                     # P x K
@@ -177,16 +177,15 @@ def sort_order(depth):
 
 
 def render(cam, g, bg, antialiased, diag=None):
-    """Returns (features C x H x W, alpha H x W, depth H x W)."""
+    """Returns features C x H x W, alpha H x W, depth H x W, and the
+    projection and tile ranges. diag, a list, receives each tile's
+    compositing state."""
     W, H = cam["width"], cam["height"]
     C = g["features"].shape[1]
     p = project(cam, g, antialiased)
     lo, hi = tile_ranges(p["mean2d"], p["radius"], W, H)
     order = sort_order(p["depth"])
     order = order[p["valid"][order]]
-    feats_out = torch.zeros(C, H, W, dtype=DT)
-    alpha_out = torch.zeros(H, W, dtype=DT)
-    depth_out = torch.zeros(H, W, dtype=DT)
     tiles_out = []
     for ty in range(-(-H // TILE)):
         for tx in range(-(-W // TILE)):
@@ -205,7 +204,7 @@ def render(cam, g, bg, antialiased, diag=None):
                 a_sum = torch.zeros(P, dtype=DT)
                 d = torch.zeros(P, dtype=DT)
             else:
-                t = composite_tile(p, idx, g["features"], px, py)
+                t = composite_tile(p, idx, px, py)
                 w = t["w"]
                 f = w @ g["features"][idx]
                 a_sum = w.sum(1)
@@ -216,25 +215,23 @@ def render(cam, g, bg, antialiased, diag=None):
                 f = f + (1 - a_sum)[:, None] * \
                     bg[:, y0:y1, x0:x1].reshape(C, -1).T
             h, w_ = y1 - y0, x1 - x0
-            tiles_out.append((y0, y1, x0, x1, f.T.reshape(C, h, w_),
-                              a_sum.reshape(h, w_), d.reshape(h, w_)))
+            tiles_out.append((f.T.reshape(C, h, w_), a_sum.reshape(h, w_),
+                              d.reshape(h, w_)))
     # Assemble with cat so autograd sees one graph.
     rows_f, rows_a, rows_d = [], [], []
     ntx = -(-W // TILE)
     for r in range(0, len(tiles_out), ntx):
         row = tiles_out[r:r + ntx]
-        rows_f.append(torch.cat([t[4] for t in row], dim=2))
-        rows_a.append(torch.cat([t[5] for t in row], dim=1))
-        rows_d.append(torch.cat([t[6] for t in row], dim=1))
-    feats_out = torch.cat(rows_f, dim=1)
-    alpha_out = torch.cat(rows_a, dim=0)
-    depth_out = torch.cat(rows_d, dim=0)
-    return feats_out, alpha_out, depth_out, p, lo, hi
+        rows_f.append(torch.cat([t[0] for t in row], dim=2))
+        rows_a.append(torch.cat([t[1] for t in row], dim=1))
+        rows_d.append(torch.cat([t[2] for t in row], dim=1))
+    return (torch.cat(rows_f, dim=1), torch.cat(rows_a, dim=0),
+            torch.cat(rows_d, dim=0), p, lo, hi)
 
 
 # ---------------------------------------------------------------- scenes
 
-def look_at_viewmat(gen, yaw, pitch, dist):
+def look_at_viewmat(yaw, pitch, dist):
     """A world-to-camera [R | t] looking at the origin from distance dist."""
     cyw, syw = math.cos(yaw), math.sin(yaw)
     cp, sp = math.cos(pitch), math.sin(pitch)
@@ -264,11 +261,8 @@ def make_scene(spec):
     fy = spec.get("fy", fx * 1.05)
     cam = dict(fx=f32(fx), fy=f32(fy), cx=f32(W * 0.47), cy=f32(H * 0.53),
                width=W, height=H,
-               viewmat=as_f32(look_at_viewmat(gen, 0.3, -0.2, 4.0)))
-    # World points: a slab in front of the camera, spread past the image
-    # edges so some Gaussians straddle borders and some are off-screen.
-    Vt = cam["viewmat"]
-    # 60% spread past the image edges (some straddle borders, some are
+               viewmat=as_f32(look_at_viewmat(0.3, -0.2, 4.0)))
+    # Camera-space points: 60% spread past the image edges (some straddle borders, some are
     # off-screen), 40% in a dense, opaque central cluster so that pixels
     # there stop early and alphas clamp.
     ns = int(N * 0.6)
@@ -283,9 +277,6 @@ def make_scene(spec):
     cam_pts = torch.cat([spread, blob], 0)
     cam_pts[:, 2] += 4.0
     logits = torch.cat([u(ns, lo=-1.5, hi=6.0), u(nb, lo=2.0, hi=12.0)])
-    # Invert [R | t]: p = R^T (c - t).
-    Vt = cam["viewmat"]
-    means = (cam_pts - Vt[:, 3]) @ Vt[:, :3]
     log_scales = u(N, 3, lo=math.log(0.04), hi=math.log(0.25))
     # The last few are large, opaque and in front: their centres clamp alpha.
     nf = min(8, N // 10)
@@ -293,7 +284,8 @@ def make_scene(spec):
     cam_pts[front, 2] = u(nf, lo=2.6, hi=3.2)
     log_scales[front] = u(nf, 3, lo=math.log(0.3), hi=math.log(0.5))
     logits[front] = u(nf, lo=9.0, hi=12.0)
-    means = (cam_pts - Vt[:, 3]) @ Vt[:, :3]
+    Vt = cam["viewmat"]
+    means = (cam_pts - Vt[:, 3]) @ Vt[:, :3]     # world = R^T (c - t)
     g = dict(
         means=as_f32(means),
         log_scales=as_f32(log_scales),

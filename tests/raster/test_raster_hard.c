@@ -260,16 +260,20 @@ static void quaternions(void)
         rt_result o;
         run(&s, &o);
         printf("  quaternions x %g:\n", lam[k]);
-        rt_compare_image("features", o.features, ref.features, nf, 2e-6, 1e-5);
-        rt_compare_image("alpha", o.alpha, ref.alpha, np, 2e-6, 1e-5);
+        char what[5][48];
+        const char *names[5] = {"features", "alpha", "lam grad quats", "grad means",
+                                "grad log_scales"};
+        for (int j = 0; j < 5; j++)
+            snprintf(what[j], sizeof what[j], "%s (q x %g)", names[j], lam[k]);
+        rt_compare_image(what[0], o.features, ref.features, nf, 2e-6, 1e-5);
+        rt_compare_image(what[1], o.alpha, ref.alpha, np, 2e-6, 1e-5);
         /* d/dq f(q/|q|) at lam q is (1/lam) times its value at q. */
         float *gq = rt_alloc(160, sizeof(float));
         for (int i = 0; i < 160; i++)
             gq[i] = (float)(o.g_quats[i] * lam[k]);
-        rt_compare_grad("lam x grad q", gq, ref.g_quats, 160, 1e-4, 1e-3, 0, 0);
-        rt_compare_grad("grad means", o.g_means, ref.g_means, 120, 1e-4, 1e-3, 0, 0);
-        rt_compare_grad("grad log_scales", o.g_log_scales, ref.g_log_scales, 120, 1e-4, 1e-3,
-                        0, 0);
+        rt_compare_grad(what[2], gq, ref.g_quats, 160, 1e-4, 1e-3, 0, 0);
+        rt_compare_grad(what[3], o.g_means, ref.g_means, 120, 1e-4, 1e-3, 0, 0);
+        rt_compare_grad(what[4], o.g_log_scales, ref.g_log_scales, 120, 1e-4, 1e-3, 0, 0);
         free(gq);
         rt_result_free(&o);
         rt_scene_free(&s);
