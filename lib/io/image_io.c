@@ -20,6 +20,9 @@
 #include "cv_shim.h"
 
 #define GS_IO_ENCODE_MAX_SIDE 65535 /* the JPEG format's limit; PNG alike */
+/* Progressive JPEGs need about ten scans; thousands of tiny scans are a
+ * known way to make libjpeg spend minutes on a small file. */
+#define GS_IO_JPEG_MAX_SCANS 256
 
 static const unsigned char png_sig[8] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n'};
 
@@ -154,7 +157,8 @@ static int jpeg_sof(const unsigned char *s, size_t seglen, uint32_t *w, uint32_t
 }
 
 /* Walks the markers from SOI to EOI: one frame header before the first
- * scan, every segment length within the buffer, EOI present. */
+ * scan, every segment length within the buffer, at most
+ * GS_IO_JPEG_MAX_SCANS scans, EOI present. */
 static int jpeg_check(const unsigned char *b, size_t len, uint32_t *w, uint32_t *h,
                       gs_error *err)
 {
@@ -194,7 +198,9 @@ static int jpeg_check(const unsigned char *b, size_t len, uint32_t *w, uint32_t 
         if (m == 0xda) {
             if (!sof)
                 return gs_error_set(err, GS_ERR_FORMAT, "jpeg: scan before frame header");
-            sos = 1;
+            if (++sos > GS_IO_JPEG_MAX_SCANS)
+                return gs_error_set(err, GS_ERR_LIMIT, "jpeg: more than %d scans",
+                                    GS_IO_JPEG_MAX_SCANS);
             pos = jpeg_skip_scan(b, len, pos);
         }
     }

@@ -397,6 +397,19 @@ static void test_jpeg_damage(void)
     memcpy(p + sos, b.p + sof, seg);
     memcpy(p + sos + seg, b.p + sos, b.n - sos);
     CHECK_ERR(gs_io_image_decode(p, b.n + seg, NULL, &img, &err), GS_ERR_FORMAT, err, "two frame");
+    /* Thousands of scans (a decoder CPU bomb) are refused. */
+    size_t sos_len = 2 + ((size_t)b.p[sos + 2] << 8 | b.p[sos + 3]);
+    unsigned char *q = malloc(b.n + 300 * (sos_len + 1));
+    size_t k = sos;
+    memcpy(q, b.p, sos);
+    for (int i = 0; i < 300; i++, k += sos_len + 1) {
+        memcpy(q + k, b.p + sos, sos_len);
+        q[k + sos_len] = 0x00; /* one byte of scan data */
+    }
+    memcpy(q + k, b.p + sos, b.n - sos);
+    CHECK_ERR(gs_io_image_decode(q, k + b.n - sos, NULL, &img, &err), GS_ERR_LIMIT, err,
+              "more than 256 scans");
+    free(q);
     /* EOI right after SOI. */
     CHECK_ERR(gs_io_image_decode("\xff\xd8\xff\xd9", 4, NULL, &img, &err), GS_ERR_FORMAT, err,
               "before any scan");
