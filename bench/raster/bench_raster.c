@@ -100,62 +100,97 @@ static int cmp_double(const void *a, const void *b)
     return (x > y) - (x < y);
 }
 
+/* One configuration under test: a path and a thread count with its own
+ * workspace and buffers. */
 typedef struct {
-    double fwd, bwd;
+    gs_raster_path path;
+    int threads;
+    gs_raster *r;
+    gs_pool *pool;
+    float *F, *A, *grad;
+    double *tf, *tb;
     gs_raster_stats st;
-} timing;
+} config;
 
-static int run(const scene *s, int size, int path, int threads, int reps, timing *out)
+typedef struct {
+    gs_camera cam;
+    gs_gaussians g;
+    float *vF;
+    size_t HW, C, n;
+} problem;
+
+static void problem_init(problem *pb, const scene *s, int size)
 {
-    gs_camera cam = {0};
-    cam.width = cam.height = size;
-    cam.fx = cam.fy = (float)(size * 2.4);
-    cam.cx = cam.cy = (float)(size * 0.5);
+    memset(pb, 0, sizeof *pb);
+    pb->cam.width = pb->cam.height = size;
+    pb->cam.fx = pb->cam.fy = (float)(size * 2.4);
+    pb->cam.cx = pb->cam.cy = (float)(size * 0.5);
     float V[12] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 600};
-    memcpy(cam.viewmat, V, sizeof V);
+    memcpy(pb->cam.viewmat, V, sizeof V);
     gs_gaussians g = {s->n, s->C, s->means, s->log_scales, s->quats, s->opac, s->feat};
-    size_t HW = (size_t)size * size, C = (size_t)s->C, n = (size_t)s->n;
-    float *F = malloc(sizeof(float) * C * HW), *A = malloc(sizeof(float) * HW);
-    float *vF = malloc(sizeof(float) * C * HW);
-    float *grad = calloc(n * (3 + 3 + 4 + 1 + C), sizeof(float));
-    for (size_t i = 0; i < C * HW; i++)
-        vF[i] = (float)(i % 7) * 0.01f - 0.03f;
-    gs_gaussian_grads G = {grad, grad + 3 * n, grad + 6 * n, grad + 10 * n, grad + 11 * n};
-    gs_raster *r = gs_raster_create();
-    gs_pool *pool = path == GS_RASTER_FAST ? gs_pool_create(threads) : NULL;
-    gs_raster_options opt = {0, (gs_raster_path)path};
-    double *tf = malloc(sizeof(double) * reps), *tb = malloc(sizeof(double) * reps);
+    pb->g = g;
+    pb->HW = (size_t)size * size, pb->C = (size_t)s->C, pb->n = (size_t)s->n;
+    pb->vF = malloc(sizeof(float) * pb->C * pb->HW);
+    for (size_t i = 0; i < pb->C * pb->HW; i++)
+        pb->vF[i] = (float)(i % 7) * 0.01f - 0.03f;
+}
+
+static void config_init(config *c, const problem *pb, gs_raster_path path, int threads, int reps)
+{
+    c->path = path;
+    c->threads = threads;
+    c->r = gs_raster_create();
+    c->pool = path == GS_RASTER_FAST ? gs_pool_create(threads) : NULL;
+    c->F = malloc(sizeof(float) * pb->C * pb->HW);
+    c->A = malloc(sizeof(float) * pb->HW);
+    c->grad = calloc(pb->n * (11 + pb->C), sizeof(float));
+    c->tf = malloc(sizeof(double) * reps);
+    c->tb = malloc(sizeof(double) * reps);
+}
+
+static int config_rep(config *c, const problem *pb, int k)
+{
+    size_t n = pb->n;
+    gs_gaussian_grads G = {c->grad, c->grad + 3 * n, c->grad + 6 * n, c->grad + 10 * n,
+                           c->grad + 11 * n};
+    gs_raster_options opt = {0, c->path};
     gs_error err;
-    int rc = 0;
-    for (int k = -1; k < reps && !rc; k++) { /* k = -1 warms up */
-        double t0 = now_ms();
-        rc = gs_raster_forward(r, pool, &cam, &g, NULL, &opt, F, A, NULL, &err);
-        double t1 = now_ms();
-        if (!rc)
-            rc = gs_raster_backward(r, pool, vF, NULL, NULL, &G, NULL, &err);
-        double t2 = now_ms();
-        if (k >= 0)
-            tf[k] = t1 - t0, tb[k] = t2 - t1;
-    }
-    if (rc)
+    double t0 = now_ms();
+    int rc = gs_raster_forward(c->r, c->pool, &pb->cam, &pb->g, NULL, &opt, c->F, c->A, NULL,
+                               &err);
+    double t1 = now_ms();
+    if (!rc)
+        rc = gs_raster_backward(c->r, c->pool, pb->vF, NULL, NULL, &G, NULL, &err);
+    double t2 = now_ms();
+    if (rc) {
         fprintf(stderr, "bench_raster: %s\n", err.msg);
-    qsort(tf, reps, sizeof *tf, cmp_double);
-    qsort(tb, reps, sizeof *tb, cmp_double);
-    out->fwd = tf[reps / 2];
-    out->bwd = tb[reps / 2];
-    gs_raster_get_stats(r, &out->st);
-    free(tf), free(tb), free(F), free(A), free(vF), free(grad);
-    gs_pool_destroy(pool);
-    gs_raster_destroy(r);
-    return rc;
+        return rc;
+    }
+    if (k >= 0)
+        c->tf[k] = t1 - t0, c->tb[k] = t2 - t1;
+    gs_raster_get_stats(c->r, &c->st);
+    return 0;
+}
+
+static void config_free(config *c)
+{
+    gs_raster_destroy(c->r);
+    gs_pool_destroy(c->pool);
+    free(c->F), free(c->A), free(c->grad), free(c->tf), free(c->tb);
+}
+
+static double median(double *x, int n)
+{
+    qsort(x, (size_t)n, sizeof *x, cmp_double);
+    return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
 }
 
 int main(int argc, char **argv)
 {
-    int reps = 15, quick = 0;
+    int reps = 15;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--quick"))
-            quick = 1, reps = 3;
+            reps = 3;
         else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
             reps = atoi(argv[++i]);
         else {
@@ -171,21 +206,29 @@ int main(int argc, char **argv)
     for (int c = 0; c < 2; c++) {
         scene s;
         make_scene(&s, cases[c].n, 32, cases[c].size == 128 ? 1.4 : 0.9);
-        timing ref, fast;
-        int sreps = quick || cases[c].size > 128 ? 3 : reps;
-        if (run(&s, cases[c].size, GS_RASTER_SCALAR, 1, sreps, &ref))
-            return 1;
+        problem pb;
+        problem_init(&pb, &s, cases[c].size);
+        int nrep = cases[c].size > 128 && reps > 5 ? 5 : reps;
+        config cf[3];
+        config_init(&cf[0], &pb, GS_RASTER_SCALAR, 1, nrep);
+        config_init(&cf[1], &pb, GS_RASTER_FAST, 1, nrep);
+        config_init(&cf[2], &pb, GS_RASTER_FAST, 2, nrep);
+        /* Interleaved: every rep runs each configuration once, so a change in
+         * machine load hits all of them alike. k = -1 warms up. */
+        for (int k = -1; k < nrep; k++)
+            for (int j = 0; j < 3; j++)
+                if (config_rep(&cf[j], &pb, k))
+                    return 1;
         double px = (double)cases[c].size * cases[c].size;
-        printf("| %dk, %d², 32 | scalar | 1 | %.1f | %.1f | 1.0 | 1.0 | %.1f | %zu |\n",
-               cases[c].n / 1000, cases[c].size, ref.fwd, ref.bwd, ref.st.contributions / px,
-               ref.st.intersections);
-        for (int t = 1; t <= 2; t++) {
-            if (run(&s, cases[c].size, GS_RASTER_FAST, t, reps, &fast))
-                return 1;
-            printf("| %dk, %d², 32 | fast | %d | %.2f | %.2f | %.1f× | %.1f× | %.1f | %zu |\n",
-                   cases[c].n / 1000, cases[c].size, t, fast.fwd, fast.bwd, ref.fwd / fast.fwd,
-                   ref.bwd / fast.bwd, fast.st.contributions / px, fast.st.intersections);
+        double rf = median(cf[0].tf, nrep), rb = median(cf[0].tb, nrep);
+        for (int j = 0; j < 3; j++) {
+            double f = median(cf[j].tf, nrep), b = median(cf[j].tb, nrep);
+            printf("| %dk, %d², 32 | %s | %d | %.2f | %.2f | %.1f× | %.1f× | %.1f | %zu |\n",
+                   cases[c].n / 1000, cases[c].size, j ? "fast" : "scalar", cf[j].threads, f, b,
+                   rf / f, rb / b, cf[j].st.contributions / px, cf[j].st.intersections);
+            config_free(&cf[j]);
         }
+        free(pb.vF);
         free(s.means), free(s.log_scales), free(s.quats), free(s.opac), free(s.feat);
     }
     return 0;

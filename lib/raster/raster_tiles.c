@@ -191,7 +191,7 @@ static void tile_forward(void *vctx, int t, int worker)
     vf *acc = (vf *)scratch;              /* C x TPIX */
     vf *Tv = acc + (size_t)C * TPIX / L;  /* TPIX */
     vf *dep = Tv + TPIX / L;              /* TPIX */
-    vi *last = (vi *)(dep + TPIX / L);    /* TPIX */
+    vi *last = (void *)(dep + TPIX / L);  /* TPIX */
     vi *alive = last + TPIX / L;          /* TPIX */
     int row_alive[TS];
     int tile_alive = 0;
@@ -356,8 +356,8 @@ static void tile_backward(void *vctx, int task, int worker)
     vf *vres = tfin + NV;                 /* v_alpha - <bg, v_pix> */
     vf *vdep = vres + NV;
     vf *bufd = vdep + NV;
-    vi *last = (vi *)(bufd + NV);
-    vf *part = (vf *)(last + NV);         /* GS_SLOT_HEAD + C partial sums */
+    vi *last = (void *)(bufd + NV);
+    vf *part = (void *)(last + NV);       /* GS_SLOT_HEAD + C partial sums */
 
     memset(buf, 0, (size_t)C * TPIX * sizeof(float));
     memset(vpix, 0, (size_t)C * TPIX * sizeof(float));
