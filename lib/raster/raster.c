@@ -118,13 +118,13 @@ static int check_inputs(const gs_camera *cam, const gs_gaussians *g,
 
 static void quat_to_rot(const float q[4], float R[9], float qn[4])
 {
-    float w = q[0], x = q[1], y = q[2], z = q[3];
-    float nn = w * w + x * x + y * y + z * z;
-    if (!(nn > 0.0f)) {
-        w = 1.0f;
-        x = y = z = 0.0f;
-    } else {
-        float inv = 1.0f / sqrtf(nn);
+    /* Divide by the largest component first, so the sum of squares neither
+     * overflows (|q| > 1.8e19) nor loses bits to denormals (|q| < 1e-19). */
+    float m = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    float w = 1.0f, x = 0.0f, y = 0.0f, z = 0.0f;
+    if (m > 0.0f) {
+        w = q[0] / m, x = q[1] / m, y = q[2] / m, z = q[3] / m;
+        float inv = 1.0f / sqrtf(w * w + x * x + y * y + z * z);
         w *= inv, x *= inv, y *= inv, z *= inv;
     }
     qn[0] = w, qn[1] = x, qn[2] = y, qn[3] = z;
@@ -427,6 +427,8 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     if (rc)
         return rc;
     static const gs_raster_options defaults = {0, GS_RASTER_FAST};
+    if (opt && opt->path != GS_RASTER_FAST && opt->path != GS_RASTER_SCALAR)
+        return gs_error_set(err, GS_ERR_ARG, "raster: unknown path %d", (int)opt->path);
     r->cam = *cam;
     r->g = *g;
     r->background = background;
@@ -602,8 +604,8 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
             gs[b] += (vM[b] * R[b] + vM[3 + b] * R[3 + b] + vM[6 + b] * R[6 + b]) * s[b];
     }
     const float *q = g->quats + 4 * (size_t)i;
-    float qq = q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3];
-    if (grads->quats && qq > 0.0f) {
+    float qm = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    if (grads->quats && qm > 0.0f) {
         float vR[9];
         for (int a = 0; a < 9; a++)
             vR[a] = vM[a] * s[a % 3];
@@ -618,7 +620,8 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
         vq[3] = 2 * (-2 * qz * vR[0] - w * vR[1] + qx * vR[2] + w * vR[3] - 2 * qz * vR[4] +
                      qy * vR[5] + qx * vR[6] + qy * vR[7]);
         float dot = vq[0] * qn[0] + vq[1] * qn[1] + vq[2] * qn[2] + vq[3] * qn[3];
-        float inv = 1.0f / sqrtf(qq);
+        float a = q[0] / qm, b = q[1] / qm, c = q[2] / qm, d = q[3] / qm;
+        float inv = 1.0f / (qm * sqrtf(a * a + b * b + c * c + d * d)); /* 1/|q| */
         float *gq = grads->quats + 4 * (size_t)i;
         for (int k = 0; k < 4; k++)
             gq[k] += (vq[k] - qn[k] * dot) * inv;
