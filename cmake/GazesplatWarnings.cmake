@@ -12,3 +12,11 @@ if(GS_SANITIZE)
     -fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer -g)
   target_link_options(gs_build_flags INTERFACE -fsanitize=address,undefined)
 endif()
+if(GS_FUZZ)
+  # libFuzzer builds (clang): coverage instrumentation for every target,
+  # sanitizers on; fuzz executables add -fsanitize=fuzzer at link time.
+  target_compile_options(gs_build_flags INTERFACE
+    -fsanitize=fuzzer-no-link,address,undefined -fno-sanitize-recover=all
+    -fno-omit-frame-pointer -g -O1)
+  target_link_options(gs_build_flags INTERFACE -fsanitize=address,undefined)
+endif()

@@ -131,10 +131,15 @@ int gs_raster_backward(gs_raster *r, gs_pool *pool, const float *v_features,
                        gs_gaussian_grads *grads, float *v_background,
                        gs_error *err);
 
-/* Statistics of the last forward, for benchmarks and tests. */
+/* Statistics of the last forward, for benchmarks and tests. visible and
+ * intersections are lower on the fast path, which also drops Gaussians and
+ * tiles that cannot reach alpha 1/255; contributions is the same on both. */
 typedef struct gs_raster_stats {
     int visible;            /* Gaussians that survived culling */
     size_t intersections;   /* (tile, Gaussian) pairs composited */
+    size_t contributions;   /* (pixel, Gaussian) pairs with alpha >= 1/255
+                               before the stop; a finite-difference test
+                               uses it to see a threshold being crossed */
 } gs_raster_stats;
 void gs_raster_get_stats(const gs_raster *r, gs_raster_stats *stats);
 

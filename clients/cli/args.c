@@ -1,0 +1,132 @@
+/* Option parsing and strict number parsing for the subcommands. */
+#include <errno.h>
+#include <float.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+
+static void vreport(const cli_command *cmd, const char *fmt, va_list ap)
+{
+    fprintf(stderr, "gazesplat %s: ", cmd->name);
+    vfprintf(stderr, fmt, ap);
+    fputc('\n', stderr);
+}
+
+int cli_usage_error(const cli_command *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vreport(cmd, fmt, ap);
+    va_end(ap);
+    fputs(cmd->usage, stderr);
+    return CLI_USAGE;
+}
+
+int cli_fail(const cli_command *cmd, const char *fmt, ...)
+{
+    va_list ap;
+    va_start(ap, fmt);
+    vreport(cmd, fmt, ap);
+    va_end(ap);
+    return CLI_FAIL;
+}
+
+static cli_opt *find_opt(cli_opt *opts, int nopts, const char *arg, size_t len)
+{
+    for (int i = 0; i < nopts; i++)
+        if (strlen(opts[i].name) == len && strncmp(opts[i].name, arg, len) == 0)
+            return &opts[i];
+    return NULL;
+}
+
+int cli_parse(const cli_command *cmd, int argc, char **argv, cli_opt *opts, int nopts)
+{
+    for (int i = 1; i < argc; i++) {
+        const char *arg = argv[i];
+        if (strcmp(arg, "--help") == 0 || strcmp(arg, "-h") == 0)
+            return CLI_HELP;
+        if (strncmp(arg, "--", 2) != 0)
+            return cli_usage_error(cmd, "unexpected argument '%s'", arg);
+        const char *eq = strchr(arg, '=');
+        size_t len = eq ? (size_t)(eq - arg) : strlen(arg);
+        cli_opt *o = find_opt(opts, nopts, arg, len);
+        if (!o)
+            return cli_usage_error(cmd, "unknown option '%.*s'", (int)len, arg);
+        if (o->value)
+            return cli_usage_error(cmd, "option %s given twice", o->name);
+        if (!o->takes_value) {
+            if (eq)
+                return cli_usage_error(cmd, "option %s takes no value", o->name);
+            o->value = "";
+        } else if (eq) {
+            o->value = eq + 1;
+        } else if (i + 1 < argc) {
+            o->value = argv[++i];
+        } else {
+            return cli_usage_error(cmd, "option %s needs a value", o->name);
+        }
+    }
+    return CLI_PARSED;
+}
+
+/* One float from s up to a comma or the end; *end is set past it. */
+static int parse_one_float(const char *s, float *out, const char **end)
+{
+    char *e;
+    if (*s == '\0' || *s == ',' || *s == ' ' || *s == '\t')
+        return -1;
+    errno = 0;
+    double v = strtod(s, &e);
+    if (e == s || (*e != ',' && *e != '\0') || !isfinite(v) || fabs(v) > FLT_MAX)
+        return -1;
+    *out = (float)v;
+    *end = e;
+    return 0;
+}
+
+int cli_parse_floats(const char *s, float *out, int n)
+{
+    for (int i = 0; i < n; i++) {
+        if (parse_one_float(s, &out[i], &s) != 0)
+            return -1;
+        if (i + 1 < n) {
+            if (*s != ',')
+                return -1;
+            s++;
+        }
+    }
+    return *s == '\0' ? 0 : -1;
+}
+
+int cli_parse_long(const char *s, long lo, long hi, long *out)
+{
+    char *e;
+    if (!s || !((*s >= '0' && *s <= '9') || *s == '-'))
+        return -1;
+    errno = 0;
+    long v = strtol(s, &e, 10);
+    if (errno || e == s || *e != '\0' || v < lo || v > hi)
+        return -1;
+    *out = v;
+    return 0;
+}
+
+int cli_parse_size(const char *s, int max, int *w, int *h)
+{
+    char buf[32];
+    const char *x = strpbrk(s, "xX");
+    long vw, vh;
+    if (!x || (size_t)(x - s) >= sizeof buf)
+        return -1;
+    memcpy(buf, s, (size_t)(x - s));
+    buf[x - s] = '\0';
+    if (cli_parse_long(buf, 1, max, &vw) != 0 || cli_parse_long(x + 1, 1, max, &vh) != 0)
+        return -1;
+    *w = (int)vw;
+    *h = (int)vh;
+    return 0;
+}

@@ -1,0 +1,60 @@
+/* gazesplat command-line tool: shared declarations.
+ *
+ * Exit codes: 0 success, 1 runtime failure (message on stderr), 2 bad
+ * usage (message and the command's usage on stderr). */
+#ifndef GS_CLI_H
+#define GS_CLI_H
+
+#include <stddef.h>
+
+enum { CLI_OK = 0, CLI_FAIL = 1, CLI_USAGE = 2 };
+
+/* One subcommand. run gets argv[0] = the command name. */
+typedef struct cli_command {
+    const char *name;
+    const char *summary; /* one line for the command list */
+    const char *usage;   /* full help text, first line "usage: gazesplat ..." */
+    int (*run)(int argc, char **argv);
+} cli_command;
+
+/* The subcommands, defined in their own files. */
+extern const cli_command cli_render_command;
+extern const cli_command cli_scene_command;
+
+/* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */
+typedef struct cli_opt {
+    const char *name;   /* with the dashes */
+    int takes_value;
+    const char *value;  /* NULL until seen; "" for a seen flag */
+} cli_opt;
+
+enum { CLI_PARSED = 0, CLI_HELP = 3 };
+
+/* Fills opts from argv[1..]. Returns CLI_PARSED, CLI_HELP for --help/-h,
+ * or CLI_USAGE after printing the problem and the usage to stderr. Unknown
+ * options, missing values, repeats and positional arguments are errors. */
+int cli_parse(const cli_command *cmd, int argc, char **argv, cli_opt *opts, int nopts);
+
+/* Prints "gazesplat NAME: <message>" and the usage to stderr; returns
+ * CLI_USAGE. */
+int cli_usage_error(const cli_command *cmd, const char *fmt, ...)
+    __attribute__((format(printf, 2, 3)));
+
+/* Prints "gazesplat NAME: <message>" to stderr; returns CLI_FAIL. */
+int cli_fail(const cli_command *cmd, const char *fmt, ...)
+    __attribute__((format(printf, 2, 3)));
+
+/* Exactly n comma-separated finite floats. Returns 0 or -1. */
+int cli_parse_floats(const char *s, float *out, int n);
+
+/* A decimal integer in [lo, hi]. Returns 0 or -1. */
+int cli_parse_long(const char *s, long lo, long hi, long *out);
+
+/* "WxH", each in [1, max]. Returns 0 or -1. */
+int cli_parse_size(const char *s, int max, int *w, int *h);
+
+/* Demo scene (demo_head.c): a stylised head, see cmd_scene.c. */
+struct gs_ply_scene;
+int cli_demo_head(unsigned long seed, struct gs_ply_scene *out);
+
+#endif

@@ -1,0 +1,67 @@
+/* gazesplat: command-line front end. Looks the subcommand up in a table;
+ * each subcommand lives in its own file and parses its own options. */
+#include <stdio.h>
+#include <string.h>
+
+#include "cli.h"
+
+static const cli_command *const commands[] = {
+    &cli_render_command,
+    &cli_scene_command,
+};
+#define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
+
+static void overview(FILE *f)
+{
+    fputs("usage: gazesplat COMMAND [OPTIONS]\n"
+          "       gazesplat help COMMAND\n\n"
+          "Commands:\n", f);
+    for (int i = 0; i < NCOMMANDS; i++)
+        fprintf(f, "  %-8s %s\n", commands[i]->name, commands[i]->summary);
+    fputs("\nExit status: 0 success, 1 failure, 2 bad usage.\n", f);
+}
+
+static const cli_command *lookup(const char *name)
+{
+    for (int i = 0; i < NCOMMANDS; i++)
+        if (strcmp(commands[i]->name, name) == 0)
+            return commands[i];
+    return NULL;
+}
+
+static int help(int argc, char **argv)
+{
+    if (argc == 2) {
+        overview(stdout);
+        return CLI_OK;
+    }
+    const cli_command *c = argc == 3 ? lookup(argv[2]) : NULL;
+    if (!c) {
+        fprintf(stderr, "gazesplat help: %s\n", argc == 3 ? "unknown command" : "one command name");
+        overview(stderr);
+        return CLI_USAGE;
+    }
+    fputs(c->usage, stdout);
+    return CLI_OK;
+}
+
+int main(int argc, char **argv)
+{
+    if (argc < 2) {
+        overview(stderr);
+        return CLI_USAGE;
+    }
+    if (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
+        overview(stdout);
+        return CLI_OK;
+    }
+    if (strcmp(argv[1], "help") == 0)
+        return help(argc, argv);
+    const cli_command *c = lookup(argv[1]);
+    if (!c) {
+        fprintf(stderr, "gazesplat: unknown command '%s'\n", argv[1]);
+        overview(stderr);
+        return CLI_USAGE;
+    }
+    return c->run(argc - 1, argv + 1);
+}

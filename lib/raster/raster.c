@@ -1,0 +1,727 @@
+/* Rasterizer front end: argument checks, projection and its gradient, depth
+ * sort, tile binning, and the dispatch to the compositing paths. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "raster_internal.h"
+
+/* Upper bound on (tile, Gaussian) pairs in one render: 16M ids (64 MB). */
+#define GS_RASTER_MAX_ISECT ((size_t)1 << 24)
+/* Fast backward scratch is processed in batches of at most this many floats. */
+#define GS_RASTER_SLOT_BUDGET ((size_t)1 << 22)
+
+int gs_raster_reserve(void **buf, size_t *cap, size_t want, size_t elem)
+{
+    if (want <= *cap)
+        return GS_OK;
+    size_t n = *cap ? *cap : 64;
+    while (n < want)
+        n = n > SIZE_MAX / 2 ? want : n * 2;
+    if (n > SIZE_MAX / elem)
+        return GS_ERR_NOMEM;
+    void *p = realloc(*buf, n * elem);
+    if (!p)
+        return GS_ERR_NOMEM;
+    *buf = p;
+    *cap = n;
+    return GS_OK;
+}
+
+static const gs_raster_kernels *fast_kernels(void)
+{
+#if defined(__x86_64__) || defined(__i386__)
+    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
+        return &gs_raster_kernels_avx2;
+#endif
+    return &gs_raster_kernels_generic;
+}
+
+gs_raster *gs_raster_create(void)
+{
+    return calloc(1, sizeof(gs_raster));
+}
+
+void gs_raster_destroy(gs_raster *r)
+{
+    if (!r)
+        return;
+    free(r->n_block);
+    free(r->order);
+    free(r->order_tmp);
+    free(r->keys);
+    free(r->keys_tmp);
+    free(r->tile_off);
+    free(r->isect);
+    free(r->t_final);
+    free(r->last);
+    free(r->slots);
+    free(r->scratch);
+    free(r);
+}
+
+void gs_raster_get_stats(const gs_raster *r, gs_raster_stats *s)
+{
+    s->visible = r ? r->visible : 0;
+    s->intersections = r ? r->n_isect : 0;
+    s->contributions = r ? r->contributions : 0;
+}
+
+/* ---- argument checks ---------------------------------------------------- */
+
+static int finite_array(const float *x, size_t n)
+{
+    return fast_kernels()->all_finite(x, n);
+}
+
+static int check_inputs(const gs_camera *cam, const gs_gaussians *g,
+                        const float *bg, gs_error *err)
+{
+    if (!cam || !g)
+        return gs_error_set(err, GS_ERR_ARG, "raster: camera and Gaussians are required");
+    if (cam->width < 1 || cam->height < 1 || cam->width > GS_RASTER_MAX_SIZE ||
+        cam->height > GS_RASTER_MAX_SIZE)
+        return gs_error_set(err, GS_ERR_ARG, "raster: image size %dx%d outside 1..%d",
+                            cam->width, cam->height, GS_RASTER_MAX_SIZE);
+    if (g->channels < 1 || g->channels > GS_RASTER_MAX_CHANNELS)
+        return gs_error_set(err, GS_ERR_ARG, "raster: %d channels outside 1..%d",
+                            g->channels, GS_RASTER_MAX_CHANNELS);
+    if (g->n < 0)
+        return gs_error_set(err, GS_ERR_ARG, "raster: negative Gaussian count %d", g->n);
+    if (g->n > 0 && (!g->means || !g->log_scales || !g->quats || !g->opacity_logits ||
+                     !g->features))
+        return gs_error_set(err, GS_ERR_ARG, "raster: a Gaussian parameter array is NULL");
+    float camv[16] = {cam->fx, cam->fy, cam->cx, cam->cy};
+    memcpy(camv + 4, cam->viewmat, sizeof cam->viewmat);
+    if (!finite_array(camv, 16))
+        return gs_error_set(err, GS_ERR_NONFINITE, "raster: non-finite camera value");
+    if (!(cam->fx > 0) || !(cam->fy > 0))
+        return gs_error_set(err, GS_ERR_ARG, "raster: focal lengths must be > 0 (fx %g, fy %g)",
+                            cam->fx, cam->fy);
+    size_t n = (size_t)g->n, C = (size_t)g->channels;
+    struct { const float *p; size_t len; const char *name; } arrays[] = {
+        {g->means, n * 3, "means"},
+        {g->log_scales, n * 3, "log_scales"},
+        {g->quats, n * 4, "quats"},
+        {g->opacity_logits, n, "opacity_logits"},
+        {g->features, n * C, "features"},
+        {bg, bg ? C * (size_t)cam->width * (size_t)cam->height : 0, "background"},
+    };
+    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++)
+        if (arrays[i].len && !finite_array(arrays[i].p, arrays[i].len))
+            return gs_error_set(err, GS_ERR_NONFINITE, "raster: non-finite value in %s",
+                                arrays[i].name);
+    return GS_OK;
+}
+
+/* ---- projection --------------------------------------------------------- */
+
+static void quat_to_rot(const float q[4], float R[9], float qn[4])
+{
+    /* Divide by the largest component first, so the sum of squares neither
+     * overflows (|q| > 1.8e19) nor loses bits to denormals (|q| < 1e-19). */
+    float m = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    float w = 1.0f, x = 0.0f, y = 0.0f, z = 0.0f;
+    if (m > 0.0f) {
+        w = q[0] / m, x = q[1] / m, y = q[2] / m, z = q[3] / m;
+        float inv = 1.0f / sqrtf(w * w + x * x + y * y + z * z);
+        w *= inv, x *= inv, y *= inv, z *= inv;
+    }
+    qn[0] = w, qn[1] = x, qn[2] = y, qn[3] = z;
+    R[0] = 1 - 2 * (y * y + z * z), R[1] = 2 * (x * y - w * z), R[2] = 2 * (x * z + w * y);
+    R[3] = 2 * (x * y + w * z), R[4] = 1 - 2 * (x * x + z * z), R[5] = 2 * (y * z - w * x);
+    R[6] = 2 * (x * z - w * y), R[7] = 2 * (y * z + w * x), R[8] = 1 - 2 * (x * x + y * y);
+}
+
+/* Camera-frame covariance Sigma_c = W R S S^T R^T W^T (symmetric 3x3). */
+static void camera_covariance(const float *V, const float R[9], const float s[3],
+                              float Sc[9])
+{
+    float M[9], WM[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            M[i * 3 + j] = R[i * 3 + j] * s[j];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            WM[i * 3 + j] = V[i * 4 + 0] * M[0 + j] + V[i * 4 + 1] * M[3 + j] +
+                            V[i * 4 + 2] * M[6 + j];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            Sc[i * 3 + j] = WM[i * 3 + 0] * WM[j * 3 + 0] + WM[i * 3 + 1] * WM[j * 3 + 1] +
+                            WM[i * 3 + 2] * WM[j * 3 + 2];
+}
+
+/* Clamped perspective Jacobian rows (J00, J02, J11, J12); reports clamping. */
+typedef struct {
+    float j00, j02, j11, j12;
+    float tx, ty;
+    int clamp_x, clamp_y;
+} jacobian;
+
+static jacobian persp_jacobian(const gs_camera *cam, float x, float y, float z)
+{
+    jacobian J;
+    float W = (float)cam->width, H = (float)cam->height;
+    float lim_xp = (W - cam->cx) / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
+    float lim_xn = cam->cx / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
+    float lim_yp = (H - cam->cy) / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+    float lim_yn = cam->cy / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+    float u = x / z, v = y / z;
+    J.clamp_x = u < -lim_xn || u > lim_xp;
+    J.clamp_y = v < -lim_yn || v > lim_yp;
+    J.tx = z * fminf(lim_xp, fmaxf(-lim_xn, u));
+    J.ty = z * fminf(lim_yp, fmaxf(-lim_yn, v));
+    float rz = 1.0f / z, rz2 = rz * rz;
+    J.j00 = cam->fx * rz;
+    J.j02 = -cam->fx * J.tx * rz2;
+    J.j11 = cam->fy * rz;
+    J.j12 = -cam->fy * J.ty * rz2;
+    return J;
+}
+
+typedef struct {
+    gs_raster *r;
+    int fast;
+} proj_ctx;
+
+#define PROJ_CHUNK 1024
+
+static void project_one(gs_raster *r, int i, int fast)
+{
+    const gs_camera *cam = &r->cam;
+    const gs_gaussians *g = &r->g;
+    gs_proj *P = &r->proj;
+    P->radius[i] = 0.0f;
+    const float *V = cam->viewmat, *p = g->means + 3 * (size_t)i;
+    float x = V[0] * p[0] + V[1] * p[1] + V[2] * p[2] + V[3];
+    float y = V[4] * p[0] + V[5] * p[1] + V[6] * p[2] + V[7];
+    float z = V[8] * p[0] + V[9] * p[1] + V[10] * p[2] + V[11];
+    if (!(z >= GS_RASTER_NEAR) || !(z <= GS_RASTER_FAR))
+        return;
+    float R[9], qn[4], s[3], Sc[9];
+    quat_to_rot(g->quats + 4 * (size_t)i, R, qn);
+    for (int k = 0; k < 3; k++)
+        s[k] = expf(g->log_scales[3 * (size_t)i + k]);
+    camera_covariance(V, R, s, Sc);
+    jacobian J = persp_jacobian(cam, x, y, z);
+    /* Sigma2 = J Sc J^T with J = [[j00, 0, j02], [0, j11, j12]]. */
+    float s00 = J.j00 * J.j00 * Sc[0] + 2 * J.j00 * J.j02 * Sc[2] + J.j02 * J.j02 * Sc[8];
+    float s11 = J.j11 * J.j11 * Sc[4] + 2 * J.j11 * J.j12 * Sc[5] + J.j12 * J.j12 * Sc[8];
+    float s01 = J.j00 * J.j11 * Sc[1] + J.j00 * J.j12 * Sc[2] + J.j02 * J.j11 * Sc[7] +
+                J.j02 * J.j12 * Sc[8];
+    float det0 = s00 * s11 - s01 * s01;
+    s00 += GS_RASTER_EPS2D;
+    s11 += GS_RASTER_EPS2D;
+    float det = s00 * s11 - s01 * s01;
+    if (!(det > 0.0f) || !isfinite(det))
+        return;
+    float inv = 1.0f / det;
+    float a = s11 * inv, b = -s01 * inv, c = s00 * inv;
+    float mx = cam->fx * x / z + cam->cx, my = cam->fy * y / z + cam->cy;
+    float half = 0.5f * (s00 + s11);
+    float lam = half + sqrtf(fmaxf(0.01f, half * half - det));
+    float rad = ceilf(3.0f * sqrtf(lam));
+    if (!isfinite(rad) || !isfinite(mx) || !isfinite(my) || !isfinite(a) || !isfinite(b) ||
+        !isfinite(c))
+        return;
+    if (mx + rad <= 0 || mx - rad >= (float)cam->width || my + rad <= 0 ||
+        my - rad >= (float)cam->height)
+        return;
+    float comp = sqrtf(fmaxf(0.0f, det0 * inv));
+    float lo = g->opacity_logits[i];
+    float op = 1.0f / (1.0f + expf(-lo));
+    if (r->opt.antialiased)
+        op *= comp;
+    if (fast) {
+        /* Opacity-aware cull: no pixel can reach alpha 1/255. The small
+         * margin keeps the test conservative against rounding. */
+        float thr = logf(255.0f * op);
+        if (!(thr > -1e-3f))
+            return;
+        thr = thr * 1.0001f + 1e-4f;
+        float cdet = a * c - b * b;
+        P->extent[2 * i] = sqrtf(fmaxf(0.0f, 2.0f * thr * c / cdet)) + 0.01f;
+        P->extent[2 * i + 1] = sqrtf(fmaxf(0.0f, 2.0f * thr * a / cdet)) + 0.01f;
+    }
+    P->mean2d[2 * i] = mx;
+    P->mean2d[2 * i + 1] = my;
+    P->conic[3 * i] = a;
+    P->conic[3 * i + 1] = b;
+    P->conic[3 * i + 2] = c;
+    P->depth[i] = z;
+    P->opacity[i] = op;
+    P->comp[i] = comp;
+    P->radius[i] = rad;
+}
+
+static void project_chunk(void *vctx, int task, int worker)
+{
+    (void)worker;
+    proj_ctx *ctx = vctx;
+    int i0 = task * PROJ_CHUNK, i1 = i0 + PROJ_CHUNK;
+    if (i1 > ctx->r->g.n)
+        i1 = ctx->r->g.n;
+    for (int i = i0; i < i1; i++)
+        project_one(ctx->r, i, ctx->fast);
+}
+
+/* ---- sorting and binning ------------------------------------------------ */
+
+/* Stable LSD radix sort of visible ids by the bits of their (positive)
+ * depth: ties keep id order, so the order never depends on threads. */
+static void sort_by_depth(gs_raster *r, int m)
+{
+    uint32_t *ord = r->order, *ot = r->order_tmp, *key = r->keys, *kt = r->keys_tmp;
+    for (int pass = 0; pass < 4; pass++) {
+        int shift = pass * 8;
+        uint32_t count[257] = {0};
+        for (int i = 0; i < m; i++)
+            count[((key[i] >> shift) & 0xff) + 1]++;
+        if (count[((key[0] >> shift) & 0xff) + 1] == (uint32_t)m)
+            continue; /* every key shares this byte */
+        for (int b = 0; b < 256; b++)
+            count[b + 1] += count[b];
+        for (int i = 0; i < m; i++) {
+            uint32_t d = count[(key[i] >> shift) & 0xff]++;
+            ot[d] = ord[i];
+            kt[d] = key[i];
+        }
+        uint32_t *t = ord; ord = ot; ot = t;
+        t = key; key = kt; kt = t;
+    }
+    if (ord != r->order)
+        memcpy(r->order, ord, (size_t)m * sizeof *ord);
+}
+
+/* Tile range [x0, x1) x [y0, y1) of the radius box, as gsplat bins it. */
+static void tile_range(const gs_raster *r, int i, int t[4])
+{
+    const float *m = r->proj.mean2d + 2 * i;
+    float rad = r->proj.radius[i], T = (float)GS_RASTER_TILE;
+    float x0 = floorf((m[0] - rad) / T), x1 = ceilf((m[0] + rad) / T);
+    float y0 = floorf((m[1] - rad) / T), y1 = ceilf((m[1] + rad) / T);
+    float tx = (float)r->tiles_x, ty = (float)r->tiles_y;
+    t[0] = (int)fminf(fmaxf(x0, 0.0f), tx);
+    t[1] = (int)fminf(fmaxf(x1, 0.0f), tx);
+    t[2] = (int)fminf(fmaxf(y0, 0.0f), ty);
+    t[3] = (int)fminf(fmaxf(y1, 0.0f), ty);
+}
+
+/* Minimum of sigma = 0.5 d^T Q d over d in [dx0,dx1] x [dy0,dy1]. */
+static float box_min_sigma(float a, float b, float c, float dx0, float dx1, float dy0,
+                           float dy1)
+{
+    if (dx0 <= 0 && dx1 >= 0 && dy0 <= 0 && dy1 >= 0)
+        return 0.0f;
+    float best = INFINITY;
+    float xs[2] = {dx0, dx1}, ys[2] = {dy0, dy1};
+    for (int k = 0; k < 2; k++) {
+        float dx = xs[k], dy = fminf(dy1, fmaxf(dy0, -b * dx / c));
+        best = fminf(best, 0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy);
+        dy = ys[k];
+        dx = fminf(dx1, fmaxf(dx0, -b * dy / a));
+        best = fminf(best, 0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy);
+    }
+    return best;
+}
+
+/* Fast path only: can any pixel centre of tile (tx, ty) reach alpha 1/255? */
+static int tile_touched(const gs_raster *r, int i, int tx, int ty)
+{
+    const gs_proj *P = &r->proj;
+    float op = P->opacity[i];
+    float thr = logf(255.0f * op) * 1.0001f + 1e-4f;
+    int T = GS_RASTER_TILE;
+    /* Pixel centres of the tile, widened by 0.01 px against rounding. */
+    float px0 = (float)(tx * T) + 0.49f;
+    float px1 = (float)((tx + 1) * T < r->cam.width ? (tx + 1) * T : r->cam.width) - 0.49f;
+    float py0 = (float)(ty * T) + 0.49f;
+    float py1 = (float)((ty + 1) * T < r->cam.height ? (ty + 1) * T : r->cam.height) - 0.49f;
+    const float *m = P->mean2d + 2 * i, *q = P->conic + 3 * i;
+    return box_min_sigma(q[0], q[1], q[2], m[0] - px1, m[0] - px0, m[1] - py1, m[1] - py0) <=
+           thr;
+}
+
+static int bin_tiles(gs_raster *r, int m, int fast, gs_error *err)
+{
+    size_t ntiles = (size_t)r->tiles_x * (size_t)r->tiles_y;
+    if (gs_raster_reserve((void **)&r->tile_off, &r->cap_tiles, ntiles + 1, sizeof(uint32_t)))
+        return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tiles");
+    uint32_t *off = r->tile_off;
+    memset(off, 0, (ntiles + 1) * sizeof *off);
+    size_t total = 0;
+    for (int k = 0; k < m; k++) {
+        int i = (int)r->order[k], t[4];
+        tile_range(r, i, t);
+        for (int ty = t[2]; ty < t[3]; ty++)
+            for (int tx = t[0]; tx < t[1]; tx++)
+                if (!fast || tile_touched(r, i, tx, ty)) {
+                    off[(size_t)ty * r->tiles_x + tx + 1]++;
+                    total++;
+                }
+        if (total > GS_RASTER_MAX_ISECT)
+            return gs_error_set(err, GS_ERR_LIMIT,
+                                "raster: more than %zu tile intersections (Gaussians too large?)",
+                                GS_RASTER_MAX_ISECT);
+    }
+    for (size_t t = 0; t < ntiles; t++)
+        off[t + 1] += off[t];
+    if (gs_raster_reserve((void **)&r->isect, &r->cap_isect, total ? total : 1, sizeof(uint32_t)))
+        return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu intersections",
+                            total);
+    r->n_isect = total;
+    /* Fill in depth order, so each tile's list comes out sorted. The sort
+     * is done, so its scratch (at least max(n, tiles) long) is free. */
+    uint32_t *fill = r->keys_tmp;
+    memcpy(fill, off, ntiles * sizeof *fill);
+    for (int k = 0; k < m; k++) {
+        int i = (int)r->order[k], t[4];
+        tile_range(r, i, t);
+        for (int ty = t[2]; ty < t[3]; ty++)
+            for (int tx = t[0]; tx < t[1]; tx++)
+                if (!fast || tile_touched(r, i, tx, ty))
+                    r->isect[fill[(size_t)ty * r->tiles_x + tx]++] = (uint32_t)i;
+    }
+    return GS_OK;
+}
+
+/* ---- forward ------------------------------------------------------------ */
+
+static int reserve_n(gs_raster *r, size_t n)
+{
+    if (n <= r->cap_n && r->n_block)
+        return GS_OK;
+    size_t cap = n < 64 ? 64 : n;
+    /* proj: 2+3+1+1+1+1+2 = 11 floats; pgrad: 2+3+1+1 = 7 floats */
+    float *blk = malloc(cap * 18 * sizeof(float));
+    if (!blk)
+        return GS_ERR_NOMEM;
+    free(r->n_block);
+    r->n_block = blk;
+    r->cap_n = cap;
+    gs_proj *P = &r->proj;
+    P->mean2d = blk, blk += 2 * cap;
+    P->conic = blk, blk += 3 * cap;
+    P->depth = blk, blk += cap;
+    P->opacity = blk, blk += cap;
+    P->comp = blk, blk += cap;
+    P->radius = blk, blk += cap;
+    P->extent = blk, blk += 2 * cap;
+    gs_proj_grad *G = &r->pgrad;
+    G->mean2d = blk, blk += 2 * cap;
+    G->conic = blk, blk += 3 * cap;
+    G->opacity = blk, blk += cap;
+    G->depth = blk;
+    return GS_OK;
+}
+
+int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
+                      const gs_gaussians *g, const float *background,
+                      const gs_raster_options *opt, float *out_f, float *out_alpha,
+                      float *out_depth, gs_error *err)
+{
+    if (!r || !out_f || !out_alpha)
+        return gs_error_set(err, GS_ERR_ARG, "raster: workspace and outputs are required");
+    r->have_forward = 0;
+    int rc = check_inputs(cam, g, background, err);
+    if (rc)
+        return rc;
+    static const gs_raster_options defaults = {0, GS_RASTER_FAST};
+    if (opt && opt->path != GS_RASTER_FAST && opt->path != GS_RASTER_SCALAR)
+        return gs_error_set(err, GS_ERR_ARG, "raster: unknown path %d", (int)opt->path);
+    r->cam = *cam;
+    r->g = *g;
+    r->background = background;
+    r->opt = opt ? *opt : defaults;
+    int fast = r->opt.path != GS_RASTER_SCALAR;
+    size_t n = (size_t)g->n, npix = (size_t)cam->width * (size_t)cam->height;
+    r->tiles_x = (cam->width + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
+    r->tiles_y = (cam->height + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
+    size_t ntiles = (size_t)r->tiles_x * (size_t)r->tiles_y;
+    if (reserve_n(r, n) ||
+        gs_raster_reserve((void **)&r->t_final, &r->cap_pix, npix, sizeof(float)))
+        return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu Gaussians", n);
+    if (gs_raster_reserve((void **)&r->last, &r->cap_last, npix, sizeof(uint32_t)))
+        return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu pixels", npix);
+    size_t cap = r->cap_order, want = n > ntiles ? n : ntiles;
+    if (want < 1)
+        want = 1;
+    if (want > r->cap_order) {
+        free(r->order), free(r->order_tmp), free(r->keys), free(r->keys_tmp);
+        r->order = malloc(want * sizeof(uint32_t));
+        r->order_tmp = malloc(want * sizeof(uint32_t));
+        r->keys = malloc(want * sizeof(uint32_t));
+        r->keys_tmp = malloc(want * sizeof(uint32_t));
+        cap = want;
+        r->cap_order = (r->order && r->order_tmp && r->keys && r->keys_tmp) ? cap : 0;
+        if (!r->cap_order)
+            return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory");
+    }
+
+    proj_ctx pc = {r, fast};
+    int chunks = (int)((n + PROJ_CHUNK - 1) / PROJ_CHUNK);
+    gs_pool_for(fast ? pool : NULL, chunks, project_chunk, &pc);
+
+    int m = 0;
+    for (size_t i = 0; i < n; i++)
+        if (r->proj.radius[i] > 0) {
+            uint32_t bits;
+            memcpy(&bits, &r->proj.depth[i], sizeof bits);
+            r->order[m] = (uint32_t)i;
+            r->keys[m++] = bits;
+        }
+    r->visible = m;
+    if (m > 0)
+        sort_by_depth(r, m);
+    rc = bin_tiles(r, m, fast, err);
+    if (rc)
+        return rc;
+
+    if (fast) {
+        if (fast_kernels()->forward(r, pool, background, out_f, out_alpha, out_depth))
+            return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tile buffers");
+    } else
+        gs_raster_scalar_forward(r, background, out_f, out_alpha, out_depth);
+    r->have_forward = 1;
+    return GS_OK;
+}
+
+/* ---- backward ----------------------------------------------------------- */
+
+/* v_Sigma2 (full symmetric 2x2, unblurred) from the conic and opacity
+ * gradients; see the derivation in raster.h's semantics. */
+static void conic_vjp(const gs_raster *r, int i, float v_s[4])
+{
+    const float *q = r->proj.conic + 3 * i, *vq = r->pgrad.conic + 3 * i;
+    /* P = [[a, b], [b, c]], G = dL/dP with the off-diagonal split evenly. */
+    float a = q[0], b = q[1], c = q[2];
+    float g00 = vq[0], g01 = 0.5f * vq[1], g11 = vq[2];
+    /* v_B = -P G P */
+    float pg00 = a * g00 + b * g01, pg01 = a * g01 + b * g11;
+    float pg10 = b * g00 + c * g01, pg11 = b * g01 + c * g11;
+    v_s[0] = -(pg00 * a + pg01 * b);
+    v_s[1] = -(pg00 * b + pg01 * c);
+    v_s[2] = -(pg10 * a + pg11 * b);
+    v_s[3] = -(pg10 * b + pg11 * c);
+    if (r->opt.antialiased) {
+        /* opacity = sigmoid(logit) * comp, comp = sqrt(det A / det B) with
+         * B = A + eps I: d comp / dA = 0.5/comp ((1 - comp^2) B^-1 - eps det(B^-1) I) */
+        int idx = i;
+        float comp = r->proj.comp[idx];
+        float sig = 1.0f / (1.0f + expf(-r->g.opacity_logits[idx]));
+        float v_comp = r->pgrad.opacity[idx] * sig;
+        if (comp > 0.0f) {
+            float k = v_comp * 0.5f / comp;
+            float one = 1.0f - comp * comp, detp = a * c - b * b;
+            v_s[0] += k * (one * a - GS_RASTER_EPS2D * detp);
+            v_s[1] += k * one * b;
+            v_s[2] += k * one * b;
+            v_s[3] += k * (one * c - GS_RASTER_EPS2D * detp);
+        }
+    }
+}
+
+static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
+{
+    if (!(r->proj.radius[i] > 0))
+        return;
+    const gs_camera *cam = &r->cam;
+    const gs_gaussians *g = &r->g;
+    const float *V = cam->viewmat, *p = g->means + 3 * (size_t)i;
+    float x = V[0] * p[0] + V[1] * p[1] + V[2] * p[2] + V[3];
+    float y = V[4] * p[0] + V[5] * p[1] + V[6] * p[2] + V[7];
+    float z = V[8] * p[0] + V[9] * p[1] + V[10] * p[2] + V[11];
+    float R[9], qn[4], s[3], Sc[9];
+    quat_to_rot(g->quats + 4 * (size_t)i, R, qn);
+    for (int k = 0; k < 3; k++)
+        s[k] = expf(g->log_scales[3 * (size_t)i + k]);
+    camera_covariance(V, R, s, Sc);
+    jacobian J = persp_jacobian(cam, x, y, z);
+
+    float vS2[4];
+    conic_vjp(r, i, vS2);
+    /* Sigma2 = J Sc J^T: v_Sc = J^T vS2 J, v_J = 2 vS2 J Sc (vS2, Sc symmetric). */
+    float Jm[6] = {J.j00, 0, J.j02, 0, J.j11, J.j12};
+    float vSc[9];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++)
+            vSc[a * 3 + b] = Jm[a] * (vS2[0] * Jm[b] + vS2[1] * Jm[3 + b]) +
+                             Jm[3 + a] * (vS2[2] * Jm[b] + vS2[3] * Jm[3 + b]);
+    float JS[6];
+    for (int a = 0; a < 2; a++)
+        for (int b = 0; b < 3; b++)
+            JS[a * 3 + b] = Jm[a * 3] * Sc[b] + Jm[a * 3 + 1] * Sc[3 + b] +
+                            Jm[a * 3 + 2] * Sc[6 + b];
+    float vJ[6];
+    for (int a = 0; a < 2; a++)
+        for (int b = 0; b < 3; b++)
+            vJ[a * 3 + b] = 2.0f * (vS2[a * 2] * JS[b] + vS2[a * 2 + 1] * JS[3 + b]);
+
+    /* Camera-space mean gradient: mean2d, depth, and the Jacobian. */
+    const float *vm = r->pgrad.mean2d + 2 * i;
+    float rz = 1.0f / z, rz2 = rz * rz, rz3 = rz2 * rz;
+    float fx = cam->fx, fy = cam->fy;
+    float vx = vm[0] * fx * rz;
+    float vy = vm[1] * fy * rz;
+    float vz = -(vm[0] * fx * x + vm[1] * fy * y) * rz2 + r->pgrad.depth[i];
+    vz += -fx * rz2 * vJ[0] - fy * rz2 * vJ[4];
+    /* j02 = -fx tx / z^2 with tx = x unclamped, z * lim when clamped. */
+    if (J.clamp_x) {
+        vz += fx * J.tx * rz3 * vJ[2];
+    } else {
+        vx += -fx * rz2 * vJ[2];
+        vz += 2.0f * fx * x * rz3 * vJ[2];
+    }
+    if (J.clamp_y) {
+        vz += fy * J.ty * rz3 * vJ[5];
+    } else {
+        vy += -fy * rz2 * vJ[5];
+        vz += 2.0f * fy * y * rz3 * vJ[5];
+    }
+    if (grads->means) {
+        float *gm = grads->means + 3 * (size_t)i;
+        for (int k = 0; k < 3; k++)
+            gm[k] += V[k] * vx + V[4 + k] * vy + V[8 + k] * vz;
+    }
+    /* Sc = V Sigma V^T: v_Sigma = V^T vSc V. Sigma = M M^T, M = R S. */
+    float vSig[9], tmp[9];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++)
+            tmp[a * 3 + b] = vSc[a * 3] * V[b] + vSc[a * 3 + 1] * V[4 + b] +
+                             vSc[a * 3 + 2] * V[8 + b];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++)
+            vSig[a * 3 + b] = V[a] * tmp[b] + V[4 + a] * tmp[3 + b] + V[8 + a] * tmp[6 + b];
+    float vM[9];
+    for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++)
+            vM[a * 3 + b] = (vSig[a * 3] + vSig[a]) * R[b] * s[b] +
+                            (vSig[a * 3 + 1] + vSig[3 + a]) * R[3 + b] * s[b] +
+                            (vSig[a * 3 + 2] + vSig[6 + a]) * R[6 + b] * s[b];
+    if (grads->log_scales) {
+        float *gs = grads->log_scales + 3 * (size_t)i;
+        for (int b = 0; b < 3; b++)
+            gs[b] += (vM[b] * R[b] + vM[3 + b] * R[3 + b] + vM[6 + b] * R[6 + b]) * s[b];
+    }
+    const float *q = g->quats + 4 * (size_t)i;
+    float qm = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    if (grads->quats && qm > 0.0f) {
+        float vR[9];
+        for (int a = 0; a < 9; a++)
+            vR[a] = vM[a] * s[a % 3];
+        float w = qn[0], qx = qn[1], qy = qn[2], qz = qn[3];
+        float vq[4];
+        vq[0] = 2 * (-qz * vR[1] + qy * vR[2] + qz * vR[3] - qx * vR[5] - qy * vR[6] +
+                     qx * vR[7]);
+        vq[1] = 2 * (qy * vR[1] + qz * vR[2] + qy * vR[3] - 2 * qx * vR[4] - w * vR[5] +
+                     qz * vR[6] + w * vR[7] - 2 * qx * vR[8]);
+        vq[2] = 2 * (-2 * qy * vR[0] + qx * vR[1] + w * vR[2] + qx * vR[3] + qz * vR[5] -
+                     w * vR[6] + qz * vR[7] - 2 * qy * vR[8]);
+        vq[3] = 2 * (-2 * qz * vR[0] - w * vR[1] + qx * vR[2] + w * vR[3] - 2 * qz * vR[4] +
+                     qy * vR[5] + qx * vR[6] + qy * vR[7]);
+        float dot = vq[0] * qn[0] + vq[1] * qn[1] + vq[2] * qn[2] + vq[3] * qn[3];
+        float a = q[0] / qm, b = q[1] / qm, c = q[2] / qm, d = q[3] / qm;
+        float inv = 1.0f / (qm * sqrtf(a * a + b * b + c * c + d * d)); /* 1/|q| */
+        float *gq = grads->quats + 4 * (size_t)i;
+        for (int k = 0; k < 4; k++)
+            gq[k] += (vq[k] - qn[k] * dot) * inv;
+    }
+    if (grads->opacity_logits) {
+        float sig = 1.0f / (1.0f + expf(-g->opacity_logits[i]));
+        float f = r->opt.antialiased ? r->proj.comp[i] : 1.0f;
+        grads->opacity_logits[i] += r->pgrad.opacity[i] * f * sig * (1.0f - sig);
+    }
+}
+
+typedef struct {
+    gs_raster *r;
+    gs_gaussian_grads *grads;
+} pback_ctx;
+
+static void project_backward_chunk(void *vctx, int task, int worker)
+{
+    (void)worker;
+    pback_ctx *c = vctx;
+    int i0 = task * PROJ_CHUNK, i1 = i0 + PROJ_CHUNK;
+    if (i1 > c->r->g.n)
+        i1 = c->r->g.n;
+    for (int i = i0; i < i1; i++)
+        project_backward_one(c->r, i, c->grads);
+}
+
+/* Adds the per-intersection slots of tiles [t0, t1) into per-Gaussian sums,
+ * in tile order: the same additions in the same order for any thread count. */
+static void gather_slots(gs_raster *r, int t0, int t1, size_t slot0, float *v_features)
+{
+    size_t C = (size_t)r->g.channels, stride = GS_SLOT_HEAD + C;
+    gs_proj_grad *G = &r->pgrad;
+    for (int t = t0; t < t1; t++)
+        for (uint32_t k = r->tile_off[t]; k < r->tile_off[t + 1]; k++) {
+            const float *s = r->slots + (k - slot0) * stride;
+            size_t i = r->isect[k];
+            G->mean2d[2 * i] += s[0];
+            G->mean2d[2 * i + 1] += s[1];
+            G->conic[3 * i] += s[2];
+            G->conic[3 * i + 1] += s[3];
+            G->conic[3 * i + 2] += s[4];
+            G->opacity[i] += s[5];
+            G->depth[i] += s[6];
+            if (v_features) {
+                float *vf = v_features + i * C;
+                for (size_t ch = 0; ch < C; ch++)
+                    vf[ch] += s[GS_SLOT_HEAD + ch];
+            }
+        }
+}
+
+static int fast_backward(gs_raster *r, gs_pool *pool, const float *v_f, const float *v_alpha,
+                         const float *v_depth, float *v_features, float *v_bg, gs_error *err)
+{
+    size_t C = (size_t)r->g.channels, stride = GS_SLOT_HEAD + C;
+    int ntiles = r->tiles_x * r->tiles_y;
+    int t0 = 0;
+    while (t0 < ntiles) {
+        /* Take whole tiles until the slot budget is used (at least one). */
+        int t1 = t0 + 1;
+        while (t1 < ntiles &&
+               (size_t)(r->tile_off[t1 + 1] - r->tile_off[t0]) * stride <= GS_RASTER_SLOT_BUDGET)
+            t1++;
+        size_t nslots = r->tile_off[t1] - r->tile_off[t0];
+        if (gs_raster_reserve((void **)&r->slots, &r->cap_slots, nslots * stride + 1,
+                              sizeof(float)))
+            return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory in backward");
+        if (fast_kernels()->backward(r, pool, t0, t1, r->tile_off[t0], v_f, v_alpha, v_depth,
+                                     v_bg))
+            return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tile buffers");
+        gather_slots(r, t0, t1, r->tile_off[t0], v_features);
+        t0 = t1;
+    }
+    return GS_OK;
+}
+
+int gs_raster_backward(gs_raster *r, gs_pool *pool, const float *v_f, const float *v_alpha,
+                       const float *v_depth, gs_gaussian_grads *grads, float *v_bg,
+                       gs_error *err)
+{
+    if (!r || !grads || !v_f)
+        return gs_error_set(err, GS_ERR_ARG, "raster: workspace, v_features and grads required");
+    if (!r->have_forward)
+        return gs_error_set(err, GS_ERR_STATE, "raster: backward called without a forward");
+    size_t n = (size_t)r->g.n;
+    memset(r->pgrad.mean2d, 0, n * 2 * sizeof(float));
+    memset(r->pgrad.conic, 0, n * 3 * sizeof(float));
+    memset(r->pgrad.opacity, 0, n * sizeof(float));
+    memset(r->pgrad.depth, 0, n * sizeof(float));
+    int fast = r->opt.path != GS_RASTER_SCALAR;
+    if (fast) {
+        int rc = fast_backward(r, pool, v_f, v_alpha, v_depth, grads->features, v_bg, err);
+        if (rc)
+            return rc;
+    } else {
+        gs_raster_scalar_backward(r, v_f, v_alpha, v_depth, grads->features, v_bg);
+    }
+    pback_ctx pc = {r, grads};
+    int chunks = (int)((n + PROJ_CHUNK - 1) / PROJ_CHUNK);
+    gs_pool_for(fast ? pool : NULL, chunks, project_backward_chunk, &pc);
+    return GS_OK;
+}

@@ -1,0 +1,94 @@
+/* Private state shared by the rasterizer's translation units. */
+#ifndef GS_RASTER_INTERNAL_H
+#define GS_RASTER_INTERNAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gazesplat/raster.h"
+
+/* Per-Gaussian projection results, indexed by Gaussian id. */
+typedef struct gs_proj {
+    float *mean2d;  /* n x 2, pixels */
+    float *conic;   /* n x 3: (a, b, c) of the inverse blurred 2D covariance */
+    float *depth;   /* n, camera z */
+    float *opacity; /* n, sigmoid(logit), times comp when antialiased */
+    float *comp;    /* n, sqrt(det Sigma2 / det(Sigma2 + eps I)) */
+    float *radius;  /* n, pixels; 0 = culled */
+    float *extent;  /* n x 2, half-extent of the alpha >= 1/255 ellipse */
+} gs_proj;
+
+/* Projection-space gradients, gathered from the compositing pass. */
+typedef struct gs_proj_grad {
+    float *mean2d;  /* n x 2 */
+    float *conic;   /* n x 3 */
+    float *opacity; /* n */
+    float *depth;   /* n */
+} gs_proj_grad;
+
+/* Gradients per (tile, Gaussian) intersection in the fast backward, so that
+ * sums never depend on thread scheduling: mean2d 2, conic 3, opacity 1,
+ * depth 1, pad 1, then C feature values. */
+#define GS_SLOT_HEAD 8
+
+struct gs_raster {
+    int have_forward;
+    gs_camera cam;
+    gs_gaussians g;
+    const float *background;
+    gs_raster_options opt;
+    int tiles_x, tiles_y;
+
+    gs_proj proj;
+    gs_proj_grad pgrad;
+    size_t cap_n;
+    void *n_block;
+
+    uint32_t *order, *order_tmp; /* visible ids sorted by (depth, id) */
+    uint32_t *keys, *keys_tmp;
+    size_t cap_order;
+
+    uint32_t *tile_off;   /* tiles + 1 offsets into isect */
+    size_t cap_tiles;
+    uint32_t *isect;      /* Gaussian id per intersection, per tile by depth */
+    size_t n_isect, cap_isect;
+
+    float *t_final;       /* H x W transmittance after compositing */
+    uint32_t *last;       /* H x W: 1 + list position of the last contributor */
+    size_t cap_pix, cap_last;
+
+    void *scratch;        /* per-worker tile buffers of the fast path */
+    size_t cap_scratch;
+
+    float *slots;         /* fast backward scratch */
+    size_t cap_slots;
+
+    int visible;
+    size_t contributions;
+};
+
+/* Growth helper: ensures *buf holds at least want elements of size elem. */
+int gs_raster_reserve(void **buf, size_t *cap, size_t want, size_t elem);
+
+/* Scalar reference compositing (raster_scalar.c). */
+void gs_raster_scalar_forward(gs_raster *r, const float *bg, float *out_f,
+                              float *out_alpha, float *out_depth);
+void gs_raster_scalar_backward(gs_raster *r, const float *v_f,
+                               const float *v_alpha, const float *v_depth,
+                               float *v_features, float *v_bg);
+
+/* Fast compositing (raster_tiles.c, built per instruction set). */
+typedef struct gs_raster_kernels {
+    int (*forward)(gs_raster *r, gs_pool *pool, const float *bg, float *out_f,
+                   float *out_alpha, float *out_depth);
+    /* Composites tiles [t0, t1) backward into r->slots. */
+    int (*backward)(gs_raster *r, gs_pool *pool, int t0, int t1,
+                     size_t slot0, const float *v_f, const float *v_alpha,
+                     const float *v_depth, float *v_bg);
+    int (*all_finite)(const float *x, size_t n);
+} gs_raster_kernels;
+
+extern const gs_raster_kernels gs_raster_kernels_generic;
+extern const gs_raster_kernels gs_raster_kernels_avx2;
+
+#endif

@@ -1,0 +1,93 @@
+/* The CLI's option and number parsers, in-process, value by value. */
+#include <float.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "cli.h"
+#include "gs_test.h"
+
+/* cli.h declares these; the test links args.c alone. */
+const cli_command cli_render_command = {"render", "", "usage: test\n", NULL};
+const cli_command cli_scene_command = {"scene", "", "usage: test\n", NULL};
+int cli_demo_head(unsigned long seed, struct gs_ply_scene *out)
+{
+    (void)seed, (void)out;
+    return -1;
+}
+
+static void test_floats(void)
+{
+    static const char *const bad4[] = {
+        "300,300,128",       "300,300,128,128,1", "300,300,1x,128", "nan,300,128,128",
+        "inf,300,128,128",   "300,,128,128",      "",               "1e39,300,128,128",
+        " 300,300,128,128",  "300 ,300,128,128",  "300,300,128,128,", ",300,300,128,128",
+        "300;300;128;128",   "-inf,1,2,3",        "1,2,3,4 ",       "0x,1,2,3",
+    };
+    float v[4];
+    for (size_t i = 0; i < sizeof bad4 / sizeof bad4[0]; i++)
+        CHECK_MSG(cli_parse_floats(bad4[i], v, 4) == -1, "'%s' accepted", bad4[i]);
+    CHECK_EQ_INT(cli_parse_floats("300,-2.5,1e-3,+7", v, 4), 0);
+    CHECK(v[0] == 300.0f && v[1] == -2.5f && v[2] == 1e-3f && v[3] == 7.0f);
+    CHECK_EQ_INT(cli_parse_floats("3.4e38,0,0,0", v, 4), 0);
+    float m[12];
+    CHECK_EQ_INT(cli_parse_floats("1,0,0,0,0,1,0,0,0,0,1,4", m, 12), 0);
+    CHECK(m[0] == 1 && m[5] == 1 && m[10] == 1 && m[11] == 4);
+    CHECK_EQ_INT(cli_parse_floats("1,0,0,0,0,1,0,0,0,0,1", m, 12), -1);
+}
+
+static void test_size_and_long(void)
+{
+    static const char *const bad[] = {"0x256", "256x0", "9000x10", "10x9000", "abc", "256",
+                                      "256x", "x256", "-5x5", "256x256x3", "1e3x5", "+5x5",
+                                      "99999999999999999999x5", " 5x5", "5x 5", ""};
+    int w = 0, h = 0;
+    long l = 0;
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+        CHECK_MSG(cli_parse_size(bad[i], 8192, &w, &h) == -1, "'%s' accepted", bad[i]);
+    CHECK(cli_parse_size("256x128", 8192, &w, &h) == 0 && w == 256 && h == 128);
+    CHECK(cli_parse_size("8192X1", 8192, &w, &h) == 0 && w == 8192 && h == 1);
+    CHECK_EQ_INT(cli_parse_long("0", 1, 256, &l), -1);
+    CHECK_EQ_INT(cli_parse_long("257", 1, 256, &l), -1);
+    CHECK_EQ_INT(cli_parse_long("1.5", 1, 256, &l), -1);
+    CHECK_EQ_INT(cli_parse_long("two", 1, 256, &l), -1);
+    CHECK_EQ_INT(cli_parse_long("", 1, 256, &l), -1);
+    CHECK_EQ_INT(cli_parse_long("99999999999999999999999", 0, 4294967295L, &l), -1);
+    CHECK(cli_parse_long("256", 1, 256, &l) == 0 && l == 256);
+    CHECK(cli_parse_long("4294967295", 0, 4294967295L, &l) == 0 && l == 4294967295L);
+}
+
+static int parse(int n, const char **args, cli_opt *o, int no)
+{
+    char *argv[16];
+    for (int i = 0; i < n; i++)
+        argv[i] = (char *)args[i];
+    for (int i = 0; i < no; i++)
+        o[i].value = NULL;
+    return cli_parse(&cli_render_command, n, argv, o, no);
+}
+
+static void test_options(void)
+{
+    cli_opt o[3] = {{"--size", 1, NULL}, {"--flag", 0, NULL}, {"--out", 1, NULL}};
+    const char *ok[] = {"render", "--size", "5x5", "--flag", "--out=a.png"};
+    CHECK_EQ_INT(parse(5, ok, o, 3), CLI_PARSED);
+    CHECK(strcmp(o[0].value, "5x5") == 0 && o[1].value && strcmp(o[2].value, "a.png") == 0);
+    const char *help[] = {"render", "--size", "5x5", "-h"};
+    CHECK_EQ_INT(parse(4, help, o, 3), CLI_HELP);
+    const char *none[] = {"render"};
+    CHECK(parse(1, none, o, 3) == CLI_PARSED && !o[0].value && !o[1].value);
+    const char *bad[][3] = {{"render", "--size", NULL},      {"render", "--bogus", "x"},
+                            {"render", "--flag=1", "x"},     {"render", "stray", "x"},
+                            {"render", "--size=1", "--size"}, {"render", "-s", "x"}};
+    const int nbad[] = {2, 2, 2, 2, 3, 2};
+    for (size_t i = 0; i < sizeof nbad / sizeof nbad[0]; i++)
+        CHECK_MSG(parse(nbad[i], bad[i], o, 3) == CLI_USAGE, "case %zu accepted", i);
+}
+
+int main(void)
+{
+    test_floats();
+    test_size_and_long();
+    test_options();
+    GS_TEST_END();
+}

@@ -1,0 +1,146 @@
+"""Writes the seed corpora of the fuzz targets (corpus/<target>/): small
+valid inputs of each layout and a few damaged ones. Deterministic, standard
+library only; rerun after changing it:
+    python3 tests/fuzz/make_corpus.py tests/fuzz/corpus"""
+import os
+import struct
+import sys
+import zlib
+
+
+def header(n, props, fmt="binary_little_endian 1.0", extra="", eol="\n"):
+    lines = ["ply", f"format {fmt}"] + ([extra] if extra else [])
+    lines += [f"element vertex {n}"] + [f"property {t} {p}" for t, p in props]
+    lines += ["end_header"]
+    return (eol.join(lines) + eol).encode()
+
+
+def std_props(rest=0, normals=True, feat=0):
+    props = [("float", c) for c in "xyz"]
+    if normals:
+        props += [("float", c) for c in ("nx", "ny", "nz")]
+    if feat:
+        props += [("float", f"feat_{i}") for i in range(feat)]
+    else:
+        props += [("float", f"f_dc_{i}") for i in range(3)]
+        props += [("float", f"f_rest_{i}") for i in range(rest)]
+    props += [("float", "opacity")]
+    props += [("float", f"scale_{i}") for i in range(3)]
+    props += [("float", f"rot_{i}") for i in range(4)]
+    return props
+
+
+def records(n, nprops, seed):
+    vals = [((i * 37 + seed * 11) % 29) / 7.0 - 2.0 for i in range(n * nprops)]
+    return struct.pack(f"<{len(vals)}f", *vals)
+
+
+def ply_files():
+    files = {}
+    p = std_props()
+    sh0 = header(3, p) + records(3, len(p), 1)
+    files["sh0_normals.ply"] = sh0
+    p = std_props(rest=9, normals=False)
+    files["sh1.ply"] = header(1, p) + records(1, len(p), 2)
+    p = std_props(rest=45)
+    files["sh3.ply"] = header(1, p) + records(1, len(p), 3)
+    p = std_props(feat=4, normals=False)
+    files["feat4.ply"] = header(2, p) + records(2, len(p), 4)
+    p = list(reversed(std_props(normals=False))) + [("uchar", "red"), ("double", "d"), ("int16", "s")]
+    data = b"".join(records(1, 14, 5 + v) + b"\x07" + struct.pack("<dh", 1.5, -3) for v in range(2))
+    files["shuffled_extra_crlf.ply"] = header(2, p, extra="comment seed", eol="\r\n") + data
+    files["empty.ply"] = header(0, std_props())
+    files["truncated_data.ply"] = sh0[:-5]
+    files["truncated_header.ply"] = sh0[:60]
+    files["trailing.ply"] = sh0 + b"\0"
+    files["ascii.ply"] = header(1, std_props(), fmt="ascii 1.0") + b"0 " * 17 + b"\n"
+    files["face_list.ply"] = header(0, std_props()).replace(
+        b"end_header", b"element face 1\nproperty list uchar int vertex_indices\nend_header") + b"\x03" + bytes(12)
+    files["double_opacity.ply"] = header(1, [(("double" if n == "opacity" else t), n) for t, n in std_props()]) + bytes(17 * 4 + 4)
+    files["absurd_count.ply"] = header(4000000000, std_props()) + records(1, 17, 6)
+    files["missing_rot.ply"] = header(1, std_props()[:-1]) + records(1, 16, 7)
+    nan = bytearray(sh0)
+    nan[-4 * 8:-4 * 7] = struct.pack("<f", float("nan"))
+    files["nan.ply"] = bytes(nan)
+    return files
+
+
+def npy(descr, shape, data, major=1, fortran="False"):
+    dims = ", ".join(str(d) for d in shape) + ("," if len(shape) == 1 else "")
+    d = f"{{'descr': '{descr}', 'fortran_order': {fortran}, 'shape': ({dims}), }}"
+    pre = 10 if major == 1 else 12
+    d += " " * (-(pre + len(d) + 1) % 64) + "\n"
+    size = struct.pack("<H", len(d)) if major == 1 else struct.pack("<I", len(d))
+    return b"\x93NUMPY" + bytes([major, 0]) + size + d.encode() + data
+
+
+def npy_files():
+    f6 = struct.pack("<6f", *[0.5 * i - 1 for i in range(6)])
+    return {
+        "f32_2x3.npy": npy("<f4", (2, 3), f6),
+        "u8_4d.npy": npy("|u1", (1, 2, 2, 3), bytes(range(12))),
+        "scalar.npy": npy("<f4", (), f6[:4]),
+        "vec_v2.npy": npy("<f4", (6,), f6, major=2),
+        "empty.npy": npy("<f4", (0, 4), b""),
+        "f64.npy": npy("<f8", (3,), bytes(24)),
+        "fortran.npy": npy("<f4", (2, 3), f6, fortran="True"),
+        "short.npy": npy("<f4", (2, 3), f6[:-1]),
+        "huge_shape.npy": npy("<f4", (4294967296, 4294967296, 16), f6),
+    }
+
+
+def png(w, h, ctype, depth, rows, plte=None):
+    def chunk(t, d):
+        return struct.pack(">I", len(d)) + t + d + struct.pack(">I", zlib.crc32(t + d))
+    ihdr = struct.pack(">IIBBBBB", w, h, depth, ctype, 0, 0, 0)
+    raw = b"".join(b"\0" + r for r in rows)
+    out = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+    if plte:
+        out += chunk(b"PLTE", plte)
+    return out + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b"")
+
+
+def jpeg(w, h, ncomp):
+    """A baseline JPEG, flat grey: every block has DC difference 0 (code
+    '0') and then EOB (code '0'), from one-symbol Huffman tables."""
+    seg = lambda m, d: b"\xff" + bytes([m]) + struct.pack(">H", len(d) + 2) + d
+    dqt = seg(0xDB, b"\x00" + bytes([1] * 64))
+    comps = b"".join(bytes([i + 1, 0x11, 0]) for i in range(ncomp))
+    sof = seg(0xC0, struct.pack(">BHHB", 8, h, w, ncomp) + comps)
+    one = bytes([1] + [0] * 15) + b"\x00"
+    dht = seg(0xC4, b"\x00" + one + b"\x10" + one)
+    sos = seg(0xDA, bytes([ncomp]) + b"".join(bytes([i + 1, 0]) for i in range(ncomp)) + b"\x00\x3f\x00")
+    nbits = 2 * ncomp * ((w + 7) // 8) * ((h + 7) // 8)
+    scan = bytes([0] * (nbits // 8)) + (bytes([0xFF >> (nbits % 8)]) if nbits % 8 else b"")
+    scan = scan.replace(b"\xff", b"\xff\x00")
+    return b"\xff\xd8" + dqt + sof + dht + sos + scan + b"\xff\xd9"
+
+
+def image_files():
+    rgb = [bytes(v for x in range(5) for v in (x * 40, y * 60, 128)) for y in range(4)]
+    files = {
+        "rgb_5x4.png": png(5, 4, 2, 8, rgb),
+        "grey_3x2.png": png(3, 2, 0, 8, [b"\x00\x80\xff", b"\x10\x20\x30"]),
+        "palette_2x1.png": png(2, 1, 3, 8, [b"\x01\x00"], plte=b"\x09\x08\x07\x64\x96\xc8"),
+        "rgba16_1x1.png": png(1, 1, 6, 16, [bytes(range(8))]),
+        "grey_8x8.jpg": jpeg(8, 8, 1),
+        "colour_20x9.jpg": jpeg(20, 9, 3),
+    }
+    files["truncated.png"] = files["rgb_5x4.png"][:-20]
+    files["truncated.jpg"] = files["colour_20x9.jpg"][:-3]
+    big = bytearray(files["grey_3x2.png"])
+    big[16:24] = struct.pack(">II", 100000, 100000)
+    files["huge_header.png"] = bytes(big)
+    return files
+
+
+def main(out):
+    for target, files in (("ply", ply_files()), ("npy", npy_files()), ("image", image_files())):
+        os.makedirs(os.path.join(out, target), exist_ok=True)
+        for name, data in files.items():
+            with open(os.path.join(out, target, name), "wb") as f:
+                f.write(data)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
