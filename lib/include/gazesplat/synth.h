@@ -318,6 +318,34 @@ int gs_synth_gen_scene(const gs_synth_gen_config *c, uint64_t index,
 int gs_synth_gen_sample(const gs_synth_gen_config *c, uint64_t index,
                         gs_pool *pool, gs_synth_sample *out, gs_error *err);
 
+/* ---- datasets on disk ---- */
+typedef void (*gs_synth_progress_fn)(void *ctx, uint64_t done, uint64_t total);
+
+typedef struct gs_synth_dataset_opts {
+    uint64_t first, count;   /* generator indices [first, first + count) */
+    int masks;               /* also write masks/NNNNNNNN.png */
+    gs_synth_progress_fn progress;  /* called after each image, may be NULL */
+    void *progress_ctx;
+} gs_synth_dataset_opts;
+
+/* Writes dir/images/NNNNNNNN.png (N = generator index), dir/masks/... (R
+ * head, G face, B 255 left eye / 128 right eye), dir/labels.jsonl (one
+ * gs_synth_labels_json object per image plus "index" and "mask") and
+ * dir/README.md describing every field. dir is created if missing (its
+ * parent must exist); existing files are overwritten. */
+int gs_synth_dataset_write(const char *dir, const gs_synth_gen_config *c,
+                           const gs_synth_dataset_opts *o, gs_pool *pool,
+                           gs_error *err);
+
+/* A contact sheet: `rows` identities of a split (one per row, each with
+ * its own slight head pose and lighting) x a 3x3 gaze grid (pitch +25, 0,
+ * -25 deg by yaw +35, 0, -35 deg, head frame) of normalized face images of
+ * tile x tile px, 2x2 supersampled. *rgb (malloc'd, 3 * width * height
+ * bytes, stride 3 * width) is freed by the caller with free(). */
+int gs_synth_contact_sheet(gs_synth_split split, int rows, int tile,
+                           gs_pool *pool, uint8_t **rgb, int *width,
+                           int *height, gs_error *err);
+
 /* ---- label text ---- */
 /* One JSON object (no newline) with every label of `s`, `image` naming
  * the image file. Returns the length written, or the length needed when
