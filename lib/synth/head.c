@@ -323,7 +323,7 @@ static void build_raw(const gs_synth_identity *id,
                     0.2f + 8 * open, 14);
     h->jaw_pivot = at(&b, 0, -5, 60);
     double jr[9];
-    gs_geom_rot_x(0.25 * open, jr); /* closed-jaw frame: rotate back up */
+    gs_geom_rot_x(-0.25 * open, jr); /* head -> closed-jaw frame: back up */
     for (int i = 0; i < 9; i++)
         h->jaw_rot[i] = (float)jr[i];
     /* Ears, neck, hair. */
@@ -647,8 +647,8 @@ SDF_INLINE sdg head_sdf_impl(const head_model *h, v3 p, const int G,
         if (h->mouth_open > 0.02f &&
             !SKIP(beyond(p, h->cavity.c, rmax(&h->cavity), 2.0f - d.d))) {
             sdg cav = op_neg(sd_ellipsoid(&h->cavity, p, G));
-            if (parts)
-                parts->cavity = cav.d - d.d;
+            if (parts) /* <= 0 where the cavity wall is the surface */
+                parts->cavity = d.d - cav.d;
             d = op_smax(d, cav, 2.0f, G);
         }
     }
@@ -741,7 +741,7 @@ static int material_of(const head_model *h, const sdf_parts *ps, float d)
 {
     const sdf_parts s = *ps;
     const float tol = 0.35f;
-    if (s.cavity < 1.0f && h->mouth_open > 0.02f)
+    if (s.cavity < 0.5f && h->mouth_open > 0.02f)
         return MAT_MOUTH;
     if (s.lid <= d + tol)
         return MAT_LID;
@@ -818,12 +818,16 @@ static float brow_density(const head_model *h, v3 p)
 v3 gs_synth_skin_albedo(const head_model *h, v3 p, int material)
 {
     if (material == MAT_MOUTH) {
-        /* Upper teeth just behind the upper lip. */
-        float teeth = (p.y < h->mouth_y + 3.0f && p.z < h->mouth_z + 8.0f &&
-                       fabsf(p.x) < 0.7f * h->mouth_w)
-                          ? 1.0f
-                          : 0.0f;
-        return v3_lerp(h->mouth_col, v3_make(0.65f, 0.62f, 0.55f), teeth);
+        /* Inside the mouth light falls off with depth behind the lips; a
+         * band of upper teeth shows just under the upper lip. */
+        float front = h->lip_up.c.z - h->lip_up.r.z;
+        float depth = maxf(0.0f, p.z - front);
+        float teeth = smoothstepf(h->mouth_y - 2.0f, h->mouth_y - 0.5f, p.y) *
+                      (1.0f - smoothstepf(h->mouth_y + 2.0f, h->mouth_y + 3.5f, p.y)) *
+                      (1.0f - smoothstepf(0.55f * h->mouth_w, 0.7f * h->mouth_w, fabsf(p.x))) *
+                      (1.0f - smoothstepf(6.0f, 9.0f, depth));
+        v3 c = v3_lerp(h->mouth_col, v3_make(0.55f, 0.52f, 0.46f), teeth);
+        return v3_scale(c, expf(-depth / 9.0f));
     }
     if (material == MAT_HAIR) {
         float s = fbm2(v3_make(p.x * 0.8f, p.y * 0.12f, p.z * 0.8f), h->tex_seed + 9u);
