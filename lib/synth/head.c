@@ -155,7 +155,7 @@ static void build_appearance(const gs_synth_identity *id, head_model *h)
     v3 hair = ramp(hair_ramp, 5, 0.5f + 0.5f * p[GS_SYNTH_ID_HAIR_COLOUR]);
     float red = 0.25f * maxf(0.0f, p[GS_SYNTH_ID_HAIR_RED]);
     h->hair_col = v3_make(hair.x * (1 + red), hair.y, hair.z * (1 - red));
-    h->brow_col = v3_scale(h->hair_col, 0.8f);
+    h->brow_col = v3_scale(h->hair_col, 0.55f);
     v3 iris_ramp[6] = {srgb(45, 28, 18),  srgb(95, 60, 30),
                        srgb(120, 100, 50), srgb(80, 110, 70),
                        srgb(70, 110, 150), srgb(130, 145, 155)};
@@ -361,12 +361,13 @@ static void build_raw(const gs_synth_identity *id,
     h->hair_plane[1] = n.y;
     h->hair_plane[2] = n.z;
     h->hair_plane[3] = -v3_dot(n, hf);
+    h->hair_curve = (10.0f + 6.0f * p[GS_SYNTH_ID_HAIRLINE]) / (60.0f * 60.0f);
     /* Blend radii. */
     /* Brows (colour only; brow_raise moves them). */
     h->brow_raise = clampf(ex->brow_raise, -1.0f, 1.0f);
     h->brow_y[0] = h->brow_y[1] = at(&b, 0, -40, 0).y - 4.0f * h->brow_raise;
     h->brow_arch = (3.0f + 1.5f * p[GS_SYNTH_ID_BROW_ARCH]) * b.sc;
-    h->brow_thick = (5.0f + 1.5f * p[GS_SYNTH_ID_BROW_THICKNESS]) * b.sc;
+    h->brow_thick = (7.5f + 2.0f * p[GS_SYNTH_ID_BROW_THICKNESS]) * b.sc;
     h->brow_x0 = 12.0f * b.sc;
     h->brow_x1 = 56.0f * b.sc;
     /* Bounds of the parts the field skips when far (see beyond()). */
@@ -439,13 +440,15 @@ SDF_INLINE sdg lid_sdf(const eye_model *e, v3 p, const int G)
     return op_max(shell, op_min(up, lo));
 }
 
-/* Hair cap: the cranium grown by the hair thickness, above the hairline
- * plane. */
+/* Hair cap: the cranium grown by the hair thickness, above the hairline:
+ * a plane bent by a term in x^2 so that the line recedes at the temples
+ * (never below the plane, so the plane alone bounds it for skipping). */
 SDF_INLINE sdg hair_sdf(const head_model *h, v3 p, const int G)
 {
     sdg e = sd_ellipsoid(&h->hair, p, G);
     v3 n = v3_make(h->hair_plane[0], h->hair_plane[1], h->hair_plane[2]);
-    sdg pl = sdg_make(v3_dot(n, p) + h->hair_plane[3], n);
+    sdg pl = sdg_make(v3_dot(n, p) + h->hair_plane[3] + h->hair_curve * p.x * p.x,
+                      v3_add(n, v3_make(2.0f * h->hair_curve * p.x, 0, 0)));
     return op_smax(e, pl, 3.0f, G);
 }
 
@@ -812,7 +815,7 @@ static float brow_density(const head_model *h, v3 p)
     /* Hair strands: noise stretched along the brow. */
     float strands = 0.5f + 0.5f * gs_synth_noise3(
         v3_make(p.x * 0.35f, p.y * 2.2f, p.z * 0.5f), h->tex_seed + 5u);
-    return band * ends * (0.55f + 0.45f * strands);
+    return band * ends * (0.7f + 0.3f * strands);
 }
 
 v3 gs_synth_skin_albedo(const head_model *h, v3 p, int material)

@@ -35,7 +35,7 @@ V_INLINE f4 vsqrt(f4 a)
 #if defined(__SSE__)
     return (f4)_mm_sqrt_ps((__m128)a);
 #else
-    f4 r;
+    f4 r = a;
     for (int i = 0; i < 4; i++)
         r[i] = sqrtf(a[i]);
     return r;
@@ -167,7 +167,8 @@ V_INLINE f4 neck4(const head_model *h, p4 p)
 V_INLINE f4 hair4(const head_model *h, p4 p)
 {
     v3 n = v3_make(h->hair_plane[0], h->hair_plane[1], h->hair_plane[2]);
-    return smax4(ell4(&h->hair, p), dotv(n, p) + h->hair_plane[3], 3.0f);
+    return smax4(ell4(&h->hair, p),
+                 dotv(n, p) + h->hair_plane[3] + h->hair_curve * p.x * p.x, 3.0f);
 }
 
 V_INLINE f4 eyeball4(const eye_model *e, p4 p)

@@ -314,7 +314,7 @@ static void march_rays(const render_ctx *r, ray_state *rays, int n)
 static void shade_rays(const render_ctx *r, ray_state *rays, int n)
 {
     const head_model *h = &r->head;
-    int skin[MAX_RAYS], ns = 0;
+    int skin[MAX_RAYS] = {0}, ns = 0;
     for (int i = 0; i < n; i++) {
         ray_state *s = &rays[i];
         if (s->hit && s->t < s->t_eye) {

@@ -149,7 +149,8 @@ typedef struct head_model {
     float mouth_w, mouth_open, mouth_y, mouth_z;
     float smile;
     sd_ell cavity;
-    float hair_plane[4]; /* hair where dot(n, p) + d < 0 */
+    float hair_plane[4]; /* hair where dot(n, p) + d + curve x^2 < 0 */
+    float hair_curve;
     int has_hair, has_ears;
     v3 jaw_pivot;
     float jaw_rot[9];  /* closed-jaw frame from head frame */
