@@ -240,6 +240,164 @@ static void compute_group_boxes(head_model *h)
         box_add_ell(&h->mouth_box, &h->cavity);
 }
 
+/* Skull, maxilla, jaw, chin, brow ridge, cheekbones and cheeks. */
+static void build_skull_face(const build_ctx *b, const float *p, float smile,
+                             head_model *h)
+{
+    float hw = 1.0f + 0.06f * p[GS_SYNTH_ID_HEAD_WIDTH];
+    float hl = 1.0f + 0.05f * p[GS_SYNTH_ID_HEAD_LENGTH];
+    float hh = 1.0f + 0.05f * p[GS_SYNTH_ID_HEAD_HEIGHT];
+    float fl = 1.0f + 0.07f * p[GS_SYNTH_ID_FACE_LENGTH];
+    float fw = 1.0f + 0.06f * p[GS_SYNTH_ID_FACE_WIDTH];
+    float fs = p[GS_SYNTH_ID_FOREHEAD_SLOPE], br = p[GS_SYNTH_ID_BROW_RIDGE];
+    float jw = 1.0f + 0.08f * p[GS_SYNTH_ID_JAW_WIDTH];
+    float cp = p[GS_SYNTH_ID_CHIN_PROJECTION], ch = p[GS_SYNTH_ID_CHIN_HEIGHT];
+    float cb = p[GS_SYNTH_ID_CHEEKBONES], cf = p[GS_SYNTH_ID_CHEEK_FULLNESS];
+    h->cranium = ell(b, at(b, 0, -40 - 4 * p[GS_SYNTH_ID_HEAD_HEIGHT], 70 + 4 * fs),
+                     74 * hw, 95 * hh, 88 * hl);
+    h->face = ell(b, at(b, 0, 8 * fl, 20), 64 * fw, 50 * fl, 38);
+    h->jaw = ell(b, at(b, 0, 50 * fl, 22), 42 * jw, 34 * fl, 34);
+    h->chin = ell(b, at(b, 0, 76 * fl + 3 * ch, -1 - 3 * cp), 23 * jw,
+                  16 * (1 + 0.1f * ch), 13);
+    h->brow = ell(b, at(b, 0, -44, -3 - 2 * br), 52, 10, 13 * (1 + 0.12f * br));
+    for (int i = 0; i < 2; i++) {
+        float s = i == 0 ? -1.0f : 1.0f;
+        h->jawbone[i].a = at(b, s * 50 * jw, 38 * fl, 50);
+        h->jawbone[i].b = at(b, s * 15 * jw, 80 * fl + 3 * ch, -3 - 2 * cp);
+        h->jawbone[i].ra = 9.0f * b->sc;
+        h->jawbone[i].rb = 11.0f * b->sc;
+        h->zyg[i] = ell(b, at(b, s * 54 * fw * (1 + 0.05f * cb), -8, 16 - 2 * cb),
+                        16, 12, 15);
+        /* A smile lifts the cheeks and pushes them out and forward. */
+        h->cheek[i] = ell(b, at(b, s * (40 * fw + 2 * smile), 12 - 4 * smile,
+                                8 - 2 * cf - 2 * smile),
+                          22, 20, 12 + 2 * cf);
+    }
+    h->ear_x = 72.0f * hw;
+}
+
+static void build_nose(const build_ctx *b, const float *p, head_model *h)
+{
+    float nl = 1.0f + 0.1f * p[GS_SYNTH_ID_NOSE_LENGTH];
+    float np = p[GS_SYNTH_ID_NOSE_PROJECTION], nb = p[GS_SYNTH_ID_NOSE_BRIDGE];
+    float nw = 1.0f + 0.12f * p[GS_SYNTH_ID_NOSE_WIDTH];
+    float nt = 1.0f + 0.1f * p[GS_SYNTH_ID_NOSE_TIP];
+    h->bridge.a = at(b, 0, -28, -11 - 2 * nb);
+    h->bridge.b = at(b, 0, -28 + 40 * nl, -27 - 3 * np);
+    h->bridge.ra = 5.0f * b->sc;
+    h->bridge.rb = 6.5f * nt * b->sc;
+    h->nose_tip = ell(b, at(b, 0, -28 + 42 * nl, -24 - 3 * np), 9 * nw * nt, 8, 8);
+    for (int i = 0; i < 2; i++) {
+        float s = i == 0 ? -1.0f : 1.0f;
+        h->nose_wing[i] = ell(b, at(b, s * 12 * nw, -28 + 47 * nl, -11 - np), 7, 6, 8);
+        h->nostril[i] = ell(b, at(b, s * 6 * nw, -28 + 50 * nl, -19 - 2 * np),
+                            3.5f, 2.2f, 5);
+    }
+}
+
+/* Lips, the mouth cavity (when open) and the jaw rotation, which opens
+ * about a transverse axis near the ears by up to 0.25 rad. */
+static void build_mouth(const build_ctx *b, const float *p,
+                        const gs_synth_expression *ex, head_model *h)
+{
+    float fl = 1.0f + 0.07f * p[GS_SYNTH_ID_FACE_LENGTH];
+    float mw = 1.0f + 0.1f * p[GS_SYNTH_ID_MOUTH_WIDTH];
+    float ul = 1.0f + 0.2f * p[GS_SYNTH_ID_UPPER_LIP];
+    float ll = 1.0f + 0.2f * p[GS_SYNTH_ID_LOWER_LIP];
+    float my = 44 * fl + 3 * p[GS_SYNTH_ID_MOUTH_HEIGHT];
+    float open = clampf(ex->mouth_open, 0.0f, 1.0f);
+    h->mouth_open = open;
+    h->smile = clampf(ex->smile, 0.0f, 1.0f);
+    h->mouth_w = 24 * mw * b->sc;
+    h->mouth_y = at(b, 0, my, 0).y;
+    h->mouth_z = at(b, 0, 0, -8).z;
+    h->lip_up = ell(b, at(b, 0, my - 4.2f * ul, -13.5f), 23 * mw, 4.6f * ul, 7);
+    h->lip_lo = ell(b, at(b, 0, my + 4.8f * ll, -12), 20 * mw, 5.0f * ll, 7);
+    h->cavity = ell(b, at(b, 0, my + 1 + 3 * open, -3), 19 * mw, 0.2f + 8 * open, 14);
+    h->jaw_pivot = at(b, 0, -5, 60);
+    double jr[9];
+    gs_geom_rot_x(-0.25 * open, jr); /* head -> closed-jaw frame: back up */
+    for (int i = 0; i < 9; i++)
+        h->jaw_rot[i] = (float)jr[i];
+}
+
+/* Ears, the neck (cut flat 150 mm below the face centre) and the hair cap
+ * (the cranium grown by the hair thickness, behind the hairline). */
+static void build_ears_neck_hair(const build_ctx *b, const float *p,
+                                 head_model *h)
+{
+    h->has_ears = 1;
+    float es = 1.0f + 0.12f * p[GS_SYNTH_ID_EAR_SIZE];
+    float ep = p[GS_SYNTH_ID_EAR_PROTRUSION];
+    for (int i = 0; i < 2; i++) {
+        float s = i == 0 ? -1.0f : 1.0f;
+        h->ear[i] = ell(b, at(b, s * (h->ear_x + 3 * ep), -18, 60), 6, 28 * es,
+                        16 * es);
+    }
+    float nk = 1.0f + 0.08f * p[GS_SYNTH_ID_NECK_WIDTH];
+    h->neck_r[0] = 47 * nk * b->sc;
+    h->neck_r[1] = 44 * nk * b->sc;
+    v3 nc = at(b, 0, 30, 55);
+    h->neck_c[0] = nc.x;
+    h->neck_c[1] = nc.y;
+    h->neck_c[2] = nc.z;
+    h->neck_y0 = nc.y;
+    h->neck_cut_y = at(b, 0, 150, 0).y;
+    float ha = p[GS_SYNTH_ID_HAIR_AMOUNT];
+    h->has_hair = ha > -0.7f;
+    h->hair = h->cranium;
+    float thick = (6.0f + 4.0f * ha) * b->sc;
+    h->hair.r = v3_add(h->hair.r, v3_make(thick, thick, thick));
+    h->hair.c = v3_add(h->hair.c, v3_make(0, -0.5f * thick, 0));
+    ell_update(&h->hair);
+    /* The hairline plane holds the x-axis, the front hairline and the nape;
+     * its normal points to the face side. */
+    v3 hf = at(b, 0, -96 - 10 * p[GS_SYNTH_ID_HAIRLINE], -12);
+    v3 dir = v3_sub(at(b, 0, 35, 150), hf);
+    v3 n = v3_norm(v3_make(0, dir.z, -dir.y));
+    if (v3_dot(n, v3_sub(at(b, 0, 0, -20), hf)) < 0)
+        n = v3_scale(n, -1.0f);
+    h->hair_plane[0] = n.x;
+    h->hair_plane[1] = n.y;
+    h->hair_plane[2] = n.z;
+    h->hair_plane[3] = -v3_dot(n, hf);
+    h->hair_curve = (10.0f + 6.0f * p[GS_SYNTH_ID_HAIRLINE]) / (60.0f * 60.0f);
+}
+
+/* Brows are colour only; brow_raise moves them. */
+static void build_brows(const build_ctx *b, const float *p,
+                        const gs_synth_expression *ex, head_model *h)
+{
+    h->brow_raise = clampf(ex->brow_raise, -1.0f, 1.0f);
+    h->brow_y[0] = h->brow_y[1] = at(b, 0, -40, 0).y - 4.0f * h->brow_raise;
+    h->brow_arch = (3.0f + 1.5f * p[GS_SYNTH_ID_BROW_ARCH]) * b->sc;
+    h->brow_thick = (7.5f + 2.0f * p[GS_SYNTH_ID_BROW_THICKNESS]) * b->sc;
+    h->brow_x0 = 12.0f * b->sc;
+    h->brow_x1 = 56.0f * b->sc;
+}
+
+/* Bounds of the parts the field skips when far (see beyond()). */
+static void build_bounds(const build_ctx *b, head_model *h)
+{
+    h->jawbone_r = 0.5f * v3_len(v3_sub(h->jawbone[0].b, h->jawbone[0].a)) +
+                   maxf(h->jawbone[0].ra, h->jawbone[0].rb);
+    h->nose_bc = v3_scale(v3_add(h->bridge.a, h->nose_tip.c), 0.5f);
+    float r = maxf(v3_len(v3_sub(h->bridge.a, h->nose_bc)),
+                   v3_len(v3_sub(h->bridge.b, h->nose_bc))) + h->bridge.rb;
+    r = maxf(r, v3_len(v3_sub(h->nose_tip.c, h->nose_bc)) + rmax(&h->nose_tip));
+    for (int i = 0; i < 2; i++)
+        r = maxf(r, v3_len(v3_sub(h->nose_wing[i].c, h->nose_bc)) +
+                        rmax(&h->nose_wing[i]));
+    h->nose_br = r + 6.0f;
+    h->lips_bc = v3_scale(v3_add(h->lip_up.c, h->lip_lo.c), 0.5f);
+    h->lips_br = 0.5f * v3_len(v3_sub(h->lip_up.c, h->lip_lo.c)) +
+                 maxf(rmax(&h->lip_up), rmax(&h->lip_lo)) + 3.0f + 12.0f * h->smile;
+    compute_group_boxes(h);
+    /* Everything: generous around the cranium and the neck. */
+    h->bound_c = at(b, 0, -10, 55);
+    h->bound_r = 175.0f * b->sc;
+}
+
 static void build_raw(const gs_synth_identity *id,
                       const gs_synth_expression *ex, double gp, double gy,
                       v3 off, head_model *h)
@@ -248,153 +406,18 @@ static void build_raw(const gs_synth_identity *id,
     build_ctx b = {1.0f + 0.05f * p[GS_SYNTH_ID_HEAD_SIZE], off};
     memset(h, 0, sizeof *h);
     h->offset = off;
-    float hw = 1.0f + 0.06f * p[GS_SYNTH_ID_HEAD_WIDTH];
-    float hl = 1.0f + 0.05f * p[GS_SYNTH_ID_HEAD_LENGTH];
-    float hh = 1.0f + 0.05f * p[GS_SYNTH_ID_HEAD_HEIGHT];
-    float fl = 1.0f + 0.07f * p[GS_SYNTH_ID_FACE_LENGTH];
-    float fw = 1.0f + 0.06f * p[GS_SYNTH_ID_FACE_WIDTH];
-    float fs = p[GS_SYNTH_ID_FOREHEAD_SLOPE];
-    float br = p[GS_SYNTH_ID_BROW_RIDGE];
-    float jw = 1.0f + 0.08f * p[GS_SYNTH_ID_JAW_WIDTH];
-    float cp = p[GS_SYNTH_ID_CHIN_PROJECTION], ch = p[GS_SYNTH_ID_CHIN_HEIGHT];
-    float cb = p[GS_SYNTH_ID_CHEEKBONES], cf = p[GS_SYNTH_ID_CHEEK_FULLNESS];
-    float smile = clampf(ex->smile, 0.0f, 1.0f);
-
-    h->cranium = ell(&b, at(&b, 0, -40 - 4 * (hh - 1) * 20, 70 + 4 * fs),
-                     74 * hw, 95 * hh, 88 * hl);
-    h->face = ell(&b, at(&b, 0, 8 * fl, 20), 64 * fw, 50 * fl, 38);
-    h->jaw = ell(&b, at(&b, 0, 50 * fl, 22), 42 * jw, 34 * fl, 34);
+    build_skull_face(&b, p, clampf(ex->smile, 0.0f, 1.0f), h);
+    /* Eyes before the sockets, which are placed around them. */
     for (int i = 0; i < 2; i++) {
-        float s = i == 0 ? -1.0f : 1.0f;
-        h->jawbone[i].a = at(&b, s * 50 * jw, 38 * fl, 50);
-        h->jawbone[i].b = at(&b, s * 15 * jw, 80 * fl + 3 * ch, -3 - 2 * cp);
-        h->jawbone[i].ra = 9.0f * b.sc;
-        h->jawbone[i].rb = 11.0f * b.sc;
-    }
-    h->chin = ell(&b, at(&b, 0, 76 * fl + 3 * ch, -1 - 3 * cp), 23 * jw,
-                  16 * (1 + 0.1f * ch), 13);
-    h->brow = ell(&b, at(&b, 0, -44, -3 - 2 * br), 52, 10, 13 * (1 + 0.12f * br));
-    for (int i = 0; i < 2; i++) {
-        float s = i == 0 ? -1.0f : 1.0f;
-        h->zyg[i] = ell(&b, at(&b, s * 54 * fw * (1 + 0.05f * cb), -8, 16 - 2 * cb),
-                        16, 12, 15);
-        h->cheek[i] = ell(&b, at(&b, s * (40 * fw + 2 * smile), 12 - 4 * smile,
-                                 8 - 2 * cf - 2 * smile),
-                          22, 20, 12 + 2 * cf);
-    }
-    /* Eyes first: the sockets are placed around them. */
-    for (int i = 0; i < 2; i++)
         build_eye(&b, p, ex, gp, gy, i, &h->eye[i]);
-    for (int i = 0; i < 2; i++) {
-        v3 c = h->eye[i].c;
-        h->socket[i] = ell(&b, v3_add(c, v3_make(0, -1 * b.sc, -12 * b.sc)),
+        h->socket[i] = ell(&b, v3_add(h->eye[i].c, v3_make(0, -1 * b.sc, -12 * b.sc)),
                            20, 14, 13);
     }
-    /* Nose. */
-    float nl = 1.0f + 0.1f * p[GS_SYNTH_ID_NOSE_LENGTH];
-    float np = p[GS_SYNTH_ID_NOSE_PROJECTION], nb = p[GS_SYNTH_ID_NOSE_BRIDGE];
-    float nw = 1.0f + 0.12f * p[GS_SYNTH_ID_NOSE_WIDTH];
-    float nt = 1.0f + 0.1f * p[GS_SYNTH_ID_NOSE_TIP];
-    h->bridge.a = at(&b, 0, -28, -11 - 2 * nb);
-    h->bridge.b = at(&b, 0, -28 + 40 * nl, -27 - 3 * np);
-    h->bridge.ra = 5.0f * b.sc;
-    h->bridge.rb = 6.5f * nt * b.sc;
-    h->nose_tip = ell(&b, at(&b, 0, -28 + 42 * nl, -24 - 3 * np), 9 * nw * nt, 8, 8);
-    for (int i = 0; i < 2; i++) {
-        float s = i == 0 ? -1.0f : 1.0f;
-        h->nose_wing[i] = ell(&b, at(&b, s * 12 * nw, -28 + 47 * nl, -11 - np), 7, 6, 8);
-        h->nostril[i] = ell(&b, at(&b, s * 6 * nw, -28 + 50 * nl, -19 - 2 * np),
-                            3.5f, 2.2f, 5);
-    }
-    /* Mouth. The jaw opens about a transverse axis near the ear. */
-    float mw = 1.0f + 0.1f * p[GS_SYNTH_ID_MOUTH_WIDTH];
-    float ul = 1.0f + 0.2f * p[GS_SYNTH_ID_UPPER_LIP];
-    float ll = 1.0f + 0.2f * p[GS_SYNTH_ID_LOWER_LIP];
-    float my = 44 * fl + 3 * p[GS_SYNTH_ID_MOUTH_HEIGHT];
-    h->mouth_open = clampf(ex->mouth_open, 0.0f, 1.0f);
-    h->smile = smile;
-    h->mouth_w = 24 * mw * b.sc;
-    h->mouth_y = at(&b, 0, my, 0).y;
-    h->mouth_z = at(&b, 0, 0, -8).z;
-    h->lip_up = ell(&b, at(&b, 0, my - 4.2f * ul, -13.5f), 23 * mw, 4.6f * ul, 7);
-    h->lip_lo = ell(&b, at(&b, 0, my + 4.8f * ll, -12), 20 * mw, 5.0f * ll, 7);
-    float open = h->mouth_open;
-    h->cavity = ell(&b, at(&b, 0, my + 1 + 3 * open, -3), 19 * mw,
-                    0.2f + 8 * open, 14);
-    h->jaw_pivot = at(&b, 0, -5, 60);
-    double jr[9];
-    gs_geom_rot_x(-0.25 * open, jr); /* head -> closed-jaw frame: back up */
-    for (int i = 0; i < 9; i++)
-        h->jaw_rot[i] = (float)jr[i];
-    /* Ears, neck, hair. */
-    h->has_ears = 1;
-    float es = 1.0f + 0.12f * p[GS_SYNTH_ID_EAR_SIZE];
-    float ep = p[GS_SYNTH_ID_EAR_PROTRUSION];
-    for (int i = 0; i < 2; i++) {
-        float s = i == 0 ? -1.0f : 1.0f;
-        h->ear[i] = ell(&b, at(&b, s * (72 + 3 * ep) * hw, -18, 60), 6, 28 * es,
-                        16 * es);
-    }
-    float nk = 1.0f + 0.08f * p[GS_SYNTH_ID_NECK_WIDTH];
-    h->neck_r[0] = 47 * nk * b.sc;
-    h->neck_r[1] = 44 * nk * b.sc;
-    v3 nc = at(&b, 0, 30, 55);
-    h->neck_c[0] = nc.x;
-    h->neck_c[1] = nc.y;
-    h->neck_c[2] = nc.z;
-    h->neck_y0 = nc.y;
-    h->neck_cut_y = at(&b, 0, 150, 0).y;
-    float ha = p[GS_SYNTH_ID_HAIR_AMOUNT];
-    h->has_hair = ha > -0.7f;
-    h->hair = h->cranium;
-    float thick = (6.0f + 4.0f * ha) * b.sc;
-    h->hair.r = v3_add(h->hair.r, v3_make(thick, thick, thick));
-    h->hair.c = v3_add(h->hair.c, v3_make(0, -0.5f * thick, 0));
-    ell_update(&h->hair);
-    v3 hf = at(&b, 0, -96 - 10 * p[GS_SYNTH_ID_HAIRLINE], -12);
-    v3 hb = at(&b, 0, 35, 150);
-    v3 dir = v3_sub(hb, hf);
-    v3 n = v3_norm(v3_make(0, dir.z, -dir.y));
-    if (v3_dot(n, v3_sub(at(&b, 0, 0, -20), hf)) < 0) /* face side positive */
-        n = v3_scale(n, -1.0f);
-    h->hair_plane[0] = n.x;
-    h->hair_plane[1] = n.y;
-    h->hair_plane[2] = n.z;
-    h->hair_plane[3] = -v3_dot(n, hf);
-    h->hair_curve = (10.0f + 6.0f * p[GS_SYNTH_ID_HAIRLINE]) / (60.0f * 60.0f);
-    /* Blend radii. */
-    /* Brows (colour only; brow_raise moves them). */
-    h->brow_raise = clampf(ex->brow_raise, -1.0f, 1.0f);
-    h->brow_y[0] = h->brow_y[1] = at(&b, 0, -40, 0).y - 4.0f * h->brow_raise;
-    h->brow_arch = (3.0f + 1.5f * p[GS_SYNTH_ID_BROW_ARCH]) * b.sc;
-    h->brow_thick = (7.5f + 2.0f * p[GS_SYNTH_ID_BROW_THICKNESS]) * b.sc;
-    h->brow_x0 = 12.0f * b.sc;
-    h->brow_x1 = 56.0f * b.sc;
-    /* Bounds of the parts the field skips when far (see beyond()). */
-    h->jawbone_r = 0.5f * v3_len(v3_sub(h->jawbone[0].b, h->jawbone[0].a)) +
-                   maxf(h->jawbone[0].ra, h->jawbone[0].rb);
-    h->nose_bc = v3_scale(v3_add(h->bridge.a, h->nose_tip.c), 0.5f);
-    h->nose_br = 0.0f;
-    {
-        v3 pts[2] = {h->bridge.a, h->bridge.b};
-        for (int i = 0; i < 2; i++)
-            h->nose_br = maxf(h->nose_br, v3_len(v3_sub(pts[i], h->nose_bc)) +
-                                               h->bridge.rb + 6.0f);
-        h->nose_br = maxf(h->nose_br, v3_len(v3_sub(h->nose_tip.c, h->nose_bc)) +
-                                           rmax(&h->nose_tip) + 6.0f);
-        for (int i = 0; i < 2; i++)
-            h->nose_br = maxf(h->nose_br,
-                               v3_len(v3_sub(h->nose_wing[i].c, h->nose_bc)) +
-                                   rmax(&h->nose_wing[i]) + 6.0f);
-    }
-    h->lips_bc = v3_scale(v3_add(h->lip_up.c, h->lip_lo.c), 0.5f);
-    h->lips_br = 0.5f * v3_len(v3_sub(h->lip_up.c, h->lip_lo.c)) +
-                 maxf(rmax(&h->lip_up), rmax(&h->lip_lo)) + 3.0f +
-                 12.0f * smile;
-    compute_group_boxes(h);
-    /* Bounding sphere: generous around the cranium + neck. */
-    h->bound_c = at(&b, 0, -10, 55);
-    h->bound_r = 175.0f * b.sc;
+    build_nose(&b, p, h);
+    build_mouth(&b, p, ex, h);
+    build_ears_neck_hair(&b, p, h);
+    build_brows(&b, p, ex, h);
+    build_bounds(&b, h);
     build_appearance(id, h);
 }
 
@@ -407,8 +430,8 @@ void gs_synth_head_build(const gs_synth_identity *id,
     gs_synth_expression neutral;
     gs_synth_expression_neutral(&neutral);
     build_raw(id, &neutral, 0.0, 0.0, v3_make(0, 0, 0), h);
-    double lm[68][3], six[6][3], fc[3];
-    gs_synth_head_landmarks(h, lm);
+    double lm[68][3] = {{0}}, six[6][3], fc[3];
+    gs_synth_head_face_points(h, lm);
     static const int idx[6] = {36, 39, 42, 45, 31, 35};
     for (int i = 0; i < 6; i++)
         for (int k = 0; k < 3; k++)

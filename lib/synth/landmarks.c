@@ -197,6 +197,12 @@ static void mouth_landmarks(const head_model *h, double lm[68][3])
     }
 }
 
+void gs_synth_head_face_points(const head_model *h, double lm[68][3])
+{
+    nose_landmarks(h, lm);
+    eye_landmarks(h, lm);
+}
+
 void gs_synth_head_landmarks(const head_model *h, double lm[68][3])
 {
     jaw_landmarks(h, lm);

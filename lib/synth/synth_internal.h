@@ -152,6 +152,7 @@ typedef struct head_model {
     float hair_plane[4]; /* hair where dot(n, p) + d + curve x^2 < 0 */
     float hair_curve;
     int has_hair, has_ears;
+    float ear_x;       /* lateral position of the ears (build frame) */
     v3 jaw_pivot;
     float jaw_rot[9];  /* closed-jaw frame from head frame */
     float jawbone_r;           /* bounding radius of a jawbone capsule */
@@ -208,5 +209,8 @@ v3 gs_synth_skin_albedo(const head_model *h, v3 p, int material);
 
 /* The 68 landmarks, head frame, for the built head. */
 void gs_synth_head_landmarks(const head_model *h, double lm[68][3]);
+/* Only the nose (27-35) and eye (36-47) points, which define the face
+ * centre; the other entries are left untouched. */
+void gs_synth_head_face_points(const head_model *h, double lm[68][3]);
 
 #endif
