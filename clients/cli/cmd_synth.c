@@ -29,7 +29,7 @@ const cli_command cli_synth_command = {
     "  --rig RIG             normalized (default): normalized face images\n"
     "                        (d_n 680 mm, f_n 1600 px at 512); single: one\n"
     "                        camera at 600 mm; ethx: 18 cameras around the head,\n"
-    "                        image i from camera i mod 18\n"
+    "                        image i = camera i mod 18 of frame i / 18\n"
     "  --supersample 1|2     samples per pixel edge (default 1)\n"
     "  --no-masks            skip the mask images\n"
     "  --threads N           worker threads (default: one per CPU)\n"

@@ -107,6 +107,11 @@ static int write_readme(const char *dir, const gs_synth_gen_config *c,
             (unsigned long long)c->identities, (unsigned long long)c->seed, c->size,
             c->size, rig_names[c->rig],
             c->supersample == 2 ? "2x2 supersampled" : "one sample per pixel");
+    if (c->rig == GS_SYNTH_RIG_ETHX)
+        fprintf(f, "Rig ethx: image N is camera N %% 18 of frame N / 18; the 18 "
+                   "views of a frame show the same scene. Cameras: 3 rows (pitch "
+                   "+20, 0, -20 deg) x 6 columns (yaw 62.5 .. -62.5 deg, image-left "
+                   "first) on a sphere around the head's nominal position.\n\n");
     fputs(readme_fields, f);
     int bad = ferror(f);
     bad |= fclose(f) != 0;

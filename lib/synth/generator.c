@@ -33,7 +33,9 @@ int gs_synth_gen_scene(const gs_synth_gen_config *c, uint64_t index,
     if (c->size < 1 || c->size > 8192)
         return gs_error_set(err, GS_ERR_ARG, "synth: size %d outside 1..8192",
                             c->size);
-    uint64_t h = gs_synth_hash2(c->seed, index);
+    /* The dome's 18 views of one frame share its scene. */
+    uint64_t frame = c->rig == GS_SYNTH_RIG_ETHX ? index / GS_SYNTH_ETHX_CAMERAS : index;
+    uint64_t h = gs_synth_hash2(c->seed, frame);
     uint64_t k = gs_synth_hash2(h, 0x6964ULL) % c->identities;
     gs_synth_scene_random(gs_synth_split_seed(c->split, k), h, &c->ranges, scene);
     switch (c->rig) {

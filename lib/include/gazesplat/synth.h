@@ -292,7 +292,8 @@ void gs_synth_template_free(gs_synth_template *t);
 /* ---- on-the-fly generator ---- */
 typedef enum gs_synth_rig {
     GS_SYNTH_RIG_SINGLE = 0,     /* one frontal camera */
-    GS_SYNTH_RIG_ETHX = 1,       /* 18 cameras; sample i uses camera i % 18 */
+    GS_SYNTH_RIG_ETHX = 1,       /* 18 cameras: sample i is camera i % 18 of
+                                    frame i / 18 (the views share a scene) */
     GS_SYNTH_RIG_NORMALIZED = 2  /* normalized face images (default d_n, f_n) */
 } gs_synth_rig;
 
@@ -308,9 +309,10 @@ typedef struct gs_synth_gen_config {
 
 void gs_synth_gen_config_default(gs_synth_gen_config *c);
 
-/* Scene and camera of sample `index` of a configuration: identity
- * k = hash(seed, index) mod identities of the split, scene seed
- * hash(seed, index). Pure function of (config, index). */
+/* Scene and camera of sample `index` of a configuration: with
+ * f = index (index / 18 for the ETH-XGaze-like rig), identity
+ * k = hash(hash(seed, f), 0x6964) mod identities of the split and scene
+ * seed hash(seed, f). Pure function of (config, index). */
 int gs_synth_gen_scene(const gs_synth_gen_config *c, uint64_t index,
                        gs_synth_scene *scene, gs_synth_camera *cam,
                        gs_error *err);
