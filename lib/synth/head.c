@@ -310,7 +310,6 @@ static void build_mouth(const build_ctx *b, const float *p,
     h->smile = clampf(ex->smile, 0.0f, 1.0f);
     h->mouth_w = 24 * mw * b->sc;
     h->mouth_y = at(b, 0, my, 0).y;
-    h->mouth_z = at(b, 0, 0, -8).z;
     h->lip_up = ell(b, at(b, 0, my - 4.2f * ul, -13.5f), 23 * mw, 4.6f * ul, 7);
     h->lip_lo = ell(b, at(b, 0, my + 4.8f * ll, -12), 20 * mw, 5.0f * ll, 7);
     h->cavity = ell(b, at(b, 0, my + 1 + 3 * open, -3), 19 * mw, 0.2f + 8 * open, 14);

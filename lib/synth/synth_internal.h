@@ -88,7 +88,7 @@ float gs_synth_noise3(v3 p, uint32_t seed);
 
 /* ---- the built head ---- */
 
-/* Axis-aligned ellipsoid, or rotated when rot != NULL-equivalent flag. */
+/* Axis-aligned ellipsoid. */
 typedef struct sd_ell {
     v3 c, r;
     v3 ir, ir2;   /* 1/r and 1/r^2 */
@@ -116,9 +116,12 @@ enum {
     MAT_COUNT
 };
 
-/* One eye. Frames: `rot` (row-major) maps eye-local to head: local -z is
- * the optical axis; `lid_rot` maps lid-local to head: local x runs from the
- * outer to the inner corner... see head.c. */
+/* One eye, head frame. The eyeball is the union of the sclera sphere and
+ * the corneal sphere (through the limbus); the iris is a disc on a plane
+ * across the optical axis. Lids: a shell around the eyeball outside the
+ * wedge between two planes through the lid axis (inner -> outer corner);
+ * n_up/n_lo point into the covered side, up_dir/lo_dir run along the
+ * margins toward the front. */
 typedef struct eye_model {
     v3 c;              /* eyeball centre */
     v3 axis;           /* optical axis, unit, out of the eye */
@@ -146,7 +149,7 @@ typedef struct head_model {
         nose_wing[2], lip_up, lip_lo, ear[2], hair, socket[2], nostril[2];
     sd_capsule bridge, jawbone[2];
     float neck_r[2], neck_c[3], neck_y0, neck_y1;
-    float mouth_w, mouth_open, mouth_y, mouth_z;
+    float mouth_w, mouth_open, mouth_y;
     float smile;
     sd_ell cavity;
     float hair_plane[4]; /* hair where dot(n, p) + d + curve x^2 < 0 */
