@@ -136,7 +136,7 @@ typedef struct eye_model {
     /* Lids: a shell around the eyeball (gap < offset < gap + thick) outside
      * the opening wedge between two planes through the lid axis. */
     float lid_gap, lid_thick;
-    v3 lid_x;          /* lid axis (unit), toward the subject's left */
+    v3 lid_x;          /* lid axis (unit), inner toward outer corner */
     v3 n_up, n_lo;     /* outward normals of the two wedge planes */
     v3 up_dir, lo_dir; /* in-plane directions of the lid margins (front) */
     float lid_bound_r;
