@@ -28,7 +28,6 @@ V_INLINE m4 msplat(int32_t a) { return (m4){a, a, a, a}; }
 V_INLINE f4 sel(m4 m, f4 a, f4 b) { return (f4)((m & (m4)a) | (~m & (m4)b)); }
 V_INLINE int any(m4 m) { return (m[0] | m[1] | m[2] | m[3]) != 0; }
 V_INLINE f4 vmax(f4 a, f4 b) { return sel(a > b, a, b); }
-V_INLINE f4 vmin(f4 a, f4 b) { return sel(a < b, a, b); }
 V_INLINE f4 vabs(f4 a) { return (f4)((m4)a & msplat(0x7fffffff)); }
 V_INLINE f4 vsqrt(f4 a)
 {
