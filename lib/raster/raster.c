@@ -179,6 +179,31 @@ static jacobian persp_jacobian(const gs_camera *cam, float x, float y, float z)
     return J;
 }
 
+/* Gaussian i in the camera frame: mean, rotation, scales, covariance and
+ * the clamped Jacobian, shared by the projection and its gradient. Returns 0
+ * (leaving the rest unset) when the mean is outside the near/far range. */
+typedef struct {
+    float x, y, z;
+    float R[9], qn[4], s[3], Sc[9];
+    jacobian J;
+} camera_gaussian;
+
+static int to_camera(const gs_raster *r, int i, camera_gaussian *cg)
+{
+    const float *V = r->cam.viewmat, *p = r->g.means + 3 * (size_t)i;
+    cg->x = V[0] * p[0] + V[1] * p[1] + V[2] * p[2] + V[3];
+    cg->y = V[4] * p[0] + V[5] * p[1] + V[6] * p[2] + V[7];
+    cg->z = V[8] * p[0] + V[9] * p[1] + V[10] * p[2] + V[11];
+    if (!(cg->z >= GS_RASTER_NEAR) || !(cg->z <= GS_RASTER_FAR))
+        return 0;
+    quat_to_rot(r->g.quats + 4 * (size_t)i, cg->R, cg->qn);
+    for (int k = 0; k < 3; k++)
+        cg->s[k] = expf(r->g.log_scales[3 * (size_t)i + k]);
+    camera_covariance(V, cg->R, cg->s, cg->Sc);
+    cg->J = persp_jacobian(&r->cam, cg->x, cg->y, cg->z);
+    return 1;
+}
+
 typedef struct {
     gs_raster *r;
     int fast;
@@ -192,18 +217,12 @@ static void project_one(gs_raster *r, int i, int fast)
     const gs_gaussians *g = &r->g;
     gs_proj *P = &r->proj;
     P->radius[i] = 0.0f;
-    const float *V = cam->viewmat, *p = g->means + 3 * (size_t)i;
-    float x = V[0] * p[0] + V[1] * p[1] + V[2] * p[2] + V[3];
-    float y = V[4] * p[0] + V[5] * p[1] + V[6] * p[2] + V[7];
-    float z = V[8] * p[0] + V[9] * p[1] + V[10] * p[2] + V[11];
-    if (!(z >= GS_RASTER_NEAR) || !(z <= GS_RASTER_FAR))
+    camera_gaussian cg;
+    if (!to_camera(r, i, &cg))
         return;
-    float R[9], qn[4], s[3], Sc[9];
-    quat_to_rot(g->quats + 4 * (size_t)i, R, qn);
-    for (int k = 0; k < 3; k++)
-        s[k] = expf(g->log_scales[3 * (size_t)i + k]);
-    camera_covariance(V, R, s, Sc);
-    jacobian J = persp_jacobian(cam, x, y, z);
+    float x = cg.x, y = cg.y, z = cg.z;
+    const float *Sc = cg.Sc;
+    jacobian J = cg.J;
     /* Sigma2 = J Sc J^T with J = [[j00, 0, j02], [0, j11, j12]]. */
     float s00 = J.j00 * J.j00 * Sc[0] + 2 * J.j00 * J.j02 * Sc[2] + J.j02 * J.j02 * Sc[8];
     float s11 = J.j11 * J.j11 * Sc[4] + 2 * J.j11 * J.j12 * Sc[5] + J.j12 * J.j12 * Sc[8];
@@ -527,16 +546,12 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
         return;
     const gs_camera *cam = &r->cam;
     const gs_gaussians *g = &r->g;
-    const float *V = cam->viewmat, *p = g->means + 3 * (size_t)i;
-    float x = V[0] * p[0] + V[1] * p[1] + V[2] * p[2] + V[3];
-    float y = V[4] * p[0] + V[5] * p[1] + V[6] * p[2] + V[7];
-    float z = V[8] * p[0] + V[9] * p[1] + V[10] * p[2] + V[11];
-    float R[9], qn[4], s[3], Sc[9];
-    quat_to_rot(g->quats + 4 * (size_t)i, R, qn);
-    for (int k = 0; k < 3; k++)
-        s[k] = expf(g->log_scales[3 * (size_t)i + k]);
-    camera_covariance(V, R, s, Sc);
-    jacobian J = persp_jacobian(cam, x, y, z);
+    camera_gaussian cg;
+    to_camera(r, i, &cg); /* visible, so inside the near and far planes */
+    const float *V = cam->viewmat;
+    float x = cg.x, y = cg.y, z = cg.z;
+    const float *R = cg.R, *qn = cg.qn, *s = cg.s, *Sc = cg.Sc;
+    jacobian J = cg.J;
 
     float vS2[4];
     conic_vjp(r, i, vS2);
