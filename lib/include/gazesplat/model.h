@@ -1,0 +1,132 @@
+/* gs_model: the GazeGaussian head model, its file, fitting and redirection.
+ *
+ * A trained model is a set of neutral 3D Gaussians in the head frame (a face
+ * stream on the face surface, an eye stream on each eyeball), the MLPs that
+ * deform them from a latent code tau (identity + expression), the head pose
+ * and the gaze, and an expression-guided neural renderer that turns the
+ * rasterized 32-channel feature map into an RGB image.
+ *
+ * Frames and units are those of gazesplat/geom.h: head frame (x toward the
+ * subject's left, y down, z into the head, origin at the face centre), mm,
+ * radians, gaze in the head frame with the ETH-XGaze signs (pitch > 0 looks
+ * up, yaw > 0 looks toward image-left for a frontal head).
+ *
+ * A model renders normalized face images (DESIGN.md normalization): square,
+ * config.image_size pixels, the face centre on the optical axis. A gs_view
+ * gives the head pose in that camera (default: the fitted one).
+ *
+ * Threads: a gs_model is immutable once loaded and may be shared by any
+ * number of threads; each thread renders and fits through its own
+ * gs_model_ctx (workspace). Results are bit-identical for any pool size.
+ * No call ever returns an image with a non-finite value. */
+#ifndef GAZESPLAT_MODEL_H
+#define GAZESPLAT_MODEL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gazesplat/error.h"
+#include "gazesplat/pool.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define GS_MODEL_FORMAT_VERSION 1
+#define GS_MODEL_MAX_CODE 256
+
+/* Documented ranges of the inputs, radians. Outside them: GS_ERR_ARG. */
+#define GS_MODEL_MAX_GAZE_PITCH 0.8727 /* 50 deg */
+#define GS_MODEL_MAX_GAZE_YAW 1.0472   /* 60 deg */
+#define GS_MODEL_MAX_HEAD_ANGLE 1.2217 /* 70 deg, pitch and yaw */
+
+typedef struct gs_model gs_model;
+typedef struct gs_model_ctx gs_model_ctx;
+
+/* Loads and validates a model file (safetensors, see docs/model.md).
+ * A truncated, corrupt or inconsistent file gives GS_ERR_FORMAT with a
+ * message naming the tensor or field. */
+int gs_model_load(const char *path, gs_model **out, gs_error *err);
+void gs_model_destroy(gs_model *m);
+
+/* What callers need to know about a loaded model. */
+typedef struct gs_model_info {
+    int image_size;   /* output images are image_size x image_size RGB */
+    int feat_size;    /* rasterized feature map edge */
+    int code_dim;     /* latent code length */
+    int n_face, n_eye; /* Gaussians: face stream, eye stream (both eyes) */
+    double focal;     /* normalized camera focal length, pixels */
+    double distance_mm; /* normalized camera distance d_n */
+    size_t param_bytes; /* memory held by the parameters */
+} gs_model_info;
+void gs_model_get_info(const gs_model *m, gs_model_info *info);
+
+/* A fitted subject: everything that differs from one face to the next. A
+ * plain value, copied by assignment; serialize with gs_subject_encode. */
+typedef struct gs_subject {
+    int code_dim;
+    float code[GS_MODEL_MAX_CODE];
+    double head_R[9];   /* head to normalized camera rotation */
+    double head_t[3];   /* face centre in the normalized camera, mm */
+    double gaze_pitch, gaze_yaw; /* gaze of the fitted image, head frame */
+    float colour_gain[3], colour_bias[3]; /* per-subject output colour */
+    float fit_psnr, fit_ssim;   /* fit quality on the input image */
+} gs_subject;
+
+/* Fixed-size little-endian encoding of a subject (for caches on disk).
+ * encode returns the bytes written or needed; decode refuses bad input. */
+#define GS_SUBJECT_ENCODED_MAX 2048
+size_t gs_subject_encode(const gs_subject *s, uint8_t *buf, size_t cap);
+int gs_subject_decode(const uint8_t *buf, size_t len, gs_subject *s,
+                      gs_error *err);
+
+/* A view to render: gaze in the head frame and head pose in the camera. */
+typedef struct gs_view {
+    double gaze_pitch, gaze_yaw;
+    int use_head;        /* 0: the subject's own head pose */
+    double head_R[9], head_t[3];
+} gs_view;
+
+gs_model_ctx *gs_model_ctx_create(const gs_model *m);
+void gs_model_ctx_destroy(gs_model_ctx *c);
+
+/* Renders `view` of subject `s` into rgb (image_size^2, 8-bit sRGB RGB,
+ * `stride` bytes per row). Consecutive calls for the same subject and
+ * head pose reuse the cached face stream: only the eye stream is redone. */
+int gs_model_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
+                    const gs_view *view, uint8_t *rgb, size_t stride,
+                    gs_error *err);
+
+/* ---- fitting a new face ---- */
+typedef struct gs_fit_options {
+    int max_iters;       /* <= 0: default 200 */
+    double time_budget_s; /* <= 0: none */
+    double plateau_rel;  /* stop when the loss improves by less than this
+                            fraction over 20 iterations; <= 0: 1e-3 */
+    int known_gaze;      /* 1: gaze_pitch/yaw are given and kept fixed */
+    double gaze_pitch, gaze_yaw;
+    int known_head;      /* 1: head_R/head_t are given and kept fixed */
+    double head_R[9], head_t[3];
+    const uint8_t *mask; /* image_size^2 weights 0..255 (face region), or
+                            NULL for the whole image */
+} gs_fit_options;
+void gs_fit_options_default(gs_fit_options *o);
+
+typedef struct gs_fit_report {
+    int iters;
+    double seconds;
+    double loss_first, loss_last;
+    int stopped_on_plateau;
+} gs_fit_report;
+
+/* Fits a subject to one normalized face image (image_size^2 RGB). A fit
+ * that diverges returns GS_ERR_NONFINITE with the iteration in the
+ * message and leaves *out unchanged. */
+int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
+                 size_t stride, const gs_fit_options *opt, gs_subject *out,
+                 gs_fit_report *report, gs_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif
