@@ -20,6 +20,8 @@
 #include <stdio.h>
 #include <string.h>
 
+#include <cblas.h>
+
 #include "gazesplat/nn.h"
 
 #define LRELU_SLOPE 0.2f
@@ -222,6 +224,7 @@ typedef struct {
     float *rgb1a, *rgb1b; /* [3, HW1] scratch */
     float *rgb0;         /* [3, HW0] scratch */
     float *gscr;         /* [GUIDE_SCRATCH C] scratch */
+    float *rows;         /* [2 * 4W] scratch rows of the blurs */
     size_t total;        /* floats */
 } act_layout;
 
@@ -274,6 +277,7 @@ static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
     L->rgb1b = carve(L, base, 3 * L->hw1);
     L->rgb0 = carve(L, base, 3 * L->hw0);
     L->gscr = carve(L, base, GUIDE_SCRATCH * Cs);
+    L->rows = carve(L, base, 8 * (size_t)W);
 }
 
 size_t gs_renderer_act_size(const gs_renderer_config *cfg, int H, int W)
@@ -336,6 +340,15 @@ static void add_into(float *dst, const float *src, size_t n)
         dst[i] += src[i];
 }
 
+/* y[n] = lrelu(y) in place, as gs_nn_leaky_relu_forward; written as a
+ * select of the factor so that it vectorises (random signs make a branch
+ * mispredict half the time). */
+static void lrelu_forward_inplace(float *y, size_t n)
+{
+    for (size_t i = 0; i < n; i++)
+        y[i] *= y[i] > 0.0f ? 1.0f : LRELU_SLOPE;
+}
+
 /* d[n] *= lrelu'(in), from the saved output y = lrelu(in) (see top). */
 static void lrelu_backward_inplace(float *d, const float *y, size_t n)
 {
@@ -364,8 +377,8 @@ static void shuffle_tile_forward(float *out, const float *y, const float *x,
         }
 }
 
-/* The adjoint: dy[4C,H,W] += and dx[C,H,W] += (dx may be NULL) from
- * dout[C,2H,2W]. */
+/* The adjoint: dy[4C,H,W] = (written) and dx[C,H,W] += (dx may be NULL)
+ * from dout[C,2H,2W]. */
 static void shuffle_tile_backward(float *dy, float *dx, const float *dout,
                                   int C, int H, int W)
 {
@@ -379,7 +392,7 @@ static void shuffle_tile_backward(float *dy, float *dx, const float *dout,
                 const float *g = src + (size_t)h * 2 * W2;
                 float *a = ddst + (size_t)h * (size_t)W;
                 for (int w = 0; w < W; w++)
-                    a[w] += g[2 * (size_t)w];
+                    a[w] = g[2 * (size_t)w];
                 if (!dskip)
                     continue;
                 float *s = dskip + (size_t)h * (size_t)W;
@@ -387,6 +400,110 @@ static void shuffle_tile_backward(float *dy, float *dx, const float *dout,
                     s[w] += g[2 * (size_t)w];
             }
         }
+}
+
+/* ---- Blur and 1x1 convolution backward, renderer-shaped ------------------
+ * The same maths as gs_nn_blur_* and gs_nn_conv1x1_backward, arranged for
+ * this network: the blur is separable and runs row by row with the
+ * reflected border handled outside the inner loops (which vectorise), and
+ * the backward passes WRITE their input gradient (every such buffer here is
+ * fresh), which saves a zeroing pass over each. Rounding differs from the
+ * gs_nn kernels in the last bits; the PyTorch test covers both. */
+
+/* Reflect index i in [-1, n] into [0, n) (PyTorch 'reflect', n >= 2). */
+static int reflect(int i, int n)
+{
+    return i < 0 ? -i : (i >= n ? 2 * n - 2 - i : i);
+}
+
+/* o[W] = [1,2,1] * v[W] with reflected ends, times scale (W >= 2). */
+static void row_blur(float *o, const float *v, int W, float scale)
+{
+    o[0] = (2.0f * v[1] + 2.0f * v[0]) * scale;
+    for (int x = 1; x < W - 1; x++)
+        o[x] = (v[x - 1] + 2.0f * v[x] + v[x + 1]) * scale;
+    o[W - 1] = (2.0f * v[W - 2] + 2.0f * v[W - 1]) * scale;
+}
+
+/* The adjoint of row_blur without the scale: e[W] from g[W] (W >= 2). The
+ * reflected taps y[0] <- x[1] and y[W-1] <- x[W-2] send g[0] to e[1] and
+ * g[W-1] to e[W-2]. */
+static void row_blur_adjoint(float *e, const float *g, int W)
+{
+    e[0] = 2.0f * g[0] + g[1];
+    for (int x = 1; x < W - 1; x++)
+        e[x] = g[x - 1] + 2.0f * g[x] + g[x + 1];
+    e[W - 1] = g[W - 2] + 2.0f * g[W - 1];
+    e[1] += g[0];
+    e[W - 2] += g[W - 1];
+}
+
+/* out[C,H,W] = ([1,2,1] x [1,2,1] / 16) * in, reflect border (H, W >= 2);
+ * row scratch v[W]. */
+static void blur_forward(float *out, const float *in, int C, int H, int W,
+                         float *v)
+{
+    size_t hw = (size_t)H * (size_t)W;
+    for (int c = 0; c < C; c++)
+        for (int y = 0; y < H; y++) {
+            const float *src = in + (size_t)c * hw;
+            const float *a = src + (size_t)reflect(y - 1, H) * (size_t)W;
+            const float *b = src + (size_t)y * (size_t)W;
+            const float *d = src + (size_t)reflect(y + 1, H) * (size_t)W;
+            for (int x = 0; x < W; x++)
+                v[x] = a[x] + 2.0f * b[x] + d[x];
+            row_blur(out + (size_t)c * hw + (size_t)y * (size_t)W, v, W,
+                     1.0f / 16.0f);
+        }
+}
+
+/* din[C,H,W] = blur^T dout (written, not added); row scratch 2W floats. */
+static void blur_backward(float *din, const float *dout, int C, int H, int W,
+                          float *scratch)
+{
+    size_t hw = (size_t)H * (size_t)W, Ws = (size_t)W;
+    float *prev = scratch, *cur = scratch + W;
+    for (int c = 0; c < C; c++) {
+        float *d = din + (size_t)c * hw;
+        memset(prev, 0, Ws * sizeof *prev); /* row -1: weight 0, but finite */
+        for (int y = 0; y < H; y++) /* rows: e = row adjoint of dout */
+            row_blur_adjoint(d + (size_t)y * Ws, dout + (size_t)c * hw + (size_t)y * Ws, W);
+        /* columns, in place: row k gets e[k-1] + 2 e[k] + e[k+1] (zero
+         * outside), plus the reflected taps e[0] -> row 1, e[H-1] -> row
+         * H-2; prev keeps the original e[k-1] */
+        for (int k = 0; k < H; k++) {
+            float *row = d + (size_t)k * Ws;
+            const float *next = k + 1 < H ? row + Ws : row; /* unused at H-1 */
+            float wu = (k > 0 ? 1.0f : 0.0f) + (k == 1 ? 1.0f : 0.0f);
+            float wd = (k + 1 < H ? 1.0f : 0.0f) + (k == H - 2 ? 1.0f : 0.0f);
+            memcpy(cur, row, Ws * sizeof *cur);
+            for (int x = 0; x < W; x++)
+                row[x] = (wu * prev[x] + 2.0f * cur[x] + wd * next[x]) *
+                         (1.0f / 16.0f);
+            float *t = prev;
+            prev = cur, cur = t;
+        }
+    }
+}
+
+/* dinp[IC,HW] = w^T dout (written; skipped when NULL); dw[OC,IC] += dout
+ * in^T; db[OC] += row sums of dout (double accumulators). */
+static void conv_backward(float *dinp, float *dw, float *db, const float *dout,
+                          const float *in, const float *w, int IC, int OC,
+                          int HW)
+{
+    if (dinp)
+        cblas_sgemm(CblasRowMajor, CblasTrans, CblasNoTrans, IC, HW, OC, 1.0f,
+                    w, IC, dout, HW, 0.0f, dinp, HW);
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, OC, IC, HW, 1.0f, dout,
+                HW, in, HW, 1.0f, dw, IC);
+    for (int o = 0; o < OC; o++) {
+        const float *row = dout + (size_t)o * (size_t)HW;
+        double acc = 0.0;
+        for (int p = 0; p < HW; p++)
+            acc += row[p];
+        db[o] += (float)acc;
+    }
 }
 
 /* ---- Multiplicative guidance ---------------------------------------------
@@ -601,18 +718,21 @@ static int block_forward(const gs_renderer_config *cfg, const act_layout *L,
     size_t ni = (size_t)hwi, no = (size_t)hwo, Cs = (size_t)C;
     int rc = gs_nn_conv1x1_forward(a->ya, xin, p->block[b].a.w, p->block[b].a.b,
                                    C, 2 * C, hwi);
-    rc = rc ? rc : gs_nn_leaky_relu_forward(a->ya, a->ya, LRELU_SLOPE, 2 * Cs * ni);
+    if (!rc)
+        lrelu_forward_inplace(a->ya, 2 * Cs * ni);
     rc = rc ? rc : gs_nn_conv1x1_forward(a->yb, a->ya, p->block[b].b.w,
                                          p->block[b].b.b, 2 * C, 4 * C, hwi);
-    rc = rc ? rc : gs_nn_leaky_relu_forward(a->yb, a->yb, LRELU_SLOPE, 4 * Cs * ni);
     if (rc)
         return rc;
+    lrelu_forward_inplace(a->yb, 4 * Cs * ni);
     shuffle_tile_forward(L->bufP, a->yb, xin, C, Hi, Wi);
-    rc = gs_nn_blur_forward(a->z, L->bufP, C, 2 * Hi, 2 * Wi);
-    rc = rc ? rc : gs_nn_conv1x1_forward(a->u, a->z, p->block[b].c.w,
+    blur_forward(a->z, L->bufP, C, 2 * Hi, 2 * Wi, L->rows);
+    rc = gs_nn_conv1x1_forward(a->u, a->z, p->block[b].c.w,
                                          p->block[b].c.b, C, C, hwo);
-    rc = rc ? rc : gs_nn_leaky_relu_forward(a->u, a->u, LRELU_SLOPE, Cs * no);
-    return rc ? rc : guide_forward(cfg, L, a, p, tau, no);
+    if (rc)
+        return rc;
+    lrelu_forward_inplace(a->u, Cs * no);
+    return guide_forward(cfg, L, a, p, tau, no);
 }
 
 /* Block b backward. dg [C,HWo] (consumed) and work [>= C HWo] are two
@@ -624,37 +744,32 @@ static int block_backward(const gs_renderer_config *cfg, const act_layout *L,
                           float *work, float *dxin, float *dtau)
 {
     const block_acts *a = &L->blk[b];
-    int C = L->C, hwi = Hi * Wi, hwo = 4 * hwi, rc = GS_OK;
+    int C = L->C, hwi = Hi * Wi, hwo = 4 * hwi;
     size_t ni = (size_t)hwi, no = (size_t)hwo, Cs = (size_t)C;
     float *cur = dg, *other = work, *t;
     if (cfg->guidance != GS_GUIDE_NONE) { /* du = guide^T dg */
         zero(other, Cs * no);
-        rc = guide_backward(cfg, L, a, p, dp, tau, dtau, cur, other, no);
+        int rc = guide_backward(cfg, L, a, p, dp, tau, dtau, cur, other, no);
+        if (rc)
+            return rc;
         t = cur, cur = other, other = t;
     }
     lrelu_backward_inplace(cur, a->u, Cs * no); /* d(conv_c out) */
-    zero(other, Cs * no);                       /* dz */
-    rc = rc ? rc : gs_nn_conv1x1_backward(other, dp->block[b].c.w,
-                                          dp->block[b].c.b, cur, a->z,
-                                          p->block[b].c.w, C, C, hwo);
+    conv_backward(other, dp->block[b].c.w, dp->block[b].c.b, cur, a->z,
+                  p->block[b].c.w, C, C, hwo); /* dz */
     t = cur, cur = other, other = t;
-    zero(other, Cs * no); /* d(shuffle + tile) */
-    rc = rc ? rc : gs_nn_blur_backward(other, cur, C, 2 * Hi, 2 * Wi);
-    if (rc)
-        return rc;
+    blur_backward(other, cur, C, 2 * Hi, 2 * Wi, L->rows); /* d(shuffle+tile) */
     t = cur, cur = other, other = t;
-    zero(other, 4 * Cs * ni); /* dyb */
-    shuffle_tile_backward(other, dxin, cur, C, Hi, Wi);
+    shuffle_tile_backward(other, dxin, cur, C, Hi, Wi); /* dyb, dxin += */
     t = cur, cur = other, other = t;
     lrelu_backward_inplace(cur, a->yb, 4 * Cs * ni);
-    zero(other, 2 * Cs * ni); /* dya */
-    rc = gs_nn_conv1x1_backward(other, dp->block[b].b.w, dp->block[b].b.b, cur,
-                                a->ya, p->block[b].b.w, 2 * C, 4 * C, hwi);
+    conv_backward(other, dp->block[b].b.w, dp->block[b].b.b, cur, a->ya,
+                  p->block[b].b.w, 2 * C, 4 * C, hwi); /* dya */
     t = cur, cur = other, other = t;
     lrelu_backward_inplace(cur, a->ya, 2 * Cs * ni);
-    return rc ? rc : gs_nn_conv1x1_backward(dxin, dp->block[b].a.w,
-                                            dp->block[b].a.b, cur, xin,
-                                            p->block[b].a.w, C, 2 * C, hwi);
+    /* dxin accumulates (the caller's dx, or the skip term added above) */
+    return gs_nn_conv1x1_backward(dxin, dp->block[b].a.w, dp->block[b].a.b, cur,
+                                  xin, p->block[b].a.w, C, 2 * C, hwi);
 }
 
 /* ---- Forward and backward ------------------------------------------------ */
@@ -684,13 +799,17 @@ int gs_renderer_forward(const gs_renderer_config *cfg,
     /* rgb = blur(up2x(conv_rgb0(x))) in rgb1a */
     rc = gs_nn_conv1x1_forward(L.rgb0, x, p->rgb0.w, p->rgb0.b, C, 3, (int)L.hw0);
     rc = rc ? rc : gs_nn_upsample2x_forward(L.rgb1b, L.rgb0, 3, H, W);
-    rc = rc ? rc : gs_nn_blur_forward(L.rgb1a, L.rgb1b, 3, H1, W1);
-    rc = rc ? rc : block_forward(cfg, &L, 0, p, x, tau, H, W);
+    if (rc)
+        return rc;
+    blur_forward(L.rgb1a, L.rgb1b, 3, H1, W1, L.rows);
+    rc = block_forward(cfg, &L, 0, p, x, tau, H, W);
     rc = rc ? rc : rgb_add(L.rgb1a, L.rgb1b, &p->block[0].rgb, L.blk[0].g, C, L.hw1);
     /* rgb = blur(up2x(rgb)) in rgb2a */
     rc = rc ? rc : gs_nn_upsample2x_forward(L.rgb2b, L.rgb1a, 3, H1, W1);
-    rc = rc ? rc : gs_nn_blur_forward(L.rgb2a, L.rgb2b, 3, 2 * H1, 2 * W1);
-    rc = rc ? rc : block_forward(cfg, &L, 1, p, L.blk[0].g, tau, H1, W1);
+    if (rc)
+        return rc;
+    blur_forward(L.rgb2a, L.rgb2b, 3, 2 * H1, 2 * W1, L.rows);
+    rc = block_forward(cfg, &L, 1, p, L.blk[0].g, tau, H1, W1);
     rc = rc ? rc : rgb_add(L.rgb2a, L.rgb2b, &p->block[1].rgb, L.blk[1].g, C, L.hw2);
     rc = rc ? rc : gs_nn_sigmoid_forward(L.out, L.rgb2a, 3 * L.hw2);
     if (rc)
@@ -717,17 +836,15 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
     /* d(rgb before the sigmoid) in rgb2a; block 1's rgb: dg1 in bufP */
     zero(L.rgb2a, 3 * L.hw2);
     rc = gs_nn_sigmoid_backward(L.rgb2a, dout_rgb, L.out, 3 * L.hw2);
-    zero(L.bufP, (size_t)C * L.hw2);
-    rc = rc ? rc : gs_nn_conv1x1_backward(L.bufP, dp->block[1].rgb.w,
-                                          dp->block[1].rgb.b, L.rgb2a,
-                                          L.blk[1].g, p->block[1].rgb.w, C, 3,
-                                          (int)L.hw2);
+    if (rc)
+        return rc;
+    conv_backward(L.bufP, dp->block[1].rgb.w, dp->block[1].rgb.b, L.rgb2a,
+                  L.blk[1].g, p->block[1].rgb.w, C, 3, (int)L.hw2);
     /* through rgb = blur(up2x(rgb)): d(rgb after block 0) in rgb1a */
-    zero(L.rgb2b, 3 * L.hw2);
-    rc = rc ? rc : gs_nn_blur_backward(L.rgb2b, L.rgb2a, 3, 2 * H1, 2 * W1);
+    blur_backward(L.rgb2b, L.rgb2a, 3, 2 * H1, 2 * W1, L.rows);
     zero(L.rgb1a, 3 * L.hw1);
-    rc = rc ? rc : gs_nn_upsample2x_backward(L.rgb1a, L.rgb2b, 3, H1, W1);
-    /* block 1, then block 0's rgb: d(g0) in bufX */
+    rc = gs_nn_upsample2x_backward(L.rgb1a, L.rgb2b, 3, H1, W1);
+    /* block 1 (its dx in bufX), then block 0's rgb: d(g0) in bufX */
     zero(L.bufX, (size_t)C * L.hw1);
     rc = rc ? rc : block_backward(cfg, &L, 1, p, dp, L.blk[0].g, tau, H1, W1,
                                   L.bufP, L.bufQ, L.bufX, dtau);
@@ -735,11 +852,12 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
                                           dp->block[0].rgb.b, L.rgb1a,
                                           L.blk[0].g, p->block[0].rgb.w, C, 3,
                                           (int)L.hw1);
+    if (rc)
+        return rc;
     /* the first rgb: blur(up2x(conv_rgb0(x))) */
-    zero(L.rgb1b, 3 * L.hw1);
-    rc = rc ? rc : gs_nn_blur_backward(L.rgb1b, L.rgb1a, 3, H1, W1);
+    blur_backward(L.rgb1b, L.rgb1a, 3, H1, W1, L.rows);
     zero(L.rgb0, 3 * L.hw0);
-    rc = rc ? rc : gs_nn_upsample2x_backward(L.rgb0, L.rgb1b, 3, H, W);
+    rc = gs_nn_upsample2x_backward(L.rgb0, L.rgb1b, 3, H, W);
     rc = rc ? rc : gs_nn_conv1x1_backward(dx, dp->rgb0.w, dp->rgb0.b, L.rgb0, x,
                                           p->rgb0.w, C, 3, (int)L.hw0);
     return rc ? rc : block_backward(cfg, &L, 0, p, dp, x, tau, H, W, L.bufX,
