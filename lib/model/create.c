@@ -5,6 +5,7 @@
 #include <string.h>
 
 #include "gazesplat/synth.h"
+#include "gazesplat/train.h"
 #include "model_internal.h"
 
 /* Distance weights of the face stream (plain distances, not squared): a
@@ -225,4 +226,59 @@ void gs_model_get_info(const gs_model *m, gs_model_info *info)
     info->focal = m->cfg.focal;
     info->distance_mm = m->cfg.d_n_mm;
     info->param_bytes = m->nparams * sizeof(float);
+}
+
+void gs_model_spec_default(gs_model_spec *s)
+{
+    memset(s, 0, sizeof *s);
+    s->preset = "cpu";
+    s->train_identities = 64;
+    s->guidance = -1;
+    s->two_stream = -1;
+    s->eye_rotation = -1;
+}
+
+int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
+                 gs_error *err)
+{
+    gs_model_config c;
+    gs_model_config_default(&c);
+    const char *preset = s->preset ? s->preset : "cpu";
+    if (strcmp(preset, "tiny") == 0) {
+        c.template_spacing_mm = 6.0;
+        c.n_eye_each = 150;
+        c.feat_dim = 16;
+        c.id_dim = 8;
+        c.hidden = 32;
+        c.feat_size = 32;
+        c.image_size = 128;
+        c.focal = 1600.0 * 128 / 512;
+    } else if (strcmp(preset, "paper") == 0) {
+        c.template_spacing_mm = 1.5;
+        c.n_eye_each = 2000;
+        c.feat_dim = 128;
+        c.id_dim = 80;
+        c.hidden = 256;
+        c.feat_size = 128;
+        c.image_size = 512;
+        c.focal = 1600.0;
+    } else if (strcmp(preset, "cpu") != 0) {
+        return gs_error_set(err, GS_ERR_ARG,
+                            "unknown model preset '%s' (cpu, tiny, paper)",
+                            preset);
+    }
+    c.n_train_ids = s->train_identities;
+    if (s->guidance >= 0)
+        c.guidance = s->guidance;
+    if (s->two_stream >= 0)
+        c.two_stream = s->two_stream;
+    if (s->eye_rotation >= 0)
+        c.eye_rotation = s->eye_rotation;
+    c.n_face = 1; /* counted from the template by gs_model_create */
+    return gs_model_create(&c, seed, out, err);
+}
+
+int gs_model_write(const gs_model *m, const char *path, gs_error *err)
+{
+    return gs_model_save(m, path, err);
 }

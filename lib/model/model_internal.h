@@ -122,6 +122,10 @@ int gs_model_create(const gs_model_config *cfg, uint64_t seed, gs_model **out,
 int gs_model_save(const gs_model *m, const char *path, gs_error *err);
 void gs_model_config_default(gs_model_config *c);
 
+/* The light part of tau for a synthetic scene (head frame). */
+struct gs_synth_scene;
+void gs_model_light_code(const struct gs_synth_scene *s, float out[12]);
+
 /* ---- MLP kernels ---- */
 /* Activation floats an MLP needs for a batch of n (pre-activations of the
  * hidden layers, post-activations, output). */
