@@ -244,7 +244,7 @@ static int parse_uint(st_parser *ps, int64_t *out)
 /* '[' uint,* ']' into v[0..max); *n the count. More than max is refused
  * with too_many_code (GS_ERR_LIMIT for shapes, GS_ERR_FORMAT for offsets). */
 static int parse_uint_array(st_parser *ps, int64_t *v, int max, int *n, int too_many_code,
-                            const char *what)
+                            const char *name, const char *what)
 {
     int rc = expect(ps, '[');
     if (rc)
@@ -257,7 +257,8 @@ static int parse_uint_array(st_parser *ps, int64_t *v, int max, int *n, int too_
     }
     for (;;) {
         if (*n == max)
-            return perr(ps, too_many_code, "%s has more than %d entries", what, max);
+            return perr(ps, too_many_code, "tensor '%s': %s has more than %d entries", name, what,
+                        max);
         if ((rc = parse_uint(ps, &v[(*n)++])) != GS_OK)
             return rc;
         skip_ws(ps);
@@ -365,8 +366,9 @@ static int parse_tensor(st_parser *ps, const char *name, size_t name_len)
         if (bit == 1)
             rc = parse_dtype(ps, name, &t->dtype);
         else if (bit == 2)
-            rc = parse_uint_array(ps, t->shape, GS_ST_MAX_DIMS, &t->ndim, GS_ERR_LIMIT, "shape");
-        else if ((rc = parse_uint_array(ps, off, 2, &k, GS_ERR_FORMAT, "data_offsets")) == GS_OK &&
+            rc = parse_uint_array(ps, t->shape, GS_ST_MAX_DIMS, &t->ndim, GS_ERR_LIMIT, name,
+                                  "shape");
+        else if ((rc = parse_uint_array(ps, off, 2, &k, GS_ERR_FORMAT, name, "data_offsets")) == GS_OK &&
                  k != 2)
             rc = perr(ps, GS_ERR_FORMAT, "tensor '%s': data_offsets needs 2 entries", name);
         if (rc)

@@ -41,6 +41,8 @@ static void expect_refused(const char *label, const uint8_t *buf, size_t len,
     CHECK_MSG(strstr(err.msg, want) != NULL, "%s: message '%s' lacks '%s'", label, err.msg, want);
     if (rc == GS_OK)
         gs_st_close(f);
+    else
+        printf("%-24s %s\n", label, err.msg);
 }
 
 static void refused_json(const char *label, const char *json, size_t dlen, int code,
