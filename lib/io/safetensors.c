@@ -321,6 +321,8 @@ static int grow(void **arr, int *cap, int need, size_t elem)
 {
     if (need <= *cap)
         return GS_OK;
+    if (*cap > INT32_MAX / 2)
+        return GS_ERR_NOMEM;
     int ncap = *cap ? *cap * 2 : 16;
     void *p = realloc(*arr, (size_t)ncap * elem);
     if (!p)
@@ -627,8 +629,8 @@ static int load(const unsigned char *header, size_t hlen, size_t data_len, int m
                 const st_source *src, gs_st_file **out, gs_error *err)
 {
     gs_st_file *f = calloc(1, sizeof *f);
-    st_parser ps = {header, header, header + hlen, NULL, 0, data_len, max_tensors, 0, 0, 0,
-                    f, err};
+    st_parser ps = {.p = header, .begin = header, .end = header + hlen, .data_len = data_len,
+                    .max_tensors = max_tensors, .f = f, .err = err};
     int rc = GS_ERR_NOMEM;
     if (f)
         f->strings = ps.arena = malloc(hlen + 1);

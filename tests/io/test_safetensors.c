@@ -274,6 +274,39 @@ static void test_writer_refuses(void)
     gs_st_close(NULL);
 }
 
+/* Many tensors: the writer's name set and the reader's binary search. */
+static void test_many(void)
+{
+    enum { N = 5000 };
+    gs_st_writer *w = gs_st_writer_create();
+    char name[32];
+    int64_t s1[1] = {1};
+    for (int i = 0; i < N; i++) {
+        float v = (float)i;
+        snprintf(name, sizeof name, "t%d", (i * 7919) % N);
+        CHECK_EQ_INT(gs_st_writer_add(w, name, GS_ST_F32, 1, s1, &v), GS_OK);
+    }
+    CHECK_EQ_INT(gs_st_writer_add(w, "t4999", GS_ST_F32, 1, s1, s1), GS_ERR_ARG);
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    gs_error err = {0, ""};
+    CHECK_EQ_INT(gs_st_writer_to_mem(w, &buf, &len, &err), GS_OK);
+    gs_st_file *f = open_ok("5000 tensors", buf, len);
+    int bad = 0;
+    for (int i = 0; f && i < N; i++) {
+        const float *p = NULL;
+        snprintf(name, sizeof name, "t%d", (i * 7919) % N);
+        if (gs_st_get_f32(f, name, 1, s1, &p, &err) != GS_OK || *p != (float)i)
+            bad++;
+    }
+    CHECK_MSG(bad == 0, "%d of %d tensors wrong", bad, N);
+    gs_st_limits lim = {0, 0, N - 1};
+    expect_refused("5000 over a limit of 4999", buf, len, &lim, GS_ERR_LIMIT, "more than 4999");
+    gs_st_close(f);
+    free(buf);
+    gs_st_writer_destroy(w);
+}
+
 /* ---- what other writers may do, and we accept --------------------------- */
 
 static void test_accepts(void)
@@ -497,6 +530,7 @@ int main(void)
     }
     test_round_trip(dir);
     test_writer_refuses();
+    test_many();
     test_accepts();
     test_refuses_json();
     test_refuses_other();
