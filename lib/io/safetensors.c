@@ -560,7 +560,29 @@ static size_t round8(size_t n)
     return (n + 7) & ~(size_t)7;
 }
 
-/* Copies every tensor into its slot, converts byte order, checks floats. */
+/* Copies one tensor into dst, converts byte order and checks its floats,
+ * a chunk at a time so the check reads what the copy left in cache. */
+#define ST_CHUNK ((size_t)256 << 10) /* a multiple of every element size */
+
+static int load_tensor(const gs_st_tensor *t, unsigned char *dst, const st_source *src,
+                       gs_error *err)
+{
+    size_t esize = dtype_sizes[t->dtype];
+    for (size_t k = 0; k < t->nbytes; k += ST_CHUNK) {
+        size_t c = t->nbytes - k < ST_CHUNK ? t->nbytes - k : ST_CHUNK;
+        int rc = read_bytes(src, t->offset + k, dst + k, c, err);
+        if (rc)
+            return rc;
+        st_swap_to_le(dst + k, c, esize);
+        size_t bad = st_first_nonfinite(t->dtype, dst + k, c);
+        if (bad != SIZE_MAX)
+            return gs_error_set(err, GS_ERR_NONFINITE, ST_ERR "tensor '%.60s' (%s): element %zu "
+                                "is NaN or Inf", t->name, dtype_names[t->dtype], k / esize + bad);
+    }
+    return GS_OK;
+}
+
+/* Gives every tensor its 8-byte aligned slot in one allocation and loads it. */
 static int load_data(gs_st_file *f, const st_source *src, gs_error *err)
 {
     size_t total = 0;
@@ -572,16 +594,10 @@ static int load_data(gs_st_file *f, const st_source *src, gs_error *err)
     size_t slot = 0;
     for (int i = 0; i < f->n; i++) {
         gs_st_tensor *t = &f->t[i];
-        unsigned char *dst = f->data + slot;
-        int rc = read_bytes(src, t->offset, dst, t->nbytes, err);
+        int rc = load_tensor(t, f->data + slot, src, err);
         if (rc)
             return rc;
-        st_swap_to_le(dst, t->nbytes, dtype_sizes[t->dtype]);
-        size_t bad = st_first_nonfinite(t->dtype, dst, t->nbytes);
-        if (bad != SIZE_MAX)
-            return gs_error_set(err, GS_ERR_NONFINITE, ST_ERR "tensor '%.60s' (%s): element %zu "
-                                "is NaN or Inf", t->name, dtype_names[t->dtype], bad);
-        t->data = dst;
+        t->data = f->data + slot;
         slot += round8(t->nbytes);
     }
     return GS_OK;

@@ -376,8 +376,13 @@ int gs_st_writer_to_mem(gs_st_writer *w, uint8_t **buf, size_t *len, gs_error *e
         free(b.p);
         return rc;
     }
+    if (data_len > SIZE_MAX - 8 - b.len) {
+        free(b.p);
+        free(order);
+        return gs_error_set(err, GS_ERR_LIMIT, ST_ERR "file over %zu bytes", SIZE_MAX);
+    }
     size_t total = 8 + b.len + data_len;
-    uint8_t *out = total >= data_len ? malloc(total) : NULL;
+    uint8_t *out = malloc(total);
     if (!out) {
         free(b.p);
         free(order);

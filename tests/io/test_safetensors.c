@@ -481,6 +481,30 @@ static void test_refuses_other(void)
     b = image_of(T1("F32", "[3]", "[0,12]"), fv, 12, &len);
     expect_refused("-Inf", b, len, NULL, GS_ERR_NONFINITE, "element 0");
     free(b);
+    /* Past the check's blocks (256) and the loader's chunks (256 KiB). */
+    static const size_t where[] = {0, 255, 256, 300, 65535, 65536, 70001, 99999};
+    float *big = calloc(100000, sizeof *big);
+    char want[64];
+    snprintf(json, sizeof json, T1("F32", "[100000]", "[0,400000]"));
+    for (size_t k = 0; k < sizeof where / sizeof *where; k++) {
+        big[where[k]] = k % 2 ? INFINITY : NAN;
+        b = image_of(json, big, 400000, &len);
+        snprintf(want, sizeof want, "element %zu is", where[k]);
+        expect_refused("NaN/Inf in a large tensor", b, len, NULL, GS_ERR_NONFINITE, want);
+        free(b);
+        big[where[k]] = 0;
+    }
+    uint16_t *big16 = (uint16_t *)big;
+    snprintf(json, sizeof json, T1("F16", "[200000]", "[0,400000]"));
+    big16[131073] = 0x7C01;
+    b = image_of(json, big, 400000, &len);
+    expect_refused("F16 NaN in a large tensor", b, len, NULL, GS_ERR_NONFINITE, "element 131073 is");
+    free(b);
+    big16[131073] = 0x7BFF; /* the largest finite half */
+    b = image_of(json, big, 400000, &len);
+    gs_st_close(open_ok("large finite F16", b, len));
+    free(b);
+    free(big);
     uint16_t hv[2] = {0x3C00, 0xFE00};
     b = image_of(T1("F16", "[2]", "[0,4]"), hv, 4, &len);
     expect_refused("F16 NaN", b, len, NULL, GS_ERR_NONFINITE, "(F16): element 1");
