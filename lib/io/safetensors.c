@@ -244,7 +244,7 @@ static int parse_uint(st_parser *ps, int64_t *out)
 /* '[' uint,* ']' into v[0..max); *n the count. More than max is refused
  * with too_many_code (GS_ERR_LIMIT for shapes, GS_ERR_FORMAT for offsets). */
 static int parse_uint_array(st_parser *ps, int64_t *v, int max, int *n, int too_many_code,
-                            const char *what)
+                            const char *name, const char *what)
 {
     int rc = expect(ps, '[');
     if (rc)
@@ -257,7 +257,8 @@ static int parse_uint_array(st_parser *ps, int64_t *v, int max, int *n, int too_
     }
     for (;;) {
         if (*n == max)
-            return perr(ps, too_many_code, "%s has more than %d entries", what, max);
+            return perr(ps, too_many_code, "tensor '%s': %s has more than %d entries", name, what,
+                        max);
         if ((rc = parse_uint(ps, &v[(*n)++])) != GS_OK)
             return rc;
         skip_ws(ps);
@@ -320,6 +321,8 @@ static int grow(void **arr, int *cap, int need, size_t elem)
 {
     if (need <= *cap)
         return GS_OK;
+    if (*cap > INT32_MAX / 2)
+        return GS_ERR_NOMEM;
     int ncap = *cap ? *cap * 2 : 16;
     void *p = realloc(*arr, (size_t)ncap * elem);
     if (!p)
@@ -365,8 +368,9 @@ static int parse_tensor(st_parser *ps, const char *name, size_t name_len)
         if (bit == 1)
             rc = parse_dtype(ps, name, &t->dtype);
         else if (bit == 2)
-            rc = parse_uint_array(ps, t->shape, GS_ST_MAX_DIMS, &t->ndim, GS_ERR_LIMIT, "shape");
-        else if ((rc = parse_uint_array(ps, off, 2, &k, GS_ERR_FORMAT, "data_offsets")) == GS_OK &&
+            rc = parse_uint_array(ps, t->shape, GS_ST_MAX_DIMS, &t->ndim, GS_ERR_LIMIT, name,
+                                  "shape");
+        else if ((rc = parse_uint_array(ps, off, 2, &k, GS_ERR_FORMAT, name, "data_offsets")) == GS_OK &&
                  k != 2)
             rc = perr(ps, GS_ERR_FORMAT, "tensor '%s': data_offsets needs 2 entries", name);
         if (rc)
@@ -556,7 +560,29 @@ static size_t round8(size_t n)
     return (n + 7) & ~(size_t)7;
 }
 
-/* Copies every tensor into its slot, converts byte order, checks floats. */
+/* Copies one tensor into dst, converts byte order and checks its floats,
+ * a chunk at a time so the check reads what the copy left in cache. */
+#define ST_CHUNK ((size_t)256 << 10) /* a multiple of every element size */
+
+static int load_tensor(const gs_st_tensor *t, unsigned char *dst, const st_source *src,
+                       gs_error *err)
+{
+    size_t esize = dtype_sizes[t->dtype];
+    for (size_t k = 0; k < t->nbytes; k += ST_CHUNK) {
+        size_t c = t->nbytes - k < ST_CHUNK ? t->nbytes - k : ST_CHUNK;
+        int rc = read_bytes(src, t->offset + k, dst + k, c, err);
+        if (rc)
+            return rc;
+        st_swap_to_le(dst + k, c, esize);
+        size_t bad = st_first_nonfinite(t->dtype, dst + k, c);
+        if (bad != SIZE_MAX)
+            return gs_error_set(err, GS_ERR_NONFINITE, ST_ERR "tensor '%.60s' (%s): element %zu "
+                                "is NaN or Inf", t->name, dtype_names[t->dtype], k / esize + bad);
+    }
+    return GS_OK;
+}
+
+/* Gives every tensor its 8-byte aligned slot in one allocation and loads it. */
 static int load_data(gs_st_file *f, const st_source *src, gs_error *err)
 {
     size_t total = 0;
@@ -568,16 +594,10 @@ static int load_data(gs_st_file *f, const st_source *src, gs_error *err)
     size_t slot = 0;
     for (int i = 0; i < f->n; i++) {
         gs_st_tensor *t = &f->t[i];
-        unsigned char *dst = f->data + slot;
-        int rc = read_bytes(src, t->offset, dst, t->nbytes, err);
+        int rc = load_tensor(t, f->data + slot, src, err);
         if (rc)
             return rc;
-        st_swap_to_le(dst, t->nbytes, dtype_sizes[t->dtype]);
-        size_t bad = st_first_nonfinite(t->dtype, dst, t->nbytes);
-        if (bad != SIZE_MAX)
-            return gs_error_set(err, GS_ERR_NONFINITE, ST_ERR "tensor '%.60s' (%s): element %zu "
-                                "is NaN or Inf", t->name, dtype_names[t->dtype], bad);
-        t->data = dst;
+        t->data = f->data + slot;
         slot += round8(t->nbytes);
     }
     return GS_OK;
@@ -625,8 +645,8 @@ static int load(const unsigned char *header, size_t hlen, size_t data_len, int m
                 const st_source *src, gs_st_file **out, gs_error *err)
 {
     gs_st_file *f = calloc(1, sizeof *f);
-    st_parser ps = {header, header, header + hlen, NULL, 0, data_len, max_tensors, 0, 0, 0,
-                    f, err};
+    st_parser ps = {.p = header, .begin = header, .end = header + hlen, .data_len = data_len,
+                    .max_tensors = max_tensors, .f = f, .err = err};
     int rc = GS_ERR_NOMEM;
     if (f)
         f->strings = ps.arena = malloc(hlen + 1);

@@ -29,6 +29,8 @@ typedef struct st_meta {
 struct gs_st_writer {
     st_entry *e;
     int n, cap;
+    int *slots;   /* open-addressing set of names: entry index + 1, 0 free */
+    size_t nslots; /* a power of two, at least twice n */
     st_meta *meta;
     int nmeta, cap_meta;
 };
@@ -51,8 +53,45 @@ void gs_st_writer_destroy(gs_st_writer *w)
         free(w->meta[i].value);
     }
     free(w->e);
+    free(w->slots);
     free(w->meta);
     free(w);
+}
+
+/* ---- name set: duplicate checks in O(1), even for 65536 tensors ------------ */
+
+static size_t hash_name(const char *s)
+{
+    uint64_t h = 1469598103934665603u; /* FNV-1a */
+    for (; *s; s++)
+        h = (h ^ (unsigned char)*s) * 1099511628211u;
+    return (size_t)h;
+}
+
+/* The slot holding name, or the free slot where it would go. */
+static size_t name_slot(const gs_st_writer *w, const char *name)
+{
+    size_t mask = w->nslots - 1, i = hash_name(name) & mask;
+    while (w->slots[i] && strcmp(w->e[w->slots[i] - 1].name, name) != 0)
+        i = (i + 1) & mask;
+    return i;
+}
+
+/* Makes room for one more name. */
+static int reserve_slot(gs_st_writer *w)
+{
+    if ((size_t)w->n + 1 <= w->nslots / 2)
+        return GS_OK;
+    size_t nslots = w->nslots ? 2 * w->nslots : 64;
+    int *slots = calloc(nslots, sizeof *slots), *old = w->slots;
+    if (!slots)
+        return GS_ERR_NOMEM;
+    w->slots = slots;
+    w->nslots = nslots;
+    for (int i = 0; i < w->n; i++)
+        w->slots[name_slot(w, w->e[i].name)] = i + 1;
+    free(old);
+    return GS_OK;
 }
 
 static int valid_utf8(const char *s, size_t *len)
@@ -112,7 +151,7 @@ int gs_st_writer_meta(gs_st_writer *w, const char *key, const char *value)
 }
 
 /* Checks name, dtype and shape; *nbytes the data size. */
-static int check_add(const gs_st_writer *w, const char *name, gs_st_dtype dt, int ndim,
+static int check_add(const char *name, gs_st_dtype dt, int ndim,
                      const int64_t *shape, size_t *nbytes)
 {
     size_t len, esize = gs_st_dtype_size(dt);
@@ -121,9 +160,6 @@ static int check_add(const gs_st_writer *w, const char *name, gs_st_dtype dt, in
         strcmp(name, "__metadata__") == 0 || !esize || ndim < 0 || ndim > GS_ST_MAX_DIMS ||
         (ndim && !shape))
         return GS_ERR_ARG;
-    for (int i = 0; i < w->n; i++)
-        if (strcmp(w->e[i].name, name) == 0)
-            return GS_ERR_ARG;
     for (int i = 0; i < ndim; i++) {
         if (shape[i] < 0)
             return GS_ERR_ARG;
@@ -143,14 +179,21 @@ int gs_st_writer_add(gs_st_writer *w, const char *name, gs_st_dtype dt, int ndim
     size_t nbytes = 0;
     if (!w)
         return GS_ERR_ARG;
-    int rc = check_add(w, name, dt, ndim, shape, &nbytes);
+    int rc = check_add(name, dt, ndim, shape, &nbytes);
     if (rc)
         return rc;
     if (nbytes && !data)
         return GS_ERR_ARG;
+    if ((rc = reserve_slot(w)) != GS_OK)
+        return rc;
+    size_t slot = name_slot(w, name);
+    if (w->slots[slot])
+        return GS_ERR_ARG; /* duplicate */
     if (nbytes && st_first_nonfinite(dt, data, nbytes) != SIZE_MAX)
         return GS_ERR_NONFINITE;
     if (w->n == w->cap) {
+        if (w->cap > INT32_MAX / 2)
+            return GS_ERR_LIMIT;
         int cap = w->cap ? 2 * w->cap : 16;
         st_entry *e = realloc(w->e, (size_t)cap * sizeof *e);
         if (!e)
@@ -176,7 +219,7 @@ int gs_st_writer_add(gs_st_writer *w, const char *name, gs_st_dtype dt, int ndim
     for (int i = 0; i < ndim; i++)
         e->shape[i] = shape[i];
     e->nbytes = nbytes;
-    w->n++;
+    w->slots[slot] = ++w->n;
     return GS_OK;
 }
 
@@ -333,8 +376,13 @@ int gs_st_writer_to_mem(gs_st_writer *w, uint8_t **buf, size_t *len, gs_error *e
         free(b.p);
         return rc;
     }
+    if (data_len > SIZE_MAX - 8 - b.len) {
+        free(b.p);
+        free(order);
+        return gs_error_set(err, GS_ERR_LIMIT, ST_ERR "file over %zu bytes", SIZE_MAX);
+    }
     size_t total = 8 + b.len + data_len;
-    uint8_t *out = total >= data_len ? malloc(total) : NULL;
+    uint8_t *out = malloc(total);
     if (!out) {
         free(b.p);
         free(order);

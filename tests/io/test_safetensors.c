@@ -41,6 +41,8 @@ static void expect_refused(const char *label, const uint8_t *buf, size_t len,
     CHECK_MSG(strstr(err.msg, want) != NULL, "%s: message '%s' lacks '%s'", label, err.msg, want);
     if (rc == GS_OK)
         gs_st_close(f);
+    else
+        printf("%-24s %s\n", label, err.msg);
 }
 
 static void refused_json(const char *label, const char *json, size_t dlen, int code,
@@ -272,6 +274,39 @@ static void test_writer_refuses(void)
     gs_st_close(NULL);
 }
 
+/* Many tensors: the writer's name set and the reader's binary search. */
+static void test_many(void)
+{
+    enum { N = 5000 };
+    gs_st_writer *w = gs_st_writer_create();
+    char name[32];
+    int64_t s1[1] = {1};
+    for (int i = 0; i < N; i++) {
+        float v = (float)i;
+        snprintf(name, sizeof name, "t%d", (i * 7919) % N);
+        CHECK_EQ_INT(gs_st_writer_add(w, name, GS_ST_F32, 1, s1, &v), GS_OK);
+    }
+    CHECK_EQ_INT(gs_st_writer_add(w, "t4999", GS_ST_F32, 1, s1, s1), GS_ERR_ARG);
+    uint8_t *buf = NULL;
+    size_t len = 0;
+    gs_error err = {0, ""};
+    CHECK_EQ_INT(gs_st_writer_to_mem(w, &buf, &len, &err), GS_OK);
+    gs_st_file *f = open_ok("5000 tensors", buf, len);
+    int bad = 0;
+    for (int i = 0; f && i < N; i++) {
+        const float *p = NULL;
+        snprintf(name, sizeof name, "t%d", (i * 7919) % N);
+        if (gs_st_get_f32(f, name, 1, s1, &p, &err) != GS_OK || *p != (float)i)
+            bad++;
+    }
+    CHECK_MSG(bad == 0, "%d of %d tensors wrong", bad, N);
+    gs_st_limits lim = {0, 0, N - 1};
+    expect_refused("5000 over a limit of 4999", buf, len, &lim, GS_ERR_LIMIT, "more than 4999");
+    gs_st_close(f);
+    free(buf);
+    gs_st_writer_destroy(w);
+}
+
 /* ---- what other writers may do, and we accept --------------------------- */
 
 static void test_accepts(void)
@@ -446,6 +481,30 @@ static void test_refuses_other(void)
     b = image_of(T1("F32", "[3]", "[0,12]"), fv, 12, &len);
     expect_refused("-Inf", b, len, NULL, GS_ERR_NONFINITE, "element 0");
     free(b);
+    /* Past the check's blocks (256) and the loader's chunks (256 KiB). */
+    static const size_t where[] = {0, 255, 256, 300, 65535, 65536, 70001, 99999};
+    float *big = calloc(100000, sizeof *big);
+    char want[64];
+    snprintf(json, sizeof json, T1("F32", "[100000]", "[0,400000]"));
+    for (size_t k = 0; k < sizeof where / sizeof *where; k++) {
+        big[where[k]] = k % 2 ? INFINITY : NAN;
+        b = image_of(json, big, 400000, &len);
+        snprintf(want, sizeof want, "element %zu is", where[k]);
+        expect_refused("NaN/Inf in a large tensor", b, len, NULL, GS_ERR_NONFINITE, want);
+        free(b);
+        big[where[k]] = 0;
+    }
+    uint16_t *big16 = (uint16_t *)big;
+    snprintf(json, sizeof json, T1("F16", "[200000]", "[0,400000]"));
+    big16[131073] = 0x7C01;
+    b = image_of(json, big, 400000, &len);
+    expect_refused("F16 NaN in a large tensor", b, len, NULL, GS_ERR_NONFINITE, "element 131073 is");
+    free(b);
+    big16[131073] = 0x7BFF; /* the largest finite half */
+    b = image_of(json, big, 400000, &len);
+    gs_st_close(open_ok("large finite F16", b, len));
+    free(b);
+    free(big);
     uint16_t hv[2] = {0x3C00, 0xFE00};
     b = image_of(T1("F16", "[2]", "[0,4]"), hv, 4, &len);
     expect_refused("F16 NaN", b, len, NULL, GS_ERR_NONFINITE, "(F16): element 1");
@@ -495,6 +554,7 @@ int main(void)
     }
     test_round_trip(dir);
     test_writer_refuses();
+    test_many();
     test_accepts();
     test_refuses_json();
     test_refuses_other();
