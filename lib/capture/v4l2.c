@@ -453,7 +453,10 @@ static void deliver(gs_cap *cap, const struct v4l2_buffer *b, int64_t t, gs_cap_
     f->rgb = cap->rgb;
     f->sequence = b->sequence;
     f->t_dequeue_ns = t;
-    f->t_capture_ns = buf_time_ns(b, t);
+    /* Some drivers (vivid) stamp the ideal frame time, which can lie a
+     * little in the future: never report a negative capture latency. */
+    int64_t tc = buf_time_ns(b, t);
+    f->t_capture_ns = tc < t ? tc : t;
     f->skipped = (int)(skipped - cap->skipped_base);
     cap->skipped_base = skipped;
     cap->stats.frames++;

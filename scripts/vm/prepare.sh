@@ -4,7 +4,9 @@
 #   - Debian 12's kernel image and modules (vivid.ko ships with it),
 #   - v4l2loopback.ko built from Debian's v4l2loopback-dkms source against
 #     the matching linux-headers,
-#   - modules.dep for the guest (depmod -b).
+#   - modules.dep for the guest (depmod -b),
+#   - udev's daemon (udev, libsystemd-shared): libusb's hotplug listens to
+#     the events udevd re-broadcasts, so the guest runs it.
 # Packages come with `apt-get download` and are unpacked with dpkg-deb -x.
 # Each step is skipped when its result is already in the cache, so only the
 # first run costs a download and a module build. Needs no root.
@@ -32,8 +34,9 @@ fetch() { # package...
 }
 stamp=root/.unpacked-$krel
 if [ ! -e "$stamp" ]; then
-    fetch "$img_pkg" "$hdr_pkg" $hdr_deps v4l2loopback-dkms
-    for p in "$img_pkg" "$hdr_pkg" $hdr_deps v4l2loopback-dkms; do
+    pkgs="$img_pkg $hdr_pkg $hdr_deps v4l2loopback-dkms udev libsystemd-shared"
+    fetch $pkgs
+    for p in $pkgs; do
         dpkg-deb -x debs/"${p}_"*.deb root
     done
     # The headers refer to their -common half and to kbuild through absolute
