@@ -10,6 +10,7 @@ static const cli_command *const commands[] = {
     &cli_scene_command,
     &cli_synth_command,
     &cli_train_command,
+    &cli_live_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
 
