@@ -104,14 +104,9 @@ static int read_config(const gs_st_file *f, gs_model_config *c,
     return gs_model_config_check(c, err);
 }
 
-int gs_model_load(const char *path, gs_model **out, gs_error *err)
+static int load_from(gs_st_file *f, gs_model **out, gs_error *err)
 {
-    if (!path || !out)
-        return gs_error_set(err, GS_ERR_ARG, "model load: NULL argument");
-    gs_st_file *f = NULL;
-    int rc = gs_st_open(path, NULL, &f, err);
-    if (rc)
-        return rc;
+    int rc;
     gs_model_config cfg;
     gs_model *m = NULL;
     rc = read_config(f, &cfg, err);
@@ -136,7 +131,6 @@ int gs_model_load(const char *path, gs_model **out, gs_error *err)
         rc = gs_error_set(err, GS_ERR_FORMAT,
                           "model: %d tensors in the file, %d expected",
                           gs_st_count(f), m->ntensors);
-    gs_st_close(f);
     if (rc) {
         gs_model_destroy(m);
         return rc;
@@ -144,4 +138,31 @@ int gs_model_load(const char *path, gs_model **out, gs_error *err)
     gs_model_bind(m, m->params, &m->p);
     *out = m;
     return GS_OK;
+}
+
+int gs_model_load(const char *path, gs_model **out, gs_error *err)
+{
+    if (!path || !out)
+        return gs_error_set(err, GS_ERR_ARG, "model load: NULL argument");
+    gs_st_file *f = NULL;
+    int rc = gs_st_open(path, NULL, &f, err);
+    if (rc)
+        return rc;
+    rc = load_from(f, out, err);
+    gs_st_close(f);
+    return rc;
+}
+
+int gs_model_load_mem(const void *buf, size_t len, gs_model **out,
+                      gs_error *err)
+{
+    if (!buf || !out)
+        return gs_error_set(err, GS_ERR_ARG, "model load: NULL argument");
+    gs_st_file *f = NULL;
+    int rc = gs_st_open_mem(buf, len, NULL, &f, err);
+    if (rc)
+        return rc;
+    rc = load_from(f, out, err);
+    gs_st_close(f);
+    return rc;
 }
