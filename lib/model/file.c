@@ -35,11 +35,16 @@ static int write_meta(gs_st_writer *w, const gs_model_config *c)
     snprintf(val, sizeof val, "%d", GS_MODEL_FORMAT_VERSION);
     rc = rc ? rc : gs_st_writer_meta(w, "format_version", val);
     for (int i = 0; i < NFIELDS && !rc; i++) {
-        const char *base = (const char *)c + k_fields[i].off;
-        if (k_fields[i].is_double)
-            snprintf(val, sizeof val, "%.17g", *(const double *)base);
-        else
-            snprintf(val, sizeof val, "%d", *(const int *)base);
+        const unsigned char *base = (const unsigned char *)c + k_fields[i].off;
+        if (k_fields[i].is_double) {
+            double d;
+            memcpy(&d, base, sizeof d);
+            snprintf(val, sizeof val, "%.17g", d);
+        } else {
+            int x;
+            memcpy(&x, base, sizeof x);
+            snprintf(val, sizeof val, "%d", x);
+        }
         snprintf(key, sizeof key, "config.%s", k_fields[i].key);
         rc = gs_st_writer_meta(w, key, val);
     }
@@ -88,14 +93,16 @@ static int read_config(const gs_st_file *f, gs_model_config *c,
             return gs_error_set(err, GS_ERR_FORMAT, "model: %s missing", key);
         char *end = NULL;
         errno = 0;
-        char *base = (char *)c + k_fields[i].off;
+        unsigned char *base = (unsigned char *)c + k_fields[i].off;
         if (k_fields[i].is_double) {
-            *(double *)base = strtod(v, &end);
+            double d = strtod(v, &end);
+            memcpy(base, &d, sizeof d);
         } else {
             long x = strtol(v, &end, 10);
             if (x < -1000000000L || x > 1000000000L)
                 errno = ERANGE;
-            *(int *)base = (int)x;
+            int xi = (int)x;
+            memcpy(base, &xi, sizeof xi);
         }
         if (errno || *end)
             return gs_error_set(err, GS_ERR_FORMAT, "model: %s = '%.40s'",
