@@ -340,20 +340,30 @@ static void add_into(float *dst, const float *src, size_t n)
         dst[i] += src[i];
 }
 
-/* y[n] = lrelu(y) in place, as gs_nn_leaky_relu_forward; written as a
- * select of the factor so that it vectorises (random signs make a branch
- * mispredict half the time). */
-static void lrelu_forward_inplace(float *y, size_t n)
+/* key > 0 ? a : b, where "key > 0" is tested on the bits as a signed
+ * integer (true exactly for positive floats, and for NaNs with the sign
+ * clear), and the choice is a bitwise blend: GCC keeps a float compare as a
+ * branch here, and random signs make it mispredict half the time, while
+ * this form vectorises. At key == 0 it picks b, so the LeakyReLU gradient
+ * at 0 is the slope, as in PyTorch and gs_nn. */
+static inline float select_pos(float key, float a, float b)
 {
-    for (size_t i = 0; i < n; i++)
-        y[i] *= y[i] > 0.0f ? 1.0f : LRELU_SLOPE;
+    int32_t k, ia, ib, r;
+    memcpy(&k, &key, sizeof k);
+    memcpy(&ia, &a, sizeof ia);
+    memcpy(&ib, &b, sizeof ib);
+    int32_t m = -(int32_t)(k > 0);
+    r = (ia & m) | (ib & ~m);
+    float out;
+    memcpy(&out, &r, sizeof out);
+    return out;
 }
 
 /* d[n] *= lrelu'(in), from the saved output y = lrelu(in) (see top). */
 static void lrelu_backward_inplace(float *d, const float *y, size_t n)
 {
     for (size_t i = 0; i < n; i++)
-        d[i] *= y[i] > 0.0f ? 1.0f : LRELU_SLOPE;
+        d[i] = select_pos(y[i], d[i], LRELU_SLOPE * d[i]);
 }
 
 /* out[C,2H,2W]: out[c, 2h+i, 2w+j] = y[4c+2i+j, h, w] + x[(4c+2i+j) % C, h, w]
@@ -409,6 +419,34 @@ static void shuffle_tile_backward(float *dy, float *dx, const float *dout,
  * the backward passes WRITE their input gradient (every such buffer here is
  * fresh), which saves a zeroing pass over each. Rounding differs from the
  * gs_nn kernels in the last bits; the PyTorch test covers both. */
+
+/* sum of x[n] in double, in four interleaved partial sums (a fixed order,
+ * so deterministic) to break the dependency chain of one accumulator. */
+static double sum_double(const float *x, size_t n)
+{
+    double s[4] = {0.0, 0.0, 0.0, 0.0};
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (int k = 0; k < 4; k++)
+            s[k] += x[i + (size_t)k];
+    for (; i < n; i++)
+        s[0] += x[i];
+    return (s[0] + s[1]) + (s[2] + s[3]);
+}
+
+/* sum of x[i] y[i] over n in double, four interleaved partial sums as
+ * sum_double. */
+static double dot_double(const float *x, const float *y, size_t n)
+{
+    double s[4] = {0.0, 0.0, 0.0, 0.0};
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4)
+        for (int k = 0; k < 4; k++)
+            s[k] += (double)x[i + (size_t)k] * y[i + (size_t)k];
+    for (; i < n; i++)
+        s[0] += (double)x[i] * y[i];
+    return (s[0] + s[1]) + (s[2] + s[3]);
+}
 
 /* Reflect index i in [-1, n] into [0, n) (PyTorch 'reflect', n >= 2). */
 static int reflect(int i, int n)
@@ -486,6 +524,28 @@ static void blur_backward(float *din, const float *dout, int C, int H, int W,
     }
 }
 
+/* out[OC,HW] = act(w[OC,IC] in[IC,HW] + b[OC]), act = LeakyReLU or none:
+ * the product written by sgemm, then one pass adds the bias and applies the
+ * activation (gs_nn_conv1x1_forward fills the bias first and would need a
+ * third pass for the activation). */
+static void conv_forward(float *out, const float *in, const float *w,
+                         const float *b, int IC, int OC, int HW, int lrelu)
+{
+    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, OC, HW, IC, 1.0f, w,
+                IC, in, HW, 0.0f, out, HW);
+    for (int o = 0; o < OC; o++) {
+        float *row = out + (size_t)o * (size_t)HW, bias = b[o];
+        if (lrelu)
+            for (int p = 0; p < HW; p++) {
+                float v = row[p] + bias;
+                row[p] = select_pos(v, v, LRELU_SLOPE * v);
+            }
+        else
+            for (int p = 0; p < HW; p++)
+                row[p] += bias;
+    }
+}
+
 /* dinp[IC,HW] = w^T dout (written; skipped when NULL); dw[OC,IC] += dout
  * in^T; db[OC] += row sums of dout (double accumulators). */
 static void conv_backward(float *dinp, float *dw, float *db, const float *dout,
@@ -497,13 +557,8 @@ static void conv_backward(float *dinp, float *dw, float *db, const float *dout,
                     w, IC, dout, HW, 0.0f, dinp, HW);
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, OC, IC, HW, 1.0f, dout,
                 HW, in, HW, 1.0f, dw, IC);
-    for (int o = 0; o < OC; o++) {
-        const float *row = dout + (size_t)o * (size_t)HW;
-        double acc = 0.0;
-        for (int p = 0; p < HW; p++)
-            acc += row[p];
-        db[o] += (float)acc;
-    }
+    for (int o = 0; o < OC; o++)
+        db[o] += (float)sum_double(dout + (size_t)o * (size_t)HW, (size_t)HW);
 }
 
 /* ---- Multiplicative guidance ---------------------------------------------
@@ -535,13 +590,8 @@ static void guide_query(float *s, const float *wk, const float *tau, int C,
 static void guide_pool(float *xbar, const float *u, const float *att, int C,
                        size_t hw)
 {
-    for (int c = 0; c < C; c++) {
-        const float *uc = u + (size_t)c * hw;
-        double acc = 0.0;
-        for (size_t p = 0; p < hw; p++)
-            acc += (double)att[p] * uc[p];
-        xbar[c] = (float)acc;
-    }
+    for (int c = 0; c < C; c++)
+        xbar[c] = (float)dot_double(att, u + (size_t)c * hw, hw);
 }
 
 /* a[C] = wv[C,C] xbar + bv */
@@ -606,11 +656,7 @@ static void guide_mul_backward(float *du, float *dtau,
     guide_pool(xbar, u, att, C, hw);
     guide_value(a, p->value_w, p->value_b, xbar, C);
     for (int c = 0; c < C; c++) {
-        const float *uc = u + (size_t)c * hw, *gc = dg + (size_t)c * hw;
-        double acc = 0.0;
-        for (size_t q = 0; q < hw; q++)
-            acc += (double)gc[q] * uc[q];
-        da[c] = (float)acc;
+        da[c] = (float)dot_double(dg + (size_t)c * hw, u + (size_t)c * hw, hw);
         dp->value_b[c] += da[c];
         for (int k = 0; k < C; k++)
             dp->value_w[(size_t)c * (size_t)C + (size_t)k] += da[c] * xbar[k];
@@ -644,12 +690,9 @@ static void guide_mul_backward(float *du, float *dtau,
             size_t off = (size_t)c * hw + p0;
             const float *uc = u + off, *gc = dg + off;
             float *duc = du + off, gain = 1.0f + a[c];
-            double acc = 0.0;
-            for (size_t i = 0; i < n; i++) {
-                acc += (double)r[i] * uc[i];
+            for (size_t i = 0; i < n; i++)
                 duc[i] += gc[i] * gain + att[p0 + i] * dxbar[c] + r[i] * sq[c];
-            }
-            ds[c] += (float)acc;
+            ds[c] += (float)dot_double(r, uc, n);
         }
     }
     for (int d = 0; d < D; d++) {
@@ -715,23 +758,13 @@ static int block_forward(const gs_renderer_config *cfg, const act_layout *L,
 {
     const block_acts *a = &L->blk[b];
     int C = L->C, hwi = Hi * Wi, hwo = 4 * hwi;
-    size_t ni = (size_t)hwi, no = (size_t)hwo, Cs = (size_t)C;
-    int rc = gs_nn_conv1x1_forward(a->ya, xin, p->block[b].a.w, p->block[b].a.b,
-                                   C, 2 * C, hwi);
-    if (!rc)
-        lrelu_forward_inplace(a->ya, 2 * Cs * ni);
-    rc = rc ? rc : gs_nn_conv1x1_forward(a->yb, a->ya, p->block[b].b.w,
-                                         p->block[b].b.b, 2 * C, 4 * C, hwi);
-    if (rc)
-        return rc;
-    lrelu_forward_inplace(a->yb, 4 * Cs * ni);
+    size_t no = (size_t)hwo;
+    conv_forward(a->ya, xin, p->block[b].a.w, p->block[b].a.b, C, 2 * C, hwi, 1);
+    conv_forward(a->yb, a->ya, p->block[b].b.w, p->block[b].b.b, 2 * C, 4 * C,
+                 hwi, 1);
     shuffle_tile_forward(L->bufP, a->yb, xin, C, Hi, Wi);
     blur_forward(a->z, L->bufP, C, 2 * Hi, 2 * Wi, L->rows);
-    rc = gs_nn_conv1x1_forward(a->u, a->z, p->block[b].c.w,
-                                         p->block[b].c.b, C, C, hwo);
-    if (rc)
-        return rc;
-    lrelu_forward_inplace(a->u, Cs * no);
+    conv_forward(a->u, a->z, p->block[b].c.w, p->block[b].c.b, C, C, hwo, 1);
     return guide_forward(cfg, L, a, p, tau, no);
 }
 
