@@ -423,7 +423,8 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     if (rc)
         return rc;
     rc = gs_renderer_forward(&c->m->rcfg, &c->m->p.rend, c->fmap, fr->code,
-                             c->fs, c->fs, c->r_act, c->r_act_len, c->rgb);
+                             c->fs, c->fs, c->r_act, c->r_act_len, c->rgb,
+                             pool);
     if (rc)
         return gs_error_set(err, rc, "model: renderer forward failed");
     return GS_OK;
@@ -701,7 +702,7 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                                       d_rgb, c->fs, c->fs,
                                       grads ? &grads->rend : &c->r_grad_p,
                                       c->v_fmap,
-                                      fg ? fg->code : NULL);
+                                      fg ? fg->code : NULL, pool);
         if (rc)
             return gs_error_set(err, rc, "model: renderer backward failed");
     }
