@@ -10,10 +10,21 @@ PACKAGES=(
   # libraries
   libopenblas-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  libopencv-objdetect-dev libopencv-calib3d-dev
+  # data: face cascades, the 68-point landmark model
+  opencv-data libdlib-data
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev
+  # face tests: dlib as the landmark reference, skimage's photos
+  libdlib-dev python3-skimage
 )
+# npm fetches the face test photos (scripts/fetch-test-assets.sh). A node
+# install from elsewhere may already bring its own npm, which Debian's
+# package would conflict with.
+if ! command -v npm >/dev/null 2>&1; then
+  PACKAGES+=(npm)
+fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do
