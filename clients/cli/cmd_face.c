@@ -30,6 +30,10 @@ const cli_command cli_face_command = {
     "                       haarcascade_frontalface_alt2.xml)\n"
     "  --model FILE         dlib 68-point shape predictor (default: Debian's\n"
     "                       libdlib-data file)\n"
+    "  --min-size PX        smallest face the cascade looks for (default:\n"
+    "                       1/16 of the photo's shorter side, at least 24)\n"
+    "  --min-neighbors N    cascade votes a face needs (default 5)\n"
+    "  --list               only list the faces found (boxes)\n"
     "  --json               print one JSON object instead of text\n"
     "\n"
     "Angles are degrees in the ETH-XGaze convention (pitch > 0 up, yaw > 0\n"
@@ -39,10 +43,12 @@ const cli_command cli_face_command = {
 };
 
 enum {
-    O_IMAGE, O_INDEX, O_BOX, O_NORM, O_MASK, O_SIZE, O_FOCAL, O_CASCADE, O_MODEL, O_JSON, O_N
+    O_IMAGE, O_INDEX, O_BOX, O_NORM, O_MASK, O_SIZE, O_FOCAL, O_CASCADE, O_MODEL, O_MINSIZE,
+    O_MINNB, O_LIST, O_JSON, O_N
 };
 
 #define MAX_LIST 64
+#define CLI_LIST 100 /* internal: stop after listing */
 #define DEG(x) ((x) * 57.29577951308232)
 
 typedef struct face_run {
@@ -87,7 +93,39 @@ static int parse_opts(const cli_opt *o, gs_face_opts *fo)
         fo->use_k = 1; /* the centre is filled once the photo's size is known */
         fo->k[0] = fo->k[4] = f;
     }
+    if (o[O_MINSIZE].value) {
+        if (cli_parse_long(o[O_MINSIZE].value, 8, 100000, &v))
+            return cli_usage_error(cmd, "--min-size: want 8..100000; got '%s'",
+                                   o[O_MINSIZE].value);
+        fo->detect.min_size = (int)v;
+    }
+    if (o[O_MINNB].value) {
+        if (cli_parse_long(o[O_MINNB].value, 0, 100, &v))
+            return cli_usage_error(cmd, "--min-neighbors: want 0..100; got '%s'",
+                                   o[O_MINNB].value);
+        fo->detect.min_neighbors = (int)v;
+    }
     return CLI_PARSED;
+}
+
+static void print_list(const face_run *r, int json)
+{
+    if (json)
+        printf("{\"width\":%d,\"height\":%d,\"faces\":[", r->img.width, r->img.height);
+    else
+        printf("image %dx%d: %d face%s\n", r->img.width, r->img.height, r->n_det,
+               r->n_det == 1 ? "" : "s");
+    for (int i = 0; i < r->n_det && i < MAX_LIST; i++) {
+        const gs_face_box b = r->det[i].box, c = r->det[i].cascade;
+        if (json)
+            printf("%s{\"box\":[%d,%d,%d,%d],\"cascade\":[%d,%d,%d,%d]}", i ? "," : "", b.left,
+                   b.top, b.right, b.bottom, c.left, c.top, c.right, c.bottom);
+        else
+            printf("  face %d: box %d,%d,%d,%d (cascade %d,%d,%d,%d)\n", i, b.left, b.top,
+                   b.right, b.bottom, c.left, c.top, c.right, c.bottom);
+    }
+    if (json)
+        printf("]}\n");
 }
 
 static void print_text(const face_run *r)
@@ -196,6 +234,8 @@ static int analyze(const cli_opt *o, gs_face_opts *fo, face_run *r)
         if (gs_face_detector_load(o[O_CASCADE].value, &det, &err) != GS_OK ||
             gs_face_detect(det, &r->img, &fo->detect, r->det, MAX_LIST, &r->n_det, &err) != GS_OK)
             rc = cli_fail(cmd, "%s", err.msg);
+        else if (o[O_LIST].value)
+            rc = CLI_LIST;
         else if (r->n_det == 0)
             rc = cli_fail(cmd, "no face found in %s", o[O_IMAGE].value);
         else if (fo->index >= r->n_det)
@@ -220,7 +260,8 @@ static int run_face(int argc, char **argv)
     cli_opt o[O_N] = {{"--image", 1, NULL},   {"--index", 1, NULL},  {"--box", 1, NULL},
                       {"--out-norm", 1, NULL}, {"--out-mask", 1, NULL}, {"--size", 1, NULL},
                       {"--focal", 1, NULL},   {"--cascade", 1, NULL}, {"--model", 1, NULL},
-                      {"--json", 0, NULL}};
+                      {"--min-size", 1, NULL}, {"--min-neighbors", 1, NULL},
+                      {"--list", 0, NULL}, {"--json", 0, NULL}};
     int rc = cli_parse(&cli_face_command, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cli_face_command.usage, stdout);
@@ -240,7 +281,19 @@ static int run_face(int argc, char **argv)
         free(r);
         return cli_fail(&cli_face_command, "%s", err.msg);
     }
+    if (o[O_LIST].value && fo.use_box) {
+        gs_io_image_free(&r->img);
+        free(r);
+        return cli_usage_error(&cli_face_command, "--list needs the detector, not --box");
+    }
     rc = analyze(o, &fo, r);
+    if (rc == CLI_LIST) {
+        print_list(r, o[O_JSON].value != NULL);
+        rc = CLI_OK;
+        gs_io_image_free(&r->img);
+        free(r);
+        return rc;
+    }
     if (rc == CLI_OK)
         rc = write_outputs(o, r);
     if (rc == CLI_OK) {

@@ -37,8 +37,8 @@ void gs_face_detector_free(gs_face_detector *d)
 void gs_face_detect_opts_default(gs_face_detect_opts *o)
 {
     o->scale_factor = 1.1;
-    o->min_neighbors = 4;
-    o->min_size = 24;
+    o->min_neighbors = 5;
+    o->min_size = 0;
 }
 
 gs_face_box gs_face_box_from_cascade(int x, int y, int w, int h)
@@ -81,14 +81,19 @@ int gs_face_detect(gs_face_detector *d, const gs_io_image *img, const gs_face_de
         (cap > 0 && !out))
         return gs_error_set(err, GS_ERR_ARG, "face detector: bad arguments");
     if (!(opts->scale_factor > 1.0 && opts->scale_factor < 4.0) || opts->min_neighbors < 0 ||
-        opts->min_size < 8)
+        (opts->min_size != 0 && opts->min_size < 8))
         return gs_error_set(err, GS_ERR_ARG,
                             "face detector: options out of range (scale %g, neighbours %d, "
                             "min size %d)", opts->scale_factor, opts->min_neighbors,
                             opts->min_size);
+    int min_size = opts->min_size;
+    if (min_size == 0) {
+        int shorter = img->width < img->height ? img->width : img->height;
+        min_size = shorter / 16 > 24 ? shorter / 16 : 24;
+    }
     int *r = NULL, nr = 0;
-    int rc = gs_cvf_detect(d->cascade, img, opts->scale_factor, opts->min_neighbors,
-                           opts->min_size, &r, &nr, err);
+    int rc = gs_cvf_detect(d->cascade, img, opts->scale_factor, opts->min_neighbors, min_size,
+                           &r, &nr, err);
     if (rc)
         return rc;
     gs_face_detection *all = nr ? malloc((size_t)nr * sizeof *all) : NULL;

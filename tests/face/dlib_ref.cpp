@@ -2,8 +2,9 @@
 // linked with Debian's libdlib). Reads a binary PPM (P6) so that dlib sees
 // exactly the pixels our decoder produced.
 //
-//   dlib_ref landmarks MODEL IMAGE.ppm L T R B [L T R B ...]
-//       68 lines "x y" per box: dlib::shape_predictor's points
+//   dlib_ref landmarks MODEL IMAGE.ppm N L T R B ... [IMAGE.ppm N ...]
+//       68 lines "x y" per box (N boxes per image): dlib::shape_predictor's
+//       points; the model is read once
 //   dlib_ref hog IMAGE.ppm [UPSAMPLE]
 //       one line "L T R B" per face of dlib's HOG frontal face detector
 #include <cmath>
@@ -42,20 +43,28 @@ bool read_ppm(const char *path, dlib::array2d<dlib::rgb_pixel> &img)
 
 int landmarks(int argc, char **argv)
 {
-    if (argc < 8 || (argc - 4) % 4)
+    if (argc < 5)
         return 2;
     dlib::shape_predictor sp;
     dlib::deserialize(argv[2]) >> sp;
-    dlib::array2d<dlib::rgb_pixel> img;
-    if (!read_ppm(argv[3], img))
-        return 1;
-    for (int i = 4; i + 3 < argc; i += 4) {
-        dlib::rectangle r(atol(argv[i]), atol(argv[i + 1]), atol(argv[i + 2]), atol(argv[i + 3]));
-        dlib::full_object_detection d = sp(img, r);
-        for (unsigned long k = 0; k < d.num_parts(); k++)
-            std::printf("%ld %ld\n", d.part(k).x(), d.part(k).y());
+    int i = 3;
+    while (i + 1 < argc) {
+        dlib::array2d<dlib::rgb_pixel> img;
+        if (!read_ppm(argv[i], img))
+            return 1;
+        const int n = atoi(argv[i + 1]);
+        i += 2;
+        if (n < 0 || i + 4 * n > argc)
+            return 2;
+        for (int b = 0; b < n; b++, i += 4) {
+            dlib::rectangle r(atol(argv[i]), atol(argv[i + 1]), atol(argv[i + 2]),
+                              atol(argv[i + 3]));
+            dlib::full_object_detection d = sp(img, r);
+            for (unsigned long k = 0; k < d.num_parts(); k++)
+                std::printf("%ld %ld\n", d.part(k).x(), d.part(k).y());
+        }
     }
-    return 0;
+    return i == argc ? 0 : 2;
 }
 
 int hog(int argc, char **argv)

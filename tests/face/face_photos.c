@@ -54,60 +54,64 @@ static int write_ppm(const char *path, const gs_io_image *img)
     return fclose(f) ? -1 : 0;
 }
 
-/* Runs dlib_ref with `args` on a temporary PPM of img; returns the
- * process's stdout as a stream (caller pcloses) or NULL. */
-static FILE *run_ref(const char *dlib_ref, const gs_io_image *img, const char *mode,
-                     const char *args, char *ppm, size_t cap)
+static int temp_ppm(const gs_io_image *img, char *ppm, size_t cap)
 {
     snprintf(ppm, cap, "/tmp/gs_face_ref_XXXXXX");
     int fd = mkstemp(ppm);
     if (fd < 0)
-        return NULL;
+        return -1;
     close(fd);
     if (write_ppm(ppm, img)) {
         unlink(ppm);
-        return NULL;
+        return -1;
     }
-    size_t n = strlen(dlib_ref) + strlen(ppm) + strlen(args) + strlen(mode) + 64;
-    char *cmd = malloc(n);
-    if (!cmd)
-        return NULL;
-    if (!strcmp(mode, "hog"))
-        snprintf(cmd, n, "'%s' hog '%s' %s", dlib_ref, ppm, args);
-    else
-        snprintf(cmd, n, "'%s' landmarks '%s' '%s' %s", dlib_ref, GS_FACE_SHAPE_MODEL_DEFAULT,
-                 ppm, args);
-    FILE *p = popen(cmd, "r");
-    free(cmd);
-    return p;
+    return 0;
 }
 
-int dlib_landmarks(const char *dlib_ref, const gs_io_image *img, const gs_face_box *boxes,
-                   int n, int *pts)
+int dlib_landmarks(const char *dlib_ref, const gs_io_image *imgs, int n_img, const int *n,
+                   const gs_face_box *boxes, int *pts)
 {
-    char args[4096] = "", ppm[64];
-    size_t len = 0;
-    for (int i = 0; i < n && len < sizeof args - 64; i++)
-        len += (size_t)snprintf(args + len, sizeof args - len, " %d %d %d %d", boxes[i].left,
-                                boxes[i].top, boxes[i].right, boxes[i].bottom);
-    FILE *p = run_ref(dlib_ref, img, "landmarks", args, ppm, sizeof ppm);
+    enum { MAXI = 16 };
+    char ppm[MAXI][64];
+    size_t cap = 1 << 16, len = 0;
+    char *cmd = malloc(cap);
+    int total = 0, made = 0, rc = -1;
+    if (!cmd || n_img > MAXI)
+        goto done;
+    len = (size_t)snprintf(cmd, cap, "'%s' landmarks '%s'", dlib_ref, GS_FACE_SHAPE_MODEL_DEFAULT);
+    for (int i = 0; i < n_img; i++, made++) {
+        if (temp_ppm(&imgs[i], ppm[i], sizeof ppm[i]))
+            goto done;
+        len += (size_t)snprintf(cmd + len, cap - len, " '%s' %d", ppm[i], n[i]);
+        for (int b = 0; b < n[i] && len < cap - 64; b++, total++)
+            len += (size_t)snprintf(cmd + len, cap - len, " %d %d %d %d", boxes[total].left,
+                                    boxes[total].top, boxes[total].right, boxes[total].bottom);
+    }
+    FILE *p = popen(cmd, "r");
     if (!p)
-        return -1;
+        goto done;
     int got = 0;
-    while (got < n * 2 * GS_FACE_LANDMARKS &&
-           fscanf(p, "%d %d", &pts[got], &pts[got + 1]) == 2)
+    while (got < total * 2 * GS_FACE_LANDMARKS && fscanf(p, "%d %d", &pts[got], &pts[got + 1]) == 2)
         got += 2;
-    int rc = pclose(p);
-    unlink(ppm);
-    return rc == 0 && got == n * 2 * GS_FACE_LANDMARKS ? 0 : -1;
+    rc = pclose(p) == 0 && got == total * 2 * GS_FACE_LANDMARKS ? 0 : -1;
+done:
+    for (int i = 0; i < made; i++)
+        unlink(ppm[i]);
+    free(cmd);
+    return rc;
 }
 
 int dlib_hog(const char *dlib_ref, const gs_io_image *img, gs_face_box *boxes, int cap)
 {
-    char ppm[64];
-    FILE *p = run_ref(dlib_ref, img, "hog", "1", ppm, sizeof ppm);
-    if (!p)
+    char ppm[64], cmd[1200];
+    if (temp_ppm(img, ppm, sizeof ppm))
         return -1;
+    snprintf(cmd, sizeof cmd, "'%s' hog '%s' 1", dlib_ref, ppm);
+    FILE *p = popen(cmd, "r");
+    if (!p) {
+        unlink(ppm);
+        return -1;
+    }
     int n = 0;
     gs_face_box b;
     while (fscanf(p, "%d %d %d %d", &b.left, &b.top, &b.right, &b.bottom) == 4) {

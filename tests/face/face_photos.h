@@ -21,10 +21,10 @@ int photo_load(const char *name, gs_io_image *img);
  * after printing why). */
 const gs_face_shape_model *photo_shape_model(void);
 
-/* Runs `dlib_ref landmarks` on img for n boxes; pts gets 68 x 2 ints per
- * box. Returns 0 or -1. */
-int dlib_landmarks(const char *dlib_ref, const gs_io_image *img, const gs_face_box *boxes,
-                   int n, int *pts);
+/* Runs `dlib_ref landmarks` once for n_img images, n[i] boxes each (boxes
+ * concatenated); pts gets 68 x 2 ints per box, in order. Returns 0 or -1. */
+int dlib_landmarks(const char *dlib_ref, const gs_io_image *imgs, int n_img, const int *n,
+                   const gs_face_box *boxes, int *pts);
 /* Runs `dlib_ref hog` (one upsampling); returns the number of boxes (up to
  * cap written) or -1. */
 int dlib_hog(const char *dlib_ref, const gs_io_image *img, gs_face_box *boxes, int cap);

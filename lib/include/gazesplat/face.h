@@ -97,8 +97,9 @@ void gs_face_detector_free(gs_face_detector *d);
 
 typedef struct gs_face_detect_opts {
     double scale_factor;  /* pyramid step, > 1 (default 1.1) */
-    int min_neighbors;    /* cascade vote (default 4) */
-    int min_size;         /* smallest cascade window, px (default 24) */
+    int min_neighbors;    /* cascade vote (default 5) */
+    int min_size;         /* smallest face, px; 0 (default): 1/16 of the
+                             image's shorter side, at least 24 */
 } gs_face_detect_opts;
 void gs_face_detect_opts_default(gs_face_detect_opts *o);
 
@@ -118,9 +119,9 @@ int gs_face_detect(gs_face_detector *d, const gs_io_image *img,
  * dlib's HOG convention: centre shifted by (GS_FACE_BOX_DX, GS_FACE_BOX_DY)
  * times w, side scaled by GS_FACE_BOX_SCALE. Fitted on the test photos by
  * scripts/fit-face-box.py; see docs/face.md. */
-#define GS_FACE_BOX_SCALE 0.8395
-#define GS_FACE_BOX_DX 0.0017
-#define GS_FACE_BOX_DY 0.0877
+#define GS_FACE_BOX_SCALE 0.9405
+#define GS_FACE_BOX_DX (-0.0094)
+#define GS_FACE_BOX_DY 0.0542
 gs_face_box gs_face_box_from_cascade(int x, int y, int w, int h);
 
 /* ---- head pose ---- */
