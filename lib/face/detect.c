@@ -1,6 +1,7 @@
 /* Face boxes: an OpenCV cascade, boxes mapped to dlib's HOG convention,
  * largest first. */
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 
 #include "cv_face_shim.h"
@@ -14,10 +15,17 @@ int gs_face_detector_load(const char *path, gs_face_detector **out, gs_error *er
 {
     if (!out)
         return gs_error_set(err, GS_ERR_ARG, "face detector: NULL output");
+    if (!path)
+        path = GS_FACE_CASCADE_DEFAULT;
+    /* Checked here: OpenCV would print its own complaint. */
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return gs_error_set(err, GS_ERR_IO, "face detector: cannot open cascade %.200s", path);
+    fclose(f);
     gs_face_detector *d = calloc(1, sizeof *d);
     if (!d)
         return gs_error_set(err, GS_ERR_NOMEM, "face detector: out of memory");
-    int rc = gs_cvf_cascade_load(path ? path : GS_FACE_CASCADE_DEFAULT, &d->cascade, err);
+    int rc = gs_cvf_cascade_load(path, &d->cascade, err);
     if (rc) {
         free(d);
         return rc;
