@@ -49,7 +49,7 @@ int gs_face_head_pose(const double uv[][2], const double k[9], gs_face_pose *out
         if (!isfinite(img[i][0]) || !isfinite(img[i][1]))
             return gs_error_set(err, GS_ERR_NONFINITE, "head pose: non-finite landmark");
     }
-    gs_face_pose p;
+    gs_face_pose p = {{0}, {0}, {0}, 0, 0, 0};
     rc = gs_cvf_solve_pnp((const double(*)[3])model, (const double(*)[2])img, 6, k, p.rvec, p.t,
                           err);
     if (rc)
