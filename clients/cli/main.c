@@ -6,6 +6,7 @@
 #include "cli.h"
 
 static const cli_command *const commands[] = {
+    &cli_client_command,
     &cli_render_command,
     &cli_scene_command,
     &cli_synth_command,
