@@ -46,7 +46,7 @@ static void h_sleep_ms(int ms)
 }
 
 /* Prints the daemon's log (on failures). */
-static void daemon_dump_log(const daemon_proc *d)
+static inline void daemon_dump_log(const daemon_proc *d)
 {
     FILE *f = fopen(d->log, "r");
     char line[1024];
@@ -101,7 +101,7 @@ static int daemon_start_v(daemon_proc *d, const char *bin, const char *const *ar
 }
 
 /* Sends sig and waits for the exit; returns the exit status or -1. */
-static int daemon_stop(daemon_proc *d, int sig, int timeout_ms)
+static inline int daemon_stop(daemon_proc *d, int sig, int timeout_ms)
 {
     if (d->pid <= 0)
         return -1;
@@ -145,7 +145,7 @@ static gs_client *h_hello(const char *addr)
 }
 
 /* HEALTH on c answers HEALTH_OK. */
-static int h_health_on(gs_client *c, uint32_t id)
+static inline int h_health_on(gs_client *c, uint32_t id)
 {
     Gazesplat__HealthRequest req = GAZESPLAT__HEALTH_REQUEST__INIT;
     gs_client_frame f;
@@ -158,7 +158,7 @@ static int h_health_on(gs_client *c, uint32_t id)
 }
 
 /* A fresh connection gets through HELLO and HEALTH. */
-static int h_server_answers(const char *addr)
+static inline int h_server_answers(const char *addr)
 {
     gs_client *c = h_hello(addr);
     int ok = c && h_health_on(c, 4242);
@@ -168,7 +168,7 @@ static int h_server_answers(const char *addr)
 
 /* Waits for a frame; -1 on timeout/close, else its type; code gets the
  * ERROR code (0 otherwise). */
-static int h_recv(gs_client *c, int timeout_ms, int *code, uint32_t *id, ProtobufCMessage **msg)
+static inline int h_recv(gs_client *c, int timeout_ms, int *code, uint32_t *id, ProtobufCMessage **msg)
 {
     gs_client_frame f;
     gs_error err;
@@ -188,7 +188,7 @@ static int h_recv(gs_client *c, int timeout_ms, int *code, uint32_t *id, Protobu
 }
 
 /* The peer closed (recv sees EOF) within timeout_ms. */
-static int h_closed(gs_client *c, int timeout_ms)
+static inline int h_closed(gs_client *c, int timeout_ms)
 {
     gs_client_frame f;
     gs_error err;
@@ -198,7 +198,7 @@ static int h_closed(gs_client *c, int timeout_ms)
     return r != GS_OK && strcmp(err.msg, "closed") == 0;
 }
 
-static size_t h_frame(uint8_t *buf, uint16_t version, uint16_t type, uint32_t len, uint32_t id)
+static inline size_t h_frame(uint8_t *buf, uint16_t version, uint16_t type, uint32_t len, uint32_t id)
 {
     gs_frame_header h;
     memset(&h, 0, sizeof h);
