@@ -10,6 +10,10 @@ PACKAGES=(
   # libraries
   libopenblas-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  # protocol: protobuf-c (C), protoc + python3-protobuf (Python client)
+  libprotobuf-c-dev protobuf-c-compiler protobuf-compiler python3-protobuf
+  # daemon tests: systemd-analyze, systemd-socket-activate
+  systemd
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev
