@@ -135,15 +135,7 @@ int main(int argc, char **argv)
         return 0;
     }
     gsd_log_set_level(cfg.log_level);
-    /* Signals are read from a signalfd by the loop; block them everywhere
-     * before any thread starts. */
-    sigset_t set;
-    sigemptyset(&set);
-    sigaddset(&set, SIGTERM);
-    sigaddset(&set, SIGINT);
-    sigaddset(&set, SIGHUP);
-    pthread_sigmask(SIG_BLOCK, &set, NULL);
-    signal(SIGPIPE, SIG_IGN);
+    signal(SIGPIPE, SIG_IGN); /* writes use MSG_NOSIGNAL or writev: EPIPE, not death */
 
     static gsd_server srv; /* large; lives for the whole program */
     char msg[600];

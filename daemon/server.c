@@ -15,7 +15,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/signalfd.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/uio.h>
@@ -53,6 +52,7 @@ struct gsd_conn {
 #define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
 
 static void conn_close(gsd_conn *c, const char *why);
+static void close_listeners(gsd_server *s);
 static void conn_update_interest(gsd_conn *c);
 
 /* ---- counters ------------------------------------------------------------ */
@@ -643,7 +643,9 @@ static uint32_t retry_after_ms(gsd_server *s)
 {
     int len, running;
     gsd_work_lengths(s, &len, &running);
-    double ms = s->job_ms_avg * (len + running) / (s->work.nworkers > 0 ? s->work.nworkers : 1);
+    /* Before any job has finished there is no history: guess 100 ms. */
+    double per_job = s->job_ms_avg > 0 ? s->job_ms_avg : 100.0;
+    double ms = per_job * (len + running) / (s->work.nworkers > 0 ? s->work.nworkers : 1);
     if (ms < 10)
         ms = 10;
     if (ms > 60000)
@@ -1082,10 +1084,13 @@ static int setup_listeners(gsd_server *s, char *msg, size_t cap)
         snprintf(path, sizeof path, "%s", s->cfg.socket);
     else
         default_socket_path(path, sizeof path);
-    if (strcmp(path, "none") != 0 && bind_unix(s, path, msg, cap) != 0)
-        return -1;
+    /* TCP first: a refused address must fail before the socket file exists. */
     if (s->cfg.tcp[0] && bind_tcp(s, s->cfg.tcp, msg, cap) != 0)
         return -1;
+    if (strcmp(path, "none") != 0 && bind_unix(s, path, msg, cap) != 0) {
+        close_listeners(s);
+        return -1;
+    }
     if (s->nlisteners == 0) {
         snprintf(msg, cap, "no socket to listen on (socket = none and no tcp)");
         return -1;
@@ -1254,14 +1259,40 @@ static void start_drain(gsd_server *s)
     s->drain_deadline = ev_now_ms() + s->cfg.drain_timeout_ms;
 }
 
+/* Signals arrive through a self-pipe: the handler may run on any thread
+ * (libraries such as OpenBLAS start threads before main can block
+ * signals), and only writes the signal number. Program state, not
+ * library state: one daemon per process. */
+static int signal_pipe_wr = -1;
+
+static void on_signal_handler(int sig)
+{
+    int saved = errno;
+    unsigned char b = (unsigned char)sig;
+    ssize_t r = write(signal_pipe_wr, &b, 1);
+    (void)r;
+    errno = saved;
+}
+
+static int install_signals(int wr)
+{
+    signal_pipe_wr = wr;
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal_handler;
+    sa.sa_flags = SA_RESTART;
+    sigemptyset(&sa.sa_mask);
+    return sigaction(SIGTERM, &sa, NULL) | sigaction(SIGINT, &sa, NULL) | sigaction(SIGHUP, &sa, NULL);
+}
+
 static void on_signal(ev_loop *loop, ev_watch *w, int events)
 {
     (void)loop;
     (void)events;
     gsd_server *s = w->ctx;
-    struct signalfd_siginfo si;
-    while (read(w->fd, &si, sizeof si) == (ssize_t)sizeof si) {
-        if (si.ssi_signo == SIGHUP) {
+    unsigned char sig;
+    while (read(w->fd, &sig, 1) == 1) {
+        if (sig == SIGHUP) {
             LOG_I("SIGHUP: reloading configuration and model");
             gsd_notify("RELOADING=1");
             if (s->on_sighup)
@@ -1298,16 +1329,13 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
         snprintf(s->state_dir, sizeof s->state_dir, "%s", cfg->state_dir);
     else if (sd && *sd)
         snprintf(s->state_dir, sizeof s->state_dir, "%.*s", (int)strcspn(sd, ":"), sd);
-    sigset_t set;
-    sigemptyset(&set);
-    sigaddset(&set, SIGTERM);
-    sigaddset(&set, SIGINT);
-    sigaddset(&set, SIGHUP);
-    int sfd = signalfd(-1, &set, SFD_NONBLOCK | SFD_CLOEXEC);
-    if (sfd < 0 || ev_add(s->loop, &s->sig_watch, sfd, EV_READ, on_signal, s) != 0) {
-        snprintf(msg, cap, "signalfd: %s", strerror(errno));
+    int pfd[2];
+    if (pipe2(pfd, O_NONBLOCK | O_CLOEXEC) != 0 ||
+        ev_add(s->loop, &s->sig_watch, pfd[0], EV_READ, on_signal, s) != 0 || install_signals(pfd[1]) != 0) {
+        snprintf(msg, cap, "signal pipe: %s", strerror(errno));
         return -1;
     }
+    s->sig_wr = pfd[1];
     if (setup_listeners(s, msg, cap) != 0)
         return -1;
     if (gsd_work_start(s, cfg->workers, cfg->queue_depth) != 0) {
@@ -1351,8 +1379,13 @@ void gsd_server_free(gsd_server *s)
     gsd_cache_persist(s);
     gsd_model_release_all(s);
     gsd_cache_destroy(s->cache);
-    if (s->sig_watch.fd > 0)
+    if (s->sig_watch.fd > 0) {
+        signal(SIGTERM, SIG_DFL);
+        signal(SIGINT, SIG_DFL);
+        signal(SIGHUP, SIG_DFL);
         close(s->sig_watch.fd);
+        close(s->sig_wr);
+    }
     ev_destroy(s->loop);
     pthread_mutex_destroy(&s->post_mu);
     pthread_mutex_destroy(&s->model_mu);

@@ -99,7 +99,8 @@ struct gsd_server {
 
     gsd_listener listeners[GSD_MAX_LISTEN + 2];
     int nlisteners;
-    ev_watch sig_watch;
+    ev_watch sig_watch;       /* read end of the signal pipe */
+    int sig_wr;
     gsd_conn *conns;          /* (loop) list of open connections */
     gsd_conn *dead;           /* (loop) closed, freed after the batch */
     int nconns;

@@ -46,14 +46,16 @@ def main():
 
         # BUSY: one worker, queue 1; a second client retries after BUSY.
         c.send(gc.FT.FRAME_SLEEP, gc.pb.Sleep(ms=400), 900)
+        threading.Event().wait(0.1)  # 900 running, 901 fills the queue
         c.send(gc.FT.FRAME_SLEEP, gc.pb.Sleep(ms=10), 901)
+        threading.Event().wait(0.05)
         c2 = gc.Client("unix:" + d.sock)
         try:
             c2.call(gc.FT.FRAME_SLEEP, gc.pb.Sleep(ms=1), gc.FT.FRAME_SLEEP_OK)
             t.check(False, "no BUSY with a full queue")
         except gc.Busy as b:
             t.check(b.retry_after_ms >= 10, "retry_after %d" % b.retry_after_ms)
-        c3 = gc.Client("unix:" + d.sock, retry_busy=20)
+        c3 = gc.Client("unix:" + d.sock, retry_busy=200)
         done = c3.call(gc.FT.FRAME_SLEEP, gc.pb.Sleep(ms=1), gc.FT.FRAME_SLEEP_OK)[1]
         t.check(done.seconds >= 0, "retried SLEEP answered")
         got = sorted(c.recv()[1] for _ in range(2))
