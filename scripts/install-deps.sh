@@ -10,6 +10,7 @@ PACKAGES=(
   # libraries
   libopenblas-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  libusb-1.0-0-dev
   # protocol: protobuf-c (C), protoc + python3-protobuf (Python client)
   libprotobuf-c-dev protobuf-c-compiler protobuf-compiler python3-protobuf
   # daemon tests: systemd-analyze, systemd-socket-activate
@@ -17,6 +18,10 @@ PACKAGES=(
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev
+  # VM tier (tests/vm): the emulator, the guest's shell and tools, depmod and
+  # a kernel module build (the kernel itself is fetched by scripts/vm/prepare.sh
+  # with apt-get download, never installed on the host)
+  qemu-system-x86 busybox-static v4l-utils kmod
 )
 
 missing=()

@@ -4,8 +4,11 @@
 #   2. an ASan+UBSan build running the unit, numeric, hard and fuzz tiers
 #      and the cheap daemon integration tests (label daemon)
 #   3. short libFuzzer runs (clang) over each fuzz target
-#   4. the release build (-O2, -Werror) running every tier; its ctest
-#      summary ends the output.
+#   4. the release build (-O2, -Werror)
+#   5. the VM tier (ctest -L vm): qemu TCG boots Debian 12's kernel with
+#      vivid and v4l2loopback around `gazesplat live` (tests/vm)
+#   6. every other tier in the release build; its ctest summary ends the
+#      output.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
@@ -25,6 +28,11 @@ if [ -x scripts/fuzz.sh ]; then
   scripts/fuzz.sh build-fuzz "${GS_FUZZ_SECONDS:-15}"
 fi
 
-echo "== release build: all tiers"
+echo "== release build"
 scripts/build.sh build -DCMAKE_BUILD_TYPE=Release
-cd build && ctest --output-on-failure -j2
+
+echo "== VM tier: qemu (TCG), vivid -> gazesplat live -> v4l2loopback"
+(cd build && ctest --output-on-failure -L vm)
+
+echo "== release build: all other tiers"
+cd build && ctest --output-on-failure -j2 -LE vm

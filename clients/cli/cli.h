@@ -22,6 +22,8 @@ extern const cli_command cli_client_command;
 extern const cli_command cli_render_command;
 extern const cli_command cli_scene_command;
 extern const cli_command cli_synth_command;
+extern const cli_command cli_train_command;
+extern const cli_command cli_live_command;
 
 /* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */
 typedef struct cli_opt {

@@ -10,6 +10,8 @@ static const cli_command *const commands[] = {
     &cli_render_command,
     &cli_scene_command,
     &cli_synth_command,
+    &cli_train_command,
+    &cli_live_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
 

@@ -2,6 +2,7 @@
 valid inputs of each layout and a few damaged ones. Deterministic, standard
 library only; rerun after changing it:
     python3 tests/fuzz/make_corpus.py tests/fuzz/corpus"""
+import json
 import os
 import struct
 import sys
@@ -134,8 +135,50 @@ def image_files():
     return files
 
 
+def st(header, data=b"", pad=True):
+    """A safetensors image: u64 LE header length, JSON header, byte buffer."""
+    h = json.dumps(header, separators=(",", ":")).encode() if isinstance(header, dict) else header
+    if pad:
+        h += b" " * (-len(h) % 8)
+    return struct.pack("<Q", len(h)) + h + data
+
+
+def st_entry(dtype, shape, begin, end):
+    return {"dtype": dtype, "shape": shape, "data_offsets": [begin, end]}
+
+
+def safetensors_files():
+    f6 = struct.pack("<6f", *[0.25 * i - 1 for i in range(6)])
+    mixed = st({"__metadata__": {"format": "gazesplat", "version": "1"},
+                "i": st_entry("I64", [2], 0, 16), "w": st_entry("F32", [2, 3], 16, 40),
+                "s": st_entry("I32", [], 40, 44), "h": st_entry("F16", [2], 44, 48),
+                "b": st_entry("U8", [3], 48, 51), "e": st_entry("F32", [0, 4], 51, 51)},
+               struct.pack("<2q", -1, 1 << 40) + f6 + struct.pack("<i2H", 7, 0x3C00, 0xC000) + b"abc")
+    loose = (b'{ "\\u00e9\\ud83d\\ude00" : {"data_offsets": [3, 11], "shape": [2], "dtype": "F32"},\n'
+             b'"a": {"shape": [3], "dtype": "U8", "data_offsets": [0, 3]}, "__metadata__": {"k": "v\\n"}}   ')
+    files = {
+        "mixed.safetensors": mixed,
+        "loose.safetensors": st(loose, b"xyz" + f6[:8], pad=False),
+        "empty.safetensors": st({}),
+        "scalar.safetensors": st({"s": st_entry("F32", [], 0, 4)}, f6[:4]),
+        "truncated.safetensors": mixed[:-5],
+        "short.safetensors": mixed[:6],
+        "huge_header_len.safetensors": struct.pack("<Q", 1 << 40) + b"{}",
+        "hole.safetensors": st({"a": st_entry("U8", [2], 0, 2), "b": st_entry("U8", [2], 4, 6)}, bytes(6)),
+        "overlap.safetensors": st({"a": st_entry("U8", [4], 0, 4), "b": st_entry("U8", [4], 2, 6)}, bytes(6)),
+        "nan.safetensors": st({"x": st_entry("F32", [2], 0, 8)}, struct.pack("<2f", 1.0, float("nan"))),
+        "float_shape.safetensors": st(b'{"x":{"dtype":"U8","shape":[2.0],"data_offsets":[0,2]}}', bytes(2)),
+        "dup_key.safetensors": st(b'{"x":{"dtype":"U8","dtype":"U8","shape":[1],"data_offsets":[0,1]}}', bytes(1)),
+        "bad_utf8.safetensors": st(b'{"x\xff":{"dtype":"U8","shape":[1],"data_offsets":[0,1]}}', bytes(1)),
+        "ndim9.safetensors": st({"x": st_entry("U8", [1] * 9, 0, 1)}, bytes(1)),
+        "overflow.safetensors": st({"x": st_entry("F32", [1 << 32, 1 << 32], 0, 4)}, bytes(4)),
+    }
+    return files
+
+
 def main(out):
-    for target, files in (("ply", ply_files()), ("npy", npy_files()), ("image", image_files())):
+    for target, files in (("ply", ply_files()), ("npy", npy_files()), ("image", image_files()),
+                          ("safetensors", safetensors_files())):
         os.makedirs(os.path.join(out, target), exist_ok=True)
         for name, data in files.items():
             with open(os.path.join(out, target, name), "wb") as f:

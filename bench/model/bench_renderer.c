@@ -1,0 +1,161 @@
+/* Renderer benchmark: forward and forward+backward milliseconds of the
+ * expression-guided renderer at 64^2 -> 256^2 (the CPU default) and
+ * 128^2 -> 512^2 (the paper's size), C = 32, D = 144, each guidance mode,
+ * one thread (OpenBLAS pinned to 1).
+ *
+ *   bench_renderer [--quick] [--reps N]
+ *
+ * Prints a Markdown table; bench/README.md records its output. Times are
+ * medians over reps; the configurations run interleaved rep by rep. */
+#define _POSIX_C_SOURCE 200809L
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "gazesplat/nn.h"
+#include "renderer.h"
+
+enum { NCASES = 6, MAX_REPS = 101 };
+
+typedef struct {
+    gs_renderer_config cfg;
+    int H, W;
+    size_t np, na, nx, nout;
+    float *params, *grads, *acts, *x, *tau, *out, *dout, *dx, *dtau;
+    gs_renderer_params p, dp;
+    double fwd[MAX_REPS], both[MAX_REPS], cpu_fwd[MAX_REPS], cpu_both[MAX_REPS];
+} bench_case;
+
+static double clock_ms(clockid_t id)
+{
+    struct timespec ts;
+    clock_gettime(id, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
+static double now_ms(void)
+{
+    return clock_ms(CLOCK_MONOTONIC);
+}
+
+/* CPU time of this thread: on a shared machine, wall time also counts the
+ * time other jobs held the core. */
+static double cpu_ms(void)
+{
+    return clock_ms(CLOCK_THREAD_CPUTIME_ID);
+}
+
+static float *alloc_fill(size_t n, uint32_t seed)
+{
+    float *a = malloc((n ? n : 1) * sizeof *a);
+    if (!a) {
+        fprintf(stderr, "out of memory\n");
+        exit(2);
+    }
+    uint32_t s = seed;
+    for (size_t i = 0; i < n; i++) {
+        s = s * 1664525u + 1013904223u;
+        a[i] = (float)(s >> 8) * (2.0f / 16777216.0f) - 1.0f;
+    }
+    return a;
+}
+
+static void setup(bench_case *b, int guidance, int side)
+{
+    b->cfg = (gs_renderer_config){32, 144, guidance, 2};
+    b->H = b->W = side;
+    b->np = gs_renderer_param_count(&b->cfg);
+    b->na = gs_renderer_act_size(&b->cfg, side, side);
+    b->nx = (size_t)32 * side * side, b->nout = (size_t)48 * side * side;
+    b->params = alloc_fill(b->np, 1), b->grads = alloc_fill(b->np, 2);
+    b->acts = alloc_fill(b->na, 3), b->x = alloc_fill(b->nx, 4);
+    b->tau = alloc_fill(144, 5), b->out = alloc_fill(b->nout, 6);
+    b->dout = alloc_fill(b->nout, 7), b->dx = alloc_fill(b->nx, 8);
+    b->dtau = alloc_fill(144, 9);
+    gs_renderer_init(&b->cfg, b->params, b->np, 11);
+    gs_renderer_bind(&b->cfg, b->params, b->np, &b->p);
+    gs_renderer_bind(&b->cfg, b->grads, b->np, &b->dp);
+    if (guidance != GS_GUIDE_NONE) /* a live guidance, as after training */
+        for (int i = 0; i < 32 * 32; i++)
+            b->p.value_w[i] = 0.01f * b->x[i];
+}
+
+static void run_once(bench_case *b, int rep)
+{
+    double t0 = now_ms(), c0 = cpu_ms();
+    int rc = gs_renderer_forward(&b->cfg, &b->p, b->x, b->tau, b->H, b->W,
+                                 b->acts, b->na, b->out);
+    double t1 = now_ms(), c1 = cpu_ms();
+    rc = rc ? rc : gs_renderer_backward(&b->cfg, &b->p, b->acts, b->na, b->x,
+                                        b->tau, b->dout, b->H, b->W, &b->dp,
+                                        b->dx, b->dtau);
+    double t2 = now_ms(), c2 = cpu_ms();
+    if (rc) {
+        fprintf(stderr, "renderer failed: %d\n", rc);
+        exit(1);
+    }
+    b->fwd[rep] = t1 - t0;
+    b->both[rep] = t2 - t0;
+    b->cpu_fwd[rep] = c1 - c0;
+    b->cpu_both[rep] = c2 - c0;
+}
+
+static int cmp(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static double median(double *x, int n)
+{
+    qsort(x, (size_t)n, sizeof *x, cmp);
+    return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
+}
+
+int main(int argc, char **argv)
+{
+    int reps = 9, quick = 0;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--quick"))
+            quick = 1;
+        else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
+            reps = atoi(argv[++i]);
+        else {
+            fprintf(stderr, "usage: bench_renderer [--quick] [--reps N]\n");
+            return 2;
+        }
+    }
+    if (quick)
+        reps = 1;
+    if (reps < 1 || reps > MAX_REPS) {
+        fprintf(stderr, "reps must be in 1..%d\n", MAX_REPS);
+        return 2;
+    }
+    gs_nn_blas_set_threads(1);
+    static const char *const names[3] = {"none", "additive", "multiplicative"};
+    bench_case *cases = calloc(NCASES, sizeof *cases);
+    if (!cases)
+        return 2;
+    int ncases = quick ? 3 : NCASES;
+    for (int i = 0; i < ncases; i++)
+        setup(&cases[i], i % 3, i < 3 ? 64 : 128);
+    for (int i = 0; i < ncases; i++) /* warm-up: page in the buffers */
+        run_once(&cases[i], 0);
+    for (int r = 0; r < reps; r++)
+        for (int i = 0; i < ncases; i++)
+            run_once(&cases[i], r);
+    printf("| features -> image | guidance | fwd ms | fwd+bwd ms | fwd CPU ms | "
+           "fwd+bwd CPU ms | activations MB |\n");
+    printf("|---|---|---|---|---|---|---|\n");
+    for (int i = 0; i < ncases; i++) {
+        bench_case *b = &cases[i];
+        printf("| %d^2 -> %d^2 | %s | %.2f | %.2f | %.2f | %.2f | %.1f |\n",
+               b->H, 4 * b->H, names[i % 3], median(b->fwd, reps),
+               median(b->both, reps), median(b->cpu_fwd, reps),
+               median(b->cpu_both, reps), (double)b->na * 4.0 / 1e6);
+    }
+    return 0;
+}

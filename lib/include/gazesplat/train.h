@@ -1,0 +1,62 @@
+/* gs_train: making and training GazeGaussian models on synthetic heads. */
+#ifndef GAZESPLAT_TRAIN_H
+#define GAZESPLAT_TRAIN_H
+
+#include <stdint.h>
+
+#include "gazesplat/error.h"
+#include "gazesplat/model.h"
+#include "gazesplat/pool.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* A new, untrained model. preset: "cpu" (the default: ~11k face Gaussians
+ * at 3 mm, 2 x 700 eye Gaussians, MLP width 64, 64^2 features -> 256^2
+ * images), "tiny" (for tests: seconds to train, 32^2 -> 128^2) or "paper"
+ * (128^2 features -> 512^2, MLP width 256). The ablation switches take
+ * -1 for the preset's value. */
+typedef struct gs_model_spec {
+    const char *preset;
+    int train_identities;   /* auto-decoder codes (>= 1) */
+    int guidance;           /* 0 none, 1 additive (released), 2 Eq. 9 */
+    int two_stream;         /* 0: single stream */
+    int eye_rotation;       /* 0: no explicit eye rotation */
+} gs_model_spec;
+void gs_model_spec_default(gs_model_spec *s);
+int gs_model_new(const gs_model_spec *spec, uint64_t seed, gs_model **out,
+                 gs_error *err);
+/* Writes a model file atomically (safetensors, docs/model.md). */
+int gs_model_write(const gs_model *m, const char *path, gs_error *err);
+
+typedef void (*gs_train_log_fn)(void *ctx, const char *fmt, ...)
+    __attribute__((format(printf, 2, 3)));
+
+typedef struct gs_train_options {
+    const char *out_path;   /* model file; checkpoints overwrite it, and
+                               out_path.opt holds the optimizer state */
+    long steps;             /* total steps (a resumed run continues) */
+    double lr;              /* base Adam learning rate */
+    uint64_t seed;          /* sample stream */
+    int resume;             /* 1: continue from out_path(.opt) */
+    long checkpoint_every;
+    long log_every;
+    gs_train_log_fn log;
+    void *log_ctx;
+} gs_train_options;
+void gs_train_options_default(gs_train_options *o);
+
+typedef struct gs_train_report {
+    long steps, skipped;
+    double seconds, final_loss;
+} gs_train_report;
+
+/* Trains m in place. */
+int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
+             gs_train_report *rep, gs_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

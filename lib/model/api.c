@@ -1,0 +1,564 @@
+/* The public face of the model: subjects, rendering and fitting. */
+#define _POSIX_C_SOURCE 200809L
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "frame.h"
+#include "gazesplat/geom.h"
+#include "gazesplat/nn.h"
+
+/* ---- subjects ---- */
+
+#define GS_SUBJECT_MAGIC 0x42555347u /* "GSUB" */
+#define GS_SUBJECT_VERSION 1u
+
+typedef struct wbuf {
+    uint8_t *p;
+    size_t n, cap;
+} wbuf;
+
+static void put(wbuf *b, const void *v, size_t n)
+{
+    /* Little-endian hosts only (checked at build time in CMake); the
+     * bytes are the in-memory representation. */
+    if (b->p && b->n + n <= b->cap)
+        memcpy(b->p + b->n, v, n);
+    b->n += n;
+}
+
+size_t gs_subject_encode(const gs_subject *s, uint8_t *buf, size_t cap)
+{
+    wbuf b = {buf, 0, cap};
+    uint32_t magic = GS_SUBJECT_MAGIC, ver = GS_SUBJECT_VERSION;
+    uint32_t dim = (uint32_t)s->code_dim;
+    put(&b, &magic, 4);
+    put(&b, &ver, 4);
+    put(&b, &dim, 4);
+    put(&b, s->code, sizeof(float) * (size_t)s->code_dim);
+    put(&b, s->head_R, sizeof s->head_R);
+    put(&b, s->head_t, sizeof s->head_t);
+    put(&b, &s->gaze_pitch, 8);
+    put(&b, &s->gaze_yaw, 8);
+    put(&b, s->colour_gain, sizeof s->colour_gain);
+    put(&b, s->colour_bias, sizeof s->colour_bias);
+    put(&b, &s->fit_psnr, 4);
+    put(&b, &s->fit_ssim, 4);
+    return b.n;
+}
+
+static int all_finite_d(const double *v, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i]))
+            return 0;
+    return 1;
+}
+
+static int all_finite_f(const float *v, int n)
+{
+    for (int i = 0; i < n; i++)
+        if (!isfinite(v[i]))
+            return 0;
+    return 1;
+}
+
+int gs_subject_decode(const uint8_t *buf, size_t len, gs_subject *out,
+                      gs_error *err)
+{
+    uint32_t magic, ver, dim;
+    if (!buf || len < 12)
+        return gs_error_set(err, GS_ERR_FORMAT, "subject: %zu bytes", len);
+    memcpy(&magic, buf, 4);
+    memcpy(&ver, buf + 4, 4);
+    memcpy(&dim, buf + 8, 4);
+    if (magic != GS_SUBJECT_MAGIC)
+        return gs_error_set(err, GS_ERR_FORMAT, "subject: bad magic");
+    if (ver != GS_SUBJECT_VERSION)
+        return gs_error_set(err, GS_ERR_UNSUPPORTED, "subject: version %u",
+                            ver);
+    if (dim < 1 || dim > GS_MODEL_MAX_CODE)
+        return gs_error_set(err, GS_ERR_FORMAT, "subject: code_dim %u", dim);
+    gs_subject s;
+    memset(&s, 0, sizeof s);
+    s.code_dim = (int)dim;
+    size_t need = gs_subject_encode(&s, NULL, 0);
+    if (len != need)
+        return gs_error_set(err, GS_ERR_FORMAT,
+                            "subject: %zu bytes, %zu expected", len, need);
+    const uint8_t *p = buf + 12;
+#define GET(dst, n) do { memcpy((dst), p, (n)); p += (n); } while (0)
+    GET(s.code, 4 * (size_t)dim);
+    GET(s.head_R, sizeof s.head_R);
+    GET(s.head_t, sizeof s.head_t);
+    GET(&s.gaze_pitch, 8);
+    GET(&s.gaze_yaw, 8);
+    GET(s.colour_gain, sizeof s.colour_gain);
+    GET(s.colour_bias, sizeof s.colour_bias);
+    GET(&s.fit_psnr, 4);
+    GET(&s.fit_ssim, 4);
+#undef GET
+    if (!all_finite_f(s.code, s.code_dim) || !all_finite_d(s.head_R, 9) ||
+        !all_finite_d(s.head_t, 3) || !isfinite(s.gaze_pitch) ||
+        !isfinite(s.gaze_yaw) || !all_finite_f(s.colour_gain, 3) ||
+        !all_finite_f(s.colour_bias, 3))
+        return gs_error_set(err, GS_ERR_NONFINITE, "subject: non-finite value");
+    *out = s;
+    return GS_OK;
+}
+
+/* ---- checks ---- */
+
+static int check_rotation(const double R[9], gs_error *err)
+{
+    if (!all_finite_d(R, 9))
+        return gs_error_set(err, GS_ERR_NONFINITE, "head rotation not finite");
+    double rt[9], e = 0;
+    gs_geom_mat3_transpose(R, rt);
+    gs_geom_mat3_mul(rt, R, rt);
+    for (int i = 0; i < 9; i++)
+        e = fmax(e, fabs(rt[i] - (i % 4 == 0 ? 1.0 : 0.0)));
+    if (e > 1e-3)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "head rotation is not orthonormal (error %g)", e);
+    return GS_OK;
+}
+
+static int check_pose(const double R[9], const double t[3], gs_error *err)
+{
+    int rc = check_rotation(R, err);
+    if (rc)
+        return rc;
+    if (!all_finite_d(t, 3))
+        return gs_error_set(err, GS_ERR_NONFINITE,
+                            "head translation not finite");
+    if (!(t[2] > 100.0 && t[2] < 5000.0))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "head distance %.1f mm outside 100..5000", t[2]);
+    double p, y;
+    gs_geom_head_pitchyaw(R, &p, &y);
+    /* The head frame's z points into the head; a frontal head has z along
+     * the camera's +z, and its angles are those of -z. */
+    double z[3] = {-R[2], -R[5], -R[8]};
+    gs_geom_vec_to_pitchyaw(z, &p, &y);
+    if (fabs(p) > GS_MODEL_MAX_HEAD_ANGLE || fabs(y) > GS_MODEL_MAX_HEAD_ANGLE)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "head pitch %.1f / yaw %.1f deg outside +-%.0f",
+                            p * 180 / GS_MODEL_PI, y * 180 / GS_MODEL_PI,
+                            GS_MODEL_MAX_HEAD_ANGLE * 180 / GS_MODEL_PI);
+    return GS_OK;
+}
+
+static int check_gaze(double pitch, double yaw, gs_error *err)
+{
+    if (!isfinite(pitch) || !isfinite(yaw))
+        return gs_error_set(err, GS_ERR_NONFINITE, "gaze not finite");
+    if (fabs(pitch) > GS_MODEL_MAX_GAZE_PITCH ||
+        fabs(yaw) > GS_MODEL_MAX_GAZE_YAW)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "gaze pitch %.1f / yaw %.1f deg outside +-%.0f / "
+                            "+-%.0f",
+                            pitch * 180 / GS_MODEL_PI, yaw * 180 / GS_MODEL_PI,
+                            GS_MODEL_MAX_GAZE_PITCH * 180 / GS_MODEL_PI,
+                            GS_MODEL_MAX_GAZE_YAW * 180 / GS_MODEL_PI);
+    return GS_OK;
+}
+
+static int check_subject(const gs_model *m, const gs_subject *s,
+                         gs_error *err)
+{
+    if (s->code_dim != gs_model_code_dim(&m->cfg))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "subject code_dim %d, model has %d", s->code_dim,
+                            gs_model_code_dim(&m->cfg));
+    if (!all_finite_f(s->code, s->code_dim) ||
+        !all_finite_f(s->colour_gain, 3) || !all_finite_f(s->colour_bias, 3))
+        return gs_error_set(err, GS_ERR_NONFINITE, "subject not finite");
+    return check_pose(s->head_R, s->head_t, err);
+}
+
+/* ---- rendering ---- */
+
+static float srgb_byte(float v)
+{
+    v = v < 0 ? 0 : v > 1 ? 1 : v;
+    return floorf(v * 255.0f + 0.5f);
+}
+
+/* Writes the frame's image with the subject's colour transform; refuses a
+ * non-finite pixel. */
+static int write_image(const gs_model_ctx *c, const gs_subject *s,
+                       uint8_t *rgb, size_t stride, gs_error *err)
+{
+    int S = c->S;
+    size_t plane = (size_t)S * S;
+    for (int y = 0; y < S; y++) {
+        uint8_t *row = rgb + (size_t)y * stride;
+        for (int x = 0; x < S; x++)
+            for (int k = 0; k < 3; k++) {
+                float v = c->rgb[k * plane + (size_t)y * S + x];
+                v = s->colour_gain[k] * v + s->colour_bias[k];
+                if (!isfinite(v))
+                    return gs_error_set(err, GS_ERR_NONFINITE,
+                                        "render: non-finite pixel (%d,%d)", x,
+                                        y);
+                row[3 * x + k] = (uint8_t)srgb_byte(v);
+            }
+    }
+    return GS_OK;
+}
+
+static void frame_of(const gs_subject *s, const gs_view *v, gs_frame *fr)
+{
+    memset(fr, 0, sizeof *fr);
+    memcpy(fr->code, s->code, sizeof(float) * (size_t)s->code_dim);
+    const double *R = v && v->use_head ? v->head_R : s->head_R;
+    const double *t = v && v->use_head ? v->head_t : s->head_t;
+    memcpy(fr->head_R, R, sizeof fr->head_R);
+    memcpy(fr->head_t, t, sizeof fr->head_t);
+    fr->gaze[0] = v ? v->gaze_pitch : s->gaze_pitch;
+    fr->gaze[1] = v ? v->gaze_yaw : s->gaze_yaw;
+}
+
+int gs_model_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
+                    const gs_view *view, uint8_t *rgb, size_t stride,
+                    gs_error *err)
+{
+    if (!c || !s || !view || !rgb)
+        return gs_error_set(err, GS_ERR_ARG, "render: NULL argument");
+    if (stride < 3 * (size_t)c->S)
+        return gs_error_set(err, GS_ERR_ARG, "render: stride %zu < %d",
+                            stride, 3 * c->S);
+    int rc = check_subject(c->m, s, err);
+    if (!rc)
+        rc = check_gaze(view->gaze_pitch, view->gaze_yaw, err);
+    if (!rc && view->use_head)
+        rc = check_pose(view->head_R, view->head_t, err);
+    if (rc)
+        return rc;
+    gs_frame fr;
+    frame_of(s, view, &fr);
+    rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
+    if (rc)
+        return rc;
+    return write_image(c, s, rgb, stride, err);
+}
+
+/* ---- fitting ---- */
+
+void gs_fit_options_default(gs_fit_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->max_iters = 200;
+    o->plateau_rel = 1e-3;
+    gs_geom_mat3_identity(o->head_R);
+}
+
+/* The fitted variables, one flat vector for a small Adam. */
+enum { V_GAZE = 0, V_ROT = 2, V_TRANS = 5, V_GAIN = 8, V_BIAS = 11,
+       V_CODE = 14 };
+
+typedef struct fit_state {
+    double x[V_CODE + GS_MODEL_MAX_CODE];
+    double g[V_CODE + GS_MODEL_MAX_CODE];
+    double m1[V_CODE + GS_MODEL_MAX_CODE], m2[V_CODE + GS_MODEL_MAX_CODE];
+    double lr[V_CODE + GS_MODEL_MAX_CODE];
+    int n;
+} fit_state;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+static void adam_update(fit_state *s, int t)
+{
+    const double b1 = 0.9, b2 = 0.999, eps = 1e-8;
+    for (int i = 0; i < s->n; i++) {
+        s->m1[i] = b1 * s->m1[i] + (1 - b1) * s->g[i];
+        s->m2[i] = b2 * s->m2[i] + (1 - b2) * s->g[i] * s->g[i];
+        double mh = s->m1[i] / (1 - pow(b1, t));
+        double vh = s->m2[i] / (1 - pow(b2, t));
+        s->x[i] -= s->lr[i] * mh / (sqrt(vh) + eps);
+    }
+}
+
+/* Image loss of the current frame against target under weights w:
+ * pred' = w (gain pred + bias) + (1 - w) target, loss = L1 + 0.1 SSIM.
+ * Fills d_rgb (d loss / d pred) and the colour gradients. */
+typedef struct fit_bufs {
+    float *target, *w, *pred, *dpred, *ssim_scratch;
+    size_t ssim_len;
+} fit_bufs;
+
+static double image_loss(gs_model_ctx *c, fit_bufs *b, const fit_state *s,
+                         double *dgain, double *dbias)
+{
+    int S = c->S;
+    size_t plane = (size_t)S * S;
+    for (int k = 0; k < 3; k++) {
+        double gn = s->x[V_GAIN + k], bi = s->x[V_BIAS + k];
+        for (size_t i = 0; i < plane; i++) {
+            float w = b->w[i];
+            float v = (float)(gn * c->rgb[k * plane + i] + bi);
+            b->pred[k * plane + i] = w * v + (1 - w) * b->target[k * plane + i];
+        }
+    }
+    float l1 = 0, ls = 0;
+    gs_nn_l1_forward(&l1, b->pred, b->target, NULL, 3, (int)plane);
+    gs_nn_ssim_loss_forward(&ls, b->pred, b->target, 3, S, S, GS_NN_SSIM_ZERO,
+                            b->ssim_scratch, b->ssim_len);
+    memset(b->dpred, 0, 3 * plane * sizeof(float));
+    gs_nn_l1_backward(b->dpred, 1.0f, b->pred, b->target, NULL, 3, (int)plane);
+    gs_nn_ssim_loss_backward(b->dpred, 0.1f, b->pred, b->target, 3, S, S,
+                             GS_NN_SSIM_ZERO, b->ssim_scratch, b->ssim_len);
+    for (int k = 0; k < 3; k++) {
+        double gn = s->x[V_GAIN + k];
+        double sg = 0, sb = 0;
+        for (size_t i = 0; i < plane; i++) {
+            float d = b->dpred[k * plane + i] * b->w[i];
+            sg += (double)d * c->rgb[k * plane + i];
+            sb += d;
+            b->dpred[k * plane + i] = (float)(d * gn);
+        }
+        dgain[k] = sg;
+        dbias[k] = sb;
+    }
+    return (double)l1 + 0.1 * (double)ls;
+}
+
+static void state_to_frame(const gs_model_ctx *c, const fit_state *s,
+                           const double R0[9], gs_frame *fr)
+{
+    memset(fr, 0, sizeof *fr);
+    for (int k = 0; k < c->D; k++)
+        fr->code[k] = (float)s->x[V_CODE + k];
+    double dR[9];
+    gs_geom_rodrigues(s->x + V_ROT, dR);
+    gs_geom_mat3_mul(dR, R0, fr->head_R);
+    for (int k = 0; k < 3; k++)
+        fr->head_t[k] = s->x[V_TRANS + k];
+    fr->gaze[0] = s->x[V_GAZE];
+    fr->gaze[1] = s->x[V_GAZE + 1];
+}
+
+static int fit_bufs_init(fit_bufs *b, const gs_model_ctx *c,
+                         const uint8_t *rgb, size_t stride,
+                         const uint8_t *mask)
+{
+    int S = c->S;
+    size_t plane = (size_t)S * S;
+    b->ssim_len = gs_nn_ssim_scratch_size(S, S, GS_NN_SSIM_ZERO);
+    b->target = malloc(3 * plane * sizeof(float));
+    b->w = malloc(plane * sizeof(float));
+    b->pred = malloc(3 * plane * sizeof(float));
+    b->dpred = malloc(3 * plane * sizeof(float));
+    b->ssim_scratch = malloc(b->ssim_len * sizeof(float));
+    if (!b->target || !b->w || !b->pred || !b->dpred || !b->ssim_scratch)
+        return GS_ERR_NOMEM;
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            size_t i = (size_t)y * S + x;
+            for (int k = 0; k < 3; k++)
+                b->target[k * plane + i] =
+                    rgb[(size_t)y * stride + 3 * x + k] / 255.0f;
+            b->w[i] = mask ? mask[i] / 255.0f : 1.0f;
+        }
+    return GS_OK;
+}
+
+static void fit_bufs_free(fit_bufs *b)
+{
+    free(b->target);
+    free(b->w);
+    free(b->pred);
+    free(b->dpred);
+    free(b->ssim_scratch);
+}
+
+static void fit_init(const gs_model_ctx *c, const gs_fit_options *o,
+                     fit_state *s)
+{
+    memset(s, 0, sizeof *s);
+    s->n = V_CODE + c->D;
+    s->x[V_GAZE] = o->known_gaze ? o->gaze_pitch : 0.0;
+    s->x[V_GAZE + 1] = o->known_gaze ? o->gaze_yaw : 0.0;
+    for (int k = 0; k < 3; k++) {
+        s->x[V_TRANS + k] = o->known_head ? o->head_t[k] : 0.0;
+        s->x[V_GAIN + k] = 1.0;
+    }
+    if (!o->known_head)
+        s->x[V_TRANS + 2] = c->m->cfg.d_n_mm;
+    for (int k = 0; k < c->D; k++)
+        s->x[V_CODE + k] = c->m->p.code_mean[k];
+    for (int k = 0; k < 2; k++)
+        s->lr[V_GAZE + k] = o->known_gaze ? 0.0 : 0.01;
+    for (int k = 0; k < 3; k++) {
+        s->lr[V_ROT + k] = o->known_head ? 0.0 : 0.004;
+        s->lr[V_TRANS + k] = o->known_head ? 0.0 : 1.0;
+        s->lr[V_GAIN + k] = 0.005;
+        s->lr[V_BIAS + k] = 0.005;
+    }
+    for (int k = 0; k < c->D; k++)
+        s->lr[V_CODE + k] = 0.03;
+}
+
+int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
+                 size_t stride, const gs_fit_options *opt, gs_subject *out,
+                 gs_fit_report *report, gs_error *err)
+{
+    if (!c || !rgb || !out)
+        return gs_error_set(err, GS_ERR_ARG, "fit: NULL argument");
+    if (stride < 3 * (size_t)c->S)
+        return gs_error_set(err, GS_ERR_ARG, "fit: stride %zu < %d", stride,
+                            3 * c->S);
+    gs_fit_options o;
+    if (opt)
+        o = *opt;
+    else
+        gs_fit_options_default(&o);
+    int rc = GS_OK;
+    if (o.known_gaze)
+        rc = check_gaze(o.gaze_pitch, o.gaze_yaw, err);
+    if (!rc && o.known_head)
+        rc = check_pose(o.head_R, o.head_t, err);
+    if (rc)
+        return rc;
+    int iters = o.max_iters > 0 ? o.max_iters : 200;
+    double plateau = o.plateau_rel > 0 ? o.plateau_rel : 1e-3;
+    double R0[9];
+    if (o.known_head)
+        memcpy(R0, o.head_R, sizeof R0);
+    else
+        gs_geom_mat3_identity(R0);
+
+    fit_bufs b;
+    memset(&b, 0, sizeof b);
+    fit_state *s = calloc(1, sizeof *s), *best = calloc(1, sizeof *best);
+    if (!s || !best || fit_bufs_init(&b, c, rgb, stride, o.mask)) {
+        free(s);
+        free(best);
+        fit_bufs_free(&b);
+        return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
+    }
+    fit_init(c, &o, s);
+    double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
+    int it = 0, plateaued = 0;
+    for (; it < iters; it++) {
+        gs_frame fr;
+        state_to_frame(c, s, R0, &fr);
+        rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
+        if (rc)
+            break;
+        double dgain[3], dbias[3];
+        double loss = image_loss(c, &b, s, dgain, dbias);
+        if (!isfinite(loss)) {
+            rc = gs_error_set(err, GS_ERR_NONFINITE,
+                              "fit diverged at iteration %d (loss %g, first "
+                              "%g)", it, loss, first);
+            break;
+        }
+        if (it == 0)
+            first = loss;
+        if (loss < best_loss) {
+            best_loss = loss;
+            *best = *s;
+        }
+        hist[it % 20] = loss;
+        if (it >= 20 && hist[(it + 1) % 20] - loss < plateau * loss) {
+            plateaued = 1;
+            break;
+        }
+        if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s)
+            break;
+        gs_frame_grad fg;
+        memset(&fg, 0, sizeof fg);
+        rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, &fg, err);
+        if (rc)
+            break;
+        memset(s->g, 0, sizeof s->g);
+        s->g[V_GAZE] = fg.gaze[0];
+        s->g[V_GAZE + 1] = fg.gaze[1];
+        for (int k = 0; k < 3; k++) {
+            s->g[V_ROT + k] = fg.rot[k];
+            s->g[V_TRANS + k] = fg.trans[k];
+            s->g[V_GAIN + k] = dgain[k];
+            s->g[V_BIAS + k] = dbias[k];
+        }
+        for (int k = 0; k < c->D; k++)
+            s->g[V_CODE + k] = fg.code[k];
+        for (int k = 0; k < s->n; k++)
+            if (!isfinite(s->g[k])) {
+                rc = gs_error_set(err, GS_ERR_NONFINITE,
+                                  "fit: non-finite gradient at iteration %d",
+                                  it);
+                break;
+            }
+        if (rc)
+            break;
+        adam_update(s, it + 1);
+        /* Keep the rotation perturbation small: fold it into R0. */
+        /* (angles stay in range; the gaze is clamped to the model's) */
+        s->x[V_GAZE] = fmax(-GS_MODEL_MAX_GAZE_PITCH,
+                            fmin(GS_MODEL_MAX_GAZE_PITCH, s->x[V_GAZE]));
+        s->x[V_GAZE + 1] = fmax(-GS_MODEL_MAX_GAZE_YAW,
+                                fmin(GS_MODEL_MAX_GAZE_YAW, s->x[V_GAZE + 1]));
+    }
+    if (!rc) {
+        gs_frame fr;
+        state_to_frame(c, best, R0, &fr);
+        rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
+        double dg[3], db[3];
+        double l = rc ? 0 : image_loss(c, &b, best, dg, db);
+        (void)l;
+        if (!rc) {
+            /* Quality on the weighted region. */
+            int S = c->S;
+            size_t plane = (size_t)S * S;
+            double se = 0, wsum = 0;
+            for (int k = 0; k < 3; k++)
+                for (size_t i = 0; i < plane; i++) {
+                    double w = b.w[i];
+                    double e = b.pred[k * plane + i] - b.target[k * plane + i];
+                    se += e * e;
+                    wsum += w;
+                }
+            float ls = 0;
+            gs_nn_ssim_loss_forward(&ls, b.pred, b.target, 3, S, S,
+                                    GS_NN_SSIM_ZERO, b.ssim_scratch,
+                                    b.ssim_len);
+            gs_subject r;
+            memset(&r, 0, sizeof r);
+            r.code_dim = c->D;
+            for (int k = 0; k < c->D; k++)
+                r.code[k] = fr.code[k];
+            memcpy(r.head_R, fr.head_R, sizeof r.head_R);
+            memcpy(r.head_t, fr.head_t, sizeof r.head_t);
+            r.gaze_pitch = fr.gaze[0];
+            r.gaze_yaw = fr.gaze[1];
+            for (int k = 0; k < 3; k++) {
+                r.colour_gain[k] = (float)best->x[V_GAIN + k];
+                r.colour_bias[k] = (float)best->x[V_BIAS + k];
+            }
+            double mse = wsum > 0 ? se / wsum : 0;
+            r.fit_psnr = (float)(mse > 1e-12 ? -10.0 * log10(mse) : 120.0);
+            r.fit_ssim = 1.0f - ls;
+            *out = r;
+        }
+    }
+    if (report) {
+        memset(report, 0, sizeof *report);
+        report->iters = it;
+        report->seconds = now_s() - t0;
+        report->loss_first = first;
+        report->loss_last = best_loss;
+        report->stopped_on_plateau = plateaued;
+    }
+    free(s);
+    free(best);
+    fit_bufs_free(&b);
+    return rc;
+}

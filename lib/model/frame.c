@@ -1,0 +1,729 @@
+/* A frame through the model.
+ *
+ * Face stream (paper Eq. 2), per face Gaussian i with feature f_i and the
+ * distance weight lambda_i (1 near the landmarks, 0 far away):
+ *   oE = E([f_i, tau]), oP = P([f_i, PE(rvec(R_head))])
+ *   x  = x0 + 4 mm (lambda oE.pos + (1 - lambda) oP.pos)
+ *   s  = s0 + 0.2 (lambda oE.scale + (1 - lambda) oP.scale), same for the
+ *        quaternion and the opacity logit
+ *   c  = c0 + oE.feat + oP.feat
+ * Colour is not blended by lambda: identity-dependent appearance (skin tone,
+ * hair colour) lives outside the landmark zone too.
+ * Eye stream (paper Eq. 4-5), per eye e with eyeball centre c_e:
+ *   R_e = R_res,e(PE(gaze)) Ry(yaw) Rx(-pitch)   (R_res initialised to I)
+ *   x   = c_e + W_e tau + R_e (x0 - c_e) + 1 mm o.pos,  o = Eye([f, tau, PE(gaze)])
+ *   isotropic log-scale s0 + 0.2 o.scale, opacity a0 + 0.2 o.opacity,
+ *   c = c0 + o.feat
+ * Both streams are moved into the camera by the head pose (x_cam = R x + t,
+ * q_cam = q_R q), rasterized at feat_size with a white RGB background and
+ * turned into the image by the renderer. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "frame.h"
+#include "gazesplat/geom.h"
+
+/* ---- small rotation helpers (wxyz quaternions) ---- */
+
+static void quat_mul(const double a[4], const double b[4], double o[4])
+{
+    o[0] = a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3];
+    o[1] = a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2];
+    o[2] = a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1];
+    o[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0];
+}
+
+/* Rotation matrix of a unit quaternion. */
+static void quat_to_mat(const double q[4], double r[9])
+{
+    double w = q[0], x = q[1], y = q[2], z = q[3];
+    r[0] = 1 - 2 * (y * y + z * z); r[1] = 2 * (x * y - w * z);
+    r[2] = 2 * (x * z + w * y);
+    r[3] = 2 * (x * y + w * z); r[4] = 1 - 2 * (x * x + z * z);
+    r[5] = 2 * (y * z - w * x);
+    r[6] = 2 * (x * z - w * y); r[7] = 2 * (y * z + w * x);
+    r[8] = 1 - 2 * (x * x + y * y);
+}
+
+/* dq[4] (unit q) from dR[9] through quat_to_mat. */
+static void quat_to_mat_backward(const double q[4], const double d[9],
+                                 double dq[4])
+{
+    double w = q[0], x = q[1], y = q[2], z = q[3];
+    dq[0] = 2 * (-z * d[1] + y * d[2] + z * d[3] - x * d[5] - y * d[6] +
+                 x * d[7]);
+    dq[1] = 2 * (y * d[1] + z * d[2] + y * d[3] - 2 * x * d[4] - w * d[5] +
+                 z * d[6] + w * d[7] - 2 * x * d[8]);
+    dq[2] = 2 * (-2 * y * d[0] + x * d[1] + w * d[2] + x * d[3] + z * d[5] -
+                 w * d[6] + z * d[7] - 2 * y * d[8]);
+    dq[3] = 2 * (-2 * z * d[0] - w * d[1] + x * d[2] + w * d[3] -
+                 2 * z * d[4] + y * d[5] + x * d[6] + y * d[7]);
+}
+
+static void mat_to_quat(const double r[9], double q[4])
+{
+    double tr = r[0] + r[4] + r[8];
+    if (tr > 0) {
+        double s = sqrt(tr + 1.0) * 2;
+        q[0] = 0.25 * s; q[1] = (r[7] - r[5]) / s;
+        q[2] = (r[2] - r[6]) / s; q[3] = (r[3] - r[1]) / s;
+    } else if (r[0] > r[4] && r[0] > r[8]) {
+        double s = sqrt(1.0 + r[0] - r[4] - r[8]) * 2;
+        q[0] = (r[7] - r[5]) / s; q[1] = 0.25 * s;
+        q[2] = (r[1] + r[3]) / s; q[3] = (r[2] + r[6]) / s;
+    } else if (r[4] > r[8]) {
+        double s = sqrt(1.0 + r[4] - r[0] - r[8]) * 2;
+        q[0] = (r[2] - r[6]) / s; q[1] = (r[1] + r[3]) / s;
+        q[2] = 0.25 * s; q[3] = (r[5] + r[7]) / s;
+    } else {
+        double s = sqrt(1.0 + r[8] - r[0] - r[4]) * 2;
+        q[0] = (r[3] - r[1]) / s; q[1] = (r[2] + r[6]) / s;
+        q[2] = (r[5] + r[7]) / s; q[3] = 0.25 * s;
+    }
+}
+
+static void mat_mul(const double a[9], const double b[9], double o[9])
+{
+    double t[9];
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            t[3 * i + j] = a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] +
+                           a[3 * i + 2] * b[6 + j];
+    memcpy(o, t, sizeof t);
+}
+
+/* ---- context ---- */
+
+static float *falloc(size_t n, int *fail)
+{
+    float *p = calloc(n ? n : 1, sizeof(float));
+    if (!p)
+        *fail = 1;
+    return p;
+}
+
+int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
+{
+    const gs_model_config *k = &m->cfg;
+    const gs_model_params *p = &m->p;
+    int fail = 0;
+    c->m = m;
+    c->nf = k->n_face;
+    c->ne = k->two_stream ? 2 * k->n_eye_each : 0;
+    c->n = c->nf + c->ne;
+    c->F = k->feat_dim;
+    c->D = gs_model_code_dim(k);
+    c->C = k->channels;
+    c->fs = k->feat_size;
+    c->S = k->image_size;
+    size_t nf = (size_t)c->nf, ne = (size_t)(c->ne ? c->ne : 1),
+           n = (size_t)c->n;
+    c->fe_in = falloc(nf * p->face_e.dims[0], &fail);
+    c->fe_act = falloc(gs_mlp_act_size(&p->face_e, c->nf), &fail);
+    c->fe_out = falloc(nf * GS_FACE_OUT(c->C), &fail);
+    c->fp_in = falloc(nf * p->face_p.dims[0], &fail);
+    c->fp_act = falloc(gs_mlp_act_size(&p->face_p, c->nf), &fail);
+    c->fp_out = falloc(nf * GS_FACE_OUT(c->C), &fail);
+    c->e_in = falloc(ne * p->eye.dims[0], &fail);
+    c->e_act = falloc(gs_mlp_act_size(&p->eye, (int)ne), &fail);
+    c->e_out = falloc(ne * GS_EYE_OUT(c->C), &fail);
+    for (int e = 0; e < 2; e++)
+        c->er_act[e] = falloc(gs_mlp_act_size(&p->eye_rot[e], 1), &fail);
+    c->g_mean = falloc(n * 3, &fail);
+    c->g_scale = falloc(n * 3, &fail);
+    c->g_quat = falloc(n * 4, &fail);
+    c->g_opac = falloc(n, &fail);
+    c->g_feat = falloc(n * c->C, &fail);
+    c->x_head = falloc(n * 3, &fail);
+    c->q_head = falloc(nf * 4, &fail);
+    c->v_mean = falloc(n * 3, &fail);
+    c->v_scale = falloc(n * 3, &fail);
+    c->v_quat = falloc(n * 4, &fail);
+    c->v_opac = falloc(n, &fail);
+    c->v_feat = falloc(n * c->C, &fail);
+    size_t fsz = (size_t)c->fs * c->fs, isz = (size_t)c->S * c->S;
+    c->bg = falloc(fsz * c->C, &fail);
+    c->fmap = falloc(fsz * c->C, &fail);
+    c->v_fmap = falloc(fsz * c->C, &fail);
+    c->alpha = falloc(fsz, &fail);
+    c->rgb = falloc(isz * 3, &fail);
+    c->v_rgb = falloc(isz * 3, &fail);
+    c->r_act_len = gs_renderer_act_size(&m->rcfg, c->fs, c->fs);
+    c->r_act = falloc(c->r_act_len, &fail);
+    size_t sc = gs_mlp_scratch_size(&p->face_e, c->nf);
+    size_t s2 = gs_mlp_scratch_size(&p->face_p, c->nf);
+    size_t s3 = gs_mlp_scratch_size(&p->eye, (int)ne);
+    sc = sc > s2 ? sc : s2;
+    sc = sc > s3 ? sc : s3;
+    size_t blk = nf * (size_t)p->face_e.dims[0];
+    size_t cand[] = {nf * (size_t)p->face_p.dims[0],
+                     ne * (size_t)p->eye.dims[0],
+                     nf * (size_t)GS_FACE_OUT(c->C),
+                     ne * (size_t)GS_EYE_OUT(c->C)};
+    for (int i = 0; i < 4; i++)
+        blk = cand[i] > blk ? cand[i] : blk;
+    c->scratch_blk = blk;
+    c->scratch_len = sc + 2 * blk;
+    c->scratch = falloc(c->scratch_len, &fail);
+    c->tmp8 = malloc(isz * 3);
+    c->raster = gs_raster_create();
+    if (fail || !c->tmp8 || !c->raster)
+        return GS_ERR_NOMEM;
+    /* White RGB background, zero for the other channels. */
+    for (size_t i = 0; i < 3 * fsz; i++)
+        c->bg[i] = 1.0f;
+    c->face_valid = 0;
+    return GS_OK;
+}
+
+void gs_model_ctx_destroy(gs_model_ctx *c)
+{
+    if (!c)
+        return;
+    float **bufs[] = {&c->fe_in, &c->fe_act, &c->fe_out, &c->fp_in,
+                      &c->fp_act, &c->fp_out, &c->e_in, &c->e_act, &c->e_out,
+                      &c->er_act[0], &c->er_act[1], &c->g_mean, &c->g_scale,
+                      &c->g_quat, &c->g_opac, &c->g_feat, &c->x_head,
+                      &c->q_head, &c->v_mean, &c->v_scale, &c->v_quat,
+                      &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
+                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->scratch};
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
+        free(*bufs[i]);
+    free(c->tmp8);
+    gs_raster_destroy(c->raster);
+    free(c);
+}
+
+gs_model_ctx *gs_model_ctx_create(const gs_model *m)
+{
+    if (!m)
+        return NULL;
+    gs_model_ctx *c = calloc(1, sizeof *c);
+    if (!c)
+        return NULL;
+    if (gs_frame_ctx_init(c, m) != GS_OK) {
+        gs_model_ctx_destroy(c);
+        return NULL;
+    }
+    return c;
+}
+
+void gs_frame_camera(const gs_model *m, const double head_t[3],
+                     gs_camera *cam)
+{
+    /* A normalized image of a face at distance |t| has focal f_n |t| / d_n
+     * (the normalization scales depth, not the image). */
+    const gs_model_config *k = &m->cfg;
+    double dist = sqrt(head_t[0] * head_t[0] + head_t[1] * head_t[1] +
+                       head_t[2] * head_t[2]);
+    double f = k->focal * dist / k->d_n_mm * k->feat_size / k->image_size;
+    memset(cam, 0, sizeof *cam);
+    cam->fx = cam->fy = (float)f;
+    cam->cx = cam->cy = 0.5f * (float)k->feat_size;
+    cam->width = cam->height = k->feat_size;
+    cam->viewmat[0] = cam->viewmat[5] = cam->viewmat[10] = 1.0f;
+}
+
+/* ---- face stream ---- */
+
+static void face_mlps(gs_model_ctx *c, const gs_frame *fr)
+{
+    const gs_model_params *p = &c->m->p;
+    int nf = c->nf, F = c->F, D = c->D;
+    int de = p->face_e.dims[0], dp = p->face_p.dims[0];
+    double rvec[3];
+    float pe[GS_PE_DIM(3) + GS_PE_DIM(2)];
+    gs_geom_rot_to_rodrigues(fr->head_R, rvec);
+    gs_model_pe(rvec, 3, pe);
+    int npe = GS_PE_DIM(3);
+    if (!c->m->cfg.two_stream) {
+        gs_model_pe(fr->gaze, 2, pe + npe);
+        npe += GS_PE_DIM(2);
+    }
+    for (int i = 0; i < nf; i++) {
+        float *a = c->fe_in + (size_t)i * de, *b = c->fp_in + (size_t)i * dp;
+        memcpy(a, p->f_feat + (size_t)i * F, F * sizeof(float));
+        memcpy(a + F, fr->code, D * sizeof(float));
+        memcpy(b, p->f_feat + (size_t)i * F, F * sizeof(float));
+        memcpy(b + F, pe, npe * sizeof(float));
+    }
+    gs_mlp_forward(&p->face_e, c->fe_in, nf, c->fe_act, c->fe_out);
+    gs_mlp_forward(&p->face_p, c->fp_in, nf, c->fp_act, c->fp_out);
+}
+
+/* Head-frame face Gaussians from the MLP outputs, then into the camera. */
+static void face_assemble(gs_model_ctx *c, const double qR[4])
+{
+    const gs_model_params *p = &c->m->p;
+    int C = c->C, O = GS_FACE_OUT(C);
+    for (int i = 0; i < c->nf; i++) {
+        const float *oe = c->fe_out + (size_t)i * O;
+        const float *op = c->fp_out + (size_t)i * O;
+        float l = p->f_lambda[i], lp = 1.0f - l;
+        float *xh = c->x_head + 3 * (size_t)i;
+        for (int k = 0; k < 3; k++)
+            xh[k] = p->f_xyz[3 * i + k] +
+                    GS_MODEL_POS_SCALE * (l * oe[k] + lp * op[k]);
+        float *feat = c->g_feat + (size_t)i * C;
+        for (int k = 0; k < C; k++)
+            feat[k] = p->f_colour[(size_t)i * C + k] + oe[3 + k] + op[3 + k];
+        const float *ae = oe + 3 + C, *ap = op + 3 + C;
+        for (int k = 0; k < 3; k++)
+            c->g_scale[3 * i + k] = p->f_scale[3 * i + k] +
+                                    GS_MODEL_ATTR_SCALE *
+                                        (l * ae[k] + lp * ap[k]);
+        double q[4], qc[4];
+        for (int k = 0; k < 4; k++) {
+            q[k] = p->f_quat[4 * i + k] +
+                   GS_MODEL_ATTR_SCALE * (l * ae[3 + k] + lp * ap[3 + k]);
+            c->q_head[4 * i + k] = (float)q[k];
+        }
+        quat_mul(qR, q, qc);
+        for (int k = 0; k < 4; k++)
+            c->g_quat[4 * i + k] = (float)qc[k];
+        c->g_opac[i] = p->f_opacity[i] +
+                       GS_MODEL_ATTR_SCALE * (l * ae[7] + lp * ap[7]);
+    }
+}
+
+/* ---- eye stream ---- */
+
+static void eye_forward(gs_model_ctx *c, const gs_frame *fr)
+{
+    const gs_model *m = c->m;
+    const gs_model_params *p = &m->p;
+    int ne = c->ne, F = c->F, D = c->D, C = c->C, O = GS_EYE_OUT(C);
+    int de = p->eye.dims[0], each = m->cfg.n_eye_each;
+    gs_model_pe(fr->gaze, 2, c->er_in);
+    gs_geom_rot_from_pitchyaw(fr->gaze[0], fr->gaze[1], 0.0, c->eye_Rg);
+    for (int e = 0; e < 2; e++) {
+        float o[4];
+        gs_mlp_forward(&p->eye_rot[e], c->er_in, 1, c->er_act[e], o);
+        double q[4] = {1.0 + o[0], o[1], o[2], o[3]};
+        double nq = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] +
+                         q[3] * q[3]);
+        for (int k = 0; k < 4; k++) {
+            c->eye_q[e][k] = q[k];
+            q[k] /= nq;
+        }
+        quat_to_mat(q, c->eye_Rres[e]);
+        if (m->cfg.eye_rotation)
+            mat_mul(c->eye_Rres[e], c->eye_Rg, c->eye_R[e]);
+        else
+            gs_geom_mat3_identity(c->eye_R[e]);
+        for (int k = 0; k < 3; k++) {
+            double s = p->eye_centre[3 * e + k];
+            const float *w = p->eye_centre_w + (size_t)(3 * e + k) * D;
+            for (int j = 0; j < D; j++)
+                s += (double)w[j] * fr->code[j];
+            c->eye_c[e][k] = s;
+        }
+    }
+    for (int i = 0; i < ne; i++) {
+        float *a = c->e_in + (size_t)i * de;
+        memcpy(a, p->e_feat + (size_t)i * F, F * sizeof(float));
+        memcpy(a + F, fr->code, D * sizeof(float));
+        memcpy(a + F + D, c->er_in, GS_PE_DIM(2) * sizeof(float));
+    }
+    gs_mlp_forward(&p->eye, c->e_in, ne, c->e_act, c->e_out);
+    for (int i = 0; i < ne; i++) {
+        int e = i < each ? 0 : 1;
+        const double *R = c->eye_R[e];
+        const float *o = c->e_out + (size_t)i * O;
+        double r[3];
+        for (int k = 0; k < 3; k++)
+            r[k] = p->e_xyz[3 * i + k] - p->eye_centre[3 * e + k];
+        int g = c->nf + i;
+        float *xh = c->x_head + 3 * (size_t)g;
+        for (int k = 0; k < 3; k++)
+            xh[k] = (float)(c->eye_c[e][k] + R[3 * k] * r[0] +
+                            R[3 * k + 1] * r[1] + R[3 * k + 2] * r[2] +
+                            GS_MODEL_EYE_POS_SCALE * o[k]);
+        float *feat = c->g_feat + (size_t)g * C;
+        for (int k = 0; k < C; k++)
+            feat[k] = p->e_colour[(size_t)i * C + k] + o[3 + k];
+        float s = p->e_scale[i] + GS_MODEL_ATTR_SCALE * o[3 + C];
+        c->g_scale[3 * g] = c->g_scale[3 * g + 1] = c->g_scale[3 * g + 2] = s;
+        c->g_opac[g] = p->e_opacity[i] + GS_MODEL_ATTR_SCALE * o[4 + C];
+    }
+}
+
+/* Moves head-frame positions [from, to) into the camera. */
+static void to_camera(gs_model_ctx *c, const gs_frame *fr, int from, int to,
+                      const double qR[4])
+{
+    const double *R = fr->head_R, *t = fr->head_t;
+    for (int i = from; i < to; i++) {
+        const float *x = c->x_head + 3 * (size_t)i;
+        float *o = c->g_mean + 3 * (size_t)i;
+        for (int k = 0; k < 3; k++)
+            o[k] = (float)(R[3 * k] * x[0] + R[3 * k + 1] * x[1] +
+                           R[3 * k + 2] * x[2] + t[k]);
+        if (i >= c->nf)
+            for (int k = 0; k < 4; k++)
+                c->g_quat[4 * (size_t)i + k] = (float)qR[k];
+    }
+}
+
+static int same_face_key(const gs_model_ctx *c, const gs_frame *fr)
+{
+    const gs_frame *k = &c->face_key;
+    if (memcmp(k->code, fr->code, sizeof k->code) ||
+        memcmp(k->head_R, fr->head_R, sizeof k->head_R) ||
+        memcmp(k->head_t, fr->head_t, sizeof k->head_t))
+        return 0;
+    if (!c->m->cfg.two_stream && memcmp(k->gaze, fr->gaze, sizeof k->gaze))
+        return 0;
+    return 1;
+}
+
+int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                     int stream, int force_face, gs_error *err)
+{
+    double qR[4];
+    mat_to_quat(fr->head_R, qR);
+    if (force_face || !c->face_valid || !same_face_key(c, fr)) {
+        face_mlps(c, fr);
+        face_assemble(c, qR);
+        to_camera(c, fr, 0, c->nf, qR);
+        c->face_key = *fr;
+        c->face_valid = 1;
+    }
+    if (c->ne) {
+        eye_forward(c, fr);
+        to_camera(c, fr, c->nf, c->n, qR);
+    }
+    c->fr = *fr;
+    c->stream = stream;
+    int first = 0, count = c->n;
+    if (stream == GS_STREAM_FACE)
+        count = c->nf;
+    else if (stream == GS_STREAM_EYE) {
+        first = c->nf;
+        count = c->ne;
+    }
+    gs_gaussians g = {
+        .n = count, .channels = c->C,
+        .means = c->g_mean + 3 * (size_t)first,
+        .log_scales = c->g_scale + 3 * (size_t)first,
+        .quats = c->g_quat + 4 * (size_t)first,
+        .opacity_logits = c->g_opac + first,
+        .features = c->g_feat + (size_t)first * c->C};
+    gs_camera cam;
+    gs_frame_camera(c->m, fr->head_t, &cam);
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    int rc = gs_raster_forward(c->raster, pool, &cam, &g, c->bg, &ro, c->fmap,
+                               c->alpha, NULL, err);
+    if (rc)
+        return rc;
+    rc = gs_renderer_forward(&c->m->rcfg, &c->m->p.rend, c->fmap, fr->code,
+                             c->fs, c->fs, c->r_act, c->r_act_len, c->rgb);
+    if (rc)
+        return gs_error_set(err, rc, "model: renderer forward failed");
+    return GS_OK;
+}
+
+/* ---- backward ---- */
+
+/* Scratch layout: [0, mlp) MLP scratch, then two blocks of `blk` floats
+ * for the output and input gradients of one MLP. */
+static void scratch_parts(const gs_model_ctx *c, float **mlp, float **dout,
+                          float **din)
+{
+    size_t blk = c->scratch_blk;
+    *mlp = c->scratch;
+    *dout = c->scratch + c->scratch_len - 2 * blk;
+    *din = c->scratch + c->scratch_len - blk;
+}
+
+static void face_backward(gs_model_ctx *c, const gs_model_params *gp,
+                          gs_frame_grad *fg, const double qR[4])
+{
+    const gs_model_params *p = &c->m->p;
+    int nf = c->nf, C = c->C, O = GS_FACE_OUT(C), F = c->F, D = c->D;
+    const double *R = c->fr.head_R;
+    float *sc, *d_o, *dinp;
+    scratch_parts(c, &sc, &d_o, &dinp);
+    gs_mlp nog;
+    memset(&nog, 0, sizeof nog);
+    for (int pass = 0; pass < 2; pass++) {
+        /* pass 0: E (weight lambda), pass 1: P (weight 1 - lambda) */
+        for (int i = 0; i < nf; i++) {
+            float l = p->f_lambda[i], w = pass == 0 ? l : 1.0f - l;
+            float *d = d_o + (size_t)i * O;
+            const float *vm = c->v_mean + 3 * (size_t)i;
+            double dx[3];
+            for (int k = 0; k < 3; k++)
+                dx[k] = R[k] * vm[0] + R[3 + k] * vm[1] + R[6 + k] * vm[2];
+            for (int k = 0; k < 3; k++)
+                d[k] = (float)(GS_MODEL_POS_SCALE * w * dx[k]);
+            memcpy(d + 3, c->v_feat + (size_t)i * C, C * sizeof(float));
+            for (int k = 0; k < 3; k++)
+                d[3 + C + k] = GS_MODEL_ATTR_SCALE * w * c->v_scale[3 * i + k];
+            /* q_cam = L(qR) q: dq = L(qR)^T dq_cam */
+            const float *vq = c->v_quat + 4 * (size_t)i;
+            double dq[4];
+            double a = qR[0], b = qR[1], cc = qR[2], dd = qR[3];
+            dq[0] = a * vq[0] + b * vq[1] + cc * vq[2] + dd * vq[3];
+            dq[1] = -b * vq[0] + a * vq[1] + dd * vq[2] - cc * vq[3];
+            dq[2] = -cc * vq[0] - dd * vq[1] + a * vq[2] + b * vq[3];
+            dq[3] = -dd * vq[0] + cc * vq[1] - b * vq[2] + a * vq[3];
+            for (int k = 0; k < 4; k++)
+                d[6 + C + k] = (float)(GS_MODEL_ATTR_SCALE * w * dq[k]);
+            d[10 + C] = GS_MODEL_ATTR_SCALE * w * c->v_opac[i];
+            if (gp && pass == 0) {
+                for (int k = 0; k < 3; k++) {
+                    gp->f_xyz[3 * i + k] += (float)dx[k];
+                    gp->f_scale[3 * i + k] += c->v_scale[3 * i + k];
+                }
+                for (int k = 0; k < 4; k++)
+                    gp->f_quat[4 * i + k] += (float)dq[k];
+                gp->f_opacity[i] += c->v_opac[i];
+                float *dc = gp->f_colour + (size_t)i * C;
+                for (int k = 0; k < C; k++)
+                    dc[k] += c->v_feat[(size_t)i * C + k];
+            }
+        }
+        const gs_mlp *mlp = pass == 0 ? &p->face_e : &p->face_p;
+        const gs_mlp *gm = gp ? (pass == 0 ? &gp->face_e : &gp->face_p) : &nog;
+        const float *in = pass == 0 ? c->fe_in : c->fp_in;
+        const float *act = pass == 0 ? c->fe_act : c->fp_act;
+        int dw = mlp->dims[0];
+        /* The pose MLP's input gradient only matters for the features. */
+        int need_din = gp || (pass == 0 && fg);
+        if (need_din)
+            memset(dinp, 0, (size_t)nf * dw * sizeof(float));
+        gs_mlp_backward(mlp, gm, in, nf, act, d_o, need_din ? dinp : NULL, sc);
+        if (!need_din)
+            continue;
+        for (int i = 0; i < nf; i++) {
+            const float *di = dinp + (size_t)i * dw;
+            if (gp)
+                for (int k = 0; k < F; k++)
+                    gp->f_feat[(size_t)i * F + k] += di[k];
+            if (pass == 0 && fg)
+                for (int k = 0; k < D; k++)
+                    fg->code[k] += di[F + k];
+        }
+    }
+}
+
+static void pose_grad(gs_model_ctx *c, gs_frame_grad *fg)
+{
+    /* mean = R x + t: dt = sum dmean, dw = sum (R x) x dmean.
+     * q_cam = q_w q_cam: dw = 1/2 (-dq_w v + w dq_v + v x dq_v). */
+    const double *t = c->fr.head_t;
+    for (int i = 0; i < c->n; i++) {
+        const float *vm = c->v_mean + 3 * (size_t)i;
+        const float *mc = c->g_mean + 3 * (size_t)i;
+        double rx[3] = {mc[0] - t[0], mc[1] - t[1], mc[2] - t[2]};
+        fg->trans[0] += vm[0];
+        fg->trans[1] += vm[1];
+        fg->trans[2] += vm[2];
+        fg->rot[0] += rx[1] * vm[2] - rx[2] * vm[1];
+        fg->rot[1] += rx[2] * vm[0] - rx[0] * vm[2];
+        fg->rot[2] += rx[0] * vm[1] - rx[1] * vm[0];
+        if (i >= c->nf)
+            continue; /* isotropic eye Gaussians: rotation has no effect */
+        const float *q = c->g_quat + 4 * (size_t)i;
+        const float *dq = c->v_quat + 4 * (size_t)i;
+        double w = q[0], v[3] = {q[1], q[2], q[3]};
+        double dv[3] = {dq[1], dq[2], dq[3]};
+        double cr[3] = {v[1] * dv[2] - v[2] * dv[1],
+                        v[2] * dv[0] - v[0] * dv[2],
+                        v[0] * dv[1] - v[1] * dv[0]};
+        for (int k = 0; k < 3; k++)
+            fg->rot[k] += 0.5 * (-dq[0] * v[k] + w * dv[k] + cr[k]);
+    }
+}
+
+static void rot_pitchyaw_partials(double p, double y, double dp[9],
+                                  double dy[9])
+{
+    /* R = Ry(y) Rx(-p). */
+    double ry[9], rx[9], dry[9], drx[9];
+    gs_geom_rot_y(y, ry);
+    gs_geom_rot_x(-p, rx);
+    double cy = cos(y), sy = sin(y), cp = cos(-p), sp = sin(-p);
+    double a[9] = {-sy, 0, cy, 0, 0, 0, -cy, 0, -sy};  /* d Ry / dy */
+    double b[9] = {0, 0, 0, 0, -sp, -cp, 0, cp, -sp};  /* d Rx(u) / du */
+    memcpy(dry, a, sizeof a);
+    memcpy(drx, b, sizeof b);
+    mat_mul(dry, rx, dy);
+    mat_mul(ry, drx, dp);
+    for (int k = 0; k < 9; k++)
+        dp[k] = -dp[k]; /* du/dp = -1 */
+}
+
+static void eye_backward(gs_model_ctx *c, const gs_model_params *gp,
+                         gs_frame_grad *fg)
+{
+    const gs_model *m = c->m;
+    const gs_model_params *p = &m->p;
+    int ne = c->ne, nf = c->nf, C = c->C, O = GS_EYE_OUT(C), F = c->F,
+        D = c->D, each = m->cfg.n_eye_each;
+    const double *R = c->fr.head_R;
+    double dRe[2][9] = {{0}}, dce[2][3] = {{0}};
+    float *sc, *d_o, *dinp;
+    scratch_parts(c, &sc, &d_o, &dinp);
+    for (int i = 0; i < ne; i++) {
+        int e = i < each ? 0 : 1, g = nf + i;
+        const float *vm = c->v_mean + 3 * (size_t)g;
+        double dx[3];
+        for (int k = 0; k < 3; k++)
+            dx[k] = R[k] * vm[0] + R[3 + k] * vm[1] + R[6 + k] * vm[2];
+        double r[3];
+        for (int k = 0; k < 3; k++)
+            r[k] = p->e_xyz[3 * i + k] - p->eye_centre[3 * e + k];
+        const double *Re = c->eye_R[e];
+        for (int k = 0; k < 3; k++) {
+            dce[e][k] += dx[k];
+            for (int j = 0; j < 3; j++)
+                dRe[e][3 * k + j] += dx[k] * r[j];
+        }
+        float *d = d_o + (size_t)i * O;
+        for (int k = 0; k < 3; k++)
+            d[k] = (float)(GS_MODEL_EYE_POS_SCALE * dx[k]);
+        memcpy(d + 3, c->v_feat + (size_t)g * C, C * sizeof(float));
+        float ds = c->v_scale[3 * g] + c->v_scale[3 * g + 1] +
+                   c->v_scale[3 * g + 2];
+        d[3 + C] = GS_MODEL_ATTR_SCALE * ds;
+        d[4 + C] = GS_MODEL_ATTR_SCALE * c->v_opac[g];
+        if (gp) {
+            for (int k = 0; k < 3; k++)
+                gp->e_xyz[3 * i + k] += (float)(Re[k] * dx[0] +
+                                                Re[3 + k] * dx[1] +
+                                                Re[6 + k] * dx[2]);
+            gp->e_scale[i] += ds;
+            gp->e_opacity[i] += c->v_opac[g];
+            float *dc = gp->e_colour + (size_t)i * C;
+            for (int k = 0; k < C; k++)
+                dc[k] += c->v_feat[(size_t)g * C + k];
+        }
+    }
+    int de = p->eye.dims[0];
+    memset(dinp, 0, (size_t)ne * de * sizeof(float));
+    gs_mlp nog;
+    memset(&nog, 0, sizeof nog);
+    gs_mlp_backward(&p->eye, gp ? &gp->eye : &nog, c->e_in, ne, c->e_act, d_o,
+                    dinp, sc);
+    float dpe[GS_PE_DIM(2)] = {0};
+    for (int i = 0; i < ne; i++) {
+        const float *di = dinp + (size_t)i * de;
+        if (gp)
+            for (int k = 0; k < F; k++)
+                gp->e_feat[(size_t)i * F + k] += di[k];
+        if (fg)
+            for (int k = 0; k < D; k++)
+                fg->code[k] += di[F + k];
+        for (int k = 0; k < GS_PE_DIM(2); k++)
+            dpe[k] += di[F + D + k];
+    }
+    /* Eyeball centres: c_e + W_e tau. */
+    for (int e = 0; e < 2; e++)
+        for (int k = 0; k < 3; k++) {
+            const float *w = p->eye_centre_w + (size_t)(3 * e + k) * D;
+            if (gp) {
+                float *dw = gp->eye_centre_w + (size_t)(3 * e + k) * D;
+                for (int j = 0; j < D; j++)
+                    dw[j] += (float)(dce[e][k] * c->fr.code[j]);
+            }
+            if (fg)
+                for (int j = 0; j < D; j++)
+                    fg->code[j] += (float)(dce[e][k] * w[j]);
+        }
+    /* Rotations: R_e = R_res,e R_g. */
+    double dgaze[2] = {0, 0};
+    if (m->cfg.eye_rotation) {
+        double dp9[9], dy9[9];
+        rot_pitchyaw_partials(c->fr.gaze[0], c->fr.gaze[1], dp9, dy9);
+        for (int e = 0; e < 2; e++) {
+            const double *Rr = c->eye_Rres[e], *Rg = c->eye_Rg;
+            double dRg[9] = {0}, dRr[9] = {0};
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    for (int k = 0; k < 3; k++) {
+                        dRg[3 * k + j] += Rr[3 * i + k] * dRe[e][3 * i + j];
+                        dRr[3 * i + k] += dRe[e][3 * i + j] * Rg[3 * k + j];
+                    }
+            for (int k = 0; k < 9; k++) {
+                dgaze[0] += dRg[k] * dp9[k];
+                dgaze[1] += dRg[k] * dy9[k];
+            }
+            /* Through normalize(q) and quat_to_mat. */
+            const double *q = c->eye_q[e];
+            double nq = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] +
+                             q[3] * q[3]);
+            double qn[4] = {q[0] / nq, q[1] / nq, q[2] / nq, q[3] / nq};
+            double dqn[4], dot = 0;
+            quat_to_mat_backward(qn, dRr, dqn);
+            for (int k = 0; k < 4; k++)
+                dot += dqn[k] * qn[k];
+            float dout4[4];
+            for (int k = 0; k < 4; k++)
+                dout4[k] = (float)((dqn[k] - dot * qn[k]) / nq);
+            float din[GS_PE_DIM(2)] = {0};
+            float rsc[2 * 32 + 2 * GS_PE_DIM(2)];
+            gs_mlp_backward(&p->eye_rot[e], gp ? &gp->eye_rot[e] : &nog,
+                            c->er_in, 1, c->er_act[e], dout4, din, rsc);
+            for (int k = 0; k < GS_PE_DIM(2); k++)
+                dpe[k] += din[k];
+        }
+    }
+    if (fg) {
+        gs_model_pe_backward(c->fr.gaze, 2, dpe, dgaze);
+        fg->gaze[0] += dgaze[0];
+        fg->gaze[1] += dgaze[1];
+    }
+}
+
+int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
+                      const float *d_fmap, const gs_model_params *grads,
+                      gs_frame_grad *fg, gs_error *err)
+{
+    size_t fsz = (size_t)c->fs * c->fs * c->C;
+    if (d_fmap)
+        memcpy(c->v_fmap, d_fmap, fsz * sizeof(float));
+    else
+        memset(c->v_fmap, 0, fsz * sizeof(float));
+    if (d_rgb) {
+        int rc = gs_renderer_backward(&c->m->rcfg, &c->m->p.rend, c->r_act,
+                                      c->r_act_len, c->fmap, c->fr.code,
+                                      d_rgb, c->fs, c->fs,
+                                      grads ? &grads->rend : NULL, c->v_fmap,
+                                      fg ? fg->code : NULL);
+        if (rc)
+            return gs_error_set(err, rc, "model: renderer backward failed");
+    }
+    size_t n = (size_t)c->n;
+    memset(c->v_mean, 0, n * 3 * sizeof(float));
+    memset(c->v_scale, 0, n * 3 * sizeof(float));
+    memset(c->v_quat, 0, n * 4 * sizeof(float));
+    memset(c->v_opac, 0, n * sizeof(float));
+    memset(c->v_feat, 0, n * c->C * sizeof(float));
+    int first = c->stream == GS_STREAM_EYE ? c->nf : 0;
+    gs_gaussian_grads gg = {c->v_mean + 3 * (size_t)first,
+                            c->v_scale + 3 * (size_t)first,
+                            c->v_quat + 4 * (size_t)first, c->v_opac + first,
+                            c->v_feat + (size_t)first * c->C};
+    int rc = gs_raster_backward(c->raster, pool, c->v_fmap, NULL, NULL, &gg,
+                                NULL, err);
+    if (rc)
+        return rc;
+    gs_frame_backward_streams(c, grads, fg);
+    return GS_OK;
+}
+
+void gs_frame_backward_streams(gs_model_ctx *c, const gs_model_params *grads,
+                               gs_frame_grad *fg)
+{
+    double qR[4];
+    mat_to_quat(c->fr.head_R, qR);
+    if (fg)
+        pose_grad(c, fg);
+    if (c->stream != GS_STREAM_EYE)
+        face_backward(c, grads, fg, qR);
+    if (c->ne && c->stream != GS_STREAM_FACE)
+        eye_backward(c, grads, fg);
+}

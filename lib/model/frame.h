@@ -1,0 +1,89 @@
+/* One frame through the model: streams -> rasterizer -> renderer, and its
+ * backward. Shared by rendering, fitting and training. */
+#ifndef GS_MODEL_FRAME_H
+#define GS_MODEL_FRAME_H
+
+#include "model_internal.h"
+
+/* What a frame is conditioned on. */
+typedef struct gs_frame {
+    float code[GS_MODEL_MAX_CODE]; /* tau = [id | expr | light] */
+    double head_R[9], head_t[3];   /* head to camera */
+    double gaze[2];                /* pitch, yaw (head frame) */
+} gs_frame;
+
+/* Gradients of a frame's inputs (accumulated by backward). */
+typedef struct gs_frame_grad {
+    float code[GS_MODEL_MAX_CODE];
+    double rot[3];     /* left perturbation R <- exp([w]) R */
+    double trans[3];
+    double gaze[2];
+} gs_frame_grad;
+
+/* Which streams to rasterize. */
+enum { GS_STREAM_BOTH = 0, GS_STREAM_FACE = 1, GS_STREAM_EYE = 2 };
+
+struct gs_model_ctx {
+    const gs_model *m;
+    int nf, ne, n;         /* face, eye, total Gaussians */
+    int F, D, C, fs, S;
+    /* face stream */
+    float *fe_in, *fe_act, *fe_out;   /* [nf, F+D], acts, [nf, FACE_OUT] */
+    float *fp_in, *fp_act, *fp_out;   /* [nf, F+PE], acts, [nf, FACE_OUT] */
+    /* eye stream */
+    float *e_in, *e_act, *e_out;      /* [ne, F+D+PE2], acts, [ne, EYE_OUT] */
+    float er_in[GS_PE_DIM(2)];
+    float *er_act[2];
+    float er_out[2][4];
+    double eye_R[2][9], eye_Rg[9], eye_Rres[2][9], eye_c[2][3];
+    double eye_q[2][4];               /* residual quaternion, unnormalized */
+    /* Gaussians in the camera frame, [n x ...] face first */
+    float *g_mean, *g_scale, *g_quat, *g_opac, *g_feat;
+    float *x_head;                    /* [n, 3] head-frame positions */
+    float *q_head;                    /* [nf, 4] head-frame quaternions */
+    float *v_mean, *v_scale, *v_quat, *v_opac, *v_feat;   /* their grads */
+    /* raster + renderer */
+    gs_raster *raster;
+    float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */
+    float *v_fmap, *v_rgb;
+    float *r_act;
+    size_t r_act_len;
+    float *scratch;
+    size_t scratch_len, scratch_blk;
+    /* last frame */
+    gs_frame fr;
+    int stream;
+    int face_valid;                   /* fe/fp outputs match fr */
+    gs_frame face_key;                /* the frame the face cache is for */
+    /* subject-level render cache for gs_model_render */
+    uint8_t *tmp8;
+};
+
+int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m);
+
+/* Runs the frame: fills c->fmap and c->rgb (3 x S x S, in [0,1]). The face
+ * stream is recomputed only when the code, head pose (or, in the single
+ * stream ablation, the gaze) changed since the last call, unless
+ * force_face. */
+int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                     int stream, int force_face, gs_error *err);
+
+/* Backward of the last forward from d_rgb [3,S,S] (may be NULL) and
+ * d_fmap [C,fs,fs] (may be NULL). Adds parameter gradients into `grads`
+ * (a gs_model_params bound to a gradient array; NULL skips them) and the
+ * frame's input gradients into fg (may be NULL). */
+int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
+                      const float *d_fmap, const gs_model_params *grads,
+                      gs_frame_grad *fg, gs_error *err);
+
+/* The stream part of the backward: from the Gaussian gradients in
+ * c->v_mean, v_scale, v_quat, v_opac, v_feat (camera frame) to the
+ * parameters and the frame inputs. */
+void gs_frame_backward_streams(gs_model_ctx *c, const gs_model_params *grads,
+                               gs_frame_grad *fg);
+
+/* The camera the model renders a frame with at feature resolution. */
+void gs_frame_camera(const gs_model *m, const double head_t[3],
+                     gs_camera *cam);
+
+#endif

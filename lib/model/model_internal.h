@@ -1,0 +1,143 @@
+/* Internal layout of a gs_model: configuration, the parameter table and the
+ * stream kernels shared by rendering, fitting and training. */
+#ifndef GS_MODEL_INTERNAL_H
+#define GS_MODEL_INTERNAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gazesplat/model.h"
+#include "gazesplat/raster.h"
+#include "renderer.h"
+
+/* ---- configuration (stored in the model file's __metadata__) ---- */
+typedef struct gs_model_config {
+    int n_face;       /* face-stream Gaussians */
+    int n_eye_each;   /* eye-stream Gaussians per eye */
+    int feat_dim;     /* per-Gaussian latent feature F */
+    int id_dim;       /* identity part of the code */
+    int hidden;       /* MLP width */
+    int channels;     /* rasterized feature channels (32) */
+    int feat_size;    /* feature map edge */
+    int image_size;   /* output edge = 4 feat_size */
+    int guidance;     /* gs_renderer guidance mode */
+    int two_stream;   /* 0: single-stream ablation */
+    int eye_rotation; /* 0: no explicit eye rotation (ablation) */
+    int n_train_ids;  /* auto-decoder codes kept in the file (may be 0) */
+    double template_spacing_mm; /* face Gaussian spacing at creation */
+    double d_n_mm;    /* normalized camera distance */
+    double focal;     /* normalized camera focal at image_size, pixels */
+} gs_model_config;
+
+/* The latent code tau = [identity (id_dim) | expression (6) | light (12)].
+ * Expression and light are per-frame labels in training (the synthetic
+ * generator knows them) and free variables when fitting a new face. */
+#define GS_MODEL_PI 3.14159265358979323846
+#define GS_MODEL_EXPR_DIM 6
+#define GS_MODEL_LIGHT_DIM 12
+static inline int gs_model_code_dim(const gs_model_config *c)
+{
+    return c->id_dim + GS_MODEL_EXPR_DIM + GS_MODEL_LIGHT_DIM;
+}
+
+/* Positional encodings: x, sin(2^k x), cos(2^k x) for k = 0..3. */
+#define GS_PE_FREQS 4
+#define GS_PE_DIM(n) ((n) * (1 + 2 * GS_PE_FREQS))
+void gs_model_pe(const double *x, int n, float *out);
+/* d x[n] += the gradient through the encoding from dout[GS_PE_DIM(n)]. */
+void gs_model_pe_backward(const double *x, int n, const float *dout,
+                          double *dx);
+
+/* Output layout of the face MLPs: position 3, feature C, log-scale 3,
+ * quaternion 4, opacity 1. Eye MLP: position 3, feature C, log-scale 1,
+ * opacity 1. */
+#define GS_FACE_OUT(C) (3 + (C) + 8)
+#define GS_EYE_OUT(C) (3 + (C) + 2)
+
+/* Scale factors of the MLP outputs (keep the raw outputs O(1)). */
+#define GS_MODEL_POS_SCALE 4.0f   /* mm per unit of position output */
+#define GS_MODEL_ATTR_SCALE 0.2f  /* paper: 0.2 for scale/rotation/opacity */
+#define GS_MODEL_EYE_POS_SCALE 1.0f
+
+/* ---- parameter table ---- */
+enum gs_pgroup {
+    GS_PG_GAUSS_XYZ, GS_PG_GAUSS_ATTR, GS_PG_GAUSS_FEAT, GS_PG_MLP,
+    GS_PG_RENDERER, GS_PG_CODES, GS_PG_FIXED, GS_PG_COUNT
+};
+
+typedef struct gs_ptensor {
+    char name[64];
+    int ndim;
+    int64_t shape[4];
+    size_t offset, count;  /* floats, into the parameter array */
+    int group;
+} gs_ptensor;
+
+#define GS_MODEL_MAX_TENSORS 96
+
+typedef struct gs_mlp {
+    int nl;          /* layers */
+    int dims[5];     /* dims[0] input .. dims[nl] output */
+    float *w[4], *b[4];
+} gs_mlp;
+
+/* Pointers into one parameter (or gradient) array. */
+typedef struct gs_model_params {
+    /* face stream [n_face x ...] */
+    float *f_xyz, *f_scale, *f_quat, *f_opacity, *f_colour, *f_feat;
+    /* eye stream [2 n_eye_each x ...], right eye first */
+    float *e_xyz, *e_scale, *e_opacity, *e_colour, *e_feat;
+    float *eye_centre_w;   /* [2, 3, code_dim]: eyeball centre shift */
+    gs_mlp face_e;         /* [feat, code] -> GS_FACE_OUT */
+    gs_mlp face_p;         /* [feat, PE(pose)] -> GS_FACE_OUT */
+    gs_mlp eye;            /* [feat, code, PE(gaze)] -> GS_EYE_OUT */
+    gs_mlp eye_rot[2];     /* PE(gaze) -> quaternion residual */
+    gs_renderer_params rend;
+    float *codes;          /* [n_train_ids, id_dim] auto-decoder codes */
+    float *code_mean;      /* [code_dim]: starting point of a fit */
+    /* fixed (not trained) */
+    float *f_lambda;       /* [n_face]: lambda_tau, distance weight */
+    float *eye_centre;     /* [2, 3] */
+} gs_model_params;
+
+struct gs_model {
+    gs_model_config cfg;
+    gs_renderer_config rcfg;
+    int ntensors;
+    gs_ptensor t[GS_MODEL_MAX_TENSORS];
+    size_t nparams;
+    size_t rend_offset;    /* the renderer's packed block */
+    float *params;
+    gs_model_params p;
+};
+
+/* Builds the tensor table of cfg and carves p out of base. */
+int gs_model_layout(const gs_model_config *cfg, gs_model *m, gs_error *err);
+void gs_model_bind(const gs_model *m, float *base, gs_model_params *p);
+int gs_model_config_check(const gs_model_config *c, gs_error *err);
+
+/* Creates a model with fresh parameters from the synthetic template. */
+int gs_model_create(const gs_model_config *cfg, uint64_t seed, gs_model **out,
+                    gs_error *err);
+int gs_model_save(const gs_model *m, const char *path, gs_error *err);
+void gs_model_config_default(gs_model_config *c);
+
+/* The light part of tau for a synthetic scene (head frame). */
+struct gs_synth_scene;
+void gs_model_light_code(const struct gs_synth_scene *s, float out[12]);
+
+/* ---- MLP kernels ---- */
+/* Activation floats an MLP needs for a batch of n (pre-activations of the
+ * hidden layers, post-activations, output). */
+size_t gs_mlp_act_size(const gs_mlp *m, int n);
+/* out[n, dims[nl]] from in[n, dims[0]]; LeakyReLU 0.01 after hidden
+ * layers. acts: gs_mlp_act_size floats, kept for the backward. */
+void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,
+                    float *out);
+/* Accumulates weight gradients into g and din[n, dims[0]] (may be NULL). */
+void gs_mlp_backward(const gs_mlp *m, const gs_mlp *g, const float *in, int n,
+                     const float *acts, const float *dout, float *din,
+                     float *scratch);
+size_t gs_mlp_scratch_size(const gs_mlp *m, int n);
+
+#endif

@@ -1,0 +1,137 @@
+/* Expression-guided neural renderer (internal to lib/model).
+ *
+ * Turns a rasterized feature map x [C, H, W] and a latent code tau [D] into
+ * an RGB image [3, 4H, 4W] in [0, 1]: two upsampling blocks of 1x1
+ * convolutions (GazeGaussian / GazeNeRF), each followed by the expression
+ * guidance, where tau attends over the pixels of the block's features.
+ * docs/model.md ("Renderer") has the diagram, the parameter names and the
+ * cost per pixel.
+ *
+ * Conventions are those of gazesplat/nn.h (llm.c style): CHW float32,
+ * forward writes, backward ADDS into every gradient it is given, nothing
+ * allocates, every call returns GS_OK or a negative gs_status (GS_ERR_ARG
+ * for NULLs, bad sizes, short buffers, an invalid config; GS_ERR_LIMIT for
+ * sizes whose arithmetic would overflow). Single-threaded and deterministic:
+ * same inputs, same bytes, provided OpenBLAS runs one thread (nn.h).
+ *
+ * All parameters live in ONE float array; gs_renderer_bind carves the named
+ * pointers out of it (and out of a gradient array of the same layout), and
+ * gs_renderer_layout describes each tensor (name, shape, offset) for the
+ * model file. */
+#ifndef GS_MODEL_RENDERER_H
+#define GS_MODEL_RENDERER_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gazesplat/error.h"
+
+/* Expression guidance after each block (u [C,HW] -> g [C,HW]), with
+ *   s = wk^T tau / sqrt(D)                 [C]   (wk [D,C])
+ *   att = softmax_p(u_p . s)                [HW]  (over all pixels)
+ *   a = wv (sum_p att_p u_p) + bv           [C]   (wv [C,C], bv [C])
+ * NONE:           g = u (the "plain renderer" ablation; no guide tensors).
+ * ADDITIVE:       g_p = u_p + a (the released GazeGaussian code; the key
+ *                 bias of that code cancels in the softmax and is omitted).
+ * MULTIPLICATIVE: g_p = u_p + u_p * a, elementwise (paper Eq. 9,
+ *                 z' = z + z . Attn(q = tau, k = z, v = z)). */
+typedef enum gs_renderer_guidance {
+    GS_GUIDE_NONE = 0,
+    GS_GUIDE_ADDITIVE = 1,
+    GS_GUIDE_MULTIPLICATIVE = 2
+} gs_renderer_guidance;
+
+#define GS_RENDERER_BLOCKS 2
+#define GS_RENDERER_MAX_CHANNELS 256
+#define GS_RENDERER_MAX_CODE 256
+#define GS_RENDERER_MAX_SIDE 2048 /* feature map H, W; the image is 4x */
+
+typedef struct gs_renderer_config {
+    int channels; /* C, feature channels (32); the blocks are C->2C->4C */
+    int code_dim; /* D, 1..GS_RENDERER_MAX_CODE */
+    int guidance; /* gs_renderer_guidance */
+    int blocks;   /* must be GS_RENDERER_BLOCKS */
+} gs_renderer_config;
+
+/* GS_OK, or GS_ERR_ARG with a message naming the bad field. */
+int gs_renderer_config_validate(const gs_renderer_config *cfg, gs_error *err);
+
+/* ---- Parameters --------------------------------------------------------- */
+
+typedef struct gs_renderer_conv {
+    float *w; /* [out, in] */
+    float *b; /* [out] */
+} gs_renderer_conv;
+
+typedef struct gs_renderer_params {
+    gs_renderer_conv rgb0; /* C -> 3 on the input features */
+    struct {
+        gs_renderer_conv a;   /* C -> 2C */
+        gs_renderer_conv b;   /* 2C -> 4C */
+        gs_renderer_conv c;   /* C -> C, after the shuffle and blur */
+        gs_renderer_conv rgb; /* C -> 3 */
+    } block[GS_RENDERER_BLOCKS];
+    /* Guidance, shared by both blocks; NULL for GS_GUIDE_NONE. */
+    float *key_w;   /* [D, C] */
+    float *value_w; /* [C, C] */
+    float *value_b; /* [C] */
+} gs_renderer_params;
+
+#define GS_RENDERER_MAX_TENSORS 21
+#define GS_RENDERER_NAME_MAX 48
+
+/* One named tensor of the parameter array, in file order. */
+typedef struct gs_renderer_tensor {
+    char name[GS_RENDERER_NAME_MAX]; /* "renderer.block0.conv_a.weight" */
+    int rank;                        /* 2 for weights, 1 for biases */
+    int shape[2];                    /* [out, in] or [out] (shape[1] = 1) */
+    size_t offset;                   /* floats from the start of the array */
+    size_t count;                    /* floats */
+} gs_renderer_tensor;
+
+/* Number of floats of the parameter array; 0 for an invalid config. */
+size_t gs_renderer_param_count(const gs_renderer_config *cfg);
+
+/* Fills table[0 .. *count) (cap >= GS_RENDERER_MAX_TENSORS is always
+ * enough); the tensors tile the array in order, without gaps. */
+int gs_renderer_layout(const gs_renderer_config *cfg,
+                       gs_renderer_tensor *table, int cap, int *count);
+
+/* Points *p into base[n] (n >= gs_renderer_param_count). Works for the
+ * parameters and for a gradient array alike. */
+int gs_renderer_bind(const gs_renderer_config *cfg, float *base, size_t n,
+                     gs_renderer_params *p);
+
+/* Deterministic initialisation of base[n] from seed (same seed, same
+ * bytes): PyTorch's default Conv2d bounds, weights and biases uniform in
+ * +-1/sqrt(fan_in); the guidance value wv and bv are zero so the guidance
+ * starts as the identity (see renderer.c). */
+int gs_renderer_init(const gs_renderer_config *cfg, float *base, size_t n,
+                     uint64_t seed);
+
+/* ---- Forward and backward ------------------------------------------------ */
+
+/* Floats of the activation buffer for an H x W feature map (everything the
+ * backward needs, plus its scratch); 0 for invalid sizes or config. */
+size_t gs_renderer_act_size(const gs_renderer_config *cfg, int H, int W);
+
+/* out_rgb[3, 4H, 4W] in [0,1] from x[C, H, W] and tau[D] (tau may be NULL
+ * for GS_GUIDE_NONE). acts[acts_len] receives the saved activations. */
+int gs_renderer_forward(const gs_renderer_config *cfg,
+                        const gs_renderer_params *p, const float *x,
+                        const float *tau, int H, int W, float *acts,
+                        size_t acts_len, float *out_rgb);
+
+/* Gradients from dout_rgb[3, 4H, 4W], with acts as left by the forward of
+ * the same x, tau, H, W (its scratch part is overwritten; the saved part is
+ * not, so backward may run again). ADDS into dparams (bound to a gradient
+ * array with gs_renderer_bind; required), dx[C, H, W] and dtau[D] (both may
+ * be NULL). */
+int gs_renderer_backward(const gs_renderer_config *cfg,
+                         const gs_renderer_params *p, float *acts,
+                         size_t acts_len, const float *x, const float *tau,
+                         const float *dout_rgb, int H, int W,
+                         const gs_renderer_params *dparams, float *dx,
+                         float *dtau);
+
+#endif

@@ -1,0 +1,430 @@
+/* Training on synthetic heads generated on the fly (normalized face images
+ * of many views per identity), auto-decoder codes per training identity.
+ *
+ * Per step: one sample; tau = [code of its identity | its expression | its
+ * light]; loss = L1 (eye region weighted 5x) + 0.1 (1 - SSIM) on the image
+ * with a white background outside the head mask, plus L1 of the feature
+ * map's first 3 channels against the 4x area-downsampled target. Adam with
+ * per-group learning rates; a step whose loss or gradient is non-finite,
+ * or whose loss spikes above 4x the running mean, is skipped and counted. */
+#define _POSIX_C_SOURCE 200809L
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <time.h>
+
+#include "frame.h"
+#include "gazesplat/nn.h"
+#include "gazesplat/safetensors.h"
+#include "gazesplat/synth.h"
+#include "gazesplat/train.h"
+
+void gs_train_options_default(gs_train_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->steps = 2000;
+    o->lr = 1e-3;
+    o->seed = 1;
+    o->checkpoint_every = 500;
+    o->log_every = 50;
+}
+
+/* The 12 light values of a scene in its head frame: sum over lights of
+ * rgb x direction (9) and the ambient colour (3). */
+void gs_model_light_code(const gs_synth_scene *s, float out[12])
+{
+    memset(out, 0, 12 * sizeof(float));
+    for (int l = 0; l < s->n_lights; l++) {
+        double d[3], dh[3];
+        for (int k = 0; k < 3; k++)
+            d[k] = s->light[l].dir[k];
+        gs_geom_mat3_tvec(s->head_R, d, dh);
+        for (int c = 0; c < 3; c++)
+            for (int k = 0; k < 3; k++)
+                out[3 * c + k] += (float)(s->light[l].rgb[c] * dh[k]);
+    }
+    for (int c = 0; c < 3; c++)
+        out[9 + c] = s->ambient[c];
+}
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return ts.tv_sec + 1e-9 * ts.tv_nsec;
+}
+
+typedef struct trainer {
+    gs_model *m;
+    gs_model_ctx *c;
+    float *grad;
+    gs_model_params g;
+    gs_nn_adam *adam;
+    gs_synth_gen_config gen;
+    gs_synth_sample sample;
+    float *target, *wl1, *dimg, *ftarget, *dfmap, *ssim;
+    size_t ssim_len;
+    double light_sum[GS_MODEL_LIGHT_DIM];
+    long light_n;
+} trainer;
+
+static double group_lr(int group)
+{
+    switch (group) {
+    case GS_PG_GAUSS_XYZ: return 10.0;  /* mm */
+    case GS_PG_GAUSS_ATTR: return 1.0;
+    case GS_PG_GAUSS_FEAT: return 5.0;
+    case GS_PG_MLP: return 1.0;
+    case GS_PG_RENDERER: return 1.0;
+    case GS_PG_CODES: return 10.0;
+    default: return 0.0;
+    }
+}
+
+static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
+                        gs_error *err)
+{
+    memset(t, 0, sizeof *t);
+    t->m = m;
+    t->c = gs_model_ctx_create(m);
+    t->grad = calloc(m->nparams, sizeof(float));
+    if (!t->c || !t->grad)
+        return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
+    gs_model_bind(m, t->grad, &t->g);
+    gs_nn_param_group groups[GS_MODEL_MAX_TENSORS];
+    int ng = 0;
+    for (int i = 0; i < m->ntensors; i++) {
+        double mult = group_lr(m->t[i].group);
+        if (mult <= 0)
+            continue;
+        groups[ng].param = m->params + m->t[i].offset;
+        groups[ng].grad = t->grad + m->t[i].offset;
+        groups[ng].n = m->t[i].count;
+        groups[ng].lr_mult = mult;
+        ng++;
+    }
+    gs_nn_adam_config ac = gs_nn_adam_default_config();
+    int rc = gs_nn_adam_create(&t->adam, groups, ng, &ac, err);
+    if (rc)
+        return rc;
+    gs_synth_gen_config_default(&t->gen);
+    t->gen.split = GS_SYNTH_TRAIN;
+    t->gen.identities = (uint64_t)m->cfg.n_train_ids;
+    t->gen.seed = o->seed;
+    t->gen.size = m->cfg.image_size;
+    t->gen.rig = GS_SYNTH_RIG_NORMALIZED;
+    t->gen.supersample = 1;
+    /* The model's documented range, a little inside the generator's. */
+    t->gen.ranges.head_yaw = 40.0 * GS_MODEL_PI / 180;
+    t->gen.ranges.head_pitch = 25.0 * GS_MODEL_PI / 180;
+    t->gen.ranges.head_roll = 5.0 * GS_MODEL_PI / 180;
+    t->gen.ranges.gaze_yaw = 40.0 * GS_MODEL_PI / 180;
+    t->gen.ranges.gaze_pitch = 30.0 * GS_MODEL_PI / 180;
+    rc = gs_synth_sample_alloc(&t->sample, t->gen.size, t->gen.size, err);
+    if (rc)
+        return rc;
+    size_t S = (size_t)m->cfg.image_size, fs = (size_t)m->cfg.feat_size;
+    t->ssim_len = gs_nn_ssim_scratch_size((int)S, (int)S, GS_NN_SSIM_ZERO);
+    t->target = malloc(3 * S * S * sizeof(float));
+    t->wl1 = malloc(S * S * sizeof(float));
+    t->dimg = malloc(3 * S * S * sizeof(float));
+    t->ftarget = malloc(3 * fs * fs * sizeof(float));
+    t->dfmap = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->ssim = malloc(t->ssim_len * sizeof(float));
+    if (!t->target || !t->wl1 || !t->dimg || !t->ftarget || !t->dfmap ||
+        !t->ssim)
+        return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
+    return GS_OK;
+}
+
+static void trainer_free(trainer *t)
+{
+    gs_model_ctx_destroy(t->c);
+    free(t->grad);
+    gs_nn_adam_destroy(t->adam);
+    gs_synth_sample_free(&t->sample);
+    free(t->target);
+    free(t->wl1);
+    free(t->dimg);
+    free(t->ftarget);
+    free(t->dfmap);
+    free(t->ssim);
+}
+
+static int identity_index(const trainer *t, uint64_t seed)
+{
+    for (int k = 0; k < t->m->cfg.n_train_ids; k++)
+        if (gs_synth_split_seed(GS_SYNTH_TRAIN, (uint64_t)k) == seed)
+            return k;
+    return -1;
+}
+
+/* Builds the frame and the targets of sample `index`. */
+static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
+                   gs_error *err)
+{
+    gs_synth_scene scene;
+    gs_synth_camera cam;
+    int rc = gs_synth_gen_scene(&t->gen, index, &scene, &cam, err);
+    if (!rc)
+        rc = gs_synth_gen_sample(&t->gen, index, NULL, &t->sample, err);
+    if (rc)
+        return rc;
+    const gs_synth_labels *lab = &t->sample.labels;
+    int k = identity_index(t, lab->identity.seed);
+    if (k < 0)
+        return gs_error_set(err, GS_ERR_STATE, "train: unknown identity");
+    *ident = k;
+    const gs_model_config *mc = &t->m->cfg;
+    memset(fr, 0, sizeof *fr);
+    memcpy(fr->code, t->m->p.codes + (size_t)k * mc->id_dim,
+           mc->id_dim * sizeof(float));
+    gs_synth_expression_to_array(&lab->expr, fr->code + mc->id_dim);
+    float *light = fr->code + mc->id_dim + GS_MODEL_EXPR_DIM;
+    gs_model_light_code(&scene, light);
+    for (int i = 0; i < GS_MODEL_LIGHT_DIM; i++)
+        t->light_sum[i] += light[i];
+    t->light_n++;
+    memcpy(fr->head_R, lab->head_R, sizeof fr->head_R);
+    memcpy(fr->head_t, lab->head_t, sizeof fr->head_t);
+    fr->gaze[0] = lab->gaze_head_pitch;
+    fr->gaze[1] = lab->gaze_head_yaw;
+    /* Targets: white outside the head; eyes weighted 5x in the L1. */
+    int S = mc->image_size, fs = mc->feat_size;
+    size_t plane = (size_t)S * S;
+    const uint8_t *head = gs_synth_sample_mask(&t->sample, GS_SYNTH_MASK_HEAD);
+    const uint8_t *le = gs_synth_sample_mask(&t->sample, GS_SYNTH_MASK_LEFT_EYE);
+    const uint8_t *re = gs_synth_sample_mask(&t->sample,
+                                             GS_SYNTH_MASK_RIGHT_EYE);
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            size_t i = (size_t)y * S + x;
+            float hm = head[i] / 255.0f;
+            for (int ch = 0; ch < 3; ch++) {
+                float v = t->sample.rgb[(size_t)y * t->sample.stride +
+                                        3 * x + ch] / 255.0f;
+                t->target[ch * plane + i] = hm * v + (1 - hm);
+            }
+            t->wl1[i] = 1.0f + 4.0f * (float)((le[i] | re[i]) != 0);
+        }
+    int f = S / fs;
+    for (int ch = 0; ch < 3; ch++)
+        for (int y = 0; y < fs; y++)
+            for (int x = 0; x < fs; x++) {
+                double s = 0;
+                for (int dy = 0; dy < f; dy++)
+                    for (int dx = 0; dx < f; dx++)
+                        s += t->target[ch * plane +
+                                       (size_t)(y * f + dy) * S + x * f + dx];
+                t->ftarget[(size_t)ch * fs * fs + (size_t)y * fs + x] =
+                    (float)(s / (f * f));
+            }
+    return GS_OK;
+}
+
+/* Loss of the current frame and its gradients into t->dimg / t->dfmap. */
+static double losses(trainer *t, double *psnr)
+{
+    gs_model_ctx *c = t->c;
+    int S = c->S, fs = c->fs;
+    size_t plane = (size_t)S * S, fplane = (size_t)fs * fs;
+    float l1 = 0, ls = 0, lf = 0;
+    gs_nn_l1_forward(&l1, c->rgb, t->target, t->wl1, 3, (int)plane);
+    gs_nn_ssim_loss_forward(&ls, c->rgb, t->target, 3, S, S, GS_NN_SSIM_ZERO,
+                            t->ssim, t->ssim_len);
+    gs_nn_l1_forward(&lf, c->fmap, t->ftarget, NULL, 3, (int)fplane);
+    memset(t->dimg, 0, 3 * plane * sizeof(float));
+    gs_nn_l1_backward(t->dimg, 1.0f, c->rgb, t->target, t->wl1, 3,
+                      (int)plane);
+    gs_nn_ssim_loss_backward(t->dimg, 0.1f, c->rgb, t->target, 3, S, S,
+                             GS_NN_SSIM_ZERO, t->ssim, t->ssim_len);
+    memset(t->dfmap, 0, 3 * fplane * sizeof(float));
+    gs_nn_l1_backward(t->dfmap, 1.0f, c->fmap, t->ftarget, NULL, 3,
+                      (int)fplane);
+    double se = 0;
+    for (size_t i = 0; i < 3 * plane; i++) {
+        double e = c->rgb[i] - t->target[i];
+        se += e * e;
+    }
+    double mse = se / (3.0 * plane);
+    *psnr = mse > 1e-12 ? -10 * log10(mse) : 120;
+    return (double)l1 + 0.1 * ls + lf;
+}
+
+static int save_checkpoint(trainer *t, const char *path, long step,
+                           gs_error *err)
+{
+    /* The mean code (starting point of fits): mean identity code, neutral
+     * expression, mean training light. */
+    gs_model *m = t->m;
+    int D = gs_model_code_dim(&m->cfg), id = m->cfg.id_dim;
+    memset(m->p.code_mean, 0, D * sizeof(float));
+    for (int k = 0; k < m->cfg.n_train_ids; k++)
+        for (int j = 0; j < id; j++)
+            m->p.code_mean[j] += m->p.codes[(size_t)k * id + j] /
+                                 m->cfg.n_train_ids;
+    if (t->light_n)
+        for (int i = 0; i < GS_MODEL_LIGHT_DIM; i++)
+            m->p.code_mean[id + GS_MODEL_EXPR_DIM + i] =
+                (float)(t->light_sum[i] / t->light_n);
+    int rc = gs_model_save(m, path, err);
+    if (rc)
+        return rc;
+    /* Optimizer state next to it, for resuming. */
+    gs_st_writer *w = gs_st_writer_create();
+    if (!w)
+        return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
+    char key[64], val[32];
+    snprintf(val, sizeof val, "%ld", step);
+    gs_st_writer_meta(w, "step", val);
+    snprintf(val, sizeof val, "%ld", gs_nn_adam_steps(t->adam));
+    gs_st_writer_meta(w, "adam_steps", val);
+    int gi = 0;
+    for (int i = 0; i < m->ntensors && !rc; i++) {
+        if (group_lr(m->t[i].group) <= 0)
+            continue;
+        float *m1, *v1;
+        gs_nn_adam_moments(t->adam, gi++, &m1, &v1);
+        int64_t n = (int64_t)m->t[i].count;
+        snprintf(key, sizeof key, "m.%s", m->t[i].name);
+        rc = gs_st_writer_add(w, key, GS_ST_F32, 1, &n, m1);
+        snprintf(key, sizeof key, "v.%s", m->t[i].name);
+        if (!rc)
+            rc = gs_st_writer_add(w, key, GS_ST_F32, 1, &n, v1);
+    }
+    char opath[4096];
+    snprintf(opath, sizeof opath, "%s.opt", path);
+    if (!rc)
+        rc = gs_st_writer_save(w, opath, err);
+    gs_st_writer_destroy(w);
+    return rc;
+}
+
+static int load_optimizer(trainer *t, const char *path, long *step,
+                          gs_error *err)
+{
+    char opath[4096];
+    snprintf(opath, sizeof opath, "%s.opt", path);
+    gs_st_file *f = NULL;
+    int rc = gs_st_open(opath, NULL, &f, err);
+    if (rc)
+        return rc;
+    const char *s = gs_st_meta(f, "step"), *a = gs_st_meta(f, "adam_steps");
+    if (!s || !a) {
+        gs_st_close(f);
+        return gs_error_set(err, GS_ERR_FORMAT, "train: %s lacks steps",
+                            opath);
+    }
+    *step = atol(s);
+    gs_nn_adam_set_steps(t->adam, atol(a));
+    int gi = 0;
+    const gs_model *m = t->m;
+    for (int i = 0; i < m->ntensors && !rc; i++) {
+        if (group_lr(m->t[i].group) <= 0)
+            continue;
+        float *m1, *v1;
+        const float *d1, *d2;
+        gs_nn_adam_moments(t->adam, gi++, &m1, &v1);
+        int64_t n = (int64_t)m->t[i].count;
+        char key[80];
+        snprintf(key, sizeof key, "m.%s", m->t[i].name);
+        rc = gs_st_get_f32(f, key, 1, &n, &d1, err);
+        snprintf(key, sizeof key, "v.%s", m->t[i].name);
+        if (!rc)
+            rc = gs_st_get_f32(f, key, 1, &n, &d2, err);
+        if (!rc) {
+            memcpy(m1, d1, (size_t)n * sizeof(float));
+            memcpy(v1, d2, (size_t)n * sizeof(float));
+        }
+    }
+    gs_st_close(f);
+    return rc;
+}
+
+int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
+             gs_train_report *rep, gs_error *err)
+{
+    if (!m || !o || !o->out_path)
+        return gs_error_set(err, GS_ERR_ARG, "train: NULL argument");
+    if (m->cfg.n_train_ids < 1 || !m->p.codes)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: the model has no training codes");
+    trainer t;
+    int rc = trainer_init(&t, m, o, err);
+    long step = 0;
+    if (!rc && o->resume)
+        rc = load_optimizer(&t, o->out_path, &step, err);
+    double t0 = now_s(), run_mean = 0, last_log = t0;
+    long skipped = 0, done = 0;
+    double psnr_acc = 0, loss_acc = 0;
+    int acc_n = 0;
+    for (; !rc && step < o->steps; step++) {
+        gs_frame fr;
+        int k = 0;
+        rc = prepare(&t, (uint64_t)step, &fr, &k, err);
+        if (rc)
+            break;
+        rc = gs_frame_forward(t.c, pool, &fr, GS_STREAM_BOTH, 1, err);
+        if (rc)
+            break;
+        double psnr;
+        double loss = losses(&t, &psnr);
+        int skip = !isfinite(loss) || (done > 50 && loss > 4 * run_mean);
+        if (!skip) {
+            gs_nn_adam_zero_grad(t.adam);
+            gs_frame_grad fg;
+            memset(&fg, 0, sizeof fg);
+            rc = gs_frame_backward(t.c, pool, t.dimg, t.dfmap, &t.g, &fg, err);
+            if (rc)
+                break;
+            float *dc = t.g.codes + (size_t)k * m->cfg.id_dim;
+            for (int j = 0; j < m->cfg.id_dim; j++)
+                dc[j] += fg.code[j];
+            double gn;
+            int arc = gs_nn_adam_step(t.adam, o->lr, &gn);
+            if (arc == GS_ERR_NONFINITE)
+                skip = 1;
+            else if (arc) {
+                rc = gs_error_set(err, arc, "train: optimizer step failed");
+                break;
+            }
+        }
+        if (skip) {
+            skipped++;
+            if (o->log)
+                o->log(o->log_ctx, "step %ld skipped (loss %g, mean %g)",
+                       step, loss, run_mean);
+            continue;
+        }
+        done++;
+        run_mean = done == 1 ? loss : 0.98 * run_mean + 0.02 * loss;
+        psnr_acc += psnr;
+        loss_acc += loss;
+        acc_n++;
+        if (o->log && o->log_every > 0 && (step + 1) % o->log_every == 0) {
+            double el = now_s() - t0, rate = done / el;
+            o->log(o->log_ctx,
+                   "step %ld/%ld loss %.4f psnr %.2f dB  %.0f ms/step  "
+                   "eta %.0f s  skipped %ld",
+                   step + 1, o->steps, loss_acc / acc_n, psnr_acc / acc_n,
+                   1000.0 * (now_s() - last_log) / acc_n,
+                   (o->steps - step - 1) / (rate > 0 ? rate : 1), skipped);
+            last_log = now_s();
+            psnr_acc = loss_acc = 0;
+            acc_n = 0;
+        }
+        if (o->checkpoint_every > 0 && (step + 1) % o->checkpoint_every == 0)
+            rc = save_checkpoint(&t, o->out_path, step + 1, err);
+    }
+    if (!rc)
+        rc = save_checkpoint(&t, o->out_path, step, err);
+    if (rep) {
+        rep->steps = step;
+        rep->skipped = skipped;
+        rep->seconds = now_s() - t0;
+        rep->final_loss = run_mean;
+    }
+    trainer_free(&t);
+    return rc;
+}

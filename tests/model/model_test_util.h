@@ -1,0 +1,44 @@
+/* Shared helpers of the model tests: a tiny model built in milliseconds. */
+#ifndef GS_MODEL_TEST_UTIL_H
+#define GS_MODEL_TEST_UTIL_H
+
+#include "../../lib/model/frame.h"
+#include "gazesplat/geom.h"
+
+/* A small model: coarse template, few eye Gaussians, narrow MLPs, 16^2
+ * features -> 64^2 images. */
+static inline gs_model *tiny_model(int guidance, uint64_t seed)
+{
+    gs_model_config cfg;
+    gs_model_config_default(&cfg);
+    cfg.template_spacing_mm = 6.0;
+    cfg.n_eye_each = 40;
+    cfg.feat_dim = 8;
+    cfg.id_dim = 4;
+    cfg.hidden = 16;
+    cfg.channels = 8;
+    cfg.feat_size = 32;
+    cfg.image_size = 128;
+    cfg.focal = 1600.0 * 128 / 512;
+    cfg.guidance = guidance;
+    cfg.n_train_ids = 3;
+    gs_model *m = NULL;
+    gs_error err;
+    if (gs_model_create(&cfg, seed, &m, &err) != GS_OK) {
+        fprintf(stderr, "tiny_model: %s\n", err.msg);
+        return NULL;
+    }
+    return m;
+}
+
+static inline void frame_default(const gs_model *m, gs_frame *fr)
+{
+    memset(fr, 0, sizeof *fr);
+    gs_geom_rot_from_pitchyaw(0.1, -0.2, 0.05, fr->head_R);
+    fr->head_t[2] = m->cfg.d_n_mm;
+    fr->gaze[0] = 0.15;
+    fr->gaze[1] = -0.25;
+    for (int k = 0; k < gs_model_code_dim(&m->cfg); k++)
+        fr->code[k] = 0.1f * (float)((k * 7) % 5 - 2);
+}
+#endif

@@ -1,0 +1,356 @@
+/* Renderer bookkeeping and contracts: config validation, the parameter
+ * layout (count, names, shapes, offsets, binding), the seeded init (bounds,
+ * determinism, guidance starting as the identity), determinism of forward
+ * and backward (same bytes twice, backward accumulating), the CPU
+ * default size (64^2 -> 256^2) and bad arguments. */
+#include "gazesplat/nn.h"
+#include "gs_test.h"
+#include "renderer.h"
+
+#include <stdint.h>
+#include <string.h>
+
+static void *xcalloc(size_t n)
+{
+    void *p = calloc(n ? n : 1, sizeof(float));
+    if (!p) {
+        fprintf(stderr, "out of memory\n");
+        exit(2);
+    }
+    return p;
+}
+
+static void fill(float *a, size_t n, uint32_t seed)
+{
+    uint32_t s = seed;
+    for (size_t i = 0; i < n; i++) {
+        s = s * 1664525u + 1013904223u;
+        a[i] = (float)(s >> 8) * (2.0f / 16777216.0f) - 1.0f;
+    }
+}
+
+static void t_config(void)
+{
+    gs_error err;
+    gs_renderer_config ok = {32, 144, GS_GUIDE_MULTIPLICATIVE, 2};
+    CHECK_EQ_INT(gs_renderer_config_validate(&ok, &err), GS_OK);
+    const gs_renderer_config bad[] = {
+        {0, 144, 0, 2}, {257, 144, 0, 2}, {32, 0, 0, 2}, {32, 257, 0, 2},
+        {32, 144, 3, 2}, {32, 144, -1, 2}, {32, 144, 0, 1}, {32, 144, 0, 3}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        gs_error_clear(&err);
+        CHECK_EQ_INT(gs_renderer_config_validate(&bad[i], &err), GS_ERR_ARG);
+        CHECK_MSG(strstr(err.msg, "renderer:") != NULL, "case %zu: message '%s'",
+                  i, err.msg);
+        CHECK_EQ_INT(gs_renderer_param_count(&bad[i]), 0);
+        CHECK_EQ_INT(gs_renderer_act_size(&bad[i], 8, 8), 0);
+    }
+    CHECK_EQ_INT(gs_renderer_config_validate(NULL, NULL), GS_ERR_ARG);
+}
+
+/* C = 32, D = 144: 99 + 2 (2112 + 8320 + 1056 + 99) + (4608 + 1024 + 32) */
+static void t_layout(void)
+{
+    gs_renderer_config g = {32, 144, GS_GUIDE_ADDITIVE, 2};
+    gs_renderer_config n = {32, 144, GS_GUIDE_NONE, 2};
+    CHECK_EQ_INT(gs_renderer_param_count(&g), 28937);
+    CHECK_EQ_INT(gs_renderer_param_count(&n), 23273);
+    gs_renderer_tensor tab[GS_RENDERER_MAX_TENSORS];
+    int count = 0;
+    CHECK_EQ_INT(gs_renderer_layout(&g, tab, GS_RENDERER_MAX_TENSORS, &count), GS_OK);
+    CHECK_EQ_INT(count, 21);
+    CHECK_EQ_INT(gs_renderer_layout(&g, tab, 20, &count), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_layout(&g, NULL, 21, &count), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_layout(&g, tab, GS_RENDERER_MAX_TENSORS, &count), GS_OK);
+    size_t off = 0;
+    for (int i = 0; i < count; i++) {
+        const gs_renderer_tensor *t = &tab[i];
+        CHECK_MSG(t->offset == off, "%s: offset %zu, expected %zu", t->name,
+                  t->offset, off);
+        CHECK_EQ_INT(t->count, (size_t)t->shape[0] * (size_t)t->shape[1]);
+        CHECK(t->rank == 1 || t->rank == 2);
+        CHECK(strncmp(t->name, "renderer.", 9) == 0);
+        for (int j = 0; j < i; j++)
+            CHECK_MSG(strcmp(t->name, tab[j].name) != 0, "duplicate %s", t->name);
+        off += t->count;
+    }
+    CHECK_EQ_INT(off, 28937);
+    CHECK(strcmp(tab[0].name, "renderer.conv_rgb.weight") == 0);
+    CHECK(strcmp(tab[4].name, "renderer.block0.conv_b.weight") == 0);
+    CHECK(tab[4].shape[0] == 128 && tab[4].shape[1] == 64 && tab[4].rank == 2);
+    CHECK(strcmp(tab[5].name, "renderer.block0.conv_b.bias") == 0);
+    CHECK(tab[5].shape[0] == 128 && tab[5].rank == 1);
+    CHECK(strcmp(tab[18].name, "renderer.guide.key.weight") == 0);
+    CHECK(tab[18].shape[0] == 144 && tab[18].shape[1] == 32);
+
+    float *base = xcalloc(28937);
+    gs_renderer_params p;
+    CHECK_EQ_INT(gs_renderer_bind(&g, base, 28936, &p), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_bind(&g, NULL, 28937, &p), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_bind(&g, base, 28937, &p), GS_OK);
+    CHECK(p.rgb0.w == base && p.rgb0.b == base + tab[1].offset);
+    CHECK(p.block[0].b.w == base + tab[4].offset);
+    CHECK(p.block[1].rgb.b == base + tab[17].offset);
+    CHECK(p.key_w == base + tab[18].offset && p.value_w == base + tab[19].offset);
+    CHECK(p.value_b == base + tab[20].offset);
+    CHECK_EQ_INT(gs_renderer_bind(&n, base, 28937, &p), GS_OK);
+    CHECK(p.key_w == NULL && p.value_w == NULL && p.value_b == NULL);
+    free(base);
+}
+
+static void t_init(void)
+{
+    gs_renderer_config g = {32, 144, GS_GUIDE_MULTIPLICATIVE, 2};
+    size_t np = gs_renderer_param_count(&g);
+    float *a = xcalloc(np), *b = xcalloc(np), *c = xcalloc(np);
+    CHECK_EQ_INT(gs_renderer_init(&g, a, np, 42), GS_OK);
+    CHECK_EQ_INT(gs_renderer_init(&g, b, np, 42), GS_OK);
+    CHECK_EQ_INT(gs_renderer_init(&g, c, np, 43), GS_OK);
+    CHECK(memcmp(a, b, np * sizeof *a) == 0);
+    CHECK(memcmp(a, c, np * sizeof *a) != 0);
+    CHECK_EQ_INT(gs_renderer_init(&g, a, np - 1, 42), GS_ERR_ARG);
+    gs_renderer_tensor tab[GS_RENDERER_MAX_TENSORS];
+    int count = 0;
+    gs_renderer_layout(&g, tab, GS_RENDERER_MAX_TENSORS, &count);
+    for (int i = 0; i < count; i++) {
+        const gs_renderer_tensor *t = &tab[i];
+        int fan_in = t->rank == 2 ? t->shape[1] : tab[i - 1].shape[1];
+        double bound = 1.0 / sqrt((double)fan_in), big = 0.0;
+        for (size_t k = 0; k < t->count; k++)
+            big = fmax(big, fabs(a[t->offset + k]));
+        if (strstr(t->name, "guide.value"))
+            CHECK_MSG(big == 0.0, "%s not zero", t->name);
+        else
+            CHECK_MSG(big <= bound && big > 0.5 * bound, "%s: max %g, bound %g",
+                      t->name, big, bound);
+    }
+    free(a); free(b); free(c);
+}
+
+typedef struct {
+    gs_renderer_config cfg;
+    int H, W;
+    size_t np, na, nx, nout;
+    float *params, *grads, *acts, *x, *tau, *out, *dout, *dx, *dtau;
+    gs_renderer_params p, dp;
+} net;
+
+static void net_make(net *n, int guidance, int D, int H, int W, uint64_t seed)
+{
+    n->cfg = (gs_renderer_config){32, D, guidance, 2};
+    n->H = H, n->W = W;
+    n->np = gs_renderer_param_count(&n->cfg);
+    n->na = gs_renderer_act_size(&n->cfg, H, W);
+    n->nx = (size_t)32 * H * W, n->nout = (size_t)48 * H * W;
+    n->params = xcalloc(n->np), n->grads = xcalloc(n->np);
+    n->acts = xcalloc(n->na), n->x = xcalloc(n->nx), n->tau = xcalloc((size_t)D);
+    n->out = xcalloc(n->nout), n->dout = xcalloc(n->nout);
+    n->dx = xcalloc(n->nx), n->dtau = xcalloc((size_t)D);
+    gs_renderer_init(&n->cfg, n->params, n->np, seed);
+    gs_renderer_bind(&n->cfg, n->params, n->np, &n->p);
+    gs_renderer_bind(&n->cfg, n->grads, n->np, &n->dp);
+    fill(n->x, n->nx, 1);
+    fill(n->tau, (size_t)D, 2);
+    fill(n->dout, n->nout, 3);
+}
+
+static void net_free(net *n)
+{
+    free(n->params); free(n->grads); free(n->acts); free(n->x); free(n->tau);
+    free(n->out); free(n->dout); free(n->dx); free(n->dtau);
+}
+
+static int net_forward(net *n)
+{
+    return gs_renderer_forward(&n->cfg, &n->p, n->x, n->tau, n->H, n->W,
+                               n->acts, n->na, n->out);
+}
+
+static int net_backward(net *n)
+{
+    return gs_renderer_backward(&n->cfg, &n->p, n->acts, n->na, n->x, n->tau,
+                                n->dout, n->H, n->W, &n->dp, n->dx, n->dtau);
+}
+
+/* With the init's zero value projection, both guidance modes give the
+ * plain renderer's image, bit for bit (the conv tensors come first in the
+ * layout, so the same seed draws the same convolutions). */
+static void t_identity_at_init(void)
+{
+    net plain, add, mul;
+    net_make(&plain, GS_GUIDE_NONE, 16, 5, 7, 9);
+    net_make(&add, GS_GUIDE_ADDITIVE, 16, 5, 7, 9);
+    net_make(&mul, GS_GUIDE_MULTIPLICATIVE, 16, 5, 7, 9);
+    CHECK_EQ_INT(net_forward(&plain), GS_OK);
+    CHECK_EQ_INT(net_forward(&add), GS_OK);
+    CHECK_EQ_INT(net_forward(&mul), GS_OK);
+    CHECK(memcmp(plain.out, add.out, plain.nout * sizeof(float)) == 0);
+    CHECK(memcmp(plain.out, mul.out, plain.nout * sizeof(float)) == 0);
+    net_free(&plain); net_free(&add); net_free(&mul);
+}
+
+static void fill_const(float *a, size_t n, float v)
+{
+    for (size_t i = 0; i < n; i++)
+        a[i] = v;
+}
+
+/* got == want + 0.5 up to the rounding of a few accumulation steps. */
+static void check_offset(const char *what, const float *got, const float *want,
+                         size_t n)
+{
+    double big = 0.0;
+    float *w = xcalloc(n);
+    for (size_t i = 0; i < n; i++) {
+        big = fmax(big, fabs((double)want[i]));
+        w[i] = want[i] + 0.5f;
+    }
+    gs_check_arrays(what, got, w, n, 1e-6 * big + 1e-7, 1e-6);
+    free(w);
+}
+
+/* Same bytes twice (over a dirty activation buffer); backward adds. */
+static void t_determinism(int guidance)
+{
+    net n;
+    net_make(&n, guidance, 144, 6, 9, 5);
+    if (guidance != GS_GUIDE_NONE) { /* a live guidance */
+        fill(n.p.value_w, 32 * 32, 11);
+        fill(n.p.value_b, 32, 12);
+    }
+    CHECK_EQ_INT(net_forward(&n), GS_OK);
+    CHECK_EQ_INT(net_backward(&n), GS_OK);
+    float *out1 = xcalloc(n.nout), *g1 = xcalloc(n.np), *dx1 = xcalloc(n.nx);
+    float *dt1 = xcalloc(144);
+    memcpy(out1, n.out, n.nout * sizeof(float));
+    memcpy(g1, n.grads, n.np * sizeof(float));
+    memcpy(dx1, n.dx, n.nx * sizeof(float));
+    memcpy(dt1, n.dtau, 144 * sizeof(float));
+    /* a fresh run over a dirty activation buffer gives the same bytes */
+    memset(n.grads, 0, n.np * sizeof(float));
+    memset(n.dx, 0, n.nx * sizeof(float));
+    memset(n.dtau, 0, 144 * sizeof(float));
+    fill(n.acts, n.na, 77);
+    CHECK_EQ_INT(net_forward(&n), GS_OK);
+    CHECK_EQ_INT(net_backward(&n), GS_OK);
+    CHECK(memcmp(out1, n.out, n.nout * sizeof(float)) == 0);
+    CHECK(memcmp(g1, n.grads, n.np * sizeof(float)) == 0);
+    CHECK(memcmp(dx1, n.dx, n.nx * sizeof(float)) == 0);
+    CHECK(memcmp(dt1, n.dtau, 144 * sizeof(float)) == 0);
+    /* backward adds: run again (the saved part of acts is intact) into
+     * gradients prefilled with 0.5 */
+    fill_const(n.grads, n.np, 0.5f);
+    fill_const(n.dx, n.nx, 0.5f);
+    fill_const(n.dtau, 144, 0.5f);
+    CHECK_EQ_INT(net_backward(&n), GS_OK);
+    check_offset("params", n.grads, g1, n.np);
+    check_offset("dx", n.dx, dx1, n.nx);
+    check_offset("dtau", n.dtau, dt1, 144);
+    /* NULL dx and dtau: the parameter gradients do not change */
+    memset(n.grads, 0, n.np * sizeof(float));
+    CHECK_EQ_INT(gs_renderer_backward(&n.cfg, &n.p, n.acts, n.na, n.x, n.tau,
+                                      n.dout, n.H, n.W, &n.dp, NULL, NULL), GS_OK);
+    CHECK(memcmp(g1, n.grads, n.np * sizeof(float)) == 0);
+    free(out1); free(g1); free(dx1); free(dt1);
+    net_free(&n);
+}
+
+/* The CPU default: 64 x 64 features -> 256 x 256 image, finite, in (0, 1). */
+static void t_default_size(void)
+{
+    net n;
+    net_make(&n, GS_GUIDE_MULTIPLICATIVE, 144, 64, 64, 1);
+    fill(n.p.value_w, 32 * 32, 4);
+    CHECK_EQ_INT(net_forward(&n), GS_OK);
+    CHECK_EQ_INT(net_backward(&n), GS_OK);
+    size_t bad = 0;
+    for (size_t i = 0; i < n.nout; i++)
+        bad += !(n.out[i] >= 0.0f && n.out[i] <= 1.0f);
+    for (size_t i = 0; i < n.np; i++)
+        bad += !isfinite(n.grads[i]);
+    for (size_t i = 0; i < n.nx; i++)
+        bad += !isfinite(n.dx[i]);
+    CHECK_MSG(bad == 0, "%zu values out of range or non-finite", bad);
+    printf("64x64 -> 256x256: %zu parameters, activations %.1f MB\n", n.np,
+           (double)n.na * 4.0 / 1e6);
+    net_free(&n);
+}
+
+static void t_bad_args(void)
+{
+    net n;
+    net_make(&n, GS_GUIDE_ADDITIVE, 8, 4, 4, 3);
+    const gs_renderer_config *c = &n.cfg;
+    gs_renderer_config badcfg = n.cfg;
+    badcfg.blocks = 3;
+    /* sizes */
+    CHECK_EQ_INT(gs_renderer_act_size(c, 0, 4), 0);
+    CHECK_EQ_INT(gs_renderer_act_size(c, 4, -1), 0);
+    CHECK_EQ_INT(gs_renderer_act_size(c, GS_RENDERER_MAX_SIDE + 1, 4), 0);
+    CHECK(gs_renderer_act_size(c, 1, 1) > 0);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 0, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 0, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, GS_RENDERER_MAX_SIDE + 1, 4,
+                                     n.acts, n.na, n.out), GS_ERR_LIMIT);
+    /* a buffer sized for 4 x 4 is too short for 4 x 5 */
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 5, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, n.na - 1, n.out), GS_ERR_ARG);
+    /* NULLs and a bad config */
+    CHECK_EQ_INT(gs_renderer_forward(NULL, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(&badcfg, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, NULL, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, NULL, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, NULL, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, NULL, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, NULL), GS_ERR_ARG);
+    gs_renderer_params holes = n.p;
+    holes.block[1].c.b = NULL;
+    CHECK_EQ_INT(gs_renderer_forward(c, &holes, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    holes = n.p;
+    holes.value_w = NULL;
+    CHECK_EQ_INT(gs_renderer_forward(c, &holes, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    /* backward */
+    CHECK_EQ_INT(net_forward(&n), GS_OK);
+    CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, NULL, 4, 4,
+                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, n.dout, 4, 4,
+                                      NULL, n.dx, n.dtau), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, n.dout, 4, 4,
+                                      &holes, n.dx, n.dtau), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na - 1, n.x, n.tau, n.dout, 4, 4,
+                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, n.dout, -4, 4,
+                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_backward(c, &n.p, NULL, n.na, n.x, n.tau, n.dout, 4, 4,
+                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+    /* nothing was added by the refused calls */
+    size_t touched = 0;
+    for (size_t i = 0; i < n.np; i++)
+        touched += n.grads[i] != 0.0f;
+    CHECK_EQ_INT(touched, 0);
+    /* the plain renderer needs no tau */
+    net plain;
+    net_make(&plain, GS_GUIDE_NONE, 8, 2, 3, 3);
+    CHECK_EQ_INT(gs_renderer_forward(&plain.cfg, &plain.p, plain.x, NULL, 2, 3,
+                                     plain.acts, plain.na, plain.out), GS_OK);
+    CHECK_EQ_INT(gs_renderer_backward(&plain.cfg, &plain.p, plain.acts, plain.na,
+                                      plain.x, NULL, plain.dout, 2, 3, &plain.dp,
+                                      plain.dx, NULL), GS_OK);
+    net_free(&plain);
+    net_free(&n);
+}
+
+int main(void)
+{
+    gs_nn_blas_set_threads(1);
+    t_config();
+    t_layout();
+    t_init();
+    t_identity_at_init();
+    t_determinism(GS_GUIDE_NONE);
+    t_determinism(GS_GUIDE_ADDITIVE);
+    t_determinism(GS_GUIDE_MULTIPLICATIVE);
+    t_default_size();
+    t_bad_args();
+    GS_TEST_END();
+}

@@ -1,0 +1,91 @@
+#!/bin/busybox sh
+# /init of the VM tier's initramfs: loads vivid and v4l2loopback, streams
+# vivid -> gazesplat live -> loopback, reads the loopback back with v4l2-ctl,
+# unbinds and rebinds vivid mid-stream, then waits for the host to hot-plug
+# a USB device. Lines starting "GS-VM:" are read by vm_live.py.
+/bin/busybox --install -s /bin
+export PATH=/bin:/usr/bin
+mount -t proc proc /proc
+mount -t sysfs sys /sys
+mount -t devtmpfs dev /dev
+mount -t tmpfs tmp /tmp
+mkdir -p /run && mount -t tmpfs run /run
+
+ok=1
+say() { echo "GS-VM: $*"; }
+fail() { say "FAIL $*"; ok=0; }
+now() { cut -d' ' -f1 /proc/uptime; }
+# Milliseconds between two uptime values.
+ms() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%d", (b - a) * 1000 }'; }
+count() { grep -c "$1" /tmp/live.log 2>/dev/null || true; }
+
+say "boot $(now) s"
+while read -r m args; do
+    insmod "/modules/$m" $args || fail "insmod $m"
+done < /modules/order
+[ -e /dev/video0 ] && [ -e /dev/video9 ] || fail "video nodes missing: $(ls /dev/video*)"
+say "modules loaded $(now) s"
+
+if [ -x /usr/lib/systemd/systemd-udevd ]; then # libusb's hotplug listens to udev's events
+    mkdir -p /run/udev
+    /usr/lib/systemd/systemd-udevd --daemon --resolve-names=never 2>/tmp/udevd.log &&
+        say "udevd started" && udev=1
+fi
+
+gazesplat live --in /dev/video0 --out /dev/video9 --size 640x480 --fps 30 --stats 2 \
+    --hotplug-any 2>/tmp/live.log &
+live=$!
+
+# 1. Stream: the loopback turns into a capture device and delivers frames.
+i=0
+while [ "$(count 'capture: streaming')" -lt 1 ] && [ $i -lt 100 ]; do sleep 0.1; i=$((i + 1)); done
+[ "$(count 'capture: streaming')" -ge 1 ] || fail "gazesplat never streamed"
+v4l2-ctl -d /dev/video9 --get-fmt-video | sed 's/^/GS-VM: loopback /'
+t0=$(now)
+timeout 20 v4l2-ctl -d /dev/video9 --stream-mmap --stream-count=60 --stream-to=/tmp/out.yuv 2>/dev/null
+t1=$(now)
+size=$(wc -c < /tmp/out.yuv 2>/dev/null || echo 0)
+[ "$size" -eq $((60 * 640 * 480 * 2)) ] || fail "read $size bytes from the loopback"
+say "loopback read 60 frames in $(ms "$t0" "$t1") ms"
+
+# 2. Unbind vivid mid-stream (DQBUF answers EINVAL), rebind, time recovery.
+before=$(count 'capture: streaming')
+echo vivid.0 > /sys/bus/platform/drivers/vivid/unbind || fail "unbind"
+sleep 1
+grep -q 'capture lost' /tmp/live.log || fail "loss not noticed"
+echo vivid.0 > /sys/bus/platform/drivers/vivid/bind || fail "bind"
+tb=$(now)
+while [ "$(count 'capture: streaming')" -le "$before" ]; do
+    [ "$(ms "$tb" "$(now)")" -gt 5000 ] && break
+    sleep 0.05
+done
+tr=$(now)
+rec=$(ms "$tb" "$tr")
+say "recovered ${rec} ms after rebind"
+[ "$(count 'capture: streaming')" -gt "$before" ] && [ "$rec" -le 2000 ] || fail "no recovery within 2 s"
+# vivid restarts at 5 fps after a rebind: the rate first agreed must be back.
+rate() { grep 'capture: streaming' /tmp/live.log | sed -n "$1" | sed 's/.* at \([0-9/]*\) fps.*/\1/'; }
+[ "$(rate '$p')" = "$(rate '1p')" ] || fail "fps not re-applied: $(rate '1p') then $(rate '$p')"
+say "rate $(rate '1p') fps before, $(rate '$p') after the rebind"
+rm -f /tmp/out.yuv
+timeout 20 v4l2-ctl -d /dev/video9 --stream-mmap --stream-count=15 --stream-to=/tmp/out.yuv 2>/dev/null
+size=$(wc -c < /tmp/out.yuv 2>/dev/null || echo 0)
+[ "$size" -eq $((15 * 640 * 480 * 2)) ] || fail "after rebind read $size bytes from the loopback"
+
+# 3. USB hot-plug: the host adds a device through the qemu monitor.
+say "HOTPLUG-READY"
+i=0
+while ! grep -q 'hotplug: .* arrived' /tmp/live.log && [ $i -lt 30 ]; do sleep 0.5; i=$((i + 1)); done
+if grep -q 'hotplug: .* arrived' /tmp/live.log; then
+    say "hotplug seen: $(grep 'hotplug: .* arrived' /tmp/live.log | head -1)"
+else
+    say "HOTPLUG-MISSED $(ls /sys/bus/usb/devices | tr '\n' ' ')"
+    [ "${udev:-0}" = 1 ] && fail "libusb hotplug did not fire"
+fi
+
+kill -TERM $live
+wait $live
+sed 's/^/GS-VM: live| /' /tmp/live.log
+[ -s /tmp/udevd.log ] && sed 's/^/GS-VM: udevd| /' /tmp/udevd.log
+[ $ok = 1 ] && say "RESULT PASS" || say "RESULT FAIL"
+poweroff -f
