@@ -155,7 +155,7 @@ static void *loader_main(void *p)
                 s->load_status = 0;
                 m = NULL;
             } else {
-                snprintf(s->load_msg, sizeof s->load_msg, "%s: %s", m->path, err.msg);
+                snprintf(s->load_msg, sizeof s->load_msg, "%.500s: %.256s", m->path, err.msg);
             }
 #else
             snprintf(s->load_msg, sizeof s->load_msg, "built without the model module");
@@ -200,7 +200,7 @@ void gsd_model_finish_load(gsd_server *s)
     if (s->load_status != 0) {
         atomic_fetch_add(&s->ctr.model_load_failures, 1);
         LOG_E("model: %s", s->load_msg);
-        snprintf(detail, sizeof detail, "%s%s", s->model ? "reload failed, serving the previous model: " : "",
+        snprintf(detail, sizeof detail, "%s%.700s", s->model ? "reload failed, serving the previous model: " : "",
                  s->load_msg);
         gsd_server_set_state(s, s->model ? GSD_READY : GSD_FAILED, detail);
         return;

@@ -130,7 +130,7 @@ struct gsd_server {
     int loader_running;       /* (loop) */
     atomic_int load_done;     /* set by the loader thread */
     int load_status;          /* loader result (read after load_done) */
-    char load_msg[256];
+    char load_msg[1024];
     gsd_model *loaded;        /* loader result */
 
     void (*on_sighup)(gsd_server *s); /* set by main: re-reads the config */
