@@ -487,6 +487,8 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest
     }
     if (fr && fr->max_iters)
         opt.max_iters = (int)fr->max_iters;
+    if (!fr && j->type == T(REDIRECT))
+        opt.max_iters = (int)((const Gazesplat__RedirectRequest *)j->req)->max_iters;
     opt.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
     if (opt.time_budget_s <= 0)
         opt.time_budget_s = 0.001;

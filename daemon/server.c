@@ -495,6 +495,10 @@ static int check_redirect(const gsd_server *s, const gs_frame_header *h,
         snprintf(msg, cap, "REDIRECT needs a subject key in the header or an inline image");
         return E(ERR_INVALID_ARGUMENT);
     }
+    if (r->max_iters > 100000) {
+        snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
+        return E(ERR_INVALID_ARGUMENT);
+    }
     if (r->output_format > GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 || r->jpeg_quality > 100) {
         snprintf(msg, cap, "output format %d / jpeg quality %u out of range", (int)r->output_format,
                  r->jpeg_quality);
