@@ -14,6 +14,10 @@ PACKAGES=(
   libopencv-objdetect-dev libopencv-calib3d-dev
   # data: face cascades, the 68-point landmark model
   opencv-data libdlib-data
+  # protocol: protobuf-c (C), protoc + python3-protobuf (Python client)
+  libprotobuf-c-dev protobuf-c-compiler protobuf-compiler python3-protobuf
+  # daemon tests: systemd-analyze, systemd-socket-activate
+  systemd
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev

@@ -19,6 +19,7 @@ typedef struct cli_command {
 
 /* The subcommands, defined in their own files. */
 extern const cli_command cli_face_command;
+extern const cli_command cli_client_command;
 extern const cli_command cli_render_command;
 extern const cli_command cli_scene_command;
 extern const cli_command cli_synth_command;

@@ -7,6 +7,7 @@
 
 static const cli_command *const commands[] = {
     &cli_face_command,
+    &cli_client_command,
     &cli_render_command,
     &cli_scene_command,
     &cli_synth_command,

@@ -1,0 +1,406 @@
+/* gazesplat client: talk to a running gazesplatd (proto/PROTOCOL.md). */
+#define _POSIX_C_SOURCE 200809L
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "cli.h"
+#include "gazesplat/image_io.h"
+#include "gs_client.h"
+
+static int run_client(int argc, char **argv);
+
+const cli_command cli_client_command = {
+    "client",
+    "talk to a running gazesplatd: hello, health, stats, fit, redirect",
+    "usage: gazesplat client ACTION [options]\n"
+    "\n"
+    "Actions:\n"
+    "  hello      negotiate the protocol version, print the server's limits\n"
+    "  health     print the server state (LOADING, READY, FAILED, DRAINING)\n"
+    "  stats      print every STATS counter\n"
+    "  fit        fit a subject to --image; prints its key and estimated labels\n"
+    "  redirect   render --subject KEY (or --image) at each --gaze-deg target\n"
+    "\n"
+    "Options:\n"
+    "  --addr ADDR          unix:PATH, tcp:HOST:PORT or PATH (default\n"
+    "                       $GAZESPLAT_ADDR, else /run/gazesplatd/gazesplatd.sock)\n"
+    "  --token TOKEN        shared secret for TCP (default $GAZESPLAT_TOKEN)\n"
+    "  --timeout-ms N       wait this long for each reply (default 120000)\n"
+    "  --image FILE         a normalized face image (PNG or JPEG)\n"
+    "  --photo              the image is a photo (needs face detection)\n"
+    "  --gaze P,Y           fit: known gaze of the image, degrees\n"
+    "  --head P,Y           fit: known head pose, degrees\n"
+    "  --key HEX            fit: the subject key to use (32 hex digits)\n"
+    "  --max-iters N        fit: iteration limit\n"
+    "  --subject HEX        redirect: a fitted subject key\n"
+    "  --gaze-deg LIST      redirect: targets 'P,Y;P,Y;...', degrees\n"
+    "  --head-deg LIST      redirect: head poses, one per target\n"
+    "  --format F           redirect: png (default), jpeg or raw\n"
+    "  --out DIR            redirect: writes DIR/target_NNN.png (or .jpg, .rgb)\n"
+    "  --deadline-ms N      per-request deadline\n"
+    "\n"
+    "Exit status: 0 success, 1 failure (a server ERROR included), 2 bad usage.\n",
+    run_client,
+};
+
+enum {
+    O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
+    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_N
+};
+
+#define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
+
+static int print_error(const gs_client_frame *f)
+{
+    const Gazesplat__Error *e = (const Gazesplat__Error *)f->msg;
+    fprintf(stderr, "gazesplat client: server: %s: %s\n", gs_msg_error_name(e->code), e->message);
+    return CLI_FAIL;
+}
+
+static int print_busy(const gs_client_frame *f)
+{
+    const Gazesplat__Busy *b = (const Gazesplat__Busy *)f->msg;
+    fprintf(stderr, "gazesplat client: server busy (queue %u), retry after %u ms\n", b->queue_length,
+            b->retry_after_ms);
+    return CLI_FAIL;
+}
+
+/* Reads a file whole (images). */
+static int slurp(const char *path, uint8_t **out, size_t *len)
+{
+    FILE *f = fopen(path, "rb");
+    struct stat st;
+    if (!f || fstat(fileno(f), &st) != 0 || st.st_size <= 0 || st.st_size > (256 << 20)) {
+        if (f)
+            fclose(f);
+        return -1;
+    }
+    *len = (size_t)st.st_size;
+    *out = malloc(*len);
+    int ok = *out && fread(*out, 1, *len, f) == *len;
+    fclose(f);
+    if (!ok)
+        free(*out);
+    return ok ? 0 : -1;
+}
+
+static int parse_pair(const char *s, Gazesplat__Angles *a)
+{
+    float v[2];
+    if (cli_parse_floats(s, v, 2) != 0)
+        return -1;
+    a->pitch_deg = v[0];
+    a->yaw_deg = v[1];
+    return 0;
+}
+
+/* "P,Y;P,Y" into a malloc'd array; returns the count or -1. */
+static int parse_list(const char *s, Gazesplat__Angles **out)
+{
+    int n = 1;
+    for (const char *p = s; *p; p++)
+        n += *p == ';';
+    Gazesplat__Angles *a = calloc((size_t)n, sizeof *a);
+    char *copy = strdup(s);
+    if (!a || !copy) {
+        free(a);
+        free(copy);
+        return -1;
+    }
+    char *save = NULL, *tok = strtok_r(copy, ";", &save);
+    int k = 0;
+    for (; tok && k < n; tok = strtok_r(NULL, ";", &save), k++) {
+        gazesplat__angles__init(&a[k]);
+        if (parse_pair(tok, &a[k]) != 0)
+            break;
+    }
+    free(copy);
+    if (k != n || tok) {
+        free(a);
+        return -1;
+    }
+    *out = a;
+    return n;
+}
+
+static int do_health(gs_client *c, int timeout)
+{
+    static const char *const states[] = {"LOADING", "READY", "FAILED", "DRAINING"};
+    gs_client_frame f;
+    gs_error err;
+    Gazesplat__HealthRequest req = GAZESPLAT__HEALTH_REQUEST__INIT;
+    if (gs_client_call(c, T(HEALTH), NULL, 1, &req.base, timeout, &f, &err) != GS_OK) {
+        fprintf(stderr, "gazesplat client: %s\n", err.msg);
+        return CLI_FAIL;
+    }
+    int rc = CLI_OK;
+    if (f.header.type == T(HEALTH_OK)) {
+        const Gazesplat__Health *h = (const Gazesplat__Health *)f.msg;
+        printf("state %s\ndetail %s\nqueue %u/%u\nworkers %u\nimage_size %u\nmodel_id %s\n",
+               h->state < 4 ? states[h->state] : "?", h->detail, h->queue_length, h->queue_depth,
+               h->workers, h->image_size, h->model_id);
+        rc = h->state == GAZESPLAT__HEALTH__STATE__READY ? CLI_OK : CLI_FAIL;
+    } else {
+        rc = f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
+    }
+    gs_client_frame_free(&f);
+    return rc;
+}
+
+static int do_stats(gs_client *c, int timeout)
+{
+    gs_client_frame f;
+    gs_error err;
+    Gazesplat__StatsRequest req = GAZESPLAT__STATS_REQUEST__INIT;
+    if (gs_client_call(c, T(STATS), NULL, 1, &req.base, timeout, &f, &err) != GS_OK) {
+        fprintf(stderr, "gazesplat client: %s\n", err.msg);
+        return CLI_FAIL;
+    }
+    int rc = CLI_OK;
+    if (f.header.type == T(STATS_OK)) {
+        const Gazesplat__Stats *s = (const Gazesplat__Stats *)f.msg;
+        for (size_t i = 0; i < s->n_counters; i++)
+            printf("%s %llu\n", s->counters[i]->name, (unsigned long long)s->counters[i]->value);
+    } else {
+        rc = f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
+    }
+    gs_client_frame_free(&f);
+    return rc;
+}
+
+static int load_image(const cli_command *cmd, const cli_opt *o, Gazesplat__Image *img, uint8_t **data)
+{
+    size_t len;
+    if (slurp(o[O_IMAGE].value, data, &len) != 0)
+        return cli_fail(cmd, "cannot read %s", o[O_IMAGE].value);
+    int fmt = gs_io_format_sniff(*data, len);
+    if (!fmt) {
+        free(*data);
+        return cli_fail(cmd, "%s is neither PNG nor JPEG", o[O_IMAGE].value);
+    }
+    img->format = fmt == GS_IO_PNG ? GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG : GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG;
+    img->data.data = *data;
+    img->data.len = len;
+    img->kind = o[O_PHOTO].value ? GAZESPLAT__IMAGE_KIND__KIND_PHOTO : GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE;
+    return CLI_OK;
+}
+
+static int do_fit(gs_client *c, const cli_opt *o, int timeout)
+{
+    const cli_command *cmd = &cli_client_command;
+    if (!o[O_IMAGE].value)
+        return cli_usage_error(cmd, "fit needs --image");
+    Gazesplat__FitRequest req = GAZESPLAT__FIT_REQUEST__INIT;
+    Gazesplat__Image img = GAZESPLAT__IMAGE__INIT;
+    Gazesplat__Angles gaze = GAZESPLAT__ANGLES__INIT, head = GAZESPLAT__ANGLES__INIT;
+    uint8_t key[GS_FRAME_KEY_SIZE] = {0}, *data = NULL;
+    if (o[O_GAZE].value && parse_pair(o[O_GAZE].value, &gaze) != 0)
+        return cli_usage_error(cmd, "--gaze wants P,Y");
+    if (o[O_HEAD].value && parse_pair(o[O_HEAD].value, &head) != 0)
+        return cli_usage_error(cmd, "--head wants P,Y");
+    if (o[O_KEY].value && gs_frame_key_parse(o[O_KEY].value, key) != 0)
+        return cli_usage_error(cmd, "--key wants 32 hex digits");
+    long iters = 0, deadline = 0;
+    if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &iters) != 0)
+        return cli_usage_error(cmd, "--max-iters wants 1..100000");
+    if (o[O_DEADLINE].value && cli_parse_long(o[O_DEADLINE].value, 1, 3600000, &deadline) != 0)
+        return cli_usage_error(cmd, "--deadline-ms wants 1..3600000");
+    int rc = load_image(cmd, o, &img, &data);
+    if (rc != CLI_OK)
+        return rc;
+    req.image = &img;
+    req.gaze = o[O_GAZE].value ? &gaze : NULL;
+    req.head = o[O_HEAD].value ? &head : NULL;
+    req.max_iters = (uint32_t)iters;
+    req.deadline_ms = (uint32_t)deadline;
+    gs_client_frame f;
+    gs_error err;
+    int r = gs_client_call(c, T(FIT), key, 1, &req.base, timeout, &f, &err);
+    free(data);
+    if (r != GS_OK)
+        return cli_fail(cmd, "%s", err.msg);
+    if (f.header.type == T(FIT_OK)) {
+        const Gazesplat__FitResult *m = (const Gazesplat__FitResult *)f.msg;
+        char hex[33];
+        gs_frame_key_hex(f.header.key, hex);
+        printf("subject %s\ngaze_deg %.3f,%.3f\nhead_deg %.3f,%.3f\npsnr %.2f\nssim %.4f\niters %u\n"
+               "seconds %.3f\ncached %s\n", hex, m->gaze ? m->gaze->pitch_deg : 0.0,
+               m->gaze ? m->gaze->yaw_deg : 0.0, m->head ? m->head->pitch_deg : 0.0,
+               m->head ? m->head->yaw_deg : 0.0, m->psnr, m->ssim, m->iters, m->seconds,
+               m->cached ? "yes" : "no");
+        rc = CLI_OK;
+    } else {
+        rc = f.header.type == T(BUSY) ? print_busy(&f) : f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
+    }
+    gs_client_frame_free(&f);
+    return rc;
+}
+
+static int write_result(const char *dir, const Gazesplat__ImageResult *m)
+{
+    const Gazesplat__Image *img = m->image;
+    const char *ext = img->format == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? "jpg"
+                      : img->format == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 ? "rgb" : "png";
+    char path[4096];
+    snprintf(path, sizeof path, "%s/target_%03u.%s", dir, m->index, ext);
+    FILE *f = fopen(path, "wb");
+    int ok = f && fwrite(img->data.data, 1, img->data.len, f) == img->data.len;
+    if (f && fclose(f) != 0)
+        ok = 0;
+    if (ok)
+        printf("%s\n", path);
+    return ok ? 0 : -1;
+}
+
+/* Receives K IMAGE frames and DONE (or an ERROR) for request 1. */
+static int receive_images(gs_client *c, const char *out, int timeout)
+{
+    for (;;) {
+        gs_client_frame f;
+        gs_error err;
+        if (gs_client_recv(c, timeout, &f, &err) != GS_OK) {
+            fprintf(stderr, "gazesplat client: %s\n", err.msg);
+            return CLI_FAIL;
+        }
+        uint16_t type = f.header.type;
+        int rc = -1;
+        if (type == T(IMAGE))
+            rc = write_result(out, (const Gazesplat__ImageResult *)f.msg) == 0 ? -1 : CLI_FAIL;
+        else if (type == T(DONE))
+            rc = CLI_OK;
+        else
+            rc = type == T(BUSY) ? print_busy(&f) : type == T(ERROR) ? print_error(&f) : CLI_FAIL;
+        gs_client_frame_free(&f);
+        if (rc >= 0)
+            return rc;
+    }
+}
+
+static int do_redirect(gs_client *c, const cli_opt *o, int timeout)
+{
+    const cli_command *cmd = &cli_client_command;
+    if (!o[O_GAZES].value || !o[O_OUT].value || (!o[O_SUBJECT].value == !o[O_IMAGE].value))
+        return cli_usage_error(cmd, "redirect needs --gaze-deg, --out and one of --subject, --image");
+    uint8_t key[GS_FRAME_KEY_SIZE] = {0}, *data = NULL;
+    if (o[O_SUBJECT].value && gs_frame_key_parse(o[O_SUBJECT].value, key) != 0)
+        return cli_usage_error(cmd, "--subject wants 32 hex digits");
+    Gazesplat__Angles *gazes = NULL, *heads = NULL;
+    int n = parse_list(o[O_GAZES].value, &gazes);
+    if (n < 0)
+        return cli_usage_error(cmd, "--gaze-deg wants 'P,Y;P,Y;...'");
+    int nh = o[O_HEADS].value ? parse_list(o[O_HEADS].value, &heads) : 0;
+    int fmt = GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+    const char *fs = o[O_FORMAT].value;
+    if (fs && !strcmp(fs, "jpeg"))
+        fmt = GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG;
+    else if (fs && !strcmp(fs, "raw"))
+        fmt = GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8;
+    int rc = CLI_OK;
+    if (o[O_HEADS].value && nh != n)
+        rc = cli_usage_error(cmd, "--head-deg needs one pose per target (%d)", n);
+    else if (fs && strcmp(fs, "png") && strcmp(fs, "jpeg") && strcmp(fs, "raw"))
+        rc = cli_usage_error(cmd, "--format wants png, jpeg or raw");
+    else if (mkdir(o[O_OUT].value, 0777) != 0 && errno != EEXIST)
+        rc = cli_fail(cmd, "cannot create %s", o[O_OUT].value);
+    Gazesplat__Image img = GAZESPLAT__IMAGE__INIT;
+    if (rc == CLI_OK && o[O_IMAGE].value)
+        rc = load_image(cmd, o, &img, &data);
+    Gazesplat__Target *targets = calloc((size_t)n, sizeof *targets);
+    Gazesplat__Target **tp = calloc((size_t)n, sizeof *tp);
+    if (rc == CLI_OK && (!targets || !tp))
+        rc = cli_fail(cmd, "out of memory");
+    if (rc == CLI_OK) {
+        for (int i = 0; i < n; i++) {
+            gazesplat__target__init(&targets[i]);
+            targets[i].gaze = &gazes[i];
+            targets[i].head = heads ? &heads[i] : NULL;
+            tp[i] = &targets[i];
+        }
+        Gazesplat__RedirectRequest req = GAZESPLAT__REDIRECT_REQUEST__INIT;
+        req.image = o[O_IMAGE].value ? &img : NULL;
+        req.n_targets = (size_t)n;
+        req.targets = tp;
+        req.output_format = (Gazesplat__ImageFormat)fmt;
+        gs_error err;
+        if (gs_client_send(c, T(REDIRECT), key, 1, &req.base, &err) != GS_OK)
+            rc = cli_fail(cmd, "%s", err.msg);
+        else
+            rc = receive_images(c, o[O_OUT].value, timeout);
+    }
+    free(targets);
+    free(tp);
+    free(gazes);
+    free(heads);
+    free(data);
+    return rc;
+}
+
+static int run_client(int argc, char **argv)
+{
+    const cli_command *cmd = &cli_client_command;
+    if (argc < 2 || !strcmp(argv[1], "--help") || !strcmp(argv[1], "-h")) {
+        fputs(cmd->usage, argc < 2 ? stderr : stdout);
+        return argc < 2 ? CLI_USAGE : CLI_OK;
+    }
+    const char *action = argv[1];
+    cli_opt o[O_N] = {
+        {"--addr", 1, NULL}, {"--token", 1, NULL}, {"--timeout-ms", 1, NULL}, {"--image", 1, NULL},
+        {"--photo", 0, NULL}, {"--gaze", 1, NULL}, {"--head", 1, NULL}, {"--key", 1, NULL},
+        {"--max-iters", 1, NULL}, {"--subject", 1, NULL}, {"--gaze-deg", 1, NULL},
+        {"--head-deg", 1, NULL}, {"--format", 1, NULL}, {"--out", 1, NULL}, {"--deadline-ms", 1, NULL},
+    };
+    int r = cli_parse(cmd, argc - 1, argv + 1, o, O_N);
+    if (r == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (r != CLI_PARSED)
+        return r;
+    int known = !strcmp(action, "hello") || !strcmp(action, "health") || !strcmp(action, "stats") ||
+                !strcmp(action, "fit") || !strcmp(action, "redirect");
+    if (!known)
+        return cli_usage_error(cmd, "unknown action '%s'", action);
+    long timeout = 120000;
+    if (o[O_TIMEOUT].value && cli_parse_long(o[O_TIMEOUT].value, 1, 86400000, &timeout) != 0)
+        return cli_usage_error(cmd, "--timeout-ms wants 1..86400000");
+    const char *addr = o[O_ADDR].value ? o[O_ADDR].value : getenv("GAZESPLAT_ADDR");
+    if (!addr)
+        addr = "/run/gazesplatd/gazesplatd.sock";
+    const char *token = o[O_TOKEN].value ? o[O_TOKEN].value : getenv("GAZESPLAT_TOKEN");
+    gs_client *c;
+    gs_error err;
+    if (gs_client_connect(addr, (int)timeout, &c, &err) != GS_OK)
+        return cli_fail(cmd, "%s", err.msg);
+    Gazesplat__HelloOk *ok = NULL;
+    if (gs_client_hello(c, "gazesplat-cli", token, (int)timeout, &ok, &err) != GS_OK) {
+        gs_client_close(c);
+        return cli_fail(cmd, "HELLO: %s", err.msg);
+    }
+    if (!strcmp(action, "hello")) {
+        const Gazesplat__Limits *l = ok->limits;
+        printf("version %u\nserver %s\nimage_size %u\n", ok->version, ok->server, ok->image_size);
+        if (l)
+            printf("max_payload %u\nmax_targets %u\nmax_inflight %u\nmax_image_side %u\n"
+                   "max_image_pixels %llu\nqueue_depth %u\nidle_timeout_ms %u\nmax_deadline_ms %u\n",
+                   l->max_payload, l->max_targets, l->max_inflight, l->max_image_side,
+                   (unsigned long long)l->max_image_pixels, l->queue_depth, l->idle_timeout_ms,
+                   l->max_deadline_ms);
+    }
+    protobuf_c_message_free_unpacked(&ok->base, NULL);
+    int timeout_i = (int)timeout;
+    if (!strcmp(action, "hello"))
+        r = CLI_OK; /* printed above */
+    else if (!strcmp(action, "health"))
+        r = do_health(c, timeout_i);
+    else if (!strcmp(action, "stats"))
+        r = do_stats(c, timeout_i);
+    else if (!strcmp(action, "fit"))
+        r = do_fit(c, o, timeout_i);
+    else
+        r = do_redirect(c, o, timeout_i);
+    gs_client_close(c);
+    return r;
+}

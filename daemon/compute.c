@@ -1,0 +1,683 @@
+/* gazesplatd compute side: the model (load, reload, refcount), the worker
+ * state (model context + thread pool) and the jobs: FIT, REDIRECT, SLEEP.
+ *
+ * Everything that touches the model API (gazesplat/model.h) is here.
+ * Photo input (face detection and normalization, lib/face) plugs in at
+ * normalize_photo(); until it exists photos are refused with
+ * ERR_PHOTO_UNSUPPORTED before they are queued. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "gazesplat/geom.h"
+#include "gazesplat/image_io.h"
+#include "gazesplat/pool.h"
+#include "log.h"
+#include "server.h"
+#ifdef GSD_HAVE_MODEL
+#include "gazesplat/model.h"
+#endif
+
+#define E(x) GAZESPLAT__ERROR_CODE__##x
+#define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
+#define DEG (M_PI / 180.0)
+
+struct gsd_model {
+#ifdef GSD_HAVE_MODEL
+    gs_model *m;
+    gs_model_info info;
+#endif
+    int image_size;
+    char id[33];
+    char path[GSD_STR_MAX];
+    atomic_int refs;
+};
+
+struct gsd_worker {
+    gsd_server *srv;
+    int index;
+    gs_pool *pool;
+    gsd_model *model; /* the model ctx was made for (a reference) */
+#ifdef GSD_HAVE_MODEL
+    gs_model_ctx *ctx;
+#endif
+};
+
+/* ---- hashing: FNV-1a, 128-bit, for model ids and content keys ---------- */
+
+typedef struct hash128 {
+    unsigned __int128 h;
+} hash128;
+
+static void hash_init(hash128 *h)
+{
+    h->h = ((unsigned __int128)0x6c62272e07bb0142ull << 64) | 0x62b821756295c58dull;
+}
+
+static void hash_bytes(hash128 *h, const void *data, size_t n)
+{
+    const unsigned __int128 prime = ((unsigned __int128)1 << 88) | 0x13b;
+    const unsigned char *p = data;
+    for (size_t i = 0; i < n; i++)
+        h->h = (h->h ^ p[i]) * prime;
+}
+
+static void hash_out(const hash128 *h, uint8_t out[16])
+{
+    for (int i = 0; i < 16; i++)
+        out[i] = (uint8_t)(h->h >> (8 * i));
+}
+
+/* ---- model references ------------------------------------------------------ */
+
+static void model_unref(gsd_model *m)
+{
+    if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
+        return;
+#ifdef GSD_HAVE_MODEL
+    gs_model_destroy(m->m);
+#endif
+    free(m);
+}
+
+#ifdef GSD_HAVE_MODEL
+static gsd_model *model_acquire(gsd_server *s)
+{
+    pthread_mutex_lock(&s->model_mu);
+    gsd_model *m = s->model;
+    if (m)
+        atomic_fetch_add(&m->refs, 1);
+    pthread_mutex_unlock(&s->model_mu);
+    return m;
+}
+#endif
+
+int gsd_model_image_size(gsd_server *s, char id[33])
+{
+    pthread_mutex_lock(&s->model_mu);
+    int size = s->model ? s->model->image_size : 0;
+    snprintf(id, 33, "%s", s->model ? s->model->id : "");
+    pthread_mutex_unlock(&s->model_mu);
+    return size;
+}
+
+/* The id is a hash of the file's bytes: subjects belong to one model. */
+static int file_id(const char *path, char id[33], char *msg, size_t cap)
+{
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    if (fd < 0) {
+        snprintf(msg, cap, "%s: %s", path, strerror(errno));
+        return -1;
+    }
+    hash128 h;
+    hash_init(&h);
+    unsigned char buf[65536];
+    ssize_t n;
+    while ((n = read(fd, buf, sizeof buf)) > 0)
+        hash_bytes(&h, buf, (size_t)n);
+    close(fd);
+    if (n < 0) {
+        snprintf(msg, cap, "%s: %s", path, strerror(errno));
+        return -1;
+    }
+    uint8_t raw[16];
+    hash_out(&h, raw);
+    gs_frame_key_hex(raw, id);
+    return 0;
+}
+
+static void *loader_main(void *p)
+{
+    gsd_server *s = p;
+    gsd_model *m = calloc(1, sizeof *m);
+    s->loaded = NULL;
+    s->load_status = -1;
+    if (!m) {
+        snprintf(s->load_msg, sizeof s->load_msg, "out of memory");
+    } else {
+        snprintf(m->path, sizeof m->path, "%s", s->cfg.model);
+        atomic_store(&m->refs, 1);
+        if (file_id(m->path, m->id, s->load_msg, sizeof s->load_msg) == 0) {
+#ifdef GSD_HAVE_MODEL
+            gs_error err;
+            gs_error_clear(&err);
+            if (gs_model_load(m->path, &m->m, &err) == GS_OK) {
+                gs_model_get_info(m->m, &m->info);
+                m->image_size = m->info.image_size;
+                s->loaded = m;
+                s->load_status = 0;
+                m = NULL;
+            } else {
+                snprintf(s->load_msg, sizeof s->load_msg, "%.500s: %.256s", m->path, err.msg);
+            }
+#else
+            snprintf(s->load_msg, sizeof s->load_msg, "built without the model module");
+#endif
+        }
+        free(m);
+    }
+    atomic_store(&s->load_done, 1);
+    ev_wake(s->loop);
+    return NULL;
+}
+
+void gsd_model_start_load(gsd_server *s)
+{
+    if (s->loader_running) {
+        LOG_W("a model load is already running");
+        return;
+    }
+    if (!s->cfg.model[0]) {
+        gsd_server_set_state(s, GSD_FAILED, "no model configured (model = PATH)");
+        return;
+    }
+    int have = s->model != NULL;
+    char detail[GSD_STR_MAX + 32];
+    snprintf(detail, sizeof detail, "%s %s", have ? "reloading" : "loading", s->cfg.model);
+    LOG_I("%s", detail);
+    s->next_extend = ev_now_ms();
+    if (pthread_create(&s->loader, NULL, loader_main, s) != 0) {
+        gsd_server_set_state(s, have ? GSD_READY : GSD_FAILED, "cannot start the loader thread");
+        return;
+    }
+    s->loader_running = 1;
+    gsd_server_set_state(s, have ? GSD_READY : GSD_LOADING, detail);
+}
+
+void gsd_model_finish_load(gsd_server *s)
+{
+    pthread_join(s->loader, NULL);
+    s->loader_running = 0;
+    atomic_store(&s->load_done, 0);
+    char detail[GSD_STR_MAX + 320];
+    if (s->load_status != 0) {
+        atomic_fetch_add(&s->ctr.model_load_failures, 1);
+        LOG_E("model: %s", s->load_msg);
+        snprintf(detail, sizeof detail, "%s%.700s", s->model ? "reload failed, serving the previous model: " : "",
+                 s->load_msg);
+        gsd_server_set_state(s, s->model ? GSD_READY : GSD_FAILED, detail);
+        return;
+    }
+    gsd_model *m = s->loaded;
+    s->loaded = NULL;
+    atomic_fetch_add(&s->ctr.model_loads, 1);
+    pthread_mutex_lock(&s->model_mu);
+    gsd_model *old = s->model;
+    s->model = m;
+    pthread_mutex_unlock(&s->model_mu);
+    if (!old) {
+        gsd_cache_restore(s);
+    } else if (strcmp(old->id, m->id) != 0) {
+        LOG_I("model changed (%s -> %s): subjects dropped", old->id, m->id);
+        gsd_cache_clear(s->cache);
+        gsd_cache_persist(s);
+    }
+    model_unref(old);
+    snprintf(detail, sizeof detail, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
+    LOG_I("ready: %s", detail);
+    gsd_server_set_state(s, GSD_READY, detail);
+}
+
+void gsd_model_release_all(gsd_server *s)
+{
+    if (s->loaded)
+        model_unref(s->loaded);
+    s->loaded = NULL;
+    model_unref(s->model);
+    s->model = NULL;
+}
+
+/* ---- cache persistence ------------------------------------------------------ */
+
+void gsd_cache_restore(gsd_server *s)
+{
+    char id[33], msg[300];
+    gsd_model_image_size(s, id);
+    if (!s->state_dir[0]) {
+        LOG_I("no state directory: subjects are not persisted");
+        return;
+    }
+    int r = gsd_cache_load(s->cache, s->state_dir, id, msg, sizeof msg);
+    if (r == 0)
+        LOG_I("subject cache %s: %s", s->state_dir, msg);
+    else
+        LOG_W("subject cache %s: %s", s->state_dir, msg);
+}
+
+int gsd_cache_persist(gsd_server *s)
+{
+    char id[33], msg[300];
+    if (!s->state_dir[0] || gsd_model_image_size(s, id) == 0)
+        return 0;
+    pthread_mutex_lock(&s->persist_mu);
+    int r = gsd_cache_save(s->cache, s->state_dir, id, msg, sizeof msg);
+    pthread_mutex_unlock(&s->persist_mu);
+    atomic_fetch_add(r == 0 ? &s->ctr.cache_saves : &s->ctr.cache_save_failures, 1);
+    if (r != 0)
+        LOG_E("subject cache: %s", msg);
+    return r;
+}
+
+/* ---- workers --------------------------------------------------------------- */
+
+gsd_worker *gsd_worker_create(gsd_server *s, int index)
+{
+    gsd_worker *w = calloc(1, sizeof *w);
+    if (!w)
+        return NULL;
+    w->srv = s;
+    w->index = index;
+    int threads = s->cfg.threads;
+    if (threads <= 0) {
+        long cpus = sysconf(_SC_NPROCESSORS_ONLN);
+        threads = (int)(cpus > 0 ? cpus : 1) / s->cfg.workers;
+        if (threads < 1)
+            threads = 1;
+    }
+    w->pool = threads > 1 ? gs_pool_create(threads) : NULL;
+    return w;
+}
+
+static void worker_drop_model(gsd_worker *w)
+{
+#ifdef GSD_HAVE_MODEL
+    gs_model_ctx_destroy(w->ctx);
+    w->ctx = NULL;
+#endif
+    model_unref(w->model);
+    w->model = NULL;
+}
+
+void gsd_worker_destroy(gsd_worker *w)
+{
+    if (!w)
+        return;
+    worker_drop_model(w);
+    gs_pool_destroy(w->pool);
+    free(w);
+}
+
+static int64_t now_ms(void)
+{
+    return ev_now_ms();
+}
+
+/* Why a job must stop now (0: go on). */
+static int job_stop(gsd_job *j)
+{
+    int st = atomic_load(&j->stop);
+    if (st)
+        return st;
+    return now_ms() > j->deadline_ms ? E(ERR_DEADLINE) : 0;
+}
+
+static gsd_out *stop_frame(gsd_server *s, gsd_job *j, int why)
+{
+    atomic_fetch_add(why == E(ERR_DEADLINE) ? &s->ctr.deadline_exceeded : &s->ctr.cancelled, 1);
+    return gsd_error_frame(j, why, why == E(ERR_DEADLINE) ? "deadline passed"
+                                   : why == E(ERR_CANCELLED) ? "cancelled" : "server stopping");
+}
+
+static gsd_out *run_sleep(gsd_server *s, gsd_job *j, int64_t t0)
+{
+    const Gazesplat__Sleep *r = (const Gazesplat__Sleep *)j->req;
+    int64_t end = t0 + r->ms;
+    while (now_ms() < end) {
+        int why = job_stop(j);
+        if (why)
+            return stop_frame(s, j, why);
+        struct timespec ts = {0, 5 * 1000000L};
+        nanosleep(&ts, NULL);
+    }
+    Gazesplat__Done d = GAZESPLAT__DONE__INIT;
+    d.seconds = (double)(now_ms() - t0) / 1000.0;
+    gsd_out *o = gsd_frame_new(j, T(SLEEP_OK), &d.base);
+    if (o)
+        o->final = 1;
+    return o;
+}
+
+#ifdef GSD_HAVE_MODEL
+/* ---- model jobs ------------------------------------------------------------ */
+
+/* Makes sure the worker's context belongs to the current model. */
+static int worker_bind_model(gsd_worker *w)
+{
+    gsd_model *m = model_acquire(w->srv);
+    if (!m)
+        return -1;
+    if (m == w->model) {
+        model_unref(m);
+        return 0;
+    }
+    worker_drop_model(w);
+    w->model = m;
+    w->ctx = gs_model_ctx_create(m->m);
+    return w->ctx ? 0 : -1;
+}
+
+/* Photo input: detect the face, normalize it to the model's camera and
+ * keep what paste-back needs. The hook for lib/face; refused earlier. */
+static int normalize_photo(const gs_io_image *photo, int size, gs_io_image *face, char *msg, size_t cap)
+{
+    (void)photo;
+    (void)size;
+    (void)face;
+    snprintf(msg, cap, "photo input is not in this build");
+    return E(ERR_PHOTO_UNSUPPORTED);
+}
+
+/* Decodes a request image into 8-bit RGB of the model's size. */
+static int decode_image(gsd_job *j, const Gazesplat__Image *img, int size, gs_io_image *out,
+                        char *msg, size_t cap)
+{
+    memset(out, 0, sizeof *out);
+    if (img->format == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
+        out->width = (int)img->width;
+        out->height = (int)img->height;
+        out->stride = (size_t)img->width * 3;
+        out->data = malloc(out->stride * (size_t)out->height);
+        if (!out->data) {
+            snprintf(msg, cap, "out of memory");
+            return E(ERR_INTERNAL);
+        }
+        for (int y = 0; y < out->height; y++)
+            memcpy(out->data + (size_t)y * out->stride, img->data.data + (size_t)y * img->stride, out->stride);
+    } else {
+        gs_io_image_limits lim = {img->data.len, j->max_pixels, j->max_side};
+        gs_error err;
+        gs_error_clear(&err);
+        int r = gs_io_image_decode(img->data.data, img->data.len, &lim, out, &err);
+        if (r != GS_OK) {
+            snprintf(msg, cap, "image: %s", err.msg);
+            return r == GS_ERR_LIMIT ? E(ERR_IMAGE_TOO_LARGE) : E(ERR_BAD_IMAGE);
+        }
+    }
+    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
+        gs_io_image face;
+        int r = normalize_photo(out, size, &face, msg, cap);
+        gs_io_image_free(out);
+        if (r)
+            return r;
+        *out = face;
+    }
+    if (out->width != size || out->height != size) {
+        snprintf(msg, cap, "normalized face is %dx%d, the model wants %dx%d", out->width, out->height,
+                 size, size);
+        gs_io_image_free(out);
+        return E(ERR_BAD_IMAGE);
+    }
+    return 0;
+}
+
+/* The key a FIT without one gets: a hash of the pixels and the labels, so
+ * the same input maps to the same subject. */
+static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, uint8_t key[16])
+{
+    hash128 h;
+    hash_init(&h);
+    for (int y = 0; y < img->height; y++)
+        hash_bytes(&h, img->data + (size_t)y * img->stride, (size_t)img->width * 3);
+    double labels[5] = {r && r->gaze ? r->gaze->pitch_deg : NAN, r && r->gaze ? r->gaze->yaw_deg : NAN,
+                        r && r->head ? r->head->pitch_deg : NAN, r && r->head ? r->head->yaw_deg : NAN,
+                        r ? (double)r->max_iters : 0};
+    hash_bytes(&h, labels, sizeof labels);
+    hash_out(&h, key);
+}
+
+static int key_zero(const uint8_t *k)
+{
+    for (int i = 0; i < 16; i++)
+        if (k[i])
+            return 0;
+    return 1;
+}
+
+static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj)
+{
+    uint8_t blob[GS_SUBJECT_ENCODED_MAX];
+    long n = gsd_cache_get(s->cache, key, blob, sizeof blob);
+    return n > 0 && gs_subject_decode(blob, (size_t)n, subj, NULL) == GS_OK ? 0 : -1;
+}
+
+static void head_rotation(const Gazesplat__Angles *a, double R[9])
+{
+    gs_geom_rot_from_pitchyaw(a->pitch_deg * DEG, a->yaw_deg * DEG, 0.0, R);
+}
+
+/* Fits (or finds) the subject of `img`; fills key, subject and report.
+ * Returns 0 or an ErrorCode with msg. *cached says no fit was run. */
+static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest *fr,
+                          const Gazesplat__Image *img, gs_subject *subj, gs_fit_report *rep,
+                          int *cached, char *msg, size_t cap)
+{
+    gsd_server *s = w->srv;
+    const gs_model_info *info = &w->model->info;
+    gs_io_image face;
+    int e = decode_image(j, img, info->image_size, &face, msg, cap);
+    if (e)
+        return e;
+    if (key_zero(j->key))
+        content_key(&face, fr, j->key);
+    memset(rep, 0, sizeof *rep);
+    *cached = cache_lookup(s, j->key, subj) == 0;
+    if (*cached) {
+        gs_io_image_free(&face);
+        return 0;
+    }
+    gs_fit_options opt;
+    gs_fit_options_default(&opt);
+    if (fr && fr->gaze) {
+        opt.known_gaze = 1;
+        opt.gaze_pitch = fr->gaze->pitch_deg * DEG;
+        opt.gaze_yaw = fr->gaze->yaw_deg * DEG;
+    }
+    if (fr && fr->head) {
+        opt.known_head = 1;
+        head_rotation(fr->head, opt.head_R);
+        opt.head_t[0] = opt.head_t[1] = 0.0;
+        opt.head_t[2] = info->distance_mm;
+    }
+    if (fr && fr->max_iters)
+        opt.max_iters = (int)fr->max_iters;
+    if (!fr && j->type == T(REDIRECT))
+        opt.max_iters = (int)((const Gazesplat__RedirectRequest *)j->req)->max_iters;
+    opt.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
+    if (opt.time_budget_s <= 0)
+        opt.time_budget_s = 0.001;
+    gs_error err;
+    gs_error_clear(&err);
+    int r = gs_model_fit(w->ctx, w->pool, face.data, face.stride, &opt, subj, rep, &err);
+    gs_io_image_free(&face);
+    if (r != GS_OK) {
+        snprintf(msg, cap, "fit: %s", err.msg);
+        return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
+    }
+    atomic_fetch_add(&s->ctr.fits, 1);
+    uint8_t blob[GS_SUBJECT_ENCODED_MAX];
+    size_t n = gs_subject_encode(subj, blob, sizeof blob);
+    /* Durable before the reply: a FIT_OK means the subject survives a crash. */
+    if (n == 0 || n > sizeof blob || gsd_cache_put(s->cache, j->key, blob, n) != 0) {
+        snprintf(msg, cap, "subject cache refused %zu bytes", n);
+        return E(ERR_INTERNAL);
+    }
+    gsd_cache_persist(s);
+    return 0;
+}
+
+static void subject_angles(const gs_subject *subj, Gazesplat__Angles *gaze, Gazesplat__Angles *head)
+{
+    gaze->pitch_deg = subj->gaze_pitch / DEG;
+    gaze->yaw_deg = subj->gaze_yaw / DEG;
+    double p, y;
+    gs_geom_head_pitchyaw(subj->head_R, &p, &y);
+    head->pitch_deg = p / DEG;
+    head->yaw_deg = y / DEG;
+}
+
+static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
+{
+    gsd_server *s = w->srv;
+    const Gazesplat__FitRequest *r = (const Gazesplat__FitRequest *)j->req;
+    gs_subject subj;
+    gs_fit_report rep;
+    int cached;
+    char msg[400];
+    int e = obtain_subject(w, j, r, r->image, &subj, &rep, &cached, msg, sizeof msg);
+    if (e)
+        return gsd_error_frame(j, e, "%s", msg);
+    int why = job_stop(j);
+    if (why)
+        return stop_frame(s, j, why);
+    if (cached)
+        atomic_fetch_add(&s->ctr.fits_cached, 1);
+    Gazesplat__Angles gaze = GAZESPLAT__ANGLES__INIT, head = GAZESPLAT__ANGLES__INIT;
+    subject_angles(&subj, &gaze, &head);
+    Gazesplat__FitResult m = GAZESPLAT__FIT_RESULT__INIT;
+    m.subject_key.data = j->key;
+    m.subject_key.len = 16;
+    m.gaze = &gaze;
+    m.head = &head;
+    m.psnr = subj.fit_psnr;
+    m.ssim = subj.fit_ssim;
+    m.iters = (uint32_t)rep.iters;
+    m.seconds = (double)(now_ms() - t0) / 1000.0;
+    m.cached = cached;
+    return gsd_frame_new(j, T(FIT_OK), &m.base);
+}
+
+/* Renders one target and posts its IMAGE frame. */
+static int render_target(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
+                         const gs_subject *subj, uint8_t *rgb, char *msg, size_t cap)
+{
+    const Gazesplat__Target *t = r->targets[i];
+    int size = w->model->info.image_size;
+    gs_view view;
+    memset(&view, 0, sizeof view);
+    view.gaze_pitch = t->gaze->pitch_deg * DEG;
+    view.gaze_yaw = t->gaze->yaw_deg * DEG;
+    if (t->head) {
+        view.use_head = 1;
+        head_rotation(t->head, view.head_R);
+        memcpy(view.head_t, subj->head_t, sizeof view.head_t);
+    }
+    gs_error err;
+    gs_error_clear(&err);
+    if (gs_model_render(w->ctx, w->pool, subj, &view, rgb, (size_t)size * 3, &err) != GS_OK) {
+        snprintf(msg, cap, "render target %zu: %s", i, err.msg);
+        return E(ERR_INTERNAL);
+    }
+    Gazesplat__Image out = GAZESPLAT__IMAGE__INIT;
+    void *enc = NULL;
+    size_t enc_len = 0;
+    int fmt = r->output_format ? (int)r->output_format : GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+    out.format = (Gazesplat__ImageFormat)fmt;
+    if (fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
+        out.data.data = rgb;
+        out.data.len = (size_t)size * size * 3;
+        out.width = out.height = (uint32_t)size;
+        out.stride = (uint32_t)size * 3;
+    } else {
+        gs_io_image img = {size, size, (size_t)size * 3, rgb};
+        int q = fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? (int)r->jpeg_quality : 0;
+        if (gs_io_image_encode(&img, fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? GS_IO_JPEG : GS_IO_PNG,
+                               q, &enc, &enc_len, &err) != GS_OK) {
+            snprintf(msg, cap, "encode target %zu: %s", i, err.msg);
+            return E(ERR_INTERNAL);
+        }
+        out.data.data = enc;
+        out.data.len = enc_len;
+    }
+    Gazesplat__ImageResult m = GAZESPLAT__IMAGE_RESULT__INIT;
+    m.index = (uint32_t)i;
+    m.image = &out;
+    m.target = (Gazesplat__Target *)t;
+    gsd_out *o = gsd_frame_new(j, T(IMAGE), &m.base);
+    free(enc);
+    if (!o) {
+        snprintf(msg, cap, "out of memory");
+        return E(ERR_INTERNAL);
+    }
+    gsd_post(w->srv, o);
+    atomic_fetch_add(&w->srv->ctr.images_out, 1);
+    return 0;
+}
+
+static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
+{
+    gsd_server *s = w->srv;
+    const Gazesplat__RedirectRequest *r = (const Gazesplat__RedirectRequest *)j->req;
+    gs_subject subj;
+    char msg[400];
+    if (r->image) {
+        gs_fit_report rep;
+        int cached;
+        int e = obtain_subject(w, j, NULL, r->image, &subj, &rep, &cached, msg, sizeof msg);
+        if (e)
+            return gsd_error_frame(j, e, "%s", msg);
+    } else if (cache_lookup(s, j->key, &subj) != 0) {
+        char hex[33];
+        gs_frame_key_hex(j->key, hex);
+        return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
+    }
+    int size = w->model->info.image_size;
+    uint8_t *rgb = malloc((size_t)size * size * 3);
+    if (!rgb)
+        return gsd_error_frame(j, E(ERR_INTERNAL), "out of memory");
+    gsd_out *o = NULL;
+    for (size_t i = 0; i < r->n_targets && !o; i++) {
+        int why = job_stop(j);
+        if (why)
+            o = stop_frame(s, j, why);
+        else if ((why = render_target(w, j, r, i, &subj, rgb, msg, sizeof msg)) != 0)
+            o = gsd_error_frame(j, why, "%s", msg);
+    }
+    free(rgb);
+    if (o)
+        return o;
+    Gazesplat__Done d = GAZESPLAT__DONE__INIT;
+    d.count = (uint32_t)r->n_targets;
+    d.seconds = (double)(now_ms() - t0) / 1000.0;
+    return gsd_frame_new(j, T(DONE), &d.base);
+}
+
+static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
+{
+    if (worker_bind_model(w) != 0)
+        return gsd_error_frame(j, E(ERR_NO_MODEL), "no model loaded");
+    return j->type == T(FIT) ? run_fit(w, j, t0) : run_redirect(w, j, t0);
+}
+#else
+static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
+{
+    (void)w;
+    (void)t0;
+    return gsd_error_frame(j, E(ERR_NO_MODEL), "built without the model module");
+}
+#endif
+
+void gsd_worker_run(gsd_worker *w, gsd_job *j)
+{
+    gsd_server *s = w->srv;
+    int64_t t0 = now_ms();
+    int why = job_stop(j);
+    gsd_out *o;
+    if (why)
+        o = stop_frame(s, j, why);
+    else if (j->type == T(SLEEP))
+        o = run_sleep(s, j, t0);
+    else
+        o = run_model_job(w, j, t0);
+    if (o) {
+        o->final = 1;
+        o->job_ms = (uint64_t)(now_ms() - t0);
+    }
+    gsd_post(s, o);
+}

@@ -1,0 +1,1409 @@
+/* gazesplatd: the event-loop side. Listeners, connections (incremental
+ * frame parser, output queues with caps), request dispatch, timeouts,
+ * completions from workers, signals, drain. */
+#define _GNU_SOURCE
+#include "server.h"
+
+#include <arpa/inet.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <netdb.h>
+#include <netinet/in.h>
+#include <signal.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/uio.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include "log.h"
+
+#define TICK_MS 50
+#define READ_BUDGET (1u << 20)   /* bytes read from one peer per event */
+#define WRITE_BUDGET (4u << 20)  /* bytes written to one peer per event */
+#define MIN_BODY_RATE 65536      /* bytes/s a frame body must sustain */
+
+struct gsd_conn {
+    ev_watch w;
+    gsd_server *srv;
+    uint64_t id;
+    int is_tcp;
+    char peer[64];
+    int hello_done;
+    uint16_t version;
+    gs_frame_parser parser;
+    gsd_out *whead, *wtail;
+    size_t woff, wbytes;
+    int closing;          /* protocol error: close once the output is flushed */
+    int eof;              /* peer closed its side: finish in-flight work */
+    int paused;           /* reading stopped: output over its cap */
+    int64_t opened_ms, last_ms, frame_start_ms, closing_ms;
+    gsd_job *inflight;
+    int ninflight;
+    gsd_conn *prev, *next;
+};
+
+#define E(x) GAZESPLAT__ERROR_CODE__##x
+#define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
+
+static void conn_close(gsd_conn *c, const char *why);
+static void close_listeners(gsd_server *s);
+static void conn_update_interest(gsd_conn *c);
+
+/* ---- counters ------------------------------------------------------------ */
+
+#define CTR(f) {#f, offsetof(gsd_counters, f)}
+static const struct {
+    const char *name;
+    size_t off;
+} counter_names[] = {
+    CTR(conn_accepted), CTR(conn_rejected), CTR(conn_closed), CTR(frames_in), CTR(frames_out),
+    CTR(bytes_in), CTR(bytes_out), CTR(protocol_errors), CTR(request_errors), CTR(timeouts),
+    CTR(req_hello), CTR(req_health), CTR(req_stats), CTR(req_fit), CTR(req_redirect),
+    CTR(req_cancel), CTR(req_sleep), CTR(busy), CTR(cancelled), CTR(deadline_exceeded),
+    CTR(fits), CTR(fits_cached), CTR(images_out), CTR(jobs_done), CTR(model_loads),
+    CTR(model_load_failures), CTR(reloads), CTR(cache_saves), CTR(cache_save_failures),
+};
+#define NCOUNTERS (sizeof counter_names / sizeof counter_names[0])
+
+static void bump(atomic_ullong *c, unsigned long long n)
+{
+    atomic_fetch_add(c, n);
+}
+
+/* ---- frames out ---------------------------------------------------------- */
+
+static gsd_out *out_pack(const gs_frame_header *h, const ProtobufCMessage *msg)
+{
+    uint8_t *buf;
+    size_t len;
+    if (gs_msg_pack(h, msg, GS_FRAME_HARD_MAX_PAYLOAD, &buf, &len) != 0)
+        return NULL;
+    gsd_out *o = malloc(sizeof *o + len);
+    if (o) {
+        memset(o, 0, sizeof *o);
+        o->len = len;
+        memcpy(o->data, buf, len);
+    }
+    free(buf);
+    return o;
+}
+
+gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage *msg)
+{
+    gs_frame_header h;
+    memset(&h, 0, sizeof h);
+    h.version = job->version;
+    h.type = type;
+    h.request_id = job->request_id;
+    memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
+    gsd_out *o = out_pack(&h, msg);
+    if (o)
+        o->job = (gsd_job *)job;
+    return o;
+}
+
+static gsd_out *error_out(const gs_frame_header *h, int code, const char *text)
+{
+    Gazesplat__Error e = GAZESPLAT__ERROR__INIT;
+    e.code = (Gazesplat__ErrorCode)code;
+    e.message = (char *)text;
+    e.request_id = h->request_id;
+    gs_frame_header eh = *h;
+    eh.type = T(ERROR);
+    return out_pack(&eh, &e.base);
+}
+
+gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
+{
+    char text[512];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    gs_frame_header h;
+    memset(&h, 0, sizeof h);
+    h.version = job->version;
+    h.request_id = job->request_id;
+    memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
+    gsd_out *o = error_out(&h, code, text);
+    if (o) {
+        o->job = (gsd_job *)job;
+        o->final = 1;
+    }
+    return o;
+}
+
+void gsd_post(gsd_server *s, gsd_out *o)
+{
+    if (!o) {
+        LOG_E("out of memory building a reply; a request stays unanswered");
+        return;
+    }
+    pthread_mutex_lock(&s->post_mu);
+    o->next = NULL;
+    if (s->post_tail)
+        s->post_tail->next = o;
+    else
+        s->post_head = o;
+    s->post_tail = o;
+    pthread_mutex_unlock(&s->post_mu);
+    ev_wake(s->loop);
+}
+
+static size_t output_cap(const gsd_conn *c)
+{
+    return (size_t)c->srv->cfg.max_output_kb * 1024;
+}
+
+static void conn_queue(gsd_conn *c, gsd_out *o)
+{
+    o->next = NULL;
+    if (c->wtail)
+        c->wtail->next = o;
+    else
+        c->whead = o;
+    c->wtail = o;
+    c->wbytes += o->len;
+    bump(&c->srv->ctr.frames_out, 1);
+    conn_update_interest(c);
+}
+
+/* A reply built on the loop thread for the frame h. */
+static void reply(gsd_conn *c, const gs_frame_header *req, uint16_t type, const ProtobufCMessage *msg)
+{
+    gs_frame_header h = *req;
+    h.version = c->version;
+    h.type = type;
+    gsd_out *o = out_pack(&h, msg);
+    if (!o) {
+        conn_close(c, "out of memory");
+        return;
+    }
+    conn_queue(c, o);
+}
+
+/* A request error: the connection stays open. */
+static void reply_error(gsd_conn *c, const gs_frame_header *req, int code, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static void reply_error(gsd_conn *c, const gs_frame_header *req, int code, const char *fmt, ...)
+{
+    char text[512];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    bump(&c->srv->ctr.request_errors, 1);
+    LOG_D("%s: request %u: %s: %s", c->peer, req->request_id, gs_msg_error_name(code), text);
+    gs_frame_header h = *req;
+    h.version = c->version;
+    gsd_out *o = error_out(&h, code, text);
+    if (o)
+        conn_queue(c, o);
+    else
+        conn_close(c, "out of memory");
+}
+
+/* A protocol error: ERROR frame, stop reading, close after the flush. */
+static void conn_fail(gsd_conn *c, int code, uint32_t request_id, const char *fmt, ...)
+    __attribute__((format(printf, 4, 5)));
+static void conn_fail(gsd_conn *c, int code, uint32_t request_id, const char *fmt, ...)
+{
+    char text[512], esc[200];
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(text, sizeof text, fmt, ap);
+    va_end(ap);
+    gsd_log_escape(c->parser.hbuf, c->parser.state == 0 ? c->parser.have : GS_FRAME_HEADER_SIZE,
+                   esc, sizeof esc);
+    LOG_W("%s: %s: %s (header bytes \"%s\"); closing", c->peer, gs_msg_error_name(code), text, esc);
+    bump(code == E(ERR_TIMEOUT) ? &c->srv->ctr.timeouts : &c->srv->ctr.protocol_errors, 1);
+    gs_frame_header h;
+    memset(&h, 0, sizeof h);
+    h.request_id = request_id;
+    h.version = c->version;
+    gsd_out *o = error_out(&h, code, text);
+    c->closing = 1;
+    c->closing_ms = ev_now_ms();
+    if (o)
+        conn_queue(c, o);
+    conn_update_interest(c);
+}
+
+/* ---- connections ----------------------------------------------------------- */
+
+static int prehello_type_ok(uint16_t type)
+{
+    return gs_msg_is_request(type);
+}
+
+static void set_limits(gsd_conn *c)
+{
+    gs_frame_limits lim = {GS_FRAME_MAX_PAYLOAD_PREHELLO, GS_PROTO_VERSION_MIN, GS_PROTO_VERSION_MAX,
+                           prehello_type_ok};
+    if (c->hello_done) {
+        lim.max_payload = (uint32_t)c->srv->cfg.max_payload;
+        lim.version_min = lim.version_max = c->version;
+    }
+    c->parser.limits = lim;
+}
+
+static void conn_update_interest(gsd_conn *c)
+{
+    if (c->w.mask < 0)
+        return;
+    size_t cap = output_cap(c);
+    if (!c->paused && c->wbytes > cap)
+        c->paused = 1;
+    else if (c->paused && c->wbytes <= cap / 2)
+        c->paused = 0;
+    int mask = (c->closing || c->eof || c->paused ? 0 : EV_READ) | (c->wbytes ? EV_WRITE : 0);
+    ev_set(c->srv->loop, &c->w, mask);
+}
+
+static void conn_free(gsd_conn *c)
+{
+    for (gsd_out *o = c->whead, *n; o; o = n) {
+        n = o->next;
+        free(o);
+    }
+    gs_frame_parser_free(&c->parser);
+    free(c);
+}
+
+static void conn_close(gsd_conn *c, const char *why)
+{
+    if (c->w.fd < 0)
+        return;
+    gsd_server *s = c->srv;
+    LOG_D("%s: closed (%s)", c->peer, why);
+    ev_del(s->loop, &c->w);
+    close(c->w.fd);
+    c->w.fd = -1;
+    c->w.mask = -1;
+    /* Jobs still running lose their connection; their frames are dropped. */
+    for (gsd_job *j = c->inflight; j; j = j->cnext) {
+        j->conn = NULL;
+        atomic_store(&j->stop, E(ERR_CANCELLED));
+    }
+    c->inflight = NULL;
+    if (c->prev)
+        c->prev->next = c->next;
+    else
+        s->conns = c->next;
+    if (c->next)
+        c->next->prev = c->prev;
+    c->next = s->dead;
+    s->dead = c;
+    s->nconns--;
+    bump(&s->ctr.conn_closed, 1);
+}
+
+static void free_dead(ev_loop *loop, void *ctx)
+{
+    (void)loop;
+    gsd_server *s = ctx;
+    while (s->dead) {
+        gsd_conn *c = s->dead;
+        s->dead = c->next;
+        conn_free(c);
+    }
+}
+
+static void conn_flush(gsd_conn *c)
+{
+    size_t budget = WRITE_BUDGET;
+    while (c->whead && budget > 0) {
+        struct iovec iov[16];
+        int n = 0;
+        size_t off = c->woff;
+        for (gsd_out *o = c->whead; o && n < 16; o = o->next, off = 0) {
+            iov[n].iov_base = o->data + off;
+            iov[n].iov_len = o->len - off;
+            n++;
+        }
+        ssize_t w = writev(c->w.fd, iov, n);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+            break;
+        if (w <= 0) {
+            conn_close(c, "write failed");
+            return;
+        }
+        bump(&c->srv->ctr.bytes_out, (unsigned long long)w);
+        c->wbytes -= (size_t)w;
+        budget = (size_t)w >= budget ? 0 : budget - (size_t)w;
+        size_t left = (size_t)w;
+        while (left > 0) {
+            gsd_out *o = c->whead;
+            size_t rest = o->len - c->woff;
+            if (left < rest) {
+                c->woff += left;
+                break;
+            }
+            left -= rest;
+            c->woff = 0;
+            c->whead = o->next;
+            if (!c->whead)
+                c->wtail = NULL;
+            free(o);
+        }
+    }
+    if (!c->whead && (c->closing || (c->eof && !c->inflight))) {
+        conn_close(c, c->closing ? "after error" : "peer closed");
+        return;
+    }
+    conn_update_interest(c);
+}
+
+/* ---- request validation ---------------------------------------------------- */
+
+int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap)
+{
+    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
+        snprintf(msg, cap, "photo input needs face detection and normalization, not in this build; "
+                 "send a normalized face (kind NORMALIZED_FACE)");
+        return E(ERR_PHOTO_UNSUPPORTED);
+    }
+    if (img->kind != GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE) {
+        snprintf(msg, cap, "unknown image kind %d", (int)img->kind);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (img->data.len == 0) {
+        snprintf(msg, cap, "empty image data");
+        return E(ERR_BAD_IMAGE);
+    }
+    size_t side = (size_t)s->cfg.max_image_side, mpix = (size_t)s->cfg.max_image_mpix << 20;
+    switch (img->format) {
+    case GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG:
+    case GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG:
+        return 0; /* sizes are checked against the file's own header when decoded */
+    case GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8:
+        if (img->width == 0 || img->height == 0 || img->width > side || img->height > side ||
+            (size_t)img->width * img->height > mpix) {
+            snprintf(msg, cap, "raw image %ux%u outside 1..%zu per side, %zu pixels", img->width,
+                     img->height, side, mpix);
+            return img->width == 0 || img->height == 0 ? E(ERR_BAD_IMAGE) : E(ERR_IMAGE_TOO_LARGE);
+        }
+        if (img->stride < 3u * img->width ||
+            img->data.len < (size_t)img->stride * (img->height - 1) + 3u * img->width) {
+            snprintf(msg, cap, "raw image %ux%u stride %u needs %zu bytes, got %zu", img->width,
+                     img->height, img->stride, (size_t)img->stride * (img->height - 1) + 3u * img->width,
+                     img->data.len);
+            return E(ERR_BAD_IMAGE);
+        }
+        return 0;
+    default:
+        snprintf(msg, cap, "unknown image format %d", (int)img->format);
+        return E(ERR_BAD_IMAGE);
+    }
+}
+
+static int check_angles(const Gazesplat__Angles *a, double max_pitch, double max_yaw,
+                        const char *what, char *msg, size_t cap)
+{
+    if (!a)
+        return 0;
+    if (!isfinite(a->pitch_deg) || !isfinite(a->yaw_deg)) {
+        snprintf(msg, cap, "%s angle not finite", what);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (fabs(a->pitch_deg) > max_pitch || fabs(a->yaw_deg) > max_yaw) {
+        snprintf(msg, cap, "%s (%g, %g) deg outside +-%g pitch, +-%g yaw", what, a->pitch_deg,
+                 a->yaw_deg, max_pitch, max_yaw);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return 0;
+}
+
+/* Documented input ranges, degrees (gazesplat/model.h). */
+#define MAX_GAZE_PITCH_DEG 50.0
+#define MAX_GAZE_YAW_DEG 60.0
+#define MAX_HEAD_DEG 70.0
+
+static int check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap)
+{
+    if (ms > (uint32_t)s->cfg.max_deadline_ms) {
+        snprintf(msg, cap, "deadline %u ms over max_deadline_ms %d", ms, s->cfg.max_deadline_ms);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return 0;
+}
+
+static int check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap)
+{
+    int e;
+    if (!r->image) {
+        snprintf(msg, cap, "FIT without an image");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if ((e = gsd_check_image(s, r->image, msg, cap)) != 0 ||
+        (e = check_angles(r->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, "gaze", msg, cap)) != 0 ||
+        (e = check_angles(r->head, MAX_HEAD_DEG, MAX_HEAD_DEG, "head", msg, cap)) != 0)
+        return e;
+    if (r->intrinsics && (!isfinite(r->intrinsics->fx) || !isfinite(r->intrinsics->fy) ||
+                          !isfinite(r->intrinsics->cx) || !isfinite(r->intrinsics->cy) ||
+                          r->intrinsics->fx <= 0 || r->intrinsics->fy <= 0)) {
+        snprintf(msg, cap, "intrinsics need finite values and fx, fy > 0");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (r->max_iters > 100000) {
+        snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return check_deadline(s, r->deadline_ms, msg, cap);
+}
+
+static int key_is_zero(const uint8_t *key)
+{
+    for (int i = 0; i < GS_FRAME_KEY_SIZE; i++)
+        if (key[i])
+            return 0;
+    return 1;
+}
+
+static int check_redirect(const gsd_server *s, const gs_frame_header *h,
+                          const Gazesplat__RedirectRequest *r, char *msg, size_t cap)
+{
+    int e;
+    if (r->n_targets == 0 || r->n_targets > (size_t)s->cfg.max_targets) {
+        snprintf(msg, cap, "%zu targets, want 1..%d", r->n_targets, s->cfg.max_targets);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    for (size_t i = 0; i < r->n_targets; i++) {
+        char what[48];
+        if (!r->targets[i]->gaze) {
+            snprintf(msg, cap, "target %zu has no gaze", i);
+            return E(ERR_INVALID_ARGUMENT);
+        }
+        snprintf(what, sizeof what, "target %zu gaze", i);
+        if ((e = check_angles(r->targets[i]->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, what, msg, cap)))
+            return e;
+        snprintf(what, sizeof what, "target %zu head", i);
+        if ((e = check_angles(r->targets[i]->head, MAX_HEAD_DEG, MAX_HEAD_DEG, what, msg, cap)))
+            return e;
+    }
+    if (r->image && (e = gsd_check_image(s, r->image, msg, cap)) != 0)
+        return e;
+    if (!r->image && key_is_zero(h->key)) {
+        snprintf(msg, cap, "REDIRECT needs a subject key in the header or an inline image");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (r->max_iters > 100000) {
+        snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (r->output_format > GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 || r->jpeg_quality > 100) {
+        snprintf(msg, cap, "output format %d / jpeg quality %u out of range", (int)r->output_format,
+                 r->jpeg_quality);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (r->output_mode == GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK) {
+        snprintf(msg, cap, "PASTE_BACK needs photo input, not in this build");
+        return E(ERR_PHOTO_UNSUPPORTED);
+    }
+    if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_NORMALIZED) {
+        snprintf(msg, cap, "unknown output mode %d", (int)r->output_mode);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return check_deadline(s, r->deadline_ms, msg, cap);
+}
+
+/* ---- handlers ------------------------------------------------------------- */
+
+/* Constant-time comparison: time does not depend on where they differ. */
+static int token_equal(const uint8_t *a, size_t alen, const char *b)
+{
+    size_t blen = strlen(b);
+    unsigned diff = (unsigned)(alen ^ blen);
+    for (size_t i = 0; i < blen; i++)
+        diff |= (unsigned)(b[i] ^ (i < alen ? a[i] : 0));
+    return diff == 0;
+}
+
+static void handle_hello(gsd_conn *c, const gs_frame_header *h, const Gazesplat__Hello *m)
+{
+    gsd_server *s = c->srv;
+    bump(&s->ctr.req_hello, 1);
+    if (c->hello_done) {
+        conn_fail(c, E(ERR_HELLO_REQUIRED), h->request_id, "second HELLO");
+        return;
+    }
+    uint32_t lo = m->min_version ? m->min_version : 1, hi = m->max_version;
+    uint32_t v = hi < GS_PROTO_VERSION_MAX ? hi : GS_PROTO_VERSION_MAX;
+    if (hi < lo || v < lo || v < GS_PROTO_VERSION_MIN) {
+        conn_fail(c, E(ERR_BAD_VERSION), h->request_id, "client speaks %u..%u, server %d..%d", lo, hi,
+                  GS_PROTO_VERSION_MIN, GS_PROTO_VERSION_MAX);
+        return;
+    }
+    if (c->is_tcp && s->cfg.token[0] && !token_equal(m->token.data, m->token.len, s->cfg.token)) {
+        conn_fail(c, E(ERR_AUTH), h->request_id, "token missing or wrong");
+        return;
+    }
+    char name[80];
+    gsd_log_escape(m->client_name, strlen(m->client_name) < 64 ? strlen(m->client_name) : 64, name,
+                   sizeof name);
+    LOG_D("%s: HELLO from '%s', version %u", c->peer, name, v);
+    c->hello_done = 1;
+    c->version = (uint16_t)v;
+    set_limits(c);
+    Gazesplat__Limits lim = GAZESPLAT__LIMITS__INIT;
+    lim.max_payload = (uint32_t)s->cfg.max_payload;
+    lim.max_targets = (uint32_t)s->cfg.max_targets;
+    lim.max_inflight = (uint32_t)s->cfg.max_inflight;
+    lim.max_image_side = (uint32_t)s->cfg.max_image_side;
+    lim.max_image_pixels = (uint64_t)s->cfg.max_image_mpix << 20;
+    lim.queue_depth = (uint32_t)s->cfg.queue_depth;
+    lim.idle_timeout_ms = (uint32_t)s->cfg.idle_timeout_ms;
+    lim.max_deadline_ms = (uint32_t)s->cfg.max_deadline_ms;
+    Gazesplat__HelloOk ok = GAZESPLAT__HELLO_OK__INIT;
+    ok.version = v;
+    ok.server = "gazesplatd " GSD_VERSION;
+    ok.limits = &lim;
+    char id[33];
+    ok.image_size = (uint32_t)gsd_model_image_size(s, id);
+    reply(c, h, T(HELLO_OK), &ok.base);
+}
+
+static void handle_health(gsd_conn *c, const gs_frame_header *h)
+{
+    gsd_server *s = c->srv;
+    bump(&s->ctr.req_health, 1);
+    int len, running;
+    gsd_work_lengths(s, &len, &running);
+    char id[33];
+    Gazesplat__Health m = GAZESPLAT__HEALTH__INIT;
+    m.state = (Gazesplat__Health__State)atomic_load(&s->state);
+    m.detail = s->detail;
+    m.queue_length = (uint32_t)len;
+    m.queue_depth = (uint32_t)s->cfg.queue_depth;
+    m.workers = (uint32_t)s->work.nworkers;
+    m.image_size = (uint32_t)gsd_model_image_size(s, id);
+    m.model_id = id;
+    reply(c, h, T(HEALTH_OK), &m.base);
+}
+
+static void handle_stats(gsd_conn *c, const gs_frame_header *h)
+{
+    gsd_server *s = c->srv;
+    bump(&s->ctr.req_stats, 1);
+    enum { EXTRA = 12 };
+    Gazesplat__Counter cs[NCOUNTERS + EXTRA];
+    Gazesplat__Counter *ptrs[NCOUNTERS + EXTRA];
+    size_t n = 0;
+    for (size_t i = 0; i < NCOUNTERS; i++, n++) {
+        gazesplat__counter__init(&cs[n]);
+        cs[n].name = (char *)counter_names[i].name;
+        cs[n].value = atomic_load((atomic_ullong *)((char *)&s->ctr + counter_names[i].off));
+    }
+    int qlen, running;
+    gsd_work_lengths(s, &qlen, &running);
+    gsd_cache_stats cst;
+    gsd_cache_stats_get(s->cache, &cst);
+    const struct {
+        const char *name;
+        uint64_t v;
+    } extra[EXTRA] = {
+        {"connections_open", (uint64_t)s->nconns}, {"queue_length", (uint64_t)qlen},
+        {"jobs_running", (uint64_t)running}, {"cache_entries", cst.entries},
+        {"cache_bytes", cst.bytes}, {"cache_budget", cst.budget}, {"cache_hits", cst.hits},
+        {"cache_misses", cst.misses}, {"cache_evictions", cst.evictions},
+        {"state", (uint64_t)atomic_load(&s->state)},
+        {"uptime_ms", (uint64_t)(ev_now_ms() - s->started_ms)},
+        {"job_ms_avg", (uint64_t)s->job_ms_avg},
+    };
+    for (size_t i = 0; i < EXTRA; i++, n++) {
+        gazesplat__counter__init(&cs[n]);
+        cs[n].name = (char *)extra[i].name;
+        cs[n].value = extra[i].v;
+    }
+    for (size_t i = 0; i < n; i++)
+        ptrs[i] = &cs[i];
+    Gazesplat__Stats m = GAZESPLAT__STATS__INIT;
+    m.n_counters = n;
+    m.counters = ptrs;
+    reply(c, h, T(STATS_OK), &m.base);
+}
+
+static void handle_cancel(gsd_conn *c, const gs_frame_header *h, const Gazesplat__Cancel *m)
+{
+    (void)h;
+    bump(&c->srv->ctr.req_cancel, 1);
+    for (gsd_job *j = c->inflight; j; j = j->cnext)
+        if (j->request_id == m->request_id) {
+            int expected = 0;
+            atomic_compare_exchange_strong(&j->stop, &expected, E(ERR_CANCELLED));
+            LOG_D("%s: cancel request %u", c->peer, m->request_id);
+        }
+}
+
+static uint32_t retry_after_ms(gsd_server *s)
+{
+    int len, running;
+    gsd_work_lengths(s, &len, &running);
+    /* Before any job has finished there is no history: guess 100 ms. */
+    double per_job = s->job_ms_avg > 0 ? s->job_ms_avg : 100.0;
+    double ms = per_job * (len + running) / (s->work.nworkers > 0 ? s->work.nworkers : 1);
+    if (ms < 10)
+        ms = 10;
+    if (ms > 60000)
+        ms = 60000;
+    return (uint32_t)ms;
+}
+
+/* FIT, REDIRECT and SLEEP: validate here, then queue for a worker. The
+ * message `m` is handed to the job on success. */
+static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
+{
+    gsd_server *s = c->srv;
+    char msg[300];
+    int e = 0;
+    uint32_t deadline = 0;
+    if (h->type == T(FIT)) {
+        bump(&s->ctr.req_fit, 1);
+        e = check_fit(s, (const Gazesplat__FitRequest *)m, msg, sizeof msg);
+        deadline = ((const Gazesplat__FitRequest *)m)->deadline_ms;
+    } else if (h->type == T(REDIRECT)) {
+        bump(&s->ctr.req_redirect, 1);
+        e = check_redirect(s, h, (const Gazesplat__RedirectRequest *)m, msg, sizeof msg);
+        deadline = ((const Gazesplat__RedirectRequest *)m)->deadline_ms;
+    } else {
+        bump(&s->ctr.req_sleep, 1);
+        const Gazesplat__Sleep *sl = (const Gazesplat__Sleep *)m;
+        deadline = sl->deadline_ms;
+        e = check_deadline(s, deadline, msg, sizeof msg);
+        if (!e && sl->ms > 60000) {
+            snprintf(msg, sizeof msg, "sleep %u ms over 60000", sl->ms);
+            e = E(ERR_INVALID_ARGUMENT);
+        }
+    }
+    int state = atomic_load(&s->state);
+    if (!e && state == GSD_DRAINING) {
+        e = E(ERR_SHUTTING_DOWN);
+        snprintf(msg, sizeof msg, "server is shutting down");
+    }
+    if (!e && h->type != T(SLEEP) && state != GSD_READY) {
+        e = state == GSD_LOADING ? E(ERR_LOADING) : E(ERR_NO_MODEL);
+        snprintf(msg, sizeof msg, "%s", s->detail);
+    }
+    for (gsd_job *j = c->inflight; !e && j; j = j->cnext)
+        if (j->request_id == h->request_id) {
+            e = E(ERR_DUPLICATE_ID);
+            snprintf(msg, sizeof msg, "request %u already in flight", h->request_id);
+        }
+    if (!e && c->ninflight >= s->cfg.max_inflight) {
+        e = E(ERR_TOO_MANY_INFLIGHT);
+        snprintf(msg, sizeof msg, "%d requests in flight (max_inflight)", c->ninflight);
+    }
+    if (e) {
+        reply_error(c, h, e, "%s", msg);
+        return -1;
+    }
+    gsd_job *j = calloc(1, sizeof *j);
+    if (!j) {
+        reply_error(c, h, E(ERR_INTERNAL), "out of memory");
+        return -1;
+    }
+    j->conn = c;
+    j->type = h->type;
+    j->version = c->version;
+    j->request_id = h->request_id;
+    memcpy(j->key, h->key, GS_FRAME_KEY_SIZE);
+    j->enqueued_ms = ev_now_ms();
+    j->deadline_ms = j->enqueued_ms + (deadline ? deadline : (uint32_t)s->cfg.request_timeout_ms);
+    j->max_side = s->cfg.max_image_side;
+    j->max_pixels = (size_t)s->cfg.max_image_mpix << 20;
+    j->req = m;
+    if (gsd_work_push(s, j) != 0) {
+        bump(&s->ctr.busy, 1);
+        Gazesplat__Busy b = GAZESPLAT__BUSY__INIT;
+        int qlen, running;
+        gsd_work_lengths(s, &qlen, &running);
+        b.retry_after_ms = retry_after_ms(s);
+        b.queue_length = (uint32_t)qlen;
+        reply(c, h, T(BUSY), &b.base);
+        free(j);
+        return -1;
+    }
+    j->cnext = c->inflight;
+    c->inflight = j;
+    c->ninflight++;
+    return 0;
+}
+
+static int frame_is_job(uint16_t type)
+{
+    return type == T(FIT) || type == T(REDIRECT) || type == T(SLEEP);
+}
+
+/* One whole frame from the parser. */
+static void dispatch(gsd_conn *c)
+{
+    gsd_server *s = c->srv;
+    gs_frame_header h = *gs_frame_parser_header(&c->parser);
+    const uint8_t *payload = gs_frame_parser_payload(&c->parser);
+    bump(&s->ctr.frames_in, 1);
+    c->last_ms = ev_now_ms();
+    if (!c->hello_done && h.type != T(HELLO)) {
+        conn_fail(c, E(ERR_HELLO_REQUIRED), h.request_id, "%s before HELLO", gs_msg_type_name(h.type));
+        return;
+    }
+    if (h.type == T(SLEEP) && !s->cfg.debug_requests) {
+        conn_fail(c, E(ERR_BAD_TYPE), h.request_id, "SLEEP needs debug_requests = yes");
+        return;
+    }
+    ProtobufCMessage *m = gs_msg_unpack(h.type, payload, h.payload_len);
+    if (!m) {
+        if (h.type == T(HELLO))
+            conn_fail(c, E(ERR_MALFORMED), h.request_id, "HELLO payload is not a Hello message");
+        else
+            reply_error(c, &h, E(ERR_MALFORMED), "%u-byte payload is not a valid %s message",
+                        h.payload_len, gs_msg_type_name(h.type));
+        return;
+    }
+    if (frame_is_job(h.type)) {
+        if (submit(c, &h, m) == 0)
+            return; /* the job owns m */
+    } else if (h.type == T(HELLO)) {
+        handle_hello(c, &h, (const Gazesplat__Hello *)m);
+    } else if (h.type == T(HEALTH)) {
+        handle_health(c, &h);
+    } else if (h.type == T(STATS)) {
+        handle_stats(c, &h);
+    } else if (h.type == T(CANCEL)) {
+        handle_cancel(c, &h, (const Gazesplat__Cancel *)m);
+    }
+    protobuf_c_message_free_unpacked(m, NULL);
+}
+
+static void parser_error(gsd_conn *c, int r)
+{
+    const gs_frame_header *h = &c->parser.header;
+    switch (r) {
+    case GS_FRAME_ERR_MAGIC:
+        conn_fail(c, E(ERR_BAD_MAGIC), 0, "bad magic");
+        break;
+    case GS_FRAME_ERR_VERSION:
+        conn_fail(c, E(ERR_BAD_VERSION), h->request_id, "frame version %u, want %u..%u", h->version,
+                  c->parser.limits.version_min, c->parser.limits.version_max);
+        break;
+    case GS_FRAME_ERR_TYPE:
+        conn_fail(c, E(ERR_BAD_TYPE), h->request_id, "frame type %u is not a request", h->type);
+        break;
+    case GS_FRAME_ERR_TOO_LARGE:
+        conn_fail(c, E(ERR_TOO_LARGE), h->request_id, "payload %u bytes over the limit %u%s",
+                  h->payload_len, c->parser.limits.max_payload, c->hello_done ? "" : " before HELLO");
+        break;
+    default:
+        conn_fail(c, E(ERR_INTERNAL), h->request_id, "out of memory");
+    }
+}
+
+static void conn_read(gsd_conn *c)
+{
+    size_t budget = READ_BUDGET;
+    while (budget > 0 && !c->closing && !c->paused && c->w.fd >= 0) {
+        uint8_t *dst;
+        size_t want;
+        gs_frame_parser_want(&c->parser, &dst, &want);
+        if (!gs_frame_parser_partial(&c->parser) && c->parser.have == 0)
+            c->frame_start_ms = 0;
+        ssize_t n = recv(c->w.fd, dst, want, 0);
+        if (n < 0 && errno == EINTR)
+            continue;
+        if (n < 0 && (errno == EAGAIN || errno == EWOULDBLOCK))
+            break;
+        if (n <= 0) {
+            if (n == 0 && !gs_frame_parser_partial(&c->parser) && (c->inflight || c->wbytes)) {
+                c->eof = 1; /* half-closed: finish the work, then close */
+                conn_update_interest(c);
+            } else {
+                conn_close(c, n == 0 ? "peer closed" : "read error");
+            }
+            return;
+        }
+        if (c->frame_start_ms == 0)
+            c->frame_start_ms = ev_now_ms();
+        bump(&c->srv->ctr.bytes_in, (unsigned long long)n);
+        budget = (size_t)n >= budget ? 0 : budget - (size_t)n;
+        int r = gs_frame_parser_advance(&c->parser, (size_t)n);
+        if (r < 0) {
+            parser_error(c, r);
+            return;
+        }
+        if (r == GS_FRAME_READY) {
+            dispatch(c);
+            if (c->w.fd >= 0)
+                gs_frame_parser_next(&c->parser);
+            c->frame_start_ms = 0;
+        }
+    }
+}
+
+static void on_conn(ev_loop *loop, ev_watch *w, int events)
+{
+    (void)loop;
+    gsd_conn *c = w->ctx;
+    if (events & EV_HUP && !(events & EV_READ)) {
+        conn_close(c, "hang-up");
+        return;
+    }
+    if (events & EV_READ)
+        conn_read(c);
+    if (c->w.fd >= 0 && (events & EV_WRITE || c->wbytes))
+        conn_flush(c);
+    if (c->w.fd >= 0 && events & EV_HUP && !(events & EV_READ))
+        conn_close(c, "hang-up");
+}
+
+static void peer_name(int fd, int is_tcp, char *out, size_t cap)
+{
+    struct sockaddr_storage ss;
+    socklen_t len = sizeof ss;
+    if (is_tcp && getpeername(fd, (struct sockaddr *)&ss, &len) == 0) {
+        char host[INET6_ADDRSTRLEN] = "?", port[8] = "?";
+        getnameinfo((struct sockaddr *)&ss, len, host, sizeof host, port, sizeof port,
+                    NI_NUMERICHOST | NI_NUMERICSERV);
+        snprintf(out, cap, "tcp:%s:%s", host, port);
+        return;
+    }
+    struct ucred cr;
+    len = sizeof cr;
+    if (!is_tcp && getsockopt(fd, SOL_SOCKET, SO_PEERCRED, &cr, &len) == 0)
+        snprintf(out, cap, "unix:pid=%d,uid=%u", (int)cr.pid, (unsigned)cr.uid);
+    else
+        snprintf(out, cap, "fd%d", fd);
+}
+
+static void on_accept(ev_loop *loop, ev_watch *w, int events)
+{
+    (void)events;
+    gsd_listener *l = w->ctx;
+    gsd_server *s = l->srv;
+    for (int i = 0; i < 64; i++) {
+        int fd = accept4(l->fd, NULL, NULL, SOCK_NONBLOCK | SOCK_CLOEXEC);
+        if (fd < 0) {
+            if (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR && errno != ECONNABORTED)
+                LOG_W("accept: %s", strerror(errno));
+            return;
+        }
+        if (s->nconns >= s->cfg.max_connections || atomic_load(&s->state) == GSD_DRAINING) {
+            bump(&s->ctr.conn_rejected, 1);
+            close(fd);
+            continue;
+        }
+        gsd_conn *c = calloc(1, sizeof *c);
+        if (!c) {
+            close(fd);
+            continue;
+        }
+        c->srv = s;
+        c->id = ++s->next_conn_id;
+        c->is_tcp = l->is_tcp;
+        c->version = GS_PROTO_VERSION_MIN;
+        c->opened_ms = c->last_ms = ev_now_ms();
+        peer_name(fd, l->is_tcp, c->peer, sizeof c->peer);
+        gs_frame_limits lim = {0};
+        gs_frame_parser_init(&c->parser, &lim);
+        set_limits(c);
+        if (ev_add(loop, &c->w, fd, EV_READ, on_conn, c) != 0) {
+            close(fd);
+            conn_free(c);
+            continue;
+        }
+        c->next = s->conns;
+        if (s->conns)
+            s->conns->prev = c;
+        s->conns = c;
+        s->nconns++;
+        bump(&s->ctr.conn_accepted, 1);
+        LOG_D("%s: connected", c->peer);
+    }
+}
+
+/* ---- listeners ------------------------------------------------------------ */
+
+static int add_listener(gsd_server *s, int fd, int is_tcp, int owned, const char *path)
+{
+    gsd_listener *l = &s->listeners[s->nlisteners];
+    l->srv = s;
+    l->fd = fd;
+    l->is_tcp = is_tcp;
+    l->owned = owned;
+    snprintf(l->path, sizeof l->path, "%s", path ? path : "");
+    if (ev_add(s->loop, &l->w, fd, EV_READ, on_accept, l) != 0)
+        return -1;
+    s->nlisteners++;
+    return 0;
+}
+
+static void default_socket_path(char *out, size_t cap)
+{
+    const char *rt = getenv("RUNTIME_DIRECTORY");
+    if (rt && *rt) {
+        char first[256];
+        snprintf(first, sizeof first, "%s", rt);
+        char *colon = strchr(first, ':'); /* several directories: the first */
+        if (colon)
+            *colon = '\0';
+        snprintf(out, cap, "%s/gazesplatd.sock", first);
+    } else {
+        snprintf(out, cap, "/run/gazesplatd/gazesplatd.sock");
+    }
+}
+
+/* Binds the Unix socket; a stale socket file nobody listens on is replaced. */
+static int bind_unix(gsd_server *s, const char *path, char *msg, size_t cap)
+{
+    struct sockaddr_un sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sun_family = AF_UNIX;
+    if (strlen(path) >= sizeof sa.sun_path) {
+        snprintf(msg, cap, "socket path too long: %s", path);
+        return -1;
+    }
+    memcpy(sa.sun_path, path, strlen(path) + 1);
+    int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+    if (fd < 0) {
+        snprintf(msg, cap, "socket: %s", strerror(errno));
+        return -1;
+    }
+    struct stat st;
+    if (lstat(path, &st) == 0 && S_ISSOCK(st.st_mode)) {
+        int probe = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        int live = probe >= 0 && connect(probe, (struct sockaddr *)&sa, sizeof sa) == 0;
+        if (probe >= 0)
+            close(probe);
+        if (live) {
+            snprintf(msg, cap, "%s: another server is listening", path);
+            close(fd);
+            return -1;
+        }
+        unlink(path);
+    }
+    /* Created with no permissions, then opened to socket_mode. */
+    mode_t old = umask(0777);
+    int r = bind(fd, (struct sockaddr *)&sa, sizeof sa);
+    umask(old);
+    if (r != 0 || chmod(path, (mode_t)s->cfg.socket_mode) != 0 || listen(fd, 128) != 0) {
+        snprintf(msg, cap, "bind %s: %s", path, strerror(errno));
+        close(fd);
+        return -1;
+    }
+    if (add_listener(s, fd, 0, 1, path) != 0) {
+        snprintf(msg, cap, "epoll: %s", strerror(errno));
+        close(fd);
+        return -1;
+    }
+    LOG_I("listening on unix:%s (mode %04o)", path, (unsigned)s->cfg.socket_mode);
+    return 0;
+}
+
+static int is_loopback(const struct sockaddr *sa)
+{
+    if (sa->sa_family == AF_INET)
+        return (ntohl(((const struct sockaddr_in *)sa)->sin_addr.s_addr) >> 24) == 127;
+    if (sa->sa_family == AF_INET6)
+        return IN6_IS_ADDR_LOOPBACK(&((const struct sockaddr_in6 *)sa)->sin6_addr);
+    return 0;
+}
+
+static int bind_tcp(gsd_server *s, const char *hostport, char *msg, size_t cap)
+{
+    char host[256];
+    const char *colon = strrchr(hostport, ':');
+    if (!colon || colon == hostport || (size_t)(colon - hostport) >= sizeof host) {
+        snprintf(msg, cap, "tcp: want HOST:PORT, got '%s'", hostport);
+        return -1;
+    }
+    snprintf(host, sizeof host, "%.*s", (int)(colon - hostport), hostport);
+    if (host[0] == '[' && strlen(host) > 2 && host[strlen(host) - 1] == ']') {
+        memmove(host, host + 1, strlen(host));
+        host[strlen(host) - 1] = '\0';
+    }
+    struct addrinfo hints, *res = NULL;
+    memset(&hints, 0, sizeof hints);
+    hints.ai_socktype = SOCK_STREAM;
+    hints.ai_flags = AI_PASSIVE | AI_NUMERICSERV;
+    int gr = getaddrinfo(host, colon + 1, &hints, &res);
+    if (gr != 0) {
+        snprintf(msg, cap, "tcp %s: %s", hostport, gai_strerror(gr));
+        return -1;
+    }
+    int rc = -1;
+    if (!is_loopback(res->ai_addr) && !s->cfg.tcp_allow_remote) {
+        snprintf(msg, cap, "tcp %s is not a loopback address; set tcp_allow_remote = yes "
+                 "(and a token) to listen on it", hostport);
+    } else {
+        int fd = socket(res->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+        int one = 1;
+        if (fd >= 0)
+            setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
+        if (fd < 0 || bind(fd, res->ai_addr, res->ai_addrlen) != 0 || listen(fd, 128) != 0 ||
+            add_listener(s, fd, 1, 0, NULL) != 0) {
+            snprintf(msg, cap, "tcp %s: %s", hostport, strerror(errno));
+            if (fd >= 0)
+                close(fd);
+        } else {
+            rc = 0;
+            if (!is_loopback(res->ai_addr) && !s->cfg.token[0])
+                LOG_W("tcp %s reachable from other hosts without a token", hostport);
+            LOG_I("listening on tcp:%s%s", hostport, s->cfg.token[0] ? " (token required)" : "");
+        }
+    }
+    freeaddrinfo(res);
+    return rc;
+}
+
+static int setup_listeners(gsd_server *s, char *msg, size_t cap)
+{
+    char names[GSD_MAX_LISTEN][64];
+    int n = gsd_listen_fds(names);
+    for (int i = 0; i < n; i++) {
+        int fd = GSD_LISTEN_FDS_START + i;
+        struct sockaddr_storage ss;
+        socklen_t len = sizeof ss;
+        if (getsockname(fd, (struct sockaddr *)&ss, &len) != 0) {
+            snprintf(msg, cap, "inherited fd %d is not a socket", fd);
+            return -1;
+        }
+        int is_tcp = ss.ss_family == AF_INET || ss.ss_family == AF_INET6;
+        if (add_listener(s, fd, is_tcp, 0, NULL) != 0) {
+            snprintf(msg, cap, "epoll on inherited fd %d: %s", fd, strerror(errno));
+            return -1;
+        }
+        LOG_I("listening on inherited fd %d (%s%s%s)", fd, is_tcp ? "tcp" : "unix",
+              names[i][0] ? ", " : "", names[i]);
+    }
+    if (n > 0)
+        return 0;
+    char path[GSD_STR_MAX];
+    if (s->cfg.socket[0])
+        snprintf(path, sizeof path, "%s", s->cfg.socket);
+    else
+        default_socket_path(path, sizeof path);
+    /* TCP first: a refused address must fail before the socket file exists. */
+    if (s->cfg.tcp[0] && bind_tcp(s, s->cfg.tcp, msg, cap) != 0)
+        return -1;
+    if (strcmp(path, "none") != 0 && bind_unix(s, path, msg, cap) != 0) {
+        close_listeners(s);
+        return -1;
+    }
+    if (s->nlisteners == 0) {
+        snprintf(msg, cap, "no socket to listen on (socket = none and no tcp)");
+        return -1;
+    }
+    return 0;
+}
+
+static void close_listeners(gsd_server *s)
+{
+    for (int i = 0; i < s->nlisteners; i++) {
+        gsd_listener *l = &s->listeners[i];
+        ev_del(s->loop, &l->w);
+        close(l->fd); /* never unlink or shut down an inherited socket */
+        if (l->owned && l->path[0])
+            unlink(l->path);
+    }
+    s->nlisteners = 0;
+}
+
+/* ---- completions, ticks, signals ------------------------------------------ */
+
+static void job_finished(gsd_server *s, gsd_job *j, uint64_t ms)
+{
+    gsd_conn *c = j->conn;
+    if (c) {
+        for (gsd_job **pp = &c->inflight; *pp; pp = &(*pp)->cnext)
+            if (*pp == j) {
+                *pp = j->cnext;
+                c->ninflight--;
+                break;
+            }
+    }
+    s->job_ms_avg = s->job_ms_avg == 0 ? (double)ms : 0.8 * s->job_ms_avg + 0.2 * (double)ms;
+    bump(&s->ctr.jobs_done, 1);
+    if (j->req)
+        protobuf_c_message_free_unpacked(j->req, NULL);
+    free(j);
+    if (c && c->eof && !c->inflight && !c->wbytes)
+        conn_close(c, "peer closed");
+}
+
+static void on_wake(ev_loop *loop, void *ctx)
+{
+    (void)loop;
+    gsd_server *s = ctx;
+    pthread_mutex_lock(&s->post_mu);
+    gsd_out *list = s->post_head;
+    s->post_head = s->post_tail = NULL;
+    pthread_mutex_unlock(&s->post_mu);
+    while (list) {
+        gsd_out *o = list;
+        list = o->next;
+        gsd_job *j = o->job;
+        int final = o->final;
+        uint64_t ms = o->job_ms;
+        if (j && j->conn && j->conn->w.fd >= 0) {
+            conn_queue(j->conn, o);
+            conn_flush(j->conn);
+        } else {
+            free(o);
+        }
+        if (final && j)
+            job_finished(s, j, ms);
+    }
+    if (atomic_load(&s->load_done))
+        gsd_model_finish_load(s);
+}
+
+static void set_status(gsd_server *s)
+{
+    static const char *const words[] = {"loading", "ready", "no model", "draining"};
+    gsd_notifyf("STATUS=%s: %s", words[atomic_load(&s->state)], s->detail);
+}
+
+static void conn_timeouts(gsd_server *s, int64_t now)
+{
+    for (gsd_conn *c = s->conns, *n; c; c = n) {
+        n = c->next;
+        int64_t frame_limit = s->cfg.header_timeout_ms;
+        if (c->parser.state == 1) /* payload: allow a slow but steady body */
+            frame_limit += (int64_t)c->parser.header.payload_len * 1000 / MIN_BODY_RATE;
+        if (c->closing) {
+            if (now - c->closing_ms > s->cfg.header_timeout_ms)
+                conn_close(c, "peer not reading the error");
+        } else if (!c->hello_done && now - c->opened_ms > s->cfg.header_timeout_ms) {
+            conn_fail(c, E(ERR_TIMEOUT), 0, "no HELLO within %d ms", s->cfg.header_timeout_ms);
+        } else if (c->frame_start_ms && now - c->frame_start_ms > frame_limit) {
+            conn_fail(c, E(ERR_TIMEOUT), 0, "frame incomplete after %lld ms",
+                      (long long)(now - c->frame_start_ms));
+        } else if (s->cfg.idle_timeout_ms && !c->inflight && !c->wbytes && !c->frame_start_ms &&
+                   now - c->last_ms > s->cfg.idle_timeout_ms) {
+            conn_fail(c, E(ERR_TIMEOUT), 0, "idle for %d ms", s->cfg.idle_timeout_ms);
+        }
+    }
+}
+
+static int drained(gsd_server *s)
+{
+    int len, running;
+    gsd_work_lengths(s, &len, &running);
+    if (len || running)
+        return 0;
+    for (gsd_conn *c = s->conns; c; c = c->next)
+        if (c->wbytes || c->inflight)
+            return 0;
+    return 1;
+}
+
+static void on_tick(ev_loop *loop, void *ctx)
+{
+    gsd_server *s = ctx;
+    int64_t now = ev_now_ms();
+    conn_timeouts(s, now);
+    if (s->watchdog_usec && now >= s->next_watchdog) {
+        gsd_notify("WATCHDOG=1");
+        s->next_watchdog = now + (int64_t)(s->watchdog_usec / 2000);
+    }
+    if (!s->ready_sent && now >= s->next_extend) {
+        /* A long model load: ask systemd for more start-up time. */
+        gsd_notify("EXTEND_TIMEOUT_USEC=20000000");
+        s->next_extend = now + 5000;
+    }
+    if (atomic_load(&s->state) == GSD_DRAINING && (drained(s) || now >= s->drain_deadline)) {
+        if (!drained(s))
+            LOG_W("drain timeout: stopping with work in flight");
+        ev_stop(loop);
+    }
+}
+
+void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
+{
+    gsd_config old = s->cfg;
+    s->cfg = *cfg;
+    /* Fixed at start: sockets, workers, state directory. */
+    memcpy(s->cfg.socket, old.socket, sizeof old.socket);
+    memcpy(s->cfg.tcp, old.tcp, sizeof old.tcp);
+    memcpy(s->cfg.state_dir, old.state_dir, sizeof old.state_dir);
+    s->cfg.socket_mode = old.socket_mode;
+    s->cfg.workers = old.workers;
+    s->cfg.threads = old.threads;
+    if (strcmp(old.socket, cfg->socket) || strcmp(old.tcp, cfg->tcp) || old.workers != cfg->workers ||
+        old.threads != cfg->threads || strcmp(old.state_dir, cfg->state_dir))
+        LOG_W("reload: socket, tcp, workers, threads and state_dir need a restart; kept");
+    gsd_log_set_level(s->cfg.log_level);
+    gsd_work_set_depth(s, s->cfg.queue_depth);
+    gsd_cache_set_budget(s->cache, (size_t)s->cfg.cache_mb << 20);
+    for (gsd_conn *c = s->conns; c; c = c->next)
+        if (c->parser.state == 0 && c->parser.have == 0)
+            set_limits(c);
+    bump(&s->ctr.reloads, 1);
+}
+
+static void start_drain(gsd_server *s)
+{
+    if (atomic_load(&s->state) == GSD_DRAINING) {
+        LOG_W("second stop signal: stopping now");
+        ev_stop(s->loop);
+        return;
+    }
+    LOG_I("draining: no new connections or requests, %d ms to finish", s->cfg.drain_timeout_ms);
+    gsd_notify("STOPPING=1");
+    atomic_store(&s->state, GSD_DRAINING);
+    snprintf(s->detail, sizeof s->detail, "shutting down");
+    set_status(s);
+    close_listeners(s);
+    s->drain_deadline = ev_now_ms() + s->cfg.drain_timeout_ms;
+}
+
+/* Signals arrive through a self-pipe: the handler may run on any thread
+ * (libraries such as OpenBLAS start threads before main can block
+ * signals), and only writes the signal number. Program state, not
+ * library state: one daemon per process. */
+static int signal_pipe_wr = -1;
+
+static void on_signal_handler(int sig)
+{
+    int saved = errno;
+    unsigned char b = (unsigned char)sig;
+    ssize_t r = write(signal_pipe_wr, &b, 1);
+    (void)r;
+    errno = saved;
+}
+
+static int install_signals(int wr)
+{
+    signal_pipe_wr = wr;
+    struct sigaction sa;
+    memset(&sa, 0, sizeof sa);
+    sa.sa_handler = on_signal_handler;
+    sa.sa_flags = SA_RESTART;
+    sigemptyset(&sa.sa_mask);
+    return sigaction(SIGTERM, &sa, NULL) | sigaction(SIGINT, &sa, NULL) | sigaction(SIGHUP, &sa, NULL);
+}
+
+static void on_signal(ev_loop *loop, ev_watch *w, int events)
+{
+    (void)loop;
+    (void)events;
+    gsd_server *s = w->ctx;
+    unsigned char sig;
+    while (read(w->fd, &sig, 1) == 1) {
+        if (sig == SIGHUP) {
+            LOG_I("SIGHUP: reloading configuration and model");
+            gsd_notify("RELOADING=1");
+            if (s->on_sighup)
+                s->on_sighup(s);
+            if (atomic_load(&s->state) != GSD_DRAINING)
+                gsd_model_start_load(s);
+        } else {
+            start_drain(s);
+        }
+    }
+}
+
+/* ---- life cycle ----------------------------------------------------------- */
+
+int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
+{
+    memset(s, 0, sizeof *s);
+    s->cfg = *cfg;
+    s->started_ms = ev_now_ms();
+    s->exit_code = 0;
+    pthread_mutex_init(&s->post_mu, NULL);
+    pthread_mutex_init(&s->model_mu, NULL);
+    pthread_mutex_init(&s->persist_mu, NULL);
+    atomic_store(&s->state, GSD_LOADING);
+    snprintf(s->detail, sizeof s->detail, "starting");
+    s->loop = ev_create(on_wake, s);
+    s->cache = gsd_cache_create((size_t)cfg->cache_mb << 20);
+    if (!s->loop || !s->cache) {
+        snprintf(msg, cap, "out of memory or epoll failure");
+        return -1;
+    }
+    const char *sd = getenv("STATE_DIRECTORY");
+    if (cfg->state_dir[0])
+        snprintf(s->state_dir, sizeof s->state_dir, "%s", cfg->state_dir);
+    else if (sd && *sd)
+        snprintf(s->state_dir, sizeof s->state_dir, "%.*s", (int)strcspn(sd, ":"), sd);
+    int pfd[2];
+    if (pipe2(pfd, O_NONBLOCK | O_CLOEXEC) != 0 ||
+        ev_add(s->loop, &s->sig_watch, pfd[0], EV_READ, on_signal, s) != 0 || install_signals(pfd[1]) != 0) {
+        snprintf(msg, cap, "signal pipe: %s", strerror(errno));
+        return -1;
+    }
+    s->sig_wr = pfd[1];
+    if (setup_listeners(s, msg, cap) != 0)
+        return -1;
+    if (gsd_work_start(s, cfg->workers, cfg->queue_depth) != 0) {
+        snprintf(msg, cap, "cannot start %d workers", cfg->workers);
+        return -1;
+    }
+    ev_set_tick(s->loop, TICK_MS, on_tick, s);
+    ev_set_after(s->loop, free_dead, s);
+    s->watchdog_usec = gsd_watchdog_usec();
+    if (s->watchdog_usec)
+        LOG_I("watchdog every %llu ms", (unsigned long long)(s->watchdog_usec / 1000));
+    return 0;
+}
+
+int gsd_server_run(gsd_server *s)
+{
+    gsd_model_start_load(s);
+    int r = ev_run(s->loop);
+    if (r != 0)
+        LOG_E("event loop: %s", strerror(errno));
+    gsd_notify("STOPPING=1");
+    return r;
+}
+
+void gsd_server_free(gsd_server *s)
+{
+    close_listeners(s);
+    /* Running jobs end at their next check; the queue is answered. */
+    for (gsd_conn *c = s->conns; c; c = c->next)
+        for (gsd_job *j = c->inflight; j; j = j->cnext)
+            atomic_store(&j->stop, E(ERR_SHUTTING_DOWN));
+    gsd_work_stop(s);
+    on_wake(s->loop, s); /* frees the jobs' final frames */
+    while (s->conns)
+        conn_close(s->conns, "shutdown");
+    free_dead(s->loop, s);
+    if (s->loader_running)
+        pthread_join(s->loader, NULL);
+    if (atomic_load(&s->load_done))
+        gsd_model_finish_load(s);
+    gsd_cache_persist(s);
+    gsd_model_release_all(s);
+    gsd_cache_destroy(s->cache);
+    if (s->sig_watch.fd > 0) {
+        signal(SIGTERM, SIG_DFL);
+        signal(SIGINT, SIG_DFL);
+        signal(SIGHUP, SIG_DFL);
+        close(s->sig_watch.fd);
+        close(s->sig_wr);
+    }
+    ev_destroy(s->loop);
+    pthread_mutex_destroy(&s->post_mu);
+    pthread_mutex_destroy(&s->model_mu);
+    pthread_mutex_destroy(&s->persist_mu);
+}
+
+void gsd_server_set_state(gsd_server *s, int state, const char *detail)
+{
+    if (atomic_load(&s->state) != GSD_DRAINING)
+        atomic_store(&s->state, state);
+    snprintf(s->detail, sizeof s->detail, "%s", detail);
+    if (!s->ready_sent && state != GSD_LOADING) {
+        gsd_notify("READY=1");
+        s->ready_sent = 1;
+    }
+    set_status(s);
+}

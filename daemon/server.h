@@ -1,0 +1,192 @@
+/* gazesplatd internals shared by server.c (event loop side), work.c (queue
+ * and worker threads), compute.c (model, FIT, REDIRECT) and main.c.
+ *
+ * Threads: one loop thread owns connections, listeners and every
+ * gsd_conn / gsd_job field marked (loop). Workers own a job while running
+ * it and talk back only through gsd_post (a locked list + ev_wake). A job
+ * is created and freed by the loop thread, which frees it when its final
+ * frame comes back, so a worker never races with a closing connection. */
+#ifndef GSD_SERVER_H
+#define GSD_SERVER_H
+
+#include <pthread.h>
+#include <stdatomic.h>
+#include <stddef.h>
+#include <stdint.h>
+
+#include "cache.h"
+#include "config.h"
+#include "ev.h"
+#include "gs_msg.h"
+#include "sd.h"
+
+#define GSD_VERSION "0.1.0"
+
+typedef struct gsd_server gsd_server;
+typedef struct gsd_conn gsd_conn;
+
+/* Health.State values. */
+enum { GSD_LOADING = 0, GSD_READY = 1, GSD_FAILED = 2, GSD_DRAINING = 3 };
+
+/* Counters reported by STATS; names in server.c. Atomic: workers add too. */
+typedef struct gsd_counters {
+    atomic_ullong conn_accepted, conn_rejected, conn_closed;
+    atomic_ullong frames_in, frames_out, bytes_in, bytes_out;
+    atomic_ullong protocol_errors, request_errors, timeouts;
+    atomic_ullong req_hello, req_health, req_stats, req_fit, req_redirect, req_cancel, req_sleep;
+    atomic_ullong busy, cancelled, deadline_exceeded;
+    atomic_ullong fits, fits_cached, images_out, jobs_done;
+    atomic_ullong model_loads, model_load_failures, reloads, cache_saves, cache_save_failures;
+} gsd_counters;
+
+/* A unit of compute work. */
+typedef struct gsd_job {
+    struct gsd_job *qnext;       /* work queue link (queue lock) */
+    struct gsd_job *cnext;       /* connection's in-flight list (loop) */
+    gsd_conn *conn;              /* (loop) NULL once the connection closed */
+    uint16_t type;               /* FRAME_FIT, FRAME_REDIRECT, FRAME_SLEEP */
+    uint16_t version;
+    uint32_t request_id;
+    uint8_t key[GS_FRAME_KEY_SIZE];
+    int64_t deadline_ms;         /* monotonic */
+    int64_t enqueued_ms;
+    atomic_int stop;             /* 0, or ERR_CANCELLED / ERR_DEADLINE / ERR_SHUTTING_DOWN */
+    int max_side;                /* image limits when the job was accepted */
+    size_t max_pixels;
+    ProtobufCMessage *req;       /* unpacked request, owned */
+} gsd_job;
+
+/* A frame on its way out; a connection's output queue is a list of these. */
+typedef struct gsd_out {
+    struct gsd_out *next;
+    gsd_job *job;   /* the job it belongs to, or NULL */
+    int final;      /* last frame of job: the loop frees the job */
+    uint64_t job_ms; /* final only: run time, for retry-after estimates */
+    size_t len;
+    uint8_t data[];
+} gsd_out;
+
+/* Work queue + workers (work.c). */
+typedef struct gsd_work {
+    pthread_mutex_t mu;
+    pthread_cond_t cv;
+    gsd_job *head, *tail;
+    int length, depth;
+    int running;      /* jobs being run */
+    int stopping;
+    int nworkers;
+    pthread_t *threads;
+} gsd_work;
+
+/* A loaded model with its identity; refcounted so a SIGHUP reload can swap
+ * it while workers finish with the old one (compute.c). */
+typedef struct gsd_model gsd_model;
+
+typedef struct gsd_listener {
+    ev_watch w;
+    gsd_server *srv;
+    int fd;
+    int is_tcp;
+    int owned;        /* we bound it: unlink the path at exit */
+    char path[108];
+} gsd_listener;
+
+struct gsd_server {
+    gsd_config cfg;           /* (loop) current configuration */
+    ev_loop *loop;
+    gsd_counters ctr;
+    int64_t started_ms;
+
+    gsd_listener listeners[GSD_MAX_LISTEN + 2];
+    int nlisteners;
+    ev_watch sig_watch;       /* read end of the signal pipe */
+    int sig_wr;
+    gsd_conn *conns;          /* (loop) list of open connections */
+    gsd_conn *dead;           /* (loop) closed, freed after the batch */
+    int nconns;
+    uint64_t next_conn_id;
+
+    atomic_int state;         /* GSD_LOADING .. */
+    int reloading;            /* (loop) a model reload is running */
+    int ready_sent;           /* (loop) READY=1 sent */
+    char detail[256];         /* (loop) health detail */
+    double job_ms_avg;        /* (loop) moving average of job time */
+    int64_t drain_deadline;   /* (loop) */
+    int exit_code;
+
+    /* worker -> loop frames */
+    pthread_mutex_t post_mu;
+    gsd_out *post_head, *post_tail;
+
+    gsd_work work;
+    gsd_cache *cache;
+    pthread_mutex_t persist_mu; /* one writer of the cache file at a time */
+    char state_dir[GSD_STR_MAX];
+
+    /* model (compute.c) */
+    pthread_mutex_t model_mu;
+    gsd_model *model;         /* current, or NULL */
+    pthread_t loader;
+    int loader_running;       /* (loop) */
+    atomic_int load_done;     /* set by the loader thread */
+    int load_status;          /* loader result (read after load_done) */
+    char load_msg[1024];
+    gsd_model *loaded;        /* loader result */
+
+    void (*on_sighup)(gsd_server *s); /* set by main: re-reads the config */
+    void *app;
+    uint64_t watchdog_usec;
+    int64_t next_watchdog, next_extend;
+};
+
+/* ---- server.c ---- */
+int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap);
+int gsd_server_run(gsd_server *s);
+void gsd_server_free(gsd_server *s);
+/* Health state and its detail text (loop thread); sends READY=1 once. */
+void gsd_server_set_state(gsd_server *s, int state, const char *detail);
+/* Applies a reloaded configuration (SIGHUP). */
+void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg);
+
+/* Thread-safe: hands a frame (from gsd_frame_new) to the loop. */
+void gsd_post(gsd_server *s, gsd_out *o);
+
+/* Packs a frame for a job's connection. NULL when out of memory. */
+gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage *msg);
+/* An ERROR frame for a job (final). */
+gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+
+/* ---- work.c ---- */
+int gsd_work_start(gsd_server *s, int nworkers, int depth);
+/* Queues a job; -1 when the queue is full (caller answers BUSY). */
+int gsd_work_push(gsd_server *s, gsd_job *job);
+void gsd_work_lengths(gsd_server *s, int *length, int *running);
+void gsd_work_set_depth(gsd_server *s, int depth);
+/* Stops and joins the workers; queued jobs are answered SHUTTING_DOWN. */
+void gsd_work_stop(gsd_server *s);
+
+/* ---- compute.c ---- */
+/* Per-worker state (model context, thread pool). */
+typedef struct gsd_worker gsd_worker;
+gsd_worker *gsd_worker_create(gsd_server *s, int index);
+void gsd_worker_destroy(gsd_worker *w);
+/* Runs a job, posting its frames; the last one is final. */
+void gsd_worker_run(gsd_worker *w, gsd_job *job);
+
+/* Starts loading cfg.model in a background thread (LOADING until done). */
+void gsd_model_start_load(gsd_server *s);
+/* Called by the loop when load_done is set: installs the model. */
+void gsd_model_finish_load(gsd_server *s);
+void gsd_model_release_all(gsd_server *s);
+/* Normalized face size of the current model, 0 when none; its id. */
+int gsd_model_image_size(gsd_server *s, char id[33]);
+/* Loads the cache file for the current model id (compute.c owns ids). */
+void gsd_cache_restore(gsd_server *s);
+/* Saves the cache file; 0 or -1 (logged). */
+int gsd_cache_persist(gsd_server *s);
+
+/* Validation shared by loop (early answer) and workers. Fills msg. */
+int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap);
+
+#endif

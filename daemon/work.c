@@ -1,0 +1,131 @@
+/* The compute queue: a bounded FIFO of jobs and the worker threads that
+ * run them. A full queue is refused at push time (the loop answers BUSY):
+ * nothing ever waits on the loop thread. */
+#include <stdlib.h>
+#include <string.h>
+
+#include "log.h"
+#include "server.h"
+
+typedef struct worker_arg {
+    gsd_server *srv;
+    int index;
+} worker_arg;
+
+static gsd_job *pop(gsd_work *w)
+{
+    gsd_job *j = w->head;
+    w->head = j->qnext;
+    if (!w->head)
+        w->tail = NULL;
+    w->length--;
+    return j;
+}
+
+static void *worker_main(void *p)
+{
+    worker_arg a = *(worker_arg *)p;
+    free(p);
+    gsd_work *w = &a.srv->work;
+    gsd_worker *wk = gsd_worker_create(a.srv, a.index);
+    pthread_mutex_lock(&w->mu);
+    for (;;) {
+        while (!w->head && !w->stopping)
+            pthread_cond_wait(&w->cv, &w->mu);
+        if (!w->head)
+            break; /* stopping with an empty queue */
+        gsd_job *j = pop(w);
+        w->running++;
+        pthread_mutex_unlock(&w->mu);
+        if (wk)
+            gsd_worker_run(wk, j);
+        else
+            gsd_post(a.srv, gsd_error_frame(j, GAZESPLAT__ERROR_CODE__ERR_INTERNAL, "worker failed to start"));
+        pthread_mutex_lock(&w->mu);
+        w->running--;
+    }
+    pthread_mutex_unlock(&w->mu);
+    gsd_worker_destroy(wk);
+    return NULL;
+}
+
+int gsd_work_start(gsd_server *s, int nworkers, int depth)
+{
+    gsd_work *w = &s->work;
+    pthread_mutex_init(&w->mu, NULL);
+    pthread_cond_init(&w->cv, NULL);
+    w->depth = depth;
+    w->threads = calloc((size_t)nworkers, sizeof *w->threads);
+    if (!w->threads)
+        return -1;
+    for (int i = 0; i < nworkers; i++) {
+        worker_arg *a = malloc(sizeof *a);
+        if (!a)
+            return -1;
+        a->srv = s;
+        a->index = i;
+        if (pthread_create(&w->threads[i], NULL, worker_main, a) != 0) {
+            free(a);
+            return -1;
+        }
+        w->nworkers++;
+    }
+    return 0;
+}
+
+int gsd_work_push(gsd_server *s, gsd_job *job)
+{
+    gsd_work *w = &s->work;
+    pthread_mutex_lock(&w->mu);
+    int ok = !w->stopping && w->length < w->depth;
+    if (ok) {
+        job->qnext = NULL;
+        if (w->tail)
+            w->tail->qnext = job;
+        else
+            w->head = job;
+        w->tail = job;
+        w->length++;
+        pthread_cond_signal(&w->cv);
+    }
+    pthread_mutex_unlock(&w->mu);
+    return ok ? 0 : -1;
+}
+
+void gsd_work_lengths(gsd_server *s, int *length, int *running)
+{
+    gsd_work *w = &s->work;
+    pthread_mutex_lock(&w->mu);
+    *length = w->length;
+    *running = w->running;
+    pthread_mutex_unlock(&w->mu);
+}
+
+void gsd_work_set_depth(gsd_server *s, int depth)
+{
+    pthread_mutex_lock(&s->work.mu);
+    s->work.depth = depth;
+    pthread_mutex_unlock(&s->work.mu);
+}
+
+void gsd_work_stop(gsd_server *s)
+{
+    gsd_work *w = &s->work;
+    if (!w->threads)
+        return;
+    pthread_mutex_lock(&w->mu);
+    w->stopping = 1;
+    /* Queued jobs are answered here; running ones see their stop flag. */
+    while (w->head) {
+        gsd_job *j = pop(w);
+        gsd_post(s, gsd_error_frame(j, GAZESPLAT__ERROR_CODE__ERR_SHUTTING_DOWN, "server stopped"));
+    }
+    pthread_cond_broadcast(&w->cv);
+    pthread_mutex_unlock(&w->mu);
+    for (int i = 0; i < w->nworkers; i++)
+        pthread_join(w->threads[i], NULL);
+    free(w->threads);
+    w->threads = NULL;
+    pthread_mutex_destroy(&w->mu);
+    pthread_cond_destroy(&w->cv);
+}
