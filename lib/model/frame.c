@@ -383,8 +383,8 @@ static int same_face_key(const gs_model_ctx *c, const gs_frame *fr)
     return 1;
 }
 
-int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
-                     int stream, int force_face, gs_error *err)
+void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
+                              int force_face)
 {
     double qR[4];
     mat_to_quat(fr->head_R, qR);
@@ -400,6 +400,12 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         to_camera(c, fr, c->nf, c->n, qR);
     }
     c->fr = *fr;
+}
+
+int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                     int stream, int force_face, gs_error *err)
+{
+    gs_frame_forward_streams(c, fr, force_face);
     c->stream = stream;
     int first = 0, count = c->n;
     if (stream == GS_STREAM_FACE)

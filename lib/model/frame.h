@@ -70,6 +70,11 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m);
 int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                      int stream, int force_face, gs_error *err);
 
+/* Only the streams of gs_frame_forward: the camera-frame Gaussians in
+ * c->g_* (tests of the stream gradients). */
+void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
+                              int force_face);
+
 /* Backward of the last forward from d_rgb [3,S,S] (may be NULL) and
  * d_fmap [C,fs,fs] (may be NULL). Adds parameter gradients into `grads`
  * (a gs_model_params bound to a gradient array; NULL skips them) and the

@@ -37,12 +37,8 @@ static float **varr(gs_model_ctx *c, int k)
 
 static double objective(probe *p, const gs_frame *fr)
 {
-    gs_error err;
-    /* Only the streams are needed, but the forward runs the whole frame. */
-    if (gs_frame_forward(p->c, NULL, fr, GS_STREAM_BOTH, 1, &err) != GS_OK) {
-        fprintf(stderr, "forward: %s\n", err.msg);
-        exit(1);
-    }
+    gs_frame_forward_streams(p->c, fr, 1);
+    p->c->stream = GS_STREAM_BOTH;
     double s = 0;
     for (int k = 0; k < 5; k++) {
         const float *g = *garr(p->c, k);
