@@ -8,6 +8,7 @@
 #include <sys/stat.h>
 
 #include "cli.h"
+#include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
 #include "gazesplat/nn.h"
@@ -39,10 +40,15 @@ const cli_command cli_fit_command = {
 const cli_command cli_redirect_command = {
     "redirect",
     "render a fitted subject (or a face image, fitted first) at new gazes",
-    "usage: gazesplat redirect --model M (--subject S.bin | --image FACE.png)\n"
+    "usage: gazesplat redirect --model M (--subject S.bin | --image IMG)\n"
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
-    "                          [--head-deg P,Y]\n"
+    "                          [--head-deg P,Y] [--index I] [--out-norm]\n"
     "\n"
+    "  --image IMG      a normalized face of the model's size, fitted first;\n"
+    "                   or any photo: its face (--index I, largest first) is\n"
+    "                   detected, normalized, fitted, redirected and pasted\n"
+    "                   back into the photo's eye regions (full-size output;\n"
+    "                   --out-norm also writes the normalized crops)\n"
     "  --gaze-deg LIST  targets, head frame, degrees (pitch > 0 looks up,\n"
     "                   yaw > 0 toward image-left), separated by ';'\n"
     "  --head-deg P,Y   render with this head pose instead of the subject's\n"
@@ -186,13 +192,115 @@ static int read_subject(const cli_command *cmd, const char *path,
     return CLI_OK;
 }
 
+/* The photo path: detect -> landmarks -> pose -> normalize -> fit ->
+ * render each target -> paste the eye regions back into the photo. */
+static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
+                          const char *path, int index, double tg[][2],
+                          int nt, const char *dir, int out_norm)
+{
+    gs_model_info info;
+    gs_model_get_info(m, &info);
+    int S = info.image_size;
+    gs_error err = {0, ""};
+    gs_io_image photo = {0}, norm = {0}, face = {S, S, 3 * (size_t)S, NULL};
+    gs_face_detector *det = NULL;
+    gs_face_shape_model *sp = NULL;
+    uint8_t *mask_n = NULL, *mask_p = NULL;
+    gs_model_ctx *c = NULL;
+    int rc = CLI_OK;
+    gs_face_opts fo;
+    gs_face_opts_default(&fo);
+    fo.index = index;
+    fo.norm_size = S;
+    fo.norm_distance_mm = info.distance_mm;
+    fo.norm_focal = info.focal;
+    gs_face_result res;
+    if (gs_io_image_read(path, NULL, &photo, &err) ||
+        gs_face_detector_load(NULL, &det, &err) ||
+        gs_face_shape_model_load(NULL, &sp, &err) ||
+        gs_face_analyze(det, sp, &photo, &fo, &res, &err) ||
+        gs_face_normalize_image(&photo, &res.norm, &norm, &err)) {
+        rc = cli_fail(cmd, "%s: %s", path, err.msg);
+        goto done;
+    }
+    mask_n = malloc((size_t)S * S);
+    mask_p = malloc((size_t)photo.width * photo.height);
+    face.data = malloc(face.stride * (size_t)S);
+    c = gs_model_ctx_create(m);
+    if (!mask_n || !mask_p || !face.data || !c) {
+        rc = cli_fail(cmd, "out of memory");
+        goto done;
+    }
+    gs_face_mask((const double(*)[2])res.uv_n, GS_FACE_MASK_FACE, 0, 4, S, S,
+                 mask_n, NULL);
+    gs_face_mask((const double(*)[2])res.uv, GS_FACE_MASK_EYES, 2, 6,
+                 photo.width, photo.height, mask_p, NULL);
+    gs_fit_options o;
+    gs_fit_options_default(&o);
+    o.mask = mask_n;
+    o.known_head = 1;
+    gs_geom_norm_rot(&res.norm, res.pose.R, o.head_R);
+    o.head_t[2] = gs_geom_vec3_norm(res.pose.t);
+    gs_subject sub;
+    gs_fit_report r;
+    if (gs_model_fit(c, pool, norm.data, norm.stride, &o, &sub, &r, &err)) {
+        rc = cli_fail(cmd, "fit: %s", err.msg);
+        goto done;
+    }
+    fprintf(stderr, "gazesplat redirect: face %d of %d, head %.1f,%.1f deg; "
+            "fit %d iterations, PSNR %.2f dB; gaze %.1f,%.1f deg\n",
+            index, res.n_faces, res.head_pitch_n / DEG, res.head_yaw_n / DEG,
+            r.iters, sub.fit_psnr, sub.gaze_pitch / DEG, sub.gaze_yaw / DEG);
+    for (int k = 0; k < nt && !rc; k++) {
+        gs_view v = {0};
+        v.gaze_pitch = tg[k][0];
+        v.gaze_yaw = tg[k][1];
+        char out[4096];
+        gs_io_image full = {0};
+        if (gs_model_render(c, pool, &sub, &v, face.data, face.stride, &err)) {
+            rc = cli_fail(cmd, "target %d: %s", k, err.msg);
+            break;
+        }
+        if (out_norm) {
+            snprintf(out, sizeof out, "%s/norm_%03d.png", dir, k);
+            if (gs_io_image_write(out, &face, GS_IO_PNG, 0, &err))
+                rc = cli_fail(cmd, "%s: %s", out, err.msg);
+        }
+        full = photo;
+        full.data = malloc(photo.stride * (size_t)photo.height);
+        if (!full.data) {
+            rc = cli_fail(cmd, "out of memory");
+            break;
+        }
+        memcpy(full.data, photo.data, photo.stride * (size_t)photo.height);
+        snprintf(out, sizeof out, "%s/%03d.png", dir, k);
+        if (gs_face_paste_back(&full, &face, &res.norm, mask_p, &err) ||
+            gs_io_image_write(out, &full, GS_IO_PNG, 0, &err))
+            rc = cli_fail(cmd, "%s: %s", out, err.msg);
+        free(full.data);
+    }
+    if (!rc)
+        printf("gazesplat redirect: %d images -> %s\n", nt, dir);
+done:
+    gs_model_ctx_destroy(c);
+    free(face.data);
+    free(mask_n);
+    free(mask_p);
+    gs_io_image_free(&norm);
+    gs_io_image_free(&photo);
+    gs_face_detector_free(det);
+    gs_face_shape_model_free(sp);
+    return rc;
+}
+
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[6] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[8] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                     {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
-                    {"--out", 1, NULL},      {"--head-deg", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 6);
+                    {"--out", 1, NULL},      {"--head-deg", 1, NULL},
+                    {"--index", 1, NULL},    {"--out-norm", 0, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 8);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -233,11 +341,41 @@ static int run_redirect(int argc, char **argv)
     if ((rc = load_model(cmd, o[0].value, &m)))
         return rc;
     gs_pool *pool = gs_pool_create(2);
+    long index = 0;
+    if (o[6].value && cli_parse_long(o[6].value, 0, 1000, &index)) {
+        gs_pool_destroy(pool);
+        gs_model_destroy(m);
+        return cli_usage_error(cmd, "--index: want 0..1000");
+    }
+    struct stat st;
+    if (o[2].value) {
+        /* A photo unless it is already a normalized face of the model's
+         * size. */
+        gs_io_image probe = {0};
+        gs_error perr = {0, ""};
+        gs_model_info mi;
+        gs_model_get_info(m, &mi);
+        int photo = 1;
+        if (gs_io_image_read(o[2].value, NULL, &probe, &perr) == GS_OK)
+            photo = probe.width != mi.image_size ||
+                    probe.height != mi.image_size || o[6].value;
+        gs_io_image_free(&probe);
+        if (photo) {
+            if (mkdir(o[4].value, 0777) &&
+                !(stat(o[4].value, &st) == 0 && S_ISDIR(st.st_mode)))
+                rc = cli_fail(cmd, "cannot create %s", o[4].value);
+            else
+                rc = redirect_photo(cmd, m, pool, o[2].value, (int)index, tg,
+                                    nt, o[4].value, o[7].value != NULL);
+            gs_pool_destroy(pool);
+            gs_model_destroy(m);
+            return rc;
+        }
+    }
     gs_subject sub;
     rc = o[1].value ? read_subject(cmd, o[1].value, &sub)
                     : fit_image(cmd, m, pool, o[2].value, NULL, NULL, 200, 0,
                                 &sub);
-    struct stat st;
     if (!rc && mkdir(o[4].value, 0777) &&
         !(stat(o[4].value, &st) == 0 && S_ISDIR(st.st_mode)))
         rc = cli_fail(cmd, "cannot create %s", o[4].value);
