@@ -43,6 +43,7 @@ const cli_command cli_redirect_command = {
     "usage: gazesplat redirect --model M (--subject S.bin | --image IMG)\n"
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
     "                          [--head-deg P,Y] [--index I] [--out-norm]\n"
+    "                          [--iters N]\n"
     "\n"
     "  --image IMG      a normalized face of the model's size, fitted first;\n"
     "                   or any photo: its face (--index I, largest first) is\n"
@@ -51,6 +52,7 @@ const cli_command cli_redirect_command = {
     "                   --out-norm also writes the normalized crops)\n"
     "  --gaze-deg LIST  targets, head frame, degrees (pitch > 0 looks up,\n"
     "                   yaw > 0 toward image-left), separated by ';'\n"
+    "  --iters N        fit iteration cap (200)\n"
     "  --head-deg P,Y   render with this head pose instead of the subject's\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
@@ -195,7 +197,8 @@ static int read_subject(const cli_command *cmd, const char *path,
 /* The photo path: detect -> landmarks -> pose -> normalize -> fit ->
  * render each target -> paste the eye regions back into the photo. */
 static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
-                          const char *path, int index, double tg[][2],
+                          const char *path, int index, int iters,
+                          double tg[][2],
                           int nt, const char *dir, int out_norm)
 {
     gs_model_info info;
@@ -238,6 +241,7 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
     gs_fit_options o;
     gs_fit_options_default(&o);
     o.mask = mask_n;
+    o.max_iters = iters;
     o.known_head = 1;
     gs_geom_norm_rot(&res.norm, res.pose.R, o.head_R);
     o.head_t[2] = gs_geom_vec3_norm(res.pose.t);
@@ -296,11 +300,12 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[8] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[9] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                     {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                     {"--out", 1, NULL},      {"--head-deg", 1, NULL},
-                    {"--index", 1, NULL},    {"--out-norm", 0, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 8);
+                    {"--index", 1, NULL},    {"--out-norm", 0, NULL},
+                    {"--iters", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 9);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -341,11 +346,12 @@ static int run_redirect(int argc, char **argv)
     if ((rc = load_model(cmd, o[0].value, &m)))
         return rc;
     gs_pool *pool = gs_pool_create(2);
-    long index = 0;
-    if (o[6].value && cli_parse_long(o[6].value, 0, 1000, &index)) {
+    long index = 0, iters = 200;
+    if ((o[6].value && cli_parse_long(o[6].value, 0, 1000, &index)) ||
+        (o[8].value && cli_parse_long(o[8].value, 1, 100000, &iters))) {
         gs_pool_destroy(pool);
         gs_model_destroy(m);
-        return cli_usage_error(cmd, "--index: want 0..1000");
+        return cli_usage_error(cmd, "--index: want 0..1000; --iters: 1..1e5");
     }
     struct stat st;
     if (o[2].value) {
@@ -365,8 +371,9 @@ static int run_redirect(int argc, char **argv)
                 !(stat(o[4].value, &st) == 0 && S_ISDIR(st.st_mode)))
                 rc = cli_fail(cmd, "cannot create %s", o[4].value);
             else
-                rc = redirect_photo(cmd, m, pool, o[2].value, (int)index, tg,
-                                    nt, o[4].value, o[7].value != NULL);
+                rc = redirect_photo(cmd, m, pool, o[2].value, (int)index,
+                                    (int)iters, tg, nt, o[4].value,
+                                    o[7].value != NULL);
             gs_pool_destroy(pool);
             gs_model_destroy(m);
             return rc;
@@ -374,7 +381,7 @@ static int run_redirect(int argc, char **argv)
     }
     gs_subject sub;
     rc = o[1].value ? read_subject(cmd, o[1].value, &sub)
-                    : fit_image(cmd, m, pool, o[2].value, NULL, NULL, 200, 0,
+                    : fit_image(cmd, m, pool, o[2].value, NULL, NULL, iters, 0,
                                 &sub);
     if (!rc && mkdir(o[4].value, 0777) &&
         !(stat(o[4].value, &st) == 0 && S_ISDIR(st.st_mode)))
