@@ -193,6 +193,8 @@ void gsd_model_start_load(gsd_server *s)
 
 void gsd_model_finish_load(gsd_server *s)
 {
+    if (s->ready_sent)
+        gsd_notify("READY=1"); /* a reload is over, whatever its outcome */
     pthread_join(s->loader, NULL);
     s->loader_running = 0;
     atomic_store(&s->load_done, 0);

@@ -1303,6 +1303,10 @@ static void on_signal(ev_loop *loop, ev_watch *w, int events)
                 s->on_sighup(s);
             if (atomic_load(&s->state) != GSD_DRAINING)
                 gsd_model_start_load(s);
+            /* systemd waits for READY=1 to end the reload; a model load
+             * sends it when it finishes. */
+            if (!s->loader_running)
+                gsd_notify("READY=1");
         } else {
             start_drain(s);
         }
