@@ -6,6 +6,9 @@ preset model, 256 px; speed does not depend on training).
 
 usage: bench_redirect.py [--build DIR] [--model FILE] [--clients 1,8,32]
                          [--seconds S] [--format raw|png]
+       bench_redirect.py --overhead    (round trips of HEALTH, answered by
+                         the loop, and of a 0 ms SLEEP, which goes through
+                         the queue and a worker: the daemon's own cost)
 """
 import argparse
 import os
@@ -55,6 +58,23 @@ def run_clients(gc, addr, keys, n, seconds, fmt):
     return lat, time.time() - t0, errors
 
 
+def overhead(gc, Daemon, a, n=5000):
+    d = Daemon(os.path.join(a.build, "daemon", "gazesplatd"), ["--set", "debug_requests=yes"]).start()
+    try:
+        with gc.Client("unix:" + d.sock) as c:
+            for name, ft, msg, want in [
+                    ("HEALTH (loop thread)", gc.FT.FRAME_HEALTH, gc.pb.HealthRequest(), gc.FT.FRAME_HEALTH_OK),
+                    ("SLEEP 0 ms (queue + worker)", gc.FT.FRAME_SLEEP, gc.pb.Sleep(ms=0), gc.FT.FRAME_SLEEP_OK)]:
+                t0 = time.perf_counter()
+                for _ in range(n):
+                    c.call(ft, msg, want)
+                print("%-28s %6.0f us per round trip (%d, one Python client)"
+                      % (name, (time.perf_counter() - t0) / n * 1e6, n))
+    finally:
+        d.stop()
+    return 0
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--build", default=os.path.join(ROOT, "build"))
@@ -63,11 +83,14 @@ def main():
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--format", default="raw", choices=["raw", "png", "jpeg"])
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--overhead", action="store_true")
     a = ap.parse_args()
     os.environ.setdefault("GAZESPLAT_PB2_DIR", os.path.join(a.build, "python"))
     import gazesplat_client as gc
     from daemon_util import Daemon
     from model_fixture import faces
+    if a.overhead:
+        return overhead(gc, Daemon, a)
     cli = os.path.join(a.build, "clients", "cli", "gazesplat")
     work = tempfile.mkdtemp(prefix="gsd_bench_")
     model = a.model
