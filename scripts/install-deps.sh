@@ -11,6 +11,9 @@ PACKAGES=(
   libopenblas-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
   libusb-1.0-0-dev
+  libopencv-objdetect-dev libopencv-calib3d-dev
+  # data: face cascades, the 68-point landmark model
+  opencv-data libdlib-data
   # protocol: protobuf-c (C), protoc + python3-protobuf (Python client)
   libprotobuf-c-dev protobuf-c-compiler protobuf-compiler python3-protobuf
   # daemon tests: systemd-analyze, systemd-socket-activate
@@ -18,11 +21,19 @@ PACKAGES=(
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev
+  # face tests: dlib as the landmark reference, skimage's photos
+  libdlib-dev python3-skimage
   # VM tier (tests/vm): the emulator, the guest's shell and tools, depmod and
   # a kernel module build (the kernel itself is fetched by scripts/vm/prepare.sh
   # with apt-get download, never installed on the host)
   qemu-system-x86 busybox-static v4l-utils kmod
 )
+# npm fetches the face test photos (scripts/fetch-test-assets.sh). A node
+# install from elsewhere may already bring its own npm, which Debian's
+# package would conflict with.
+if ! command -v npm >/dev/null 2>&1; then
+  PACKAGES+=(npm)
+fi
 
 missing=()
 for p in "${PACKAGES[@]}"; do

@@ -12,6 +12,8 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/install-deps.sh
+# The real-face test photos (npm); the face tests skip only without them.
+scripts/fetch-test-assets.sh
 
 echo "== cppcheck"
 cppcheck --quiet --error-exitcode=1 --std=c11 --inline-suppr \

@@ -1,7 +1,8 @@
 /* Renderer benchmark: forward and forward+backward milliseconds of the
  * expression-guided renderer at 64^2 -> 256^2 (the CPU default) and
  * 128^2 -> 512^2 (the paper's size), C = 32, D = 144, each guidance mode,
- * one thread (OpenBLAS pinned to 1).
+ * on the calling thread and on a gs_pool of 2 threads (OpenBLAS pinned to
+ * one thread: the pool splits the passes).
  *
  *   bench_renderer [--quick] [--reps N]
  *
@@ -16,13 +17,15 @@
 #include <time.h>
 
 #include "gazesplat/nn.h"
+#include "gazesplat/pool.h"
 #include "renderer.h"
 
-enum { NCASES = 6, MAX_REPS = 101 };
+enum { NCASES = 12, MAX_REPS = 101 };
 
 typedef struct {
     gs_renderer_config cfg;
-    int H, W;
+    int H, W, threads;
+    gs_pool *pool;
     size_t np, na, nx, nout;
     float *params, *grads, *acts, *x, *tau, *out, *dout, *dx, *dtau;
     gs_renderer_params p, dp;
@@ -41,11 +44,11 @@ static double now_ms(void)
     return clock_ms(CLOCK_MONOTONIC);
 }
 
-/* CPU time of this thread: on a shared machine, wall time also counts the
- * time other jobs held the core. */
+/* CPU time of the process (all its threads): on a shared machine, wall
+ * time also counts the time other jobs held the cores. */
 static double cpu_ms(void)
 {
-    return clock_ms(CLOCK_THREAD_CPUTIME_ID);
+    return clock_ms(CLOCK_PROCESS_CPUTIME_ID);
 }
 
 static float *alloc_fill(size_t n, uint32_t seed)
@@ -63,8 +66,14 @@ static float *alloc_fill(size_t n, uint32_t seed)
     return a;
 }
 
-static void setup(bench_case *b, int guidance, int side)
+static void setup(bench_case *b, int guidance, int side, int threads)
 {
+    b->threads = threads;
+    b->pool = threads > 1 ? gs_pool_create(threads) : NULL;
+    if (threads > 1 && !b->pool) {
+        fprintf(stderr, "cannot create a pool\n");
+        exit(2);
+    }
     b->cfg = (gs_renderer_config){32, 144, guidance, 2};
     b->H = b->W = side;
     b->np = gs_renderer_param_count(&b->cfg);
@@ -87,11 +96,11 @@ static void run_once(bench_case *b, int rep)
 {
     double t0 = now_ms(), c0 = cpu_ms();
     int rc = gs_renderer_forward(&b->cfg, &b->p, b->x, b->tau, b->H, b->W,
-                                 b->acts, b->na, b->out);
+                                 b->acts, b->na, b->out, b->pool);
     double t1 = now_ms(), c1 = cpu_ms();
     rc = rc ? rc : gs_renderer_backward(&b->cfg, &b->p, b->acts, b->na, b->x,
                                         b->tau, b->dout, b->H, b->W, &b->dp,
-                                        b->dx, b->dtau);
+                                        b->dx, b->dtau, b->pool);
     double t2 = now_ms(), c2 = cpu_ms();
     if (rc) {
         fprintf(stderr, "renderer failed: %d\n", rc);
@@ -139,23 +148,25 @@ int main(int argc, char **argv)
     bench_case *cases = calloc(NCASES, sizeof *cases);
     if (!cases)
         return 2;
-    int ncases = quick ? 3 : NCASES;
-    for (int i = 0; i < ncases; i++)
-        setup(&cases[i], i % 3, i < 3 ? 64 : 128);
+    int ncases = quick ? 6 : NCASES;
+    for (int i = 0; i < ncases; i++) /* modes, then threads, then sizes */
+        setup(&cases[i], i % 3, i < 6 ? 64 : 128, (i / 3) % 2 ? 2 : 1);
     for (int i = 0; i < ncases; i++) /* warm-up: page in the buffers */
         run_once(&cases[i], 0);
     for (int r = 0; r < reps; r++)
         for (int i = 0; i < ncases; i++)
             run_once(&cases[i], r);
-    printf("| features -> image | guidance | fwd ms | fwd+bwd ms | fwd CPU ms | "
-           "fwd+bwd CPU ms | activations MB |\n");
-    printf("|---|---|---|---|---|---|---|\n");
+    printf("| features -> image | guidance | threads | fwd ms | fwd+bwd ms | "
+           "fwd CPU ms | fwd+bwd CPU ms | activations MB |\n");
+    printf("|---|---|---|---|---|---|---|---|\n");
     for (int i = 0; i < ncases; i++) {
         bench_case *b = &cases[i];
-        printf("| %d^2 -> %d^2 | %s | %.2f | %.2f | %.2f | %.2f | %.1f |\n",
-               b->H, 4 * b->H, names[i % 3], median(b->fwd, reps),
+        printf("| %d^2 -> %d^2 | %s | %d | %.2f | %.2f | %.2f | %.2f | %.1f |\n",
+               b->H, 4 * b->H, names[i % 3], b->threads, median(b->fwd, reps),
                median(b->both, reps), median(b->cpu_fwd, reps),
                median(b->cpu_both, reps), (double)b->na * 4.0 / 1e6);
     }
+    for (int i = 0; i < ncases; i++)
+        gs_pool_destroy(cases[i].pool);
     return 0;
 }

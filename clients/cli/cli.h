@@ -18,11 +18,14 @@ typedef struct cli_command {
 } cli_command;
 
 /* The subcommands, defined in their own files. */
+extern const cli_command cli_face_command;
 extern const cli_command cli_client_command;
 extern const cli_command cli_render_command;
 extern const cli_command cli_scene_command;
 extern const cli_command cli_synth_command;
 extern const cli_command cli_train_command;
+extern const cli_command cli_fit_command;
+extern const cli_command cli_redirect_command;
 extern const cli_command cli_live_command;
 
 /* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */

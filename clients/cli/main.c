@@ -6,11 +6,14 @@
 #include "cli.h"
 
 static const cli_command *const commands[] = {
+    &cli_face_command,
     &cli_client_command,
     &cli_render_command,
     &cli_scene_command,
     &cli_synth_command,
     &cli_train_command,
+    &cli_fit_command,
+    &cli_redirect_command,
     &cli_live_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])

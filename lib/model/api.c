@@ -444,17 +444,6 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         fit_bufs_free(&b);
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
     }
-    /* The renderer's backward pass writes parameter gradients; fitting
-     * ignores them, so they go to a scratch block. */
-    float *scratch = calloc(c->m->nparams, sizeof(float));
-    if (!scratch) {
-        free(s);
-        free(best);
-        fit_bufs_free(&b);
-        return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
-    }
-    gs_model_params scratch_g;
-    gs_model_bind(c->m, scratch, &scratch_g);
     fit_init(c, &o, s);
     double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
     int it = 0, plateaued = 0;
@@ -487,7 +476,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             break;
         gs_frame_grad fg;
         memset(&fg, 0, sizeof fg);
-        rc = gs_frame_backward(c, pool, b.dpred, NULL, &scratch_g, &fg, err);
+        rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, &fg, err);
         if (rc)
             break;
         memset(s->g, 0, sizeof s->g);
@@ -568,7 +557,6 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         report->loss_last = best_loss;
         report->stopped_on_plateau = plateaued;
     }
-    free(scratch);
     free(s);
     free(best);
     fit_bufs_free(&b);

@@ -35,11 +35,16 @@ static int write_meta(gs_st_writer *w, const gs_model_config *c)
     snprintf(val, sizeof val, "%d", GS_MODEL_FORMAT_VERSION);
     rc = rc ? rc : gs_st_writer_meta(w, "format_version", val);
     for (int i = 0; i < NFIELDS && !rc; i++) {
-        const char *base = (const char *)c + k_fields[i].off;
-        if (k_fields[i].is_double)
-            snprintf(val, sizeof val, "%.17g", *(const double *)base);
-        else
-            snprintf(val, sizeof val, "%d", *(const int *)base);
+        const unsigned char *base = (const unsigned char *)c + k_fields[i].off;
+        if (k_fields[i].is_double) {
+            double d;
+            memcpy(&d, base, sizeof d);
+            snprintf(val, sizeof val, "%.17g", d);
+        } else {
+            int x;
+            memcpy(&x, base, sizeof x);
+            snprintf(val, sizeof val, "%d", x);
+        }
         snprintf(key, sizeof key, "config.%s", k_fields[i].key);
         rc = gs_st_writer_meta(w, key, val);
     }
@@ -88,14 +93,16 @@ static int read_config(const gs_st_file *f, gs_model_config *c,
             return gs_error_set(err, GS_ERR_FORMAT, "model: %s missing", key);
         char *end = NULL;
         errno = 0;
-        char *base = (char *)c + k_fields[i].off;
+        unsigned char *base = (unsigned char *)c + k_fields[i].off;
         if (k_fields[i].is_double) {
-            *(double *)base = strtod(v, &end);
+            double d = strtod(v, &end);
+            memcpy(base, &d, sizeof d);
         } else {
             long x = strtol(v, &end, 10);
             if (x < -1000000000L || x > 1000000000L)
                 errno = ERANGE;
-            *(int *)base = (int)x;
+            int xi = (int)x;
+            memcpy(base, &xi, sizeof xi);
         }
         if (errno || *end)
             return gs_error_set(err, GS_ERR_FORMAT, "model: %s = '%.40s'",
@@ -104,14 +111,9 @@ static int read_config(const gs_st_file *f, gs_model_config *c,
     return gs_model_config_check(c, err);
 }
 
-int gs_model_load(const char *path, gs_model **out, gs_error *err)
+static int load_from(gs_st_file *f, gs_model **out, gs_error *err)
 {
-    if (!path || !out)
-        return gs_error_set(err, GS_ERR_ARG, "model load: NULL argument");
-    gs_st_file *f = NULL;
-    int rc = gs_st_open(path, NULL, &f, err);
-    if (rc)
-        return rc;
+    int rc;
     gs_model_config cfg;
     gs_model *m = NULL;
     rc = read_config(f, &cfg, err);
@@ -136,7 +138,6 @@ int gs_model_load(const char *path, gs_model **out, gs_error *err)
         rc = gs_error_set(err, GS_ERR_FORMAT,
                           "model: %d tensors in the file, %d expected",
                           gs_st_count(f), m->ntensors);
-    gs_st_close(f);
     if (rc) {
         gs_model_destroy(m);
         return rc;
@@ -144,4 +145,31 @@ int gs_model_load(const char *path, gs_model **out, gs_error *err)
     gs_model_bind(m, m->params, &m->p);
     *out = m;
     return GS_OK;
+}
+
+int gs_model_load(const char *path, gs_model **out, gs_error *err)
+{
+    if (!path || !out)
+        return gs_error_set(err, GS_ERR_ARG, "model load: NULL argument");
+    gs_st_file *f = NULL;
+    int rc = gs_st_open(path, NULL, &f, err);
+    if (rc)
+        return rc;
+    rc = load_from(f, out, err);
+    gs_st_close(f);
+    return rc;
+}
+
+int gs_model_load_mem(const void *buf, size_t len, gs_model **out,
+                      gs_error *err)
+{
+    if (!buf || !out)
+        return gs_error_set(err, GS_ERR_ARG, "model load: NULL argument");
+    gs_st_file *f = NULL;
+    int rc = gs_st_open_mem(buf, len, NULL, &f, err);
+    if (rc)
+        return rc;
+    rc = load_from(f, out, err);
+    gs_st_close(f);
+    return rc;
 }

@@ -151,6 +151,10 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->v_rgb = falloc(isz * 3, &fail);
     c->r_act_len = gs_renderer_act_size(&m->rcfg, c->fs, c->fs);
     c->r_act = falloc(c->r_act_len, &fail);
+    size_t rn = gs_renderer_param_count(&m->rcfg);
+    c->r_grad = falloc(rn, &fail);
+    if (c->r_grad)
+        gs_renderer_bind(&m->rcfg, c->r_grad, rn, &c->r_grad_p);
     size_t sc = gs_mlp_scratch_size(&p->face_e, c->nf);
     size_t s2 = gs_mlp_scratch_size(&p->face_p, c->nf);
     size_t s3 = gs_mlp_scratch_size(&p->eye, (int)ne);
@@ -187,7 +191,8 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->g_quat, &c->g_opac, &c->g_feat, &c->x_head,
                       &c->q_head, &c->v_mean, &c->v_scale, &c->v_quat,
                       &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
-                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->scratch};
+                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->r_grad,
+                      &c->scratch};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(*bufs[i]);
     free(c->tmp8);
@@ -418,7 +423,8 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     if (rc)
         return rc;
     rc = gs_renderer_forward(&c->m->rcfg, &c->m->p.rend, c->fmap, fr->code,
-                             c->fs, c->fs, c->r_act, c->r_act_len, c->rgb);
+                             c->fs, c->fs, c->r_act, c->r_act_len, c->rgb,
+                             pool);
     if (rc)
         return gs_error_set(err, rc, "model: renderer forward failed");
     return GS_OK;
@@ -688,11 +694,15 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
     else
         memset(c->v_fmap, 0, fsz * sizeof(float));
     if (d_rgb) {
+        if (!grads)
+            memset(c->r_grad, 0,
+                   gs_renderer_param_count(&c->m->rcfg) * sizeof(float));
         int rc = gs_renderer_backward(&c->m->rcfg, &c->m->p.rend, c->r_act,
                                       c->r_act_len, c->fmap, c->fr.code,
                                       d_rgb, c->fs, c->fs,
-                                      grads ? &grads->rend : NULL, c->v_fmap,
-                                      fg ? fg->code : NULL);
+                                      grads ? &grads->rend : &c->r_grad_p,
+                                      c->v_fmap,
+                                      fg ? fg->code : NULL, pool);
         if (rc)
             return gs_error_set(err, rc, "model: renderer backward failed");
     }

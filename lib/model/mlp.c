@@ -51,7 +51,7 @@ void gs_mlp_backward(const gs_mlp *m, const gs_mlp *g, const float *in, int n,
                      const float *acts, const float *dout, float *din,
                      float *scratch)
 {
-    const float *pre[4], *post[4];
+    const float *pre[4] = {0}, *post[4] = {0};
     const float *a = acts;
     for (int l = 0; l + 1 < m->nl; l++) {
         size_t sz = (size_t)n * m->dims[l + 1];

@@ -11,6 +11,8 @@
  *   out = sigmoid(rgb)                                      [3, 4H, 4W]
  * lrelu has slope 0.2. Its backward reads the saved OUTPUT: with a positive
  * slope, out > 0 exactly when in > 0, so the gradient is the same.
+ * The passes themselves (and their split over a gs_pool) are in
+ * renderer_ops.c; this file holds the layouts and the order of the passes.
  * tile(xin): shuffled channel c at (2h+i, 2w+j) adds xin channel
  * (4c+2i+j) mod C, i.e. xin.repeat(1,4,1,1) before the shuffle. */
 #include "renderer.h"
@@ -20,11 +22,8 @@
 #include <stdio.h>
 #include <string.h>
 
-#include <cblas.h>
-
 #include "gazesplat/nn.h"
-
-#define LRELU_SLOPE 0.2f
+#include "renderer_ops.h"
 
 /* ---- Configuration ------------------------------------------------------ */
 
@@ -224,11 +223,13 @@ typedef struct {
     float *rgb1a, *rgb1b; /* [3, HW1] scratch */
     float *rgb0;         /* [3, HW0] scratch */
     float *gscr;         /* [GUIDE_SCRATCH C] scratch */
-    float *rows;         /* [2 * 4W] scratch rows of the blurs */
+    float *rows;         /* blur rows, gs_rop_rows_size(C, 4W) */
+    float *part;         /* conv partials, gs_rop_part_size(C) */
+    float *rbuf;         /* [HW2] guidance backward */
     size_t total;        /* floats */
 } act_layout;
 
-enum { GUIDE_SCRATCH = 8 }; /* floats per channel for the guidance kernels */
+enum { GUIDE_SCRATCH = 6 }; /* floats per channel for the guidance passes */
 
 static float *carve(act_layout *L, float *base, size_t n)
 {
@@ -277,7 +278,9 @@ static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
     L->rgb1b = carve(L, base, 3 * L->hw1);
     L->rgb0 = carve(L, base, 3 * L->hw0);
     L->gscr = carve(L, base, GUIDE_SCRATCH * Cs);
-    L->rows = carve(L, base, 8 * (size_t)W);
+    L->rows = carve(L, base, gs_rop_rows_size(C, 4 * (size_t)W));
+    L->part = carve(L, base, gs_rop_part_size(C));
+    L->rbuf = guided ? carve(L, base, L->hw2) : NULL;
 }
 
 size_t gs_renderer_act_size(const gs_renderer_config *cfg, int H, int W)
@@ -327,11 +330,24 @@ static int check_call(const gs_renderer_config *cfg, const gs_renderer_params *p
     return GS_OK;
 }
 
-/* ---- Small kernels ------------------------------------------------------- */
+/* ---- Passes ---------------------------------------------------------- */
 
-static void zero(float *x, size_t n)
+static gs_rop_ctx rop_ctx(const act_layout *L, gs_pool *pool)
 {
-    memset(x, 0, n * sizeof *x);
+    gs_rop_ctx x = {pool, L->part, L->rows, 4 * (size_t)L->W, L->rbuf};
+    return x;
+}
+
+static gs_rop_guide rop_guide(const gs_renderer_config *cfg,
+                              const act_layout *L, const gs_renderer_params *p,
+                              const gs_renderer_params *dp)
+{
+    gs_rop_guide gd = {p->key_w, p->value_w, p->value_b,
+                       dp ? dp->key_w : NULL, dp ? dp->value_w : NULL,
+                       dp ? dp->value_b : NULL, L->C, L->D,
+                       cfg->guidance == GS_GUIDE_MULTIPLICATIVE,
+                       sqrtf((float)L->D)};
+    return gd;
 }
 
 static void add_into(float *dst, const float *src, size_t n)
@@ -340,454 +356,83 @@ static void add_into(float *dst, const float *src, size_t n)
         dst[i] += src[i];
 }
 
-/* y[n] = lrelu(y) in place, as gs_nn_leaky_relu_forward; written as a
- * select of the factor so that it vectorises (random signs make a branch
- * mispredict half the time). */
-static void lrelu_forward_inplace(float *y, size_t n)
-{
-    for (size_t i = 0; i < n; i++)
-        y[i] *= y[i] > 0.0f ? 1.0f : LRELU_SLOPE;
-}
-
-/* d[n] *= lrelu'(in), from the saved output y = lrelu(in) (see top). */
-static void lrelu_backward_inplace(float *d, const float *y, size_t n)
-{
-    for (size_t i = 0; i < n; i++)
-        d[i] *= y[i] > 0.0f ? 1.0f : LRELU_SLOPE;
-}
-
-/* out[C,2H,2W]: out[c, 2h+i, 2w+j] = y[4c+2i+j, h, w] + x[(4c+2i+j) % C, h, w]
- * for y [4C,H,W], x [C,H,W]. */
-static void shuffle_tile_forward(float *out, const float *y, const float *x,
-                                 int C, int H, int W)
-{
-    size_t hw = (size_t)H * (size_t)W, W2 = 2 * (size_t)W;
-    for (int c = 0; c < C; c++)
-        for (int k = 0; k < 4; k++) {
-            const float *src = y + (size_t)(4 * c + k) * hw;
-            const float *skip = x + (size_t)((4 * c + k) % C) * hw;
-            float *dst = out + (size_t)c * 4 * hw + (size_t)(k >> 1) * W2 + (size_t)(k & 1);
-            for (int h = 0; h < H; h++) {
-                const float *s = src + (size_t)h * (size_t)W;
-                const float *t = skip + (size_t)h * (size_t)W;
-                float *d = dst + (size_t)h * 2 * W2;
-                for (int w = 0; w < W; w++)
-                    d[2 * (size_t)w] = s[w] + t[w];
-            }
-        }
-}
-
-/* The adjoint: dy[4C,H,W] = (written) and dx[C,H,W] += (dx may be NULL)
- * from dout[C,2H,2W]. */
-static void shuffle_tile_backward(float *dy, float *dx, const float *dout,
-                                  int C, int H, int W)
-{
-    size_t hw = (size_t)H * (size_t)W, W2 = 2 * (size_t)W;
-    for (int c = 0; c < C; c++)
-        for (int k = 0; k < 4; k++) {
-            float *ddst = dy + (size_t)(4 * c + k) * hw;
-            float *dskip = dx ? dx + (size_t)((4 * c + k) % C) * hw : NULL;
-            const float *src = dout + (size_t)c * 4 * hw + (size_t)(k >> 1) * W2 + (size_t)(k & 1);
-            for (int h = 0; h < H; h++) {
-                const float *g = src + (size_t)h * 2 * W2;
-                float *a = ddst + (size_t)h * (size_t)W;
-                for (int w = 0; w < W; w++)
-                    a[w] = g[2 * (size_t)w];
-                if (!dskip)
-                    continue;
-                float *s = dskip + (size_t)h * (size_t)W;
-                for (int w = 0; w < W; w++)
-                    s[w] += g[2 * (size_t)w];
-            }
-        }
-}
-
-/* ---- Blur and 1x1 convolution backward, renderer-shaped ------------------
- * The same maths as gs_nn_blur_* and gs_nn_conv1x1_backward, arranged for
- * this network: the blur is separable and runs row by row with the
- * reflected border handled outside the inner loops (which vectorise), and
- * the backward passes WRITE their input gradient (every such buffer here is
- * fresh), which saves a zeroing pass over each. Rounding differs from the
- * gs_nn kernels in the last bits; the PyTorch test covers both. */
-
-/* Reflect index i in [-1, n] into [0, n) (PyTorch 'reflect', n >= 2). */
-static int reflect(int i, int n)
-{
-    return i < 0 ? -i : (i >= n ? 2 * n - 2 - i : i);
-}
-
-/* o[W] = [1,2,1] * v[W] with reflected ends, times scale (W >= 2). */
-static void row_blur(float *o, const float *v, int W, float scale)
-{
-    o[0] = (2.0f * v[1] + 2.0f * v[0]) * scale;
-    for (int x = 1; x < W - 1; x++)
-        o[x] = (v[x - 1] + 2.0f * v[x] + v[x + 1]) * scale;
-    o[W - 1] = (2.0f * v[W - 2] + 2.0f * v[W - 1]) * scale;
-}
-
-/* The adjoint of row_blur without the scale: e[W] from g[W] (W >= 2). The
- * reflected taps y[0] <- x[1] and y[W-1] <- x[W-2] send g[0] to e[1] and
- * g[W-1] to e[W-2]. */
-static void row_blur_adjoint(float *e, const float *g, int W)
-{
-    e[0] = 2.0f * g[0] + g[1];
-    for (int x = 1; x < W - 1; x++)
-        e[x] = g[x - 1] + 2.0f * g[x] + g[x + 1];
-    e[W - 1] = g[W - 2] + 2.0f * g[W - 1];
-    e[1] += g[0];
-    e[W - 2] += g[W - 1];
-}
-
-/* out[C,H,W] = ([1,2,1] x [1,2,1] / 16) * in, reflect border (H, W >= 2);
- * row scratch v[W]. */
-static void blur_forward(float *out, const float *in, int C, int H, int W,
-                         float *v)
-{
-    size_t hw = (size_t)H * (size_t)W;
-    for (int c = 0; c < C; c++)
-        for (int y = 0; y < H; y++) {
-            const float *src = in + (size_t)c * hw;
-            const float *a = src + (size_t)reflect(y - 1, H) * (size_t)W;
-            const float *b = src + (size_t)y * (size_t)W;
-            const float *d = src + (size_t)reflect(y + 1, H) * (size_t)W;
-            for (int x = 0; x < W; x++)
-                v[x] = a[x] + 2.0f * b[x] + d[x];
-            row_blur(out + (size_t)c * hw + (size_t)y * (size_t)W, v, W,
-                     1.0f / 16.0f);
-        }
-}
-
-/* din[C,H,W] = blur^T dout (written, not added); row scratch 2W floats. */
-static void blur_backward(float *din, const float *dout, int C, int H, int W,
-                          float *scratch)
-{
-    size_t hw = (size_t)H * (size_t)W, Ws = (size_t)W;
-    float *prev = scratch, *cur = scratch + W;
-    for (int c = 0; c < C; c++) {
-        float *d = din + (size_t)c * hw;
-        memset(prev, 0, Ws * sizeof *prev); /* row -1: weight 0, but finite */
-        for (int y = 0; y < H; y++) /* rows: e = row adjoint of dout */
-            row_blur_adjoint(d + (size_t)y * Ws, dout + (size_t)c * hw + (size_t)y * Ws, W);
-        /* columns, in place: row k gets e[k-1] + 2 e[k] + e[k+1] (zero
-         * outside), plus the reflected taps e[0] -> row 1, e[H-1] -> row
-         * H-2; prev keeps the original e[k-1] */
-        for (int k = 0; k < H; k++) {
-            float *row = d + (size_t)k * Ws;
-            const float *next = k + 1 < H ? row + Ws : row; /* unused at H-1 */
-            float wu = (k > 0 ? 1.0f : 0.0f) + (k == 1 ? 1.0f : 0.0f);
-            float wd = (k + 1 < H ? 1.0f : 0.0f) + (k == H - 2 ? 1.0f : 0.0f);
-            memcpy(cur, row, Ws * sizeof *cur);
-            for (int x = 0; x < W; x++)
-                row[x] = (wu * prev[x] + 2.0f * cur[x] + wd * next[x]) *
-                         (1.0f / 16.0f);
-            float *t = prev;
-            prev = cur, cur = t;
-        }
-    }
-}
-
-/* dinp[IC,HW] = w^T dout (written; skipped when NULL); dw[OC,IC] += dout
- * in^T; db[OC] += row sums of dout (double accumulators). */
-static void conv_backward(float *dinp, float *dw, float *db, const float *dout,
-                          const float *in, const float *w, int IC, int OC,
-                          int HW)
-{
-    if (dinp)
-        cblas_sgemm(CblasRowMajor, CblasTrans, CblasNoTrans, IC, HW, OC, 1.0f,
-                    w, IC, dout, HW, 0.0f, dinp, HW);
-    cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, OC, IC, HW, 1.0f, dout,
-                HW, in, HW, 1.0f, dw, IC);
-    for (int o = 0; o < OC; o++) {
-        const float *row = dout + (size_t)o * (size_t)HW;
-        double acc = 0.0;
-        for (int p = 0; p < HW; p++)
-            acc += row[p];
-        db[o] += (float)acc;
-    }
-}
-
-/* ---- Multiplicative guidance ---------------------------------------------
- * g_p = u_p + u_p * a, a = wv xbar + bv, xbar = sum_p att_p u_p,
- * att = softmax_p(u_p . s), s = wk^T tau / temp. Backward with dg [C,HW]:
- *   da_c = sum_p dg_cp u_cp; dbv += da; dwv += da xbar^T; dxbar = wv^T da
- *   du_p += dg_p * (1 + a) + att_p dxbar + r_p s,
- *     r_p = att_p (u_p . dxbar - xbar . dxbar)      (softmax backward)
- *   ds = sum_p r_p u_p; dwk += tau ds^T / temp; dtau += wk ds / temp.
- * The additive mode is gs_nn_attention (same maths with da_c = sum_p dg_cp
- * and du_p += dg_p + ...). */
-
-/* s[C] = wk[D,C]^T tau[D] / temp */
-static void guide_query(float *s, const float *wk, const float *tau, int C,
-                        int D, float temp)
-{
-    for (int c = 0; c < C; c++)
-        s[c] = 0.0f;
-    for (int d = 0; d < D; d++) {
-        const float *row = wk + (size_t)d * (size_t)C;
-        for (int c = 0; c < C; c++)
-            s[c] += row[c] * tau[d];
-    }
-    for (int c = 0; c < C; c++)
-        s[c] /= temp;
-}
-
-/* xbar[C] = sum_p att_p u[c,p] (double accumulators) */
-static void guide_pool(float *xbar, const float *u, const float *att, int C,
-                       size_t hw)
-{
-    for (int c = 0; c < C; c++) {
-        const float *uc = u + (size_t)c * hw;
-        double acc = 0.0;
-        for (size_t p = 0; p < hw; p++)
-            acc += (double)att[p] * uc[p];
-        xbar[c] = (float)acc;
-    }
-}
-
-/* a[C] = wv[C,C] xbar + bv */
-static void guide_value(float *a, const float *wv, const float *bv,
-                        const float *xbar, int C)
-{
-    for (int c = 0; c < C; c++) {
-        const float *row = wv + (size_t)c * (size_t)C;
-        float v = bv[c];
-        for (int k = 0; k < C; k++)
-            v += row[k] * xbar[k];
-        a[c] = v;
-    }
-}
-
-/* att[HW] = softmax_p(u_p . s) and a[C]; scratch sq, xbar [C] each */
-static void guide_attend(float *att, float *a, float *sq, float *xbar,
-                         const float *u, const float *tau,
-                         const gs_renderer_params *p, int C, int D, size_t hw,
-                         float temp)
-{
-    guide_query(sq, p->key_w, tau, C, D, temp);
-    zero(att, hw);
-    for (int c = 0; c < C; c++) {
-        const float *uc = u + (size_t)c * hw;
-        for (size_t q = 0; q < hw; q++)
-            att[q] += uc[q] * sq[c];
-    }
-    gs_nn_softmax_forward(att, att, (int)hw);
-    guide_pool(xbar, u, att, C, hw);
-    guide_value(a, p->value_w, p->value_b, xbar, C);
-}
-
-/* g[C,HW], att[HW] from u[C,HW]; scratch 3C floats */
-static void guide_mul_forward(float *g, float *att, const float *u,
-                              const float *tau, const gs_renderer_params *p,
-                              int C, int D, size_t hw, float temp,
-                              float *scratch)
-{
-    float *sq = scratch, *xbar = sq + C, *a = xbar + C;
-    guide_attend(att, a, sq, xbar, u, tau, p, C, D, hw, temp);
-    for (int c = 0; c < C; c++) {
-        const float *uc = u + (size_t)c * hw;
-        float *gc = g + (size_t)c * hw;
-        for (size_t q = 0; q < hw; q++)
-            gc[q] = uc[q] + uc[q] * a[c];
-    }
-}
-
-/* du[C,HW] += ..., guidance gradients into dp, dtau (may be NULL) from
- * dg[C,HW]; u, att saved by forward; scratch 6C floats */
-static void guide_mul_backward(float *du, float *dtau,
-                               const gs_renderer_params *dp, const float *dg,
-                               const float *u, const float *att,
-                               const float *tau, const gs_renderer_params *p,
-                               int C, int D, size_t hw, float temp,
-                               float *scratch)
-{
-    float *sq = scratch, *xbar = sq + C, *a = xbar + C, *da = a + C,
-          *dxbar = da + C, *ds = dxbar + C;
-    guide_query(sq, p->key_w, tau, C, D, temp);
-    guide_pool(xbar, u, att, C, hw);
-    guide_value(a, p->value_w, p->value_b, xbar, C);
-    for (int c = 0; c < C; c++) {
-        const float *uc = u + (size_t)c * hw, *gc = dg + (size_t)c * hw;
-        double acc = 0.0;
-        for (size_t q = 0; q < hw; q++)
-            acc += (double)gc[q] * uc[q];
-        da[c] = (float)acc;
-        dp->value_b[c] += da[c];
-        for (int k = 0; k < C; k++)
-            dp->value_w[(size_t)c * (size_t)C + (size_t)k] += da[c] * xbar[k];
-    }
-    double S = 0.0;
-    for (int k = 0; k < C; k++) {
-        float v = 0.0f;
-        for (int c = 0; c < C; c++)
-            v += p->value_w[(size_t)c * (size_t)C + (size_t)k] * da[c];
-        dxbar[k] = v;
-        S += (double)xbar[k] * v;
-    }
-    /* r_p per block of pixels: one sweep over the channels for the dot
-     * product u_p . dxbar, a second for the updates and ds. */
-    for (int c = 0; c < C; c++)
-        ds[c] = 0.0f;
-    enum { BLOCK = 256 };
-    float r[BLOCK];
-    for (size_t p0 = 0; p0 < hw; p0 += BLOCK) {
-        size_t n = hw - p0 < BLOCK ? hw - p0 : BLOCK;
-        for (size_t i = 0; i < n; i++)
-            r[i] = 0.0f;
-        for (int c = 0; c < C; c++) {
-            const float *uc = u + (size_t)c * hw + p0;
-            for (size_t i = 0; i < n; i++)
-                r[i] += uc[i] * dxbar[c];
-        }
-        for (size_t i = 0; i < n; i++)
-            r[i] = att[p0 + i] * (float)((double)r[i] - S);
-        for (int c = 0; c < C; c++) {
-            size_t off = (size_t)c * hw + p0;
-            const float *uc = u + off, *gc = dg + off;
-            float *duc = du + off, gain = 1.0f + a[c];
-            double acc = 0.0;
-            for (size_t i = 0; i < n; i++) {
-                acc += (double)r[i] * uc[i];
-                duc[i] += gc[i] * gain + att[p0 + i] * dxbar[c] + r[i] * sq[c];
-            }
-            ds[c] += (float)acc;
-        }
-    }
-    for (int d = 0; d < D; d++) {
-        const float *row = p->key_w + (size_t)d * (size_t)C;
-        float *drow = dp->key_w + (size_t)d * (size_t)C, acc = 0.0f;
-        for (int c = 0; c < C; c++) {
-            float dq = ds[c] / temp;
-            drow[c] += tau[d] * dq;
-            acc += row[c] * dq;
-        }
-        if (dtau)
-            dtau[d] += acc;
-    }
-}
-
-static float guide_temp(int D)
-{
-    return sqrtf((float)D);
-}
-
-/* g = guide(u); writes att. Nothing for GS_GUIDE_NONE (g aliases u). */
-static int guide_forward(const gs_renderer_config *cfg, const act_layout *L,
-                         const block_acts *a, const gs_renderer_params *p,
-                         const float *tau, size_t hw)
-{
-    int C = L->C, D = L->D;
-    float temp = guide_temp(D);
-    if (cfg->guidance == GS_GUIDE_ADDITIVE)
-        return gs_nn_attention_forward(a->g, a->att, a->u, tau, p->key_w, NULL,
-                                       p->value_w, p->value_b, C, D, (int)hw,
-                                       temp, L->gscr,
-                                       GUIDE_SCRATCH * (size_t)C);
-    if (cfg->guidance == GS_GUIDE_MULTIPLICATIVE)
-        guide_mul_forward(a->g, a->att, a->u, tau, p, C, D, hw, temp, L->gscr);
-    return GS_OK;
-}
-
-/* du[C,HW] += the guidance's adjoint of dg; parameter and tau gradients. */
-static int guide_backward(const gs_renderer_config *cfg, const act_layout *L,
-                          const block_acts *a, const gs_renderer_params *p,
-                          const gs_renderer_params *dp, const float *tau,
-                          float *dtau, const float *dg, float *du, size_t hw)
-{
-    int C = L->C, D = L->D;
-    float temp = guide_temp(D);
-    if (cfg->guidance == GS_GUIDE_ADDITIVE)
-        return gs_nn_attention_backward(du, dtau, dp->key_w, NULL, dp->value_w,
-                                        dp->value_b, dg, a->u, a->att, tau,
-                                        p->key_w, p->value_w, C, D, (int)hw,
-                                        temp, L->gscr,
-                                        GUIDE_SCRATCH * (size_t)C);
-    guide_mul_backward(du, dtau, dp, dg, a->u, a->att, tau, p, C, D, hw, temp,
-                       L->gscr);
-    return GS_OK;
-}
-
 /* ---- Blocks -------------------------------------------------------------- */
 
 /* Block b: xin [C,Hi,Wi] -> a->g [C,2Hi,2Wi]; bufP is the temporary. */
-static int block_forward(const gs_renderer_config *cfg, const act_layout *L,
-                         int b, const gs_renderer_params *p, const float *xin,
-                         const float *tau, int Hi, int Wi)
+static void block_forward(const gs_renderer_config *cfg, const act_layout *L,
+                          const gs_rop_ctx *x, int b,
+                          const gs_renderer_params *p, const float *xin,
+                          const float *tau, int Hi, int Wi)
 {
     const block_acts *a = &L->blk[b];
     int C = L->C, hwi = Hi * Wi, hwo = 4 * hwi;
-    size_t ni = (size_t)hwi, no = (size_t)hwo, Cs = (size_t)C;
-    int rc = gs_nn_conv1x1_forward(a->ya, xin, p->block[b].a.w, p->block[b].a.b,
-                                   C, 2 * C, hwi);
-    if (!rc)
-        lrelu_forward_inplace(a->ya, 2 * Cs * ni);
-    rc = rc ? rc : gs_nn_conv1x1_forward(a->yb, a->ya, p->block[b].b.w,
-                                         p->block[b].b.b, 2 * C, 4 * C, hwi);
-    if (rc)
-        return rc;
-    lrelu_forward_inplace(a->yb, 4 * Cs * ni);
-    shuffle_tile_forward(L->bufP, a->yb, xin, C, Hi, Wi);
-    blur_forward(a->z, L->bufP, C, 2 * Hi, 2 * Wi, L->rows);
-    rc = gs_nn_conv1x1_forward(a->u, a->z, p->block[b].c.w,
-                                         p->block[b].c.b, C, C, hwo);
-    if (rc)
-        return rc;
-    lrelu_forward_inplace(a->u, Cs * no);
-    return guide_forward(cfg, L, a, p, tau, no);
+    gs_rop_conv_forward(x, a->ya, xin, p->block[b].a.w, p->block[b].a.b, C,
+                        2 * C, hwi, 1);
+    gs_rop_conv_forward(x, a->yb, a->ya, p->block[b].b.w, p->block[b].b.b,
+                        2 * C, 4 * C, hwi, 1);
+    gs_rop_shuffle_tile_forward(x, L->bufP, a->yb, xin, C, Hi, Wi);
+    gs_rop_blur_forward(x, a->z, L->bufP, C, 2 * Hi, 2 * Wi);
+    gs_rop_conv_forward(x, a->u, a->z, p->block[b].c.w, p->block[b].c.b, C, C,
+                        hwo, 1);
+    if (cfg->guidance != GS_GUIDE_NONE) {
+        gs_rop_guide gd = rop_guide(cfg, L, p, NULL);
+        gs_rop_guide_forward(x, &gd, a->g, a->att, a->u, tau, (size_t)hwo,
+                             L->gscr);
+    }
 }
 
 /* Block b backward. dg [C,HWo] (consumed) and work [>= C HWo] are two
  * ping-pong buffers; adds into dxin [C,HWi] (may be NULL), dp, dtau. */
-static int block_backward(const gs_renderer_config *cfg, const act_layout *L,
-                          int b, const gs_renderer_params *p,
-                          const gs_renderer_params *dp, const float *xin,
-                          const float *tau, int Hi, int Wi, float *dg,
-                          float *work, float *dxin, float *dtau)
+static void block_backward(const gs_renderer_config *cfg, const act_layout *L,
+                           const gs_rop_ctx *x, int b,
+                           const gs_renderer_params *p,
+                           const gs_renderer_params *dp, const float *xin,
+                           const float *tau, int Hi, int Wi, float *dg,
+                           float *work, float *dxin, float *dtau)
 {
     const block_acts *a = &L->blk[b];
     int C = L->C, hwi = Hi * Wi, hwo = 4 * hwi;
     size_t ni = (size_t)hwi, no = (size_t)hwo, Cs = (size_t)C;
     float *cur = dg, *other = work, *t;
     if (cfg->guidance != GS_GUIDE_NONE) { /* du = guide^T dg */
-        zero(other, Cs * no);
-        int rc = guide_backward(cfg, L, a, p, dp, tau, dtau, cur, other, no);
-        if (rc)
-            return rc;
+        gs_rop_guide gd = rop_guide(cfg, L, p, dp);
+        gs_rop_guide_backward(x, &gd, other, dtau, cur, a->u, a->att, tau, no,
+                              L->gscr);
         t = cur, cur = other, other = t;
     }
-    lrelu_backward_inplace(cur, a->u, Cs * no); /* d(conv_c out) */
-    conv_backward(other, dp->block[b].c.w, dp->block[b].c.b, cur, a->z,
-                  p->block[b].c.w, C, C, hwo); /* dz */
+    gs_rop_lrelu_backward(x, cur, a->u, Cs * no); /* d(conv_c out) */
+    gs_rop_conv_backward(x, other, 0, dp->block[b].c.w, dp->block[b].c.b, cur,
+                         a->z, p->block[b].c.w, C, C, hwo); /* dz */
     t = cur, cur = other, other = t;
-    blur_backward(other, cur, C, 2 * Hi, 2 * Wi, L->rows); /* d(shuffle+tile) */
+    gs_rop_blur_backward(x, other, cur, C, 2 * Hi, 2 * Wi); /* d(shuffle+tile) */
     t = cur, cur = other, other = t;
-    shuffle_tile_backward(other, dxin, cur, C, Hi, Wi); /* dyb, dxin += */
+    gs_rop_shuffle_tile_backward(x, other, dxin, cur, C, Hi, Wi); /* dyb */
     t = cur, cur = other, other = t;
-    lrelu_backward_inplace(cur, a->yb, 4 * Cs * ni);
-    conv_backward(other, dp->block[b].b.w, dp->block[b].b.b, cur, a->ya,
-                  p->block[b].b.w, 2 * C, 4 * C, hwi); /* dya */
+    gs_rop_lrelu_backward(x, cur, a->yb, 4 * Cs * ni);
+    gs_rop_conv_backward(x, other, 0, dp->block[b].b.w, dp->block[b].b.b, cur,
+                         a->ya, p->block[b].b.w, 2 * C, 4 * C, hwi); /* dya */
     t = cur, cur = other, other = t;
-    lrelu_backward_inplace(cur, a->ya, 2 * Cs * ni);
-    /* dxin accumulates (the caller's dx, or the skip term added above) */
-    return gs_nn_conv1x1_backward(dxin, dp->block[b].a.w, dp->block[b].a.b, cur,
-                                  xin, p->block[b].a.w, C, 2 * C, hwi);
+    gs_rop_lrelu_backward(x, cur, a->ya, 2 * Cs * ni);
+    /* dxin accumulates: the caller's dx, or the skip term added above */
+    gs_rop_conv_backward(x, dxin, 1, dp->block[b].a.w, dp->block[b].a.b, cur,
+                         xin, p->block[b].a.w, C, 2 * C, hwi);
 }
 
 /* ---- Forward and backward ------------------------------------------------ */
 
 /* dst[3,HW] += conv_rgb(g): the 3-channel projection into a temporary. */
-static int rgb_add(float *dst, float *tmp, const gs_renderer_conv *conv,
-                   const float *g, int C, size_t hw)
+static void rgb_add(const gs_rop_ctx *x, float *dst, float *tmp,
+                    const gs_renderer_conv *conv, const float *g, int C,
+                    size_t hw)
 {
-    int rc = gs_nn_conv1x1_forward(tmp, g, conv->w, conv->b, C, 3, (int)hw);
-    if (!rc)
-        add_into(dst, tmp, 3 * hw);
-    return rc;
+    gs_rop_conv_forward(x, tmp, g, conv->w, conv->b, C, 3, (int)hw, 0);
+    add_into(dst, tmp, 3 * hw);
 }
 
 int gs_renderer_forward(const gs_renderer_config *cfg,
                         const gs_renderer_params *p, const float *x,
                         const float *tau, int H, int W, float *acts,
-                        size_t acts_len, float *out_rgb)
+                        size_t acts_len, float *out_rgb, gs_pool *pool)
 {
     act_layout L;
     int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, &L);
@@ -795,23 +440,24 @@ int gs_renderer_forward(const gs_renderer_config *cfg,
         return rc;
     if (!out_rgb)
         return GS_ERR_ARG;
+    gs_rop_ctx ox = rop_ctx(&L, pool);
     int C = L.C, H1 = 2 * H, W1 = 2 * W;
     /* rgb = blur(up2x(conv_rgb0(x))) in rgb1a */
-    rc = gs_nn_conv1x1_forward(L.rgb0, x, p->rgb0.w, p->rgb0.b, C, 3, (int)L.hw0);
-    rc = rc ? rc : gs_nn_upsample2x_forward(L.rgb1b, L.rgb0, 3, H, W);
+    gs_rop_conv_forward(&ox, L.rgb0, x, p->rgb0.w, p->rgb0.b, C, 3, (int)L.hw0, 0);
+    rc = gs_nn_upsample2x_forward(L.rgb1b, L.rgb0, 3, H, W);
     if (rc)
         return rc;
-    blur_forward(L.rgb1a, L.rgb1b, 3, H1, W1, L.rows);
-    rc = block_forward(cfg, &L, 0, p, x, tau, H, W);
-    rc = rc ? rc : rgb_add(L.rgb1a, L.rgb1b, &p->block[0].rgb, L.blk[0].g, C, L.hw1);
+    gs_rop_blur_forward(&ox, L.rgb1a, L.rgb1b, 3, H1, W1);
+    block_forward(cfg, &L, &ox, 0, p, x, tau, H, W);
+    rgb_add(&ox, L.rgb1a, L.rgb1b, &p->block[0].rgb, L.blk[0].g, C, L.hw1);
     /* rgb = blur(up2x(rgb)) in rgb2a */
-    rc = rc ? rc : gs_nn_upsample2x_forward(L.rgb2b, L.rgb1a, 3, H1, W1);
+    rc = gs_nn_upsample2x_forward(L.rgb2b, L.rgb1a, 3, H1, W1);
     if (rc)
         return rc;
-    blur_forward(L.rgb2a, L.rgb2b, 3, 2 * H1, 2 * W1, L.rows);
-    rc = block_forward(cfg, &L, 1, p, L.blk[0].g, tau, H1, W1);
-    rc = rc ? rc : rgb_add(L.rgb2a, L.rgb2b, &p->block[1].rgb, L.blk[1].g, C, L.hw2);
-    rc = rc ? rc : gs_nn_sigmoid_forward(L.out, L.rgb2a, 3 * L.hw2);
+    gs_rop_blur_forward(&ox, L.rgb2a, L.rgb2b, 3, 2 * H1, 2 * W1);
+    block_forward(cfg, &L, &ox, 1, p, L.blk[0].g, tau, H1, W1);
+    rgb_add(&ox, L.rgb2a, L.rgb2b, &p->block[1].rgb, L.blk[1].g, C, L.hw2);
+    rc = gs_nn_sigmoid_forward(L.out, L.rgb2a, 3 * L.hw2);
     if (rc)
         return rc;
     memcpy(out_rgb, L.out, 3 * L.hw2 * sizeof *out_rgb);
@@ -823,7 +469,7 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
                          size_t acts_len, const float *x, const float *tau,
                          const float *dout_rgb, int H, int W,
                          const gs_renderer_params *dparams, float *dx,
-                         float *dtau)
+                         float *dtau, gs_pool *pool)
 {
     act_layout L;
     int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, &L);
@@ -831,35 +477,39 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
         return rc;
     if (!dout_rgb || !params_ok(cfg, dparams))
         return GS_ERR_ARG;
+    gs_rop_ctx ox = rop_ctx(&L, pool);
     int C = L.C, H1 = 2 * H, W1 = 2 * W;
     const gs_renderer_params *dp = dparams;
     /* d(rgb before the sigmoid) in rgb2a; block 1's rgb: dg1 in bufP */
-    zero(L.rgb2a, 3 * L.hw2);
+    memset(L.rgb2a, 0, 3 * L.hw2 * sizeof *L.rgb2a);
     rc = gs_nn_sigmoid_backward(L.rgb2a, dout_rgb, L.out, 3 * L.hw2);
     if (rc)
         return rc;
-    conv_backward(L.bufP, dp->block[1].rgb.w, dp->block[1].rgb.b, L.rgb2a,
-                  L.blk[1].g, p->block[1].rgb.w, C, 3, (int)L.hw2);
+    gs_rop_conv_backward(&ox, L.bufP, 0, dp->block[1].rgb.w, dp->block[1].rgb.b,
+                         L.rgb2a, L.blk[1].g, p->block[1].rgb.w, C, 3,
+                         (int)L.hw2);
     /* through rgb = blur(up2x(rgb)): d(rgb after block 0) in rgb1a */
-    blur_backward(L.rgb2b, L.rgb2a, 3, 2 * H1, 2 * W1, L.rows);
-    zero(L.rgb1a, 3 * L.hw1);
+    gs_rop_blur_backward(&ox, L.rgb2b, L.rgb2a, 3, 2 * H1, 2 * W1);
+    memset(L.rgb1a, 0, 3 * L.hw1 * sizeof *L.rgb1a);
     rc = gs_nn_upsample2x_backward(L.rgb1a, L.rgb2b, 3, H1, W1);
-    /* block 1 (its dx in bufX), then block 0's rgb: d(g0) in bufX */
-    zero(L.bufX, (size_t)C * L.hw1);
-    rc = rc ? rc : block_backward(cfg, &L, 1, p, dp, L.blk[0].g, tau, H1, W1,
-                                  L.bufP, L.bufQ, L.bufX, dtau);
-    rc = rc ? rc : gs_nn_conv1x1_backward(L.bufX, dp->block[0].rgb.w,
-                                          dp->block[0].rgb.b, L.rgb1a,
-                                          L.blk[0].g, p->block[0].rgb.w, C, 3,
-                                          (int)L.hw1);
     if (rc)
         return rc;
+    /* block 1 (its dx in bufX), then block 0's rgb: d(g0) in bufX */
+    gs_rop_zero(&ox, L.bufX, (size_t)C * L.hw1);
+    block_backward(cfg, &L, &ox, 1, p, dp, L.blk[0].g, tau, H1, W1, L.bufP,
+                   L.bufQ, L.bufX, dtau);
+    gs_rop_conv_backward(&ox, L.bufX, 1, dp->block[0].rgb.w, dp->block[0].rgb.b,
+                         L.rgb1a, L.blk[0].g, p->block[0].rgb.w, C, 3,
+                         (int)L.hw1);
     /* the first rgb: blur(up2x(conv_rgb0(x))) */
-    blur_backward(L.rgb1b, L.rgb1a, 3, H1, W1, L.rows);
-    zero(L.rgb0, 3 * L.hw0);
+    gs_rop_blur_backward(&ox, L.rgb1b, L.rgb1a, 3, H1, W1);
+    memset(L.rgb0, 0, 3 * L.hw0 * sizeof *L.rgb0);
     rc = gs_nn_upsample2x_backward(L.rgb0, L.rgb1b, 3, H, W);
-    rc = rc ? rc : gs_nn_conv1x1_backward(dx, dp->rgb0.w, dp->rgb0.b, L.rgb0, x,
-                                          p->rgb0.w, C, 3, (int)L.hw0);
-    return rc ? rc : block_backward(cfg, &L, 0, p, dp, x, tau, H, W, L.bufX,
-                                    L.bufP, dx, dtau);
+    if (rc)
+        return rc;
+    gs_rop_conv_backward(&ox, dx, 1, dp->rgb0.w, dp->rgb0.b, L.rgb0, x,
+                         p->rgb0.w, C, 3, (int)L.hw0);
+    block_backward(cfg, &L, &ox, 0, p, dp, x, tau, H, W, L.bufX, L.bufP, dx,
+                   dtau);
+    return GS_OK;
 }

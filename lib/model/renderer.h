@@ -11,8 +11,13 @@
  * forward writes, backward ADDS into every gradient it is given, nothing
  * allocates, every call returns GS_OK or a negative gs_status (GS_ERR_ARG
  * for NULLs, bad sizes, short buffers, an invalid config; GS_ERR_LIMIT for
- * sizes whose arithmetic would overflow). Single-threaded and deterministic:
- * same inputs, same bytes, provided OpenBLAS runs one thread (nn.h).
+ * sizes whose arithmetic would overflow).
+ *
+ * Threads: forward and backward run their passes on an optional gs_pool
+ * (NULL: the calling thread), split by a partition that depends on the
+ * sizes only, so the result is the same bytes for any pool, provided
+ * OpenBLAS runs one thread (gs_nn_blas_set_threads(1), see nn.h). The pool
+ * must not be running another gs_pool_for at the same time (pool.h).
  *
  * All parameters live in ONE float array; gs_renderer_bind carves the named
  * pointers out of it (and out of a gradient array of the same layout), and
@@ -25,6 +30,7 @@
 #include <stdint.h>
 
 #include "gazesplat/error.h"
+#include "gazesplat/pool.h"
 
 /* Expression guidance after each block (u [C,HW] -> g [C,HW]), with
  *   s = wk^T tau / sqrt(D)                 [C]   (wk [D,C])
@@ -120,7 +126,7 @@ size_t gs_renderer_act_size(const gs_renderer_config *cfg, int H, int W);
 int gs_renderer_forward(const gs_renderer_config *cfg,
                         const gs_renderer_params *p, const float *x,
                         const float *tau, int H, int W, float *acts,
-                        size_t acts_len, float *out_rgb);
+                        size_t acts_len, float *out_rgb, gs_pool *pool);
 
 /* Gradients from dout_rgb[3, 4H, 4W], with acts as left by the forward of
  * the same x, tau, H, W (its scratch part is overwritten; the saved part is
@@ -132,6 +138,6 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
                          size_t acts_len, const float *x, const float *tau,
                          const float *dout_rgb, int H, int W,
                          const gs_renderer_params *dparams, float *dx,
-                         float *dtau);
+                         float *dtau, gs_pool *pool);
 
 #endif

@@ -275,7 +275,7 @@ static int save_checkpoint(trainer *t, const char *path, long step,
     gs_st_writer *w = gs_st_writer_create();
     if (!w)
         return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
-    char key[64], val[32];
+    char key[80], val[32];
     snprintf(val, sizeof val, "%ld", step);
     gs_st_writer_meta(w, "step", val);
     snprintf(val, sizeof val, "%ld", gs_nn_adam_steps(t->adam));

@@ -94,7 +94,7 @@ static void teardown(fd_case *c)
 static double loss(fd_case *c)
 {
     int rc = gs_renderer_forward(&c->cfg, &c->p, c->x, c->tau, c->H, c->W,
-                                 c->acts, c->na, c->out);
+                                 c->acts, c->na, c->out, NULL);
     if (rc) {
         fprintf(stderr, "forward failed: %d\n", rc);
         exit(1);
@@ -140,7 +140,7 @@ static void run(int guidance, const char *name, int H, int W)
     CHECK_EQ_INT(gs_renderer_bind(&c.cfg, g, c.np, &dp), GS_OK);
     loss(&c);
     CHECK_EQ_INT(gs_renderer_backward(&c.cfg, &c.p, c.acts, c.na, c.x, c.tau,
-                                      c.R, H, W, &dp, dx, dtau), GS_OK);
+                                      c.R, H, W, &dp, dx, dtau, NULL), GS_OK);
     gs_renderer_tensor tab[GS_RENDERER_MAX_TENSORS];
     int count = 0;
     CHECK_EQ_INT(gs_renderer_layout(&c.cfg, tab, GS_RENDERER_MAX_TENSORS, &count), GS_OK);

@@ -12,6 +12,7 @@
  * gradient tensor varies over orders of magnitude between tensors). */
 #include "gazesplat/image_io.h"
 #include "gazesplat/nn.h"
+#include "gazesplat/pool.h"
 #include "gs_test.h"
 #include "renderer.h"
 
@@ -21,6 +22,7 @@
 #define RTOL 1e-5
 
 static const char *g_dir;
+static gs_pool *g_pool; /* 2 threads: the split passes against PyTorch */
 
 /* Loads DIR/mode/name.npy, checking the shape; NULL (and a failure) when it
  * is missing or has another shape. want_rank 0 skips the shape check. */
@@ -105,9 +107,9 @@ static void run_mode(const char *mode, int guidance)
     gs_renderer_params p, dp;
     CHECK_EQ_INT(gs_renderer_bind(&cfg, params, np, &p), GS_OK);
     CHECK_EQ_INT(gs_renderer_bind(&cfg, grads, np, &dp), GS_OK);
-    CHECK_EQ_INT(gs_renderer_forward(&cfg, &p, x, tau, H, W, acts, na, out), GS_OK);
+    CHECK_EQ_INT(gs_renderer_forward(&cfg, &p, x, tau, H, W, acts, na, out, g_pool), GS_OK);
     CHECK_EQ_INT(gs_renderer_backward(&cfg, &p, acts, na, x, tau, dout, H, W,
-                                      &dp, dx, dtau), GS_OK);
+                                      &dp, dx, dtau, g_pool), GS_OK);
     compare(mode, "out", out, want, nout);
     compare(mode, "dx", dx, want_dx, nx);
     if (guidance != GS_GUIDE_NONE)
@@ -134,8 +136,12 @@ int main(int argc, char **argv)
     }
     g_dir = argv[1];
     gs_nn_blas_set_threads(1);
+    g_pool = gs_pool_create(2);
+    if (!g_pool)
+        return fprintf(stderr, "cannot create a pool\n"), 1;
     run_mode("none", GS_GUIDE_NONE);
     run_mode("additive", GS_GUIDE_ADDITIVE);
     run_mode("multiplicative", GS_GUIDE_MULTIPLICATIVE);
+    gs_pool_destroy(g_pool);
     GS_TEST_END();
 }

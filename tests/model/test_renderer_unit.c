@@ -1,9 +1,10 @@
 /* Renderer bookkeeping and contracts: config validation, the parameter
  * layout (count, names, shapes, offsets, binding), the seeded init (bounds,
  * determinism, guidance starting as the identity), determinism of forward
- * and backward (same bytes twice, backward accumulating), the CPU
- * default size (64^2 -> 256^2) and bad arguments. */
+ * and backward (same bytes twice, backward accumulating, the same bytes on
+ * pools of 1, 2 and 3 threads as inline), the CPU default size (64^2 -> 256^2) and bad arguments. */
 #include "gazesplat/nn.h"
+#include "gazesplat/pool.h"
 #include "gs_test.h"
 #include "renderer.h"
 
@@ -163,13 +164,13 @@ static void net_free(net *n)
 static int net_forward(net *n)
 {
     return gs_renderer_forward(&n->cfg, &n->p, n->x, n->tau, n->H, n->W,
-                               n->acts, n->na, n->out);
+                               n->acts, n->na, n->out, NULL);
 }
 
 static int net_backward(net *n)
 {
     return gs_renderer_backward(&n->cfg, &n->p, n->acts, n->na, n->x, n->tau,
-                                n->dout, n->H, n->W, &n->dp, n->dx, n->dtau);
+                                n->dout, n->H, n->W, &n->dp, n->dx, n->dtau, NULL);
 }
 
 /* With the init's zero value projection, both guidance modes give the
@@ -249,8 +250,53 @@ static void t_determinism(int guidance)
     /* NULL dx and dtau: the parameter gradients do not change */
     memset(n.grads, 0, n.np * sizeof(float));
     CHECK_EQ_INT(gs_renderer_backward(&n.cfg, &n.p, n.acts, n.na, n.x, n.tau,
-                                      n.dout, n.H, n.W, &n.dp, NULL, NULL), GS_OK);
+                                      n.dout, n.H, n.W, &n.dp, NULL, NULL, NULL), GS_OK);
     CHECK(memcmp(g1, n.grads, n.np * sizeof(float)) == 0);
+    free(out1); free(g1); free(dx1); free(dt1);
+    net_free(&n);
+}
+
+/* Inline (NULL pool) and pools of 1, 2 and 3 threads give the same bytes:
+ * 24 x 24 features so that the 1x1 convolutions and the guidance split into
+ * several pixel bands (2 at 48^2, 5 at 96^2). */
+static void t_threads(int guidance)
+{
+    net n;
+    net_make(&n, guidance, 144, 24, 24, 8);
+    if (guidance != GS_GUIDE_NONE) {
+        fill(n.p.value_w, 32 * 32, 13);
+        fill(n.p.value_b, 32, 14);
+    }
+    CHECK_EQ_INT(net_forward(&n), GS_OK);
+    CHECK_EQ_INT(net_backward(&n), GS_OK);
+    float *out1 = xcalloc(n.nout), *g1 = xcalloc(n.np), *dx1 = xcalloc(n.nx);
+    float *dt1 = xcalloc(144);
+    memcpy(out1, n.out, n.nout * sizeof(float));
+    memcpy(g1, n.grads, n.np * sizeof(float));
+    memcpy(dx1, n.dx, n.nx * sizeof(float));
+    memcpy(dt1, n.dtau, 144 * sizeof(float));
+    for (int threads = 1; threads <= 3; threads++) {
+        gs_pool *pool = gs_pool_create(threads);
+        CHECK(pool != NULL);
+        memset(n.grads, 0, n.np * sizeof(float));
+        memset(n.dx, 0, n.nx * sizeof(float));
+        memset(n.dtau, 0, 144 * sizeof(float));
+        memset(n.out, 0, n.nout * sizeof(float));
+        CHECK_EQ_INT(gs_renderer_forward(&n.cfg, &n.p, n.x, n.tau, n.H, n.W,
+                                         n.acts, n.na, n.out, pool), GS_OK);
+        CHECK_EQ_INT(gs_renderer_backward(&n.cfg, &n.p, n.acts, n.na, n.x, n.tau,
+                                          n.dout, n.H, n.W, &n.dp, n.dx, n.dtau,
+                                          pool), GS_OK);
+        CHECK_MSG(memcmp(out1, n.out, n.nout * sizeof(float)) == 0,
+                  "mode %d, %d threads: image differs", guidance, threads);
+        CHECK_MSG(memcmp(g1, n.grads, n.np * sizeof(float)) == 0,
+                  "mode %d, %d threads: parameter gradients differ", guidance, threads);
+        CHECK_MSG(memcmp(dx1, n.dx, n.nx * sizeof(float)) == 0,
+                  "mode %d, %d threads: dx differs", guidance, threads);
+        CHECK_MSG(memcmp(dt1, n.dtau, 144 * sizeof(float)) == 0,
+                  "mode %d, %d threads: dtau differs", guidance, threads);
+        gs_pool_destroy(pool);
+    }
     free(out1); free(g1); free(dx1); free(dt1);
     net_free(&n);
 }
@@ -288,41 +334,41 @@ static void t_bad_args(void)
     CHECK_EQ_INT(gs_renderer_act_size(c, 4, -1), 0);
     CHECK_EQ_INT(gs_renderer_act_size(c, GS_RENDERER_MAX_SIDE + 1, 4), 0);
     CHECK(gs_renderer_act_size(c, 1, 1) > 0);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 0, 4, n.acts, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 0, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 0, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 0, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, GS_RENDERER_MAX_SIDE + 1, 4,
-                                     n.acts, n.na, n.out), GS_ERR_LIMIT);
+                                     n.acts, n.na, n.out, NULL), GS_ERR_LIMIT);
     /* a buffer sized for 4 x 4 is too short for 4 x 5 */
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 5, n.acts, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, n.na - 1, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 5, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, n.na - 1, n.out, NULL), GS_ERR_ARG);
     /* NULLs and a bad config */
-    CHECK_EQ_INT(gs_renderer_forward(NULL, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(&badcfg, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, NULL, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, NULL, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, NULL, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, NULL, n.na, n.out), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(NULL, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(&badcfg, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, NULL, n.x, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, NULL, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, NULL, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, NULL, n.na, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, NULL, NULL), GS_ERR_ARG);
     gs_renderer_params holes = n.p;
     holes.block[1].c.b = NULL;
-    CHECK_EQ_INT(gs_renderer_forward(c, &holes, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &holes, n.x, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
     holes = n.p;
     holes.value_w = NULL;
-    CHECK_EQ_INT(gs_renderer_forward(c, &holes, n.x, n.tau, 4, 4, n.acts, n.na, n.out), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &holes, n.x, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
     /* backward */
     CHECK_EQ_INT(net_forward(&n), GS_OK);
     CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, NULL, 4, 4,
-                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+                                      &n.dp, n.dx, n.dtau, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, n.dout, 4, 4,
-                                      NULL, n.dx, n.dtau), GS_ERR_ARG);
+                                      NULL, n.dx, n.dtau, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, n.dout, 4, 4,
-                                      &holes, n.dx, n.dtau), GS_ERR_ARG);
+                                      &holes, n.dx, n.dtau, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na - 1, n.x, n.tau, n.dout, 4, 4,
-                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+                                      &n.dp, n.dx, n.dtau, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_backward(c, &n.p, n.acts, n.na, n.x, n.tau, n.dout, -4, 4,
-                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+                                      &n.dp, n.dx, n.dtau, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_backward(c, &n.p, NULL, n.na, n.x, n.tau, n.dout, 4, 4,
-                                      &n.dp, n.dx, n.dtau), GS_ERR_ARG);
+                                      &n.dp, n.dx, n.dtau, NULL), GS_ERR_ARG);
     /* nothing was added by the refused calls */
     size_t touched = 0;
     for (size_t i = 0; i < n.np; i++)
@@ -332,10 +378,10 @@ static void t_bad_args(void)
     net plain;
     net_make(&plain, GS_GUIDE_NONE, 8, 2, 3, 3);
     CHECK_EQ_INT(gs_renderer_forward(&plain.cfg, &plain.p, plain.x, NULL, 2, 3,
-                                     plain.acts, plain.na, plain.out), GS_OK);
+                                     plain.acts, plain.na, plain.out, NULL), GS_OK);
     CHECK_EQ_INT(gs_renderer_backward(&plain.cfg, &plain.p, plain.acts, plain.na,
                                       plain.x, NULL, plain.dout, 2, 3, &plain.dp,
-                                      plain.dx, NULL), GS_OK);
+                                      plain.dx, NULL, NULL), GS_OK);
     net_free(&plain);
     net_free(&n);
 }
@@ -350,6 +396,9 @@ int main(void)
     t_determinism(GS_GUIDE_NONE);
     t_determinism(GS_GUIDE_ADDITIVE);
     t_determinism(GS_GUIDE_MULTIPLICATIVE);
+    t_threads(GS_GUIDE_NONE);
+    t_threads(GS_GUIDE_ADDITIVE);
+    t_threads(GS_GUIDE_MULTIPLICATIVE);
     t_default_size();
     t_bad_args();
     GS_TEST_END();

@@ -47,6 +47,9 @@ typedef struct gs_model_ctx gs_model_ctx;
  * A truncated, corrupt or inconsistent file gives GS_ERR_FORMAT with a
  * message naming the tensor or field. */
 int gs_model_load(const char *path, gs_model **out, gs_error *err);
+/* The same from a file image in memory (copied). */
+int gs_model_load_mem(const void *buf, size_t len, gs_model **out,
+                      gs_error *err);
 void gs_model_destroy(gs_model *m);
 
 /* What callers need to know about a loaded model. */

@@ -1,0 +1,275 @@
+/* gazesplat fit / redirect: fit a subject to a normalized face image and
+ * render it at other gazes. (Photos go through face detection and
+ * normalization first; see docs/face.md.) */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+
+#include "cli.h"
+#include "gazesplat/geom.h"
+#include "gazesplat/image_io.h"
+#include "gazesplat/nn.h"
+#include "gazesplat/model.h"
+
+static int run_fit(int argc, char **argv);
+static int run_redirect(int argc, char **argv);
+
+const cli_command cli_fit_command = {
+    "fit",
+    "fit a subject (latent code, head pose, gaze, colour) to a face image",
+    "usage: gazesplat fit --model M --image FACE.png --out SUBJECT.bin\n"
+    "                     [--gaze-deg P,Y] [--iters N] [--time S]\n"
+    "\n"
+    "  --model FILE     a model file (gazesplat train)\n"
+    "  --image FILE     a normalized face image (PNG/JPEG) of the model's\n"
+    "                   image size: face centre at the image centre, the\n"
+    "                   model's normalized camera (docs/model.md)\n"
+    "  --mask FILE      optional grey image: weight of each pixel (face\n"
+    "                   region), same size\n"
+    "  --gaze-deg P,Y   the image's gaze (head frame, degrees) if known;\n"
+    "                   otherwise it is estimated with the fit\n"
+    "  --iters N        iteration cap (200); --time S: time budget\n"
+    "  --out FILE       the fitted subject (binary, gs_subject_encode)\n"
+    "Prints the fit quality and the estimated labels.\n",
+    run_fit,
+};
+
+const cli_command cli_redirect_command = {
+    "redirect",
+    "render a fitted subject (or a face image, fitted first) at new gazes",
+    "usage: gazesplat redirect --model M (--subject S.bin | --image FACE.png)\n"
+    "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
+    "                          [--head-deg P,Y]\n"
+    "\n"
+    "  --gaze-deg LIST  targets, head frame, degrees (pitch > 0 looks up,\n"
+    "                   yaw > 0 toward image-left), separated by ';'\n"
+    "  --head-deg P,Y   render with this head pose instead of the subject's\n"
+    "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
+    run_redirect,
+};
+
+#define DEG (3.14159265358979323846 / 180.0)
+
+static int load_model(const cli_command *cmd, const char *path, gs_model **m)
+{
+    gs_error err = {0, ""};
+    gs_nn_blas_set_threads(1);
+    if (gs_model_load(path, m, &err))
+        return cli_fail(cmd, "%s: %s", path, err.msg);
+    return CLI_OK;
+}
+
+static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
+                     const char *image, const char *mask, const char *gaze,
+                     long iters, double budget, gs_subject *sub)
+{
+    gs_model_info info;
+    gs_model_get_info(m, &info);
+    gs_io_image img = {0}, mk = {0};
+    gs_error err = {0, ""};
+    if (gs_io_image_read(image, NULL, &img, &err))
+        return cli_fail(cmd, "%s: %s", image, err.msg);
+    int rc = CLI_OK;
+    if (img.width != info.image_size || img.height != info.image_size)
+        rc = cli_fail(cmd, "%s is %dx%d; the model wants %dx%d normalized "
+                      "faces", image, img.width, img.height, info.image_size,
+                      info.image_size);
+    uint8_t *w = NULL;
+    if (!rc && mask) {
+        if (gs_io_image_read(mask, NULL, &mk, &err))
+            rc = cli_fail(cmd, "%s: %s", mask, err.msg);
+        else if (mk.width != img.width || mk.height != img.height)
+            rc = cli_fail(cmd, "mask size differs from the image");
+        else {
+            w = malloc((size_t)img.width * img.height);
+            for (int y = 0; y < img.height && w; y++)
+                for (int x = 0; x < img.width; x++)
+                    w[(size_t)y * img.width + x] =
+                        mk.data[(size_t)y * mk.stride + 3 * x];
+        }
+    }
+    gs_fit_options o;
+    gs_fit_options_default(&o);
+    o.max_iters = (int)iters;
+    o.time_budget_s = budget;
+    o.mask = w;
+    float g[2];
+    if (!rc && gaze) {
+        if (cli_parse_floats(gaze, g, 2))
+            rc = cli_usage_error(cmd, "--gaze-deg: want P,Y");
+        o.known_gaze = 1;
+        o.gaze_pitch = g[0] * DEG;
+        o.gaze_yaw = g[1] * DEG;
+    }
+    if (!rc) {
+        gs_model_ctx *c = gs_model_ctx_create(m);
+        gs_fit_report r;
+        if (!c)
+            rc = cli_fail(cmd, "out of memory");
+        else if (gs_model_fit(c, pool, img.data, img.stride, &o, sub, &r,
+                              &err))
+            rc = cli_fail(cmd, "fit: %s", err.msg);
+        else
+            fprintf(stderr,
+                    "gazesplat %s: fit %d iterations in %.2f s%s: PSNR %.2f "
+                    "dB, SSIM %.4f; gaze %.1f,%.1f deg\n",
+                    cmd->name, r.iters, r.seconds,
+                    r.stopped_on_plateau ? " (plateau)" : "", sub->fit_psnr,
+                    sub->fit_ssim, sub->gaze_pitch / DEG,
+                    sub->gaze_yaw / DEG);
+        gs_model_ctx_destroy(c);
+    }
+    free(w);
+    gs_io_image_free(&img);
+    gs_io_image_free(&mk);
+    return rc;
+}
+
+static int run_fit(int argc, char **argv)
+{
+    const cli_command *cmd = &cli_fit_command;
+    cli_opt o[7] = {{"--model", 1, NULL}, {"--image", 1, NULL},
+                    {"--mask", 1, NULL},  {"--gaze-deg", 1, NULL},
+                    {"--iters", 1, NULL}, {"--time", 1, NULL},
+                    {"--out", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 7);
+    if (rc == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (rc != CLI_PARSED)
+        return rc;
+    if (!o[0].value || !o[1].value || !o[6].value)
+        return cli_usage_error(cmd, "--model, --image and --out are needed");
+    long iters = 200;
+    float budget = 0;
+    if (o[4].value && cli_parse_long(o[4].value, 1, 100000, &iters))
+        return cli_usage_error(cmd, "--iters: want 1..100000");
+    if (o[5].value && (cli_parse_floats(o[5].value, &budget, 1) ||
+                       !(budget > 0 && budget < 1e5)))
+        return cli_usage_error(cmd, "--time: want seconds > 0");
+    gs_model *m = NULL;
+    if ((rc = load_model(cmd, o[0].value, &m)))
+        return rc;
+    gs_pool *pool = gs_pool_create(2);
+    gs_subject sub;
+    rc = fit_image(cmd, m, pool, o[1].value, o[2].value, o[3].value, iters,
+                   budget, &sub);
+    if (!rc) {
+        uint8_t buf[GS_SUBJECT_ENCODED_MAX];
+        size_t n = gs_subject_encode(&sub, buf, sizeof buf);
+        FILE *f = fopen(o[6].value, "wb");
+        if (!f || fwrite(buf, 1, n, f) != n)
+            rc = cli_fail(cmd, "cannot write %s", o[6].value);
+        if (f && fclose(f))
+            rc = cli_fail(cmd, "cannot write %s", o[6].value);
+    }
+    gs_pool_destroy(pool);
+    gs_model_destroy(m);
+    return rc;
+}
+
+static int read_subject(const cli_command *cmd, const char *path,
+                        gs_subject *s)
+{
+    uint8_t buf[GS_SUBJECT_ENCODED_MAX + 1];
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return cli_fail(cmd, "cannot open %s", path);
+    size_t n = fread(buf, 1, sizeof buf, f);
+    fclose(f);
+    gs_error err = {0, ""};
+    if (gs_subject_decode(buf, n, s, &err))
+        return cli_fail(cmd, "%s: %s", path, err.msg);
+    return CLI_OK;
+}
+
+static int run_redirect(int argc, char **argv)
+{
+    const cli_command *cmd = &cli_redirect_command;
+    cli_opt o[6] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+                    {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
+                    {"--out", 1, NULL},      {"--head-deg", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 6);
+    if (rc == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (rc != CLI_PARSED)
+        return rc;
+    if (!o[0].value || !o[3].value || !o[4].value ||
+        !o[1].value == !o[2].value)
+        return cli_usage_error(cmd, "--model, --gaze-deg, --out and one of "
+                                    "--subject / --image are needed");
+    /* Parse every target before any work. */
+    enum { MAXT = 256 };
+    double tg[MAXT][2];
+    int nt = 0;
+    const char *s = o[3].value;
+    while (*s) {
+        char item[64];
+        size_t len = strcspn(s, ";");
+        float v[2];
+        if (len == 0 || len >= sizeof item || nt == MAXT)
+            return cli_usage_error(cmd, "--gaze-deg: want \"P,Y;P,Y\" (<= %d)",
+                                   MAXT);
+        memcpy(item, s, len);
+        item[len] = 0;
+        if (cli_parse_floats(item, v, 2))
+            return cli_usage_error(cmd, "--gaze-deg: bad target '%s'", item);
+        tg[nt][0] = v[0] * DEG;
+        tg[nt][1] = v[1] * DEG;
+        nt++;
+        s += len;
+        if (*s == ';')
+            s++;
+    }
+    float head[2] = {0, 0};
+    if (o[5].value && cli_parse_floats(o[5].value, head, 2))
+        return cli_usage_error(cmd, "--head-deg: want P,Y");
+    gs_model *m = NULL;
+    if ((rc = load_model(cmd, o[0].value, &m)))
+        return rc;
+    gs_pool *pool = gs_pool_create(2);
+    gs_subject sub;
+    rc = o[1].value ? read_subject(cmd, o[1].value, &sub)
+                    : fit_image(cmd, m, pool, o[2].value, NULL, NULL, 200, 0,
+                                &sub);
+    struct stat st;
+    if (!rc && mkdir(o[4].value, 0777) &&
+        !(stat(o[4].value, &st) == 0 && S_ISDIR(st.st_mode)))
+        rc = cli_fail(cmd, "cannot create %s", o[4].value);
+    gs_model_info info;
+    gs_model_get_info(m, &info);
+    gs_model_ctx *c = rc ? NULL : gs_model_ctx_create(m);
+    gs_io_image img = {info.image_size, info.image_size,
+                       3 * (size_t)info.image_size, NULL};
+    img.data = malloc(img.stride * (size_t)img.height);
+    for (int k = 0; !rc && k < nt; k++) {
+        gs_view v = {0};
+        v.gaze_pitch = tg[k][0];
+        v.gaze_yaw = tg[k][1];
+        if (o[5].value) {
+            v.use_head = 1;
+            /* Head angles as geom.h defines them (z-axis of R). */
+            gs_geom_rot_from_pitchyaw(head[0] * DEG, head[1] * DEG, 0,
+                                      v.head_R);
+            memcpy(v.head_t, sub.head_t, sizeof v.head_t);
+        }
+        gs_error err = {0, ""};
+        char path[4096];
+        snprintf(path, sizeof path, "%s/%03d.png", o[4].value, k);
+        if (gs_model_render(c, pool, &sub, &v, img.data, img.stride, &err) ||
+            gs_io_image_write(path, &img, GS_IO_PNG, 0, &err))
+            rc = cli_fail(cmd, "target %d: %s", k, err.msg);
+    }
+    if (!rc)
+        printf("gazesplat redirect: %d images -> %s\n", nt, o[4].value);
+    free(img.data);
+    gs_model_ctx_destroy(c);
+    gs_pool_destroy(pool);
+    gs_model_destroy(m);
+    return rc;
+}

@@ -1,0 +1,238 @@
+/* gs_face: real faces. A photo in, the normalized face the model fits out,
+ * and the redirected face pasted back into the photo.
+ *
+ *   detect      OpenCV cascade (Debian opencv-data) -> face boxes, mapped to
+ *               the box convention of dlib's HOG detector, largest first
+ *   landmarks   68 iBUG points by our own implementation of dlib's ensemble
+ *               of regression trees (Kazemi & Sullivan 2014), reading dlib's
+ *               shape_predictor_68_face_landmarks.dat; identical to dlib's
+ *               own points for the same box
+ *   pose        solvePnP (EPnP, then Levenberg-Marquardt) of the 6-point face
+ *               model of geom.h; t is the face centre
+ *   normalize   gs_geom_normalize + a perspective warp (and its inverse)
+ *   masks       face and eye regions from the landmarks, at any size
+ *   paste-back  a redirected normalized face blended into the photo through
+ *               a feathered mask, in the photo's own pixels
+ *
+ * Frames, units and pixel conventions are those of geom.h: millimetres,
+ * radians, OpenCV camera frame, pixel centres at +0.5. Boxes are the one
+ * exception: they are dlib rectangles (integer, inclusive corners, pixel
+ * centres at integers), because the landmark model was trained on them.
+ *
+ * The 68-point model was trained on the iBUG 300-W data set, whose owners
+ * ask that it not be used commercially.
+ *
+ * Images are gs_io_image (8-bit RGB). Every call returns GS_OK or a negative
+ * gs_status and fills the optional gs_error. A photo without a usable face
+ * is GS_ERR_ARG with a message that says why (no face, face too small,
+ * landmarks outside the image). Models are read-only after loading and may
+ * be shared by threads; a detector may not (OpenCV's cascade is not
+ * re-entrant): one per thread. */
+#ifndef GAZESPLAT_FACE_H
+#define GAZESPLAT_FACE_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#include "gazesplat/error.h"
+#include "gazesplat/geom.h"
+#include "gazesplat/image_io.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define GS_FACE_LANDMARKS 68
+/* Faces whose box is narrower than this are refused ("too small"): the
+ * landmark model was trained on faces of about 80 px and above. */
+#define GS_FACE_MIN_BOX 40
+/* Model file of Debian's libdlib-data. */
+#define GS_FACE_SHAPE_MODEL_DEFAULT "/usr/share/dlib/shape_predictor_68_face_landmarks.dat"
+/* Cascade of Debian's opencv-data (chosen on the test photos, docs/face.md). */
+#define GS_FACE_CASCADE_DEFAULT \
+    "/usr/share/opencv4/haarcascades/haarcascade_frontalface_alt2.xml"
+
+/* A dlib rectangle: inclusive integer corners, width = right - left + 1. */
+typedef struct gs_face_box {
+    int left, top, right, bottom;
+} gs_face_box;
+
+/* ---- landmarks: ensemble of regression trees ---- */
+
+typedef struct gs_face_shape_model gs_face_shape_model;
+
+/* Parses a dlib shape_predictor serialization held in memory (the data is
+ * copied). Refuses truncated, corrupt and inconsistent data with
+ * GS_ERR_FORMAT, shapes this implementation does not handle (trees of
+ * different depths, more than 256 parts) with GS_ERR_UNSUPPORTED, and sizes
+ * over 1 GiB with GS_ERR_LIMIT. Free with gs_face_shape_model_free. */
+int gs_face_shape_model_parse(const void *buf, size_t len,
+                              gs_face_shape_model **out, gs_error *err);
+/* Same, from a file; NULL path: GS_FACE_SHAPE_MODEL_DEFAULT. The 99 MB
+ * model takes a few hundred ms: load it once per process. */
+int gs_face_shape_model_load(const char *path, gs_face_shape_model **out,
+                             gs_error *err);
+void gs_face_shape_model_free(gs_face_shape_model *m);
+/* Number of landmarks the model predicts (68 for dlib's model). */
+int gs_face_shape_model_parts(const gs_face_shape_model *m);
+
+/* Runs the predictor on `box`. pts (n_parts x 2, may be NULL) receives
+ * dlib's integer points (pixel centres at integers, exactly what
+ * dlib::shape_predictor returns); uv (n_parts x 2, may be NULL) the same
+ * points before rounding, in geom.h pixels (+0.5). Boxes need not lie
+ * inside the image (pixels outside read as 0, as in dlib). GS_ERR_ARG for
+ * an empty box or image. */
+int gs_face_shape_predict(const gs_face_shape_model *m,
+                          const gs_io_image *img, gs_face_box box, int *pts,
+                          double *uv, gs_error *err);
+
+/* ---- detection ---- */
+
+typedef struct gs_face_detector gs_face_detector;
+
+/* Loads an OpenCV cascade XML; NULL path: GS_FACE_CASCADE_DEFAULT. */
+int gs_face_detector_load(const char *path, gs_face_detector **out,
+                          gs_error *err);
+void gs_face_detector_free(gs_face_detector *d);
+
+typedef struct gs_face_detect_opts {
+    double scale_factor;  /* pyramid step, > 1 (default 1.1) */
+    int min_neighbors;    /* cascade vote (default 5) */
+    int min_size;         /* smallest face, px; 0 (default): 1/16 of the
+                             image's shorter side, at least 24 */
+} gs_face_detect_opts;
+void gs_face_detect_opts_default(gs_face_detect_opts *o);
+
+typedef struct gs_face_detection {
+    gs_face_box box;      /* in dlib's HOG box convention (the fit below) */
+    gs_face_box cascade;  /* the cascade's own box */
+} gs_face_detection;
+
+/* Finds faces, largest first (ties: top, then left). Writes up to `cap`
+ * detections and the number found (possibly more than cap) to *n. opts may
+ * be NULL (defaults). */
+int gs_face_detect(gs_face_detector *d, const gs_io_image *img,
+                   const gs_face_detect_opts *opts, gs_face_detection *out,
+                   int cap, int *n, gs_error *err);
+
+/* The fixed box affine from a cascade box (x, y, w, h; OpenCV pixels) to
+ * dlib's HOG convention: centre shifted by (GS_FACE_BOX_DX, GS_FACE_BOX_DY)
+ * times w, side scaled by GS_FACE_BOX_SCALE. Fitted on the test photos by
+ * scripts/fit-face-box.py; see docs/face.md. */
+#define GS_FACE_BOX_SCALE 0.9405
+#define GS_FACE_BOX_DX (-0.0094)
+#define GS_FACE_BOX_DY 0.0542
+gs_face_box gs_face_box_from_cascade(int x, int y, int w, int h);
+
+/* ---- head pose ---- */
+
+/* Default intrinsics for a w x h photo when the caller has none: focal
+ * length = the longer side in pixels (about a 53 degree field across it,
+ * typical of webcams and phone cameras), principal point at the centre,
+ * no distortion. */
+void gs_face_default_intrinsics(int width, int height, double k[9]);
+
+typedef struct gs_face_pose {
+    double R[9];        /* head to camera rotation (geom.h head frame) */
+    double rvec[3];     /* the same, axis-angle */
+    double t[3];        /* face centre, camera frame, mm: X = R X_head + t */
+    double pitch, yaw;  /* head angles (gs_geom_head_pitchyaw), radians */
+    double rms_px;      /* reprojection error of the 6 points */
+} gs_face_pose;
+
+/* Head pose from the 68 landmarks (uv, geom.h pixels) and intrinsics k:
+ * solvePnP of the 6-point model (iBUG 36, 39, 42, 45, 31, 35) centred on
+ * its face centre, EPnP then iterative Levenberg-Marquardt. GS_ERR_ARG when
+ * the solution puts the face behind the camera. */
+int gs_face_head_pose(const double uv[][2], const double k[9],
+                      gs_face_pose *out, gs_error *err);
+
+/* ---- the whole analysis ---- */
+
+typedef struct gs_face_opts {
+    int index;              /* which detection, largest first (default 0) */
+    int use_box;            /* 1: skip detection and use `box` */
+    gs_face_box box;
+    int use_k;              /* 1: camera intrinsics `k`; 0: the default */
+    double k[9];
+    int norm_size;          /* normalized image side (default 512) */
+    double norm_distance_mm; /* d_n (default GS_GEOM_NORM_DISTANCE_MM) */
+    double norm_focal;      /* f_n (default gs_geom_norm_focal(norm_size)) */
+    gs_face_detect_opts detect;
+} gs_face_opts;
+void gs_face_opts_default(gs_face_opts *o);
+
+/* Everything a redirect needs to fit the normalized face and paste the
+ * result back. */
+typedef struct gs_face_result {
+    int image_width, image_height;
+    int n_faces;                    /* detections (0 when use_box) */
+    gs_face_box box;                /* the face used */
+    int pts[GS_FACE_LANDMARKS][2];  /* dlib's integer landmarks */
+    double uv[GS_FACE_LANDMARKS][2];     /* landmarks, geom.h pixels */
+    double uv_n[GS_FACE_LANDMARKS][2];   /* the same in the normalized image */
+    double k[9];                    /* intrinsics used */
+    gs_face_pose pose;              /* in the photo's camera */
+    gs_geom_norm norm;              /* normalization of this face */
+    double head_pitch_n, head_yaw_n; /* head angles in the normalized camera */
+} gs_face_result;
+
+/* Photo -> detection -> landmarks -> head pose -> normalization. `det` may
+ * be NULL when opts->use_box. Errors (GS_ERR_ARG): no face, index past the
+ * faces found, box narrower than GS_FACE_MIN_BOX, a landmark outside the
+ * image. */
+int gs_face_analyze(gs_face_detector *det, const gs_face_shape_model *sp,
+                    const gs_io_image *img, const gs_face_opts *opts,
+                    gs_face_result *out, gs_error *err);
+
+/* ---- warps ---- */
+
+/* The normalized face: img warped by n->W into a new n->width x
+ * n->height image (bilinear, black outside). Free with gs_io_image_free. */
+int gs_face_normalize_image(const gs_io_image *img, const gs_geom_norm *n,
+                            gs_io_image *out, gs_error *err);
+/* The inverse: a normalized image warped by n->W_inv back into a new
+ * width x height image in the photo's pixels. */
+int gs_face_denormalize_image(const gs_io_image *norm_img,
+                              const gs_geom_norm *n, int width, int height,
+                              gs_io_image *out, gs_error *err);
+
+/* ---- masks ---- */
+
+typedef enum gs_face_mask_kind {
+    GS_FACE_MASK_FACE = 0,       /* hull of jaw (0-16) and brows (17-26),
+                                    the brows raised by 10% of the face
+                                    height to take in the forehead's lower
+                                    part; eyes included */
+    GS_FACE_MASK_FACE_NO_EYES = 1, /* FACE minus both eye masks */
+    GS_FACE_MASK_EYES = 2,       /* both eye polygons (36-41, 42-47) */
+    GS_FACE_MASK_RIGHT_EYE = 3,  /* 36-41, the subject's right (image left) */
+    GS_FACE_MASK_LEFT_EYE = 4    /* 42-47 */
+} gs_face_mask_kind;
+
+/* Rasterizes a mask into `mask` (width x height bytes, row-major): the
+ * polygon grown by `dilate` pixels (eye polygons are also grown by 30% of
+ * the eye width so lids and a margin of skin move with the eye), with a
+ * linear ramp `feather` pixels wide centred on its edge (0: hard edge).
+ * Values 0..255. uv: the 68 landmarks in the mask's own pixels (geom.h;
+ * result.uv for the photo, result.uv_n for the normalized image). */
+int gs_face_mask(const double uv[][2], gs_face_mask_kind kind, double dilate,
+                 double feather, int width, int height, uint8_t *mask,
+                 gs_error *err);
+
+/* ---- paste-back ---- */
+
+/* Blends a redirected normalized face into `photo` in place: each photo
+ * pixel p gets mask(p) * face(W p) + (1 - mask(p)) * photo(p), the face
+ * sampled bilinearly at W p (geom.h pixels). `mask` is in the photo's
+ * pixels (photo->width x photo->height), e.g. gs_face_mask of kind FACE or
+ * EYES on result.uv with some feathering; pixels where it is 0, and those
+ * whose W p falls outside the normalized face, are left alone. */
+int gs_face_paste_back(gs_io_image *photo, const gs_io_image *norm_face,
+                       const gs_geom_norm *n, const uint8_t *mask,
+                       gs_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,143 @@
+/* The public model API on a tiny model trained for a few steps: render,
+ * fit, subjects, the face-stream cache, and bad input. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "gazesplat/nn.h"
+#include "gazesplat/synth.h"
+#include "gazesplat/train.h"
+#include "gs_test.h"
+#include "model_test_util.h"
+
+int main(void)
+{
+    gs_nn_blas_set_threads(1);
+    char path[128];
+    snprintf(path, sizeof path, "test_model_api_%d.safetensors", (int)getpid());
+    gs_model_spec spec;
+    gs_model_spec_default(&spec);
+    spec.preset = "tiny";
+    spec.train_identities = 2;
+    gs_model *m = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
+    gs_train_options to;
+    gs_train_options_default(&to);
+    to.out_path = path;
+    to.steps = 6;
+    to.checkpoint_every = 0;
+    gs_train_report rep;
+    CHECK_MSG(gs_train(m, &to, NULL, &rep, &err) == GS_OK, "%s", err.msg);
+    CHECK(rep.steps == 6 && isfinite(rep.final_loss));
+    gs_model_destroy(m);
+    m = NULL;
+    CHECK_MSG(gs_model_load(path, &m, &err) == GS_OK, "%s", err.msg);
+    gs_model_info info;
+    gs_model_get_info(m, &info);
+    int S = info.image_size;
+    CHECK(S == 128);
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    CHECK(c != NULL);
+
+    /* A synthetic normalized face to fit. */
+    gs_synth_gen_config g;
+    gs_synth_gen_config_default(&g);
+    g.split = GS_SYNTH_TEST;
+    g.size = S;
+    g.rig = GS_SYNTH_RIG_NORMALIZED;
+    gs_synth_sample smp;
+    CHECK(gs_synth_sample_alloc(&smp, S, S, &err) == GS_OK);
+    CHECK(gs_synth_gen_sample(&g, 3, NULL, &smp, &err) == GS_OK);
+    gs_fit_options fo;
+    gs_fit_options_default(&fo);
+    fo.max_iters = 8;
+    fo.known_head = 1;
+    memcpy(fo.head_R, smp.labels.head_R, sizeof fo.head_R);
+    memcpy(fo.head_t, smp.labels.head_t, sizeof fo.head_t);
+    gs_subject sub;
+    gs_fit_report fr;
+    CHECK_MSG(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &sub, &fr,
+                           &err) == GS_OK, "%s", err.msg);
+    CHECK(fr.iters >= 1 && isfinite(sub.fit_psnr) && sub.fit_psnr > 5);
+    CHECK(fr.loss_last <= fr.loss_first);
+    printf("fit: %d iterations, loss %.4f -> %.4f, PSNR %.2f dB\n", fr.iters,
+           fr.loss_first, fr.loss_last, sub.fit_psnr);
+
+    /* Subjects survive encode/decode; bad bytes are refused. */
+    uint8_t buf[GS_SUBJECT_ENCODED_MAX];
+    size_t n = gs_subject_encode(&sub, buf, sizeof buf);
+    CHECK(n > 0 && n <= sizeof buf);
+    gs_subject back;
+    CHECK(gs_subject_decode(buf, n, &back, &err) == GS_OK);
+    CHECK(memcmp(back.code, sub.code, sizeof(float) * sub.code_dim) == 0);
+    CHECK(gs_subject_decode(buf, n - 1, &back, &err) == GS_ERR_FORMAT);
+    buf[0] ^= 1;
+    CHECK(gs_subject_decode(buf, n, &back, &err) == GS_ERR_FORMAT);
+
+    /* A gaze sweep reuses the face stream; it must equal renders from a
+     * fresh context, byte for byte. */
+    size_t isz = 3 * (size_t)S * S;
+    uint8_t *a = malloc(isz), *b = malloc(isz);
+    gs_model_ctx *c2 = gs_model_ctx_create(m);
+    int same = 1;
+    for (int k = 0; k < 4; k++) {
+        gs_view v = {0};
+        v.gaze_pitch = 0.1 * k - 0.15;
+        v.gaze_yaw = 0.2 - 0.13 * k;
+        CHECK(gs_model_render(c, NULL, &sub, &v, a, 3 * (size_t)S, &err) ==
+              GS_OK);
+        gs_model_ctx_destroy(c2);
+        c2 = gs_model_ctx_create(m);
+        CHECK(gs_model_render(c2, NULL, &sub, &v, b, 3 * (size_t)S, &err) ==
+              GS_OK);
+        same &= memcmp(a, b, isz) == 0;
+    }
+    CHECK_MSG(same, "cached face stream render differs from a fresh one");
+    /* Different gazes give different images. */
+    gs_view v0 = {0}, v1 = {0};
+    v1.gaze_yaw = 0.5;
+    gs_model_render(c, NULL, &sub, &v0, a, 3 * (size_t)S, &err);
+    gs_model_render(c, NULL, &sub, &v1, b, 3 * (size_t)S, &err);
+    CHECK(memcmp(a, b, isz) != 0);
+
+    /* Bad input. */
+    gs_view bad = {0};
+    bad.gaze_pitch = 1.2;
+    CHECK(gs_model_render(c, NULL, &sub, &bad, a, 3 * (size_t)S, &err) ==
+          GS_ERR_ARG);
+    bad.gaze_pitch = NAN;
+    CHECK(gs_model_render(c, NULL, &sub, &bad, a, 3 * (size_t)S, &err) ==
+          GS_ERR_NONFINITE);
+    bad.gaze_pitch = 0;
+    CHECK(gs_model_render(c, NULL, &sub, &bad, a, 2 * (size_t)S, &err) ==
+          GS_ERR_ARG);
+    bad.use_head = 1;
+    gs_geom_mat3_identity(bad.head_R);
+    bad.head_R[0] = 2; /* not a rotation */
+    bad.head_t[2] = 600;
+    CHECK(gs_model_render(c, NULL, &sub, &bad, a, 3 * (size_t)S, &err) ==
+          GS_ERR_ARG);
+    gs_subject nan_sub = sub;
+    nan_sub.code[0] = NAN;
+    CHECK(gs_model_render(c, NULL, &nan_sub, &v0, a, 3 * (size_t)S, &err) ==
+          GS_ERR_NONFINITE);
+    fo.known_gaze = 1;
+    fo.gaze_yaw = 3.0;
+    CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &sub, NULL, &err) ==
+          GS_ERR_ARG);
+
+    free(a);
+    free(b);
+    gs_model_ctx_destroy(c2);
+    gs_model_ctx_destroy(c);
+    gs_synth_sample_free(&smp);
+    gs_model_destroy(m);
+    unlink(path);
+    char opt[160];
+    snprintf(opt, sizeof opt, "%s.opt", path);
+    unlink(opt);
+    GS_TEST_END();
+}
