@@ -414,6 +414,7 @@ static void handle_hello(gsd_conn *c, const gs_frame_header *h, const Gazesplat_
     ok.limits = &lim;
     char id[33];
     ok.image_size = (uint32_t)gsd_model_image_size(s, id);
+    ok.photo_input = atomic_load(&s->photo_state) > 0;
     reply(c, h, T(HELLO_OK), &ok.base);
 }
 
@@ -432,6 +433,9 @@ static void handle_health(gsd_conn *c, const gs_frame_header *h)
     m.workers = (uint32_t)s->work.nworkers;
     m.image_size = (uint32_t)gsd_model_image_size(s, id);
     m.model_id = id;
+    int photo = atomic_load(&s->photo_state);
+    m.photo_input = photo > 0;
+    m.photo_detail = photo < 0 ? s->photo_msg : photo == 0 ? "face models not loaded yet" : "";
     reply(c, h, T(HEALTH_OK), &m.base);
 }
 

@@ -133,6 +133,13 @@ struct gsd_server {
     char load_msg[1024];
     gsd_model *loaded;        /* loader result */
 
+    /* photo input (compute.c): the landmark model, loaded once with the
+     * first model; detectors are per worker (not re-entrant) */
+    struct gs_face_shape_model *face_sp;
+    atomic_int photo_state;   /* 0 not known yet, 1 available, -1 not */
+    char photo_msg[300];      /* why not (loop thread) */
+    char face_cascade[GSD_STR_MAX]; /* fixed at start */
+
     void (*on_sighup)(gsd_server *s); /* set by main: re-reads the config */
     ev_fn on_accept;          /* listeners' callback (server.c) */
     void *app;

@@ -12,12 +12,14 @@
 
 int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap)
 {
-    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
-        snprintf(msg, cap, "photo input needs face detection and normalization, not in this build; "
-                 "send a normalized face (kind NORMALIZED_FACE)");
+    /* Until the face models are loaded (state 0) the server-state check
+     * answers ERR_LOADING. */
+    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO && atomic_load(&s->photo_state) < 0) {
+        snprintf(msg, cap, "photo input unavailable: %s; send a normalized face (kind NORMALIZED_FACE)",
+                 s->photo_msg);
         return E(ERR_PHOTO_UNSUPPORTED);
     }
-    if (img->kind != GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE) {
+    if (img->kind != GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE && img->kind != GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
         snprintf(msg, cap, "unknown image kind %d", (int)img->kind);
         return E(ERR_INVALID_ARGUMENT);
     }
@@ -82,6 +84,16 @@ int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap)
     return 0;
 }
 
+static int check_intrinsics(const Gazesplat__Intrinsics *k, char *msg, size_t cap)
+{
+    if (k && (!isfinite(k->fx) || !isfinite(k->fy) || !isfinite(k->cx) || !isfinite(k->cy) ||
+              k->fx <= 0 || k->fy <= 0)) {
+        snprintf(msg, cap, "intrinsics need finite values and fx, fy > 0");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return 0;
+}
+
 int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap)
 {
     int e;
@@ -93,12 +105,8 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
         (e = check_angles(r->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, "gaze", msg, cap)) != 0 ||
         (e = check_angles(r->head, MAX_HEAD_DEG, MAX_HEAD_DEG, "head", msg, cap)) != 0)
         return e;
-    if (r->intrinsics && (!isfinite(r->intrinsics->fx) || !isfinite(r->intrinsics->fy) ||
-                          !isfinite(r->intrinsics->cx) || !isfinite(r->intrinsics->cy) ||
-                          r->intrinsics->fx <= 0 || r->intrinsics->fy <= 0)) {
-        snprintf(msg, cap, "intrinsics need finite values and fx, fy > 0");
-        return E(ERR_INVALID_ARGUMENT);
-    }
+    if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
+        return e;
     if (r->max_iters > 100000) {
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
@@ -145,16 +153,20 @@ int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
     }
+    if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
+        return e;
     if (r->output_format > GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 || r->jpeg_quality > 100) {
         snprintf(msg, cap, "output format %d / jpeg quality %u out of range", (int)r->output_format,
                  r->jpeg_quality);
         return E(ERR_INVALID_ARGUMENT);
     }
-    if (r->output_mode == GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK) {
-        snprintf(msg, cap, "PASTE_BACK needs photo input, not in this build");
-        return E(ERR_PHOTO_UNSUPPORTED);
+    if (r->output_mode == GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK &&
+        (!r->image || r->image->kind != GAZESPLAT__IMAGE_KIND__KIND_PHOTO)) {
+        snprintf(msg, cap, "PASTE_BACK needs the photo in the request (image of kind PHOTO)");
+        return E(ERR_INVALID_ARGUMENT);
     }
-    if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_NORMALIZED) {
+    if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_NORMALIZED &&
+        r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK) {
         snprintf(msg, cap, "unknown output mode %d", (int)r->output_mode);
         return E(ERR_INVALID_ARGUMENT);
     }

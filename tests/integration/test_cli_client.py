@@ -39,7 +39,7 @@ def main():
     r = run(daemon, "-c", conf)
     t.check(r.returncode == 2 and ":2: unknown key" in r.stderr, "bad file: %s" % r.stderr)
 
-    d = Daemon(daemon, ["--model", model]).start()
+    d = Daemon(daemon, ["--model", model, "--set", "photo_input=no"]).start()
     try:
         addr = "--addr=" + d.sock
         for _ in range(200):
