@@ -1,10 +1,9 @@
 /* gazesplatd compute side: the model (load, reload, refcount), the worker
  * state (model context + thread pool) and the jobs: FIT, REDIRECT, SLEEP.
  *
- * Everything that touches the model API (gazesplat/model.h) is here.
- * Photo input (face detection and normalization, lib/face) plugs in at
- * normalize_photo(); until it exists photos are refused with
- * ERR_PHOTO_UNSUPPORTED before they are queued. */
+ * Everything that touches the model API (gazesplat/model.h) and the face
+ * pipeline (gazesplat/face.h: photo -> normalized face, paste-back) is
+ * here. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
@@ -16,6 +15,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
 #include "gazesplat/pool.h"
@@ -44,6 +44,7 @@ struct gsd_worker {
     gsd_server *srv;
     int index;
     gs_pool *pool;
+    gs_face_detector *det; /* loaded at the first photo (one per thread) */
     gsd_model *model; /* the model ctx was made for (a reference) */
 #ifdef GSD_HAVE_MODEL
     gs_model_ctx *ctx;
@@ -163,6 +164,13 @@ static void *loader_main(void *p)
         }
         free(m);
     }
+    /* The landmark model (about 100 MB) is read once, with the first model. */
+    if (s->cfg.photo_input && !s->face_sp && atomic_load(&s->photo_state) == 0) {
+        gs_error ferr;
+        gs_error_clear(&ferr);
+        if (gs_face_shape_model_load(s->cfg.face_landmarks, &s->face_sp, &ferr) != GS_OK)
+            snprintf(s->photo_msg, sizeof s->photo_msg, "%.280s", ferr.msg);
+    }
     atomic_store(&s->load_done, 1);
     ev_wake(s->loop);
     return NULL;
@@ -173,6 +181,12 @@ void gsd_model_start_load(gsd_server *s)
     if (s->loader_running) {
         LOG_W("a model load is already running");
         return;
+    }
+    if (!s->face_cascade[0])
+        snprintf(s->face_cascade, sizeof s->face_cascade, "%s", s->cfg.face_cascade);
+    if (!s->cfg.photo_input && atomic_load(&s->photo_state) == 0) {
+        snprintf(s->photo_msg, sizeof s->photo_msg, "photo_input = no");
+        atomic_store(&s->photo_state, -1);
     }
     if (!s->cfg.model[0]) {
         gsd_server_set_state(s, GSD_FAILED, "no model configured (model = PATH)");
@@ -193,9 +207,18 @@ void gsd_model_start_load(gsd_server *s)
 
 void gsd_model_finish_load(gsd_server *s)
 {
+    if (s->ready_sent)
+        gsd_notify("READY=1"); /* a reload is over, whatever its outcome */
     pthread_join(s->loader, NULL);
     s->loader_running = 0;
     atomic_store(&s->load_done, 0);
+    if (atomic_load(&s->photo_state) == 0 && s->cfg.photo_input) {
+        atomic_store(&s->photo_state, s->face_sp ? 1 : -1);
+        if (s->face_sp)
+            LOG_I("photo input: landmarks %s, cascade %s", s->cfg.face_landmarks, s->face_cascade);
+        else
+            LOG_W("photo input unavailable: %s", s->photo_msg);
+    }
     char detail[GSD_STR_MAX + 320];
     if (s->load_status != 0) {
         atomic_fetch_add(&s->ctr.model_load_failures, 1);
@@ -227,6 +250,8 @@ void gsd_model_finish_load(gsd_server *s)
 
 void gsd_model_release_all(gsd_server *s)
 {
+    gs_face_shape_model_free(s->face_sp);
+    s->face_sp = NULL;
     if (s->loaded)
         model_unref(s->loaded);
     s->loaded = NULL;
@@ -300,6 +325,7 @@ void gsd_worker_destroy(gsd_worker *w)
     if (!w)
         return;
     worker_drop_model(w);
+    gs_face_detector_free(w->det);
     gs_pool_destroy(w->pool);
     free(w);
 }
@@ -363,20 +389,24 @@ static int worker_bind_model(gsd_worker *w)
     return w->ctx ? 0 : -1;
 }
 
-/* Photo input: detect the face, normalize it to the model's camera and
- * keep what paste-back needs. The hook for lib/face; refused earlier. */
-static int normalize_photo(const gs_io_image *photo, int size, gs_io_image *face, char *msg, size_t cap)
+/* A photo request keeps its photo and face analysis: the fit uses the
+ * landmark head pose and face mask, paste-back the normalization. */
+typedef struct photo_input {
+    int is_photo;
+    gs_io_image photo;
+    gs_face_result face;
+    uint8_t *mask_n; /* face weights in the normalized image */
+} photo_input;
+
+static void photo_input_free(photo_input *p)
 {
-    (void)photo;
-    (void)size;
-    (void)face;
-    snprintf(msg, cap, "photo input is not in this build");
-    return E(ERR_PHOTO_UNSUPPORTED);
+    gs_io_image_free(&p->photo);
+    free(p->mask_n);
+    memset(p, 0, sizeof *p);
 }
 
-/* Decodes a request image into 8-bit RGB of the model's size. */
-static int decode_image(gsd_job *j, const Gazesplat__Image *img, int size, gs_io_image *out,
-                        char *msg, size_t cap)
+/* Decodes a request image (PNG, JPEG or raw) into 8-bit RGB. */
+static int decode_image(gsd_job *j, const Gazesplat__Image *img, gs_io_image *out, char *msg, size_t cap)
 {
     memset(out, 0, sizeof *out);
     if (img->format == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
@@ -390,31 +420,77 @@ static int decode_image(gsd_job *j, const Gazesplat__Image *img, int size, gs_io
         }
         for (int y = 0; y < out->height; y++)
             memcpy(out->data + (size_t)y * out->stride, img->data.data + (size_t)y * img->stride, out->stride);
-    } else {
-        gs_io_image_limits lim = {img->data.len, j->max_pixels, j->max_side};
-        gs_error err;
-        gs_error_clear(&err);
-        int r = gs_io_image_decode(img->data.data, img->data.len, &lim, out, &err);
-        if (r != GS_OK) {
-            snprintf(msg, cap, "image: %s", err.msg);
-            return r == GS_ERR_LIMIT ? E(ERR_IMAGE_TOO_LARGE) : E(ERR_BAD_IMAGE);
-        }
+        return 0;
     }
-    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
-        gs_io_image face;
-        int r = normalize_photo(out, size, &face, msg, cap);
-        gs_io_image_free(out);
-        if (r)
-            return r;
-        *out = face;
-    }
-    if (out->width != size || out->height != size) {
-        snprintf(msg, cap, "normalized face is %dx%d, the model wants %dx%d", out->width, out->height,
-                 size, size);
-        gs_io_image_free(out);
-        return E(ERR_BAD_IMAGE);
+    gs_io_image_limits lim = {img->data.len, j->max_pixels, j->max_side};
+    gs_error err;
+    gs_error_clear(&err);
+    int r = gs_io_image_decode(img->data.data, img->data.len, &lim, out, &err);
+    if (r != GS_OK) {
+        snprintf(msg, cap, "image: %s", err.msg);
+        return r == GS_ERR_LIMIT ? E(ERR_IMAGE_TOO_LARGE) : E(ERR_BAD_IMAGE);
     }
     return 0;
+}
+
+/* Photo -> face analysis (detection, landmarks, head pose) -> the face
+ * normalized to the model's camera, and its face mask. */
+static int normalize_photo(gsd_worker *w, const Gazesplat__Intrinsics *k, photo_input *p,
+                           gs_io_image *face, char *msg, size_t cap)
+{
+    gsd_server *s = w->srv;
+    const gs_model_info *info = &w->model->info;
+    gs_error err;
+    gs_error_clear(&err);
+    if (!s->face_sp || (!w->det && gs_face_detector_load(s->face_cascade, &w->det, &err) != GS_OK)) {
+        snprintf(msg, cap, "photo input unavailable: %s", s->face_sp ? err.msg : "no landmark model");
+        return E(ERR_PHOTO_UNSUPPORTED);
+    }
+    gs_face_opts o;
+    gs_face_opts_default(&o);
+    o.norm_size = info->image_size;
+    o.norm_distance_mm = info->distance_mm;
+    o.norm_focal = info->focal;
+    if (k) {
+        double kk[9] = {k->fx, 0, k->cx, 0, k->fy, k->cy, 0, 0, 1};
+        o.use_k = 1;
+        memcpy(o.k, kk, sizeof kk);
+    }
+    int r = gs_face_analyze(w->det, s->face_sp, &p->photo, &o, &p->face, &err);
+    if (r != GS_OK) {
+        snprintf(msg, cap, "photo: %s", err.msg);
+        return r == GS_ERR_ARG ? E(ERR_NO_FACE) : E(ERR_INTERNAL);
+    }
+    int size = info->image_size;
+    p->mask_n = malloc((size_t)size * size);
+    if (!p->mask_n || gs_face_normalize_image(&p->photo, &p->face.norm, face, &err) != GS_OK ||
+        gs_face_mask(p->face.uv_n, GS_FACE_MASK_FACE, 0.0, 4.0, size, size, p->mask_n, &err) != GS_OK) {
+        snprintf(msg, cap, "photo normalization: %s", p->mask_n ? err.msg : "out of memory");
+        return E(ERR_INTERNAL);
+    }
+    p->is_photo = 1;
+    return 0;
+}
+
+/* The request's image as the normalized face the model fits; a photo is
+ * kept in *p for the fit options and paste-back. */
+static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, const Gazesplat__Intrinsics *k,
+                      photo_input *p, gs_io_image *face, char *msg, size_t cap)
+{
+    int size = w->model->info.image_size;
+    memset(p, 0, sizeof *p);
+    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
+        int e = decode_image(j, img, &p->photo, msg, cap);
+        return e ? e : normalize_photo(w, k, p, face, msg, cap);
+    }
+    int e = decode_image(j, img, face, msg, cap);
+    if (!e && (face->width != size || face->height != size)) {
+        snprintf(msg, cap, "normalized face is %dx%d, the model wants %dx%d", face->width, face->height,
+                 size, size);
+        gs_io_image_free(face);
+        return E(ERR_BAD_IMAGE);
+    }
+    return e;
 }
 
 /* The key a FIT without one gets: a hash of the pixels and the labels, so
@@ -452,16 +528,17 @@ static void head_rotation(const Gazesplat__Angles *a, double R[9])
     gs_geom_rot_from_pitchyaw(a->pitch_deg * DEG, a->yaw_deg * DEG, 0.0, R);
 }
 
-/* Fits (or finds) the subject of `img`; fills key, subject and report.
- * Returns 0 or an ErrorCode with msg. *cached says no fit was run. */
+/* Fits (or finds) the subject of `img`; fills key, subject and report,
+ * and *p for a photo (the caller frees it). Returns 0 or an ErrorCode with
+ * msg. *cached says no fit was run. */
 static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest *fr,
-                          const Gazesplat__Image *img, gs_subject *subj, gs_fit_report *rep,
-                          int *cached, char *msg, size_t cap)
+                          const Gazesplat__Image *img, const Gazesplat__Intrinsics *k, photo_input *p,
+                          gs_subject *subj, gs_fit_report *rep, int *cached, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
     const gs_model_info *info = &w->model->info;
     gs_io_image face;
-    int e = decode_image(j, img, info->image_size, &face, msg, cap);
+    int e = input_face(w, j, img, k, p, &face, msg, cap);
     if (e)
         return e;
     if (key_zero(j->key))
@@ -482,9 +559,16 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest
     if (fr && fr->head) {
         opt.known_head = 1;
         head_rotation(fr->head, opt.head_R);
-        opt.head_t[0] = opt.head_t[1] = 0.0;
-        opt.head_t[2] = info->distance_mm;
+    } else if (p->is_photo) {
+        /* The landmarks' head pose, rotated into the normalized camera. */
+        opt.known_head = 1;
+        gs_geom_norm_rot(&p->face.norm, p->face.pose.R, opt.head_R);
     }
+    if (opt.known_head) {
+        opt.head_t[0] = opt.head_t[1] = 0.0;
+        opt.head_t[2] = info->distance_mm; /* the face centre is on the axis */
+    }
+    opt.mask = p->mask_n;
     if (fr && fr->max_iters)
         opt.max_iters = (int)fr->max_iters;
     if (!fr && j->type == T(REDIRECT))
@@ -530,7 +614,9 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     gs_fit_report rep;
     int cached;
     char msg[400];
-    int e = obtain_subject(w, j, r, r->image, &subj, &rep, &cached, msg, sizeof msg);
+    photo_input photo;
+    int e = obtain_subject(w, j, r, r->image, r->intrinsics, &photo, &subj, &rep, &cached, msg, sizeof msg);
+    photo_input_free(&photo);
     if (e)
         return gsd_error_frame(j, e, "%s", msg);
     int why = job_stop(j);
@@ -553,9 +639,103 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     return gsd_frame_new(j, T(FIT_OK), &m.base);
 }
 
-/* Renders one target and posts its IMAGE frame. */
+/* Encodes img as the request asks and posts it as target i's IMAGE frame. */
+static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
+                      const gs_io_image *img, char *msg, size_t cap)
+{
+    Gazesplat__Image out = GAZESPLAT__IMAGE__INIT;
+    void *enc = NULL;
+    size_t enc_len = 0;
+    int fmt = r->output_format ? (int)r->output_format : GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+    out.format = (Gazesplat__ImageFormat)fmt;
+    if (fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
+        out.data.data = img->data;
+        out.data.len = img->stride * (size_t)img->height;
+        out.width = (uint32_t)img->width;
+        out.height = (uint32_t)img->height;
+        out.stride = (uint32_t)img->stride;
+    } else {
+        gs_error err;
+        gs_error_clear(&err);
+        int q = fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? (int)r->jpeg_quality : 0;
+        if (gs_io_image_encode(img, fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? GS_IO_JPEG : GS_IO_PNG,
+                               q, &enc, &enc_len, &err) != GS_OK) {
+            snprintf(msg, cap, "encode target %zu: %s", i, err.msg);
+            return E(ERR_INTERNAL);
+        }
+        out.data.data = enc;
+        out.data.len = enc_len;
+    }
+    Gazesplat__ImageResult m = GAZESPLAT__IMAGE_RESULT__INIT;
+    m.index = (uint32_t)i;
+    m.image = &out;
+    m.target = r->targets[i];
+    gsd_out *o = gsd_frame_new(j, T(IMAGE), &m.base);
+    free(enc);
+    if (!o) {
+        snprintf(msg, cap, "out of memory");
+        return E(ERR_INTERNAL);
+    }
+    gsd_post(w->srv, o);
+    atomic_fetch_add(&w->srv->ctr.images_out, 1);
+    return 0;
+}
+
+/* Paste-back state of one request: the blend masks in the photo's pixels
+ * (eyes for gaze-only targets, the whole face when the head turns), made
+ * when first needed, and the output buffer. */
+typedef struct paste_state {
+    uint8_t *mask[2]; /* 0: eyes, 1: face */
+    gs_io_image out;
+} paste_state;
+
+static void paste_state_free(paste_state *ps)
+{
+    free(ps->mask[0]);
+    free(ps->mask[1]);
+    free(ps->out.data);
+    memset(ps, 0, sizeof *ps);
+}
+
+static int paste_back(const photo_input *p, paste_state *ps, int whole_face, const gs_io_image *norm,
+                      char *msg, size_t cap)
+{
+    const gs_io_image *ph = &p->photo;
+    size_t bytes = ph->stride * (size_t)ph->height, px = (size_t)ph->width * ph->height;
+    gs_error err;
+    gs_error_clear(&err);
+    if (!ps->mask[whole_face]) {
+        /* Feather with the face: about 4% of the face box width. */
+        double feather = 0.04 * (p->face.box.right - p->face.box.left + 1);
+        ps->mask[whole_face] = malloc(px);
+        if (!ps->mask[whole_face] ||
+            gs_face_mask(p->face.uv, whole_face ? GS_FACE_MASK_FACE : GS_FACE_MASK_EYES, 2.0,
+                         feather < 2 ? 2 : feather, ph->width, ph->height, ps->mask[whole_face], &err) != GS_OK) {
+            snprintf(msg, cap, "paste-back mask: %s", ps->mask[whole_face] ? err.msg : "out of memory");
+            return E(ERR_INTERNAL);
+        }
+    }
+    if (!ps->out.data) {
+        ps->out = *ph;
+        ps->out.data = malloc(bytes);
+        if (!ps->out.data) {
+            snprintf(msg, cap, "out of memory");
+            return E(ERR_INTERNAL);
+        }
+    }
+    memcpy(ps->out.data, ph->data, bytes);
+    if (gs_face_paste_back(&ps->out, norm, &p->face.norm, ps->mask[whole_face], &err) != GS_OK) {
+        snprintf(msg, cap, "paste-back: %s", err.msg);
+        return E(ERR_INTERNAL);
+    }
+    return 0;
+}
+
+/* Renders target i into rgb (the normalized face) and posts it, pasted
+ * back into the photo when the request asks for it. */
 static int render_target(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
-                         const gs_subject *subj, uint8_t *rgb, char *msg, size_t cap)
+                         const gs_subject *subj, const photo_input *p, paste_state *ps, uint8_t *rgb,
+                         char *msg, size_t cap)
 {
     const Gazesplat__Target *t = r->targets[i];
     int size = w->model->info.image_size;
@@ -574,40 +754,11 @@ static int render_target(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReq
         snprintf(msg, cap, "render target %zu: %s", i, err.msg);
         return E(ERR_INTERNAL);
     }
-    Gazesplat__Image out = GAZESPLAT__IMAGE__INIT;
-    void *enc = NULL;
-    size_t enc_len = 0;
-    int fmt = r->output_format ? (int)r->output_format : GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
-    out.format = (Gazesplat__ImageFormat)fmt;
-    if (fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
-        out.data.data = rgb;
-        out.data.len = (size_t)size * size * 3;
-        out.width = out.height = (uint32_t)size;
-        out.stride = (uint32_t)size * 3;
-    } else {
-        gs_io_image img = {size, size, (size_t)size * 3, rgb};
-        int q = fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? (int)r->jpeg_quality : 0;
-        if (gs_io_image_encode(&img, fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? GS_IO_JPEG : GS_IO_PNG,
-                               q, &enc, &enc_len, &err) != GS_OK) {
-            snprintf(msg, cap, "encode target %zu: %s", i, err.msg);
-            return E(ERR_INTERNAL);
-        }
-        out.data.data = enc;
-        out.data.len = enc_len;
-    }
-    Gazesplat__ImageResult m = GAZESPLAT__IMAGE_RESULT__INIT;
-    m.index = (uint32_t)i;
-    m.image = &out;
-    m.target = (Gazesplat__Target *)t;
-    gsd_out *o = gsd_frame_new(j, T(IMAGE), &m.base);
-    free(enc);
-    if (!o) {
-        snprintf(msg, cap, "out of memory");
-        return E(ERR_INTERNAL);
-    }
-    gsd_post(w->srv, o);
-    atomic_fetch_add(&w->srv->ctr.images_out, 1);
-    return 0;
+    gs_io_image norm = {size, size, (size_t)size * 3, rgb};
+    if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK)
+        return post_image(w, j, r, i, &norm, msg, cap);
+    int e = paste_back(p, ps, t->head != NULL, &norm, msg, cap);
+    return e ? e : post_image(w, j, r, i, &ps->out, msg, cap);
 }
 
 static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
@@ -616,12 +767,17 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     const Gazesplat__RedirectRequest *r = (const Gazesplat__RedirectRequest *)j->req;
     gs_subject subj;
     char msg[400];
+    photo_input photo;
+    memset(&photo, 0, sizeof photo);
     if (r->image) {
         gs_fit_report rep;
         int cached;
-        int e = obtain_subject(w, j, NULL, r->image, &subj, &rep, &cached, msg, sizeof msg);
-        if (e)
+        int e = obtain_subject(w, j, NULL, r->image, r->intrinsics, &photo, &subj, &rep, &cached, msg,
+                               sizeof msg);
+        if (e) {
+            photo_input_free(&photo);
             return gsd_error_frame(j, e, "%s", msg);
+        }
     } else if (cache_lookup(s, j->key, &subj) != 0) {
         char hex[33];
         gs_frame_key_hex(j->key, hex);
@@ -629,17 +785,19 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     }
     int size = w->model->info.image_size;
     uint8_t *rgb = malloc((size_t)size * size * 3);
-    if (!rgb)
-        return gsd_error_frame(j, E(ERR_INTERNAL), "out of memory");
-    gsd_out *o = NULL;
+    paste_state ps;
+    memset(&ps, 0, sizeof ps);
+    gsd_out *o = rgb ? NULL : gsd_error_frame(j, E(ERR_INTERNAL), "out of memory");
     for (size_t i = 0; i < r->n_targets && !o; i++) {
         int why = job_stop(j);
         if (why)
             o = stop_frame(s, j, why);
-        else if ((why = render_target(w, j, r, i, &subj, rgb, msg, sizeof msg)) != 0)
+        else if ((why = render_target(w, j, r, i, &subj, &photo, &ps, rgb, msg, sizeof msg)) != 0)
             o = gsd_error_frame(j, why, "%s", msg);
     }
     free(rgb);
+    paste_state_free(&ps);
+    photo_input_free(&photo);
     if (o)
         return o;
     Gazesplat__Done d = GAZESPLAT__DONE__INIT;

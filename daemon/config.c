@@ -7,6 +7,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gazesplat/face.h"
 #include "log.h"
 
 enum { T_STR, T_INT, T_OCT, T_BOOL, T_LEVEL };
@@ -47,6 +48,9 @@ static const key_def keys[] = {
     {"cache_mb", T_INT, OFF(cache_mb), 1, 65536, "256"},
     {"log_level", T_LEVEL, OFF(log_level), 0, 3, "info"},
     {"debug_requests", T_BOOL, OFF(debug_requests), 0, 1, "no"},
+    {"photo_input", T_BOOL, OFF(photo_input), 0, 1, "yes"},
+    {"face_landmarks", T_STR, OFF(face_landmarks), 0, 0, GS_FACE_SHAPE_MODEL_DEFAULT},
+    {"face_cascade", T_STR, OFF(face_cascade), 0, 0, GS_FACE_CASCADE_DEFAULT},
 };
 #define NKEYS (sizeof keys / sizeof keys[0])
 

@@ -25,6 +25,9 @@ typedef struct gsd_config {
     int cache_mb;
     int log_level;
     int debug_requests;
+    int photo_input;                  /* accept KIND_PHOTO (needs the two below) */
+    char face_landmarks[GSD_STR_MAX]; /* dlib 68-point shape predictor */
+    char face_cascade[GSD_STR_MAX];   /* OpenCV face cascade */
 } gsd_config;
 
 void gsd_config_default(gsd_config *c);

@@ -20,9 +20,9 @@ uint64_t gsd_watchdog_usec(void);
 
 /* Sockets passed by the service manager: checks $LISTEN_PID against our
  * pid, returns the count n (fds 3 .. 3+n-1, made close-on-exec and
- * non-blocking), 0 when not activated. Names from $LISTEN_FDNAMES go into
- * names[i] (NULL when absent; pointers into the environment copy kept by
- * the caller). Unsets the variables so children do not inherit them. */
+ * non-blocking), 0 when not activated. The names from $LISTEN_FDNAMES are
+ * copied into names[i] ("" when absent). Unsets the variables so children
+ * do not inherit them. */
 int gsd_listen_fds(char names[GSD_MAX_LISTEN][64]);
 
 #endif

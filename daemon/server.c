@@ -52,7 +52,6 @@ struct gsd_conn {
 #define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
 
 static void conn_close(gsd_conn *c, const char *why);
-static void close_listeners(gsd_server *s);
 static void conn_update_interest(gsd_conn *c);
 
 /* ---- counters ------------------------------------------------------------ */
@@ -362,159 +361,6 @@ static void conn_flush(gsd_conn *c)
     conn_update_interest(c);
 }
 
-/* ---- request validation ---------------------------------------------------- */
-
-int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap)
-{
-    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
-        snprintf(msg, cap, "photo input needs face detection and normalization, not in this build; "
-                 "send a normalized face (kind NORMALIZED_FACE)");
-        return E(ERR_PHOTO_UNSUPPORTED);
-    }
-    if (img->kind != GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE) {
-        snprintf(msg, cap, "unknown image kind %d", (int)img->kind);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    if (img->data.len == 0) {
-        snprintf(msg, cap, "empty image data");
-        return E(ERR_BAD_IMAGE);
-    }
-    size_t side = (size_t)s->cfg.max_image_side, mpix = (size_t)s->cfg.max_image_mpix << 20;
-    switch (img->format) {
-    case GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG:
-    case GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG:
-        return 0; /* sizes are checked against the file's own header when decoded */
-    case GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8:
-        if (img->width == 0 || img->height == 0 || img->width > side || img->height > side ||
-            (size_t)img->width * img->height > mpix) {
-            snprintf(msg, cap, "raw image %ux%u outside 1..%zu per side, %zu pixels", img->width,
-                     img->height, side, mpix);
-            return img->width == 0 || img->height == 0 ? E(ERR_BAD_IMAGE) : E(ERR_IMAGE_TOO_LARGE);
-        }
-        if (img->stride < 3u * img->width ||
-            img->data.len < (size_t)img->stride * (img->height - 1) + 3u * img->width) {
-            snprintf(msg, cap, "raw image %ux%u stride %u needs %zu bytes, got %zu", img->width,
-                     img->height, img->stride, (size_t)img->stride * (img->height - 1) + 3u * img->width,
-                     img->data.len);
-            return E(ERR_BAD_IMAGE);
-        }
-        return 0;
-    default:
-        snprintf(msg, cap, "unknown image format %d", (int)img->format);
-        return E(ERR_BAD_IMAGE);
-    }
-}
-
-static int check_angles(const Gazesplat__Angles *a, double max_pitch, double max_yaw,
-                        const char *what, char *msg, size_t cap)
-{
-    if (!a)
-        return 0;
-    if (!isfinite(a->pitch_deg) || !isfinite(a->yaw_deg)) {
-        snprintf(msg, cap, "%s angle not finite", what);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    if (fabs(a->pitch_deg) > max_pitch || fabs(a->yaw_deg) > max_yaw) {
-        snprintf(msg, cap, "%s (%g, %g) deg outside +-%g pitch, +-%g yaw", what, a->pitch_deg,
-                 a->yaw_deg, max_pitch, max_yaw);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    return 0;
-}
-
-/* Documented input ranges, degrees (gazesplat/model.h). */
-#define MAX_GAZE_PITCH_DEG 50.0
-#define MAX_GAZE_YAW_DEG 60.0
-#define MAX_HEAD_DEG 70.0
-
-static int check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap)
-{
-    if (ms > (uint32_t)s->cfg.max_deadline_ms) {
-        snprintf(msg, cap, "deadline %u ms over max_deadline_ms %d", ms, s->cfg.max_deadline_ms);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    return 0;
-}
-
-static int check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap)
-{
-    int e;
-    if (!r->image) {
-        snprintf(msg, cap, "FIT without an image");
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    if ((e = gsd_check_image(s, r->image, msg, cap)) != 0 ||
-        (e = check_angles(r->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, "gaze", msg, cap)) != 0 ||
-        (e = check_angles(r->head, MAX_HEAD_DEG, MAX_HEAD_DEG, "head", msg, cap)) != 0)
-        return e;
-    if (r->intrinsics && (!isfinite(r->intrinsics->fx) || !isfinite(r->intrinsics->fy) ||
-                          !isfinite(r->intrinsics->cx) || !isfinite(r->intrinsics->cy) ||
-                          r->intrinsics->fx <= 0 || r->intrinsics->fy <= 0)) {
-        snprintf(msg, cap, "intrinsics need finite values and fx, fy > 0");
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    if (r->max_iters > 100000) {
-        snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    return check_deadline(s, r->deadline_ms, msg, cap);
-}
-
-static int key_is_zero(const uint8_t *key)
-{
-    for (int i = 0; i < GS_FRAME_KEY_SIZE; i++)
-        if (key[i])
-            return 0;
-    return 1;
-}
-
-static int check_redirect(const gsd_server *s, const gs_frame_header *h,
-                          const Gazesplat__RedirectRequest *r, char *msg, size_t cap)
-{
-    int e;
-    if (r->n_targets == 0 || r->n_targets > (size_t)s->cfg.max_targets) {
-        snprintf(msg, cap, "%zu targets, want 1..%d", r->n_targets, s->cfg.max_targets);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    for (size_t i = 0; i < r->n_targets; i++) {
-        char what[48];
-        if (!r->targets[i]->gaze) {
-            snprintf(msg, cap, "target %zu has no gaze", i);
-            return E(ERR_INVALID_ARGUMENT);
-        }
-        snprintf(what, sizeof what, "target %zu gaze", i);
-        if ((e = check_angles(r->targets[i]->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, what, msg, cap)))
-            return e;
-        snprintf(what, sizeof what, "target %zu head", i);
-        if ((e = check_angles(r->targets[i]->head, MAX_HEAD_DEG, MAX_HEAD_DEG, what, msg, cap)))
-            return e;
-    }
-    if (r->image && (e = gsd_check_image(s, r->image, msg, cap)) != 0)
-        return e;
-    if (!r->image && key_is_zero(h->key)) {
-        snprintf(msg, cap, "REDIRECT needs a subject key in the header or an inline image");
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    if (r->max_iters > 100000) {
-        snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    if (r->output_format > GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 || r->jpeg_quality > 100) {
-        snprintf(msg, cap, "output format %d / jpeg quality %u out of range", (int)r->output_format,
-                 r->jpeg_quality);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    if (r->output_mode == GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK) {
-        snprintf(msg, cap, "PASTE_BACK needs photo input, not in this build");
-        return E(ERR_PHOTO_UNSUPPORTED);
-    }
-    if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_NORMALIZED) {
-        snprintf(msg, cap, "unknown output mode %d", (int)r->output_mode);
-        return E(ERR_INVALID_ARGUMENT);
-    }
-    return check_deadline(s, r->deadline_ms, msg, cap);
-}
-
 /* ---- handlers ------------------------------------------------------------- */
 
 /* Constant-time comparison: time does not depend on where they differ. */
@@ -568,6 +414,7 @@ static void handle_hello(gsd_conn *c, const gs_frame_header *h, const Gazesplat_
     ok.limits = &lim;
     char id[33];
     ok.image_size = (uint32_t)gsd_model_image_size(s, id);
+    ok.photo_input = atomic_load(&s->photo_state) > 0;
     reply(c, h, T(HELLO_OK), &ok.base);
 }
 
@@ -586,6 +433,9 @@ static void handle_health(gsd_conn *c, const gs_frame_header *h)
     m.workers = (uint32_t)s->work.nworkers;
     m.image_size = (uint32_t)gsd_model_image_size(s, id);
     m.model_id = id;
+    int photo = atomic_load(&s->photo_state);
+    m.photo_input = photo > 0;
+    m.photo_detail = photo < 0 ? s->photo_msg : photo == 0 ? "face models not loaded yet" : "";
     reply(c, h, T(HEALTH_OK), &m.base);
 }
 
@@ -667,17 +517,17 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
     uint32_t deadline = 0;
     if (h->type == T(FIT)) {
         bump(&s->ctr.req_fit, 1);
-        e = check_fit(s, (const Gazesplat__FitRequest *)m, msg, sizeof msg);
+        e = gsd_check_fit(s, (const Gazesplat__FitRequest *)m, msg, sizeof msg);
         deadline = ((const Gazesplat__FitRequest *)m)->deadline_ms;
     } else if (h->type == T(REDIRECT)) {
         bump(&s->ctr.req_redirect, 1);
-        e = check_redirect(s, h, (const Gazesplat__RedirectRequest *)m, msg, sizeof msg);
+        e = gsd_check_redirect(s, h, (const Gazesplat__RedirectRequest *)m, msg, sizeof msg);
         deadline = ((const Gazesplat__RedirectRequest *)m)->deadline_ms;
     } else {
         bump(&s->ctr.req_sleep, 1);
         const Gazesplat__Sleep *sl = (const Gazesplat__Sleep *)m;
         deadline = sl->deadline_ms;
-        e = check_deadline(s, deadline, msg, sizeof msg);
+        e = gsd_check_deadline(s, deadline, msg, sizeof msg);
         if (!e && sl->ms > 60000) {
             snprintf(msg, sizeof msg, "sleep %u ms over 60000", sl->ms);
             e = E(ERR_INVALID_ARGUMENT);
@@ -927,193 +777,6 @@ static void on_accept(ev_loop *loop, ev_watch *w, int events)
     }
 }
 
-/* ---- listeners ------------------------------------------------------------ */
-
-static int add_listener(gsd_server *s, int fd, int is_tcp, int owned, const char *path)
-{
-    gsd_listener *l = &s->listeners[s->nlisteners];
-    l->srv = s;
-    l->fd = fd;
-    l->is_tcp = is_tcp;
-    l->owned = owned;
-    snprintf(l->path, sizeof l->path, "%s", path ? path : "");
-    if (ev_add(s->loop, &l->w, fd, EV_READ, on_accept, l) != 0)
-        return -1;
-    s->nlisteners++;
-    return 0;
-}
-
-static void default_socket_path(char *out, size_t cap)
-{
-    const char *rt = getenv("RUNTIME_DIRECTORY");
-    if (rt && *rt) {
-        char first[256];
-        snprintf(first, sizeof first, "%s", rt);
-        char *colon = strchr(first, ':'); /* several directories: the first */
-        if (colon)
-            *colon = '\0';
-        snprintf(out, cap, "%s/gazesplatd.sock", first);
-    } else {
-        snprintf(out, cap, "/run/gazesplatd/gazesplatd.sock");
-    }
-}
-
-/* Binds the Unix socket; a stale socket file nobody listens on is replaced. */
-static int bind_unix(gsd_server *s, const char *path, char *msg, size_t cap)
-{
-    struct sockaddr_un sa;
-    memset(&sa, 0, sizeof sa);
-    sa.sun_family = AF_UNIX;
-    if (strlen(path) >= sizeof sa.sun_path) {
-        snprintf(msg, cap, "socket path too long: %s", path);
-        return -1;
-    }
-    memcpy(sa.sun_path, path, strlen(path) + 1);
-    int fd = socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-    if (fd < 0) {
-        snprintf(msg, cap, "socket: %s", strerror(errno));
-        return -1;
-    }
-    struct stat st;
-    if (lstat(path, &st) == 0 && S_ISSOCK(st.st_mode)) {
-        int probe = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        int live = probe >= 0 && connect(probe, (struct sockaddr *)&sa, sizeof sa) == 0;
-        if (probe >= 0)
-            close(probe);
-        if (live) {
-            snprintf(msg, cap, "%s: another server is listening", path);
-            close(fd);
-            return -1;
-        }
-        unlink(path);
-    }
-    /* Created with no permissions, then opened to socket_mode. */
-    mode_t old = umask(0777);
-    int r = bind(fd, (struct sockaddr *)&sa, sizeof sa);
-    umask(old);
-    if (r != 0 || chmod(path, (mode_t)s->cfg.socket_mode) != 0 || listen(fd, 128) != 0) {
-        snprintf(msg, cap, "bind %s: %s", path, strerror(errno));
-        close(fd);
-        return -1;
-    }
-    if (add_listener(s, fd, 0, 1, path) != 0) {
-        snprintf(msg, cap, "epoll: %s", strerror(errno));
-        close(fd);
-        return -1;
-    }
-    LOG_I("listening on unix:%s (mode %04o)", path, (unsigned)s->cfg.socket_mode);
-    return 0;
-}
-
-static int is_loopback(const struct sockaddr *sa)
-{
-    if (sa->sa_family == AF_INET)
-        return (ntohl(((const struct sockaddr_in *)sa)->sin_addr.s_addr) >> 24) == 127;
-    if (sa->sa_family == AF_INET6)
-        return IN6_IS_ADDR_LOOPBACK(&((const struct sockaddr_in6 *)sa)->sin6_addr);
-    return 0;
-}
-
-static int bind_tcp(gsd_server *s, const char *hostport, char *msg, size_t cap)
-{
-    char host[256];
-    const char *colon = strrchr(hostport, ':');
-    if (!colon || colon == hostport || (size_t)(colon - hostport) >= sizeof host) {
-        snprintf(msg, cap, "tcp: want HOST:PORT, got '%s'", hostport);
-        return -1;
-    }
-    snprintf(host, sizeof host, "%.*s", (int)(colon - hostport), hostport);
-    if (host[0] == '[' && strlen(host) > 2 && host[strlen(host) - 1] == ']') {
-        memmove(host, host + 1, strlen(host));
-        host[strlen(host) - 1] = '\0';
-    }
-    struct addrinfo hints, *res = NULL;
-    memset(&hints, 0, sizeof hints);
-    hints.ai_socktype = SOCK_STREAM;
-    hints.ai_flags = AI_PASSIVE | AI_NUMERICSERV;
-    int gr = getaddrinfo(host, colon + 1, &hints, &res);
-    if (gr != 0) {
-        snprintf(msg, cap, "tcp %s: %s", hostport, gai_strerror(gr));
-        return -1;
-    }
-    int rc = -1;
-    if (!is_loopback(res->ai_addr) && !s->cfg.tcp_allow_remote) {
-        snprintf(msg, cap, "tcp %s is not a loopback address; set tcp_allow_remote = yes "
-                 "(and a token) to listen on it", hostport);
-    } else {
-        int fd = socket(res->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-        int one = 1;
-        if (fd >= 0)
-            setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-        if (fd < 0 || bind(fd, res->ai_addr, res->ai_addrlen) != 0 || listen(fd, 128) != 0 ||
-            add_listener(s, fd, 1, 0, NULL) != 0) {
-            snprintf(msg, cap, "tcp %s: %s", hostport, strerror(errno));
-            if (fd >= 0)
-                close(fd);
-        } else {
-            rc = 0;
-            if (!is_loopback(res->ai_addr) && !s->cfg.token[0])
-                LOG_W("tcp %s reachable from other hosts without a token", hostport);
-            LOG_I("listening on tcp:%s%s", hostport, s->cfg.token[0] ? " (token required)" : "");
-        }
-    }
-    freeaddrinfo(res);
-    return rc;
-}
-
-static int setup_listeners(gsd_server *s, char *msg, size_t cap)
-{
-    char names[GSD_MAX_LISTEN][64];
-    int n = gsd_listen_fds(names);
-    for (int i = 0; i < n; i++) {
-        int fd = GSD_LISTEN_FDS_START + i;
-        struct sockaddr_storage ss;
-        socklen_t len = sizeof ss;
-        if (getsockname(fd, (struct sockaddr *)&ss, &len) != 0) {
-            snprintf(msg, cap, "inherited fd %d is not a socket", fd);
-            return -1;
-        }
-        int is_tcp = ss.ss_family == AF_INET || ss.ss_family == AF_INET6;
-        if (add_listener(s, fd, is_tcp, 0, NULL) != 0) {
-            snprintf(msg, cap, "epoll on inherited fd %d: %s", fd, strerror(errno));
-            return -1;
-        }
-        LOG_I("listening on inherited fd %d (%s%s%s)", fd, is_tcp ? "tcp" : "unix",
-              names[i][0] ? ", " : "", names[i]);
-    }
-    if (n > 0)
-        return 0;
-    char path[GSD_STR_MAX];
-    if (s->cfg.socket[0])
-        snprintf(path, sizeof path, "%s", s->cfg.socket);
-    else
-        default_socket_path(path, sizeof path);
-    /* TCP first: a refused address must fail before the socket file exists. */
-    if (s->cfg.tcp[0] && bind_tcp(s, s->cfg.tcp, msg, cap) != 0)
-        return -1;
-    if (strcmp(path, "none") != 0 && bind_unix(s, path, msg, cap) != 0) {
-        close_listeners(s);
-        return -1;
-    }
-    if (s->nlisteners == 0) {
-        snprintf(msg, cap, "no socket to listen on (socket = none and no tcp)");
-        return -1;
-    }
-    return 0;
-}
-
-static void close_listeners(gsd_server *s)
-{
-    for (int i = 0; i < s->nlisteners; i++) {
-        gsd_listener *l = &s->listeners[i];
-        ev_del(s->loop, &l->w);
-        close(l->fd); /* never unlink or shut down an inherited socket */
-        if (l->owned && l->path[0])
-            unlink(l->path);
-    }
-    s->nlisteners = 0;
-}
-
 /* ---- completions, ticks, signals ------------------------------------------ */
 
 static void job_finished(gsd_server *s, gsd_job *j, uint64_t ms)
@@ -1259,7 +922,7 @@ static void start_drain(gsd_server *s)
     atomic_store(&s->state, GSD_DRAINING);
     snprintf(s->detail, sizeof s->detail, "shutting down");
     set_status(s);
-    close_listeners(s);
+    gsd_listen_close(s);
     s->drain_deadline = ev_now_ms() + s->cfg.drain_timeout_ms;
 }
 
@@ -1303,6 +966,10 @@ static void on_signal(ev_loop *loop, ev_watch *w, int events)
                 s->on_sighup(s);
             if (atomic_load(&s->state) != GSD_DRAINING)
                 gsd_model_start_load(s);
+            /* systemd waits for READY=1 to end the reload; a model load
+             * sends it when it finishes. */
+            if (!s->loader_running)
+                gsd_notify("READY=1");
         } else {
             start_drain(s);
         }
@@ -1340,7 +1007,8 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
         return -1;
     }
     s->sig_wr = pfd[1];
-    if (setup_listeners(s, msg, cap) != 0)
+    s->on_accept = on_accept;
+    if (gsd_listen_setup(s, msg, cap) != 0)
         return -1;
     if (gsd_work_start(s, cfg->workers, cfg->queue_depth) != 0) {
         snprintf(msg, cap, "cannot start %d workers", cfg->workers);
@@ -1366,7 +1034,7 @@ int gsd_server_run(gsd_server *s)
 
 void gsd_server_free(gsd_server *s)
 {
-    close_listeners(s);
+    gsd_listen_close(s);
     /* Running jobs end at their next check; the queue is answered. */
     for (gsd_conn *c = s->conns; c; c = c->next)
         for (gsd_job *j = c->inflight; j; j = j->cnext)

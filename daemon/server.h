@@ -133,7 +133,15 @@ struct gsd_server {
     char load_msg[1024];
     gsd_model *loaded;        /* loader result */
 
+    /* photo input (compute.c): the landmark model, loaded once with the
+     * first model; detectors are per worker (not re-entrant) */
+    struct gs_face_shape_model *face_sp;
+    atomic_int photo_state;   /* 0 not known yet, 1 available, -1 not */
+    char photo_msg[300];      /* why not (loop thread) */
+    char face_cascade[GSD_STR_MAX]; /* fixed at start */
+
     void (*on_sighup)(gsd_server *s); /* set by main: re-reads the config */
+    ev_fn on_accept;          /* listeners' callback (server.c) */
     void *app;
     uint64_t watchdog_usec;
     int64_t next_watchdog, next_extend;
@@ -186,7 +194,16 @@ void gsd_cache_restore(gsd_server *s);
 /* Saves the cache file; 0 or -1 (logged). */
 int gsd_cache_persist(gsd_server *s);
 
-/* Validation shared by loop (early answer) and workers. Fills msg. */
+/* ---- validate.c: 0 or an ErrorCode with a message in msg ---- */
 int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap);
+int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap);
+int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap);
+int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
+                       const Gazesplat__RedirectRequest *r, char *msg, size_t cap);
+
+/* ---- listen.c ---- */
+int gsd_listen_setup(gsd_server *s, char *msg, size_t cap);
+/* Closes the listeners; unlinks only sockets this process bound. */
+void gsd_listen_close(gsd_server *s);
 
 #endif

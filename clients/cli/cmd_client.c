@@ -30,15 +30,17 @@ const cli_command cli_client_command = {
     "  --token TOKEN        shared secret for TCP (default $GAZESPLAT_TOKEN)\n"
     "  --timeout-ms N       wait this long for each reply (default 120000)\n"
     "  --image FILE         a normalized face image (PNG or JPEG)\n"
-    "  --photo              the image is a photo (needs face detection)\n"
+    "  --photo              the image is a photo: the server finds and normalizes\n"
+    "                       the face\n"
     "  --gaze P,Y           fit: known gaze of the image, degrees\n"
     "  --head P,Y           fit: known head pose, degrees\n"
     "  --key HEX            fit: the subject key to use (32 hex digits)\n"
-    "  --max-iters N        fit: iteration limit\n"
+    "  --max-iters N        fit (and redirect of an --image): iteration limit\n"
     "  --subject HEX        redirect: a fitted subject key\n"
     "  --gaze-deg LIST      redirect: targets 'P,Y;P,Y;...', degrees\n"
     "  --head-deg LIST      redirect: head poses, one per target\n"
     "  --format F           redirect: png (default), jpeg or raw\n"
+    "  --paste-back         redirect: paste the result back into the --photo\n"
     "  --out DIR            redirect: writes DIR/target_NNN.png (or .jpg, .rgb)\n"
     "  --deadline-ms N      per-request deadline\n"
     "\n"
@@ -48,7 +50,7 @@ const cli_command cli_client_command = {
 
 enum {
     O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
-    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_N
+    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_N
 };
 
 #define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
@@ -324,6 +326,11 @@ static int do_redirect(gs_client *c, const cli_opt *o, int timeout)
         req.n_targets = (size_t)n;
         req.targets = tp;
         req.output_format = (Gazesplat__ImageFormat)fmt;
+        if (o[O_PASTE].value)
+            req.output_mode = GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK;
+        long iters = 0;
+        if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &iters) == 0)
+            req.max_iters = (uint32_t)iters;
         gs_error err;
         if (gs_client_send(c, T(REDIRECT), key, 1, &req.base, &err) != GS_OK)
             rc = cli_fail(cmd, "%s", err.msg);
@@ -351,6 +358,7 @@ static int run_client(int argc, char **argv)
         {"--photo", 0, NULL}, {"--gaze", 1, NULL}, {"--head", 1, NULL}, {"--key", 1, NULL},
         {"--max-iters", 1, NULL}, {"--subject", 1, NULL}, {"--gaze-deg", 1, NULL},
         {"--head-deg", 1, NULL}, {"--format", 1, NULL}, {"--out", 1, NULL}, {"--deadline-ms", 1, NULL},
+        {"--paste-back", 0, NULL},
     };
     int r = cli_parse(cmd, argc - 1, argv + 1, o, O_N);
     if (r == CLI_HELP) {

@@ -229,16 +229,20 @@ class Client:
         return self.call(FT.FRAME_FIT, req, FT.FRAME_FIT_OK, key or ZERO_KEY)[1]
 
     def redirect(self, gaze_deg, subject=None, image=None, head_deg=None, fmt="png",
-                 jpeg_quality=0, deadline_ms=0, max_iters=0):
+                 jpeg_quality=0, deadline_ms=0, max_iters=0, photo=False, paste_back=False):
         """Yields one ImageResult per target as the server streams them.
-        gaze_deg: [(pitch, yaw), ...]; head_deg: None or one pose per target."""
+        gaze_deg: [(pitch, yaw), ...]; head_deg: None or one pose per target.
+        photo: the image is a photo (the server finds the face); paste_back:
+        return the photo with the redirected face blended in."""
         if (subject is None) == (image is None):
             raise ValueError("give exactly one of subject and image")
         req = pb.RedirectRequest(
             output_format={"png": pb.FORMAT_PNG, "jpeg": pb.FORMAT_JPEG, "raw": pb.FORMAT_RAW_RGB8}[fmt],
             jpeg_quality=jpeg_quality, deadline_ms=deadline_ms, max_iters=max_iters)
         if image is not None:
-            req.image.CopyFrom(_image(image))
+            req.image.CopyFrom(_image(image, pb.KIND_PHOTO if photo else pb.KIND_NORMALIZED_FACE))
+        if paste_back:
+            req.output_mode = pb.OUTPUT_PASTE_BACK
         heads = head_deg or [None] * len(gaze_deg)
         if len(heads) != len(gaze_deg):
             raise ValueError("one head pose per target")

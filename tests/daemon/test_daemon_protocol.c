@@ -261,7 +261,7 @@ static const mcase cases[] = {
     {"FIT NaN gaze", 0, b_fit_nan, E(ERR_INVALID_ARGUMENT), 0},
     {"FIT -inf head", 0, b_fit_inf_head, E(ERR_INVALID_ARGUMENT), 0},
     {"FIT gaze pitch 80", 0, b_fit_range, E(ERR_INVALID_ARGUMENT), 0},
-    {"FIT photo", 0, b_fit_photo, E(ERR_PHOTO_UNSUPPORTED), 0},
+    {"FIT photo (photo_input = no)", 0, b_fit_photo, E(ERR_PHOTO_UNSUPPORTED), 0},
     {"FIT unknown image kind", 0, b_fit_kind, E(ERR_INVALID_ARGUMENT), 0},
     {"FIT raw stride < 3w", 0, b_fit_stride, E(ERR_BAD_IMAGE), 0},
     {"FIT raw data short", 0, b_fit_short, E(ERR_BAD_IMAGE), 0},
@@ -278,7 +278,7 @@ static const mcase cases[] = {
     {"REDIRECT pitch -51", 0, b_redir_range, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT target without gaze", 0, b_redir_nogaze, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT without key or image", 0, b_redir_nokey, E(ERR_INVALID_ARGUMENT), 0},
-    {"REDIRECT paste-back", 0, b_redir_paste, E(ERR_PHOTO_UNSUPPORTED), 0},
+    {"REDIRECT paste-back without a photo", 0, b_redir_paste, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT jpeg quality 101", 0, b_redir_quality, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT unknown output format", 0, b_redir_format, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT deadline over max", 0, b_redir_deadline, E(ERR_INVALID_ARGUMENT), 0},
@@ -463,6 +463,7 @@ int main(int argc, char **argv)
     const char *args[] = {"--set", "max_payload=1048576", "--set", "header_timeout_ms=500",
                           "--set", "idle_timeout_ms=1500", "--set", "debug_requests=yes",
                           "--set", "max_output_kb=64", "--set", "max_image_mpix=8",
+                          "--set", "photo_input=no",
                           "--log-level", "debug", NULL};
     if (daemon_start_v(&d, bin, args) != 0) {
         fprintf(stderr, "gazesplatd did not start\n");

@@ -1,8 +1,9 @@
 """gazesplatd end to end with a tiny real model (trained at test time):
 FIT (derived and chosen keys, cache hits, known labels), REDIRECT by key
-and inline (PNG, JPEG, raw), CANCEL midway, image errors (wrong size,
-corrupt, decompression bomb), persistence across a restart, SIGHUP model
-reload, a different model dropping the old subjects.
+and inline (PNG, JPEG, raw), photo input (detection, normalization,
+paste-back, no face), CANCEL midway, image errors (wrong size, corrupt,
+decompression bomb), persistence across a restart, SIGHUP model reload, a
+different model dropping the old subjects.
 usage: test_daemon_model.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import os
 import struct
@@ -126,6 +127,57 @@ def test_cancel(t, addr, key):
 
 
 faces_small = []
+ASTRONAUT = "/usr/lib/python3/dist-packages/skimage/data/astronaut.png"
+
+
+def test_photo(t, addr, size):
+    """A real photo (python3-skimage's astronaut, 512 x 512, one face)."""
+    import numpy as np
+    with gc.Client(addr) as c:
+        t.check(c.server.photo_input and c.health().photo_input, "photo input advertised")
+        if not os.path.exists(ASTRONAUT):
+            print("SKIP photo checks: %s missing (python3-skimage)" % ASTRONAUT)
+            return
+        photo = open(ASTRONAUT, "rb").read()
+        r = c.fit(photo, photo=True, max_iters=FAST)
+        t.check(not r.cached and len(r.subject_key) == 16, "photo fit: %s" % r)
+        # The landmarks' head pose is kept: a near-frontal astronaut.
+        t.check(abs(r.head.yaw_deg) < 30 and abs(r.head.pitch_deg) < 40, "photo head %s" % r.head)
+        out = list(c.redirect([(0, 0)], subject=r.subject_key, fmt="raw"))
+        t.check(gc.image_array(out[0]).shape == (size, size, 3), "normalized render of a photo subject")
+        req = gc.pb.RedirectRequest(image=gc.pb.Image(format=gc.pb.FORMAT_PNG, data=photo, kind=gc.pb.KIND_PHOTO),
+                                    output_mode=gc.pb.OUTPUT_PASTE_BACK, output_format=gc.pb.FORMAT_RAW_RGB8,
+                                    max_iters=FAST)
+        req.targets.add().gaze.CopyFrom(gc.pb.Angles(pitch_deg=10, yaw_deg=-15))
+        tg = req.targets.add()
+        tg.gaze.CopyFrom(gc.pb.Angles())
+        tg.head.CopyFrom(gc.pb.Angles(yaw_deg=15))
+        rid = c.new_id()
+        c.send(gc.FT.FRAME_REDIRECT, req, rid)
+        res = list(c._images(rid))
+        arrs = [gc.image_array(x) for x in res]
+        t.check(len(arrs) == 2 and all(a.shape == (512, 512, 3) for a in arrs), "paste-back size")
+        if len(arrs) == 2:
+            # Eyes only for a gaze target, the whole face when the head
+            # turns; the photo's corners are untouched either way.
+            t.check(int(np.count_nonzero(arrs[0] != arrs[1])) > 0, "paste-backs differ")
+            t.check((arrs[0][:40, :40] == arrs[1][:40, :40]).all(), "corners untouched")
+        flat = np.full((200, 200, 3), 128, np.uint8)
+        expect_error(t, lambda: c.fit(flat, photo=True), gc.pb.ERR_NO_FACE, "photo without a face")
+        expect_error(t, lambda: _paste_normalized(c), gc.pb.ERR_INVALID_ARGUMENT,
+                     "paste-back of a normalized face")
+
+
+imgs_for_photo = []
+
+
+def _paste_normalized(c):
+    req = gc.pb.RedirectRequest(image=gc.pb.Image(format=gc.pb.FORMAT_PNG, data=imgs_for_photo[0]),
+                                output_mode=gc.pb.OUTPUT_PASTE_BACK)
+    req.targets.add().gaze.CopyFrom(gc.pb.Angles())
+    rid = c.new_id()
+    c.send(gc.FT.FRAME_REDIRECT, req, rid)
+    return c._images(rid)
 
 
 def main():
@@ -148,6 +200,8 @@ def main():
         size = h.image_size if h else 0
         key1, key2 = test_fit_and_redirect(t, addr, imgs, size)
         test_cancel(t, addr, key1)
+        imgs_for_photo.extend(imgs)
+        test_photo(t, addr, size)
         # SIGHUP reloads the same model: subjects stay.
         d.proc.send_signal(1)
         time.sleep(1.0)
@@ -157,7 +211,9 @@ def main():
                     % (st["model_loads"], st["reloads"]))
             t.check(len(list(c.redirect([(0, 0)], subject=key2))) == 1, "subject kept across reload")
         t.check(d.stop() == 0, "clean exit")
-        # Restart: the subjects come back from the state directory.
+        # Restart: the subjects come back from the state directory (no
+        # photos from here on: skip loading the 100 MB landmark model).
+        args += ["--set", "photo_input=no"]
         d = Daemon(daemon, args).start()
         addr = "unix:" + d.sock
         wait_ready(t, addr)
@@ -167,7 +223,7 @@ def main():
             t.check(c.fit(imgs[1], key=key2).cached, "subject 2 after restart")
         t.check(d.stop() == 0, "clean exit")
         # Another model: the old subjects do not apply to it.
-        d = Daemon(daemon, ["--model", other, "--state-dir", state]).start()
+        d = Daemon(daemon, ["--model", other, "--state-dir", state, "--set", "photo_input=no"]).start()
         addr = "unix:" + d.sock
         wait_ready(t, addr)
         with gc.Client(addr) as c:

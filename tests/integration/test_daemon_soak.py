@@ -75,7 +75,7 @@ def main():
     os.makedirs(state, exist_ok=True)
     for f in os.listdir(state):
         os.unlink(os.path.join(state, f))
-    args = ["--model", model, "--state-dir", state, "--set", "queue_depth=64",
+    args = ["--model", model, "--state-dir", state, "--set", "queue_depth=64", "--set", "photo_input=no",
             "--set", "max_connections=128"]
     d = Daemon(daemon, args).start()
     try:

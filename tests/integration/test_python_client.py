@@ -25,7 +25,8 @@ def expect_error(t, fn, code, what):
 def main():
     t = Checks()
     d = Daemon(os.path.abspath(sys.argv[1]),
-               ["--set", "debug_requests=yes", "--set", "workers=1", "--set", "queue_depth=1"]).start()
+               ["--set", "debug_requests=yes", "--set", "workers=1", "--set", "queue_depth=1",
+                "--set", "photo_input=no"]).start()
     try:
         c = gc.Client("unix:" + d.sock, client_name="pytest")
         t.check(c.server.version == 1 and c.server.limits.max_targets == 64, "hello: %s" % c.server)

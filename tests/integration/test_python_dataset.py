@@ -24,7 +24,7 @@ def main():
     faces(cli, work, 128, 3)
     paths = [os.path.join(work, "faces128", "images", n)
              for n in sorted(os.listdir(os.path.join(work, "faces128", "images")))]
-    d = Daemon(daemon, ["--model", model]).start()
+    d = Daemon(daemon, ["--model", model, "--set", "photo_input=no"]).start()
     try:
         import torch
         import gazesplat_client as gc

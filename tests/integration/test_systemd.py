@@ -88,6 +88,12 @@ def test_activation(t, binary, tmp):
         t.check("STATUS=" in text, "STATUS= in %r" % msgs)
         t.check(text.count("WATCHDOG=1") >= 3, "3 watchdog pings within 3 s: %r" % msgs)
         t.check(not os.path.exists(unused), "fell back to binding %s" % unused)
+        # SIGHUP: RELOADING=1, then READY=1 once the reload is over.
+        proc.send_signal(signal.SIGHUP)
+        msgs = recv_notifications(ns, time.time() + 2.0, lambda g: any("READY=1" in m for m in g))
+        text = "\n".join(m for m in msgs if "WATCHDOG" not in m)
+        t.check("RELOADING=1" in text and text.index("RELOADING=1") < text.rindex("READY=1"),
+                "SIGHUP notifications: %r" % msgs)
         proc.send_signal(signal.SIGTERM)
         rc = proc.wait(10)
         msgs = recv_notifications(ns, time.time() + 1.0, lambda g: any("STOPPING=1" in m for m in g))

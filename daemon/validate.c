@@ -1,0 +1,174 @@
+/* gazesplatd: request validation, run on the loop thread before a request
+ * is queued, so bad requests are answered at once and never reach a
+ * worker. Each check returns 0 or an ErrorCode with a message. */
+#include <math.h>
+#include <stdio.h>
+
+#include "server.h"
+
+#define E(x) GAZESPLAT__ERROR_CODE__##x
+
+/* ---- request validation ---------------------------------------------------- */
+
+int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap)
+{
+    /* Until the face models are loaded (state 0) the server-state check
+     * answers ERR_LOADING. */
+    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO && atomic_load(&s->photo_state) < 0) {
+        snprintf(msg, cap, "photo input unavailable: %s; send a normalized face (kind NORMALIZED_FACE)",
+                 s->photo_msg);
+        return E(ERR_PHOTO_UNSUPPORTED);
+    }
+    if (img->kind != GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE && img->kind != GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
+        snprintf(msg, cap, "unknown image kind %d", (int)img->kind);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (img->data.len == 0) {
+        snprintf(msg, cap, "empty image data");
+        return E(ERR_BAD_IMAGE);
+    }
+    size_t side = (size_t)s->cfg.max_image_side, mpix = (size_t)s->cfg.max_image_mpix << 20;
+    switch (img->format) {
+    case GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG:
+    case GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG:
+        return 0; /* sizes are checked against the file's own header when decoded */
+    case GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8:
+        if (img->width == 0 || img->height == 0 || img->width > side || img->height > side ||
+            (size_t)img->width * img->height > mpix) {
+            snprintf(msg, cap, "raw image %ux%u outside 1..%zu per side, %zu pixels", img->width,
+                     img->height, side, mpix);
+            return img->width == 0 || img->height == 0 ? E(ERR_BAD_IMAGE) : E(ERR_IMAGE_TOO_LARGE);
+        }
+        if (img->stride < 3u * img->width ||
+            img->data.len < (size_t)img->stride * (img->height - 1) + 3u * img->width) {
+            snprintf(msg, cap, "raw image %ux%u stride %u needs %zu bytes, got %zu", img->width,
+                     img->height, img->stride, (size_t)img->stride * (img->height - 1) + 3u * img->width,
+                     img->data.len);
+            return E(ERR_BAD_IMAGE);
+        }
+        return 0;
+    default:
+        snprintf(msg, cap, "unknown image format %d", (int)img->format);
+        return E(ERR_BAD_IMAGE);
+    }
+}
+
+static int check_angles(const Gazesplat__Angles *a, double max_pitch, double max_yaw,
+                        const char *what, char *msg, size_t cap)
+{
+    if (!a)
+        return 0;
+    if (!isfinite(a->pitch_deg) || !isfinite(a->yaw_deg)) {
+        snprintf(msg, cap, "%s angle not finite", what);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (fabs(a->pitch_deg) > max_pitch || fabs(a->yaw_deg) > max_yaw) {
+        snprintf(msg, cap, "%s (%g, %g) deg outside +-%g pitch, +-%g yaw", what, a->pitch_deg,
+                 a->yaw_deg, max_pitch, max_yaw);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return 0;
+}
+
+/* Documented input ranges, degrees (gazesplat/model.h). */
+#define MAX_GAZE_PITCH_DEG 50.0
+#define MAX_GAZE_YAW_DEG 60.0
+#define MAX_HEAD_DEG 70.0
+
+int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap)
+{
+    if (ms > (uint32_t)s->cfg.max_deadline_ms) {
+        snprintf(msg, cap, "deadline %u ms over max_deadline_ms %d", ms, s->cfg.max_deadline_ms);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return 0;
+}
+
+static int check_intrinsics(const Gazesplat__Intrinsics *k, char *msg, size_t cap)
+{
+    if (k && (!isfinite(k->fx) || !isfinite(k->fy) || !isfinite(k->cx) || !isfinite(k->cy) ||
+              k->fx <= 0 || k->fy <= 0)) {
+        snprintf(msg, cap, "intrinsics need finite values and fx, fy > 0");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return 0;
+}
+
+int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap)
+{
+    int e;
+    if (!r->image) {
+        snprintf(msg, cap, "FIT without an image");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if ((e = gsd_check_image(s, r->image, msg, cap)) != 0 ||
+        (e = check_angles(r->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, "gaze", msg, cap)) != 0 ||
+        (e = check_angles(r->head, MAX_HEAD_DEG, MAX_HEAD_DEG, "head", msg, cap)) != 0)
+        return e;
+    if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
+        return e;
+    if (r->max_iters > 100000) {
+        snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return gsd_check_deadline(s, r->deadline_ms, msg, cap);
+}
+
+static int key_is_zero(const uint8_t *key)
+{
+    for (int i = 0; i < GS_FRAME_KEY_SIZE; i++)
+        if (key[i])
+            return 0;
+    return 1;
+}
+
+int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
+                          const Gazesplat__RedirectRequest *r, char *msg, size_t cap)
+{
+    int e;
+    if (r->n_targets == 0 || r->n_targets > (size_t)s->cfg.max_targets) {
+        snprintf(msg, cap, "%zu targets, want 1..%d", r->n_targets, s->cfg.max_targets);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    for (size_t i = 0; i < r->n_targets; i++) {
+        char what[48];
+        if (!r->targets[i]->gaze) {
+            snprintf(msg, cap, "target %zu has no gaze", i);
+            return E(ERR_INVALID_ARGUMENT);
+        }
+        snprintf(what, sizeof what, "target %zu gaze", i);
+        if ((e = check_angles(r->targets[i]->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, what, msg, cap)))
+            return e;
+        snprintf(what, sizeof what, "target %zu head", i);
+        if ((e = check_angles(r->targets[i]->head, MAX_HEAD_DEG, MAX_HEAD_DEG, what, msg, cap)))
+            return e;
+    }
+    if (r->image && (e = gsd_check_image(s, r->image, msg, cap)) != 0)
+        return e;
+    if (!r->image && key_is_zero(h->key)) {
+        snprintf(msg, cap, "REDIRECT needs a subject key in the header or an inline image");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (r->max_iters > 100000) {
+        snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
+        return e;
+    if (r->output_format > GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 || r->jpeg_quality > 100) {
+        snprintf(msg, cap, "output format %d / jpeg quality %u out of range", (int)r->output_format,
+                 r->jpeg_quality);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (r->output_mode == GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK &&
+        (!r->image || r->image->kind != GAZESPLAT__IMAGE_KIND__KIND_PHOTO)) {
+        snprintf(msg, cap, "PASTE_BACK needs the photo in the request (image of kind PHOTO)");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_NORMALIZED &&
+        r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK) {
+        snprintf(msg, cap, "unknown output mode %d", (int)r->output_mode);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    return gsd_check_deadline(s, r->deadline_ms, msg, cap);
+}

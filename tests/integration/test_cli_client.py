@@ -1,0 +1,84 @@
+"""`gazesplat client` and gazesplatd's command line against the real
+daemon with a tiny real model: hello, health, stats, fit, redirect to
+files; exit statuses (0 ok, 1 server error, 2 usage); --check-config and
+configuration errors.
+usage: test_cli_client.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
+import os
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from daemon_util import Checks, Daemon  # noqa: E402
+from model_fixture import faces, tiny_model  # noqa: E402
+
+
+def run(*args):
+    return subprocess.run(list(args), capture_output=True, text=True, timeout=120)
+
+
+def main():
+    daemon, cli, work = (os.path.abspath(a) for a in sys.argv[1:4])
+    os.makedirs(work, exist_ok=True)
+    t = Checks()
+    model = tiny_model(cli, work, seed=1)
+    faces(cli, work, 128, 3)
+    face = os.path.join(work, "faces128", "images", "00000000.png")
+
+    r = run(daemon, "--check-config", "--set", "workers=3", "--model", model)
+    t.check(r.returncode == 0 and "workers = 3" in r.stdout and "model = " + model in r.stdout,
+            "--check-config: %d %s" % (r.returncode, r.stdout[:200]))
+    r = run(daemon, "--set", "workers=0")
+    t.check(r.returncode == 2 and "[1, 64]" in r.stderr, "bad value: %d %s" % (r.returncode, r.stderr))
+    r = run(daemon, "--bogus")
+    t.check(r.returncode == 2 and "unknown option" in r.stderr, "unknown flag: %d" % r.returncode)
+    conf = os.path.join(work, "bad.conf")
+    with open(conf, "w") as f:
+        f.write("workers = 1\nno_such_key = 3\n")
+    r = run(daemon, "-c", conf)
+    t.check(r.returncode == 2 and ":2: unknown key" in r.stderr, "bad file: %s" % r.stderr)
+
+    d = Daemon(daemon, ["--model", model, "--set", "photo_input=no"]).start()
+    try:
+        addr = "--addr=" + d.sock
+        for _ in range(200):
+            if run(cli, "client", "health", addr).returncode == 0:
+                break
+            time.sleep(0.05)
+        r = run(cli, "client", "health", addr)
+        t.check(r.returncode == 0 and "state READY" in r.stdout, "health: %s" % r.stdout)
+        r = run(cli, "client", "hello", addr)
+        t.check(r.returncode == 0 and "version 1" in r.stdout and "max_targets 64" in r.stdout, "hello")
+        r = run(cli, "client", "fit", addr, "--image", face, "--max-iters", "3", "--gaze", "5,-5")
+        key = [ln.split()[1] for ln in r.stdout.splitlines() if ln.startswith("subject ")]
+        t.check(r.returncode == 0 and len(key) == 1 and "gaze_deg 5.000,-5.000" in r.stdout,
+                "fit: %d %s %s" % (r.returncode, r.stdout, r.stderr))
+        out = os.path.join(work, "cli_out")
+        r = run(cli, "client", "redirect", addr, "--subject", key[0] if key else "0" * 32,
+                "--gaze-deg", "0,0;10,-20", "--out", out)
+        files = sorted(os.listdir(out)) if os.path.isdir(out) else []
+        t.check(r.returncode == 0 and files == ["target_000.png", "target_001.png"],
+                "redirect: %d %s %s" % (r.returncode, files, r.stderr))
+        r = run(cli, "client", "redirect", addr, "--subject", "ab" * 16, "--gaze-deg", "0,0", "--out", out)
+        t.check(r.returncode == 1 and "ERR_UNKNOWN_SUBJECT" in r.stderr, "unknown subject: %s" % r.stderr)
+        r = run(cli, "client", "redirect", addr, "--subject", "xyz", "--gaze-deg", "0,0", "--out", out)
+        t.check(r.returncode == 2, "bad key is a usage error: %d" % r.returncode)
+        r = run(cli, "client", "fit", addr, "--image", face, "--photo")
+        t.check(r.returncode == 1 and "ERR_PHOTO_UNSUPPORTED" in r.stderr, "photo: %s" % r.stderr)
+        r = run(cli, "client", "stats", addr)
+        t.check(r.returncode == 0 and "images_out 2" in r.stdout, "stats: %s" % r.stdout[-300:])
+        r = run(cli, "client", "frobnicate", addr)
+        t.check(r.returncode == 2, "unknown action: %d" % r.returncode)
+        r = run(cli, "client", "health", "--addr=" + os.path.join(work, "nope.sock"))
+        t.check(r.returncode == 1 and "connect" in r.stderr, "no server: %s" % r.stderr)
+    finally:
+        rc = d.stop()
+        if t.failures:
+            print(d.log()[-3000:])
+    t.check(rc == 0, "exit %s" % rc)
+    return t.status()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
