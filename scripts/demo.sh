@@ -24,7 +24,8 @@ $G render --ply out/demo.ply --intrinsics 300,300,128,128 --size 256x256 \
 PHOTO=/usr/lib/python3/dist-packages/skimage/data/astronaut.png
 rm -rf out/daemon && mkdir -p out/daemon/state
 ./build/daemon/gazesplatd --socket out/daemon/gazesplatd.sock --model "$MODEL" \
-  --state-dir out/daemon/state 2> out/daemon/gazesplatd.log &
+  --state-dir out/daemon/state --set request_timeout_ms=600000 \
+  2> out/daemon/gazesplatd.log &
 pid=$!
 trap 'kill $pid 2>/dev/null || true' EXIT
 for _ in $(seq 300); do
@@ -32,7 +33,7 @@ for _ in $(seq 300); do
   sleep 0.1
 done
 $G client redirect --addr out/daemon/gazesplatd.sock --image "$PHOTO" --photo \
-  --paste-back --max-iters 100 --out out/daemon \
+  --paste-back --max-iters 100 --deadline-ms 600000 --out out/daemon \
   --gaze-deg "20,25;20,0;20,-25;0,25;0,0;0,-25;-20,25;-20,0;-20,-25"
 kill -TERM $pid && wait $pid || true
 echo "wrote out/daemon/*.png, out/input.png, out/subject.bin, out/redirect/*.png, out/demo.png"
