@@ -47,6 +47,7 @@ void gs_raster_destroy(gs_raster *r)
     if (!r)
         return;
     free(r->n_block);
+    free(r->splats);
     free(r->order);
     free(r->order_tmp);
     free(r->keys);
@@ -65,6 +66,19 @@ void gs_raster_get_stats(const gs_raster *r, gs_raster_stats *s)
     s->visible = r ? r->visible : 0;
     s->intersections = r ? r->n_isect : 0;
     s->contributions = r ? r->contributions : 0;
+}
+
+/* fmaxf and fminf are library calls on x86 (their NaN rules have no single
+ * instruction). These take the second argument when either is NaN, and the
+ * callers pass a constant or an ordered value second. */
+static inline float max_f(float x, float lo)
+{
+    return x > lo ? x : lo;
+}
+
+static inline float min_f(float x, float hi)
+{
+    return x < hi ? x : hi;
 }
 
 /* ---- argument checks ---------------------------------------------------- */
@@ -120,7 +134,7 @@ static void quat_to_rot(const float q[4], float R[9], float qn[4])
 {
     /* Divide by the largest component first, so the sum of squares neither
      * overflows (|q| > 1.8e19) nor loses bits to denormals (|q| < 1e-19). */
-    float m = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    float m = max_f(max_f(fabsf(q[0]), fabsf(q[1])), max_f(fabsf(q[2]), fabsf(q[3])));
     float w = 1.0f, x = 0.0f, y = 0.0f, z = 0.0f;
     if (m > 0.0f) {
         w = q[0] / m, x = q[1] / m, y = q[2] / m, z = q[3] / m;
@@ -138,14 +152,20 @@ static void camera_covariance(const float *V, const float R[9], const float s[3]
                               float Sc[9])
 {
     float M[9], WM[9];
+#pragma GCC unroll 9
     for (int i = 0; i < 3; i++)
+#pragma GCC unroll 9
         for (int j = 0; j < 3; j++)
             M[i * 3 + j] = R[i * 3 + j] * s[j];
+#pragma GCC unroll 9
     for (int i = 0; i < 3; i++)
+#pragma GCC unroll 9
         for (int j = 0; j < 3; j++)
             WM[i * 3 + j] = V[i * 4 + 0] * M[0 + j] + V[i * 4 + 1] * M[3 + j] +
                             V[i * 4 + 2] * M[6 + j];
+#pragma GCC unroll 9
     for (int i = 0; i < 3; i++)
+#pragma GCC unroll 9
         for (int j = 0; j < 3; j++)
             Sc[i * 3 + j] = WM[i * 3 + 0] * WM[j * 3 + 0] + WM[i * 3 + 1] * WM[j * 3 + 1] +
                             WM[i * 3 + 2] * WM[j * 3 + 2];
@@ -169,8 +189,8 @@ static jacobian persp_jacobian(const gs_camera *cam, float x, float y, float z)
     float u = x / z, v = y / z;
     J.clamp_x = u < -lim_xn || u > lim_xp;
     J.clamp_y = v < -lim_yn || v > lim_yp;
-    J.tx = z * fminf(lim_xp, fmaxf(-lim_xn, u));
-    J.ty = z * fminf(lim_yp, fmaxf(-lim_yn, v));
+    J.tx = z * min_f(max_f(u, -lim_xn), lim_xp);
+    J.ty = z * min_f(max_f(v, -lim_yn), lim_yp);
     float rz = 1.0f / z, rz2 = rz * rz;
     J.j00 = cam->fx * rz;
     J.j02 = -cam->fx * J.tx * rz2;
@@ -197,6 +217,7 @@ static int to_camera(const gs_raster *r, int i, camera_gaussian *cg)
     if (!(cg->z >= GS_RASTER_NEAR) || !(cg->z <= GS_RASTER_FAR))
         return 0;
     quat_to_rot(r->g.quats + 4 * (size_t)i, cg->R, cg->qn);
+#pragma GCC unroll 9
     for (int k = 0; k < 3; k++)
         cg->s[k] = expf(r->g.log_scales[3 * (size_t)i + k]);
     camera_covariance(V, cg->R, cg->s, cg->Sc);
@@ -238,7 +259,7 @@ static void project_one(gs_raster *r, int i, int fast)
     float a = s11 * inv, b = -s01 * inv, c = s00 * inv;
     float mx = cam->fx * x / z + cam->cx, my = cam->fy * y / z + cam->cy;
     float half = 0.5f * (s00 + s11);
-    float lam = half + sqrtf(fmaxf(0.01f, half * half - det));
+    float lam = half + sqrtf(max_f(half * half - det, 0.01f));
     float rad = ceilf(3.0f * sqrtf(lam));
     if (!isfinite(rad) || !isfinite(mx) || !isfinite(my) || !isfinite(a) || !isfinite(b) ||
         !isfinite(c))
@@ -246,7 +267,7 @@ static void project_one(gs_raster *r, int i, int fast)
     if (mx + rad <= 0 || mx - rad >= (float)cam->width || my + rad <= 0 ||
         my - rad >= (float)cam->height)
         return;
-    float comp = sqrtf(fmaxf(0.0f, det0 * inv));
+    float comp = sqrtf(max_f(det0 * inv, 0.0f));
     float lo = g->opacity_logits[i];
     float op = 1.0f / (1.0f + expf(-lo));
     if (r->opt.antialiased)
@@ -259,8 +280,11 @@ static void project_one(gs_raster *r, int i, int fast)
             return;
         thr = thr * 1.0001f + 1e-4f;
         float cdet = a * c - b * b;
-        P->extent[2 * i] = sqrtf(fmaxf(0.0f, 2.0f * thr * c / cdet)) + 0.01f;
-        P->extent[2 * i + 1] = sqrtf(fmaxf(0.0f, 2.0f * thr * a / cdet)) + 0.01f;
+        gs_splat *sp = r->splats + i;
+        sp->mx = mx, sp->my = my, sp->a = a, sp->b = b, sp->c = c;
+        sp->op = op, sp->z = z, sp->thr = thr;
+        sp->ex = sqrtf(max_f(2.0f * thr * c / cdet, 0.0f)) + 0.01f;
+        sp->ey = sqrtf(max_f(2.0f * thr * a / cdet, 0.0f)) + 0.01f;
     }
     P->mean2d[2 * i] = mx;
     P->mean2d[2 * i + 1] = my;
@@ -320,10 +344,10 @@ static void tile_range(const gs_raster *r, int i, int t[4])
     float x0 = floorf((m[0] - rad) / T), x1 = ceilf((m[0] + rad) / T);
     float y0 = floorf((m[1] - rad) / T), y1 = ceilf((m[1] + rad) / T);
     float tx = (float)r->tiles_x, ty = (float)r->tiles_y;
-    t[0] = (int)fminf(fmaxf(x0, 0.0f), tx);
-    t[1] = (int)fminf(fmaxf(x1, 0.0f), tx);
-    t[2] = (int)fminf(fmaxf(y0, 0.0f), ty);
-    t[3] = (int)fminf(fmaxf(y1, 0.0f), ty);
+    t[0] = (int)min_f(max_f(x0, 0.0f), tx);
+    t[1] = (int)min_f(max_f(x1, 0.0f), tx);
+    t[2] = (int)min_f(max_f(y0, 0.0f), ty);
+    t[3] = (int)min_f(max_f(y1, 0.0f), ty);
 }
 
 /* Minimum of sigma = 0.5 d^T Q d over d in [dx0,dx1] x [dy0,dy1]. */
@@ -334,12 +358,13 @@ static float box_min_sigma(float a, float b, float c, float dx0, float dx1, floa
         return 0.0f;
     float best = INFINITY;
     float xs[2] = {dx0, dx1}, ys[2] = {dy0, dy1};
+#pragma GCC unroll 9
     for (int k = 0; k < 2; k++) {
-        float dx = xs[k], dy = fminf(dy1, fmaxf(dy0, -b * dx / c));
-        best = fminf(best, 0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy);
+        float dx = xs[k], dy = min_f(max_f(-b * dx / c, dy0), dy1);
+        best = min_f(0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy, best);
         dy = ys[k];
-        dx = fminf(dx1, fmaxf(dx0, -b * dy / a));
-        best = fminf(best, 0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy);
+        dx = min_f(max_f(-b * dy / a, dx0), dx1);
+        best = min_f(0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy, best);
     }
     return best;
 }
@@ -347,18 +372,15 @@ static float box_min_sigma(float a, float b, float c, float dx0, float dx1, floa
 /* Fast path only: can any pixel centre of tile (tx, ty) reach alpha 1/255? */
 static int tile_touched(const gs_raster *r, int i, int tx, int ty)
 {
-    const gs_proj *P = &r->proj;
-    float op = P->opacity[i];
-    float thr = logf(255.0f * op) * 1.0001f + 1e-4f;
+    const gs_splat *sp = r->splats + i;
     int T = GS_RASTER_TILE;
     /* Pixel centres of the tile, widened by 0.01 px against rounding. */
     float px0 = (float)(tx * T) + 0.49f;
     float px1 = (float)((tx + 1) * T < r->cam.width ? (tx + 1) * T : r->cam.width) - 0.49f;
     float py0 = (float)(ty * T) + 0.49f;
     float py1 = (float)((ty + 1) * T < r->cam.height ? (ty + 1) * T : r->cam.height) - 0.49f;
-    const float *m = P->mean2d + 2 * i, *q = P->conic + 3 * i;
-    return box_min_sigma(q[0], q[1], q[2], m[0] - px1, m[0] - px0, m[1] - py1, m[1] - py0) <=
-           thr;
+    return box_min_sigma(sp->a, sp->b, sp->c, sp->mx - px1, sp->mx - px0, sp->my - py1,
+                         sp->my - py0) <= sp->thr;
 }
 
 static int bin_tiles(gs_raster *r, int m, int fast, gs_error *err)
@@ -411,8 +433,8 @@ static int reserve_n(gs_raster *r, size_t n)
     if (n <= r->cap_n && r->n_block)
         return GS_OK;
     size_t cap = n < 64 ? 64 : n;
-    /* proj: 2+3+1+1+1+1+2 = 11 floats; pgrad: 2+3+1+1 = 7 floats */
-    float *blk = malloc(cap * 18 * sizeof(float));
+    /* proj: 2+3+1+1+1+1 = 9 floats; pgrad: 2+3+1+1 = 7 floats */
+    float *blk = malloc(cap * 16 * sizeof(float));
     if (!blk)
         return GS_ERR_NOMEM;
     free(r->n_block);
@@ -425,7 +447,6 @@ static int reserve_n(gs_raster *r, size_t n)
     P->opacity = blk, blk += cap;
     P->comp = blk, blk += cap;
     P->radius = blk, blk += cap;
-    P->extent = blk, blk += 2 * cap;
     gs_proj_grad *G = &r->pgrad;
     G->mean2d = blk, blk += 2 * cap;
     G->conic = blk, blk += 3 * cap;
@@ -457,6 +478,14 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     r->tiles_x = (cam->width + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
     r->tiles_y = (cam->height + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
     size_t ntiles = (size_t)r->tiles_x * (size_t)r->tiles_y;
+    if (fast && n > r->cap_splats) {
+        free(r->splats);
+        r->cap_splats = 0;
+        r->splats = aligned_alloc(64, n * sizeof(gs_splat));
+        if (!r->splats)
+            return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu Gaussians", n);
+        r->cap_splats = n;
+    }
     if (reserve_n(r, n) ||
         gs_raster_reserve((void **)&r->t_final, &r->cap_pix, npix, sizeof(float)))
         return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu Gaussians", n);
@@ -558,17 +587,23 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
     /* Sigma2 = J Sc J^T: v_Sc = J^T vS2 J, v_J = 2 vS2 J Sc (vS2, Sc symmetric). */
     float Jm[6] = {J.j00, 0, J.j02, 0, J.j11, J.j12};
     float vSc[9];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vSc[a * 3 + b] = Jm[a] * (vS2[0] * Jm[b] + vS2[1] * Jm[3 + b]) +
                              Jm[3 + a] * (vS2[2] * Jm[b] + vS2[3] * Jm[3 + b]);
     float JS[6];
+#pragma GCC unroll 9
     for (int a = 0; a < 2; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             JS[a * 3 + b] = Jm[a * 3] * Sc[b] + Jm[a * 3 + 1] * Sc[3 + b] +
                             Jm[a * 3 + 2] * Sc[6 + b];
     float vJ[6];
+#pragma GCC unroll 9
     for (int a = 0; a < 2; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vJ[a * 3 + b] = 2.0f * (vS2[a * 2] * JS[b] + vS2[a * 2 + 1] * JS[3 + b]);
 
@@ -595,33 +630,42 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
     }
     if (grads->means) {
         float *gm = grads->means + 3 * (size_t)i;
+#pragma GCC unroll 9
         for (int k = 0; k < 3; k++)
             gm[k] += V[k] * vx + V[4 + k] * vy + V[8 + k] * vz;
     }
     /* Sc = V Sigma V^T: v_Sigma = V^T vSc V. Sigma = M M^T, M = R S. */
     float vSig[9], tmp[9];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             tmp[a * 3 + b] = vSc[a * 3] * V[b] + vSc[a * 3 + 1] * V[4 + b] +
                              vSc[a * 3 + 2] * V[8 + b];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vSig[a * 3 + b] = V[a] * tmp[b] + V[4 + a] * tmp[3 + b] + V[8 + a] * tmp[6 + b];
     float vM[9];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vM[a * 3 + b] = (vSig[a * 3] + vSig[a]) * R[b] * s[b] +
                             (vSig[a * 3 + 1] + vSig[3 + a]) * R[3 + b] * s[b] +
                             (vSig[a * 3 + 2] + vSig[6 + a]) * R[6 + b] * s[b];
     if (grads->log_scales) {
         float *gs = grads->log_scales + 3 * (size_t)i;
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             gs[b] += (vM[b] * R[b] + vM[3 + b] * R[3 + b] + vM[6 + b] * R[6 + b]) * s[b];
     }
     const float *q = g->quats + 4 * (size_t)i;
-    float qm = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    float qm = max_f(max_f(fabsf(q[0]), fabsf(q[1])), max_f(fabsf(q[2]), fabsf(q[3])));
     if (grads->quats && qm > 0.0f) {
         float vR[9];
+#pragma GCC unroll 9
         for (int a = 0; a < 9; a++)
             vR[a] = vM[a] * s[a % 3];
         float w = qn[0], qx = qn[1], qy = qn[2], qz = qn[3];
@@ -638,6 +682,7 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
         float a = q[0] / qm, b = q[1] / qm, c = q[2] / qm, d = q[3] / qm;
         float inv = 1.0f / (qm * sqrtf(a * a + b * b + c * c + d * d)); /* 1/|q| */
         float *gq = grads->quats + 4 * (size_t)i;
+#pragma GCC unroll 9
         for (int k = 0; k < 4; k++)
             gq[k] += (vq[k] - qn[k] * dot) * inv;
     }

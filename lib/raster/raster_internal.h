@@ -15,8 +15,19 @@ typedef struct gs_proj {
     float *opacity; /* n, sigmoid(logit), times comp when antialiased */
     float *comp;    /* n, sqrt(det Sigma2 / det(Sigma2 + eps I)) */
     float *radius;  /* n, pixels; 0 = culled */
-    float *extent;  /* n x 2, half-extent of the alpha >= 1/255 ellipse */
 } gs_proj;
+
+/* What the fast compositing reads of Gaussian i, in one cache line, so a
+ * tile's walk through its list costs one miss per Gaussian (plus its
+ * features) instead of one per array. Fast path only. */
+typedef struct gs_splat {
+    float mx, my;  /* mean2d */
+    float a, b, c; /* conic */
+    float op, z;   /* opacity, depth */
+    float thr;     /* ln(255 op) widened: alpha >= 1/255 needs sigma <= thr */
+    float ex, ey;  /* half-extent of the sigma <= thr ellipse, widened */
+    float pad[6];
+} gs_splat;
 
 /* Projection-space gradients, gathered from the compositing pass. */
 typedef struct gs_proj_grad {
@@ -43,6 +54,8 @@ struct gs_raster {
     gs_proj_grad pgrad;
     size_t cap_n;
     void *n_block;
+    gs_splat *splats;     /* n, 64-byte aligned; fast path */
+    size_t cap_splats;
 
     uint32_t *order, *order_tmp; /* visible ids sorted by (depth, id) */
     uint32_t *keys, *keys_tmp;
