@@ -1,6 +1,7 @@
 /* Rasterizer front end: argument checks, projection and its gradient, depth
  * sort, tile binning, and the dispatch to the compositing paths. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -48,6 +49,7 @@ void gs_raster_destroy(gs_raster *r)
         return;
     free(r->n_block);
     free(r->splats);
+    free(r->rects);
     free(r->order);
     free(r->order_tmp);
     free(r->keys);
@@ -337,92 +339,154 @@ static void sort_by_depth(gs_raster *r, int m)
 }
 
 /* Tile range [x0, x1) x [y0, y1) of the radius box, as gsplat bins it. */
-static void tile_range(const gs_raster *r, int i, int t[4])
+static void tile_range(const gs_raster *r, int i, int32_t t[4])
 {
     const float *m = r->proj.mean2d + 2 * i;
     float rad = r->proj.radius[i], T = (float)GS_RASTER_TILE;
     float x0 = floorf((m[0] - rad) / T), x1 = ceilf((m[0] + rad) / T);
     float y0 = floorf((m[1] - rad) / T), y1 = ceilf((m[1] + rad) / T);
     float tx = (float)r->tiles_x, ty = (float)r->tiles_y;
-    t[0] = (int)min_f(max_f(x0, 0.0f), tx);
-    t[1] = (int)min_f(max_f(x1, 0.0f), tx);
-    t[2] = (int)min_f(max_f(y0, 0.0f), ty);
-    t[3] = (int)min_f(max_f(y1, 0.0f), ty);
+    t[0] = (int32_t)min_f(max_f(x0, 0.0f), tx);
+    t[1] = (int32_t)min_f(max_f(x1, 0.0f), tx);
+    t[2] = (int32_t)min_f(max_f(y0, 0.0f), ty);
+    t[3] = (int32_t)min_f(max_f(y1, 0.0f), ty);
 }
 
-/* Minimum of sigma = 0.5 d^T Q d over d in [dx0,dx1] x [dy0,dy1]. */
-static float box_min_sigma(float a, float b, float c, float dx0, float dx1, float dy0,
-                           float dy1)
+/* Tiles [lo, hi) whose pixel centres [16 t + 0.49, 16 t + 15.51] meet
+ * [x0, x1], within [lo, hi). */
+static void centre_range(float x0, float x1, int32_t *lo, int32_t *hi)
 {
-    if (dx0 <= 0 && dx1 >= 0 && dy0 <= 0 && dy1 >= 0)
-        return 0.0f;
-    float best = INFINITY;
-    float xs[2] = {dx0, dx1}, ys[2] = {dy0, dy1};
-#pragma GCC unroll 9
-    for (int k = 0; k < 2; k++) {
-        float dx = xs[k], dy = min_f(max_f(-b * dx / c, dy0), dy1);
-        best = min_f(0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy, best);
-        dy = ys[k];
-        dx = min_f(max_f(-b * dy / a, dx0), dx1);
-        best = min_f(0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy, best);
+    const float T = (float)GS_RASTER_TILE;
+    float f0 = min_f(max_f((x0 + 0.49f) * (1.0f / T) - 1.0f, (float)*lo), (float)*hi);
+    float f1 = min_f(max_f((x1 - 0.49f) * (1.0f / T) + 1.0f, f0), (float)*hi);
+    int32_t i0 = (int32_t)f0, i1 = (int32_t)f1;
+    *lo = i0 + ((float)i0 < f0);
+    *hi = i1 > *lo ? i1 : *lo;
+}
+
+/* Fast path: narrows the radius box t to the tiles that the bounding box of
+ * the splat's sigma <= thr ellipse reaches. */
+static void ellipse_tiles(const gs_splat *sp, int32_t t[4])
+{
+    centre_range(sp->mx - sp->ex, sp->mx + sp->ex, &t[0], &t[1]);
+    centre_range(sp->my - sp->ey, sp->my + sp->ey, &t[2], &t[3]);
+}
+
+/* Fast path only: tiles [*a, *b) of tile row ty whose pixel centres the
+ * splat's sigma <= thr ellipse reaches, within the radius box [tx0, tx1).
+ * The ellipse cut to the row's band of pixel centres is convex, so it meets
+ * a tile's box of centres exactly when its x-extent meets the box's x-range;
+ * that extent ends at the ellipse's own left and right extremes, or where
+ * they fall outside the band, on the band's nearer edge. Boxes are widened
+ * by 0.01 px against rounding, so only tiles that cannot be reached go. */
+static void band_tiles(const gs_raster *r, const gs_splat *sp, int ty, int tx0, int tx1, int *a,
+                       int *b)
+{
+    const float T = (float)GS_RASTER_TILE;
+    float py0 = (float)ty * T + 0.49f;
+    float py1 = min_f((float)(ty + 1) * T, (float)r->cam.height) - 0.49f;
+    float dy0 = sp->my - py1, dy1 = sp->my - py0; /* d = mean - pixel centre */
+    *a = *b = tx0;
+    if (dy0 > sp->ey || dy1 < -sp->ey)
+        return;
+    float qa = sp->a, qb = sp->b, qc = sp->c, det = qa * qc - qb * qb, thr = sp->thr;
+    /* The extremes of dx lie at dy = -+ b ex / c with ex = sqrt(2 thr c / det). */
+    float ex = sqrtf(max_f(2.0f * thr * qc / det, 0.0f));
+    float dyr = min_f(max_f(-qb * ex / qc, dy0), dy1);
+    float dyl = min_f(max_f(qb * ex / qc, dy0), dy1);
+    float dxmax = (-qb * dyr + sqrtf(max_f(2.0f * qa * thr - det * dyr * dyr, 0.0f))) / qa;
+    float dxmin = (-qb * dyl - sqrtf(max_f(2.0f * qa * thr - det * dyl * dyl, 0.0f))) / qa;
+    int32_t lo = tx0, hi = tx1;
+    centre_range(sp->mx - dxmax - 0.01f, sp->mx - dxmin + 0.01f, &lo, &hi);
+    *a = lo, *b = hi;
+}
+
+/* Tile rows are binned in bands, one task each; every task walks all
+ * visible Gaussians in depth order, so a tile's list comes out sorted and
+ * only its own band's task writes it. */
+typedef struct {
+    gs_raster *r;
+    const int32_t *rect; /* m x 4: tx0, tx1, ty0, ty1 per sorted Gaussian */
+    int m, fast, band, fill;
+    uint32_t *cursor;     /* fill pass: next free slot per tile */
+    _Atomic size_t total; /* count pass: pairs so far (for the limit) */
+} bin_ctx;
+
+static void bin_band(void *vctx, int task, int worker)
+{
+    (void)worker;
+    bin_ctx *ctx = vctx;
+    gs_raster *r = ctx->r;
+    int y0 = task * ctx->band, y1 = y0 + ctx->band < r->tiles_y ? y0 + ctx->band : r->tiles_y;
+    uint32_t *count = r->tile_off + 1;
+    size_t local = 0;
+    for (int k = 0; k < ctx->m; k++) {
+        const int32_t *t = ctx->rect + 4 * (size_t)k;
+        if (t[3] <= y0 || t[2] >= y1)
+            continue;
+        uint32_t i = r->order[k];
+        int ya = t[2] > y0 ? t[2] : y0, yb = t[3] < y1 ? t[3] : y1;
+        for (int ty = ya; ty < yb; ty++) {
+            int a = t[0], b = t[1];
+            if (ctx->fast && b - a > 2 && t[3] - t[2] > 2)
+                band_tiles(r, r->splats + i, ty, t[0], t[1], &a, &b);
+            size_t row = (size_t)ty * r->tiles_x;
+            if (ctx->fill) {
+                for (int tx = a; tx < b; tx++)
+                    r->isect[ctx->cursor[row + tx]++] = i;
+            } else {
+                for (int tx = a; tx < b; tx++)
+                    count[row + tx]++;
+                local += (size_t)(b - a);
+            }
+        }
+        /* Publish now and then, so an absurd scene stops early. */
+        if (local > 4096) {
+            if (atomic_fetch_add(&ctx->total, local) + local > GS_RASTER_MAX_ISECT)
+                return;
+            local = 0;
+        }
     }
-    return best;
+    if (!ctx->fill)
+        atomic_fetch_add(&ctx->total, local);
 }
 
-/* Fast path only: can any pixel centre of tile (tx, ty) reach alpha 1/255? */
-static int tile_touched(const gs_raster *r, int i, int tx, int ty)
-{
-    const gs_splat *sp = r->splats + i;
-    int T = GS_RASTER_TILE;
-    /* Pixel centres of the tile, widened by 0.01 px against rounding. */
-    float px0 = (float)(tx * T) + 0.49f;
-    float px1 = (float)((tx + 1) * T < r->cam.width ? (tx + 1) * T : r->cam.width) - 0.49f;
-    float py0 = (float)(ty * T) + 0.49f;
-    float py1 = (float)((ty + 1) * T < r->cam.height ? (ty + 1) * T : r->cam.height) - 0.49f;
-    return box_min_sigma(sp->a, sp->b, sp->c, sp->mx - px1, sp->mx - px0, sp->my - py1,
-                         sp->my - py0) <= sp->thr;
-}
-
-static int bin_tiles(gs_raster *r, int m, int fast, gs_error *err)
+static int bin_tiles(gs_raster *r, gs_pool *pool, int m, int fast, gs_error *err)
 {
     size_t ntiles = (size_t)r->tiles_x * (size_t)r->tiles_y;
-    if (gs_raster_reserve((void **)&r->tile_off, &r->cap_tiles, ntiles + 1, sizeof(uint32_t)))
+    if (gs_raster_reserve((void **)&r->tile_off, &r->cap_tiles, ntiles + 1, sizeof(uint32_t)) ||
+        gs_raster_reserve((void **)&r->rects, &r->cap_rects, 4 * (size_t)(m ? m : 1),
+                          sizeof(int32_t)))
         return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tiles");
+    for (int k = 0; k < m; k++) {
+        int32_t *t = r->rects + 4 * (size_t)k;
+        tile_range(r, (int)r->order[k], t);
+        if (fast)
+            ellipse_tiles(r->splats + r->order[k], t);
+    }
     uint32_t *off = r->tile_off;
     memset(off, 0, (ntiles + 1) * sizeof *off);
-    size_t total = 0;
-    for (int k = 0; k < m; k++) {
-        int i = (int)r->order[k], t[4];
-        tile_range(r, i, t);
-        for (int ty = t[2]; ty < t[3]; ty++)
-            for (int tx = t[0]; tx < t[1]; tx++)
-                if (!fast || tile_touched(r, i, tx, ty)) {
-                    off[(size_t)ty * r->tiles_x + tx + 1]++;
-                    total++;
-                }
-        if (total > GS_RASTER_MAX_ISECT)
-            return gs_error_set(err, GS_ERR_LIMIT,
-                                "raster: more than %zu tile intersections (Gaussians too large?)",
-                                GS_RASTER_MAX_ISECT);
-    }
+    int threads = fast ? gs_pool_threads(pool) : 1;
+    int tasks = 4 * threads < r->tiles_y ? 4 * threads : r->tiles_y;
+    bin_ctx ctx = {r, r->rects, m, fast, (r->tiles_y + tasks - 1) / tasks, 0, NULL, 0};
+    tasks = (r->tiles_y + ctx.band - 1) / ctx.band;
+    gs_pool_for(fast ? pool : NULL, tasks, bin_band, &ctx);
+    size_t total = atomic_load(&ctx.total);
+    if (total > GS_RASTER_MAX_ISECT)
+        return gs_error_set(err, GS_ERR_LIMIT,
+                            "raster: more than %zu tile intersections (Gaussians too large?)",
+                            GS_RASTER_MAX_ISECT);
     for (size_t t = 0; t < ntiles; t++)
         off[t + 1] += off[t];
     if (gs_raster_reserve((void **)&r->isect, &r->cap_isect, total ? total : 1, sizeof(uint32_t)))
         return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu intersections",
                             total);
     r->n_isect = total;
-    /* Fill in depth order, so each tile's list comes out sorted. The sort
-     * is done, so its scratch (at least max(n, tiles) long) is free. */
-    uint32_t *fill = r->keys_tmp;
-    memcpy(fill, off, ntiles * sizeof *fill);
-    for (int k = 0; k < m; k++) {
-        int i = (int)r->order[k], t[4];
-        tile_range(r, i, t);
-        for (int ty = t[2]; ty < t[3]; ty++)
-            for (int tx = t[0]; tx < t[1]; tx++)
-                if (!fast || tile_touched(r, i, tx, ty))
-                    r->isect[fill[(size_t)ty * r->tiles_x + tx]++] = (uint32_t)i;
-    }
+    /* The sort is done, so its scratch (at least max(n, tiles) long) is free. */
+    ctx.cursor = r->keys_tmp;
+    memcpy(ctx.cursor, off, ntiles * sizeof *ctx.cursor);
+    ctx.fill = 1;
+    gs_pool_for(fast ? pool : NULL, tasks, bin_band, &ctx);
     return GS_OK;
 }
 
@@ -521,7 +585,7 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     r->visible = m;
     if (m > 0)
         sort_by_depth(r, m);
-    rc = bin_tiles(r, m, fast, err);
+    rc = bin_tiles(r, pool, m, fast, err);
     if (rc)
         return rc;
 

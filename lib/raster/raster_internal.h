@@ -61,6 +61,8 @@ struct gs_raster {
     uint32_t *keys, *keys_tmp;
     size_t cap_order;
 
+    int32_t *rects;       /* visible x 4: radius box in tiles, in depth order */
+    size_t cap_rects;
     uint32_t *tile_off;   /* tiles + 1 offsets into isect */
     size_t cap_tiles;
     uint32_t *isect;      /* Gaussian id per intersection, per tile by depth */
