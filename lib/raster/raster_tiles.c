@@ -82,10 +82,16 @@ static inline int any(vi m)
     return mask_bits(m) != 0;
 }
 
-/* Lane sum in a fixed order (pairwise), the same on every path. */
+typedef float vf4 __attribute__((vector_size(16)));
+
+/* Lane sum in a fixed order (pairwise), the same on every path:
+ * ((v0 + v4) + (v2 + v6)) + ((v1 + v5) + (v3 + v7)), as three shuffles and
+ * three adds. */
 static inline float hsum(vf v)
 {
-    return ((v[0] + v[4]) + (v[2] + v[6])) + ((v[1] + v[5]) + (v[3] + v[7]));
+    vf4 h = __builtin_shufflevector(v, v, 0, 1, 2, 3) + __builtin_shufflevector(v, v, 4, 5, 6, 7);
+    h = h + __builtin_shufflevector(h, h, 2, 3, 0, 1);
+    return h[0] + h[1];
 }
 
 /* exp(x) for x <= 0: Cody-Waite reduction x = n ln2 + r, degree-6 minimax
@@ -141,15 +147,20 @@ static tile_info get_tile(const gs_raster *r, int t)
 static int splat_window(const gs_splat *sp, const tile_info *ti, int *r0, int *r1, int *g0,
                         int *g1)
 {
+    /* Clamped to the tile before rounding, so the conversions are exact and
+     * no rounding call is needed: ceil(x) for x in [0, 16] is (int)x plus
+     * one when x has a fraction. */
     float mx = sp->mx - (float)ti->x0 - 0.5f, my = sp->my - (float)ti->y0 - 0.5f;
-    float fy0 = ceilf(my - sp->ey), fy1 = floorf(my + sp->ey);
-    float fx0 = ceilf(mx - sp->ex), fx1 = floorf(mx + sp->ex);
-    if (fy1 < 0 || fx1 < 0 || fy0 > (float)(ti->h - 1) || fx0 > (float)(ti->w - 1))
+    float hx = (float)(ti->w - 1), hy = (float)(ti->h - 1);
+    float y0 = my - sp->ey, y1 = my + sp->ey, x0 = mx - sp->ex, x1 = mx + sp->ex;
+    if (!(y1 >= 0 && x1 >= 0 && y0 <= hy && x0 <= hx))
         return 0;
-    *r0 = fy0 > 0 ? (int)fy0 : 0;
-    *r1 = fy1 < (float)(ti->h - 1) ? (int)fy1 : ti->h - 1;
-    int c0 = fx0 > 0 ? (int)fx0 : 0;
-    int c1 = fx1 < (float)(ti->w - 1) ? (int)fx1 : ti->w - 1;
+    y0 = y0 > 0 ? y0 : 0, x0 = x0 > 0 ? x0 : 0;
+    y1 = y1 < hy ? y1 : hy, x1 = x1 < hx ? x1 : hx;
+    int iy0 = (int)y0, ix0 = (int)x0;
+    *r0 = iy0 + ((float)iy0 < y0);
+    *r1 = (int)y1;
+    int c0 = ix0 + ((float)ix0 < x0), c1 = (int)x1;
     *g0 = c0 / L;
     *g1 = c1 / L;
     return *r0 <= *r1 && c0 <= c1;
@@ -173,23 +184,62 @@ static inline void prefetch_pair(const gs_raster *r, uint32_t k, uint32_t s, uin
     __builtin_prefetch(f + C - 1);
 }
 
+/* A vector's lanes as scalars, for the per-pixel loops. */
+typedef union {
+    vf v;
+    float f[L];
+} lanes;
+
 /* Per-lane sigma, exp(-sigma) and alpha of one splat on one group. */
 typedef struct {
     vf dx, sigma, vis, alpha;
     vi ok; /* sigma >= 0 and alpha >= 1/255 */
 } group_eval;
 
-static inline group_eval eval_group(float mx, float dy, float a, float b, float c, float op,
-                                    float gx)
+/* sigma first: a group where no lane has sigma <= thr (the splat's widened
+ * ln(255 opacity)) cannot pass the alpha test, so the exponential is
+ * skipped there without changing any decision. */
+static inline int group_sigma(group_eval *g, float mx, float dy, float a, float b, float c,
+                              float thr, float gx, vi alive)
 {
-    group_eval g;
-    g.dx = splat(mx - gx) - lane_centre;
-    g.sigma = splat(0.5f) * (splat(a) * g.dx * g.dx + splat(c * dy * dy)) + splat(b * dy) * g.dx;
-    g.vis = vexp_neg(-g.sigma);
-    g.alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(op) * g.vis);
-    g.ok = (g.sigma >= splat(0.0f)) & (g.alpha >= splat(GS_RASTER_MIN_ALPHA));
-    return g;
+    g->dx = splat(mx - gx) - lane_centre;
+    g->sigma = splat(0.5f) * (splat(a) * g->dx * g->dx + splat(c * dy * dy)) +
+               splat(b * dy) * g->dx;
+    return any(alive & (g->sigma <= splat(thr)));
 }
+
+static inline void group_alpha(group_eval *g, float op)
+{
+    g->vis = vexp_neg(-g->sigma);
+    g->alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(op) * g->vis);
+    g->ok = (g->sigma >= splat(0.0f)) & (g->alpha >= splat(GS_RASTER_MIN_ALPHA));
+}
+
+/* a[c] += f[c] w for c < nv, written out so that a constant nv leaves
+ * straight-line code (GCC does not unroll the loop at -O2). */
+static inline __attribute__((always_inline)) void axpy_nv(vf *a, const vf *f, vf w, const int nv)
+{
+    switch (nv) {
+    default: a[7] += f[7] * w; /* fallthrough */
+    case 7: a[6] += f[6] * w; /* fallthrough */
+    case 6: a[5] += f[5] * w; /* fallthrough */
+    case 5: a[4] += f[4] * w; /* fallthrough */
+    case 4: a[3] += f[3] * w; /* fallthrough */
+    case 3: a[2] += f[2] * w; /* fallthrough */
+    case 2: a[1] += f[1] * w; /* fallthrough */
+    case 1: a[0] += f[0] * w;
+    }
+}
+
+/* One channel block of the backward's per-pixel work (see tile_backward_nv). */
+#define BWD_BLOCK(c)                                                                     \
+    do {                                                                                 \
+        vf b_ = buf[p + (c)], vp_ = vpix[p + (c)];                                       \
+        sf += fv[c] * vp_;                                                               \
+        sb += b_ * vp_;                                                                  \
+        buf[p + (c)] = b_ + fv[c] * facj;                                                \
+        pf[c] += facj * vp_;                                                             \
+    } while (0)
 
 /* ---- pixel-major channel blocks ----------------------------------------- */
 
@@ -343,7 +393,7 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
         if (!splat_window(sp, &ti, &r0, &r1, &g0, &g1))
             continue;
         const float q[3] = {sp->a, sp->b, sp->c};
-        float mx = sp->mx - (float)ti.x0, op = sp->op, z = sp->z;
+        float mx = sp->mx - (float)ti.x0, op = sp->op, z = sp->z, thr = sp->thr;
         float my = sp->my - (float)ti.y0;
         vf fv[MAX_NV];
         load_features(r->g.features + (size_t)i * C, C, nv, fv);
@@ -354,10 +404,14 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
             float dy = my - ((float)row + 0.5f);
             for (int gi = g0; gi <= g1; gi++) {
                 int v = row * GROUPS + gi;
-                if (!any(st.alive[v]))
+                vi alive = st.alive[v];
+                if (!any(alive))
                     continue; /* every pixel here has stopped */
-                group_eval ge = eval_group(mx, dy, q[0], q[1], q[2], op, (float)(gi * L));
-                vi valid = ge.ok & st.alive[v];
+                group_eval ge;
+                if (!group_sigma(&ge, mx, dy, q[0], q[1], q[2], thr, (float)(gi * L), alive))
+                    continue;
+                group_alpha(&ge, op);
+                vi valid = ge.ok & alive;
                 if (!any(valid))
                     continue;
                 vf T = st.T[v];
@@ -376,16 +430,12 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
                 st.T[v] = vsel(valid, next_T, T);
                 st.last[v] = vseli(valid, pos, st.last[v]);
                 st.dep[v] += splat(z) * w;
-                float wl[L];
-                memcpy(wl, &w, sizeof wl);
+                lanes wl = {w};
                 vf *a = acc + (size_t)v * L * nv;
                 while (bits) {
                     int j = __builtin_ctz(bits);
                     bits &= bits - 1;
-                    vf wj = splat(wl[j]), *aj = a + j * nv;
-#pragma GCC unroll 8
-                    for (int c = 0; c < nv; c++)
-                        aj[c] += fv[c] * wj;
+                    axpy_nv(a + j * nv, fv, splat(wl.f[j]), nv);
                 }
             }
         }
@@ -541,8 +591,9 @@ tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
     st.last = (void *)(st.bufd + NV);
     vf *part = (void *)(st.last + NV); /* GS_SLOT_HEAD partial sums */
 
+    /* vpix needs no clearing: load_tile fills every pixel of the image and
+     * pixels outside it are never valid (their last contributor is 0). */
     memset(buf, 0, (size_t)nv * TPIX * sizeof(vf));
-    memset(vpix, 0, (size_t)nv * TPIX * sizeof(vf));
     for (int v = 0; v < NV; v++) {
         st.T[v] = st.tfin[v] = st.vres[v] = st.vdep[v] = st.bufd[v] = splat(0.0f);
         st.last[v] = (vi){0};
@@ -561,7 +612,7 @@ tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
         if (!splat_window(sp, &ti, &r0, &r1, &g0, &g1))
             continue;
         const float q[3] = {sp->a, sp->b, sp->c};
-        float mx = sp->mx - (float)ti.x0, op = sp->op, z = sp->z;
+        float mx = sp->mx - (float)ti.x0, op = sp->op, z = sp->z, thr = sp->thr;
         float my = sp->my - (float)ti.y0;
         vf fv[MAX_NV], pf[MAX_NV];
         load_features(r->g.features + (size_t)i * C, C, nv, fv);
@@ -578,7 +629,11 @@ tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
                 vi before_last = pos < st.last[v];
                 if (!any(before_last))
                     continue; /* behind every pixel's last contributor */
-                group_eval ge = eval_group(mx, dy, q[0], q[1], q[2], op, (float)(gi * L));
+                group_eval ge;
+                if (!group_sigma(&ge, mx, dy, q[0], q[1], q[2], thr, (float)(gi * L),
+                                 before_last))
+                    continue;
+                group_alpha(&ge, op);
                 vi valid = ge.ok & before_last;
                 if (!any(valid))
                     continue;
@@ -592,29 +647,27 @@ tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
                 /* Channels of each contributing pixel: the feature part of
                  * the alpha gradient, the running sums behind it and the
                  * Gaussian's feature gradient. */
-                float Tl[L], ral[L], facl[L], val[L] = {0};
-                memcpy(Tl, &T, sizeof Tl);
-                memcpy(ral, &ra, sizeof ral);
-                memcpy(facl, &fac, sizeof facl);
+                lanes Tl = {T}, ral = {ra}, facl = {fac}, val = {splat(0.0f)};
                 unsigned bits = (unsigned)mask_bits(valid);
                 while (bits) {
                     int j = __builtin_ctz(bits);
                     bits &= bits - 1;
                     size_t p = ((size_t)v * L + (size_t)j) * (size_t)nv;
-                    vf Tj = splat(Tl[j]), raj = splat(ral[j]), facj = splat(facl[j]);
-                    vf s = splat(0.0f);
-#pragma GCC unroll 8
-                    for (int c = 0; c < nv; c++) {
-                        vf b = buf[p + c], vp = vpix[p + c];
-                        s += (fv[c] * Tj - b * raj) * vp;
-                        buf[p + c] = b + fv[c] * facj;
-                        pf[c] += facj * vp;
+                    vf facj = splat(facl.f[j]), sf = splat(0.0f), sb = splat(0.0f);
+                    switch (nv) {
+                    default: BWD_BLOCK(7); /* fallthrough */
+                    case 7: BWD_BLOCK(6); /* fallthrough */
+                    case 6: BWD_BLOCK(5); /* fallthrough */
+                    case 5: BWD_BLOCK(4); /* fallthrough */
+                    case 4: BWD_BLOCK(3); /* fallthrough */
+                    case 3: BWD_BLOCK(2); /* fallthrough */
+                    case 2: BWD_BLOCK(1); /* fallthrough */
+                    case 1: BWD_BLOCK(0);
                     }
-                    val[j] = hsum(s);
+                    /* sum_ch (f T - buf ra) v_pix */
+                    val.f[j] = hsum(splat(Tl.f[j]) * sf - splat(ral.f[j]) * sb);
                 }
-                vf va;
-                memcpy(&va, val, sizeof va);
-                va += st.tfin[v] * ra * st.vres[v] +
+                vf va = val.v + st.tfin[v] * ra * st.vres[v] +
                       st.vdep[v] * (splat(z) * T - st.bufd[v] * ra);
                 st.bufd[v] += splat(z) * fac;
                 part[6] += fac * st.vdep[v];
