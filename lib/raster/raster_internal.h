@@ -26,7 +26,8 @@ typedef struct gs_splat {
     float op, z;   /* opacity, depth */
     float thr;     /* ln(255 op) widened: alpha >= 1/255 needs sigma <= thr */
     float ex, ey;  /* half-extent of the sigma <= thr ellipse, widened */
-    float pad[6];
+    int32_t tiles[4]; /* tile box [x0, x1) x [y0, y1) that the ellipse's box meets */
+    float pad[2];
 } gs_splat;
 
 /* Projection-space gradients, gathered from the compositing pass. */
