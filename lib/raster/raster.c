@@ -55,6 +55,8 @@ void gs_raster_destroy(gs_raster *r)
     free(r->keys);
     free(r->keys_tmp);
     free(r->tile_off);
+    free(r->tile_order);
+    free(r->tile_keys);
     free(r->isect);
     free(r->t_final);
     free(r->last);

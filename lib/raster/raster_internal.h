@@ -65,6 +65,10 @@ struct gs_raster {
     int32_t *rects;       /* visible x 4: radius box in tiles, in depth order */
     size_t cap_rects;
     uint32_t *tile_off;   /* tiles + 1 offsets into isect */
+    uint32_t *tile_order; /* fast path: tiles by decreasing list length */
+    size_t cap_tile_order;
+    uint64_t *tile_keys;  /* its sort keys */
+    size_t cap_tile_keys;
     size_t cap_tiles;
     uint32_t *isect;      /* Gaussian id per intersection, per tile by depth */
     size_t n_isect, cap_isect;

@@ -357,7 +357,7 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
 {
     gs_raster *r = ctx->r;
     const int C = r->g.channels;
-    tile_info ti = get_tile(r, t);
+    tile_info ti = get_tile(r, (int)r->tile_order[t]);
 
     float *scratch = (float *)r->scratch + (size_t)worker * ctx->per_worker;
     vf *acc = (vf *)scratch; /* TPIX x nv */
@@ -501,14 +501,47 @@ static size_t scratch_per_worker(int C)
     return (per + 15) / 16 * 16; /* keep each worker's block 64-byte aligned */
 }
 
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Tiles [t0, t1) into r->tile_order, longest list first (ties by index), so
+ * the pool's workers take the heavy tiles early and finish together. Which
+ * worker composites a tile never changes its result. */
+static int order_tiles(gs_raster *r, int t0, int t1)
+{
+    size_t n = (size_t)(t1 - t0);
+    if (gs_raster_reserve((void **)&r->tile_order, &r->cap_tile_order, n ? n : 1,
+                          sizeof(uint32_t)) ||
+        gs_raster_reserve((void **)&r->tile_keys, &r->cap_tile_keys, n ? n : 1,
+                          sizeof(uint64_t)))
+        return GS_ERR_NOMEM;
+    /* Keys (UINT32_MAX - length, tile) sort ascending into that order. */
+    uint64_t *key = r->tile_keys;
+    const uint32_t *off = r->tile_off;
+    for (size_t a = 0; a < n; a++) {
+        uint32_t t = (uint32_t)t0 + (uint32_t)a;
+        key[a] = ((uint64_t)(UINT32_MAX - (off[t + 1] - off[t])) << 32) | t;
+    }
+    qsort(key, n, sizeof *key, cmp_u64);
+    for (size_t a = 0; a < n; a++)
+        r->tile_order[a] = (uint32_t)key[a];
+    return GS_OK;
+}
+
 static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out_f,
                         float *out_alpha, float *out_depth)
 {
     size_t per = scratch_per_worker(r->g.channels);
     if (reserve_scratch(r, pool, per))
         return GS_ERR_NOMEM;
+    int ntiles = r->tiles_x * r->tiles_y;
+    if (order_tiles(r, 0, ntiles))
+        return GS_ERR_NOMEM;
     fwd_ctx ctx = {r, bg, out_f, out_alpha, out_depth, per, 0};
-    gs_pool_for(pool, r->tiles_x * r->tiles_y, tile_forward, &ctx);
+    gs_pool_for(pool, ntiles, tile_forward, &ctx);
     r->contributions = atomic_load(&ctx.contributions);
     return GS_OK;
 }
@@ -517,8 +550,7 @@ static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out
 
 typedef struct {
     gs_raster *r;
-    int t0;
-    size_t slot0, per_worker;
+    size_t slot0, per_worker; /* slot0: slot of the batch's first pair */
     const float *v_f, *v_alpha, *v_depth;
     float *v_bg;
 } bwd_ctx;
@@ -578,7 +610,7 @@ tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
     const int C = r->g.channels;
     const size_t stride = GS_SLOT_HEAD + (size_t)C;
     const int NV = TPIX / L;
-    tile_info ti = get_tile(r, ctx->t0 + task);
+    tile_info ti = get_tile(r, (int)r->tile_order[task]);
 
     vf *buf = (vf *)((float *)r->scratch + (size_t)worker * ctx->per_worker); /* TPIX x nv */
     vf *vpix = buf + (size_t)nv * TPIX;                                       /* TPIX x nv */
@@ -714,7 +746,9 @@ static int fast_backward(gs_raster *r, gs_pool *pool, int t0, int t1, size_t slo
     size_t per = scratch_per_worker(r->g.channels);
     if (reserve_scratch(r, pool, per)) /* the pool may differ from the forward's */
         return GS_ERR_NOMEM;
-    bwd_ctx ctx = {r, t0, slot0, per, v_f, v_alpha, v_depth, v_bg};
+    if (order_tiles(r, t0, t1))
+        return GS_ERR_NOMEM;
+    bwd_ctx ctx = {r, slot0, per, v_f, v_alpha, v_depth, v_bg};
     gs_pool_for(pool, t1 - t0, tile_backward, &ctx);
     return GS_OK;
 }
