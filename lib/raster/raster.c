@@ -182,14 +182,22 @@ typedef struct {
     int clamp_x, clamp_y;
 } jacobian;
 
-static jacobian persp_jacobian(const gs_camera *cam, float x, float y, float z)
+/* Limits of x/z and y/z for the Jacobian clamp: the image extent widened by
+ * the margin, (+x, -x, +y, -y). Once per render: they are divisions. */
+static void clamp_limits(const gs_camera *cam, float lim[4])
+{
+    float W = (float)cam->width, H = (float)cam->height;
+    lim[0] = (W - cam->cx) / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
+    lim[1] = cam->cx / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
+    lim[2] = (H - cam->cy) / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+    lim[3] = cam->cy / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+}
+
+static jacobian persp_jacobian(const gs_camera *cam, const float lim[4], float x, float y,
+                               float z)
 {
     jacobian J;
-    float W = (float)cam->width, H = (float)cam->height;
-    float lim_xp = (W - cam->cx) / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
-    float lim_xn = cam->cx / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
-    float lim_yp = (H - cam->cy) / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
-    float lim_yn = cam->cy / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+    float lim_xp = lim[0], lim_xn = lim[1], lim_yp = lim[2], lim_yn = lim[3];
     float u = x / z, v = y / z;
     J.clamp_x = u < -lim_xn || u > lim_xp;
     J.clamp_y = v < -lim_yn || v > lim_yp;
@@ -225,7 +233,7 @@ static int to_camera(const gs_raster *r, int i, camera_gaussian *cg)
     for (int k = 0; k < 3; k++)
         cg->s[k] = expf(r->g.log_scales[3 * (size_t)i + k]);
     camera_covariance(V, cg->R, cg->s, cg->Sc);
-    cg->J = persp_jacobian(&r->cam, cg->x, cg->y, cg->z);
+    cg->J = persp_jacobian(&r->cam, r->clamp_lim, cg->x, cg->y, cg->z);
     return 1;
 }
 
@@ -544,6 +552,7 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     if (opt && opt->path != GS_RASTER_FAST && opt->path != GS_RASTER_SCALAR)
         return gs_error_set(err, GS_ERR_ARG, "raster: unknown path %d", (int)opt->path);
     r->cam = *cam;
+    clamp_limits(cam, r->clamp_lim);
     r->g = *g;
     r->background = background;
     r->opt = opt ? *opt : defaults;

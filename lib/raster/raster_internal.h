@@ -46,6 +46,7 @@ typedef struct gs_proj_grad {
 struct gs_raster {
     int have_forward;
     gs_camera cam;
+    float clamp_lim[4];   /* x/z, y/z limits of the Jacobian clamp */
     gs_gaussians g;
     const float *background;
     gs_raster_options opt;
