@@ -263,6 +263,27 @@ static inline vf load_n(const float *p, int n)
     return v;
 }
 
+/* The same for the per-pixel contributor counts. */
+static inline vi load_ni(const uint32_t *p, int n)
+{
+    vi v = {0};
+    if (n == L)
+        memcpy(&v, p, sizeof v);
+    else
+        for (int j = 0; j < n; j++)
+            v[j] = (int32_t)p[j];
+    return v;
+}
+
+static inline void store_ni(uint32_t *p, vi v, int n)
+{
+    if (n == L)
+        memcpy(p, &v, sizeof v);
+    else
+        for (int j = 0; j < n; j++)
+            p[j] = (uint32_t)v[j];
+}
+
 /* Stores the first n <= 8 lanes of v at p. */
 static inline void store_n(float *p, vf v, int n)
 {
@@ -346,7 +367,7 @@ write_tile(fwd_ctx *ctx, const tile_info *ti, const vf *acc, const fwd_state *st
             vf alpha = splat(1.0f) - T;
             store_n(ctx->out_alpha + pix0, alpha, n);
             store_n(r->t_final + pix0, T, n);
-            store_n((float *)r->last + pix0, (vf)st->last[v], n);
+            store_ni(r->last + pix0, st->last[v], n);
             if (ctx->out_depth)
                 store_n(ctx->out_depth + pix0, st->dep[v], n);
         }
@@ -577,7 +598,7 @@ load_tile(bwd_ctx *ctx, const tile_info *ti, vf *vpix, const bwd_state *st, cons
             vf T = load_n(r->t_final + pix0, n);
             st->T[v] = st->tfin[v] = T;
             st->vdep[v] = ctx->v_depth ? load_n(ctx->v_depth + pix0, n) : splat(0.0f);
-            st->last[v] = (vi)load_n((const float *)r->last + pix0, n);
+            st->last[v] = load_ni(r->last + pix0, n);
             vf bg_dot = splat(0.0f);
             for (int cb = 0; cb < nv; cb++) {
                 vf m[L];
