@@ -485,7 +485,10 @@ static int bin_tiles(gs_raster *r, gs_pool *pool, int m, int fast, gs_error *err
     uint32_t *off = r->tile_off;
     memset(off, 0, (ntiles + 1) * sizeof *off);
     int threads = fast ? gs_pool_threads(pool) : 1;
-    int tasks = 4 * threads < r->tiles_y ? 4 * threads : r->tiles_y;
+    /* Few bands: every band walks all Gaussians, and the test of whether one
+     * overlaps the band is an unpredictable branch. */
+    int tasks = threads > 1 ? 2 * threads : 1;
+    tasks = tasks < r->tiles_y ? tasks : r->tiles_y;
     bin_ctx ctx = {r, r->rects, m, fast, (r->tiles_y + tasks - 1) / tasks, 0, NULL, 0};
     tasks = (r->tiles_y + ctx.band - 1) / ctx.band;
     gs_pool_for(fast ? pool : NULL, tasks, bin_band, &ctx);
