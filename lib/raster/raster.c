@@ -810,25 +810,53 @@ static void add_row(float *restrict y, const float *restrict x, size_t n)
 }
 
 /* Adds the per-intersection slots of tiles [t0, t1) into per-Gaussian sums,
- * in tile order: the same additions in the same order for any thread count. */
-static void gather_slots(gs_raster *r, int t0, int t1, size_t slot0, float *v_features)
+ * in tile order: the same additions in the same order for any thread count.
+ * Tasks split the slot's columns, not the pairs: task 0 takes the seven
+ * projection-space values, task j >= 1 channels [16 (j - 1), 16 j), so each
+ * output element still gets its additions in tile order, from one task. */
+#define GATHER_CHANNELS 16
+
+typedef struct {
+    gs_raster *r;
+    int t0, t1;
+    size_t slot0;
+    float *v_features;
+} gather_ctx;
+
+static void gather_task(void *vctx, int task, int worker)
 {
+    (void)worker;
+    gather_ctx *c = vctx;
+    gs_raster *r = c->r;
     size_t C = (size_t)r->g.channels, stride = GS_SLOT_HEAD + C;
+    size_t c0 = task > 0 ? (size_t)(task - 1) * GATHER_CHANNELS : 0;
+    size_t n = C - c0 < GATHER_CHANNELS ? C - c0 : GATHER_CHANNELS;
     gs_proj_grad *G = &r->pgrad;
-    for (int t = t0; t < t1; t++)
-        for (uint32_t k = r->tile_off[t]; k < r->tile_off[t + 1]; k++) {
-            const float *s = r->slots + (k - slot0) * stride;
-            size_t i = r->isect[k];
-            G->mean2d[2 * i] += s[0];
-            G->mean2d[2 * i + 1] += s[1];
-            G->conic[3 * i] += s[2];
-            G->conic[3 * i + 1] += s[3];
-            G->conic[3 * i + 2] += s[4];
-            G->opacity[i] += s[5];
-            G->depth[i] += s[6];
-            if (v_features)
-                add_row(v_features + i * C, s + GS_SLOT_HEAD, C);
+    for (uint32_t k = r->tile_off[c->t0]; k < r->tile_off[c->t1]; k++) {
+        const float *s = r->slots + (k - c->slot0) * stride;
+        size_t i = r->isect[k];
+        if (task > 0) {
+            add_row(c->v_features + i * C + c0, s + GS_SLOT_HEAD + c0, n);
+            continue;
         }
+        G->mean2d[2 * i] += s[0];
+        G->mean2d[2 * i + 1] += s[1];
+        G->conic[3 * i] += s[2];
+        G->conic[3 * i + 1] += s[3];
+        G->conic[3 * i + 2] += s[4];
+        G->opacity[i] += s[5];
+        G->depth[i] += s[6];
+    }
+}
+
+static void gather_slots(gs_raster *r, gs_pool *pool, int t0, int t1, size_t slot0,
+                         float *v_features)
+{
+    gather_ctx ctx = {r, t0, t1, slot0, v_features};
+    int tasks = 1;
+    if (v_features)
+        tasks += (r->g.channels + GATHER_CHANNELS - 1) / GATHER_CHANNELS;
+    gs_pool_for(pool, tasks, gather_task, &ctx);
 }
 
 static int fast_backward(gs_raster *r, gs_pool *pool, const float *v_f, const float *v_alpha,
@@ -850,7 +878,7 @@ static int fast_backward(gs_raster *r, gs_pool *pool, const float *v_f, const fl
         if (fast_kernels()->backward(r, pool, t0, t1, r->tile_off[t0], v_f, v_alpha, v_depth,
                                      v_bg))
             return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tile buffers");
-        gather_slots(r, t0, t1, r->tile_off[t0], v_features);
+        gather_slots(r, pool, t0, t1, r->tile_off[t0], v_features);
         t0 = t1;
     }
     return GS_OK;
