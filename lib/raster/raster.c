@@ -1,6 +1,7 @@
 /* Rasterizer front end: argument checks, projection and its gradient, depth
  * sort, tile binning, and the dispatch to the compositing paths. */
 #include <math.h>
+#include <stdatomic.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -47,11 +48,15 @@ void gs_raster_destroy(gs_raster *r)
     if (!r)
         return;
     free(r->n_block);
+    free(r->splats);
+    free(r->rects);
     free(r->order);
     free(r->order_tmp);
     free(r->keys);
     free(r->keys_tmp);
     free(r->tile_off);
+    free(r->tile_order);
+    free(r->tile_keys);
     free(r->isect);
     free(r->t_final);
     free(r->last);
@@ -65,6 +70,19 @@ void gs_raster_get_stats(const gs_raster *r, gs_raster_stats *s)
     s->visible = r ? r->visible : 0;
     s->intersections = r ? r->n_isect : 0;
     s->contributions = r ? r->contributions : 0;
+}
+
+/* fmaxf and fminf are library calls on x86 (their NaN rules have no single
+ * instruction). These take the second argument when either is NaN, and the
+ * callers pass a constant or an ordered value second. */
+static inline float max_f(float x, float lo)
+{
+    return x > lo ? x : lo;
+}
+
+static inline float min_f(float x, float hi)
+{
+    return x < hi ? x : hi;
 }
 
 /* ---- argument checks ---------------------------------------------------- */
@@ -120,7 +138,7 @@ static void quat_to_rot(const float q[4], float R[9], float qn[4])
 {
     /* Divide by the largest component first, so the sum of squares neither
      * overflows (|q| > 1.8e19) nor loses bits to denormals (|q| < 1e-19). */
-    float m = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    float m = max_f(max_f(fabsf(q[0]), fabsf(q[1])), max_f(fabsf(q[2]), fabsf(q[3])));
     float w = 1.0f, x = 0.0f, y = 0.0f, z = 0.0f;
     if (m > 0.0f) {
         w = q[0] / m, x = q[1] / m, y = q[2] / m, z = q[3] / m;
@@ -138,14 +156,20 @@ static void camera_covariance(const float *V, const float R[9], const float s[3]
                               float Sc[9])
 {
     float M[9], WM[9];
+#pragma GCC unroll 9
     for (int i = 0; i < 3; i++)
+#pragma GCC unroll 9
         for (int j = 0; j < 3; j++)
             M[i * 3 + j] = R[i * 3 + j] * s[j];
+#pragma GCC unroll 9
     for (int i = 0; i < 3; i++)
+#pragma GCC unroll 9
         for (int j = 0; j < 3; j++)
             WM[i * 3 + j] = V[i * 4 + 0] * M[0 + j] + V[i * 4 + 1] * M[3 + j] +
                             V[i * 4 + 2] * M[6 + j];
+#pragma GCC unroll 9
     for (int i = 0; i < 3; i++)
+#pragma GCC unroll 9
         for (int j = 0; j < 3; j++)
             Sc[i * 3 + j] = WM[i * 3 + 0] * WM[j * 3 + 0] + WM[i * 3 + 1] * WM[j * 3 + 1] +
                             WM[i * 3 + 2] * WM[j * 3 + 2];
@@ -158,19 +182,27 @@ typedef struct {
     int clamp_x, clamp_y;
 } jacobian;
 
-static jacobian persp_jacobian(const gs_camera *cam, float x, float y, float z)
+/* Limits of x/z and y/z for the Jacobian clamp: the image extent widened by
+ * the margin, (+x, -x, +y, -y). Once per render: they are divisions. */
+static void clamp_limits(const gs_camera *cam, float lim[4])
+{
+    float W = (float)cam->width, H = (float)cam->height;
+    lim[0] = (W - cam->cx) / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
+    lim[1] = cam->cx / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
+    lim[2] = (H - cam->cy) / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+    lim[3] = cam->cy / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+}
+
+static jacobian persp_jacobian(const gs_camera *cam, const float lim[4], float x, float y,
+                               float z)
 {
     jacobian J;
-    float W = (float)cam->width, H = (float)cam->height;
-    float lim_xp = (W - cam->cx) / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
-    float lim_xn = cam->cx / cam->fx + GS_RASTER_CLAMP_MARGIN * W / cam->fx;
-    float lim_yp = (H - cam->cy) / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
-    float lim_yn = cam->cy / cam->fy + GS_RASTER_CLAMP_MARGIN * H / cam->fy;
+    float lim_xp = lim[0], lim_xn = lim[1], lim_yp = lim[2], lim_yn = lim[3];
     float u = x / z, v = y / z;
     J.clamp_x = u < -lim_xn || u > lim_xp;
     J.clamp_y = v < -lim_yn || v > lim_yp;
-    J.tx = z * fminf(lim_xp, fmaxf(-lim_xn, u));
-    J.ty = z * fminf(lim_yp, fmaxf(-lim_yn, v));
+    J.tx = z * min_f(max_f(u, -lim_xn), lim_xp);
+    J.ty = z * min_f(max_f(v, -lim_yn), lim_yp);
     float rz = 1.0f / z, rz2 = rz * rz;
     J.j00 = cam->fx * rz;
     J.j02 = -cam->fx * J.tx * rz2;
@@ -197,10 +229,11 @@ static int to_camera(const gs_raster *r, int i, camera_gaussian *cg)
     if (!(cg->z >= GS_RASTER_NEAR) || !(cg->z <= GS_RASTER_FAR))
         return 0;
     quat_to_rot(r->g.quats + 4 * (size_t)i, cg->R, cg->qn);
+#pragma GCC unroll 9
     for (int k = 0; k < 3; k++)
         cg->s[k] = expf(r->g.log_scales[3 * (size_t)i + k]);
     camera_covariance(V, cg->R, cg->s, cg->Sc);
-    cg->J = persp_jacobian(&r->cam, cg->x, cg->y, cg->z);
+    cg->J = persp_jacobian(&r->cam, r->clamp_lim, cg->x, cg->y, cg->z);
     return 1;
 }
 
@@ -210,6 +243,9 @@ typedef struct {
 } proj_ctx;
 
 #define PROJ_CHUNK 1024
+
+static void tile_range(const gs_raster *r, int i, int32_t t[4]);
+static void ellipse_tiles(const gs_splat *sp, int32_t t[4]);
 
 static void project_one(gs_raster *r, int i, int fast)
 {
@@ -238,7 +274,7 @@ static void project_one(gs_raster *r, int i, int fast)
     float a = s11 * inv, b = -s01 * inv, c = s00 * inv;
     float mx = cam->fx * x / z + cam->cx, my = cam->fy * y / z + cam->cy;
     float half = 0.5f * (s00 + s11);
-    float lam = half + sqrtf(fmaxf(0.01f, half * half - det));
+    float lam = half + sqrtf(max_f(half * half - det, 0.01f));
     float rad = ceilf(3.0f * sqrtf(lam));
     if (!isfinite(rad) || !isfinite(mx) || !isfinite(my) || !isfinite(a) || !isfinite(b) ||
         !isfinite(c))
@@ -246,7 +282,7 @@ static void project_one(gs_raster *r, int i, int fast)
     if (mx + rad <= 0 || mx - rad >= (float)cam->width || my + rad <= 0 ||
         my - rad >= (float)cam->height)
         return;
-    float comp = sqrtf(fmaxf(0.0f, det0 * inv));
+    float comp = sqrtf(max_f(det0 * inv, 0.0f));
     float lo = g->opacity_logits[i];
     float op = 1.0f / (1.0f + expf(-lo));
     if (r->opt.antialiased)
@@ -259,8 +295,11 @@ static void project_one(gs_raster *r, int i, int fast)
             return;
         thr = thr * 1.0001f + 1e-4f;
         float cdet = a * c - b * b;
-        P->extent[2 * i] = sqrtf(fmaxf(0.0f, 2.0f * thr * c / cdet)) + 0.01f;
-        P->extent[2 * i + 1] = sqrtf(fmaxf(0.0f, 2.0f * thr * a / cdet)) + 0.01f;
+        gs_splat *sp = r->splats + i;
+        sp->mx = mx, sp->my = my, sp->a = a, sp->b = b, sp->c = c;
+        sp->op = op, sp->z = z, sp->thr = thr;
+        sp->ex = sqrtf(max_f(2.0f * thr * c / cdet, 0.0f)) + 0.01f;
+        sp->ey = sqrtf(max_f(2.0f * thr * a / cdet, 0.0f)) + 0.01f;
     }
     P->mean2d[2 * i] = mx;
     P->mean2d[2 * i + 1] = my;
@@ -271,6 +310,10 @@ static void project_one(gs_raster *r, int i, int fast)
     P->opacity[i] = op;
     P->comp[i] = comp;
     P->radius[i] = rad;
+    if (fast) {
+        tile_range(r, i, r->splats[i].tiles);
+        ellipse_tiles(r->splats + i, r->splats[i].tiles);
+    }
 }
 
 static void project_chunk(void *vctx, int task, int worker)
@@ -313,94 +356,158 @@ static void sort_by_depth(gs_raster *r, int m)
 }
 
 /* Tile range [x0, x1) x [y0, y1) of the radius box, as gsplat bins it. */
-static void tile_range(const gs_raster *r, int i, int t[4])
+static void tile_range(const gs_raster *r, int i, int32_t t[4])
 {
     const float *m = r->proj.mean2d + 2 * i;
     float rad = r->proj.radius[i], T = (float)GS_RASTER_TILE;
     float x0 = floorf((m[0] - rad) / T), x1 = ceilf((m[0] + rad) / T);
     float y0 = floorf((m[1] - rad) / T), y1 = ceilf((m[1] + rad) / T);
     float tx = (float)r->tiles_x, ty = (float)r->tiles_y;
-    t[0] = (int)fminf(fmaxf(x0, 0.0f), tx);
-    t[1] = (int)fminf(fmaxf(x1, 0.0f), tx);
-    t[2] = (int)fminf(fmaxf(y0, 0.0f), ty);
-    t[3] = (int)fminf(fmaxf(y1, 0.0f), ty);
+    t[0] = (int32_t)min_f(max_f(x0, 0.0f), tx);
+    t[1] = (int32_t)min_f(max_f(x1, 0.0f), tx);
+    t[2] = (int32_t)min_f(max_f(y0, 0.0f), ty);
+    t[3] = (int32_t)min_f(max_f(y1, 0.0f), ty);
 }
 
-/* Minimum of sigma = 0.5 d^T Q d over d in [dx0,dx1] x [dy0,dy1]. */
-static float box_min_sigma(float a, float b, float c, float dx0, float dx1, float dy0,
-                           float dy1)
+/* Tiles [lo, hi) whose pixel centres [16 t + 0.49, 16 t + 15.51] meet
+ * [x0, x1], within [lo, hi). */
+static void centre_range(float x0, float x1, int32_t *lo, int32_t *hi)
 {
-    if (dx0 <= 0 && dx1 >= 0 && dy0 <= 0 && dy1 >= 0)
-        return 0.0f;
-    float best = INFINITY;
-    float xs[2] = {dx0, dx1}, ys[2] = {dy0, dy1};
-    for (int k = 0; k < 2; k++) {
-        float dx = xs[k], dy = fminf(dy1, fmaxf(dy0, -b * dx / c));
-        best = fminf(best, 0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy);
-        dy = ys[k];
-        dx = fminf(dx1, fmaxf(dx0, -b * dy / a));
-        best = fminf(best, 0.5f * (a * dx * dx + c * dy * dy) + b * dx * dy);
+    const float T = (float)GS_RASTER_TILE;
+    float f0 = min_f(max_f((x0 + 0.49f) * (1.0f / T) - 1.0f, (float)*lo), (float)*hi);
+    float f1 = min_f(max_f((x1 - 0.49f) * (1.0f / T) + 1.0f, f0), (float)*hi);
+    int32_t i0 = (int32_t)f0, i1 = (int32_t)f1;
+    *lo = i0 + ((float)i0 < f0);
+    *hi = i1 > *lo ? i1 : *lo;
+}
+
+/* Fast path: narrows the radius box t to the tiles that the bounding box of
+ * the splat's sigma <= thr ellipse reaches. */
+static void ellipse_tiles(const gs_splat *sp, int32_t t[4])
+{
+    centre_range(sp->mx - sp->ex, sp->mx + sp->ex, &t[0], &t[1]);
+    centre_range(sp->my - sp->ey, sp->my + sp->ey, &t[2], &t[3]);
+}
+
+/* Fast path only: tiles [*a, *b) of tile row ty whose pixel centres the
+ * splat's sigma <= thr ellipse reaches, within the radius box [tx0, tx1).
+ * The ellipse cut to the row's band of pixel centres is convex, so it meets
+ * a tile's box of centres exactly when its x-extent meets the box's x-range;
+ * that extent ends at the ellipse's own left and right extremes, or where
+ * they fall outside the band, on the band's nearer edge. Boxes are widened
+ * by 0.01 px against rounding, so only tiles that cannot be reached go. */
+static void band_tiles(const gs_raster *r, const gs_splat *sp, int ty, int tx0, int tx1, int *a,
+                       int *b)
+{
+    const float T = (float)GS_RASTER_TILE;
+    float py0 = (float)ty * T + 0.49f;
+    float py1 = min_f((float)(ty + 1) * T, (float)r->cam.height) - 0.49f;
+    float dy0 = sp->my - py1, dy1 = sp->my - py0; /* d = mean - pixel centre */
+    *a = *b = tx0;
+    if (dy0 > sp->ey || dy1 < -sp->ey)
+        return;
+    float qa = sp->a, qb = sp->b, qc = sp->c, det = qa * qc - qb * qb, thr = sp->thr;
+    /* The extremes of dx lie at dy = -+ b ex / c with ex = sqrt(2 thr c / det). */
+    float ex = sqrtf(max_f(2.0f * thr * qc / det, 0.0f));
+    float dyr = min_f(max_f(-qb * ex / qc, dy0), dy1);
+    float dyl = min_f(max_f(qb * ex / qc, dy0), dy1);
+    float dxmax = (-qb * dyr + sqrtf(max_f(2.0f * qa * thr - det * dyr * dyr, 0.0f))) / qa;
+    float dxmin = (-qb * dyl - sqrtf(max_f(2.0f * qa * thr - det * dyl * dyl, 0.0f))) / qa;
+    int32_t lo = tx0, hi = tx1;
+    centre_range(sp->mx - dxmax - 0.01f, sp->mx - dxmin + 0.01f, &lo, &hi);
+    *a = lo, *b = hi;
+}
+
+/* Tile rows are binned in bands, one task each; every task walks all
+ * visible Gaussians in depth order, so a tile's list comes out sorted and
+ * only its own band's task writes it. */
+typedef struct {
+    gs_raster *r;
+    const int32_t *rect; /* m x 4: tx0, tx1, ty0, ty1 per sorted Gaussian */
+    int m, fast, band, fill;
+    uint32_t *cursor;     /* fill pass: next free slot per tile */
+    _Atomic size_t total; /* count pass: pairs so far (for the limit) */
+} bin_ctx;
+
+static void bin_band(void *vctx, int task, int worker)
+{
+    (void)worker;
+    bin_ctx *ctx = vctx;
+    gs_raster *r = ctx->r;
+    int y0 = task * ctx->band, y1 = y0 + ctx->band < r->tiles_y ? y0 + ctx->band : r->tiles_y;
+    uint32_t *count = r->tile_off + 1;
+    size_t local = 0;
+    for (int k = 0; k < ctx->m; k++) {
+        const int32_t *t = ctx->rect + 4 * (size_t)k;
+        if (t[3] <= y0 || t[2] >= y1)
+            continue;
+        uint32_t i = r->order[k];
+        int ya = t[2] > y0 ? t[2] : y0, yb = t[3] < y1 ? t[3] : y1;
+        for (int ty = ya; ty < yb; ty++) {
+            int a = t[0], b = t[1];
+            if (ctx->fast && b - a > 2 && t[3] - t[2] > 2)
+                band_tiles(r, r->splats + i, ty, t[0], t[1], &a, &b);
+            size_t row = (size_t)ty * r->tiles_x;
+            if (ctx->fill) {
+                for (int tx = a; tx < b; tx++)
+                    r->isect[ctx->cursor[row + tx]++] = i;
+            } else {
+                for (int tx = a; tx < b; tx++)
+                    count[row + tx]++;
+                local += (size_t)(b - a);
+            }
+        }
+        /* Publish now and then, so an absurd scene stops early. */
+        if (local > 4096) {
+            if (atomic_fetch_add(&ctx->total, local) + local > GS_RASTER_MAX_ISECT)
+                return;
+            local = 0;
+        }
     }
-    return best;
+    if (!ctx->fill)
+        atomic_fetch_add(&ctx->total, local);
 }
 
-/* Fast path only: can any pixel centre of tile (tx, ty) reach alpha 1/255? */
-static int tile_touched(const gs_raster *r, int i, int tx, int ty)
-{
-    const gs_proj *P = &r->proj;
-    float op = P->opacity[i];
-    float thr = logf(255.0f * op) * 1.0001f + 1e-4f;
-    int T = GS_RASTER_TILE;
-    /* Pixel centres of the tile, widened by 0.01 px against rounding. */
-    float px0 = (float)(tx * T) + 0.49f;
-    float px1 = (float)((tx + 1) * T < r->cam.width ? (tx + 1) * T : r->cam.width) - 0.49f;
-    float py0 = (float)(ty * T) + 0.49f;
-    float py1 = (float)((ty + 1) * T < r->cam.height ? (ty + 1) * T : r->cam.height) - 0.49f;
-    const float *m = P->mean2d + 2 * i, *q = P->conic + 3 * i;
-    return box_min_sigma(q[0], q[1], q[2], m[0] - px1, m[0] - px0, m[1] - py1, m[1] - py0) <=
-           thr;
-}
-
-static int bin_tiles(gs_raster *r, int m, int fast, gs_error *err)
+static int bin_tiles(gs_raster *r, gs_pool *pool, int m, int fast, gs_error *err)
 {
     size_t ntiles = (size_t)r->tiles_x * (size_t)r->tiles_y;
-    if (gs_raster_reserve((void **)&r->tile_off, &r->cap_tiles, ntiles + 1, sizeof(uint32_t)))
+    if (gs_raster_reserve((void **)&r->tile_off, &r->cap_tiles, ntiles + 1, sizeof(uint32_t)) ||
+        gs_raster_reserve((void **)&r->rects, &r->cap_rects, 4 * (size_t)(m ? m : 1),
+                          sizeof(int32_t)))
         return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tiles");
+    for (int k = 0; k < m; k++) {
+        int32_t *t = r->rects + 4 * (size_t)k;
+        if (fast)
+            memcpy(t, r->splats[r->order[k]].tiles, sizeof r->splats->tiles);
+        else
+            tile_range(r, (int)r->order[k], t);
+    }
     uint32_t *off = r->tile_off;
     memset(off, 0, (ntiles + 1) * sizeof *off);
-    size_t total = 0;
-    for (int k = 0; k < m; k++) {
-        int i = (int)r->order[k], t[4];
-        tile_range(r, i, t);
-        for (int ty = t[2]; ty < t[3]; ty++)
-            for (int tx = t[0]; tx < t[1]; tx++)
-                if (!fast || tile_touched(r, i, tx, ty)) {
-                    off[(size_t)ty * r->tiles_x + tx + 1]++;
-                    total++;
-                }
-        if (total > GS_RASTER_MAX_ISECT)
-            return gs_error_set(err, GS_ERR_LIMIT,
-                                "raster: more than %zu tile intersections (Gaussians too large?)",
-                                GS_RASTER_MAX_ISECT);
-    }
+    int threads = fast ? gs_pool_threads(pool) : 1;
+    /* Few bands: every band walks all Gaussians, and the test of whether one
+     * overlaps the band is an unpredictable branch. */
+    int tasks = threads > 1 ? 2 * threads : 1;
+    tasks = tasks < r->tiles_y ? tasks : r->tiles_y;
+    bin_ctx ctx = {r, r->rects, m, fast, (r->tiles_y + tasks - 1) / tasks, 0, NULL, 0};
+    tasks = (r->tiles_y + ctx.band - 1) / ctx.band;
+    gs_pool_for(fast ? pool : NULL, tasks, bin_band, &ctx);
+    size_t total = atomic_load(&ctx.total);
+    if (total > GS_RASTER_MAX_ISECT)
+        return gs_error_set(err, GS_ERR_LIMIT,
+                            "raster: more than %zu tile intersections (Gaussians too large?)",
+                            GS_RASTER_MAX_ISECT);
     for (size_t t = 0; t < ntiles; t++)
         off[t + 1] += off[t];
     if (gs_raster_reserve((void **)&r->isect, &r->cap_isect, total ? total : 1, sizeof(uint32_t)))
         return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu intersections",
                             total);
     r->n_isect = total;
-    /* Fill in depth order, so each tile's list comes out sorted. The sort
-     * is done, so its scratch (at least max(n, tiles) long) is free. */
-    uint32_t *fill = r->keys_tmp;
-    memcpy(fill, off, ntiles * sizeof *fill);
-    for (int k = 0; k < m; k++) {
-        int i = (int)r->order[k], t[4];
-        tile_range(r, i, t);
-        for (int ty = t[2]; ty < t[3]; ty++)
-            for (int tx = t[0]; tx < t[1]; tx++)
-                if (!fast || tile_touched(r, i, tx, ty))
-                    r->isect[fill[(size_t)ty * r->tiles_x + tx]++] = (uint32_t)i;
-    }
+    /* The sort is done, so its scratch (at least max(n, tiles) long) is free. */
+    ctx.cursor = r->keys_tmp;
+    memcpy(ctx.cursor, off, ntiles * sizeof *ctx.cursor);
+    ctx.fill = 1;
+    gs_pool_for(fast ? pool : NULL, tasks, bin_band, &ctx);
     return GS_OK;
 }
 
@@ -411,8 +518,8 @@ static int reserve_n(gs_raster *r, size_t n)
     if (n <= r->cap_n && r->n_block)
         return GS_OK;
     size_t cap = n < 64 ? 64 : n;
-    /* proj: 2+3+1+1+1+1+2 = 11 floats; pgrad: 2+3+1+1 = 7 floats */
-    float *blk = malloc(cap * 18 * sizeof(float));
+    /* proj: 2+3+1+1+1+1 = 9 floats; pgrad: 2+3+1+1 = 7 floats */
+    float *blk = malloc(cap * 16 * sizeof(float));
     if (!blk)
         return GS_ERR_NOMEM;
     free(r->n_block);
@@ -425,7 +532,6 @@ static int reserve_n(gs_raster *r, size_t n)
     P->opacity = blk, blk += cap;
     P->comp = blk, blk += cap;
     P->radius = blk, blk += cap;
-    P->extent = blk, blk += 2 * cap;
     gs_proj_grad *G = &r->pgrad;
     G->mean2d = blk, blk += 2 * cap;
     G->conic = blk, blk += 3 * cap;
@@ -449,6 +555,7 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     if (opt && opt->path != GS_RASTER_FAST && opt->path != GS_RASTER_SCALAR)
         return gs_error_set(err, GS_ERR_ARG, "raster: unknown path %d", (int)opt->path);
     r->cam = *cam;
+    clamp_limits(cam, r->clamp_lim);
     r->g = *g;
     r->background = background;
     r->opt = opt ? *opt : defaults;
@@ -457,6 +564,14 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     r->tiles_x = (cam->width + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
     r->tiles_y = (cam->height + GS_RASTER_TILE - 1) / GS_RASTER_TILE;
     size_t ntiles = (size_t)r->tiles_x * (size_t)r->tiles_y;
+    if (fast && n > r->cap_splats) {
+        free(r->splats);
+        r->cap_splats = 0;
+        r->splats = aligned_alloc(64, n * sizeof(gs_splat));
+        if (!r->splats)
+            return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu Gaussians", n);
+        r->cap_splats = n;
+    }
     if (reserve_n(r, n) ||
         gs_raster_reserve((void **)&r->t_final, &r->cap_pix, npix, sizeof(float)))
         return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu Gaussians", n);
@@ -492,7 +607,7 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     r->visible = m;
     if (m > 0)
         sort_by_depth(r, m);
-    rc = bin_tiles(r, m, fast, err);
+    rc = bin_tiles(r, pool, m, fast, err);
     if (rc)
         return rc;
 
@@ -558,17 +673,23 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
     /* Sigma2 = J Sc J^T: v_Sc = J^T vS2 J, v_J = 2 vS2 J Sc (vS2, Sc symmetric). */
     float Jm[6] = {J.j00, 0, J.j02, 0, J.j11, J.j12};
     float vSc[9];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vSc[a * 3 + b] = Jm[a] * (vS2[0] * Jm[b] + vS2[1] * Jm[3 + b]) +
                              Jm[3 + a] * (vS2[2] * Jm[b] + vS2[3] * Jm[3 + b]);
     float JS[6];
+#pragma GCC unroll 9
     for (int a = 0; a < 2; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             JS[a * 3 + b] = Jm[a * 3] * Sc[b] + Jm[a * 3 + 1] * Sc[3 + b] +
                             Jm[a * 3 + 2] * Sc[6 + b];
     float vJ[6];
+#pragma GCC unroll 9
     for (int a = 0; a < 2; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vJ[a * 3 + b] = 2.0f * (vS2[a * 2] * JS[b] + vS2[a * 2 + 1] * JS[3 + b]);
 
@@ -595,33 +716,42 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
     }
     if (grads->means) {
         float *gm = grads->means + 3 * (size_t)i;
+#pragma GCC unroll 9
         for (int k = 0; k < 3; k++)
             gm[k] += V[k] * vx + V[4 + k] * vy + V[8 + k] * vz;
     }
     /* Sc = V Sigma V^T: v_Sigma = V^T vSc V. Sigma = M M^T, M = R S. */
     float vSig[9], tmp[9];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             tmp[a * 3 + b] = vSc[a * 3] * V[b] + vSc[a * 3 + 1] * V[4 + b] +
                              vSc[a * 3 + 2] * V[8 + b];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vSig[a * 3 + b] = V[a] * tmp[b] + V[4 + a] * tmp[3 + b] + V[8 + a] * tmp[6 + b];
     float vM[9];
+#pragma GCC unroll 9
     for (int a = 0; a < 3; a++)
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             vM[a * 3 + b] = (vSig[a * 3] + vSig[a]) * R[b] * s[b] +
                             (vSig[a * 3 + 1] + vSig[3 + a]) * R[3 + b] * s[b] +
                             (vSig[a * 3 + 2] + vSig[6 + a]) * R[6 + b] * s[b];
     if (grads->log_scales) {
         float *gs = grads->log_scales + 3 * (size_t)i;
+#pragma GCC unroll 9
         for (int b = 0; b < 3; b++)
             gs[b] += (vM[b] * R[b] + vM[3 + b] * R[3 + b] + vM[6 + b] * R[6 + b]) * s[b];
     }
     const float *q = g->quats + 4 * (size_t)i;
-    float qm = fmaxf(fmaxf(fabsf(q[0]), fabsf(q[1])), fmaxf(fabsf(q[2]), fabsf(q[3])));
+    float qm = max_f(max_f(fabsf(q[0]), fabsf(q[1])), max_f(fabsf(q[2]), fabsf(q[3])));
     if (grads->quats && qm > 0.0f) {
         float vR[9];
+#pragma GCC unroll 9
         for (int a = 0; a < 9; a++)
             vR[a] = vM[a] * s[a % 3];
         float w = qn[0], qx = qn[1], qy = qn[2], qz = qn[3];
@@ -638,6 +768,7 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
         float a = q[0] / qm, b = q[1] / qm, c = q[2] / qm, d = q[3] / qm;
         float inv = 1.0f / (qm * sqrtf(a * a + b * b + c * c + d * d)); /* 1/|q| */
         float *gq = grads->quats + 4 * (size_t)i;
+#pragma GCC unroll 9
         for (int k = 0; k < 4; k++)
             gq[k] += (vq[k] - qn[k] * dot) * inv;
     }
@@ -664,29 +795,68 @@ static void project_backward_chunk(void *vctx, int task, int worker)
         project_backward_one(c->r, i, c->grads);
 }
 
-/* Adds the per-intersection slots of tiles [t0, t1) into per-Gaussian sums,
- * in tile order: the same additions in the same order for any thread count. */
-static void gather_slots(gs_raster *r, int t0, int t1, size_t slot0, float *v_features)
+/* y[0..n) += x[0..n), four at a time so that the blocks become vector adds. */
+static void add_row(float *restrict y, const float *restrict x, size_t n)
 {
+    size_t c = 0;
+    for (; c + 4 <= n; c += 4) {
+        y[c] += x[c];
+        y[c + 1] += x[c + 1];
+        y[c + 2] += x[c + 2];
+        y[c + 3] += x[c + 3];
+    }
+    for (; c < n; c++)
+        y[c] += x[c];
+}
+
+/* Adds the per-intersection slots of tiles [t0, t1) into per-Gaussian sums,
+ * in tile order: the same additions in the same order for any thread count.
+ * Tasks split the slot's columns, not the pairs: task 0 takes the seven
+ * projection-space values, task j >= 1 channels [16 (j - 1), 16 j), so each
+ * output element still gets its additions in tile order, from one task. */
+#define GATHER_CHANNELS 16
+
+typedef struct {
+    gs_raster *r;
+    int t0, t1;
+    size_t slot0;
+    float *v_features;
+} gather_ctx;
+
+static void gather_task(void *vctx, int task, int worker)
+{
+    (void)worker;
+    gather_ctx *c = vctx;
+    gs_raster *r = c->r;
     size_t C = (size_t)r->g.channels, stride = GS_SLOT_HEAD + C;
+    size_t c0 = task > 0 ? (size_t)(task - 1) * GATHER_CHANNELS : 0;
+    size_t n = C - c0 < GATHER_CHANNELS ? C - c0 : GATHER_CHANNELS;
     gs_proj_grad *G = &r->pgrad;
-    for (int t = t0; t < t1; t++)
-        for (uint32_t k = r->tile_off[t]; k < r->tile_off[t + 1]; k++) {
-            const float *s = r->slots + (k - slot0) * stride;
-            size_t i = r->isect[k];
-            G->mean2d[2 * i] += s[0];
-            G->mean2d[2 * i + 1] += s[1];
-            G->conic[3 * i] += s[2];
-            G->conic[3 * i + 1] += s[3];
-            G->conic[3 * i + 2] += s[4];
-            G->opacity[i] += s[5];
-            G->depth[i] += s[6];
-            if (v_features) {
-                float *vf = v_features + i * C;
-                for (size_t ch = 0; ch < C; ch++)
-                    vf[ch] += s[GS_SLOT_HEAD + ch];
-            }
+    for (uint32_t k = r->tile_off[c->t0]; k < r->tile_off[c->t1]; k++) {
+        const float *s = r->slots + (k - c->slot0) * stride;
+        size_t i = r->isect[k];
+        if (task > 0) {
+            add_row(c->v_features + i * C + c0, s + GS_SLOT_HEAD + c0, n);
+            continue;
         }
+        G->mean2d[2 * i] += s[0];
+        G->mean2d[2 * i + 1] += s[1];
+        G->conic[3 * i] += s[2];
+        G->conic[3 * i + 1] += s[3];
+        G->conic[3 * i + 2] += s[4];
+        G->opacity[i] += s[5];
+        G->depth[i] += s[6];
+    }
+}
+
+static void gather_slots(gs_raster *r, gs_pool *pool, int t0, int t1, size_t slot0,
+                         float *v_features)
+{
+    gather_ctx ctx = {r, t0, t1, slot0, v_features};
+    int tasks = 1;
+    if (v_features)
+        tasks += (r->g.channels + GATHER_CHANNELS - 1) / GATHER_CHANNELS;
+    gs_pool_for(pool, tasks, gather_task, &ctx);
 }
 
 static int fast_backward(gs_raster *r, gs_pool *pool, const float *v_f, const float *v_alpha,
@@ -708,7 +878,7 @@ static int fast_backward(gs_raster *r, gs_pool *pool, const float *v_f, const fl
         if (fast_kernels()->backward(r, pool, t0, t1, r->tile_off[t0], v_f, v_alpha, v_depth,
                                      v_bg))
             return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tile buffers");
-        gather_slots(r, t0, t1, r->tile_off[t0], v_features);
+        gather_slots(r, pool, t0, t1, r->tile_off[t0], v_features);
         t0 = t1;
     }
     return GS_OK;

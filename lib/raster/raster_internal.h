@@ -15,8 +15,20 @@ typedef struct gs_proj {
     float *opacity; /* n, sigmoid(logit), times comp when antialiased */
     float *comp;    /* n, sqrt(det Sigma2 / det(Sigma2 + eps I)) */
     float *radius;  /* n, pixels; 0 = culled */
-    float *extent;  /* n x 2, half-extent of the alpha >= 1/255 ellipse */
 } gs_proj;
+
+/* What the fast compositing reads of Gaussian i, in one cache line, so a
+ * tile's walk through its list costs one miss per Gaussian (plus its
+ * features) instead of one per array. Fast path only. */
+typedef struct gs_splat {
+    float mx, my;  /* mean2d */
+    float a, b, c; /* conic */
+    float op, z;   /* opacity, depth */
+    float thr;     /* ln(255 op) widened: alpha >= 1/255 needs sigma <= thr */
+    float ex, ey;  /* half-extent of the sigma <= thr ellipse, widened */
+    int32_t tiles[4]; /* tile box [x0, x1) x [y0, y1) that the ellipse's box meets */
+    float pad[2];
+} gs_splat;
 
 /* Projection-space gradients, gathered from the compositing pass. */
 typedef struct gs_proj_grad {
@@ -34,6 +46,7 @@ typedef struct gs_proj_grad {
 struct gs_raster {
     int have_forward;
     gs_camera cam;
+    float clamp_lim[4];   /* x/z, y/z limits of the Jacobian clamp */
     gs_gaussians g;
     const float *background;
     gs_raster_options opt;
@@ -43,12 +56,20 @@ struct gs_raster {
     gs_proj_grad pgrad;
     size_t cap_n;
     void *n_block;
+    gs_splat *splats;     /* n, 64-byte aligned; fast path */
+    size_t cap_splats;
 
     uint32_t *order, *order_tmp; /* visible ids sorted by (depth, id) */
     uint32_t *keys, *keys_tmp;
     size_t cap_order;
 
+    int32_t *rects;       /* visible x 4: radius box in tiles, in depth order */
+    size_t cap_rects;
     uint32_t *tile_off;   /* tiles + 1 offsets into isect */
+    uint32_t *tile_order; /* fast path: tiles by decreasing list length */
+    size_t cap_tile_order;
+    uint64_t *tile_keys;  /* its sort keys */
+    size_t cap_tile_keys;
     size_t cap_tiles;
     uint32_t *isect;      /* Gaussian id per intersection, per tile by depth */
     size_t n_isect, cap_isect;

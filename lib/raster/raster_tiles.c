@@ -33,10 +33,18 @@ static inline vf splat(float x)
     return (vf){x, x, x, x, x, x, x, x};
 }
 
-/* m ? a : b per lane (C has no vector ?:). */
+#ifdef __AVX2__
+#include <immintrin.h>
+#endif
+
+/* m ? a : b per lane (C has no vector ?:); m lanes are 0 or -1. */
 static inline vf vsel(vi m, vf a, vf b)
 {
+#ifdef __AVX2__
+    return (vf)_mm256_blendv_ps((__m256)b, (__m256)a, (__m256)m);
+#else
     return (vf)(((vi)a & m) | ((vi)b & ~m));
+#endif
 }
 
 static inline vi vseli(vi m, vi a, vi b)
@@ -55,7 +63,6 @@ static inline vf vmax(vf a, vf b)
 }
 
 #ifdef __AVX2__
-#include <immintrin.h>
 static inline int mask_bits(vi m)
 {
     return _mm256_movemask_ps((__m256)m);
@@ -75,10 +82,16 @@ static inline int any(vi m)
     return mask_bits(m) != 0;
 }
 
-/* Lane sum in a fixed order (pairwise), the same on every path. */
+typedef float vf4 __attribute__((vector_size(16)));
+
+/* Lane sum in a fixed order (pairwise), the same on every path:
+ * ((v0 + v4) + (v2 + v6)) + ((v1 + v5) + (v3 + v7)), as three shuffles and
+ * three adds. */
 static inline float hsum(vf v)
 {
-    return ((v[0] + v[4]) + (v[2] + v[6])) + ((v[1] + v[5]) + (v[3] + v[7]));
+    vf4 h = __builtin_shufflevector(v, v, 0, 1, 2, 3) + __builtin_shufflevector(v, v, 4, 5, 6, 7);
+    h = h + __builtin_shufflevector(h, h, 2, 3, 0, 1);
+    return h[0] + h[1];
 }
 
 /* exp(x) for x <= 0: Cody-Waite reduction x = n ln2 + r, degree-6 minimax
@@ -129,26 +142,53 @@ static tile_info get_tile(const gs_raster *r, int t)
     return ti;
 }
 
-/* Rows [*r0, *r1] and groups [*g0, *g1] of the tile that Gaussian i's
+/* Rows [*r0, *r1] and groups [*g0, *g1] of the tile that splat sp's
  * ellipse can reach; returns 0 when none. */
-static int splat_window(const gs_proj *P, uint32_t i, const tile_info *ti, int *r0, int *r1,
-                        int *g0, int *g1)
+static int splat_window(const gs_splat *sp, const tile_info *ti, int *r0, int *r1, int *g0,
+                        int *g1)
 {
-    float mx = P->mean2d[2 * i] - (float)ti->x0 - 0.5f;
-    float my = P->mean2d[2 * i + 1] - (float)ti->y0 - 0.5f;
-    float ex = P->extent[2 * i], ey = P->extent[2 * i + 1];
-    float fy0 = ceilf(my - ey), fy1 = floorf(my + ey);
-    float fx0 = ceilf(mx - ex), fx1 = floorf(mx + ex);
-    if (fy1 < 0 || fx1 < 0 || fy0 > (float)(ti->h - 1) || fx0 > (float)(ti->w - 1))
+    /* Clamped to the tile before rounding, so the conversions are exact and
+     * no rounding call is needed: ceil(x) for x in [0, 16] is (int)x plus
+     * one when x has a fraction. */
+    float mx = sp->mx - (float)ti->x0 - 0.5f, my = sp->my - (float)ti->y0 - 0.5f;
+    float hx = (float)(ti->w - 1), hy = (float)(ti->h - 1);
+    float y0 = my - sp->ey, y1 = my + sp->ey, x0 = mx - sp->ex, x1 = mx + sp->ex;
+    if (!(y1 >= 0 && x1 >= 0 && y0 <= hy && x0 <= hx))
         return 0;
-    *r0 = fy0 > 0 ? (int)fy0 : 0;
-    *r1 = fy1 < (float)(ti->h - 1) ? (int)fy1 : ti->h - 1;
-    int c0 = fx0 > 0 ? (int)fx0 : 0;
-    int c1 = fx1 < (float)(ti->w - 1) ? (int)fx1 : ti->w - 1;
+    y0 = y0 > 0 ? y0 : 0, x0 = x0 > 0 ? x0 : 0;
+    y1 = y1 < hy ? y1 : hy, x1 = x1 < hx ? x1 : hx;
+    int iy0 = (int)y0, ix0 = (int)x0;
+    *r0 = iy0 + ((float)iy0 < y0);
+    *r1 = (int)y1;
+    int c0 = ix0 + ((float)ix0 < x0), c1 = (int)x1;
     *g0 = c0 / L;
     *g1 = c1 / L;
     return *r0 <= *r1 && c0 <= c1;
 }
+
+/* Pairs ahead of the one being composited whose data is fetched early: the
+ * ids in a tile's list are in depth order, so their records and features
+ * are scattered over memory. */
+#define PREFETCH_AHEAD 6
+
+static inline void prefetch_pair(const gs_raster *r, uint32_t k, uint32_t s, uint32_t e)
+{
+    if (k < s || k >= e)
+        return;
+    uint32_t i = r->isect[k];
+    size_t C = (size_t)r->g.channels;
+    const float *f = r->g.features + i * C;
+    __builtin_prefetch(r->splats + i);
+    for (size_t o = 0; o < C; o += 16)
+        __builtin_prefetch(f + o);
+    __builtin_prefetch(f + C - 1);
+}
+
+/* A vector's lanes as scalars, for the per-pixel loops. */
+typedef union {
+    vf v;
+    float f[L];
+} lanes;
 
 /* Per-lane sigma, exp(-sigma) and alpha of one splat on one group. */
 typedef struct {
@@ -156,16 +196,130 @@ typedef struct {
     vi ok; /* sigma >= 0 and alpha >= 1/255 */
 } group_eval;
 
-static inline group_eval eval_group(float mx, float dy, float a, float b, float c, float op,
-                                    float gx)
+/* sigma first: a group where no lane has sigma <= thr (the splat's widened
+ * ln(255 opacity)) cannot pass the alpha test, so the exponential is
+ * skipped there without changing any decision. */
+static inline int group_sigma(group_eval *g, float mx, float dy, float a, float b, float c,
+                              float thr, float gx, vi alive)
 {
-    group_eval g;
-    g.dx = splat(mx - gx) - lane_centre;
-    g.sigma = splat(0.5f) * (splat(a) * g.dx * g.dx + splat(c * dy * dy)) + splat(b * dy) * g.dx;
-    g.vis = vexp_neg(-g.sigma);
-    g.alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(op) * g.vis);
-    g.ok = (g.sigma >= splat(0.0f)) & (g.alpha >= splat(GS_RASTER_MIN_ALPHA));
-    return g;
+    g->dx = splat(mx - gx) - lane_centre;
+    g->sigma = splat(0.5f) * (splat(a) * g->dx * g->dx + splat(c * dy * dy)) +
+               splat(b * dy) * g->dx;
+    return any(alive & (g->sigma <= splat(thr)));
+}
+
+static inline void group_alpha(group_eval *g, float op)
+{
+    g->vis = vexp_neg(-g->sigma);
+    g->alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(op) * g->vis);
+    g->ok = (g->sigma >= splat(0.0f)) & (g->alpha >= splat(GS_RASTER_MIN_ALPHA));
+}
+
+/* a[c] += f[c] w for c < nv, written out so that a constant nv leaves
+ * straight-line code (GCC does not unroll the loop at -O2). */
+static inline __attribute__((always_inline)) void axpy_nv(vf *a, const vf *f, vf w, const int nv)
+{
+    switch (nv) {
+    default: a[7] += f[7] * w; /* fallthrough */
+    case 7: a[6] += f[6] * w; /* fallthrough */
+    case 6: a[5] += f[5] * w; /* fallthrough */
+    case 5: a[4] += f[4] * w; /* fallthrough */
+    case 4: a[3] += f[3] * w; /* fallthrough */
+    case 3: a[2] += f[2] * w; /* fallthrough */
+    case 2: a[1] += f[1] * w; /* fallthrough */
+    case 1: a[0] += f[0] * w;
+    }
+}
+
+/* One channel block of the backward's per-pixel work (see tile_backward_nv). */
+#define BWD_BLOCK(c)                                                                     \
+    do {                                                                                 \
+        vf b_ = buf[p + (c)], vp_ = vpix[p + (c)];                                       \
+        sf += fv[c] * vp_;                                                               \
+        sb += b_ * vp_;                                                                  \
+        buf[p + (c)] = b_ + fv[c] * facj;                                                \
+        pf[c] += facj * vp_;                                                             \
+    } while (0)
+
+/* ---- pixel-major channel blocks ----------------------------------------- */
+
+/* Channels are kept pixel-major inside a tile, nv vectors of 8 channels per
+ * pixel, so that a contributing (pixel, Gaussian) pair costs nv vector
+ * operations with the Gaussian's features held in registers, whatever the
+ * number of other pixels in its group. The image planes are C x H x W, so
+ * tiles are transposed on the way in and out, 8 x 8 at a time. */
+#define MAX_NV (GS_RASTER_MAX_CHANNELS / L)
+
+/* The first n <= 8 floats at p, zeros after them. A whole vector is the
+ * common case; a constant-size memcpy compiles to one unaligned load. */
+static inline vf load_n(const float *p, int n)
+{
+    vf v = splat(0.0f);
+    if (n == L)
+        memcpy(&v, p, sizeof v);
+    else
+        for (int j = 0; j < n; j++)
+            v[j] = p[j];
+    return v;
+}
+
+/* The same for the per-pixel contributor counts. */
+static inline vi load_ni(const uint32_t *p, int n)
+{
+    vi v = {0};
+    if (n == L)
+        memcpy(&v, p, sizeof v);
+    else
+        for (int j = 0; j < n; j++)
+            v[j] = (int32_t)p[j];
+    return v;
+}
+
+static inline void store_ni(uint32_t *p, vi v, int n)
+{
+    if (n == L)
+        memcpy(p, &v, sizeof v);
+    else
+        for (int j = 0; j < n; j++)
+            p[j] = (uint32_t)v[j];
+}
+
+/* Stores the first n <= 8 lanes of v at p. */
+static inline void store_n(float *p, vf v, int n)
+{
+    if (n == L)
+        memcpy(p, &v, sizeof v);
+    else
+        for (int j = 0; j < n; j++)
+            p[j] = v[j];
+}
+
+/* Features of one Gaussian as nv vectors, zero past channel C. */
+static inline void load_features(const float *f, int C, int nv, vf *fv)
+{
+    for (int c = 0; c < nv; c++)
+        fv[c] = load_n(f + c * L, C - c * L < L ? C - c * L : L);
+}
+
+/* In-place transpose of 8 vectors (rows) into 8 vectors (columns). */
+static inline void transpose8(vf m[L])
+{
+    vf t[L], u[L];
+    for (int k = 0; k < L; k += 2) {
+        t[k] = __builtin_shufflevector(m[k], m[k + 1], 0, 8, 1, 9, 4, 12, 5, 13);
+        t[k + 1] = __builtin_shufflevector(m[k], m[k + 1], 2, 10, 3, 11, 6, 14, 7, 15);
+    }
+    for (int k = 0; k < L; k += 4)
+        for (int h = 0; h < 2; h++) {
+            u[k + 2 * h] =
+                __builtin_shufflevector(t[k + h], t[k + h + 2], 0, 1, 8, 9, 4, 5, 12, 13);
+            u[k + 2 * h + 1] =
+                __builtin_shufflevector(t[k + h], t[k + h + 2], 2, 3, 10, 11, 6, 7, 14, 15);
+        }
+    for (int k = 0; k < 4; k++) {
+        m[k] = __builtin_shufflevector(u[k], u[k + 4], 0, 1, 2, 3, 8, 9, 10, 11);
+        m[k + 4] = __builtin_shufflevector(u[k], u[k + 4], 4, 5, 6, 7, 12, 13, 14, 15);
+    }
 }
 
 /* ---- forward ------------------------------------------------------------ */
@@ -178,46 +332,92 @@ typedef struct {
     _Atomic size_t contributions; /* integer sum: order-independent */
 } fwd_ctx;
 
-static void tile_forward(void *vctx, int t, int worker)
+/* Group vectors of a tile's pixel state, each TPIX / L long. */
+typedef struct {
+    vf *T, *dep;
+    vi *last, *alive;
+} fwd_state;
+
+/* Writes the tile: acc (TPIX x nv, pixel-major) plus T times the
+ * background into the C planes, then alpha, T, last and depth. */
+static inline __attribute__((always_inline)) void
+write_tile(fwd_ctx *ctx, const tile_info *ti, const vf *acc, const fwd_state *st, const int nv)
 {
-    fwd_ctx *ctx = vctx;
     gs_raster *r = ctx->r;
-    const gs_proj *P = &r->proj;
     const int C = r->g.channels, W = r->cam.width;
     const size_t HW = (size_t)W * (size_t)r->cam.height;
-    tile_info ti = get_tile(r, t);
+    for (int row = 0; row < ti->h; row++)
+        for (int gi = 0; gi * L < ti->w; gi++) {
+            int v = row * GROUPS + gi, n = ti->w - gi * L < L ? ti->w - gi * L : L;
+            size_t pix0 = (size_t)(ti->y0 + row) * W + (size_t)(ti->x0 + gi * L);
+            vf T = st->T[v];
+            for (int cb = 0; cb < nv; cb++) {
+                vf m[L];
+                for (int j = 0; j < L; j++)
+                    m[j] = acc[(size_t)(v * L + j) * nv + cb];
+                transpose8(m);
+                for (int k = 0; k < L && cb * L + k < C; k++) {
+                    size_t off = (size_t)(cb * L + k) * HW + pix0;
+                    vf o = m[k];
+                    if (ctx->bg)
+                        o += T * load_n(ctx->bg + off, n);
+                    store_n(ctx->out_f + off, o, n);
+                }
+            }
+            vf alpha = splat(1.0f) - T;
+            store_n(ctx->out_alpha + pix0, alpha, n);
+            store_n(r->t_final + pix0, T, n);
+            store_ni(r->last + pix0, st->last[v], n);
+            if (ctx->out_depth)
+                store_n(ctx->out_depth + pix0, st->dep[v], n);
+        }
+}
+
+static inline __attribute__((always_inline)) void
+tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
+{
+    gs_raster *r = ctx->r;
+    const int C = r->g.channels;
+    tile_info ti = get_tile(r, (int)r->tile_order[t]);
 
     float *scratch = (float *)r->scratch + (size_t)worker * ctx->per_worker;
-    vf *acc = (vf *)scratch;              /* C x TPIX */
-    vf *Tv = acc + (size_t)C * TPIX / L;  /* TPIX */
-    vf *dep = Tv + TPIX / L;              /* TPIX */
-    vi *last = (void *)(dep + TPIX / L);  /* TPIX */
-    vi *alive = last + TPIX / L;          /* TPIX */
+    vf *acc = (vf *)scratch; /* TPIX x nv */
+    fwd_state st;
+    st.T = acc + (size_t)nv * TPIX;
+    st.dep = st.T + TPIX / L;
+    st.last = (void *)(st.dep + TPIX / L);
+    st.alive = st.last + TPIX / L;
     int row_alive[TS];
     int tile_alive = 0;
     size_t contributions = 0;
-    memset(acc, 0, (size_t)C * TPIX * sizeof(float));
+    memset(acc, 0, (size_t)nv * TPIX * sizeof(vf));
     for (int row = 0; row < TS; row++) {
         row_alive[row] = row < ti.h ? ti.w : 0;
         tile_alive += row_alive[row];
         for (int gi = 0; gi < GROUPS; gi++) {
             int v = row * GROUPS + gi;
-            Tv[v] = splat(1.0f);
-            dep[v] = splat(0.0f);
-            last[v] = (vi){0};
+            st.T[v] = splat(1.0f);
+            st.dep[v] = splat(0.0f);
+            st.last[v] = (vi){0};
             for (int j = 0; j < L; j++)
-                alive[v][j] = (row < ti.h && gi * L + j < ti.w) ? -1 : 0;
+                st.alive[v][j] = (row < ti.h && gi * L + j < ti.w) ? -1 : 0;
         }
     }
 
+    for (uint32_t k = ti.s; k < ti.s + PREFETCH_AHEAD; k++)
+        prefetch_pair(r, k, ti.s, ti.e);
     for (uint32_t k = ti.s; k < ti.e && tile_alive > 0; k++) {
+        prefetch_pair(r, k + PREFETCH_AHEAD, ti.s, ti.e);
         uint32_t i = r->isect[k];
+        const gs_splat *sp = r->splats + i;
         int r0, r1, g0, g1;
-        if (!splat_window(P, i, &ti, &r0, &r1, &g0, &g1))
+        if (!splat_window(sp, &ti, &r0, &r1, &g0, &g1))
             continue;
-        const float *q = P->conic + 3 * i, *f = r->g.features + (size_t)i * C;
-        float mx = P->mean2d[2 * i] - (float)ti.x0, op = P->opacity[i], z = P->depth[i];
-        float my = P->mean2d[2 * i + 1] - (float)ti.y0;
+        const float q[3] = {sp->a, sp->b, sp->c};
+        float mx = sp->mx - (float)ti.x0, op = sp->op, z = sp->z, thr = sp->thr;
+        float my = sp->my - (float)ti.y0;
+        vf fv[MAX_NV];
+        load_features(r->g.features + (size_t)i * C, C, nv, fv);
         vi pos = (vi){0} + (int32_t)(k - ti.s + 1);
         for (int row = r0; row <= r1; row++) {
             if (!row_alive[row])
@@ -225,73 +425,78 @@ static void tile_forward(void *vctx, int t, int worker)
             float dy = my - ((float)row + 0.5f);
             for (int gi = g0; gi <= g1; gi++) {
                 int v = row * GROUPS + gi;
-                if (!any(alive[v]))
+                vi alive = st.alive[v];
+                if (!any(alive))
                     continue; /* every pixel here has stopped */
-                group_eval ge = eval_group(mx, dy, q[0], q[1], q[2], op, (float)(gi * L));
-                vi valid = ge.ok & alive[v];
+                group_eval ge;
+                if (!group_sigma(&ge, mx, dy, q[0], q[1], q[2], thr, (float)(gi * L), alive))
+                    continue;
+                group_alpha(&ge, op);
+                vi valid = ge.ok & alive;
                 if (!any(valid))
                     continue;
-                vf T = Tv[v];
+                vf T = st.T[v];
                 vf next_T = T * (splat(1.0f) - ge.alpha);
                 vi stop = valid & (next_T <= splat(GS_RASTER_T_EPS));
                 if (any(stop)) {
-                    alive[v] &= ~stop;
+                    st.alive[v] &= ~stop;
                     valid &= ~stop;
                     int n = __builtin_popcount((unsigned)mask_bits(stop));
                     row_alive[row] -= n;
                     tile_alive -= n;
                 }
-                contributions += (size_t)__builtin_popcount((unsigned)mask_bits(valid));
+                unsigned bits = (unsigned)mask_bits(valid);
+                contributions += (size_t)__builtin_popcount(bits);
                 vf w = vsel(valid, ge.alpha * T, splat(0.0f));
-                Tv[v] = vsel(valid, next_T, T);
-                last[v] = vseli(valid, pos, last[v]);
-                dep[v] += splat(z) * w;
-                for (int ch = 0; ch < C; ch++)
-                    acc[(size_t)ch * (TPIX / L) + v] += splat(f[ch]) * w;
+                st.T[v] = vsel(valid, next_T, T);
+                st.last[v] = vseli(valid, pos, st.last[v]);
+                st.dep[v] += splat(z) * w;
+                lanes wl = {w};
+                vf *a = acc + (size_t)v * L * nv;
+                while (bits) {
+                    int j = __builtin_ctz(bits);
+                    bits &= bits - 1;
+                    axpy_nv(a + j * nv, fv, splat(wl.f[j]), nv);
+                }
             }
         }
     }
 
     atomic_fetch_add_explicit(&ctx->contributions, contributions, memory_order_relaxed);
-    /* Write out row by row: acc holds each channel as a 16 x 16 block. */
-    const float *bg = ctx->bg;
-    const float *accf = (const float *)acc, *Tf = (const float *)Tv;
-    const float *depf = (const float *)dep;
-    const int32_t *lastf = (const int32_t *)last;
-    for (int row = 0; row < ti.h; row++) {
-        size_t pix0 = (size_t)(ti.y0 + row) * W + (size_t)ti.x0;
-        const float *Trow = Tf + row * TS;
-        for (int ch = 0; ch < C; ch++) {
-            const float *a = accf + (size_t)ch * TPIX + row * TS;
-            float *o = ctx->out_f + ch * HW + pix0;
-            if (bg) {
-                const float *b = bg + ch * HW + pix0;
-                for (int col = 0; col < ti.w; col++)
-                    o[col] = a[col] + Trow[col] * b[col];
-            } else {
-                memcpy(o, a, (size_t)ti.w * sizeof *o);
-            }
-        }
-        for (int col = 0; col < ti.w; col++) {
-            ctx->out_alpha[pix0 + col] = 1.0f - Trow[col];
-            r->t_final[pix0 + col] = Trow[col];
-            r->last[pix0 + col] = (uint32_t)lastf[row * TS + col];
-        }
-        if (ctx->out_depth)
-            memcpy(ctx->out_depth + pix0, depf + row * TS, (size_t)ti.w * sizeof(float));
+    write_tile(ctx, &ti, acc, &st, nv);
+}
+
+/* One instance per channel-vector count, so the features stay in registers. */
+static void tile_forward(void *vctx, int t, int worker)
+{
+    fwd_ctx *ctx = vctx;
+    switch ((ctx->r->g.channels + L - 1) / L) {
+    case 1: tile_forward_nv(ctx, t, worker, 1); break;
+    case 2: tile_forward_nv(ctx, t, worker, 2); break;
+    case 3: tile_forward_nv(ctx, t, worker, 3); break;
+    case 4: tile_forward_nv(ctx, t, worker, 4); break;
+    case 5: tile_forward_nv(ctx, t, worker, 5); break;
+    case 6: tile_forward_nv(ctx, t, worker, 6); break;
+    case 7: tile_forward_nv(ctx, t, worker, 7); break;
+    default: tile_forward_nv(ctx, t, worker, MAX_NV); break;
     }
+}
+
+static size_t padded_channels(int C)
+{
+    return (size_t)(C + L - 1) / L * L;
 }
 
 static size_t fwd_scratch_floats(int C)
 {
-    return (size_t)(C + 4) * TPIX;
+    return (padded_channels(C) + 4) * TPIX;
 }
 
 static size_t bwd_scratch_floats(int C)
 {
-    /* buf, vpix: C x TPIX each; T, tfin, vA-bgdot, vD, bufd, last: TPIX each;
-     * partial sums: (GS_SLOT_HEAD + C) vectors */
-    return (size_t)(2 * C + 6) * TPIX + (size_t)(GS_SLOT_HEAD + C) * L;
+    /* buf, vpix: TPIX x padded C each; T, tfin, vA-bgdot, vD, bufd, last:
+     * TPIX each; partial sums: GS_SLOT_HEAD vectors */
+    return (2 * padded_channels(C) + 6) * TPIX + (size_t)GS_SLOT_HEAD * L;
 }
 
 /* Scratch is aligned for the vectors: realloc is not, so grow by hand. */
@@ -317,14 +522,47 @@ static size_t scratch_per_worker(int C)
     return (per + 15) / 16 * 16; /* keep each worker's block 64-byte aligned */
 }
 
+static int cmp_u64(const void *a, const void *b)
+{
+    uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+    return (x > y) - (x < y);
+}
+
+/* Tiles [t0, t1) into r->tile_order, longest list first (ties by index), so
+ * the pool's workers take the heavy tiles early and finish together. Which
+ * worker composites a tile never changes its result. */
+static int order_tiles(gs_raster *r, int t0, int t1)
+{
+    size_t n = (size_t)(t1 - t0);
+    if (gs_raster_reserve((void **)&r->tile_order, &r->cap_tile_order, n ? n : 1,
+                          sizeof(uint32_t)) ||
+        gs_raster_reserve((void **)&r->tile_keys, &r->cap_tile_keys, n ? n : 1,
+                          sizeof(uint64_t)))
+        return GS_ERR_NOMEM;
+    /* Keys (UINT32_MAX - length, tile) sort ascending into that order. */
+    uint64_t *key = r->tile_keys;
+    const uint32_t *off = r->tile_off;
+    for (size_t a = 0; a < n; a++) {
+        uint32_t t = (uint32_t)t0 + (uint32_t)a;
+        key[a] = ((uint64_t)(UINT32_MAX - (off[t + 1] - off[t])) << 32) | t;
+    }
+    qsort(key, n, sizeof *key, cmp_u64);
+    for (size_t a = 0; a < n; a++)
+        r->tile_order[a] = (uint32_t)key[a];
+    return GS_OK;
+}
+
 static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out_f,
                         float *out_alpha, float *out_depth)
 {
     size_t per = scratch_per_worker(r->g.channels);
     if (reserve_scratch(r, pool, per))
         return GS_ERR_NOMEM;
+    int ntiles = r->tiles_x * r->tiles_y;
+    if (order_tiles(r, 0, ntiles))
+        return GS_ERR_NOMEM;
     fwd_ctx ctx = {r, bg, out_f, out_alpha, out_depth, per, 0};
-    gs_pool_for(pool, r->tiles_x * r->tiles_y, tile_forward, &ctx);
+    gs_pool_for(pool, ntiles, tile_forward, &ctx);
     r->contributions = atomic_load(&ctx.contributions);
     return GS_OK;
 }
@@ -333,88 +571,122 @@ static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out
 
 typedef struct {
     gs_raster *r;
-    int t0;
-    size_t slot0, per_worker;
+    size_t slot0, per_worker; /* slot0: slot of the batch's first pair */
     const float *v_f, *v_alpha, *v_depth;
     float *v_bg;
 } bwd_ctx;
 
-static void tile_backward(void *vctx, int task, int worker)
+/* Group vectors of a tile's backward pixel state, each TPIX / L long. */
+typedef struct {
+    vf *T, *tfin, *vres, *vdep, *bufd; /* vres: v_alpha - <bg, v_pix> */
+    vi *last;
+} bwd_state;
+
+/* Loads the tile's upstream gradient pixel-major into vpix (TPIX x nv) and
+ * the per-pixel state; adds T_final v_pix into v_bg. */
+static inline __attribute__((always_inline)) void
+load_tile(bwd_ctx *ctx, const tile_info *ti, vf *vpix, const bwd_state *st, const int nv)
 {
-    bwd_ctx *ctx = vctx;
     gs_raster *r = ctx->r;
-    const gs_proj *P = &r->proj;
     const int C = r->g.channels, W = r->cam.width;
-    const size_t HW = (size_t)W * (size_t)r->cam.height, stride = GS_SLOT_HEAD + (size_t)C;
-    const int NV = TPIX / L;
-    tile_info ti = get_tile(r, ctx->t0 + task);
-
-    vf *buf = (vf *)((float *)r->scratch + (size_t)worker * ctx->per_worker); /* C x NV */
-    vf *vpix = buf + (size_t)C * NV;      /* C x NV */
-    vf *Tv = vpix + (size_t)C * NV;       /* NV */
-    vf *tfin = Tv + NV;
-    vf *vres = tfin + NV;                 /* v_alpha - <bg, v_pix> */
-    vf *vdep = vres + NV;
-    vf *bufd = vdep + NV;
-    vi *last = (void *)(bufd + NV);
-    vf *part = (void *)(last + NV);       /* GS_SLOT_HEAD + C partial sums */
-
-    memset(buf, 0, (size_t)C * TPIX * sizeof(float));
-    memset(vpix, 0, (size_t)C * TPIX * sizeof(float));
-    for (int v = 0; v < NV; v++) {
-        Tv[v] = tfin[v] = vres[v] = vdep[v] = bufd[v] = splat(0.0f);
-        last[v] = (vi){0};
-    }
-    /* Load the tile row by row; vpix holds each channel as a 16 x 16 block. */
+    const size_t HW = (size_t)W * (size_t)r->cam.height;
     const float *bg = r->background;
-    float *vpf = (float *)vpix, *Tf = (float *)Tv, *tff = (float *)tfin;
-    float *vrf = (float *)vres, *vdf = (float *)vdep;
-    int32_t *lastf = (int32_t *)last;
-    for (int row = 0; row < ti.h; row++) {
-        size_t pix0 = (size_t)(ti.y0 + row) * W + (size_t)ti.x0;
-        float bg_dot[TS] = {0};
-        for (int col = 0; col < ti.w; col++) {
-            float T = r->t_final[pix0 + col];
-            Tf[row * TS + col] = tff[row * TS + col] = T;
-            vdf[row * TS + col] = ctx->v_depth ? ctx->v_depth[pix0 + col] : 0.0f;
-            lastf[row * TS + col] = (int32_t)r->last[pix0 + col];
+    for (int row = 0; row < ti->h; row++)
+        for (int gi = 0; gi * L < ti->w; gi++) {
+            int v = row * GROUPS + gi, n = ti->w - gi * L < L ? ti->w - gi * L : L;
+            size_t pix0 = (size_t)(ti->y0 + row) * W + (size_t)(ti->x0 + gi * L);
+            vf T = load_n(r->t_final + pix0, n);
+            st->T[v] = st->tfin[v] = T;
+            st->vdep[v] = ctx->v_depth ? load_n(ctx->v_depth + pix0, n) : splat(0.0f);
+            st->last[v] = load_ni(r->last + pix0, n);
+            vf bg_dot = splat(0.0f);
+            for (int cb = 0; cb < nv; cb++) {
+                vf m[L];
+                for (int k = 0; k < L; k++) {
+                    int ch = cb * L + k;
+                    m[k] = splat(0.0f);
+                    if (ch >= C)
+                        continue;
+                    size_t off = (size_t)ch * HW + pix0;
+                    m[k] = load_n(ctx->v_f + off, n);
+                    if (bg)
+                        bg_dot += load_n(bg + off, n) * m[k];
+                    if (ctx->v_bg) {
+                        store_n(ctx->v_bg + off, load_n(ctx->v_bg + off, n) + T * m[k], n);
+                    }
+                }
+                transpose8(m);
+                for (int j = 0; j < L; j++)
+                    vpix[(size_t)(v * L + j) * nv + cb] = m[j];
+            }
+            vf va = ctx->v_alpha ? load_n(ctx->v_alpha + pix0, n) : splat(0.0f);
+            st->vres[v] = va - bg_dot;
         }
-        for (int ch = 0; ch < C; ch++) {
-            const float *g = ctx->v_f + ch * HW + pix0;
-            memcpy(vpf + (size_t)ch * TPIX + row * TS, g, (size_t)ti.w * sizeof *g);
-            if (bg)
-                for (int col = 0; col < ti.w; col++)
-                    bg_dot[col] += bg[ch * HW + pix0 + col] * g[col];
-            if (ctx->v_bg)
-                for (int col = 0; col < ti.w; col++)
-                    ctx->v_bg[ch * HW + pix0 + col] += Tf[row * TS + col] * g[col];
-        }
-        for (int col = 0; col < ti.w; col++)
-            vrf[row * TS + col] = (ctx->v_alpha ? ctx->v_alpha[pix0 + col] : 0.0f) - bg_dot[col];
-    }
+}
 
+static inline __attribute__((always_inline)) void
+tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
+{
+    gs_raster *r = ctx->r;
+    const int C = r->g.channels;
+    const size_t stride = GS_SLOT_HEAD + (size_t)C;
+    const int NV = TPIX / L;
+    tile_info ti = get_tile(r, (int)r->tile_order[task]);
+
+    vf *buf = (vf *)((float *)r->scratch + (size_t)worker * ctx->per_worker); /* TPIX x nv */
+    vf *vpix = buf + (size_t)nv * TPIX;                                       /* TPIX x nv */
+    bwd_state st;
+    st.T = vpix + (size_t)nv * TPIX;
+    st.tfin = st.T + NV;
+    st.vres = st.tfin + NV;
+    st.vdep = st.vres + NV;
+    st.bufd = st.vdep + NV;
+    st.last = (void *)(st.bufd + NV);
+    vf *part = (void *)(st.last + NV); /* GS_SLOT_HEAD partial sums */
+
+    /* vpix needs no clearing: load_tile fills every pixel of the image and
+     * pixels outside it are never valid (their last contributor is 0). */
+    memset(buf, 0, (size_t)nv * TPIX * sizeof(vf));
+    for (int v = 0; v < NV; v++) {
+        st.T[v] = st.tfin[v] = st.vres[v] = st.vdep[v] = st.bufd[v] = splat(0.0f);
+        st.last[v] = (vi){0};
+    }
+    load_tile(ctx, &ti, vpix, &st, nv);
+
+    for (uint32_t k = ti.e; k-- > ti.s && k + PREFETCH_AHEAD >= ti.e;)
+        prefetch_pair(r, k, ti.s, ti.e);
     for (uint32_t k = ti.e; k-- > ti.s;) {
+        prefetch_pair(r, k - PREFETCH_AHEAD, ti.s, ti.e);
         uint32_t i = r->isect[k];
+        const gs_splat *sp = r->splats + i;
         float *slot = r->slots + (k - ctx->slot0) * stride;
         memset(slot, 0, stride * sizeof(float));
         int r0, r1, g0, g1;
-        if (!splat_window(P, i, &ti, &r0, &r1, &g0, &g1))
+        if (!splat_window(sp, &ti, &r0, &r1, &g0, &g1))
             continue;
-        const float *q = P->conic + 3 * i, *f = r->g.features + (size_t)i * C;
-        float mx = P->mean2d[2 * i] - (float)ti.x0, op = P->opacity[i], z = P->depth[i];
-        float my = P->mean2d[2 * i + 1] - (float)ti.y0;
+        const float q[3] = {sp->a, sp->b, sp->c};
+        float mx = sp->mx - (float)ti.x0, op = sp->op, z = sp->z, thr = sp->thr;
+        float my = sp->my - (float)ti.y0;
+        vf fv[MAX_NV], pf[MAX_NV];
+        load_features(r->g.features + (size_t)i * C, C, nv, fv);
+        for (int c = 0; c < nv; c++)
+            pf[c] = splat(0.0f);
         vi pos = (vi){0} + (int32_t)(k - ti.s);
         int touched = 0;
-        for (size_t h = 0; h < stride; h++)
+        for (int h = 0; h < GS_SLOT_HEAD; h++)
             part[h] = splat(0.0f);
         for (int row = r0; row <= r1; row++) {
             float dy = my - ((float)row + 0.5f);
             for (int gi = g0; gi <= g1; gi++) {
                 int v = row * GROUPS + gi;
-                vi before_last = pos < last[v];
+                vi before_last = pos < st.last[v];
                 if (!any(before_last))
                     continue; /* behind every pixel's last contributor */
-                group_eval ge = eval_group(mx, dy, q[0], q[1], q[2], op, (float)(gi * L));
+                group_eval ge;
+                if (!group_sigma(&ge, mx, dy, q[0], q[1], q[2], thr, (float)(gi * L),
+                                 before_last))
+                    continue;
+                group_alpha(&ge, op);
                 vi valid = ge.ok & before_last;
                 if (!any(valid))
                     continue;
@@ -422,22 +694,36 @@ static void tile_backward(void *vctx, int task, int worker)
                 vf ra = splat(1.0f) /
                         vmax(splat(1.0f) - ge.alpha, splat(GS_RASTER_ONE_MINUS_ALPHA_FLOOR));
                 ra = vsel(valid, ra, splat(1.0f));
-                vf T = Tv[v] * ra;
-                Tv[v] = T;
+                vf T = st.T[v] * ra;
+                st.T[v] = T;
                 vf fac = vsel(valid, ge.alpha * T, splat(0.0f));
-                /* Four running sums break the dependency chain over channels. */
-                vf va4[4] = {splat(0.0f), splat(0.0f), splat(0.0f), splat(0.0f)};
-                for (int ch = 0; ch < C; ch++) {
-                    vf fc = splat(f[ch]), vp = vpix[(size_t)ch * NV + v];
-                    vf *bc = &buf[(size_t)ch * NV + v];
-                    va4[ch & 3] += (fc * T - *bc * ra) * vp;
-                    *bc += fc * fac;
-                    part[GS_SLOT_HEAD + ch] += fac * vp;
+                /* Channels of each contributing pixel: the feature part of
+                 * the alpha gradient, the running sums behind it and the
+                 * Gaussian's feature gradient. */
+                lanes Tl = {T}, ral = {ra}, facl = {fac}, val = {splat(0.0f)};
+                unsigned bits = (unsigned)mask_bits(valid);
+                while (bits) {
+                    int j = __builtin_ctz(bits);
+                    bits &= bits - 1;
+                    size_t p = ((size_t)v * L + (size_t)j) * (size_t)nv;
+                    vf facj = splat(facl.f[j]), sf = splat(0.0f), sb = splat(0.0f);
+                    switch (nv) {
+                    default: BWD_BLOCK(7); /* fallthrough */
+                    case 7: BWD_BLOCK(6); /* fallthrough */
+                    case 6: BWD_BLOCK(5); /* fallthrough */
+                    case 5: BWD_BLOCK(4); /* fallthrough */
+                    case 4: BWD_BLOCK(3); /* fallthrough */
+                    case 3: BWD_BLOCK(2); /* fallthrough */
+                    case 2: BWD_BLOCK(1); /* fallthrough */
+                    case 1: BWD_BLOCK(0);
+                    }
+                    /* sum_ch (f T - buf ra) v_pix */
+                    val.f[j] = hsum(splat(Tl.f[j]) * sf - splat(ral.f[j]) * sb);
                 }
-                vf va = (va4[0] + va4[1]) + (va4[2] + va4[3]);
-                va += tfin[v] * ra * vres[v] + vdep[v] * (splat(z) * T - bufd[v] * ra);
-                bufd[v] += splat(z) * fac;
-                part[6] += fac * vdep[v];
+                vf va = val.v + st.tfin[v] * ra * st.vres[v] +
+                      st.vdep[v] * (splat(z) * T - st.bufd[v] * ra);
+                st.bufd[v] += splat(z) * fac;
+                part[6] += fac * st.vdep[v];
                 vi grad_ok = valid & (splat(op) * ge.vis <= splat(GS_RASTER_MAX_ALPHA));
                 va = vsel(grad_ok, va, splat(0.0f));
                 vf vsig = -ge.alpha * va;
@@ -450,9 +736,27 @@ static void tile_backward(void *vctx, int task, int worker)
                 part[5] += ge.vis * va;
             }
         }
-        if (touched)
-            for (size_t h = 0; h < stride; h++)
+        if (touched) {
+            for (int h = 0; h < GS_SLOT_HEAD; h++)
                 slot[h] = hsum(part[h]);
+            for (int c = 0; c < nv; c++)
+                store_n(slot + GS_SLOT_HEAD + c * L, pf[c], C - c * L < L ? C - c * L : L);
+        }
+    }
+}
+
+static void tile_backward(void *vctx, int task, int worker)
+{
+    bwd_ctx *ctx = vctx;
+    switch ((ctx->r->g.channels + L - 1) / L) {
+    case 1: tile_backward_nv(ctx, task, worker, 1); break;
+    case 2: tile_backward_nv(ctx, task, worker, 2); break;
+    case 3: tile_backward_nv(ctx, task, worker, 3); break;
+    case 4: tile_backward_nv(ctx, task, worker, 4); break;
+    case 5: tile_backward_nv(ctx, task, worker, 5); break;
+    case 6: tile_backward_nv(ctx, task, worker, 6); break;
+    case 7: tile_backward_nv(ctx, task, worker, 7); break;
+    default: tile_backward_nv(ctx, task, worker, MAX_NV); break;
     }
 }
 
@@ -463,7 +767,9 @@ static int fast_backward(gs_raster *r, gs_pool *pool, int t0, int t1, size_t slo
     size_t per = scratch_per_worker(r->g.channels);
     if (reserve_scratch(r, pool, per)) /* the pool may differ from the forward's */
         return GS_ERR_NOMEM;
-    bwd_ctx ctx = {r, t0, slot0, per, v_f, v_alpha, v_depth, v_bg};
+    if (order_tiles(r, t0, t1))
+        return GS_ERR_NOMEM;
+    bwd_ctx ctx = {r, slot0, per, v_f, v_alpha, v_depth, v_bg};
     gs_pool_for(pool, t1 - t0, tile_backward, &ctx);
     return GS_OK;
 }
