@@ -179,6 +179,14 @@ static int run_fit(int argc, char **argv)
     return rc;
 }
 
+/* mkdir -p of one level: an existing directory is fine. */
+static int make_dir(const char *path)
+{
+    struct stat st;
+    return mkdir(path, 0777) == 0 ||
+           (stat(path, &st) == 0 && S_ISDIR(st.st_mode));
+}
+
 static int read_subject(const cli_command *cmd, const char *path,
                         gs_subject *s)
 {
@@ -353,7 +361,6 @@ static int run_redirect(int argc, char **argv)
         gs_model_destroy(m);
         return cli_usage_error(cmd, "--index: want 0..1000; --iters: 1..1e5");
     }
-    struct stat st;
     if (o[2].value) {
         /* A photo unless it is already a normalized face of the model's
          * size. */
@@ -367,8 +374,7 @@ static int run_redirect(int argc, char **argv)
                     probe.height != mi.image_size || o[6].value;
         gs_io_image_free(&probe);
         if (photo) {
-            if (mkdir(o[4].value, 0777) &&
-                !(stat(o[4].value, &st) == 0 && S_ISDIR(st.st_mode)))
+            if (!make_dir(o[4].value))
                 rc = cli_fail(cmd, "cannot create %s", o[4].value);
             else
                 rc = redirect_photo(cmd, m, pool, o[2].value, (int)index,
@@ -383,8 +389,7 @@ static int run_redirect(int argc, char **argv)
     rc = o[1].value ? read_subject(cmd, o[1].value, &sub)
                     : fit_image(cmd, m, pool, o[2].value, NULL, NULL, iters, 0,
                                 &sub);
-    if (!rc && mkdir(o[4].value, 0777) &&
-        !(stat(o[4].value, &st) == 0 && S_ISDIR(st.st_mode)))
+    if (!rc && !make_dir(o[4].value))
         rc = cli_fail(cmd, "cannot create %s", o[4].value);
     gs_model_info info;
     gs_model_get_info(m, &info);

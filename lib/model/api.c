@@ -137,7 +137,6 @@ static int check_pose(const double R[9], const double t[3], gs_error *err)
         return gs_error_set(err, GS_ERR_ARG,
                             "head distance %.1f mm outside 100..5000", t[2]);
     double p, y;
-    gs_geom_head_pitchyaw(R, &p, &y);
     /* The head frame's z points into the head; a frontal head has z along
      * the camera's +z, and its angles are those of -z. */
     double z[3] = {-R[2], -R[5], -R[8]};
@@ -500,8 +499,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         if (rc)
             break;
         adam_update(s, it + 1);
-        /* Keep the rotation perturbation small: fold it into R0. */
-        /* (angles stay in range; the gaze is clamped to the model's) */
+        /* The gaze stays inside the model's documented range. */
         s->x[V_GAZE] = fmax(-GS_MODEL_MAX_GAZE_PITCH,
                             fmin(GS_MODEL_MAX_GAZE_PITCH, s->x[V_GAZE]));
         s->x[V_GAZE + 1] = fmax(-GS_MODEL_MAX_GAZE_YAW,
@@ -511,10 +509,10 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         gs_frame fr;
         state_to_frame(c, best, R0, &fr);
         rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
-        double dg[3], db[3];
-        double l = rc ? 0 : image_loss(c, &b, best, dg, db);
-        (void)l;
         if (!rc) {
+            /* Composites the best render into b.pred for the figures. */
+            double dg[3], db[3];
+            image_loss(c, &b, best, dg, db);
             /* Quality on the weighted region. */
             int S = c->S;
             size_t plane = (size_t)S * S;

@@ -83,16 +83,6 @@ static void mat_to_quat(const double r[9], double q[4])
     }
 }
 
-static void mat_mul(const double a[9], const double b[9], double o[9])
-{
-    double t[9];
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++)
-            t[3 * i + j] = a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] +
-                           a[3 * i + 2] * b[6 + j];
-    memcpy(o, t, sizeof t);
-}
-
 /* ---- context ---- */
 
 static float *falloc(size_t n, int *fail)
@@ -314,7 +304,7 @@ static void eye_forward(gs_model_ctx *c, const gs_frame *fr)
         }
         quat_to_mat(q, c->eye_Rres[e]);
         if (m->cfg.eye_rotation)
-            mat_mul(c->eye_Rres[e], c->eye_Rg, c->eye_R[e]);
+            gs_geom_mat3_mul(c->eye_Rres[e], c->eye_Rg, c->eye_R[e]);
         else
             gs_geom_mat3_identity(c->eye_R[e]);
         for (int k = 0; k < 3; k++) {
@@ -554,16 +544,14 @@ static void rot_pitchyaw_partials(double p, double y, double dp[9],
                                   double dy[9])
 {
     /* R = Ry(y) Rx(-p). */
-    double ry[9], rx[9], dry[9], drx[9];
+    double ry[9], rx[9];
     gs_geom_rot_y(y, ry);
     gs_geom_rot_x(-p, rx);
     double cy = cos(y), sy = sin(y), cp = cos(-p), sp = sin(-p);
-    double a[9] = {-sy, 0, cy, 0, 0, 0, -cy, 0, -sy};  /* d Ry / dy */
-    double b[9] = {0, 0, 0, 0, -sp, -cp, 0, cp, -sp};  /* d Rx(u) / du */
-    memcpy(dry, a, sizeof a);
-    memcpy(drx, b, sizeof b);
-    mat_mul(dry, rx, dy);
-    mat_mul(ry, drx, dp);
+    const double dry[9] = {-sy, 0, cy, 0, 0, 0, -cy, 0, -sy}; /* d Ry / dy */
+    const double drx[9] = {0, 0, 0, 0, -sp, -cp, 0, cp, -sp}; /* d Rx(u) / du */
+    gs_geom_mat3_mul(dry, rx, dy);
+    gs_geom_mat3_mul(ry, drx, dp);
     for (int k = 0; k < 9; k++)
         dp[k] = -dp[k]; /* du/dp = -1 */
 }

@@ -80,17 +80,6 @@ static void run(int eye_rotation)
             p.w[k][i] = ((r >> 8) & 0xffff) / 65536.0f - 0.5f;
         }
     }
-    if (getenv("GS_ONLY")) {
-        int only = atoi(getenv("GS_ONLY")); /* 1 face, 2 eye, 3 field */
-        for (int k = 0; k < 5; k++)
-            for (size_t i = 0; i < p.len[k]; i++) {
-                size_t g = i / per[k];
-                int is_eye = g >= (size_t)p.c->nf;
-                if ((only == 1 && is_eye) || (only == 2 && !is_eye) ||
-                    (only >= 3 && k + 3 != only))
-                    p.w[k][i] = 0.0f;
-            }
-    }
     /* Eye Gaussians are isotropic: their rotation is not a parameter. */
     for (size_t i = 4 * (size_t)p.c->nf; i < p.len[2]; i++)
         p.w[2][i] = 0.0f;
@@ -126,7 +115,7 @@ static void run(int eye_rotation)
     char name[96];
     for (int k = 0; k < gs_model_code_dim(&p.m->cfg); k++) {
         gs_frame f2 = fr;
-        double h = getenv("GS_HC") ? atof(getenv("GS_HC")) : 3e-2;
+        double h = 3e-2;
         f2.code[k] = fr.code[k] + (float)h;
         double up = objective(&p, &f2);
         f2.code[k] = fr.code[k] - (float)h;
@@ -195,7 +184,7 @@ static void run(int eye_rotation)
         }
         for (size_t i = 0; i < t->count; i++)
             ana += (double)dir[i] * grad[t->offset + i];
-        double h = getenv("GS_HP") ? atof(getenv("GS_HP")) : 3e-3, fx[2];
+        double h = 3e-3, fx[2];
         for (int sgn = 0; sgn < 2; sgn++) {
             for (size_t i = 0; i < t->count; i++)
                 p.m->params[t->offset + i] =
