@@ -15,6 +15,7 @@ import argparse
 import io
 import os
 import sys
+import time
 
 from PIL import Image, ImageDraw, ImageFont
 
@@ -63,6 +64,18 @@ def compose(images, pitches, yaws, cell):
     return grid
 
 
+def wait_ready(client, seconds):
+    """Polls HEALTH while the model loads; raises unless READY in time."""
+    end = time.time() + seconds
+    while True:
+        h = client.health()
+        if h.state == gc.pb.Health.READY:
+            return h
+        if h.state != gc.pb.Health.LOADING or time.time() > end:
+            raise RuntimeError("server is %s: %s" % (gc.pb.Health.State.Name(h.state), h.detail))
+        time.sleep(0.2)
+
+
 def redirect_grid(client, photo, pitches, yaws, is_photo=True, paste_back=True, max_iters=0,
                   deadline_ms=0):
     """Sends one REDIRECT with len(pitches) x len(yaws) targets (row-major);
@@ -97,6 +110,8 @@ def main(argv=None):
     ap.add_argument("--max-iters", type=int, default=100, help="fit iterations (default 100)")
     ap.add_argument("--deadline-ms", type=int, default=0, help="request deadline (0: the server's)")
     ap.add_argument("--cell", type=int, default=256, help="cell edge in pixels (default 256)")
+    ap.add_argument("--wait-ready", type=float, default=120.0,
+                    help="seconds to wait for the model to load (default 120)")
     a = ap.parse_args(argv)
     if not 16 <= a.cell <= 2048:
         ap.error("--cell wants 16..2048")
@@ -105,6 +120,7 @@ def main(argv=None):
     # The socket waits as long as the request may run.
     timeout = max(120.0, a.deadline_ms / 1000.0 + 30.0)
     with gc.Client(a.addr, token=a.token, timeout=timeout, client_name="gazesplat_grid") as c:
+        wait_ready(c, a.wait_ready)
         images = redirect_grid(c, photo, a.pitch, a.yaw, is_photo=not a.normalized,
                                paste_back=not a.no_paste_back, max_iters=a.max_iters,
                                deadline_ms=a.deadline_ms)
@@ -117,6 +133,6 @@ def main(argv=None):
 if __name__ == "__main__":
     try:
         sys.exit(main())
-    except (gc.GazesplatError, gc.Busy, OSError) as e:
+    except (gc.GazesplatError, gc.Busy, OSError, RuntimeError) as e:
         print("gazesplat_grid: %s" % e, file=sys.stderr)
         sys.exit(1)
