@@ -11,7 +11,9 @@
     Python client imports its generated messages; the extracted daemon
     loads the shipped model with the installed configuration and answers
     HEALTH READY; systemd-analyze verify prints nothing for the extracted
-    units (ExecStart pointed into the temporary root).
+    units (ExecStart pointed into the temporary root); systemd-sysusers
+    --root on the temporary root creates the gazesplat group from the
+    packaged sysusers.d file.
 usage: test_package.py BUILD_DIR INSTALL_PREFIX"""
 import os
 import re
@@ -198,6 +200,14 @@ def check_units(t, root, unit_dir, sbin, tmp):
             "systemd-analyze verify on the extracted units: rc %d %r %r" % (r.returncode, r.stdout, r.stderr))
 
 
+def check_sysusers(t, root):
+    r = run(["systemd-sysusers", "--root=" + root, "gazesplat.conf"])
+    group = os.path.join(root, "etc", "group")
+    lines = open(group).read().splitlines() if os.path.exists(group) else []
+    t.check(r.returncode == 0 and any(line.startswith("gazesplat:") for line in lines),
+            "systemd-sysusers --root: rc %d %s, group file %s" % (r.returncode, r.stderr, lines))
+
+
 def main():
     build, prefix = os.path.abspath(sys.argv[1]), sys.argv[2].rstrip("/") or "/"
     for tool in ("cpack", "dpkg-deb", "dpkg-shlibdeps", "systemd-analyze"):
@@ -220,6 +230,7 @@ def main():
         if model and conf:
             check_daemon(t, sbin, root + conf, model, pydir)
         check_units(t, root, unit_dir, sbin, tmp)
+        check_sysusers(t, root)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return t.status()
