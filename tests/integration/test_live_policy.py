@@ -76,6 +76,20 @@ def main():
         r = run(cli, "client", "live-policy", addr, "--refit", "--set", "enabled=yes")
         t.check(r.returncode == 0 and fields(r.stdout).get("enabled") == "yes", "refit: %s" % r.stderr)
 
+        # The Python client speaks the same frames.
+        sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
+        import gazesplat_client as gc
+        with gc.Client(d.sock) as c:
+            pol = c.live_policy(strength=0.25, enabled=True)
+            t.check(abs(pol.strength - 0.25) < 1e-6 and pol.enabled, "python set: %s" % pol)
+            try:
+                c.live_policy(strength=5)
+                t.check(False, "python: strength 5 accepted")
+            except gc.GazesplatError as e:
+                t.check(e.name == "ERR_INVALID_ARGUMENT", "python error %s" % e.name)
+            st = c.live_status()
+            t.check(st.running and abs(st.policy.strength - 0.25) < 1e-6, "python status: %s" % st)
+
         time.sleep(1.5)  # the capture keeps failing and reopening meanwhile
         r = run(cli, "client", "live-status", addr)
         s = fields(r.stdout)
