@@ -10,7 +10,10 @@
  * output fps, added latency (frame timestamp -> written) p50/p99, CPU use,
  * eye renders per second and the blend weight.
  *
- * usage: bench_live --model M [--seconds S] [--fit-budget S] */
+ * --still keeps the head frontal and still: the patch stays exact, no
+ * renders are needed after the first.
+ *
+ * usage: bench_live --model M [--seconds S] [--fit-budget S] [--still] */
 #define _GNU_SOURCE
 #include <stdio.h>
 #include <stdlib.h>
@@ -41,11 +44,50 @@ static double cpu_s(void)
            (double)ru.ru_stime.tv_sec + (double)ru.ru_stime.tv_usec / 1e6;
 }
 
+#define MAXS 4096
 typedef struct scene {
     uint8_t *frames[NPOSE]; /* head yaw -4..4 deg */
-    int n;
+    int n, still;           /* still: always the frontal head */
     gs_live_stage *stage;
+    /* CPU time (this thread's, so load on the machine does not count) */
+    double stage_cpu[MAXS];
+    int nstage;
+    gs_live_engine inner;   /* the real engine, wrapped to time renders */
+    double render_cpu, render_wall;
+    int nrender;
 } scene;
+
+static double thread_cpu_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
+}
+
+static int cmp_d(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+static int timed_fit(void *ctx, const gs_io_image *f, const gs_live_track_state *st,
+                     const double k[9], gs_live_subject *out, gs_error *err)
+{
+    scene *s = ctx;
+    return s->inner.fit(s->inner.ctx, f, st, k, out, err);
+}
+
+static int timed_render(void *ctx, const gs_live_subject *subj, double p, double y, uint8_t *rgb,
+                        gs_error *err)
+{
+    scene *s = ctx;
+    double c0 = thread_cpu_s(), t0 = now_s();
+    int r = s->inner.render(s->inner.ctx, subj, p, y, rgb, err);
+    s->render_cpu += thread_cpu_s() - c0;
+    s->render_wall += now_s() - t0;
+    s->nrender++;
+    return r;
+}
 
 /* Paints the next synthetic head (back and forth, one pose step every 3
  * frames: about 10 deg/s), then runs the eye-contact stage. */
@@ -54,10 +96,14 @@ static int bench_stage(void *ctx, uint8_t *rgb, size_t stride, int w, int h, int
 {
     scene *s = ctx;
     int k = (s->n++ / 3) % (2 * NPOSE - 2);
-    int i = k < NPOSE ? k : 2 * NPOSE - 2 - k;
+    int i = s->still ? NPOSE / 2 : k < NPOSE ? k : 2 * NPOSE - 2 - k;
     for (int y = 0; y < h; y++)
         memcpy(rgb + (size_t)y * stride, s->frames[i] + (size_t)y * 3 * W, 3 * (size_t)w);
-    return gs_live_stage_process(s->stage, rgb, stride, w, h, t, err);
+    double c0 = thread_cpu_s();
+    int r = gs_live_stage_process(s->stage, rgb, stride, w, h, t, err);
+    if (s->nstage < MAXS)
+        s->stage_cpu[s->nstage++] = thread_cpu_s() - c0;
+    return r;
 }
 
 static int render_heads(scene *s, gs_error *e)
@@ -74,9 +120,13 @@ static int render_heads(scene *s, gs_error *e)
         gs_geom_rot_from_pitchyaw(0.0, (i - NPOSE / 2) * 0.0175, 0.0, sc.head_R);
         sc.gaze_pitch = -0.15; /* looking at a screen below the camera */
         gs_synth_sample smp;
-        int r = gs_synth_render(&sc, &cam, NULL, NULL, &smp, e);
-        if (r != GS_OK)
+        int r = gs_synth_sample_alloc(&smp, W, H, e);
+        if (r == GS_OK)
+            r = gs_synth_render(&sc, &cam, NULL, NULL, &smp, e);
+        if (r != GS_OK) {
+            gs_synth_sample_free(&smp);
             return r;
+        }
         s->frames[i] = malloc(3 * (size_t)W * H);
         for (int y = 0; y < H && s->frames[i]; y++)
             memcpy(s->frames[i] + (size_t)y * 3 * W, smp.rgb + (size_t)y * smp.stride, 3 * W);
@@ -134,6 +184,14 @@ int main(int argc, char **argv)
 {
     const char *model_path = NULL;
     double seconds = 10, budget = 20;
+    int still = 0;
+    for (int i = 1; i < argc; i++)
+        if (!strcmp(argv[i], "--still")) { /* a flag: drop it from the pairs */
+            still = 1;
+            for (int j = i; j + 1 < argc; j++)
+                argv[j] = argv[j + 1];
+            argc--;
+        }
     for (int i = 1; i + 1 < argc; i += 2) {
         if (!strcmp(argv[i], "--model"))
             model_path = argv[i + 1];
@@ -143,12 +201,13 @@ int main(int argc, char **argv)
             budget = atof(argv[i + 1]);
     }
     if (!model_path) {
-        fprintf(stderr, "usage: bench_live --model M [--seconds S] [--fit-budget S]\n");
+        fprintf(stderr, "usage: bench_live --model M [--seconds S] [--fit-budget S] [--still]\n");
         return 2;
     }
     gs_error e = {0};
     scene s;
     memset(&s, 0, sizeof s);
+    s.still = still;
     gs_model *m = NULL;
     gs_face_shape_model *sp = NULL;
     gs_face_detector *det = NULL;
@@ -169,8 +228,10 @@ int main(int argc, char **argv)
     fm.det = det;
     fm.sp = sp;
     gs_live_track_ops ops = gs_live_track_ops_face(&fm);
+    s.inner = eng;
+    gs_live_engine timed = {&s, eng.image_size, timed_fit, timed_render};
     if (r == GS_OK)
-        r = gs_live_stage_create(NULL, &ops, &eng, pol, &s.stage, &e);
+        r = gs_live_stage_create(NULL, &ops, &timed, pol, &s.stage, &e);
     if (r != GS_OK) {
         fprintf(stderr, "bench_live: %s\n", e.msg);
         return 1;
@@ -205,13 +266,24 @@ int main(int argc, char **argv)
         return 1;
     }
     double t1 = now_s(), c1 = cpu_s();
-    sleep_s(seconds);
+    s.nstage = 0;
+    s.render_cpu = s.render_wall = 0;
+    s.nrender = 0;
+    double wsum = 0;
+    int wn = 0;
+    while (now_s() - t1 < seconds) { /* sample the blend weight */
+        sleep_s(0.1);
+        gs_live_stage_get_status(s.stage, &st);
+        wsum += st.weight;
+        wn++;
+    }
     gs_cap_pipe_get_stats(b.p, &ps);
     gs_live_stage_get_status(s.stage, &st);
     double t2 = now_s(), c2 = cpu_s();
     rig_stop(&b);
     double dt = t2 - t1;
-    printf("phase 2: synthetic %dx%d at 30 fps, eye contact on, %.1f s\n", W, H, dt);
+    printf("phase 2: synthetic %dx%d at 30 fps, eye contact on, head %s, %.1f s\n", W, H,
+           still ? "still" : "turning +-4 deg at 10 deg/s", dt);
     printf("fps out %.1f (in %.1f), ring drops %llu\n", (double)ps.out / dt, (double)ps.in / dt,
            (unsigned long long)ps.ring_drops);
     printf("added latency ms (frame timestamp -> written): p50 %.2f p99 %.2f max %.2f\n",
@@ -222,6 +294,21 @@ int main(int argc, char **argv)
            (double)(st.renders - s0.renders) / dt, (unsigned long long)(st.renders - s0.renders),
            (unsigned long long)(st.faces - s0.faces), (unsigned long long)(st.frames - s0.frames),
            (double)st.weight);
+    qsort(s.stage_cpu, (size_t)s.nstage, sizeof(double), cmp_d);
+    if (s.nstage)
+        printf("stage CPU per frame (thread time, load-independent) p50 %.2f ms p99 %.2f ms; "
+               "render CPU %.1f ms (wall %.1f ms) per render; mean blend weight %.2f\n",
+               1e3 * s.stage_cpu[s.nstage / 2], 1e3 * s.stage_cpu[(s.nstage - 1) * 99 / 100],
+               s.nrender ? 1e3 * s.render_cpu / s.nrender : 0.0,
+               s.nrender ? 1e3 * s.render_wall / s.nrender : 0.0, wn ? wsum / wn : 0.0);
+    double la[3] = {0, 0, 0};
+    FILE *lf = fopen("/proc/loadavg", "r");
+    if (lf) {
+        if (fscanf(lf, "%lf %lf %lf", &la[0], &la[1], &la[2]) != 3)
+            la[0] = 0;
+        fclose(lf);
+    }
+    printf("machine load average %.1f during the run\n", la[0]);
     printf("cpu %.0f%% of one core (%.2f s over %.2f s; the render worker included)\n",
            100.0 * (c2 - c1) / dt, c2 - c1, dt);
     gs_live_stage_destroy(s.stage);
