@@ -5,7 +5,6 @@
 #define _GNU_SOURCE
 #include <math.h>
 #include <pthread.h>
-#include <stddef.h>
 #include <stdlib.h>
 #include <string.h>
 #include <strings.h>
@@ -171,14 +170,27 @@ void gs_cap_policy_update(gs_cap_policy *p, const gs_cap_policy_input *in,
 
 /* ---- settings by name (the daemon's LIVE_POLICY, the CLI) ---- */
 
-#define FIELD(name) {#name, offsetof(gs_cap_policy_config, name)}
-static const struct {
-    const char *name;
-    size_t off;
-} fields[] = {FIELD(strength),           FIELD(gaze_low_deg),        FIELD(gaze_high_deg),
-              FIELD(head_pitch_low_deg), FIELD(head_pitch_high_deg), FIELD(head_yaw_low_deg),
-              FIELD(head_yaw_high_deg),  FIELD(smooth_s),            FIELD(blink_openness),
-              FIELD(blink_hold_max_s)};
+/* The float field called `name`, or NULL. */
+static float *field(gs_cap_policy_config *c, const char *name)
+{
+    struct {
+        const char *name;
+        float *f;
+    } t[] = {{"strength", &c->strength},
+             {"gaze_low_deg", &c->gaze_low_deg},
+             {"gaze_high_deg", &c->gaze_high_deg},
+             {"head_pitch_low_deg", &c->head_pitch_low_deg},
+             {"head_pitch_high_deg", &c->head_pitch_high_deg},
+             {"head_yaw_low_deg", &c->head_yaw_low_deg},
+             {"head_yaw_high_deg", &c->head_yaw_high_deg},
+             {"smooth_s", &c->smooth_s},
+             {"blink_openness", &c->blink_openness},
+             {"blink_hold_max_s", &c->blink_hold_max_s}};
+    for (size_t i = 0; i < sizeof t / sizeof t[0]; i++)
+        if (!strcmp(name, t[i].name))
+            return t[i].f;
+    return NULL;
+}
 
 static int parse_bool(const char *v, int *out)
 {
@@ -202,15 +214,14 @@ int gs_cap_policy_config_set(gs_cap_policy_config *c, const char *key, const cha
             return GS_OK;
         return gs_error_set(err, GS_ERR_ARG, "policy: enabled: want yes or no, got '%.40s'", value);
     }
-    for (size_t i = 0; i < sizeof fields / sizeof fields[0]; i++) {
-        if (strcmp(key, fields[i].name))
-            continue;
+    float *f = field(c, key);
+    if (f) {
         char *end;
         double d = strtod(value, &end);
         if (end == value || *end || !isfinite(d) || fabs(d) > 1e6)
             return gs_error_set(err, GS_ERR_ARG, "policy: %s: want a number, got '%.40s'", key,
                                 value);
-        *(float *)((char *)c + fields[i].off) = (float)d;
+        *f = (float)d;
         return GS_OK;
     }
     return gs_error_set(err, GS_ERR_ARG, "policy: unknown key '%.60s'", key);
