@@ -926,6 +926,10 @@ void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
     if (strcmp(old.socket, cfg->socket) || strcmp(old.tcp, cfg->tcp) || old.workers != cfg->workers ||
         old.threads != cfg->threads || strcmp(old.state_dir, cfg->state_dir))
         LOG_W("reload: socket, tcp, workers, threads and state_dir need a restart; kept");
+    if (strcmp(old.live_device, cfg->live_device) || strcmp(old.live_output, cfg->live_output) ||
+        old.live_width != cfg->live_width || old.live_height != cfg->live_height ||
+        old.live_fps != cfg->live_fps || old.live_fit_budget_s != cfg->live_fit_budget_s)
+        LOG_W("reload: live.* keys need a restart; the live pipeline keeps its settings");
     gsd_log_set_level(s->cfg.log_level);
     gsd_work_set_depth(s, s->cfg.queue_depth);
     gsd_cache_set_budget(s->cache, (size_t)s->cfg.cache_mb << 20);
