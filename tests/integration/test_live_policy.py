@@ -57,16 +57,9 @@ def main():
         t.check(s.get("policy.strength") == "0.5" and s.get("policy.enabled") == "no",
                 "status after set: %s" % r.stdout)
 
-        bad = [["strength=2"], ["gaze_low_deg=40"], ["no_such_key=1"], ["strength=nan"],
-               ["enabled=maybe"], ["smooth_s=0.1", "strength=-1"], ["blink_openness="],
-               ["strength=0.7", "bogus=1"]]
-        for b in bad:
-            args = []
-            for kv in b:
-                args += ["--set", kv]
-            r = run(cli, "client", "live-policy", addr, *args)
-            t.check(r.returncode == 1 and "ERR_INVALID_ARGUMENT" in r.stderr,
-                    "bad %s: %d %s" % (b, r.returncode, r.stderr))
+        r = run(cli, "client", "live-policy", addr, "--set", "strength=0.7", "--set", "bogus=1")
+        t.check(r.returncode == 1 and "ERR_INVALID_ARGUMENT" in r.stderr,
+                "bad setting: %d %s" % (r.returncode, r.stderr))
         r = run(cli, "client", "live-policy", addr)
         p = fields(r.stdout)
         t.check(p.get("strength") == "0.5" and p.get("smooth_s") == "0.25",
@@ -82,15 +75,22 @@ def main():
         with gc.Client(d.sock) as c:
             pol = c.live_policy(strength=0.25, enabled=True)
             t.check(abs(pol.strength - 0.25) < 1e-6 and pol.enabled, "python set: %s" % pol)
-            try:
-                c.live_policy(strength=5)
-                t.check(False, "python: strength 5 accepted")
-            except gc.GazesplatError as e:
-                t.check(e.name == "ERR_INVALID_ARGUMENT", "python error %s" % e.name)
+            bad = [{"strength": 2}, {"gaze_low_deg": 40}, {"no_such_key": 1},
+                   {"strength": "nan"}, {"enabled": "maybe"}, {"smooth_s": 0.1, "strength": -1},
+                   {"blink_openness": ""}, {"strength": 0.7, "bogus": 1}]
+            for b in bad:
+                try:
+                    c.live_policy(**b)
+                    t.check(False, "accepted %s" % b)
+                except gc.GazesplatError as e:
+                    t.check(e.name == "ERR_INVALID_ARGUMENT", "%s: %s" % (b, e.name))
+            pol = c.live_policy()
+            t.check(abs(pol.strength - 0.25) < 1e-6 and abs(pol.smooth_s - 0.25) < 1e-6,
+                    "rejected settings changed nothing: %s" % pol)
             st = c.live_status()
             t.check(st.running and abs(st.policy.strength - 0.25) < 1e-6, "python status: %s" % st)
 
-        time.sleep(1.5)  # the capture keeps failing and reopening meanwhile
+        time.sleep(0.5)  # the capture keeps failing and reopening meanwhile
         r = run(cli, "client", "live-status", addr)
         s = fields(r.stdout)
         t.check(r.returncode == 0 and s.get("streaming") == "no" and s.get("frames_in") == "0",
