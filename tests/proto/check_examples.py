@@ -43,7 +43,8 @@ def main():
         sys.path.insert(0, pb2)
         import gazesplat_pb2 as pb
         classes = {1: pb.Hello, 2: pb.HelloOk, 3: pb.HealthRequest, 7: pb.FitRequest,
-                   9: pb.RedirectRequest, 11: pb.Done, 12: pb.Cancel, 13: pb.Error, 14: pb.Busy}
+                   9: pb.RedirectRequest, 11: pb.Done, 12: pb.Cancel, 13: pb.Error, 14: pb.Busy,
+                   15: pb.LivePolicyRequest}
         for name, body in blocks:
             data = bytes.fromhex("".join(line[4:] for line in body.splitlines()))
             typ = struct.unpack("<H", data[6:8])[0]
