@@ -196,6 +196,10 @@ int gsd_cache_persist(gsd_server *s);
 
 /* ---- validate.c: 0 or an ErrorCode with a message in msg ---- */
 int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap);
+/* Width and height that a PNG (IHDR) or JPEG (first SOF) declares, found
+ * by the data's own signature whatever the declared format: 0, or -1 when
+ * there is no such header (the decoder then says what is wrong). */
+int gsd_image_probe(const uint8_t *p, size_t n, uint32_t *w, uint32_t *h);
 int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap);
 int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap);
 int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
