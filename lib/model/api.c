@@ -475,8 +475,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             break;
         gs_frame_grad fg;
         memset(&fg, 0, sizeof fg);
-        rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, &fg,
-                               err);
+        rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
+                               &fg, err);
         if (rc)
             break;
         memset(s->g, 0, sizeof s->g);

@@ -165,12 +165,17 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->v_fmap_face = falloc(fsz * c->C, &fail);
     c->alpha_face = falloc(fsz, &fail);
     c->bg_crop = falloc(fsz * c->C, &fail);
+    c->fmap_eye = falloc(fsz * c->C, &fail);
+    c->v_fmap_eye = falloc(fsz * c->C, &fail);
+    c->alpha_eye = falloc(fsz, &fail);
     c->gvec = falloc((size_t)c->C, &fail);
     c->tmp8 = malloc(isz * 3);
     c->raster = gs_raster_create();
     c->raster_face = gs_raster_create();
     c->raster_crop = gs_raster_create();
-    if (fail || !c->tmp8 || !c->raster || !c->raster_face || !c->raster_crop)
+    c->raster_eye = gs_raster_create();
+    if (fail || !c->tmp8 || !c->raster || !c->raster_face || !c->raster_crop ||
+        !c->raster_eye)
         return GS_ERR_NOMEM;
     const gs_renderer_config *rc = &m->rcfg;
     c->src_mode = c->ne > 0 && rc->guidance != GS_GUIDE_NONE &&
@@ -195,13 +200,15 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
                       &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->r_grad,
                       &c->scratch, &c->fmap_face, &c->v_fmap_face,
-                      &c->alpha_face, &c->bg_crop, &c->gvec};
+                      &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
+                      &c->v_fmap_eye, &c->alpha_eye};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(*bufs[i]);
     free(c->tmp8);
     gs_raster_destroy(c->raster);
     gs_raster_destroy(c->raster_face);
     gs_raster_destroy(c->raster_crop);
+    gs_raster_destroy(c->raster_eye);
     free(c);
 }
 
@@ -468,6 +475,14 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                        (c->used_src || c->face_loss);
     if (c->used_face_map) {
         rc = face_map(c, pool, err);
+        if (rc)
+            return rc;
+    }
+    c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss;
+    if (c->used_eye_map) { /* the eye stream alone, for its training loss */
+        gs_gaussians ge = gaussians_of(c, c->nf, c->ne);
+        rc = gs_raster_forward(c->raster_eye, pool, &cam, &ge, c->bg, &ro,
+                               c->fmap_eye, c->alpha_eye, NULL, err);
         if (rc)
             return rc;
     }
@@ -918,8 +933,8 @@ static void eye_backward(gs_model_ctx *c, const gs_model_params *gp,
 
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap, const float *d_fmap_face,
-                      const gs_model_params *grads, gs_frame_grad *fg,
-                      gs_error *err)
+                      const float *d_fmap_eye, const gs_model_params *grads,
+                      gs_frame_grad *fg, gs_error *err)
 {
     size_t fsz = (size_t)c->fs * c->fs * c->C;
     if (d_fmap)
@@ -962,6 +977,16 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                                 c->v_feat};
         rc = gs_raster_backward(c->raster_face, pool, c->v_fmap_face, NULL,
                                 NULL, &gf, NULL, err);
+        if (rc)
+            return rc;
+    }
+    if (c->used_eye_map && d_fmap_eye) { /* the eye-only map: eye stream */
+        size_t e = (size_t)c->nf;
+        gs_gaussian_grads ge = {c->v_mean + 3 * e, c->v_scale + 3 * e,
+                                c->v_quat + 4 * e, c->v_opac + e,
+                                c->v_feat + e * c->C};
+        rc = gs_raster_backward(c->raster_eye, pool, d_fmap_eye, NULL, NULL,
+                                &ge, NULL, err);
         if (rc)
             return rc;
     }

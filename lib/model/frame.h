@@ -53,7 +53,10 @@ struct gs_model_ctx {
     int face_fresh;                   /* face stream redone by the last call */
     int face_map_valid;               /* fmap_face matches the face cache */
     int face_loss;                    /* training: always make fmap_face */
-    int used_src, used_face_map;      /* what the last forward did */
+    int eye_loss;                     /* training: make fmap_eye */
+    int used_src, used_face_map, used_eye_map; /* what the last forward did */
+    gs_raster *raster_eye;
+    float *fmap_eye, *alpha_eye, *v_fmap_eye; /* the eye stream alone */
     float *bg_crop;                   /* [C, fs*fs] background of a crop */
     /* incremental renders (gs_frame_render): fmap and rgb hold the full
      * render of inc_key; inc_rect the eye stream's footprint in it */
@@ -95,14 +98,16 @@ void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
                               int force_face);
 
 /* Backward of the last forward from d_rgb [3,S,S] (may be NULL),
- * d_fmap [C,fs,fs] (may be NULL) and, with SOURCE guidance, d_fmap_face
- * (the face-only map c->fmap_face; may be NULL). Adds parameter gradients
+ * d_fmap [C,fs,fs] (may be NULL), d_fmap_face (the face-only map
+ * c->fmap_face, made with SOURCE guidance or face_loss; may be NULL) and
+ * d_fmap_eye (the eye-only map c->fmap_eye, made with eye_loss; may be
+ * NULL). Adds parameter gradients
  * into `grads` (a gs_model_params bound to a gradient array; NULL skips
  * them) and the frame's input gradients into fg (may be NULL). */
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap, const float *d_fmap_face,
-                      const gs_model_params *grads, gs_frame_grad *fg,
-                      gs_error *err);
+                      const float *d_fmap_eye, const gs_model_params *grads,
+                      gs_frame_grad *fg, gs_error *err);
 
 /* Renders a frame into c->rgb for display (no backward). When the model
  * allows it (SOURCE or no guidance, two streams) and the last render had

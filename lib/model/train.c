@@ -65,6 +65,7 @@ typedef struct trainer {
     gs_synth_sample sample;
     float *target, *wl1, *dimg, *ftarget, *dfmap, *ssim;
     float *fmask, *dfmap_face; /* face-only render: mask [fs^2], gradient */
+    float *emask, *dfmap_eye;  /* eye-only render: eye area [fs^2], gradient */
     size_t ssim_len;
     double light_sum[GS_MODEL_LIGHT_DIM];
     long light_n;
@@ -92,7 +93,8 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     t->grad = calloc(m->nparams, sizeof(float));
     if (!t->c || !t->grad)
         return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
-    t->c->face_loss = 1; /* the face-only render is supervised too */
+    t->c->face_loss = 1; /* the face-only and eye-only renders are */
+    t->c->eye_loss = 1;  /* supervised too */
     gs_model_bind(m, t->grad, &t->g);
     gs_nn_param_group groups[GS_MODEL_MAX_TENSORS];
     int ng = 0;
@@ -135,9 +137,11 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     t->dfmap = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
     t->dfmap_face = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
     t->fmask = malloc(fs * fs * sizeof(float));
+    t->dfmap_eye = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->emask = malloc(fs * fs * sizeof(float));
     t->ssim = malloc(t->ssim_len * sizeof(float));
     if (!t->target || !t->wl1 || !t->dimg || !t->ftarget || !t->dfmap ||
-        !t->ssim || !t->dfmap_face || !t->fmask)
+        !t->ssim || !t->dfmap_face || !t->fmask || !t->dfmap_eye || !t->emask)
         return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
     return GS_OK;
 }
@@ -155,6 +159,8 @@ static void trainer_free(trainer *t)
     free(t->dfmap);
     free(t->dfmap_face);
     free(t->fmask);
+    free(t->dfmap_eye);
+    free(t->emask);
     free(t->ssim);
 }
 
@@ -225,6 +231,11 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
                     if (yy >= 0 && yy < S && xx >= 0 && xx < S)
                         eye = (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
             t->fmask[(size_t)y * fs + x] = eye ? 0.0f : 1.0f;
+            int in_eye = 0; /* share of the feature pixel that is eye */
+            for (int yy = y * f; yy < (y + 1) * f; yy++)
+                for (int xx = x * f; xx < (x + 1) * f; xx++)
+                    in_eye += (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
+            t->emask[(size_t)y * fs + x] = (float)in_eye / (float)(f * f);
         }
     for (int ch = 0; ch < 3; ch++)
         for (int y = 0; y < fs; y++)
@@ -274,7 +285,15 @@ static double losses(trainer *t, double *psnr)
     }
     double mse = se / (3.0 * plane);
     *psnr = mse > 1e-12 ? -10 * log10(mse) : 120;
-    return (double)l1 + 0.1 * ls + lf + lface;
+    float leye = 0; /* the eye stream alone, over the visible eyes, x5 */
+    if (c->used_eye_map) {
+        gs_nn_l1_forward(&leye, c->fmap_eye, t->ftarget, t->emask, 3,
+                         (int)fplane);
+        memset(t->dfmap_eye, 0, 3 * fplane * sizeof(float));
+        gs_nn_l1_backward(t->dfmap_eye, 5.0f, c->fmap_eye, t->ftarget,
+                          t->emask, 3, (int)fplane);
+    }
+    return (double)l1 + 0.1 * ls + lf + lface + 5.0 * leye;
 }
 
 static int save_checkpoint(trainer *t, const char *path, long step,
@@ -402,6 +421,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
             memset(&fg, 0, sizeof fg);
             rc = gs_frame_backward(t.c, pool, t.dimg, t.dfmap,
                                    t.c->used_face_map ? t.dfmap_face : NULL,
+                                   t.c->used_eye_map ? t.dfmap_eye : NULL,
                                    &t.g, &fg, err);
             if (rc)
                 break;
