@@ -201,7 +201,11 @@ def check_units(t, root, unit_dir, sbin, tmp):
 
 
 def check_sysusers(t, root):
-    r = run(["systemd-sysusers", "--root=" + root, "gazesplat.conf"])
+    # the packaged file wherever the prefix put it; an etc/ for the lock
+    conf = [os.path.join(d, f) for d, _, fs in os.walk(root) for f in fs
+            if f == "gazesplat.conf" and d.endswith("sysusers.d")]
+    os.makedirs(os.path.join(root, "etc"), exist_ok=True)
+    r = run(["systemd-sysusers", "--root=" + root] + (conf[:1] or ["gazesplat.conf"]))
     group = os.path.join(root, "etc", "group")
     lines = open(group).read().splitlines() if os.path.exists(group) else []
     t.check(r.returncode == 0 and any(line.startswith("gazesplat:") for line in lines),
