@@ -132,6 +132,7 @@ static void *setter(void *arg)
 {
     gs_cap_policy *p = arg;
     gs_cap_policy_config c = gs_cap_policy_config_default();
+    c.smooth_s = 0.0f; /* as make(0): each weight is exactly 0 or 1 */
     for (int i = 0; i < 2000; i++) {
         c.strength = (float)(i % 2);
         gs_cap_policy_set(p, &c, NULL);
