@@ -133,9 +133,12 @@ gs_face_box gs_face_box_from_cascade(int x, int y, int w, int h);
  * no distortion. */
 void gs_face_default_intrinsics(int width, int height, double k[9]);
 
-/* Which 6-point face model the pose is solved against. The two differ by a
- * fixed rotation of the head frame (about 10 deg of pitch, docs/face.md),
- * so pick the one whose frame the consumer of the pose uses:
+/* Which 6-point face model the pose is solved against. The two head frames
+ * differ by about 12 deg of pitch, and their shapes differ too (the
+ * synthetic head's nose wings stand 21 mm in front of its inner eye
+ * corners, the generic model's 7 mm): on the mean synthetic head the
+ * generic model errs by 14 deg on average (docs/face.md). Pick the model
+ * whose frame the consumer of the pose uses:
  *   GENERIC  gs_geom_face_model6, the widely used generic model: head angles
  *            comparable with other tools (the default of gs_face_opts).
  *   SYNTH    gs_geom_face_model6_synth, the mean synthetic head of
