@@ -138,6 +138,23 @@ static double hull_dist(const hull *h, double x, double y)
     return out > 0 ? edge : out;
 }
 
+/* Pixel box [x0, x1) x [y0, y1) holding every pixel centre within 2 px of
+ * the hull, clipped to the image. */
+static void hull_box(const hull *h, int box[4])
+{
+    double lo[2] = {1e9, 1e9}, hi[2] = {-1e9, -1e9};
+    for (int i = 0; i < h->n; i++)
+        for (int c = 0; c < 2; c++) {
+            lo[c] = fmin(lo[c], h->p[i][c]);
+            hi[c] = fmax(hi[c], h->p[i][c]);
+        }
+    for (int c = 0; c < 2; c++) {
+        double a = floor(lo[c] - 3.0), b = ceil(hi[c] + 3.0);
+        box[2 * c] = a < 0 ? 0 : (a > SIZE ? SIZE : (int)a);
+        box[2 * c + 1] = b < 0 ? 0 : (b > SIZE ? SIZE : (int)b);
+    }
+}
+
 int main(void)
 {
     gs_synth_sample s;
@@ -187,9 +204,14 @@ int main(void)
             hull_build(&h, &s.labels.lm2d[e == 0 ? 36 : 42], 6);
             int in_mask = 0, in_hull = 0, mask_in_hull = 0, hull_core = 0,
                 core_eye = 0;
+            int box[4];
+            hull_box(&h, box);
             for (int y = 0; y < SIZE; y++)
                 for (int x = 0; x < SIZE; x++) {
-                    double d = hull_dist(&h, x + 0.5, y + 0.5);
+                    /* Outside the box the hull is more than 2 px away. */
+                    double d = x < box[0] || x >= box[1] || y < box[2] || y >= box[3]
+                                   ? 2.0
+                                   : hull_dist(&h, x + 0.5, y + 0.5);
                     int eye = m[(size_t)y * SIZE + x] != 0;
                     in_mask += eye;
                     in_hull += d <= 0;
@@ -233,8 +255,10 @@ int main(void)
         hull h;
         hull_build(&h, (const double(*)[2])s.labels.lm2d, 68);
         int core = 0, covered = 0;
-        for (int y = 0; y < SIZE; y++)
-            for (int x = 0; x < SIZE; x++) {
+        int box[4];
+        hull_box(&h, box);
+        for (int y = box[2]; y < box[3]; y++)
+            for (int x = box[0]; x < box[1]; x++) {
                 if (hull_dist(&h, x + 0.5, y + 0.5) > -1.0)
                     continue;
                 size_t i = (size_t)y * SIZE + x;
