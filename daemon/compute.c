@@ -100,6 +100,23 @@ static gsd_model *model_acquire(gsd_server *s)
 }
 #endif
 
+const struct gs_model *gsd_model_get(gsd_server *s, gsd_model **ref)
+{
+#ifdef GSD_HAVE_MODEL
+    *ref = model_acquire(s);
+    return *ref ? (*ref)->m : NULL;
+#else
+    (void)s;
+    *ref = NULL;
+    return NULL;
+#endif
+}
+
+void gsd_model_put(gsd_model *ref)
+{
+    model_unref(ref);
+}
+
 int gsd_model_image_size(gsd_server *s, char id[33])
 {
     pthread_mutex_lock(&s->model_mu);
@@ -246,6 +263,7 @@ void gsd_model_finish_load(gsd_server *s)
     snprintf(detail, sizeof detail, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
     LOG_I("ready: %s", detail);
     gsd_server_set_state(s, GSD_READY, detail);
+    gsd_live_model_ready(s);
 }
 
 void gsd_model_release_all(gsd_server *s)

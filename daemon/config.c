@@ -51,6 +51,12 @@ static const key_def keys[] = {
     {"photo_input", T_BOOL, OFF(photo_input), 0, 1, "yes"},
     {"face_landmarks", T_STR, OFF(face_landmarks), 0, 0, GS_FACE_SHAPE_MODEL_DEFAULT},
     {"face_cascade", T_STR, OFF(face_cascade), 0, 0, GS_FACE_CASCADE_DEFAULT},
+    {"live.device", T_STR, OFF(live_device), 0, 0, ""},
+    {"live.output", T_STR, OFF(live_output), 0, 0, ""},
+    {"live.width", T_INT, OFF(live_width), 16, 8192, "640"},
+    {"live.height", T_INT, OFF(live_height), 16, 8192, "480"},
+    {"live.fps", T_INT, OFF(live_fps), 1, 240, "30"},
+    {"live.fit_budget_s", T_INT, OFF(live_fit_budget_s), 1, 600, "30"},
 };
 #define NKEYS (sizeof keys / sizeof keys[0])
 

@@ -28,6 +28,11 @@ typedef struct gsd_config {
     int photo_input;                  /* accept KIND_PHOTO (needs the two below) */
     char face_landmarks[GSD_STR_MAX]; /* dlib 68-point shape predictor */
     char face_cascade[GSD_STR_MAX];   /* OpenCV face cascade */
+    /* live eye contact hosted by the daemon (live.c); "" device = off */
+    char live_device[GSD_STR_MAX];    /* /dev/videoN or usb:VID:PID[:SERIAL] */
+    char live_output[GSD_STR_MAX];    /* v4l2loopback device, "" = none */
+    int live_width, live_height, live_fps;
+    int live_fit_budget_s;            /* longest background fit */
 } gsd_config;
 
 void gsd_config_default(gsd_config *c);

@@ -44,7 +44,7 @@ static void default_socket_path(char *out, size_t cap)
             *colon = '\0';
         snprintf(out, cap, "%s/gazesplatd.sock", first);
     } else {
-        snprintf(out, cap, "/run/gazesplatd/gazesplatd.sock");
+        snprintf(out, cap, "/run/gazesplat/gazesplatd.sock");
     }
 }
 

@@ -14,7 +14,7 @@ static const char usage[] =
     "\n"
     "  -c, --config FILE     configuration file (key = value lines, daemon/README.md)\n"
     "  --socket PATH         Unix socket (default $RUNTIME_DIRECTORY/gazesplatd.sock,\n"
-    "                        else /run/gazesplatd/gazesplatd.sock; 'none' for TCP only)\n"
+    "                        else /run/gazesplat/gazesplatd.sock; 'none' for TCP only)\n"
     "  --tcp HOST:PORT       also listen on TCP (loopback unless tcp_allow_remote)\n"
     "  --model FILE          model file\n"
     "  --state-dir DIR       subject cache directory (default $STATE_DIRECTORY)\n"

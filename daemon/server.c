@@ -587,6 +587,27 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
     return 0;
 }
 
+static void handle_live_policy(gsd_conn *c, const gs_frame_header *h,
+                               const Gazesplat__LivePolicyRequest *m)
+{
+    Gazesplat__LivePolicy p = GAZESPLAT__LIVE_POLICY__INIT;
+    char msg[256];
+    int code = gsd_live_policy(c->srv, m, &p, msg, sizeof msg);
+    if (code)
+        reply_error(c, h, code, "%s", msg);
+    else
+        reply(c, h, T(LIVE_POLICY_OK), &p.base);
+}
+
+static void handle_live_status(gsd_conn *c, const gs_frame_header *h)
+{
+    Gazesplat__LiveStatus m = GAZESPLAT__LIVE_STATUS__INIT;
+    Gazesplat__LivePolicy p = GAZESPLAT__LIVE_POLICY__INIT;
+    Gazesplat__Angles head = GAZESPLAT__ANGLES__INIT, corr = GAZESPLAT__ANGLES__INIT;
+    gsd_live_status(c->srv, &m, &p, &head, &corr);
+    reply(c, h, T(LIVE_STATUS_OK), &m.base);
+}
+
 static int frame_is_job(uint16_t type)
 {
     return type == T(FIT) || type == T(REDIRECT) || type == T(SLEEP);
@@ -628,6 +649,10 @@ static void dispatch(gsd_conn *c)
         handle_stats(c, &h);
     } else if (h.type == T(CANCEL)) {
         handle_cancel(c, &h, (const Gazesplat__Cancel *)m);
+    } else if (h.type == T(LIVE_POLICY)) {
+        handle_live_policy(c, &h, (const Gazesplat__LivePolicyRequest *)m);
+    } else if (h.type == T(LIVE_STATUS)) {
+        handle_live_status(c, &h);
     }
     protobuf_c_message_free_unpacked(m, NULL);
 }
@@ -901,6 +926,10 @@ void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
     if (strcmp(old.socket, cfg->socket) || strcmp(old.tcp, cfg->tcp) || old.workers != cfg->workers ||
         old.threads != cfg->threads || strcmp(old.state_dir, cfg->state_dir))
         LOG_W("reload: socket, tcp, workers, threads and state_dir need a restart; kept");
+    if (strcmp(old.live_device, cfg->live_device) || strcmp(old.live_output, cfg->live_output) ||
+        old.live_width != cfg->live_width || old.live_height != cfg->live_height ||
+        old.live_fps != cfg->live_fps || old.live_fit_budget_s != cfg->live_fit_budget_s)
+        LOG_W("reload: live.* keys need a restart; the live pipeline keeps its settings");
     gsd_log_set_level(s->cfg.log_level);
     gsd_work_set_depth(s, s->cfg.queue_depth);
     gsd_cache_set_budget(s->cache, (size_t)s->cfg.cache_mb << 20);
@@ -1014,6 +1043,8 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
         snprintf(msg, cap, "cannot start %d workers", cfg->workers);
         return -1;
     }
+    if (gsd_live_start(s, msg, cap) != 0)
+        return -1;
     ev_set_tick(s->loop, TICK_MS, on_tick, s);
     ev_set_after(s->loop, free_dead, s);
     s->watchdog_usec = gsd_watchdog_usec();
@@ -1049,6 +1080,7 @@ void gsd_server_free(gsd_server *s)
     if (atomic_load(&s->load_done))
         gsd_model_finish_load(s);
     gsd_cache_persist(s);
+    gsd_live_stop(s); /* holds a model reference and borrows the landmark model */
     gsd_model_release_all(s);
     gsd_cache_destroy(s->cache);
     if (s->sig_watch.fd > 0) {

@@ -24,6 +24,7 @@
 
 typedef struct gsd_server gsd_server;
 typedef struct gsd_conn gsd_conn;
+typedef struct gsd_live gsd_live;
 
 /* Health.State values. */
 enum { GSD_LOADING = 0, GSD_READY = 1, GSD_FAILED = 2, GSD_DRAINING = 3 };
@@ -140,6 +141,8 @@ struct gsd_server {
     char photo_msg[300];      /* why not (loop thread) */
     char face_cascade[GSD_STR_MAX]; /* fixed at start */
 
+    gsd_live *live;           /* the hosted live pipeline (live.c), or NULL */
+
     void (*on_sighup)(gsd_server *s); /* set by main: re-reads the config */
     ev_fn on_accept;          /* listeners' callback (server.c) */
     void *app;
@@ -194,8 +197,31 @@ void gsd_cache_restore(gsd_server *s);
 /* Saves the cache file; 0 or -1 (logged). */
 int gsd_cache_persist(gsd_server *s);
 
+/* A reference to the current model for a long-lived user (the live
+ * stage): NULL when none is loaded. Release with gsd_model_put. */
+struct gs_model;
+const struct gs_model *gsd_model_get(gsd_server *s, gsd_model **ref);
+void gsd_model_put(gsd_model *ref);
+
+/* ---- live.c: the live pipeline, when live.device is set ---- */
+/* Starts capture -> pass-through -> loopback; 0 or -1 with msg. */
+int gsd_live_start(gsd_server *s, char *msg, size_t cap);
+/* The first model is in: attaches the eye-contact stage (loop thread). */
+void gsd_live_model_ready(gsd_server *s);
+void gsd_live_stop(gsd_server *s);
+/* LIVE_POLICY: 0 with *out filled, or an ErrorCode with a message. */
+int gsd_live_policy(gsd_server *s, const Gazesplat__LivePolicyRequest *r, Gazesplat__LivePolicy *out,
+                    char *msg, size_t cap);
+/* LIVE_STATUS; pol, head and corr are storage for the sub-messages. */
+void gsd_live_status(gsd_server *s, Gazesplat__LiveStatus *m, Gazesplat__LivePolicy *pol,
+                     Gazesplat__Angles *head, Gazesplat__Angles *corr);
+
 /* ---- validate.c: 0 or an ErrorCode with a message in msg ---- */
 int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap);
+/* Width and height that a PNG (IHDR) or JPEG (first SOF) declares, found
+ * by the data's own signature whatever the declared format: 0, or -1 when
+ * there is no such header (the decoder then says what is wrong). */
+int gsd_image_probe(const uint8_t *p, size_t n, uint32_t *w, uint32_t *h);
 int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap);
 int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap);
 int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,

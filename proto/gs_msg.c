@@ -26,6 +26,10 @@ static const type_entry types[] = {
     {GAZESPLAT__FRAME_TYPE__FRAME_CANCEL, "CANCEL", &gazesplat__cancel__descriptor, 1},
     {GAZESPLAT__FRAME_TYPE__FRAME_ERROR, "ERROR", &gazesplat__error__descriptor, 0},
     {GAZESPLAT__FRAME_TYPE__FRAME_BUSY, "BUSY", &gazesplat__busy__descriptor, 0},
+    {GAZESPLAT__FRAME_TYPE__FRAME_LIVE_POLICY, "LIVE_POLICY", &gazesplat__live_policy_request__descriptor, 1},
+    {GAZESPLAT__FRAME_TYPE__FRAME_LIVE_POLICY_OK, "LIVE_POLICY_OK", &gazesplat__live_policy__descriptor, 0},
+    {GAZESPLAT__FRAME_TYPE__FRAME_LIVE_STATUS, "LIVE_STATUS", &gazesplat__live_status_request__descriptor, 1},
+    {GAZESPLAT__FRAME_TYPE__FRAME_LIVE_STATUS_OK, "LIVE_STATUS_OK", &gazesplat__live_status__descriptor, 0},
     {GAZESPLAT__FRAME_TYPE__FRAME_SLEEP, "SLEEP", &gazesplat__sleep__descriptor, 1},
     {GAZESPLAT__FRAME_TYPE__FRAME_SLEEP_OK, "SLEEP_OK", &gazesplat__done__descriptor, 0},
 };

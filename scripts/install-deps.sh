@@ -18,6 +18,10 @@ PACKAGES=(
   libprotobuf-c-dev protobuf-c-compiler protobuf-compiler python3-protobuf
   # daemon tests: systemd-analyze, systemd-socket-activate
   systemd
+  # the .deb (cpack): dpkg-deb, dpkg-shlibdeps and the file(1) it runs
+  dpkg-dev file
+  # the Python grid client (scripts/demo.sh): PNG reading and writing
+  python3-pil
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev

@@ -65,7 +65,7 @@ int main(int argc, char **argv)
         fprintf(stderr, "bench_capture: %s\n", e.msg);
         return 1;
     }
-    gs_cap_pipe_config pc = {cap, gs_cap_stage_passthrough(), o, 2, NULL, NULL, NULL};
+    gs_cap_pipe_config pc = {cap, gs_cap_stage_passthrough(), o, 2, NULL, NULL, NULL, -1};
     double t0 = now_s(), c0 = cpu_s();
     if (gs_cap_pipe_start(&pc, &p, &e)) {
         fprintf(stderr, "bench_capture: %s\n", e.msg);

@@ -74,7 +74,7 @@ static void setup(bench_case *b, int guidance, int side, int threads)
         fprintf(stderr, "cannot create a pool\n");
         exit(2);
     }
-    b->cfg = (gs_renderer_config){32, 144, guidance, 2};
+    b->cfg = (gs_renderer_config){32, 144, guidance, 2, 0};
     b->H = b->W = side;
     b->np = gs_renderer_param_count(&b->cfg);
     b->na = gs_renderer_act_size(&b->cfg, side, side);

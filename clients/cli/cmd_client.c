@@ -14,7 +14,7 @@ static int run_client(int argc, char **argv);
 
 const cli_command cli_client_command = {
     "client",
-    "talk to a running gazesplatd: hello, health, stats, fit, redirect",
+    "talk to a running gazesplatd: hello, health, stats, fit, redirect, live-policy, live-status",
     "usage: gazesplat client ACTION [options]\n"
     "\n"
     "Actions:\n"
@@ -23,6 +23,10 @@ const cli_command cli_client_command = {
     "  stats      print every STATS counter\n"
     "  fit        fit a subject to --image; prints its key and estimated labels\n"
     "  redirect   render --subject KEY (or --image) at each --gaze-deg target\n"
+    "  live-policy  print the live eye-contact policy; --set k=v (repeatable, or\n"
+    "             k=v,k=v) changes it at once, all settings or none; --refit\n"
+    "             drops the fitted subject\n"
+    "  live-status  print the live pipeline's state (camera, face, subject, weight)\n"
     "\n"
     "Options:\n"
     "  --addr ADDR          unix:PATH, tcp:HOST:PORT or PATH (default\n"
@@ -50,8 +54,10 @@ const cli_command cli_client_command = {
 
 enum {
     O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
-    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_N
+    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_N
 };
+
+#define MAX_SETS 32
 
 #define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
 
@@ -171,6 +177,103 @@ static int do_stats(gs_client *c, int timeout)
     }
     gs_client_frame_free(&f);
     return rc;
+}
+
+static void print_policy(const Gazesplat__LivePolicy *p, const char *prefix)
+{
+    if (!p)
+        return;
+    printf("%senabled %s\n%sstrength %g\n%sgaze_low_deg %g\n%sgaze_high_deg %g\n"
+           "%shead_pitch_low_deg %g\n%shead_pitch_high_deg %g\n%shead_yaw_low_deg %g\n"
+           "%shead_yaw_high_deg %g\n%ssmooth_s %g\n%sblink_openness %g\n%sblink_hold_max_s %g\n",
+           prefix, p->enabled ? "yes" : "no", prefix, p->strength, prefix, p->gaze_low_deg, prefix,
+           p->gaze_high_deg, prefix, p->head_pitch_low_deg, prefix, p->head_pitch_high_deg, prefix,
+           p->head_yaw_low_deg, prefix, p->head_yaw_high_deg, prefix, p->smooth_s, prefix,
+           p->blink_openness, prefix, p->blink_hold_max_s);
+}
+
+/* Splits each "k=v[,k=v...]" into LiveSetting messages (in buf). */
+static int parse_sets(const char **sets, int nsets, char *buf, size_t cap,
+                      Gazesplat__LiveSetting *items, Gazesplat__LiveSetting **ptrs, size_t *n)
+{
+    size_t used = 0;
+    *n = 0;
+    for (int i = 0; i < nsets; i++) {
+        size_t len = strlen(sets[i]);
+        if (used + len + 1 > cap)
+            return -1;
+        char *s = memcpy(buf + used, sets[i], len + 1), *save = NULL;
+        used += len + 1;
+        for (char *kv = strtok_r(s, ",", &save); kv; kv = strtok_r(NULL, ",", &save)) {
+            char *eq = strchr(kv, '=');
+            if (!eq || eq == kv || *n >= MAX_SETS)
+                return -1;
+            *eq = '\0';
+            gazesplat__live_setting__init(&items[*n]);
+            items[*n].key = kv;
+            items[*n].value = eq + 1;
+            ptrs[*n] = &items[*n];
+            (*n)++;
+        }
+    }
+    return 0;
+}
+
+static int do_live_policy(gs_client *c, const char **sets, int nsets, int refit, int timeout)
+{
+    const cli_command *cmd = &cli_client_command;
+    char buf[4096];
+    Gazesplat__LiveSetting items[MAX_SETS], *ptrs[MAX_SETS];
+    Gazesplat__LivePolicyRequest req = GAZESPLAT__LIVE_POLICY_REQUEST__INIT;
+    if (parse_sets(sets, nsets, buf, sizeof buf, items, ptrs, &req.n_set) != 0)
+        return cli_usage_error(cmd, "--set wants key=value[,key=value...] (at most %d)", MAX_SETS);
+    req.set = ptrs;
+    req.refit = refit;
+    gs_client_frame f;
+    gs_error err;
+    if (gs_client_call(c, T(LIVE_POLICY), NULL, 1, &req.base, timeout, &f, &err) != GS_OK)
+        return cli_fail(cmd, "%s", err.msg);
+    int rc = CLI_OK;
+    if (f.header.type == T(LIVE_POLICY_OK))
+        print_policy((const Gazesplat__LivePolicy *)f.msg, "");
+    else
+        rc = f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
+    gs_client_frame_free(&f);
+    return rc;
+}
+
+static int do_live_status(gs_client *c, int timeout)
+{
+    const cli_command *cmd = &cli_client_command;
+    Gazesplat__LiveStatusRequest req = GAZESPLAT__LIVE_STATUS_REQUEST__INIT;
+    gs_client_frame f;
+    gs_error err;
+    if (gs_client_call(c, T(LIVE_STATUS), NULL, 1, &req.base, timeout, &f, &err) != GS_OK)
+        return cli_fail(cmd, "%s", err.msg);
+    if (f.header.type != T(LIVE_STATUS_OK)) {
+        int rc = f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
+        gs_client_frame_free(&f);
+        return rc;
+    }
+    const Gazesplat__LiveStatus *m = (const Gazesplat__LiveStatus *)f.msg;
+    printf("running %s\ndevice %s\noutput %s\nstreaming %s\nframes_in %llu\nframes_out %llu\n"
+           "placeholders %llu\nreopens %llu\nlatency_ms %.1f/%.1f\nface %s\nsubject_ready %s\n"
+           "fitting %s\nfits %llu\nrefits %llu\nrenders %llu\nweight %.3f\n",
+           m->running ? "yes" : "no", m->device, m->output, m->streaming ? "yes" : "no",
+           (unsigned long long)m->frames_in, (unsigned long long)m->frames_out,
+           (unsigned long long)m->placeholders, (unsigned long long)m->reopens,
+           m->latency_p50_ms, m->latency_p99_ms, m->face ? "yes" : "no",
+           m->subject_ready ? "yes" : "no", m->fitting ? "yes" : "no",
+           (unsigned long long)m->fits, (unsigned long long)m->refits,
+           (unsigned long long)m->renders, m->weight);
+    if (m->head)
+        printf("head_deg %.1f,%.1f\n", m->head->pitch_deg, m->head->yaw_deg);
+    if (m->correction)
+        printf("correction_deg %.1f,%.1f\n", m->correction->pitch_deg, m->correction->yaw_deg);
+    print_policy(m->policy, "policy.");
+    printf("detail %s\n", m->detail);
+    gs_client_frame_free(&f);
+    return CLI_OK;
 }
 
 static int load_image(const cli_command *cmd, const cli_opt *o, Gazesplat__Image *img, uint8_t **data)
@@ -358,8 +461,21 @@ static int run_client(int argc, char **argv)
         {"--photo", 0, NULL}, {"--gaze", 1, NULL}, {"--head", 1, NULL}, {"--key", 1, NULL},
         {"--max-iters", 1, NULL}, {"--subject", 1, NULL}, {"--gaze-deg", 1, NULL},
         {"--head-deg", 1, NULL}, {"--format", 1, NULL}, {"--out", 1, NULL}, {"--deadline-ms", 1, NULL},
-        {"--paste-back", 0, NULL},
+        {"--paste-back", 0, NULL}, {"--refit", 0, NULL},
     };
+    /* --set may repeat: take every one out before the common parser. */
+    const char *sets[MAX_SETS];
+    int nsets = 0, kept = 1;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--set") && i + 1 < argc && nsets < MAX_SETS) {
+            sets[nsets++] = argv[++i];
+            continue;
+        }
+        if (!strcmp(argv[i], "--set"))
+            return cli_usage_error(cmd, "--set wants key=value (at most %d)", MAX_SETS);
+        argv[kept++] = argv[i];
+    }
+    argc = kept;
     int r = cli_parse(cmd, argc - 1, argv + 1, o, O_N);
     if (r == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -368,7 +484,10 @@ static int run_client(int argc, char **argv)
     if (r != CLI_PARSED)
         return r;
     int known = !strcmp(action, "hello") || !strcmp(action, "health") || !strcmp(action, "stats") ||
-                !strcmp(action, "fit") || !strcmp(action, "redirect");
+                !strcmp(action, "fit") || !strcmp(action, "redirect") ||
+                !strcmp(action, "live-policy") || !strcmp(action, "live-status");
+    if (nsets && strcmp(action, "live-policy"))
+        return cli_usage_error(cmd, "--set is for live-policy");
     if (!known)
         return cli_usage_error(cmd, "unknown action '%s'", action);
     long timeout = 120000;
@@ -407,6 +526,10 @@ static int run_client(int argc, char **argv)
         r = do_stats(c, timeout_i);
     else if (!strcmp(action, "fit"))
         r = do_fit(c, o, timeout_i);
+    else if (!strcmp(action, "live-policy"))
+        r = do_live_policy(c, sets, nsets, o[O_REFIT].value != NULL, timeout_i);
+    else if (!strcmp(action, "live-status"))
+        r = do_live_status(c, timeout_i);
     else
         r = do_redirect(c, o, timeout_i);
     gs_client_close(c);

@@ -1,5 +1,6 @@
-/* gazesplat live: camera -> processing (pass-through until the eye-contact
- * stage exists) -> v4l2loopback, with periodic statistics. */
+/* gazesplat live: camera -> eye contact (with --model; else pass-through)
+ * -> v4l2loopback, with periodic statistics. The policy is fixed at start
+ * here (--policy); gazesplatd with live.device changes it at run time. */
 #define _GNU_SOURCE
 #include <signal.h>
 #include <stdio.h>
@@ -10,12 +11,13 @@
 
 #include "cli.h"
 #include "gazesplat/capture.h"
+#include "gazesplat/live.h"
 
 static const char usage[] =
     "usage: gazesplat live --in /dev/videoN|usb:VID:PID[:SERIAL] [--out /dev/videoM]\n"
     "                      [--size WxH] [--fps N] [--format auto|yuyv|mjpeg]\n"
     "                      [--seconds S] [--stats S] [--no-hotplug] [--hotplug-any]\n"
-    "                      [--sysfs DIR]\n"
+    "                      [--sysfs DIR] [--model M [--policy k=v,...]]\n"
     "\n"
     "Streams a camera to a v4l2loopback device (YUYV; load the module with\n"
     "exclusive_caps=1 for browsers). Without --out frames are discarded (to\n"
@@ -31,6 +33,10 @@ static const char usage[] =
     "  --seconds  stop after S seconds (default: run until SIGINT/SIGTERM)\n"
     "  --stats    print statistics every S seconds (default 5; 0 only at the end)\n"
     "  --sysfs    sysfs root for resolving usb: cameras (default /sys)\n"
+    "  --model    a model file: turns on eye contact (the subject is fitted in the\n"
+    "             background on the first frontal frames; pass-through until then)\n"
+    "  --policy   eye-contact policy, e.g. strength=0.8,smooth_s=0.2,enabled=yes\n"
+    "             (keys in docs/live.md); at run time use gazesplatd's live.device\n"
     "\n"
     "Events and statistics go to stderr, one line each, prefixed with the\n"
     "monotonic time in seconds.\n";
@@ -82,6 +88,21 @@ typedef struct tick {
     uint64_t in, out;
 } tick;
 
+static void print_live(gs_live_stage *st)
+{
+    if (!st)
+        return;
+    gs_live_status s;
+    gs_live_stage_get_status(st, &s);
+    fprintf(stderr,
+            "[%.3f] eyes: face %d subject %s | fits %llu refits %llu renders %llu | weight "
+            "%.2f | head %.0f/%.0f deg | last fit %.1f s\n",
+            mono_s(), s.face, s.subject_ready ? "ready" : s.fitting ? "fitting" : "none",
+            (unsigned long long)s.fits, (unsigned long long)s.refits,
+            (unsigned long long)s.renders, (double)s.weight, s.head_pitch * 57.29578,
+            s.head_yaw * 57.29578, s.last_fit_s);
+}
+
 static void print_stats(gs_cap_pipe *p, tick *last, int final)
 {
     gs_cap_pipe_stats s;
@@ -105,7 +126,50 @@ static void print_stats(gs_cap_pipe *p, tick *last, int final)
 }
 
 enum { O_IN, O_OUT, O_SIZE, O_FPS, O_FORMAT, O_SECONDS, O_STATS, O_NOHOTPLUG, O_HPANY,
-       O_SYSFS, O_COUNT };
+       O_SYSFS, O_MODEL, O_POLICY, O_COUNT };
+
+/* What eye contact needs; all NULL without --model. */
+typedef struct eyes {
+    gs_model *model;
+    gs_face_shape_model *sp;
+    gs_face_detector *det;
+    gs_live_face_models fm;
+    gs_live_engine engine;
+    gs_cap_policy *policy;
+    gs_live_stage *stage;
+} eyes;
+
+static void eyes_free(eyes *y)
+{
+    gs_live_stage_destroy(y->stage);
+    gs_live_engine_model_free(&y->engine);
+    gs_cap_policy_destroy(y->policy);
+    gs_face_detector_free(y->det);
+    gs_face_shape_model_free(y->sp);
+    gs_model_destroy(y->model);
+}
+
+static int eyes_start(const char *model, const char *policy, eyes *y, gs_error *e)
+{
+    gs_cap_policy_config pc = gs_cap_policy_config_default();
+    int r = policy ? gs_cap_policy_config_parse(&pc, policy, e) : GS_OK;
+    if (r == GS_OK)
+        r = gs_model_load(model, &y->model, e);
+    if (r == GS_OK)
+        r = gs_face_shape_model_load(NULL, &y->sp, e);
+    if (r == GS_OK)
+        r = gs_face_detector_load(NULL, &y->det, e);
+    if (r == GS_OK)
+        r = gs_cap_policy_create(&pc, &y->policy, e);
+    if (r == GS_OK)
+        r = gs_live_engine_model(y->model, NULL, 0, &y->engine, e);
+    y->fm.det = y->det;
+    y->fm.sp = y->sp;
+    gs_live_track_ops ops = gs_live_track_ops_face(&y->fm);
+    if (r == GS_OK)
+        r = gs_live_stage_create(NULL, &ops, &y->engine, y->policy, &y->stage, e);
+    return r;
+}
 
 static int parse_format(const char *s, gs_cap_pixfmt *pf)
 {
@@ -121,7 +185,7 @@ static int parse_format(const char *s, gs_cap_pixfmt *pf)
 }
 
 /* Runs until a signal or the time limit, printing statistics. */
-static void loop(gs_cap_pipe *p, long seconds, long stats_every)
+static void loop(gs_cap_pipe *p, gs_live_stage *st, long seconds, long stats_every)
 {
     tick last = {mono_s(), cpu_s(), 0, 0}, first = last;
     double t_end = seconds > 0 ? last.t + (double)seconds : 0, t_stats = last.t + (double)stats_every;
@@ -130,10 +194,12 @@ static void loop(gs_cap_pipe *p, long seconds, long stats_every)
         nanosleep(&ts, NULL);
         if (stats_every > 0 && mono_s() >= t_stats) {
             print_stats(p, &last, 0);
+            print_live(st);
             t_stats += (double)stats_every;
         }
     }
     print_stats(p, &first, 1);
+    print_live(st);
 }
 
 static int run_live(int argc, char **argv)
@@ -142,7 +208,8 @@ static int run_live(int argc, char **argv)
     cli_opt o[O_COUNT] = {{"--in", 1, NULL},      {"--out", 1, NULL},     {"--size", 1, NULL},
                           {"--fps", 1, NULL},     {"--format", 1, NULL},  {"--seconds", 1, NULL},
                           {"--stats", 1, NULL},   {"--no-hotplug", 0, NULL},
-                          {"--hotplug-any", 0, NULL}, {"--sysfs", 1, NULL}};
+                          {"--hotplug-any", 0, NULL}, {"--sysfs", 1, NULL},
+                          {"--model", 1, NULL},   {"--policy", 1, NULL}};
     int r = cli_parse(cmd, argc, argv, o, O_COUNT);
     if (r == CLI_HELP) {
         fputs(usage, stdout);
@@ -172,13 +239,24 @@ static int run_live(int argc, char **argv)
     if (gs_cap_resolve(o[O_IN].value, &ro, path, sizeof path, &e) != GS_OK)
         return cli_fail(cmd, "%s", e.msg);
     c.path = path;
+    if (o[O_POLICY].value && !o[O_MODEL].value)
+        return cli_usage_error(cmd, "--policy needs --model");
+    eyes y;
+    memset(&y, 0, sizeof y);
+    if (o[O_MODEL].value && eyes_start(o[O_MODEL].value, o[O_POLICY].value, &y, &e) != GS_OK) {
+        eyes_free(&y);
+        return cli_fail(cmd, "%s", e.msg);
+    }
     gs_cap *cap = NULL;
     gs_cap_out *out = NULL;
-    if (gs_cap_create(&c, &cap, &e) != GS_OK)
+    if (gs_cap_create(&c, &cap, &e) != GS_OK) {
+        eyes_free(&y);
         return cli_fail(cmd, "%s", e.msg);
+    }
     if (o[O_OUT].value && gs_cap_out_create(o[O_OUT].value, c.width & ~1, c.height, c.fps, NULL,
                                             &out, &e) != GS_OK) {
         gs_cap_destroy(cap);
+        eyes_free(&y);
         return cli_fail(cmd, "%s", e.msg);
     }
     /* Hotplug: for usb: cameras (and on request for any device); a missing
@@ -197,15 +275,17 @@ static int run_live(int argc, char **argv)
     }
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
-    gs_cap_pipe_config pc = {cap, gs_cap_stage_passthrough(), out, 2, NULL, on_event, NULL};
+    gs_cap_stage stage = y.stage ? gs_live_stage_as_cap(y.stage) : gs_cap_stage_passthrough();
+    gs_cap_pipe_config pc = {cap, stage, out, 2, NULL, on_event, NULL, 0};
     gs_cap_pipe *p = NULL;
     r = gs_cap_pipe_start(&pc, &p, &e);
     if (r == GS_OK) {
         fprintf(stderr, "[%.3f] live: %s -> %s\n", mono_s(), path,
                 o[O_OUT].value ? o[O_OUT].value : "(discard)");
-        loop(p, seconds, stats_every);
+        loop(p, y.stage, seconds, stats_every);
         gs_cap_pipe_stop(p);
     }
+    eyes_free(&y);
     gs_cap_hotplug_stop(hp);
     gs_cap_out_destroy(out);
     gs_cap_destroy(cap);

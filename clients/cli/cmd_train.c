@@ -26,6 +26,10 @@ const cli_command cli_train_command = {
     "  --checkpoint N      save every N steps (500)\n"
     "  --log-every N       progress line every N steps (50)\n"
     "  --guidance MODE     none | additive | paper (renderer guidance)\n"
+    "  --guide-source S    face (default: one guidance vector from the face\n"
+    "                      stream's map, exact incremental gaze sweeps) |\n"
+    "                      block (each block attends over its own features);\n"
+    "                      with --resume, switches a model's source\n"
     "  --single-stream     ablation: one stream, gaze through the pose MLP\n"
     "  --no-eye-rotation   ablation: eyes deformed like the face\n",
     run_train,
@@ -43,7 +47,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 }
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
-       O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_N };
+       O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -53,7 +57,7 @@ static int run_train(int argc, char **argv)
         {"--threads", 1, NULL}, {"--resume", 0, NULL},
         {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
         {"--guidance", 1, NULL}, {"--single-stream", 0, NULL},
-        {"--no-eye-rotation", 0, NULL}};
+        {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -114,6 +118,14 @@ static int run_train(int argc, char **argv)
         if (spec.guidance == -2)
             return cli_usage_error(cmd, "--guidance: none, additive or paper");
     }
+    if (o[O_GSRC].value) {
+        const char *g = o[O_GSRC].value;
+        spec.guide_source = strcmp(g, "block") == 0  ? 0
+                            : strcmp(g, "face") == 0 ? 1
+                                                     : -2;
+        if (spec.guide_source == -2)
+            return cli_usage_error(cmd, "--guide-source: face or block");
+    }
     if (o[O_SINGLE].value)
         spec.two_stream = 0;
     if (o[O_NOEYE].value)
@@ -126,8 +138,12 @@ static int run_train(int argc, char **argv)
     gs_model *m = NULL;
     rc = t.resume ? gs_model_load(t.out_path, &m, &err)
                   : gs_model_new(&spec, (uint64_t)seed, &m, &err);
-    if (rc)
+    if (!rc && t.resume && spec.guide_source >= 0)
+        rc = gs_model_set_guide_source(m, spec.guide_source, &err);
+    if (rc) {
+        gs_model_destroy(m);
         return cli_fail(cmd, "%s", err.msg);
+    }
     gs_pool *pool = threads > 1 ? gs_pool_create((int)threads) : NULL;
     gs_train_report rep;
     rc = gs_train(m, &t, pool, &rep, &err);

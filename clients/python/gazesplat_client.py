@@ -64,6 +64,8 @@ MESSAGES = {
     FT.FRAME_REDIRECT: pb.RedirectRequest, FT.FRAME_IMAGE: pb.ImageResult,
     FT.FRAME_DONE: pb.Done, FT.FRAME_CANCEL: pb.Cancel, FT.FRAME_ERROR: pb.Error,
     FT.FRAME_BUSY: pb.Busy, FT.FRAME_SLEEP: pb.Sleep, FT.FRAME_SLEEP_OK: pb.Done,
+    FT.FRAME_LIVE_POLICY: pb.LivePolicyRequest, FT.FRAME_LIVE_POLICY_OK: pb.LivePolicy,
+    FT.FRAME_LIVE_STATUS: pb.LiveStatusRequest, FT.FRAME_LIVE_STATUS_OK: pb.LiveStatus,
 }
 
 
@@ -215,6 +217,20 @@ class Client:
     def stats(self):
         msg = self.call(FT.FRAME_STATS, pb.StatsRequest(), FT.FRAME_STATS_OK)[1]
         return {c.name: c.value for c in msg.counters}
+
+    def live_policy(self, refit=False, **settings):
+        """Reads (no arguments) or changes the live eye-contact policy:
+        live_policy(strength=0.5, enabled=False). All settings apply or none
+        (GazesplatError ERR_INVALID_ARGUMENT). Returns the LivePolicy in force."""
+        req = pb.LivePolicyRequest(refit=refit)
+        for k, v in settings.items():
+            if isinstance(v, bool):
+                v = "yes" if v else "no"
+            req.set.add(key=k, value=str(v))
+        return self.call(FT.FRAME_LIVE_POLICY, req, FT.FRAME_LIVE_POLICY_OK)[1]
+
+    def live_status(self):
+        return self.call(FT.FRAME_LIVE_STATUS, pb.LiveStatusRequest(), FT.FRAME_LIVE_STATUS_OK)[1]
 
     def fit(self, image, gaze_deg=None, head_deg=None, key=None, max_iters=0, deadline_ms=0,
             photo=False):

@@ -1,6 +1,7 @@
 /* v4l2loopback output: YUYV frames written with write(). The format is set
- * with S_FMT on the OUTPUT type and read back; consumers (browsers) want
- * YUYV at an even width, so an odd-width frame loses its last column. */
+ * once with S_FMT on the OUTPUT type and read back, and kept for the
+ * writer's life (re-applied on every reopen): consumers (browsers) want
+ * YUYV at an even width and a format that never changes under them. */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
@@ -20,6 +21,9 @@ struct gs_cap_out {
     int width, height, fps;
     uint8_t *yuyv;
     size_t yuyv_cap;
+    uint8_t *scaled;       /* a frame of another size, letterboxed */
+    size_t scaled_cap;
+    uint8_t *placeholder;  /* the "no video" frame, drawn once */
     int64_t retry_ns;
 };
 
@@ -127,8 +131,34 @@ void gs_cap_out_destroy(gs_cap_out *o)
         return;
     out_close(o);
     free(o->yuyv);
+    free(o->scaled);
+    free(o->placeholder);
     free(o->path);
     free(o);
+}
+
+/* Nearest-neighbour letterbox of src into dst (w x h): the aspect ratio
+ * kept, black bars. Camera frames of another size (a camera that came back
+ * at another resolution) keep the loopback's format: readers that opened it
+ * would otherwise see the stream break (v4l2loopback refuses S_FMT while
+ * it is in use). */
+static void letterbox(const uint8_t *src, size_t stride, int sw, int sh, uint8_t *dst, int w,
+                      int h)
+{
+    double s = (double)w / sw < (double)h / sh ? (double)w / sw : (double)h / sh;
+    int ow = (int)(sw * s), oh = (int)(sh * s);
+    int x0 = (w - ow) / 2, y0 = (h - oh) / 2;
+    memset(dst, 0, 3 * (size_t)w * (size_t)h);
+    for (int y = 0; y < oh; y++) {
+        int sy = (int)((y + 0.5) / s);
+        sy = sy < sh ? sy : sh - 1;
+        uint8_t *d = dst + ((size_t)(y0 + y) * (size_t)w + (size_t)x0) * 3;
+        for (int x = 0; x < ow; x++) {
+            int sx = (int)((x + 0.5) / s);
+            sx = sx < sw ? sx : sw - 1;
+            memcpy(d + 3 * (size_t)x, src + (size_t)sy * stride + 3 * (size_t)sx, 3);
+        }
+    }
 }
 
 int gs_cap_out_write(gs_cap_out *o, const uint8_t *rgb, size_t stride, int width, int height,
@@ -136,14 +166,22 @@ int gs_cap_out_write(gs_cap_out *o, const uint8_t *rgb, size_t stride, int width
 {
     if (!o || !rgb || width < 2 || height < 1 || stride < 3 * (size_t)width)
         return gs_error_set(err, GS_ERR_ARG, "output: bad frame");
-    width &= ~1;
     int r;
-    if (width != o->width || height != o->height) {
-        out_close(o);
-        if ((r = out_size(o, width, height, err)) != GS_OK)
-            return r;
-        o->retry_ns = 0;
+    if ((width & ~1) != o->width || height != o->height) {
+        size_t need = 3 * (size_t)o->width * (size_t)o->height;
+        if (need > o->scaled_cap) {
+            uint8_t *p = realloc(o->scaled, need);
+            if (!p)
+                return gs_error_set(err, GS_ERR_NOMEM, "output: out of memory");
+            o->scaled = p;
+            o->scaled_cap = need;
+        }
+        letterbox(rgb, stride, width, height, o->scaled, o->width, o->height);
+        rgb = o->scaled;
+        stride = 3 * (size_t)o->width;
     }
+    width = o->width;
+    height = o->height;
     if (o->fd < 0) {
         if (o->ops->now_ns(o->ops->ctx) < o->retry_ns)
             return gs_error_set(err, GS_ERR_IO, "%s: closed, reopening", o->path);
@@ -165,4 +203,67 @@ int gs_cap_out_write(gs_cap_out *o, const uint8_t *rgb, size_t stride, int width
     if (n < 0)
         return gs_error_set(err, GS_ERR_IO, "%s: write: %s", o->path, strerror((int)-n));
     return gs_error_set(err, GS_ERR_IO, "%s: short write (%zd of %zu)", o->path, n, len);
+}
+
+void gs_cap_out_size(const gs_cap_out *o, int *width, int *height)
+{
+    *width = o->width;
+    *height = o->height;
+}
+
+/* 5x7 glyphs, one byte per row (bit 4 = leftmost column). */
+static const struct {
+    char c;
+    uint8_t rows[7];
+} glyphs[] = {{'N', {0x11, 0x19, 0x15, 0x13, 0x11, 0x11, 0x11}},
+              {'O', {0x0E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E}},
+              {'V', {0x11, 0x11, 0x11, 0x11, 0x11, 0x0A, 0x04}},
+              {'I', {0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E}},
+              {'D', {0x1E, 0x11, 0x11, 0x11, 0x11, 0x11, 0x1E}},
+              {'E', {0x1F, 0x10, 0x10, 0x1E, 0x10, 0x10, 0x1F}},
+              {' ', {0, 0, 0, 0, 0, 0, 0}}};
+
+static const uint8_t *glyph(char c)
+{
+    for (size_t i = 0; i < sizeof glyphs / sizeof glyphs[0]; i++)
+        if (glyphs[i].c == c)
+            return glyphs[i].rows;
+    return glyphs[sizeof glyphs / sizeof glyphs[0] - 1].rows;
+}
+
+void gs_cap_placeholder_rgb(uint8_t *rgb, size_t stride, int width, int height)
+{
+    static const char text[] = "NO VIDEO";
+    int n = (int)sizeof text - 1;
+    for (int y = 0; y < height; y++)
+        memset(rgb + (size_t)y * stride, 32, 3 * (size_t)width);
+    int cell = width / (6 * n + 4); /* glyph pixel size: the text spans most of the width */
+    cell = cell < 1 ? 1 : cell;
+    if (cell * 7 > height)
+        return;
+    int x0 = (width - cell * (6 * n - 1)) / 2, y0 = (height - 7 * cell) / 2;
+    for (int i = 0; i < n; i++) {
+        const uint8_t *g = glyph(text[i]);
+        for (int r = 0; r < 7 * cell; r++)
+            for (int c = 0; c < 5 * cell; c++) {
+                if (!(g[r / cell] & (0x10 >> (c / cell))))
+                    continue;
+                int x = x0 + (6 * i) * cell + c, y = y0 + r;
+                if (x >= 0 && x < width && y >= 0 && y < height)
+                    memset(rgb + (size_t)y * stride + 3 * (size_t)x, 200, 3);
+            }
+    }
+}
+
+int gs_cap_out_write_placeholder(gs_cap_out *o, gs_error *err)
+{
+    if (!o)
+        return gs_error_set(err, GS_ERR_ARG, "output: NULL argument");
+    size_t need = 3 * (size_t)o->width * (size_t)o->height;
+    if (!o->placeholder) {
+        if (!(o->placeholder = malloc(need)))
+            return gs_error_set(err, GS_ERR_NOMEM, "output: out of memory");
+        gs_cap_placeholder_rgb(o->placeholder, 3 * (size_t)o->width, o->width, o->height);
+    }
+    return gs_cap_out_write(o, o->placeholder, 3 * (size_t)o->width, o->width, o->height, err);
 }

@@ -1,8 +1,10 @@
 /* The live pipeline: capture thread -> ring -> processing thread -> ring ->
  * output thread. Frames live in a fixed pool; a ring that is full drops its
  * oldest frame, so a slow stage costs frames, never latency. */
+#define _POSIX_C_SOURCE 200809L
 #include <pthread.h>
 #include <stdatomic.h>
+#include <time.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -41,6 +43,7 @@ struct gs_cap_pipe {
     ring r_proc, r_out;          /* capture -> processing, processing -> output */
     atomic_int stop;
     uint64_t in, out, drops;     /* guarded by lock */
+    uint64_t placeholders;       /* guarded by lock */
     gs_cap_stats cap_stats;      /* guarded by lock */
     window w_capture, w_process, w_output, w_total;
     pthread_t threads[3];
@@ -215,12 +218,62 @@ static void *process_thread(void *arg)
     return NULL;
 }
 
+/* Like wait_pop, but gives up after ms milliseconds (*timed_out set). */
+static pframe *wait_pop_for(gs_cap_pipe *p, ring *r, pthread_cond_t *cv, int ms, int *timed_out)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    ts.tv_sec += ms / 1000;
+    ts.tv_nsec += (long)(ms % 1000) * 1000000L;
+    if (ts.tv_nsec >= 1000000000L) {
+        ts.tv_sec++;
+        ts.tv_nsec -= 1000000000L;
+    }
+    *timed_out = 0;
+    pthread_mutex_lock(&p->lock);
+    pframe *f;
+    while (!(f = ring_pop(r)) && !atomic_load(&p->stop))
+        if (pthread_cond_timedwait(cv, &p->lock, &ts) != 0) {
+            *timed_out = 1;
+            break;
+        }
+    pthread_mutex_unlock(&p->lock);
+    return f;
+}
+
+/* No frame for placeholder_ms (the camera is gone, or reopening): keep the
+ * loopback alive with the "no video" frame, about 10 per second. */
+static void write_placeholder(gs_cap_pipe *p)
+{
+    gs_error e = {0};
+    if (gs_cap_out_write_placeholder(p->cfg.out, &e) != GS_OK)
+        return;
+    pthread_mutex_lock(&p->lock);
+    p->placeholders++;
+    pthread_mutex_unlock(&p->lock);
+}
+
 static void *output_thread(void *arg)
 {
     gs_cap_pipe *p = arg;
     pframe *f;
-    int failing = 0;
-    while ((f = wait_pop(p, &p->r_out, &p->to_out))) {
+    int failing = 0, idle_ms = 0;
+    int hold = p->cfg.placeholder_ms ? p->cfg.placeholder_ms : 500;
+    for (;;) {
+        int timed_out = 0;
+        if (p->cfg.out && hold > 0)
+            f = wait_pop_for(p, &p->r_out, &p->to_out, idle_ms >= hold ? 100 : hold - idle_ms,
+                             &timed_out);
+        else
+            f = wait_pop(p, &p->r_out, &p->to_out);
+        if (timed_out) {
+            idle_ms = idle_ms >= hold ? idle_ms + 100 : hold;
+            write_placeholder(p);
+            continue;
+        }
+        if (!f)
+            break;
+        idle_ms = 0;
         int64_t t0 = now(p);
         gs_error e = {0};
         int r = p->cfg.out ? gs_cap_out_write(p->cfg.out, f->rgb, 3 * (size_t)f->width,
@@ -266,6 +319,8 @@ int gs_cap_pipe_start(const gs_cap_pipe_config *cfg, gs_cap_pipe **out, gs_error
     if (!cfg || !out || !cfg->cap || !cfg->stage.process)
         return gs_error_set(err, GS_ERR_ARG, "pipeline: capture and stage needed");
     int size = cfg->ring ? cfg->ring : 2;
+    if (cfg->placeholder_ms > 60000)
+        return gs_error_set(err, GS_ERR_ARG, "pipeline: placeholder_ms over 60000");
     if (size < 1 || size > MAX_RING)
         return gs_error_set(err, GS_ERR_ARG, "pipeline: ring %d outside 1..%d", size, MAX_RING);
     gs_cap_pipe *p = calloc(1, sizeof *p);
@@ -279,7 +334,11 @@ int gs_cap_pipe_start(const gs_cap_pipe_config *cfg, gs_cap_pipe **out, gs_error
     atomic_init(&p->stop, 0);
     pthread_mutex_init(&p->lock, NULL);
     pthread_cond_init(&p->to_proc, NULL);
-    pthread_cond_init(&p->to_out, NULL);
+    pthread_condattr_t ca; /* timed waits on the monotonic clock */
+    pthread_condattr_init(&ca);
+    pthread_condattr_setclock(&ca, CLOCK_MONOTONIC);
+    pthread_cond_init(&p->to_out, &ca);
+    pthread_condattr_destroy(&ca);
     void *(*fns[3])(void *) = {output_thread, process_thread, capture_thread};
     for (int i = 0; i < 3; i++) {
         if (pthread_create(&p->threads[i], NULL, fns[i], p) != 0) {
@@ -321,6 +380,7 @@ void gs_cap_pipe_get_stats(gs_cap_pipe *p, gs_cap_pipe_stats *s)
     s->in = p->in;
     s->out = p->out;
     s->ring_drops = p->drops;
+    s->placeholders = p->placeholders;
     s->cap = p->cap_stats;
     if (copy) {
         copy[0] = p->w_capture;

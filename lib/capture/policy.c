@@ -2,9 +2,12 @@
  * gaze and head pose (thresholds after NVIDIA Maxine's eye contact: gaze
  * 20->30 deg, head pitch 15->25 deg, head yaw 25->30 deg). Pure arithmetic
  * plus a mutex so another thread can change the settings at run time. */
+#define _GNU_SOURCE
 #include <math.h>
 #include <pthread.h>
 #include <stdlib.h>
+#include <string.h>
+#include <strings.h>
 
 #include "gazesplat/capture.h"
 
@@ -163,4 +166,86 @@ void gs_cap_policy_update(gs_cap_policy *p, const gs_cap_policy_input *in,
     out->gaze_pitch = p->gaze_pitch;
     out->gaze_yaw = p->gaze_yaw;
     out->held = held;
+}
+
+/* ---- settings by name (the daemon's LIVE_POLICY, the CLI) ---- */
+
+/* The float field called `name`, or NULL. */
+static float *field(gs_cap_policy_config *c, const char *name)
+{
+    struct {
+        const char *name;
+        float *f;
+    } t[] = {{"strength", &c->strength},
+             {"gaze_low_deg", &c->gaze_low_deg},
+             {"gaze_high_deg", &c->gaze_high_deg},
+             {"head_pitch_low_deg", &c->head_pitch_low_deg},
+             {"head_pitch_high_deg", &c->head_pitch_high_deg},
+             {"head_yaw_low_deg", &c->head_yaw_low_deg},
+             {"head_yaw_high_deg", &c->head_yaw_high_deg},
+             {"smooth_s", &c->smooth_s},
+             {"blink_openness", &c->blink_openness},
+             {"blink_hold_max_s", &c->blink_hold_max_s}};
+    for (size_t i = 0; i < sizeof t / sizeof t[0]; i++)
+        if (!strcmp(name, t[i].name))
+            return t[i].f;
+    return NULL;
+}
+
+static int parse_bool(const char *v, int *out)
+{
+    static const char *yes[] = {"yes", "true", "on", "1"}, *no[] = {"no", "false", "off", "0"};
+    for (int i = 0; i < 4; i++) {
+        if (!strcasecmp(v, yes[i]))
+            return *out = 1, 0;
+        if (!strcasecmp(v, no[i]))
+            return *out = 0, 0;
+    }
+    return -1;
+}
+
+int gs_cap_policy_config_set(gs_cap_policy_config *c, const char *key, const char *value,
+                             gs_error *err)
+{
+    if (!c || !key || !value)
+        return gs_error_set(err, GS_ERR_ARG, "policy: setting without key or value");
+    if (!strcmp(key, "enabled")) {
+        if (parse_bool(value, &c->enabled) == 0)
+            return GS_OK;
+        return gs_error_set(err, GS_ERR_ARG, "policy: enabled: want yes or no, got '%.40s'", value);
+    }
+    float *f = field(c, key);
+    if (f) {
+        char *end;
+        double d = strtod(value, &end);
+        if (end == value || *end || !isfinite(d) || fabs(d) > 1e6)
+            return gs_error_set(err, GS_ERR_ARG, "policy: %s: want a number, got '%.40s'", key,
+                                value);
+        *f = (float)d;
+        return GS_OK;
+    }
+    return gs_error_set(err, GS_ERR_ARG, "policy: unknown key '%.60s'", key);
+}
+
+int gs_cap_policy_config_parse(gs_cap_policy_config *c, const char *list, gs_error *err)
+{
+    gs_cap_policy_config t = *c;
+    char buf[1024];
+    if (!list || strlen(list) >= sizeof buf)
+        return gs_error_set(err, GS_ERR_ARG, "policy: settings list missing or too long");
+    strcpy(buf, list);
+    char *save = NULL;
+    for (char *kv = strtok_r(buf, ",", &save); kv; kv = strtok_r(NULL, ",", &save)) {
+        char *eq = strchr(kv, '=');
+        if (!eq)
+            return gs_error_set(err, GS_ERR_ARG, "policy: want key=value, got '%.40s'", kv);
+        *eq = '\0';
+        int r = gs_cap_policy_config_set(&t, kv, eq + 1, err);
+        if (r != GS_OK)
+            return r;
+    }
+    int r = gs_cap_policy_config_check(&t, err);
+    if (r == GS_OK)
+        *c = t;
+    return r;
 }

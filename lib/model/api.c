@@ -238,7 +238,7 @@ int gs_model_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
         return rc;
     gs_frame fr;
     frame_of(s, view, &fr);
-    rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
+    rc = gs_frame_render(c, pool, &fr, NULL, err);
     if (rc)
         return rc;
     return write_image(c, s, rgb, stride, err);
@@ -475,7 +475,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             break;
         gs_frame_grad fg;
         memset(&fg, 0, sizeof fg);
-        rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, &fg, err);
+        rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
+                               &fg, err);
         if (rc)
             break;
         memset(s->g, 0, sizeof s->g);

@@ -236,6 +236,7 @@ void gs_model_spec_default(gs_model_spec *s)
     s->guidance = -1;
     s->two_stream = -1;
     s->eye_rotation = -1;
+    s->guide_source = -1;
 }
 
 int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
@@ -274,8 +275,19 @@ int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
         c.two_stream = s->two_stream;
     if (s->eye_rotation >= 0)
         c.eye_rotation = s->eye_rotation;
+    if (s->guide_source >= 0)
+        c.guide_source = s->guide_source;
     c.n_face = 1; /* counted from the template by gs_model_create */
     return gs_model_create(&c, seed, out, err);
+}
+
+int gs_model_set_guide_source(gs_model *m, int source, gs_error *err)
+{
+    if (!m || (source != GS_GUIDE_SRC_BLOCK && source != GS_GUIDE_SRC_SOURCE))
+        return gs_error_set(err, GS_ERR_ARG, "guide source %d: 0 or 1", source);
+    m->cfg.guide_source = source;
+    m->rcfg.guide_source = source;
+    return GS_OK;
 }
 
 int gs_model_write(const gs_model *m, const char *path, gs_error *err)

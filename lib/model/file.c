@@ -15,17 +15,21 @@ typedef struct cfg_field {
     const char *key;
     int is_double;
     size_t off;
+    int optional; /* added after format version 1 shipped */
+    int dflt;     /* its value when absent */
 } cfg_field;
 
-#define I(f) {#f, 0, offsetof(gs_model_config, f)}
-#define D(f) {#f, 1, offsetof(gs_model_config, f)}
+#define I(f) {#f, 0, offsetof(gs_model_config, f), 0, 0}
+#define D(f) {#f, 1, offsetof(gs_model_config, f), 0, 0}
+#define OPT_I(f, v) {#f, 0, offsetof(gs_model_config, f), 1, v}
 static const cfg_field k_fields[] = {
     I(n_face), I(n_eye_each), I(feat_dim), I(id_dim), I(hidden),
     I(channels), I(feat_size), I(image_size), I(guidance), I(two_stream),
     I(eye_rotation), I(n_train_ids), D(template_spacing_mm), D(d_n_mm),
-    D(focal)};
+    D(focal), OPT_I(guide_source, GS_GUIDE_SRC_BLOCK)};
 #undef I
 #undef D
+#undef OPT_I
 #define NFIELDS (int)(sizeof k_fields / sizeof k_fields[0])
 
 static int write_meta(gs_st_writer *w, const gs_model_config *c)
@@ -89,11 +93,15 @@ static int read_config(const gs_st_file *f, gs_model_config *c,
         char key[64];
         snprintf(key, sizeof key, "config.%s", k_fields[i].key);
         const char *v = gs_st_meta(f, key);
+        unsigned char *base = (unsigned char *)c + k_fields[i].off;
+        if (!v && k_fields[i].optional) {
+            memcpy(base, &k_fields[i].dflt, sizeof k_fields[i].dflt);
+            continue;
+        }
         if (!v || !*v)
             return gs_error_set(err, GS_ERR_FORMAT, "model: %s missing", key);
         char *end = NULL;
         errno = 0;
-        unsigned char *base = (unsigned char *)c + k_fields[i].off;
         if (k_fields[i].is_double) {
             double d = strtod(v, &end);
             memcpy(base, &d, sizeof d);

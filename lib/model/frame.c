@@ -17,6 +17,7 @@
  * Both streams are moved into the camera by the head pose (x_cam = R x + t,
  * q_cam = q_R q), rasterized at feat_size with a white RGB background and
  * turned into the image by the renderer. */
+#include <limits.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -160,10 +161,26 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->scratch_blk = blk;
     c->scratch_len = sc + 2 * blk;
     c->scratch = falloc(c->scratch_len, &fail);
+    c->fmap_face = falloc(fsz * c->C, &fail);
+    c->v_fmap_face = falloc(fsz * c->C, &fail);
+    c->alpha_face = falloc(fsz, &fail);
+    c->bg_crop = falloc(fsz * c->C, &fail);
+    c->fmap_eye = falloc(fsz * c->C, &fail);
+    c->v_fmap_eye = falloc(fsz * c->C, &fail);
+    c->alpha_eye = falloc(fsz, &fail);
+    c->gvec = falloc((size_t)c->C, &fail);
     c->tmp8 = malloc(isz * 3);
     c->raster = gs_raster_create();
-    if (fail || !c->tmp8 || !c->raster)
+    c->raster_face = gs_raster_create();
+    c->raster_crop = gs_raster_create();
+    c->raster_eye = gs_raster_create();
+    if (fail || !c->tmp8 || !c->raster || !c->raster_face || !c->raster_crop ||
+        !c->raster_eye)
         return GS_ERR_NOMEM;
+    const gs_renderer_config *rc = &m->rcfg;
+    c->src_mode = c->ne > 0 && rc->guidance != GS_GUIDE_NONE &&
+                  rc->guide_source == GS_GUIDE_SRC_SOURCE;
+    c->inc_ok = c->ne > 0 && (rc->guidance == GS_GUIDE_NONE || c->src_mode);
     /* White RGB background, zero for the other channels. */
     for (size_t i = 0; i < 3 * fsz; i++)
         c->bg[i] = 1.0f;
@@ -182,11 +199,16 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->q_head, &c->v_mean, &c->v_scale, &c->v_quat,
                       &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
                       &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->r_grad,
-                      &c->scratch};
+                      &c->scratch, &c->fmap_face, &c->v_fmap_face,
+                      &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
+                      &c->v_fmap_eye, &c->alpha_eye};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(*bufs[i]);
     free(c->tmp8);
     gs_raster_destroy(c->raster);
+    gs_raster_destroy(c->raster_face);
+    gs_raster_destroy(c->raster_crop);
+    gs_raster_destroy(c->raster_eye);
     free(c);
 }
 
@@ -384,6 +406,10 @@ void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
         to_camera(c, fr, 0, c->nf, qR);
         c->face_key = *fr;
         c->face_valid = 1;
+        c->face_fresh = 1;
+        c->face_map_valid = 0;
+    } else {
+        c->face_fresh = 0;
     }
     if (c->ne) {
         eye_forward(c, fr);
@@ -392,18 +418,9 @@ void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
     c->fr = *fr;
 }
 
-int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
-                     int stream, int force_face, gs_error *err)
+/* The Gaussians [first, first + count) as a raster input. */
+static gs_gaussians gaussians_of(const gs_model_ctx *c, int first, int count)
 {
-    gs_frame_forward_streams(c, fr, force_face);
-    c->stream = stream;
-    int first = 0, count = c->n;
-    if (stream == GS_STREAM_FACE)
-        count = c->nf;
-    else if (stream == GS_STREAM_EYE) {
-        first = c->nf;
-        count = c->ne;
-    }
     gs_gaussians g = {
         .n = count, .channels = c->C,
         .means = c->g_mean + 3 * (size_t)first,
@@ -411,6 +428,40 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         .quats = c->g_quat + 4 * (size_t)first,
         .opacity_logits = c->g_opac + first,
         .features = c->g_feat + (size_t)first * c->C};
+    return g;
+}
+
+/* The face stream alone into c->fmap_face (the guidance source and the
+ * face-only training render), unless it is current. */
+static int face_map(gs_model_ctx *c, gs_pool *pool, gs_error *err)
+{
+    if (c->face_map_valid)
+        return GS_OK;
+    gs_gaussians g = gaussians_of(c, 0, c->nf);
+    gs_camera cam;
+    gs_frame_camera(c->m, c->fr.head_t, &cam);
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    int rc = gs_raster_forward(c->raster_face, pool, &cam, &g, c->bg, &ro,
+                               c->fmap_face, c->alpha_face, NULL, err);
+    if (!rc)
+        c->face_map_valid = 1;
+    return rc;
+}
+
+int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                     int stream, int force_face, gs_error *err)
+{
+    gs_frame_forward_streams(c, fr, force_face);
+    c->stream = stream;
+    c->inc_valid = 0; /* fmap and rgb are overwritten */
+    int first = 0, count = c->n;
+    if (stream == GS_STREAM_FACE)
+        count = c->nf;
+    else if (stream == GS_STREAM_EYE) {
+        first = c->nf;
+        count = c->ne;
+    }
+    gs_gaussians g = gaussians_of(c, first, count);
     gs_camera cam;
     gs_frame_camera(c->m, fr->head_t, &cam);
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
@@ -418,11 +469,213 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                                c->alpha, NULL, err);
     if (rc)
         return rc;
-    rc = gs_renderer_forward(&c->m->rcfg, &c->m->p.rend, c->fmap, fr->code,
-                             c->fs, c->fs, c->r_act, c->r_act_len, c->rgb,
-                             pool);
+    /* the face-only map: the guidance source, or a training loss term */
+    c->used_src = c->src_mode && stream == GS_STREAM_BOTH;
+    c->used_face_map = c->ne > 0 && stream == GS_STREAM_BOTH &&
+                       (c->used_src || c->face_loss);
+    if (c->used_face_map) {
+        rc = face_map(c, pool, err);
+        if (rc)
+            return rc;
+    }
+    c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss;
+    if (c->used_eye_map) { /* the eye stream alone, for its training loss */
+        gs_gaussians ge = gaussians_of(c, c->nf, c->ne);
+        rc = gs_raster_forward(c->raster_eye, pool, &cam, &ge, c->bg, &ro,
+                               c->fmap_eye, c->alpha_eye, NULL, err);
+        if (rc)
+            return rc;
+    }
+    rc = gs_renderer_forward_src(&c->m->rcfg, &c->m->p.rend, c->fmap,
+                                 fr->code, c->used_src ? c->fmap_face : NULL,
+                                 c->fs, c->fs, c->r_act, c->r_act_len, c->rgb,
+                                 pool);
     if (rc)
         return gs_error_set(err, rc, "model: renderer forward failed");
+    return GS_OK;
+}
+
+/* ---- incremental renders ---- */
+
+/* Tile-aligned box (feature pixels, x0 y0 x1 y1, x1 y1 exclusive, clipped
+ * to the map; empty when x0 >= x1) of every tile the eye stream's
+ * Gaussians can reach. The rasterizer bins a Gaussian to each tile its
+ * 3-sigma box touches and composites it on any pixel of those tiles where
+ * its alpha passes 1/255, so its reach is a set of whole tiles. The box
+ * here is a superset: isotropic eye Gaussians, sigma bounded by
+ * 1.25 f s / z (perspective stretch off the axis) plus the 0.3 px^2
+ * screen dilation. */
+static void eye_tiles(const gs_model_ctx *c, const gs_camera *cam, int r[4])
+{
+    double lo[2] = {1e30, 1e30}, hi[2] = {-1e30, -1e30};
+    for (int i = c->nf; i < c->n; i++) {
+        const float *x = c->g_mean + 3 * (size_t)i, *ls = c->g_scale + 3 * (size_t)i;
+        double z = x[2];
+        if (!(z > GS_RASTER_NEAR)) /* behind the camera: never drawn */
+            continue;
+        double smax = exp(fmax(ls[0], fmax(ls[1], ls[2])));
+        double rad = 3.0 * (1.25 * cam->fx * smax / z + 0.6) + 1.0;
+        double u = cam->fx * x[0] / z + cam->cx, v = cam->fy * x[1] / z + cam->cy;
+        lo[0] = fmin(lo[0], u - rad), hi[0] = fmax(hi[0], u + rad);
+        lo[1] = fmin(lo[1], v - rad), hi[1] = fmax(hi[1], v + rad);
+    }
+    const int T = GS_RASTER_TILE, lim[2] = {cam->width, cam->height};
+    for (int k = 0; k < 2; k++) {
+        double a = fmax(lo[k], 0.0), b = fmin(hi[k], (double)lim[k]);
+        if (!(a < b)) {
+            r[0] = r[1] = r[2] = r[3] = 0;
+            return;
+        }
+        int t0 = (int)floor(a / T) * T, t1 = (int)ceil(b / T) * T;
+        r[k] = t0;
+        r[k + 2] = t1 < lim[k] ? t1 : lim[k];
+    }
+}
+
+static void box_union(int a[4], const int b[4])
+{
+    if (b[0] >= b[2] || b[1] >= b[3])
+        return;
+    if (a[0] >= a[2] || a[1] >= a[3]) {
+        memcpy(a, b, 4 * sizeof *a);
+        return;
+    }
+    a[0] = b[0] < a[0] ? b[0] : a[0], a[1] = b[1] < a[1] ? b[1] : a[1];
+    a[2] = b[2] > a[2] ? b[2] : a[2], a[3] = b[3] > a[3] ? b[3] : a[3];
+}
+
+/* box grown by m on every side, clipped to [0, n)^2 */
+static void box_grow(const int b[4], int m, int n, int o[4])
+{
+    o[0] = b[0] - m > 0 ? b[0] - m : 0, o[1] = b[1] - m > 0 ? b[1] - m : 0;
+    o[2] = b[2] + m < n ? b[2] + m : n, o[3] = b[3] + m < n ? b[3] + m : n;
+}
+
+/* Rasterizes every Gaussian over the box d (tile-aligned) into c->fmap;
+ * ch is the bounding box of the feature pixels that changed (empty when
+ * none did): the renderer need only revisit that. */
+static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
+                      const int d[4], int ch[4], gs_error *err)
+{
+    int w = d[2] - d[0], h = d[3] - d[1], fs = c->fs, C = c->C;
+    size_t plane = (size_t)w * h;
+    gs_camera cam = *full;
+    cam.cx -= (float)d[0], cam.cy -= (float)d[1];
+    cam.width = w, cam.height = h;
+    for (int k = 0; k < C; k++) /* the background is constant per channel */
+        for (size_t i = 0; i < plane; i++)
+            c->bg_crop[k * plane + i] = c->bg[(size_t)k * fs * fs];
+    gs_gaussians g = gaussians_of(c, 0, c->n);
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    float *out = c->v_fmap, *alpha = c->v_fmap_face; /* scratch here */
+    int rc = gs_raster_forward(c->raster_crop, pool, &cam, &g, c->bg_crop, &ro,
+                               out, alpha, NULL, err);
+    if (rc)
+        return rc;
+    ch[0] = ch[1] = INT_MAX, ch[2] = ch[3] = INT_MIN;
+    for (int k = 0; k < C; k++)
+        for (int y = 0; y < h; y++) {
+            float *dst = c->fmap + ((size_t)k * fs + d[1] + y) * fs + d[0];
+            const float *src = out + k * plane + (size_t)y * w;
+            for (int x = 0; x < w; x++)
+                if (dst[x] != src[x]) {
+                    int gx = d[0] + x, gy = d[1] + y;
+                    ch[0] = gx < ch[0] ? gx : ch[0], ch[2] = gx >= ch[2] ? gx + 1 : ch[2];
+                    ch[1] = gy < ch[1] ? gy : ch[1], ch[3] = gy >= ch[3] ? gy + 1 : ch[3];
+                }
+            memcpy(dst, src, (size_t)w * sizeof(float));
+        }
+    if (ch[0] == INT_MAX)
+        ch[0] = ch[1] = ch[2] = ch[3] = 0;
+    return GS_OK;
+}
+
+/* Re-renders the output over the reach of the feature box d. */
+static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
+{
+    const int R = GS_RENDERER_REACH, fs = c->fs, C = c->C, S = c->S;
+    int in[4], keep[4];
+    box_grow(d, 2 * R, fs, in);   /* what the kept pixels read */
+    box_grow(d, R, fs, keep);     /* what the change can reach */
+    int w = in[2] - in[0], h = in[3] - in[1];
+    float *x = c->v_fmap, *out = c->v_rgb; /* scratch here */
+    for (int k = 0; k < C; k++)
+        for (int y = 0; y < h; y++)
+            memcpy(x + ((size_t)k * h + y) * w,
+                   c->fmap + ((size_t)k * fs + in[1] + y) * fs + in[0],
+                   (size_t)w * sizeof(float));
+    int rc = gs_renderer_forward_vec(&c->m->rcfg, &c->m->p.rend, x, c->gvec,
+                                     h, w, c->r_act, c->r_act_len, out, pool);
+    if (rc)
+        return rc;
+    int W4 = 4 * w, H4 = 4 * h;
+    for (int k = 0; k < 3; k++)
+        for (int y = 4 * keep[1]; y < 4 * keep[3]; y++)
+            memcpy(c->rgb + ((size_t)k * S + y) * S + 4 * keep[0],
+                   out + ((size_t)k * H4 + y - 4 * in[1]) * W4 +
+                       4 * (keep[0] - in[0]),
+                   (size_t)(4 * (keep[2] - keep[0])) * sizeof(float));
+    return GS_OK;
+}
+
+static int same_subject_pose(const gs_frame *a, const gs_frame *b)
+{
+    return !memcmp(a->code, b->code, sizeof a->code) &&
+           !memcmp(a->head_R, b->head_R, sizeof a->head_R) &&
+           !memcmp(a->head_t, b->head_t, sizeof a->head_t);
+}
+
+int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                    int *incremental, gs_error *err)
+{
+    gs_camera cam;
+    int rc;
+    if (incremental)
+        *incremental = 0;
+    if (!c->inc_ok)
+        return gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
+    if (!c->inc_valid || !same_subject_pose(&c->inc_key, fr)) {
+        rc = gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
+        if (rc)
+            return rc;
+        if (c->src_mode) {
+            rc = gs_renderer_guide_vector(&c->m->rcfg, &c->m->p.rend,
+                                          c->fmap_face, fr->code, c->fs, c->fs,
+                                          c->r_act, c->r_act_len, c->gvec,
+                                          pool);
+            if (rc)
+                return gs_error_set(err, rc, "model: guidance vector failed");
+        }
+        gs_frame_camera(c->m, fr->head_t, &cam);
+        eye_tiles(c, &cam, c->inc_rect);
+        c->inc_key = *fr;
+        c->inc_valid = 1;
+        return GS_OK;
+    }
+    c->inc_valid = 0; /* until the update is complete */
+    gs_frame_forward_streams(c, fr, 0);
+    gs_frame_camera(c->m, fr->head_t, &cam);
+    int now[4], dirty[4];
+    eye_tiles(c, &cam, now);
+    memcpy(dirty, c->inc_rect, sizeof dirty);
+    box_union(dirty, now);
+    if (dirty[0] < dirty[2] && dirty[1] < dirty[3]) {
+        int changed[4];
+        rc = raster_box(c, pool, &cam, dirty, changed, err);
+        if (rc)
+            return rc;
+        if (changed[0] < changed[2])
+            rc = render_box(c, pool, changed);
+        if (rc)
+            return gs_error_set(err, rc, "model: incremental renderer failed");
+        c->inc_stats[0] += (double)(dirty[2] - dirty[0]) * (dirty[3] - dirty[1]);
+        c->inc_stats[1] += (double)(changed[2] - changed[0]) * (changed[3] - changed[1]);
+    }
+    memcpy(c->inc_rect, now, sizeof now);
+    c->inc_key = *fr;
+    c->inc_valid = 1;
+    if (incremental)
+        *incremental = 1;
     return GS_OK;
 }
 
@@ -679,7 +932,8 @@ static void eye_backward(gs_model_ctx *c, const gs_model_params *gp,
 }
 
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
-                      const float *d_fmap, const gs_model_params *grads,
+                      const float *d_fmap, const float *d_fmap_face,
+                      const float *d_fmap_eye, const gs_model_params *grads,
                       gs_frame_grad *fg, gs_error *err)
 {
     size_t fsz = (size_t)c->fs * c->fs * c->C;
@@ -687,16 +941,19 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         memcpy(c->v_fmap, d_fmap, fsz * sizeof(float));
     else
         memset(c->v_fmap, 0, fsz * sizeof(float));
+    if (c->used_face_map && d_fmap_face)
+        memcpy(c->v_fmap_face, d_fmap_face, fsz * sizeof(float));
+    else
+        memset(c->v_fmap_face, 0, fsz * sizeof(float));
     if (d_rgb) {
         if (!grads)
             memset(c->r_grad, 0,
                    gs_renderer_param_count(&c->m->rcfg) * sizeof(float));
-        int rc = gs_renderer_backward(&c->m->rcfg, &c->m->p.rend, c->r_act,
-                                      c->r_act_len, c->fmap, c->fr.code,
-                                      d_rgb, c->fs, c->fs,
-                                      grads ? &grads->rend : &c->r_grad_p,
-                                      c->v_fmap,
-                                      fg ? fg->code : NULL, pool);
+        int rc = gs_renderer_backward_src(
+            &c->m->rcfg, &c->m->p.rend, c->r_act, c->r_act_len, c->fmap,
+            c->fr.code, c->used_src ? c->fmap_face : NULL, d_rgb, c->fs, c->fs,
+            grads ? &grads->rend : &c->r_grad_p, c->v_fmap,
+            c->used_src ? c->v_fmap_face : NULL, fg ? fg->code : NULL, pool);
         if (rc)
             return gs_error_set(err, rc, "model: renderer backward failed");
     }
@@ -715,6 +972,24 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                                 NULL, err);
     if (rc)
         return rc;
+    if (c->used_face_map) { /* the face-only map adds to the face stream */
+        gs_gaussian_grads gf = {c->v_mean, c->v_scale, c->v_quat, c->v_opac,
+                                c->v_feat};
+        rc = gs_raster_backward(c->raster_face, pool, c->v_fmap_face, NULL,
+                                NULL, &gf, NULL, err);
+        if (rc)
+            return rc;
+    }
+    if (c->used_eye_map && d_fmap_eye) { /* the eye-only map: eye stream */
+        size_t e = (size_t)c->nf;
+        gs_gaussian_grads ge = {c->v_mean + 3 * e, c->v_scale + 3 * e,
+                                c->v_quat + 4 * e, c->v_opac + e,
+                                c->v_feat + e * c->C};
+        rc = gs_raster_backward(c->raster_eye, pool, d_fmap_eye, NULL, NULL,
+                                &ge, NULL, err);
+        if (rc)
+            return rc;
+    }
     gs_frame_backward_streams(c, grads, fg);
     return GS_OK;
 }

@@ -44,6 +44,28 @@ struct gs_model_ctx {
     float *v_mean, *v_scale, *v_quat, *v_opac, *v_feat;   /* their grads */
     /* raster + renderer */
     gs_raster *raster;
+    /* SOURCE guidance (renderer.h): the face stream's own map is the
+     * guidance source; it and its vector are kept with the face cache */
+    int src_mode;                     /* SOURCE guidance and two streams */
+    gs_raster *raster_face;
+    float *fmap_face, *alpha_face, *v_fmap_face; /* [C,fs,fs], [fs,fs] */
+    float *gvec;                      /* [C] guidance vector of fmap_face */
+    int face_fresh;                   /* face stream redone by the last call */
+    int face_map_valid;               /* fmap_face matches the face cache */
+    int face_loss;                    /* training: always make fmap_face */
+    int eye_loss;                     /* training: make fmap_eye */
+    int used_src, used_face_map, used_eye_map; /* what the last forward did */
+    gs_raster *raster_eye;
+    float *fmap_eye, *alpha_eye, *v_fmap_eye; /* the eye stream alone */
+    float *bg_crop;                   /* [C, fs*fs] background of a crop */
+    /* incremental renders (gs_frame_render): fmap and rgb hold the full
+     * render of inc_key; inc_rect the eye stream's footprint in it */
+    int inc_ok;                       /* the model allows them */
+    int inc_valid;
+    gs_frame inc_key;
+    int inc_rect[4];                  /* x0, y0, x1, y1 (exclusive), feat px */
+    gs_raster *raster_crop;
+    double inc_stats[2];              /* feature px re-rasterized, changed */
     float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */
     float *v_fmap, *v_rgb;
     float *r_act;
@@ -75,13 +97,26 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
                               int force_face);
 
-/* Backward of the last forward from d_rgb [3,S,S] (may be NULL) and
- * d_fmap [C,fs,fs] (may be NULL). Adds parameter gradients into `grads`
- * (a gs_model_params bound to a gradient array; NULL skips them) and the
- * frame's input gradients into fg (may be NULL). */
+/* Backward of the last forward from d_rgb [3,S,S] (may be NULL),
+ * d_fmap [C,fs,fs] (may be NULL), d_fmap_face (the face-only map
+ * c->fmap_face, made with SOURCE guidance or face_loss; may be NULL) and
+ * d_fmap_eye (the eye-only map c->fmap_eye, made with eye_loss; may be
+ * NULL). Adds parameter gradients
+ * into `grads` (a gs_model_params bound to a gradient array; NULL skips
+ * them) and the frame's input gradients into fg (may be NULL). */
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
-                      const float *d_fmap, const gs_model_params *grads,
+                      const float *d_fmap, const float *d_fmap_face,
+                      const float *d_fmap_eye, const gs_model_params *grads,
                       gs_frame_grad *fg, gs_error *err);
+
+/* Renders a frame into c->rgb for display (no backward). When the model
+ * allows it (SOURCE or no guidance, two streams) and the last render had
+ * the same code and head pose, only the eye stream's footprint (old and
+ * new) is rasterized again and only the renderer's reach around it is
+ * recomputed; the result equals gs_frame_forward's within float rounding
+ * (test_model_api). *incremental (may be NULL) tells which path ran. */
+int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                    int *incremental, gs_error *err);
 
 /* The stream part of the backward: from the Gaussian gradients in
  * c->v_mean, v_scale, v_quat, v_opac, v_feat (camera frame) to the

@@ -18,6 +18,7 @@ void gs_model_config_default(gs_model_config *c)
     c->feat_size = 64;
     c->image_size = 256;
     c->guidance = GS_GUIDE_ADDITIVE;
+    c->guide_source = GS_GUIDE_SRC_SOURCE;
     c->two_stream = 1;
     c->eye_rotation = 1;
     c->n_train_ids = 0;
@@ -41,6 +42,7 @@ int gs_model_config_check(const gs_model_config *c, gs_error *err)
     RANGE(channels, 3, GS_RASTER_MAX_CHANNELS)
     RANGE(feat_size, 8, 1024)
     RANGE(guidance, 0, 2)
+    RANGE(guide_source, 0, 1)
     RANGE(two_stream, 0, 1)
     RANGE(eye_rotation, 0, 1)
     RANGE(n_train_ids, 0, 100000)
@@ -168,6 +170,7 @@ int gs_model_layout(const gs_model_config *cfg, gs_model *m, gs_error *err)
     m->rcfg.channels = C;
     m->rcfg.code_dim = D;
     m->rcfg.guidance = cfg->guidance;
+    m->rcfg.guide_source = cfg->guide_source;
     m->rcfg.blocks = GS_RENDERER_BLOCKS;
     rc = gs_renderer_config_validate(&m->rcfg, err);
     if (rc)

@@ -21,6 +21,8 @@ typedef struct gs_model_config {
     int feat_size;    /* feature map edge */
     int image_size;   /* output edge = 4 feat_size */
     int guidance;     /* gs_renderer guidance mode */
+    int guide_source; /* gs_renderer guide source; files without the key
+                         (before it existed) mean BLOCK */
     int two_stream;   /* 0: single-stream ablation */
     int eye_rotation; /* 0: no explicit eye rotation (ablation) */
     int n_train_ids;  /* auto-decoder codes kept in the file (may be 0) */

@@ -44,6 +44,10 @@ int gs_renderer_config_validate(const gs_renderer_config *cfg, gs_error *err)
     if (cfg->blocks != GS_RENDERER_BLOCKS)
         return gs_error_set(err, GS_ERR_ARG, "renderer: blocks %d, only %d supported",
                             cfg->blocks, GS_RENDERER_BLOCKS);
+    if (cfg->guide_source != GS_GUIDE_SRC_BLOCK &&
+        cfg->guide_source != GS_GUIDE_SRC_SOURCE)
+        return gs_error_set(err, GS_ERR_ARG, "renderer: unknown guide source %d",
+                            cfg->guide_source);
     return GS_OK;
 }
 
@@ -209,7 +213,7 @@ typedef struct {
     float *z;   /* [C, HWo]   blur(shuffle(yb) + tile(xin)) */
     float *u;   /* [C, HWo]   lrelu(conv_c(z)) */
     float *g;   /* [C, HWo]   guide(u); == u without guidance */
-    float *att; /* [HWo]      attention weights; NULL without guidance */
+    float *att; /* [HWo]      attention weights; NULL unless BLOCK guidance */
 } block_acts;
 
 typedef struct {
@@ -217,6 +221,9 @@ typedef struct {
     size_t hw0, hw1, hw2;
     block_acts blk[GS_RENDERER_BLOCKS];
     float *out;          /* [3, HW2] saved sigmoid output */
+    float *satt;         /* [HW0] source attention (SOURCE guidance) */
+    float *gvec;         /* [C] the guidance vector (SOURCE guidance) */
+    float *gda;          /* [C] its gradient (scratch) */
     float *bufP, *bufQ;  /* [C, HW2] scratch */
     float *bufX;         /* [C, HW1] scratch */
     float *rgb2a, *rgb2b; /* [3, HW2] scratch */
@@ -250,10 +257,18 @@ static int check_sizes(int C, int H, int W)
     return big > (size_t)INT_MAX ? GS_ERR_LIMIT : GS_OK;
 }
 
+/* SOURCE guidance in use: one vector for both blocks. */
+static int source_guided(const gs_renderer_config *cfg)
+{
+    return cfg->guidance != GS_GUIDE_NONE &&
+           cfg->guide_source == GS_GUIDE_SRC_SOURCE;
+}
+
 static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
                         int W, float *base)
 {
-    int C = cfg->channels, guided = cfg->guidance != GS_GUIDE_NONE;
+    int C = cfg->channels, guided = cfg->guidance != GS_GUIDE_NONE,
+        src = source_guided(cfg);
     memset(L, 0, sizeof *L);
     L->C = C, L->D = cfg->code_dim, L->H = H, L->W = W;
     L->hw0 = (size_t)H * (size_t)W, L->hw1 = 4 * L->hw0, L->hw2 = 16 * L->hw0;
@@ -266,9 +281,12 @@ static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
         a->z = carve(L, base, Cs * hwo);
         a->u = carve(L, base, Cs * hwo);
         a->g = guided ? carve(L, base, Cs * hwo) : a->u;
-        a->att = guided ? carve(L, base, hwo) : NULL;
+        a->att = guided && !src ? carve(L, base, hwo) : NULL;
     }
     L->out = carve(L, base, 3 * L->hw2);
+    L->satt = src ? carve(L, base, L->hw0) : NULL;
+    L->gvec = src ? carve(L, base, Cs) : NULL;
+    L->gda = src ? carve(L, base, Cs) : NULL;
     L->bufP = carve(L, base, Cs * L->hw2);
     L->bufQ = carve(L, base, Cs * L->hw2);
     L->bufX = carve(L, base, Cs * L->hw1);
@@ -374,11 +392,14 @@ static void block_forward(const gs_renderer_config *cfg, const act_layout *L,
     gs_rop_blur_forward(x, a->z, L->bufP, C, 2 * Hi, 2 * Wi);
     gs_rop_conv_forward(x, a->u, a->z, p->block[b].c.w, p->block[b].c.b, C, C,
                         hwo, 1);
-    if (cfg->guidance != GS_GUIDE_NONE) {
-        gs_rop_guide gd = rop_guide(cfg, L, p, NULL);
+    if (cfg->guidance == GS_GUIDE_NONE)
+        return;
+    gs_rop_guide gd = rop_guide(cfg, L, p, NULL);
+    if (source_guided(cfg))
+        gs_rop_guide_apply(x, &gd, a->g, a->u, L->gvec, (size_t)hwo);
+    else
         gs_rop_guide_forward(x, &gd, a->g, a->att, a->u, tau, (size_t)hwo,
                              L->gscr);
-    }
 }
 
 /* Block b backward. dg [C,HWo] (consumed) and work [>= C HWo] are two
@@ -396,8 +417,15 @@ static void block_backward(const gs_renderer_config *cfg, const act_layout *L,
     float *cur = dg, *other = work, *t;
     if (cfg->guidance != GS_GUIDE_NONE) { /* du = guide^T dg */
         gs_rop_guide gd = rop_guide(cfg, L, p, dp);
-        gs_rop_guide_backward(x, &gd, other, dtau, cur, a->u, a->att, tau, no,
-                              L->gscr);
+        if (source_guided(cfg)) { /* da of this block added to L->gda */
+            float *da = L->gscr;
+            gs_rop_guide_apply_backward(x, &gd, other, da, cur, a->u, L->gvec,
+                                        no);
+            add_into(L->gda, da, Cs);
+        } else {
+            gs_rop_guide_backward(x, &gd, other, dtau, cur, a->u, a->att, tau,
+                                  no, L->gscr);
+        }
         t = cur, cur = other, other = t;
     }
     gs_rop_lrelu_backward(x, cur, a->u, Cs * no); /* d(conv_c out) */
@@ -429,10 +457,39 @@ static void rgb_add(const gs_rop_ctx *x, float *dst, float *tmp,
     add_into(dst, tmp, 3 * hw);
 }
 
-int gs_renderer_forward(const gs_renderer_config *cfg,
-                        const gs_renderer_params *p, const float *x,
-                        const float *tau, int H, int W, float *acts,
-                        size_t acts_len, float *out_rgb, gs_pool *pool)
+/* The passes after the guidance vector (if any) is in place. */
+static int forward_core(const gs_renderer_config *cfg, const act_layout *L,
+                        const gs_rop_ctx *ox, const gs_renderer_params *p,
+                        const float *x, const float *tau, float *out_rgb)
+{
+    int C = L->C, H = L->H, W = L->W, H1 = 2 * H, W1 = 2 * W;
+    /* rgb = blur(up2x(conv_rgb0(x))) in rgb1a */
+    gs_rop_conv_forward(ox, L->rgb0, x, p->rgb0.w, p->rgb0.b, C, 3, (int)L->hw0, 0);
+    int rc = gs_nn_upsample2x_forward(L->rgb1b, L->rgb0, 3, H, W);
+    if (rc)
+        return rc;
+    gs_rop_blur_forward(ox, L->rgb1a, L->rgb1b, 3, H1, W1);
+    block_forward(cfg, L, ox, 0, p, x, tau, H, W);
+    rgb_add(ox, L->rgb1a, L->rgb1b, &p->block[0].rgb, L->blk[0].g, C, L->hw1);
+    /* rgb = blur(up2x(rgb)) in rgb2a */
+    rc = gs_nn_upsample2x_forward(L->rgb2b, L->rgb1a, 3, H1, W1);
+    if (rc)
+        return rc;
+    gs_rop_blur_forward(ox, L->rgb2a, L->rgb2b, 3, 2 * H1, 2 * W1);
+    block_forward(cfg, L, ox, 1, p, L->blk[0].g, tau, H1, W1);
+    rgb_add(ox, L->rgb2a, L->rgb2b, &p->block[1].rgb, L->blk[1].g, C, L->hw2);
+    rc = gs_nn_sigmoid_forward(L->out, L->rgb2a, 3 * L->hw2);
+    if (rc)
+        return rc;
+    memcpy(out_rgb, L->out, 3 * L->hw2 * sizeof *out_rgb);
+    return GS_OK;
+}
+
+int gs_renderer_forward_src(const gs_renderer_config *cfg,
+                            const gs_renderer_params *p, const float *x,
+                            const float *tau, const float *src, int H, int W,
+                            float *acts, size_t acts_len, float *out_rgb,
+                            gs_pool *pool)
 {
     act_layout L;
     int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, &L);
@@ -441,35 +498,70 @@ int gs_renderer_forward(const gs_renderer_config *cfg,
     if (!out_rgb)
         return GS_ERR_ARG;
     gs_rop_ctx ox = rop_ctx(&L, pool);
-    int C = L.C, H1 = 2 * H, W1 = 2 * W;
-    /* rgb = blur(up2x(conv_rgb0(x))) in rgb1a */
-    gs_rop_conv_forward(&ox, L.rgb0, x, p->rgb0.w, p->rgb0.b, C, 3, (int)L.hw0, 0);
-    rc = gs_nn_upsample2x_forward(L.rgb1b, L.rgb0, 3, H, W);
+    if (source_guided(cfg)) {
+        gs_rop_guide gd = rop_guide(cfg, &L, p, NULL);
+        gs_rop_guide_vector(&ox, &gd, L.gvec, L.satt, src ? src : x, tau,
+                            L.hw0, L.gscr);
+    }
+    return forward_core(cfg, &L, &ox, p, x, tau, out_rgb);
+}
+
+int gs_renderer_forward(const gs_renderer_config *cfg,
+                        const gs_renderer_params *p, const float *x,
+                        const float *tau, int H, int W, float *acts,
+                        size_t acts_len, float *out_rgb, gs_pool *pool)
+{
+    return gs_renderer_forward_src(cfg, p, x, tau, NULL, H, W, acts, acts_len,
+                                   out_rgb, pool);
+}
+
+int gs_renderer_guide_vector(const gs_renderer_config *cfg,
+                             const gs_renderer_params *p, const float *src,
+                             const float *tau, int H, int W, float *acts,
+                             size_t acts_len, float *a, gs_pool *pool)
+{
+    act_layout L;
+    int rc = check_call(cfg, p, src, tau, H, W, acts, acts_len, &L);
     if (rc)
         return rc;
-    gs_rop_blur_forward(&ox, L.rgb1a, L.rgb1b, 3, H1, W1);
-    block_forward(cfg, &L, &ox, 0, p, x, tau, H, W);
-    rgb_add(&ox, L.rgb1a, L.rgb1b, &p->block[0].rgb, L.blk[0].g, C, L.hw1);
-    /* rgb = blur(up2x(rgb)) in rgb2a */
-    rc = gs_nn_upsample2x_forward(L.rgb2b, L.rgb1a, 3, H1, W1);
-    if (rc)
-        return rc;
-    gs_rop_blur_forward(&ox, L.rgb2a, L.rgb2b, 3, 2 * H1, 2 * W1);
-    block_forward(cfg, &L, &ox, 1, p, L.blk[0].g, tau, H1, W1);
-    rgb_add(&ox, L.rgb2a, L.rgb2b, &p->block[1].rgb, L.blk[1].g, C, L.hw2);
-    rc = gs_nn_sigmoid_forward(L.out, L.rgb2a, 3 * L.hw2);
-    if (rc)
-        return rc;
-    memcpy(out_rgb, L.out, 3 * L.hw2 * sizeof *out_rgb);
+    if (!a || !source_guided(cfg))
+        return GS_ERR_ARG;
+    gs_rop_ctx ox = rop_ctx(&L, pool);
+    gs_rop_guide gd = rop_guide(cfg, &L, p, NULL);
+    gs_rop_guide_vector(&ox, &gd, L.gvec, L.satt, src, tau, L.hw0, L.gscr);
+    memcpy(a, L.gvec, (size_t)L.C * sizeof *a);
     return GS_OK;
 }
 
-int gs_renderer_backward(const gs_renderer_config *cfg,
-                         const gs_renderer_params *p, float *acts,
-                         size_t acts_len, const float *x, const float *tau,
-                         const float *dout_rgb, int H, int W,
-                         const gs_renderer_params *dparams, float *dx,
-                         float *dtau, gs_pool *pool)
+int gs_renderer_forward_vec(const gs_renderer_config *cfg,
+                            const gs_renderer_params *p, const float *x,
+                            const float *a, int H, int W, float *acts,
+                            size_t acts_len, float *out_rgb, gs_pool *pool)
+{
+    act_layout L;
+    int guided = cfg && cfg->guidance != GS_GUIDE_NONE;
+    if (guided && (!source_guided(cfg) || !a))
+        return GS_ERR_ARG;
+    /* check_call wants a tau for guided configs; the blocks never read it
+     * here, so the vector stands in. */
+    int rc = check_call(cfg, p, x, a, H, W, acts, acts_len, &L);
+    if (rc)
+        return rc;
+    if (!out_rgb)
+        return GS_ERR_ARG;
+    gs_rop_ctx ox = rop_ctx(&L, pool);
+    if (guided)
+        memcpy(L.gvec, a, (size_t)L.C * sizeof *a);
+    return forward_core(cfg, &L, &ox, p, x, NULL, out_rgb);
+}
+
+int gs_renderer_backward_src(const gs_renderer_config *cfg,
+                             const gs_renderer_params *p, float *acts,
+                             size_t acts_len, const float *x,
+                             const float *tau, const float *src,
+                             const float *dout_rgb, int H, int W,
+                             const gs_renderer_params *dparams, float *dx,
+                             float *dsrc, float *dtau, gs_pool *pool)
 {
     act_layout L;
     int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, &L);
@@ -480,6 +572,8 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
     gs_rop_ctx ox = rop_ctx(&L, pool);
     int C = L.C, H1 = 2 * H, W1 = 2 * W;
     const gs_renderer_params *dp = dparams;
+    if (source_guided(cfg))
+        memset(L.gda, 0, (size_t)C * sizeof *L.gda);
     /* d(rgb before the sigmoid) in rgb2a; block 1's rgb: dg1 in bufP */
     memset(L.rgb2a, 0, 3 * L.hw2 * sizeof *L.rgb2a);
     rc = gs_nn_sigmoid_backward(L.rgb2a, dout_rgb, L.out, 3 * L.hw2);
@@ -511,5 +605,23 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
                          p->rgb0.w, C, 3, (int)L.hw0);
     block_backward(cfg, &L, &ox, 0, p, dp, x, tau, H, W, L.bufX, L.bufP, dx,
                    dtau);
+    if (source_guided(cfg)) { /* the vector's backward, once for both blocks */
+        gs_rop_guide gd = rop_guide(cfg, &L, p, dp);
+        gs_rop_guide_vector_backward(&ox, &gd, src ? dsrc : dx, dtau, L.gda,
+                                     src ? src : x, L.satt, tau, L.hw0,
+                                     L.gscr + C);
+    }
     return GS_OK;
+}
+
+int gs_renderer_backward(const gs_renderer_config *cfg,
+                         const gs_renderer_params *p, float *acts,
+                         size_t acts_len, const float *x, const float *tau,
+                         const float *dout_rgb, int H, int W,
+                         const gs_renderer_params *dparams, float *dx,
+                         float *dtau, gs_pool *pool)
+{
+    return gs_renderer_backward_src(cfg, p, acts, acts_len, x, tau, NULL,
+                                    dout_rgb, H, W, dparams, dx, NULL, dtau,
+                                    pool);
 }

@@ -41,6 +41,21 @@
  *                 bias of that code cancels in the softmax and is omitted).
  * MULTIPLICATIVE: g_p = u_p + u_p * a, elementwise (paper Eq. 9,
  *                 z' = z + z . Attn(q = tau, k = z, v = z)). */
+/* Where the guidance vector comes from (for ADDITIVE and MULTIPLICATIVE):
+ * BLOCK: as above, each block's vector from attention over that block's
+ *        own u (the released GazeGaussian code). The vector depends on
+ *        every pixel, so a change anywhere changes the whole image.
+ * SOURCE: ONE vector a from attention of tau over a separate source map
+ *        src [C, H, W] (the model passes its face stream's feature map),
+ *        applied in both blocks. The renderer is then local given a: a
+ *        feature pixel influences only output pixels near it, which makes
+ *        exact incremental renders of gaze changes possible (the face stream
+ *        does not depend on the gaze). */
+typedef enum gs_renderer_guide_source {
+    GS_GUIDE_SRC_BLOCK = 0,
+    GS_GUIDE_SRC_SOURCE = 1
+} gs_renderer_guide_source;
+
 typedef enum gs_renderer_guidance {
     GS_GUIDE_NONE = 0,
     GS_GUIDE_ADDITIVE = 1,
@@ -57,7 +72,15 @@ typedef struct gs_renderer_config {
     int code_dim; /* D, 1..GS_RENDERER_MAX_CODE */
     int guidance; /* gs_renderer_guidance */
     int blocks;   /* must be GS_RENDERER_BLOCKS */
+    int guide_source; /* gs_renderer_guide_source */
 } gs_renderer_config;
+
+/* Output pixels (at 4x) that a change of feature pixel (i, j) can reach lie
+ * within GS_RENDERER_REACH feature pixels of it (i.e. 4 (i +- REACH)), when
+ * the guidance source is SOURCE or there is no guidance: the only spatial
+ * operators are the 3x3 blurs, the bilinear 2x upsamplings and the pixel
+ * shuffles (test_renderer checks the bound on impulses). */
+#define GS_RENDERER_REACH 2
 
 /* GS_OK, or GS_ERR_ARG with a message naming the bad field. */
 int gs_renderer_config_validate(const gs_renderer_config *cfg, gs_error *err);
@@ -128,6 +151,30 @@ int gs_renderer_forward(const gs_renderer_config *cfg,
                         const float *tau, int H, int W, float *acts,
                         size_t acts_len, float *out_rgb, gs_pool *pool);
 
+/* With a guidance source (SOURCE): the same, the vector from src [C,H,W]
+ * (NULL: x itself). Other configs ignore src. */
+int gs_renderer_forward_src(const gs_renderer_config *cfg,
+                            const gs_renderer_params *p, const float *x,
+                            const float *tau, const float *src, int H, int W,
+                            float *acts, size_t acts_len, float *out_rgb,
+                            gs_pool *pool);
+
+/* The guidance vector a [C] of src [C,H,W] (SOURCE configs only): what
+ * gs_renderer_forward_src computes before the blocks. acts as for a
+ * forward of that size. */
+int gs_renderer_guide_vector(const gs_renderer_config *cfg,
+                             const gs_renderer_params *p, const float *src,
+                             const float *tau, int H, int W, float *acts,
+                             size_t acts_len, float *a, gs_pool *pool);
+
+/* Forward with a given guidance vector a [C] (SOURCE configs; NONE ignores
+ * a): renders any crop of a feature map exactly as the full map would,
+ * away from the crop's cut edges (GS_RENDERER_REACH). No backward. */
+int gs_renderer_forward_vec(const gs_renderer_config *cfg,
+                            const gs_renderer_params *p, const float *x,
+                            const float *a, int H, int W, float *acts,
+                            size_t acts_len, float *out_rgb, gs_pool *pool);
+
 /* Gradients from dout_rgb[3, 4H, 4W], with acts as left by the forward of
  * the same x, tau, H, W (its scratch part is overwritten; the saved part is
  * not, so backward may run again). ADDS into dparams (bound to a gradient
@@ -139,5 +186,15 @@ int gs_renderer_backward(const gs_renderer_config *cfg,
                          const float *dout_rgb, int H, int W,
                          const gs_renderer_params *dparams, float *dx,
                          float *dtau, gs_pool *pool);
+
+/* Backward of gs_renderer_forward_src: also adds into dsrc [C,H,W] (may be
+ * NULL; when src was NULL the source gradient goes to dx). */
+int gs_renderer_backward_src(const gs_renderer_config *cfg,
+                             const gs_renderer_params *p, float *acts,
+                             size_t acts_len, const float *x,
+                             const float *tau, const float *src,
+                             const float *dout_rgb, int H, int W,
+                             const gs_renderer_params *dparams, float *dx,
+                             float *dsrc, float *dtau, gs_pool *pool);
 
 #endif

@@ -419,19 +419,24 @@ void gs_rop_zero(const gs_rop_ctx *x, float *d, size_t n)
 }
 
 /* ---- Guidance ------------------------------------------------------------
- * Forward as in renderer_ops.h. Backward with dg [C,HW], gain = 1 + a
- * (multiplicative) or 1 (additive):
- *   da_c = sum_p dg_cp u_cp (multiplicative) or sum_p dg_cp (additive)
+ * Two halves, so that the guidance vector can come from another map than
+ * the one it is applied to (renderer.h, guide sources):
+ *   vector: s = wk^T tau / temp, att = softmax_p(src_p . s),
+ *           xbar = sum_p att_p src_p, a = wv xbar + bv
+ *   apply:  g_p = u_p + a (additive) or u_p + u_p * a (multiplicative)
+ * Backward of apply, with gain = 1 + a (multiplicative) or 1 (additive):
+ *   du_p = dg_p * gain;  da_c = sum_p dg_cp u_cp (mult.) or sum_p dg_cp
+ * Backward of vector from da:
  *   dbv += da; dwv += da xbar^T; dxbar = wv^T da; S = xbar . dxbar
- *   r_p = att_p (u_p . dxbar - S)                 (softmax backward)
- *   du_p = dg_p * gain + att_p dxbar + r_p s
- *   ds = sum_p r_p u_p; dwk += tau ds^T / temp; dtau += wk ds / temp
- * (the additive case is gs_nn_attention's maths). */
+ *   r_p = att_p (src_p . dxbar - S)               (softmax backward)
+ *   dsrc_p += att_p dxbar + r_p s
+ *   ds = sum_p r_p src_p; dwk += tau ds^T / temp; dtau += wk ds / temp
+ * (the additive case with src = u is gs_nn_attention's maths). */
 
 typedef struct {
     const gs_rop_guide *gd;
     float *g, *att_out, *du, *r; /* att_out: forward only */
-    const float *att, *u, *dg, *s, *a, *dxbar;
+    const float *att, *u, *src, *dg, *s, *a, *dxbar;
     float *xbar, *da, *ds;
     size_t hw, band;
     double S;
@@ -451,7 +456,7 @@ static void guide_query(float *s, const gs_rop_guide *gd, const float *tau)
         s[c] /= gd->temp;
 }
 
-/* Band t of pixels: att_p = u_p . s (the logits) */
+/* Band t of pixels: att_p = src_p . s (the logits) */
 static void logits_task(void *ctx, int t, int worker)
 {
     (void)worker;
@@ -461,9 +466,9 @@ static void logits_task(void *ctx, int t, int worker)
     for (size_t i = 0; i < n; i++)
         att[i] = 0.0f;
     for (int c = 0; c < j->gd->C; c++) {
-        const float *uc = j->u + (size_t)c * j->hw + p0;
+        const float *sc = j->src + (size_t)c * j->hw + p0;
         for (size_t i = 0; i < n; i++)
-            att[i] += uc[i] * j->s[c];
+            att[i] += sc[i] * j->s[c];
     }
 }
 
@@ -471,26 +476,36 @@ static void pool_task(void *ctx, int c, int worker)
 {
     (void)worker;
     const guide_job *j = ctx;
-    j->xbar[c] = (float)dot_double(j->att, j->u + (size_t)c * j->hw, j->hw);
+    j->xbar[c] = (float)dot_double(j->att, j->src + (size_t)c * j->hw, j->hw);
 }
 
-/* att, then xbar [C] and a [C] (wv xbar + bv) */
-static void guide_attend(const gs_rop_ctx *x, guide_job *j, float *a)
+/* a[C] = wv xbar + bv */
+static void value_project(const gs_rop_guide *gd, const float *xbar, float *a)
 {
-    const gs_rop_guide *gd = j->gd;
-    gs_pool_for(x->pool, band_count(j->hw), logits_task, j);
-    gs_nn_softmax_forward(j->att_out, j->att_out, (int)j->hw);
-    gs_pool_for(x->pool, gd->C, pool_task, j);
     for (int c = 0; c < gd->C; c++) {
         const float *row = gd->wv + (size_t)c * (size_t)gd->C;
         float v = gd->bv[c];
         for (int k = 0; k < gd->C; k++)
-            v += row[k] * j->xbar[k];
+            v += row[k] * xbar[k];
         a[c] = v;
     }
 }
 
-static void guide_out_task(void *ctx, int c, int worker)
+void gs_rop_guide_vector(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                         float *a, float *att, const float *src,
+                         const float *tau, size_t hw, float *scratch)
+{
+    float *s = scratch, *xbar = s + gd->C;
+    guide_job j = {.gd = gd, .att_out = att, .att = att, .src = src, .s = s,
+                   .xbar = xbar, .hw = hw, .band = band_len(hw)};
+    guide_query(s, gd, tau);
+    gs_pool_for(x->pool, band_count(hw), logits_task, &j);
+    gs_nn_softmax_forward(att, att, (int)hw);
+    gs_pool_for(x->pool, gd->C, pool_task, &j);
+    value_project(gd, xbar, a);
+}
+
+static void apply_task(void *ctx, int c, int worker)
 {
     (void)worker;
     const guide_job *j = ctx;
@@ -504,30 +519,38 @@ static void guide_out_task(void *ctx, int c, int worker)
             gc[q] = uc[q] + a;
 }
 
-void gs_rop_guide_forward(const gs_rop_ctx *x, const gs_rop_guide *gd,
-                          float *g, float *att, const float *u,
-                          const float *tau, size_t hw, float *scratch)
+void gs_rop_guide_apply(const gs_rop_ctx *x, const gs_rop_guide *gd, float *g,
+                        const float *u, const float *a, size_t hw)
 {
-    int C = gd->C;
-    float *s = scratch, *xbar = s + C, *a = xbar + C;
-    guide_job j = {.gd = gd, .g = g, .att_out = att, .att = att, .u = u,
-                   .s = s, .a = a,
-                   .xbar = xbar, .hw = hw, .band = band_len(hw)};
-    guide_query(s, gd, tau);
-    guide_attend(x, &j, a);
-    gs_pool_for(x->pool, C, guide_out_task, &j);
+    guide_job j = {.gd = gd, .g = g, .u = u, .a = a, .hw = hw};
+    gs_pool_for(x->pool, gd->C, apply_task, &j);
 }
 
-static void da_task(void *ctx, int c, int worker)
+/* Channel c: du_c = dg_c gain; da_c as above */
+static void apply_back_task(void *ctx, int c, int worker)
 {
     (void)worker;
     const guide_job *j = ctx;
-    const float *gc = j->dg + (size_t)c * j->hw;
-    j->da[c] = (float)(j->gd->mult ? dot_double(gc, j->u + (size_t)c * j->hw, j->hw)
+    size_t off = (size_t)c * j->hw;
+    const float *gc = j->dg + off, *uc = j->u + off;
+    float *duc = j->du + off;
+    float gain = j->gd->mult ? 1.0f + j->a[c] : 1.0f;
+    for (size_t q = 0; q < j->hw; q++)
+        duc[q] = gc[q] * gain;
+    j->da[c] = (float)(j->gd->mult ? dot_double(gc, uc, j->hw)
                                    : sum_double(gc, j->hw));
 }
 
-/* Band t of pixels: r_p = att_p (u_p . dxbar - S) */
+void gs_rop_guide_apply_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                                 float *du, float *da, const float *dg,
+                                 const float *u, const float *a, size_t hw)
+{
+    guide_job j = {.gd = gd, .du = du, .da = da, .dg = dg, .u = u, .a = a,
+                   .hw = hw};
+    gs_pool_for(x->pool, gd->C, apply_back_task, &j);
+}
+
+/* Band t of pixels: r_p = att_p (src_p . dxbar - S) */
 static void r_task(void *ctx, int t, int worker)
 {
     (void)worker;
@@ -537,49 +560,42 @@ static void r_task(void *ctx, int t, int worker)
     for (size_t i = 0; i < n; i++)
         r[i] = 0.0f;
     for (int c = 0; c < j->gd->C; c++) {
-        const float *uc = j->u + (size_t)c * j->hw + p0;
+        const float *sc = j->src + (size_t)c * j->hw + p0;
         for (size_t i = 0; i < n; i++)
-            r[i] += uc[i] * j->dxbar[c];
+            r[i] += sc[i] * j->dxbar[c];
     }
     for (size_t i = 0; i < n; i++)
         r[i] = j->att[p0 + i] * (float)((double)r[i] - j->S);
 }
 
-/* Channel c: du_c = dg_c gain + att dxbar_c + r s_c; ds_c = r . u_c */
-static void du_task(void *ctx, int c, int worker)
+/* Channel c: dsrc_c += att dxbar_c + r s_c; ds_c = r . src_c */
+static void dsrc_task(void *ctx, int c, int worker)
 {
     (void)worker;
     const guide_job *j = ctx;
     size_t off = (size_t)c * j->hw;
-    const float *uc = j->u + off, *gc = j->dg + off, *att = j->att, *r = j->r;
-    float *duc = j->du + off, dxb = j->dxbar[c], sc = j->s[c];
-    float gain = j->gd->mult ? 1.0f + j->a[c] : 1.0f;
-    for (size_t q = 0; q < j->hw; q++)
-        duc[q] = gc[q] * gain + att[q] * dxb + r[q] * sc;
-    j->ds[c] = (float)dot_double(r, uc, j->hw);
+    const float *sc = j->src + off, *att = j->att, *r = j->r;
+    float dxb = j->dxbar[c], qc = j->s[c];
+    if (j->du) {
+        float *d = j->du + off;
+        for (size_t q = 0; q < j->hw; q++)
+            d[q] = d[q] + att[q] * dxb + r[q] * qc;
+    }
+    j->ds[c] = (float)dot_double(r, sc, j->hw);
 }
 
-void gs_rop_guide_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
-                           float *du, float *dtau, const float *dg,
-                           const float *u, const float *att, const float *tau,
-                           size_t hw, float *scratch)
+void gs_rop_guide_vector_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                                  float *dsrc, float *dtau, const float *da,
+                                  const float *src, const float *att,
+                                  const float *tau, size_t hw, float *scratch)
 {
     int C = gd->C;
-    float *s = scratch, *xbar = s + C, *a = xbar + C, *da = a + C,
-          *dxbar = da + C, *ds = dxbar + C;
-    guide_job j = {.gd = gd, .att = att, .du = du, .r = x->r, .u = u,
-                   .dg = dg, .s = s, .a = a, .dxbar = dxbar, .xbar = xbar,
-                   .da = da, .ds = ds, .hw = hw, .band = band_len(hw)};
+    float *s = scratch, *xbar = s + C, *dxbar = xbar + C, *ds = dxbar + C;
+    guide_job j = {.gd = gd, .att = att, .du = dsrc, .r = x->r, .src = src,
+                   .s = s, .dxbar = dxbar, .xbar = xbar, .ds = ds, .hw = hw,
+                   .band = band_len(hw)};
     guide_query(s, gd, tau);
     gs_pool_for(x->pool, C, pool_task, &j); /* xbar from the saved att */
-    for (int c = 0; c < C; c++) {
-        const float *row = gd->wv + (size_t)c * (size_t)C;
-        float v = gd->bv[c];
-        for (int k = 0; k < C; k++)
-            v += row[k] * xbar[k];
-        a[c] = v;
-    }
-    gs_pool_for(x->pool, C, da_task, &j);
     for (int c = 0; c < C; c++) {
         gd->dbv[c] += da[c];
         for (int k = 0; k < C; k++)
@@ -595,7 +611,7 @@ void gs_rop_guide_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
     }
     j.S = S;
     gs_pool_for(x->pool, band_count(hw), r_task, &j);
-    gs_pool_for(x->pool, C, du_task, &j);
+    gs_pool_for(x->pool, C, dsrc_task, &j);
     for (int d = 0; d < gd->D; d++) {
         const float *row = gd->wk + (size_t)d * (size_t)C;
         float *drow = gd->dwk + (size_t)d * (size_t)C, acc = 0.0f;
@@ -607,4 +623,28 @@ void gs_rop_guide_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
         if (dtau)
             dtau[d] += acc;
     }
+}
+
+void gs_rop_guide_forward(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                          float *g, float *att, const float *u,
+                          const float *tau, size_t hw, float *scratch)
+{
+    float *a = scratch + 2 * gd->C;
+    gs_rop_guide_vector(x, gd, a, att, u, tau, hw, scratch);
+    gs_rop_guide_apply(x, gd, g, u, a, hw);
+}
+
+void gs_rop_guide_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                           float *du, float *dtau, const float *dg,
+                           const float *u, const float *att, const float *tau,
+                           size_t hw, float *scratch)
+{
+    int C = gd->C;
+    float *a = scratch, *da = a + C, *vs = da + C;
+    /* a again from the saved att (no softmax) */
+    guide_job j = {.gd = gd, .att = att, .src = u, .xbar = vs, .hw = hw};
+    gs_pool_for(x->pool, C, pool_task, &j);
+    value_project(gd, vs, a);
+    gs_rop_guide_apply_backward(x, gd, du, da, dg, u, a, hw);
+    gs_rop_guide_vector_backward(x, gd, du, dtau, da, u, att, tau, hw, vs);
 }

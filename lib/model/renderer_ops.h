@@ -65,10 +65,11 @@ void gs_rop_lrelu_backward(const gs_rop_ctx *x, float *d, const float *y,
                            size_t n);
 void gs_rop_zero(const gs_rop_ctx *x, float *d, size_t n);
 
-/* Guidance of tau [D] over u [C,HW] (renderer.h):
- *   s = wk^T tau / temp, att = softmax_p(u_p . s), a = wv (sum att_p u_p) + bv
- *   g_p = u_p + a (additive) or u_p + u_p * a (multiplicative).
- * att [HW] is saved for the backward; scratch 3C floats. */
+/* Guidance of tau [D] (renderer.h, renderer_ops.c for the maths):
+ *   vector: s = wk^T tau / temp, att = softmax_p(src_p . s),
+ *           a = wv (sum_p att_p src_p) + bv                   [C]
+ *   apply:  g_p = u_p + a (additive) or u_p + u_p * a (multiplicative)
+ * att [HW] is saved for the backward. */
 typedef struct gs_rop_guide {
     const float *wk, *wv, *bv; /* [D,C], [C,C], [C] */
     float *dwk, *dwv, *dbv;    /* gradients (backward), added to */
@@ -76,6 +77,25 @@ typedef struct gs_rop_guide {
     float temp;
 } gs_rop_guide;
 
+/* a[C], att[HW] from src [C,HW] and tau; scratch 2C floats. */
+void gs_rop_guide_vector(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                         float *a, float *att, const float *src,
+                         const float *tau, size_t hw, float *scratch);
+/* g[C,HW] from u[C,HW] and a[C]. */
+void gs_rop_guide_apply(const gs_rop_ctx *x, const gs_rop_guide *gd, float *g,
+                        const float *u, const float *a, size_t hw);
+/* du[C,HW] (written) and da[C] (written) from dg[C,HW]. */
+void gs_rop_guide_apply_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                                 float *du, float *da, const float *dg,
+                                 const float *u, const float *a, size_t hw);
+/* From da[C]: adds into dsrc[C,HW] (NULL: skipped), dtau (may be NULL),
+ * dwk, dwv, dbv; needs x->r [HW]; scratch 4C floats. */
+void gs_rop_guide_vector_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
+                                  float *dsrc, float *dtau, const float *da,
+                                  const float *src, const float *att,
+                                  const float *tau, size_t hw, float *scratch);
+
+/* Both halves with src = u: scratch 3C floats. */
 void gs_rop_guide_forward(const gs_rop_ctx *x, const gs_rop_guide *gd,
                           float *g, float *att, const float *u,
                           const float *tau, size_t hw, float *scratch);

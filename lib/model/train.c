@@ -64,6 +64,8 @@ typedef struct trainer {
     gs_synth_gen_config gen;
     gs_synth_sample sample;
     float *target, *wl1, *dimg, *ftarget, *dfmap, *ssim;
+    float *fmask, *dfmap_face; /* face-only render: mask [fs^2], gradient */
+    float *emask, *dfmap_eye;  /* eye-only render: eye area [fs^2], gradient */
     size_t ssim_len;
     double light_sum[GS_MODEL_LIGHT_DIM];
     long light_n;
@@ -91,6 +93,8 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     t->grad = calloc(m->nparams, sizeof(float));
     if (!t->c || !t->grad)
         return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
+    t->c->face_loss = 1; /* the face-only and eye-only renders are */
+    t->c->eye_loss = 1;  /* supervised too */
     gs_model_bind(m, t->grad, &t->g);
     gs_nn_param_group groups[GS_MODEL_MAX_TENSORS];
     int ng = 0;
@@ -131,9 +135,13 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     t->dimg = malloc(3 * S * S * sizeof(float));
     t->ftarget = malloc(3 * fs * fs * sizeof(float));
     t->dfmap = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->dfmap_face = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->fmask = malloc(fs * fs * sizeof(float));
+    t->dfmap_eye = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->emask = malloc(fs * fs * sizeof(float));
     t->ssim = malloc(t->ssim_len * sizeof(float));
     if (!t->target || !t->wl1 || !t->dimg || !t->ftarget || !t->dfmap ||
-        !t->ssim)
+        !t->ssim || !t->dfmap_face || !t->fmask || !t->dfmap_eye || !t->emask)
         return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
     return GS_OK;
 }
@@ -149,6 +157,10 @@ static void trainer_free(trainer *t)
     free(t->dimg);
     free(t->ftarget);
     free(t->dfmap);
+    free(t->dfmap_face);
+    free(t->fmask);
+    free(t->dfmap_eye);
+    free(t->emask);
     free(t->ssim);
 }
 
@@ -209,6 +221,22 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
             t->wl1[i] = 1.0f + 4.0f * (float)((le[i] | re[i]) != 0);
         }
     int f = S / fs;
+    /* face-only mask: feature pixels with no eye pixel within one feature
+     * pixel (the eyes are missing from the face-only render) */
+    for (int y = 0; y < fs; y++)
+        for (int x = 0; x < fs; x++) {
+            int eye = 0;
+            for (int yy = (y - 1) * f; yy < (y + 2) * f && !eye; yy++)
+                for (int xx = (x - 1) * f; xx < (x + 2) * f && !eye; xx++)
+                    if (yy >= 0 && yy < S && xx >= 0 && xx < S)
+                        eye = (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
+            t->fmask[(size_t)y * fs + x] = eye ? 0.0f : 1.0f;
+            int in_eye = 0; /* share of the feature pixel that is eye */
+            for (int yy = y * f; yy < (y + 1) * f; yy++)
+                for (int xx = x * f; xx < (x + 1) * f; xx++)
+                    in_eye += (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
+            t->emask[(size_t)y * fs + x] = (float)in_eye / (float)(f * f);
+        }
     for (int ch = 0; ch < 3; ch++)
         for (int y = 0; y < fs; y++)
             for (int x = 0; x < fs; x++) {
@@ -234,6 +262,14 @@ static double losses(trainer *t, double *psnr)
     gs_nn_ssim_loss_forward(&ls, c->rgb, t->target, 3, S, S, GS_NN_SSIM_ZERO,
                             t->ssim, t->ssim_len);
     gs_nn_l1_forward(&lf, c->fmap, t->ftarget, NULL, 3, (int)fplane);
+    float lface = 0; /* the face stream alone, away from the eyes */
+    if (c->used_face_map) {
+        gs_nn_l1_forward(&lface, c->fmap_face, t->ftarget, t->fmask, 3,
+                         (int)fplane);
+        memset(t->dfmap_face, 0, 3 * fplane * sizeof(float));
+        gs_nn_l1_backward(t->dfmap_face, 1.0f, c->fmap_face, t->ftarget,
+                          t->fmask, 3, (int)fplane);
+    }
     memset(t->dimg, 0, 3 * plane * sizeof(float));
     gs_nn_l1_backward(t->dimg, 1.0f, c->rgb, t->target, t->wl1, 3,
                       (int)plane);
@@ -249,7 +285,15 @@ static double losses(trainer *t, double *psnr)
     }
     double mse = se / (3.0 * plane);
     *psnr = mse > 1e-12 ? -10 * log10(mse) : 120;
-    return (double)l1 + 0.1 * ls + lf;
+    float leye = 0; /* the eye stream alone, over the visible eyes, x5 */
+    if (c->used_eye_map) {
+        gs_nn_l1_forward(&leye, c->fmap_eye, t->ftarget, t->emask, 3,
+                         (int)fplane);
+        memset(t->dfmap_eye, 0, 3 * fplane * sizeof(float));
+        gs_nn_l1_backward(t->dfmap_eye, 5.0f, c->fmap_eye, t->ftarget,
+                          t->emask, 3, (int)fplane);
+    }
+    return (double)l1 + 0.1 * ls + lf + lface + 5.0 * leye;
 }
 
 static int save_checkpoint(trainer *t, const char *path, long step,
@@ -375,7 +419,10 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
             gs_nn_adam_zero_grad(t.adam);
             gs_frame_grad fg;
             memset(&fg, 0, sizeof fg);
-            rc = gs_frame_backward(t.c, pool, t.dimg, t.dfmap, &t.g, &fg, err);
+            rc = gs_frame_backward(t.c, pool, t.dimg, t.dfmap,
+                                   t.c->used_face_map ? t.dfmap_face : NULL,
+                                   t.c->used_eye_map ? t.dfmap_eye : NULL,
+                                   &t.g, &fg, err);
             if (rc)
                 break;
             float *dc = t.g.codes + (size_t)k * m->cfg.id_dim;

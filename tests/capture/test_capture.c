@@ -282,10 +282,28 @@ static void test_output(void)
     f.t_ns += 1000000000;
     CHECK_EQ_INT(gs_cap_out_write(o, rgb, 192, 64, 48, &e), GS_OK);
     CHECK_EQ_INT(f.opens, 2);
-    /* Odd-width frames lose a column; a new size renegotiates. */
+    /* Frames of another size keep the format: letterboxed, never renegotiated. */
+    int sfmt = f.s_fmt_calls;
     CHECK_EQ_INT(gs_cap_out_write(o, rgb, 192, 63, 48, &e), GS_OK);
-    CHECK_EQ_INT(f.w, 62);
-    CHECK_EQ_INT(f.last_write_len, 62 * 48 * 2);
+    CHECK_EQ_INT(gs_cap_out_write(o, rgb, 96, 32, 16, &e), GS_OK);
+    CHECK_EQ_INT(f.s_fmt_calls, sfmt);
+    CHECK_EQ_INT(f.w, 64);
+    CHECK_EQ_INT(f.last_write_len, 64 * 48 * 2);
+    /* 32x16 into 64x48: scale 2, rows 8..39 carry the picture, bars are black
+     * (Y 16 in limited range). */
+    CHECK_EQ_INT(f.last_write[0], 16);
+    CHECK_EQ_INT(f.last_write[(size_t)47 * 128], 16);
+    CHECK(f.last_write[(size_t)20 * 128 + 2 * 4] != 16 || f.last_write[(size_t)20 * 128 + 2 * 5] != 16);
+    /* The placeholder: the same format, text brighter than the background. */
+    CHECK_EQ_INT(gs_cap_out_write_placeholder(o, &e), GS_OK);
+    CHECK_EQ_INT(f.last_write_len, 64 * 48 * 2);
+    int lo = 255, hi = 0;
+    for (size_t i = 0; i < 64 * 48 * 2; i += 2) {
+        lo = f.last_write[i] < lo ? f.last_write[i] : lo;
+        hi = f.last_write[i] > hi ? f.last_write[i] : hi;
+    }
+    CHECK_MSG(lo < 60 && hi > 150, "placeholder luma %d..%d", lo, hi);
+    CHECK_EQ_INT(f.s_fmt_calls, sfmt);
     gs_cap_out_destroy(o);
     fake_free(&f);
 }

@@ -41,7 +41,7 @@ static void run(int delay_ms, int ring, int run_ms, gs_cap_pipe_stats *st, fake_
     CHECK_EQ_INT(gs_cap_create(&c, &cap, NULL), GS_OK);
     CHECK_EQ_INT(gs_cap_out_create("/dev/video9", 160, 120, 30, &out->ops, &o, NULL), GS_OK);
     slow s = {delay_ms, 0};
-    gs_cap_pipe_config pc = {cap, {&s, slow_process}, o, ring, NULL, NULL, NULL};
+    gs_cap_pipe_config pc = {cap, {&s, slow_process}, o, ring, NULL, NULL, NULL, -1};
     gs_cap_pipe *p = NULL;
     gs_error e = {0};
     memset(st, 0, sizeof *st);
@@ -57,8 +57,45 @@ static void run(int delay_ms, int ring, int run_ms, gs_cap_pipe_stats *st, fake_
     fake_free(&cam);
 }
 
+/* A camera that never delivers (gone): after placeholder_ms the loopback
+ * gets "no video" frames in its own format, about 10 a second. */
+static void test_placeholder(void)
+{
+    fake_v4l2 cam, out;
+    fake_init(&cam);
+    cam.real_clock = 1;
+    cam.stall = 1;
+    fake_init(&out);
+    gs_cap_config c = gs_cap_config_default("/dev/video0");
+    c.width = 160;
+    c.height = 120;
+    c.timeout_ms = 200;
+    c.ops = &cam.ops;
+    gs_cap *cap = NULL;
+    gs_cap_out *o = NULL;
+    CHECK_EQ_INT(gs_cap_create(&c, &cap, NULL), GS_OK);
+    CHECK_EQ_INT(gs_cap_out_create("/dev/video9", 160, 120, 30, &out.ops, &o, NULL), GS_OK);
+    gs_cap_pipe_config pc = {cap, gs_cap_stage_passthrough(), o, 2, NULL, NULL, NULL, 300};
+    gs_cap_pipe *p = NULL;
+    CHECK_EQ_INT(gs_cap_pipe_start(&pc, &p, NULL), GS_OK);
+    struct timespec ts = {1, 0};
+    nanosleep(&ts, NULL);
+    gs_cap_pipe_stats st;
+    gs_cap_pipe_get_stats(p, &st);
+    gs_cap_pipe_stop(p);
+    CHECK_MSG(st.out == 0 && st.placeholders >= 4 && st.placeholders <= 9,
+              "%llu placeholders, %llu frames in 1 s (hold 300 ms)",
+              (unsigned long long)st.placeholders, (unsigned long long)st.out);
+    CHECK(out.last_write_len == 160 * 120 * 2);
+    gs_cap_destroy(cap);
+    gs_cap_out_destroy(o);
+    fake_free(&cam);
+    fake_free(&out);
+}
+
 int main(void)
 {
+    test_placeholder();
     gs_cap_pipe_stats st;
     fake_v4l2 out;
 

@@ -2,6 +2,7 @@
  * hold, settings changed from another thread. */
 #include <math.h>
 #include <pthread.h>
+#include <string.h>
 
 #include "gazesplat/capture.h"
 #include "gs_test.h"
@@ -151,8 +152,33 @@ static void test_threads(void)
     gs_cap_policy_destroy(p);
 }
 
+/* Settings by name: all or nothing, ranges checked on the result. */
+static void test_parse(void)
+{
+    gs_cap_policy_config c = gs_cap_policy_config_default();
+    gs_error e = {0};
+    CHECK_EQ_INT(gs_cap_policy_config_parse(&c, "strength=0.5,enabled=off,smooth_s=0.25", &e),
+                 GS_OK);
+    CHECK(c.strength == 0.5f && c.enabled == 0 && c.smooth_s == 0.25f);
+    /* low above the old high, then high: fine in this order */
+    CHECK_EQ_INT(gs_cap_policy_config_parse(&c, "gaze_low_deg=35,gaze_high_deg=45", &e), GS_OK);
+    CHECK(c.gaze_low_deg == 35.0f && c.gaze_high_deg == 45.0f);
+    static const char *bad[] = {"strength=2",  "gaze_low_deg=50", "nope=1",        "strength=nan",
+                                "enabled=maybe", "strength",      "smooth_s=1e30", "strength=0.1x",
+                                "strength=0.7,bogus=1", "blink_openness="};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        gs_cap_policy_config before = c;
+        int r = gs_cap_policy_config_parse(&c, bad[i], &e);
+        CHECK_MSG(r == GS_ERR_ARG, "'%s' accepted", bad[i]);
+        CHECK_MSG(memcmp(&before, &c, sizeof c) == 0, "'%s' changed the config", bad[i]);
+    }
+    CHECK_EQ_INT(gs_cap_policy_config_set(&c, "enabled", "YES", &e), GS_OK);
+    CHECK_EQ_INT(c.enabled, 1);
+}
+
 int main(void)
 {
+    test_parse();
     test_thresholds();
     test_config_check();
     test_smoothing();

@@ -167,6 +167,80 @@ static size_t b_fit_empty(uint8_t *b)
     i.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
     return fit_with(b, &i, NULL, NULL, 0);
 }
+/* Decompression bombs: files whose headers declare more pixels than the
+ * limits (here 8 Mi pixels, 4096 per side); refused from the header. */
+static uint8_t bomb[64];
+static void put_be(uint8_t *p, uint32_t v, int n)
+{
+    for (int i = 0; i < n; i++)
+        p[i] = (uint8_t)(v >> (8 * (n - 1 - i)));
+}
+static Gazesplat__Image png_bomb(uint32_t w, uint32_t h)
+{
+    static const uint8_t head[] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n', 0, 0, 0, 13, 'I', 'H', 'D', 'R'};
+    memset(bomb, 0, sizeof bomb);
+    memcpy(bomb, head, sizeof head);
+    put_be(bomb + 16, w, 4);
+    put_be(bomb + 20, h, 4);
+    bomb[24] = 8; /* 8-bit RGB */
+    bomb[25] = 2;
+    Gazesplat__Image img = GAZESPLAT__IMAGE__INIT;
+    img.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+    img.data.data = bomb;
+    img.data.len = 33;
+    return img;
+}
+/* SOI, an APP0 segment to walk over, then SOFn declaring w x h. */
+static Gazesplat__Image jpeg_bomb(uint8_t sof, uint32_t w, uint32_t h)
+{
+    static const uint8_t head[] = {0xff, 0xd8, 0xff, 0xe0, 0, 6, 'J', 'F', 'I', 'F'};
+    memset(bomb, 0, sizeof bomb);
+    memcpy(bomb, head, sizeof head);
+    uint8_t *f = bomb + sizeof head;
+    f[0] = 0xff;
+    f[1] = sof;
+    put_be(f + 2, 17, 2);
+    f[4] = 8;
+    put_be(f + 5, h, 2);
+    put_be(f + 7, w, 2);
+    f[9] = 3;
+    Gazesplat__Image img = GAZESPLAT__IMAGE__INIT;
+    img.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG;
+    img.data.data = bomb;
+    img.data.len = sizeof head + 19;
+    return img;
+}
+static size_t b_png_bomb(uint8_t *b) { Gazesplat__Image i = png_bomb(100000, 100000); return fit_with(b, &i, NULL, NULL, 0); }
+static size_t b_png_mpix(uint8_t *b) { Gazesplat__Image i = png_bomb(4096, 4096); return fit_with(b, &i, NULL, NULL, 0); }
+static size_t b_png_side(uint8_t *b) { Gazesplat__Image i = png_bomb(8000, 16); return fit_with(b, &i, NULL, NULL, 0); }
+static size_t b_jpeg_bomb(uint8_t *b) { Gazesplat__Image i = jpeg_bomb(0xc0, 65500, 65500); return fit_with(b, &i, NULL, NULL, 0); }
+static size_t b_jpeg_prog(uint8_t *b) { Gazesplat__Image i = jpeg_bomb(0xc2, 4000, 4000); return fit_with(b, &i, NULL, NULL, 0); }
+/* A JPEG sent as FORMAT_PNG: the data's own signature is what counts. */
+static size_t b_jpeg_as_png(uint8_t *b)
+{
+    Gazesplat__Image i = jpeg_bomb(0xc1, 30000, 30000);
+    i.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+    return fit_with(b, &i, NULL, NULL, 0);
+}
+static size_t b_fit_intrinsics(uint8_t *b)
+{
+    Gazesplat__Image img = raw_image(8, 8, 24, 192);
+    Gazesplat__Intrinsics k = GAZESPLAT__INTRINSICS__INIT;
+    k.fx = 0;
+    k.fy = 500;
+    Gazesplat__FitRequest m = GAZESPLAT__FIT_REQUEST__INIT;
+    m.image = &img;
+    m.intrinsics = &k;
+    return pack(b, T(FIT), 9, NULL, &m.base);
+}
+static size_t b_fit_iters(uint8_t *b)
+{
+    Gazesplat__Image img = raw_image(8, 8, 24, 192);
+    Gazesplat__FitRequest m = GAZESPLAT__FIT_REQUEST__INIT;
+    m.image = &img;
+    m.max_iters = 100001;
+    return pack(b, T(FIT), 9, NULL, &m.base);
+}
 static size_t b_fit_deadline(uint8_t *b) { Gazesplat__Image i = raw_image(8, 8, 24, 192); return fit_with(b, &i, NULL, NULL, 4000000); }
 static size_t b_fit_nomodel(uint8_t *b) { Gazesplat__Image i = raw_image(8, 8, 24, 192); return fit_with(b, &i, NULL, NULL, 0); }
 
@@ -206,6 +280,22 @@ static size_t b_redir_paste(uint8_t *b) { return redirect_with(b, 1, 0, 0, subje
 static size_t b_redir_quality(uint8_t *b) { return redirect_with(b, 1, 0, 0, subject, t_quality); }
 static size_t b_redir_format(uint8_t *b) { return redirect_with(b, 1, 0, 0, subject, t_format); }
 static size_t b_redir_deadline(uint8_t *b) { return redirect_with(b, 1, 0, 0, subject, t_deadline); }
+static void t_bomb(Gazesplat__RedirectRequest *m)
+{
+    static Gazesplat__Image img;
+    img = png_bomb(70000, 3);
+    m->image = &img;
+}
+static void t_mode(Gazesplat__RedirectRequest *m) { m->output_mode = (Gazesplat__OutputMode)5; }
+static void t_nan_head(Gazesplat__RedirectRequest *m)
+{
+    static Gazesplat__Angles head = GAZESPLAT__ANGLES__INIT;
+    head.pitch_deg = NAN;
+    m->targets[m->n_targets - 1]->head = &head;
+}
+static size_t b_redir_bomb(uint8_t *b) { return redirect_with(b, 1, 0, 0, NULL, t_bomb); }
+static size_t b_redir_mode(uint8_t *b) { return redirect_with(b, 1, 0, 0, subject, t_mode); }
+static size_t b_redir_nan_head(uint8_t *b) { return redirect_with(b, 3, 5, 0, subject, t_nan_head); }
 static size_t b_redir_nomodel(uint8_t *b) { return redirect_with(b, 2, 10, 0, subject, NULL); }
 static size_t b_sleep_long(uint8_t *b)
 {
@@ -270,6 +360,14 @@ static const mcase cases[] = {
     {"FIT raw over max_image_mpix", 0, b_fit_mpix, E(ERR_IMAGE_TOO_LARGE), 0},
     {"FIT unknown format", 0, b_fit_format, E(ERR_BAD_IMAGE), 0},
     {"FIT empty PNG", 0, b_fit_empty, E(ERR_BAD_IMAGE), 0},
+    {"FIT PNG header 100000^2 (decompression bomb)", 0, b_png_bomb, E(ERR_IMAGE_TOO_LARGE), 0},
+    {"FIT PNG header 4096^2 over max_image_mpix", 0, b_png_mpix, E(ERR_IMAGE_TOO_LARGE), 0},
+    {"FIT PNG header 8000 wide", 0, b_png_side, E(ERR_IMAGE_TOO_LARGE), 0},
+    {"FIT JPEG SOF0 65500^2 (decompression bomb)", 0, b_jpeg_bomb, E(ERR_IMAGE_TOO_LARGE), 0},
+    {"FIT progressive JPEG 4000^2", 0, b_jpeg_prog, E(ERR_IMAGE_TOO_LARGE), 0},
+    {"FIT JPEG bomb labelled PNG", 0, b_jpeg_as_png, E(ERR_IMAGE_TOO_LARGE), 0},
+    {"FIT focal length 0", 0, b_fit_intrinsics, E(ERR_INVALID_ARGUMENT), 0},
+    {"FIT max_iters 100001", 0, b_fit_iters, E(ERR_INVALID_ARGUMENT), 0},
     {"FIT deadline over max", 0, b_fit_deadline, E(ERR_INVALID_ARGUMENT), 0},
     {"FIT without a model", 0, b_fit_nomodel, E(ERR_NO_MODEL), 0},
     {"REDIRECT 0 targets", 0, b_redir_zero, E(ERR_INVALID_ARGUMENT), 0},
@@ -282,6 +380,9 @@ static const mcase cases[] = {
     {"REDIRECT jpeg quality 101", 0, b_redir_quality, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT unknown output format", 0, b_redir_format, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT deadline over max", 0, b_redir_deadline, E(ERR_INVALID_ARGUMENT), 0},
+    {"REDIRECT inline PNG bomb 70000 wide", 0, b_redir_bomb, E(ERR_IMAGE_TOO_LARGE), 0},
+    {"REDIRECT unknown output mode", 0, b_redir_mode, E(ERR_INVALID_ARGUMENT), 0},
+    {"REDIRECT NaN head pose", 0, b_redir_nan_head, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT without a model", 0, b_redir_nomodel, E(ERR_NO_MODEL), 0},
     {"SLEEP 600 s", 0, b_sleep_long, E(ERR_INVALID_ARGUMENT), 0},
 };

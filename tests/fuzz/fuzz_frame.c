@@ -1,7 +1,9 @@
 /* Fuzz target: the frame parser and the message decoder, as the daemon
  * drives them. The first input byte picks the limits (before or after
  * HELLO) and the chunk size the stream is fed in; every complete frame's
- * payload is unpacked as the message its type names. */
+ * payload is unpacked as the message its type names, and the image of a
+ * FIT or REDIRECT goes through the daemon's header probe (the PNG/JPEG
+ * size check that refuses decompression bombs on the loop thread). */
 #include <stddef.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -9,12 +11,28 @@
 
 #include "gs_frame.h"
 #include "gs_msg.h"
+#include "server.h"
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
 static int request_type(uint16_t t)
 {
     return gs_msg_is_request(t);
+}
+
+static void probe(const Gazesplat__Image *img)
+{
+    uint32_t w, h;
+    if (img) /* the probe's reads are what is fuzzed; the result does not matter */
+        (void)gsd_image_probe(img->data.data, img->data.len, &w, &h);
+}
+
+static void probe_request(uint16_t type, const ProtobufCMessage *m)
+{
+    if (type == GAZESPLAT__FRAME_TYPE__FRAME_FIT)
+        probe(((const Gazesplat__FitRequest *)m)->image);
+    else if (type == GAZESPLAT__FRAME_TYPE__FRAME_REDIRECT)
+        probe(((const Gazesplat__RedirectRequest *)m)->image);
 }
 
 static int any_type(uint16_t t)
@@ -45,6 +63,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
             const gs_frame_header *h = gs_frame_parser_header(&p);
             ProtobufCMessage *m = gs_msg_unpack(h->type, gs_frame_parser_payload(&p), h->payload_len);
             if (m) {
+                probe_request(h->type, m);
                 /* Re-pack what was decoded: sizes must agree. */
                 uint8_t *buf;
                 size_t len;

@@ -1,11 +1,16 @@
 """The Python client against the real daemon (no model): HELLO, HEALTH,
 STATS, errors raised as GazesplatError with their codes, BUSY retries,
-CANCEL, and a frame packed by Python accepted byte for byte.
+CANCEL, and a frame packed by Python accepted byte for byte. Then HEALTH
+LOADING and ERR_LOADING while the model is loading (the model file is a
+FIFO that the test holds back), and FAILED with the reason after it.
 usage: test_python_client.py GAZESPLATD"""
+import errno
 import math
 import os
 import sys
+import tempfile
 import threading
+import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
@@ -20,6 +25,52 @@ def expect_error(t, fn, code, what):
         t.check(False, "%s: no error" % what)
     except gc.GazesplatError as e:
         t.check(e.code == code, "%s: got %s want %s" % (what, e.name, gc.pb.ErrorCode.Name(code)))
+
+
+def feed_fifo(path, data):
+    """Writes data to the FIFO's next reader, if one is waiting: True."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_NONBLOCK)
+    except OSError as e:
+        if e.errno == errno.ENXIO:  # no reader yet
+            return False
+        raise
+    try:
+        os.write(fd, data)
+    except BrokenPipeError:  # the reader gave up first
+        pass
+    finally:
+        os.close(fd)
+    return True
+
+
+def test_loading(t, binary):
+    """The loader blocks reading a FIFO: the daemon answers meanwhile."""
+    fifo = os.path.join(tempfile.mkdtemp(prefix="gsd_fifo_"), "model.safetensors")
+    os.mkfifo(fifo)
+    d = Daemon(binary, ["--model", fifo, "--set", "photo_input=no"]).start()
+    try:
+        with gc.Client("unix:" + d.sock) as c:
+            h = c.health()
+            t.check(h.state == gc.pb.Health.LOADING and c.server.image_size == 0,
+                    "health while loading: %s" % h)
+            img = b"\x89PNG\r\n\x1a\n" + b"\0" * 40
+            expect_error(t, lambda: c.fit(img), gc.pb.ERR_LOADING, "fit while loading")
+            expect_error(t, lambda: list(c.redirect([(0, 0)], subject=b"k" * 16)),
+                         gc.pb.ERR_LOADING, "redirect while loading")
+            # Release the loader (it may open the file more than once).
+            end = time.time() + 10
+            while time.time() < end and c.health().state == gc.pb.Health.LOADING:
+                feed_fifo(fifo, b"not a model")
+                time.sleep(0.02)
+            h = c.health()
+            t.check(h.state == gc.pb.Health.FAILED and h.detail != "", "health after a bad model: %s" % h)
+            expect_error(t, lambda: c.fit(img), gc.pb.ERR_NO_MODEL, "fit after a failed load")
+    finally:
+        rc = d.stop()
+        t.check(rc == 0, "daemon exit %s (loading test)" % rc)
+        if t.failures:
+            print(d.log())
 
 
 def main():
@@ -80,6 +131,7 @@ def main():
         t.check(rc == 0, "daemon exit %s" % rc)
         if t.failures:
             print(d.log())
+    test_loading(t, os.path.abspath(sys.argv[1]))
     return t.status()
 
 

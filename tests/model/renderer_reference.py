@@ -17,6 +17,11 @@ Files, all float32 .npy, in OUT_DIR/<mode>/:
   grad.<tensor name>.npy    d(sum(dout * out)) / d(tensor)
   x.npy [C,H,W], tau.npy [D], dout.npy [3,4H,4W], out.npy [3,4H,4W],
   dx.npy, dtau.npy, unused.key_bias.npy [D]
+  and for the source modes src.npy [C,H,W] and dsrc.npy.
+
+The source modes (GS_GUIDE_SRC_SOURCE): ONE guidance vector, the attention
+of tau over the pixels of a separate map src, added (or multiplied in) after
+both blocks.
 """
 import math
 import os
@@ -27,7 +32,8 @@ import torch
 import torch.nn.functional as F
 
 C, D, H, W = 32, 144, 8, 12
-MODES = ("none", "additive", "multiplicative")
+MODES = ("none", "additive", "multiplicative", "source_additive",
+         "source_multiplicative")
 SLOPE = 0.2
 
 rng = np.random.default_rng(20250612)
@@ -75,20 +81,28 @@ def conv(t, p, prefix):
     return F.conv2d(t, p[prefix + ".weight"][:, :, None, None], p[prefix + ".bias"])
 
 
-def guide(u, tau, p, bk, mode):
-    """Cross-attention of tau over the pixels of u [1,C,h,w], unfolded."""
-    if mode == "none":
-        return u
-    n, c, h, w = u.shape
-    z = u.reshape(c, h * w)
+def attend(z, tau, p, bk):
+    """Cross-attention of tau over the pixels of z [C,HW], unfolded: [C]."""
     k = p["renderer.guide.key.weight"] @ z + bk[:, None]            # [D, HW]
     att = torch.softmax((tau @ k) / math.sqrt(D), dim=0)            # [HW]
     v = p["renderer.guide.value.weight"] @ z + p["renderer.guide.value.bias"][:, None]
-    a = (v @ att).reshape(1, c, 1, 1)                               # [1,C,1,1]
-    return u + a if mode == "additive" else u + u * a
+    return v @ att
 
 
-def renderer(x, tau, p, bk, mode):
+def guide(u, tau, p, bk, mode, avec):
+    """The guidance after a block: over u itself, or with the source's avec."""
+    if mode == "none":
+        return u
+    n, c, h, w = u.shape
+    a = avec if avec is not None else attend(u.reshape(c, h * w), tau, p, bk)
+    a = a.reshape(1, c, 1, 1)
+    return u + a if mode.endswith("additive") else u + u * a
+
+
+def renderer(x, tau, p, bk, mode, src):
+    avec = None
+    if mode.startswith("source"):
+        avec = attend(src.reshape(C, H * W), tau, p, bk)
     x = x[None]
     rgb = blur(up2x(conv(x, p, "renderer.conv_rgb")))
     for b in range(2):
@@ -97,7 +111,7 @@ def renderer(x, tau, p, bk, mode):
         y = F.leaky_relu(conv(y, p, pre + ".conv_b"), SLOPE)
         x = blur(F.pixel_shuffle(y + x.repeat(1, 4, 1, 1), 2))
         x = F.leaky_relu(conv(x, p, pre + ".conv_c"), SLOPE)
-        x = guide(x, tau, p, bk, mode)
+        x = guide(x, tau, p, bk, mode, avec)
         rgb = rgb + conv(x, p, pre + ".conv_rgb")
         if b == 0:
             rgb = blur(up2x(rgb))
@@ -127,9 +141,10 @@ def one_mode(out_dir, mode):
     tau = uniform(D, 8.0)  # logits spread over about +-1: a peaked attention
     dout = uniform((3, 4 * H, 4 * W), 1.0)
 
+    src = uniform((C, H, W), 1.0)
     p = {k: leaf(v) for k, v in params.items()}
-    tx, ttau, tbk = leaf(x), leaf(tau), leaf(bk)
-    out = renderer(tx, ttau, p, tbk, mode)
+    tx, ttau, tbk, tsrc = leaf(x), leaf(tau), leaf(bk), leaf(src)
+    out = renderer(tx, ttau, p, tbk, mode, tsrc)
     out.backward(torch.tensor(dout, dtype=torch.float64))
     if mode != "none":
         assert float(tbk.grad.abs().max()) < 1e-9, "the key bias must cancel"
@@ -145,6 +160,9 @@ def one_mode(out_dir, mode):
     save(os.path.join(d, "dx.npy"), tx.grad.numpy())
     dtau = ttau.grad.numpy() if ttau.grad is not None else np.zeros(D)
     save(os.path.join(d, "dtau.npy"), dtau)
+    if mode.startswith("source"):
+        save(os.path.join(d, "src.npy"), src)
+        save(os.path.join(d, "dsrc.npy"), tsrc.grad.numpy())
 
 
 def main():

@@ -1,7 +1,7 @@
 /* Compares the renderer with the PyTorch reference written by
  * renderer_reference.py (float64 torch on float32 inputs; the guidance
- * unfolded there, with a key bias the C code omits), in all three guidance
- * modes: the output and the gradient of every parameter tensor, of x and of
+ * unfolded there, with a key bias the C code omits), in every guidance
+ * mode and source: the output and the gradient of every parameter tensor, of x and of
  * tau.
  *
  * Usage: test_renderer_reference REFERENCE_DIR
@@ -83,9 +83,9 @@ static int load_params(const char *mode, const gs_renderer_tensor *tab,
     return 1;
 }
 
-static void run_mode(const char *mode, int guidance)
+static void run_mode(const char *mode, int guidance, int source)
 {
-    gs_renderer_config cfg = {32, 144, guidance, 2};
+    gs_renderer_config cfg = {32, 144, guidance, 2, source};
     gs_renderer_tensor tab[GS_RENDERER_MAX_TENSORS];
     int count = 0;
     CHECK_EQ_INT(gs_renderer_layout(&cfg, tab, GS_RENDERER_MAX_TENSORS, &count), GS_OK);
@@ -107,11 +107,22 @@ static void run_mode(const char *mode, int guidance)
     gs_renderer_params p, dp;
     CHECK_EQ_INT(gs_renderer_bind(&cfg, params, np, &p), GS_OK);
     CHECK_EQ_INT(gs_renderer_bind(&cfg, grads, np, &dp), GS_OK);
-    CHECK_EQ_INT(gs_renderer_forward(&cfg, &p, x, tau, H, W, acts, na, out, g_pool), GS_OK);
-    CHECK_EQ_INT(gs_renderer_backward(&cfg, &p, acts, na, x, tau, dout, H, W,
-                                      &dp, dx, dtau, g_pool), GS_OK);
+    float *src = NULL, *want_dsrc = NULL, *dsrc = NULL;
+    if (source) {
+        src = load(mode, "src", 0, NULL, NULL);
+        want_dsrc = load(mode, "dsrc", 0, NULL, NULL);
+        dsrc = calloc(nx, sizeof(float));
+    }
+    CHECK_EQ_INT(gs_renderer_forward_src(&cfg, &p, x, tau, src, H, W, acts, na,
+                                         out, g_pool), GS_OK);
+    CHECK_EQ_INT(gs_renderer_backward_src(&cfg, &p, acts, na, x, tau, src, dout,
+                                          H, W, &dp, dx, dsrc, dtau, g_pool),
+                 GS_OK);
     compare(mode, "out", out, want, nout);
     compare(mode, "dx", dx, want_dx, nx);
+    if (source && dsrc && want_dsrc)
+        compare(mode, "dsrc", dsrc, want_dsrc, nx);
+    free(src); free(want_dsrc); free(dsrc);
     if (guidance != GS_GUIDE_NONE)
         compare(mode, "dtau", dtau, want_dtau, nt);
     for (int i = 0; i < count; i++) {
@@ -139,9 +150,12 @@ int main(int argc, char **argv)
     g_pool = gs_pool_create(2);
     if (!g_pool)
         return fprintf(stderr, "cannot create a pool\n"), 1;
-    run_mode("none", GS_GUIDE_NONE);
-    run_mode("additive", GS_GUIDE_ADDITIVE);
-    run_mode("multiplicative", GS_GUIDE_MULTIPLICATIVE);
+    run_mode("none", GS_GUIDE_NONE, GS_GUIDE_SRC_BLOCK);
+    run_mode("additive", GS_GUIDE_ADDITIVE, GS_GUIDE_SRC_BLOCK);
+    run_mode("multiplicative", GS_GUIDE_MULTIPLICATIVE, GS_GUIDE_SRC_BLOCK);
+    run_mode("source_additive", GS_GUIDE_ADDITIVE, GS_GUIDE_SRC_SOURCE);
+    run_mode("source_multiplicative", GS_GUIDE_MULTIPLICATIVE,
+             GS_GUIDE_SRC_SOURCE);
     gs_pool_destroy(g_pool);
     GS_TEST_END();
 }

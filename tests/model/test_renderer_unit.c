@@ -33,11 +33,13 @@ static void fill(float *a, size_t n, uint32_t seed)
 static void t_config(void)
 {
     gs_error err;
-    gs_renderer_config ok = {32, 144, GS_GUIDE_MULTIPLICATIVE, 2};
+    gs_renderer_config ok = {32, 144, GS_GUIDE_MULTIPLICATIVE, 2, 0};
     CHECK_EQ_INT(gs_renderer_config_validate(&ok, &err), GS_OK);
     const gs_renderer_config bad[] = {
-        {0, 144, 0, 2}, {257, 144, 0, 2}, {32, 0, 0, 2}, {32, 257, 0, 2},
-        {32, 144, 3, 2}, {32, 144, -1, 2}, {32, 144, 0, 1}, {32, 144, 0, 3}};
+        {0, 144, 0, 2, 0}, {257, 144, 0, 2, 0}, {32, 0, 0, 2, 0},
+        {32, 257, 0, 2, 0}, {32, 144, 3, 2, 0}, {32, 144, -1, 2, 0},
+        {32, 144, 0, 1, 0}, {32, 144, 0, 3, 0}, {32, 144, 1, 2, 2},
+        {32, 144, 1, 2, -1}};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         gs_error_clear(&err);
         CHECK_EQ_INT(gs_renderer_config_validate(&bad[i], &err), GS_ERR_ARG);
@@ -52,8 +54,8 @@ static void t_config(void)
 /* C = 32, D = 144: 99 + 2 (2112 + 8320 + 1056 + 99) + (4608 + 1024 + 32) */
 static void t_layout(void)
 {
-    gs_renderer_config g = {32, 144, GS_GUIDE_ADDITIVE, 2};
-    gs_renderer_config n = {32, 144, GS_GUIDE_NONE, 2};
+    gs_renderer_config g = {32, 144, GS_GUIDE_ADDITIVE, 2, 0};
+    gs_renderer_config n = {32, 144, GS_GUIDE_NONE, 2, 0};
     CHECK_EQ_INT(gs_renderer_param_count(&g), 28937);
     CHECK_EQ_INT(gs_renderer_param_count(&n), 23273);
     gs_renderer_tensor tab[GS_RENDERER_MAX_TENSORS];
@@ -101,7 +103,7 @@ static void t_layout(void)
 
 static void t_init(void)
 {
-    gs_renderer_config g = {32, 144, GS_GUIDE_MULTIPLICATIVE, 2};
+    gs_renderer_config g = {32, 144, GS_GUIDE_MULTIPLICATIVE, 2, 0};
     size_t np = gs_renderer_param_count(&g);
     float *a = xcalloc(np), *b = xcalloc(np), *c = xcalloc(np);
     CHECK_EQ_INT(gs_renderer_init(&g, a, np, 42), GS_OK);
@@ -138,7 +140,7 @@ typedef struct {
 
 static void net_make(net *n, int guidance, int D, int H, int W, uint64_t seed)
 {
-    n->cfg = (gs_renderer_config){32, D, guidance, 2};
+    n->cfg = (gs_renderer_config){32, D, guidance, 2, 0};
     n->H = H, n->W = W;
     n->np = gs_renderer_param_count(&n->cfg);
     n->na = gs_renderer_act_size(&n->cfg, H, W);
@@ -386,6 +388,80 @@ static void t_bad_args(void)
     net_free(&n);
 }
 
+/* SOURCE guidance is local given its vector:
+ * - forward_src equals guide_vector + forward_vec byte for byte;
+ * - a change of one feature pixel (i, j) changes only output pixels within
+ *   4 (i +- GS_RENDERER_REACH) (and the bound is tight: pixels at the edge
+ *   of that window do change);
+ * - a crop of the feature map rendered with forward_vec equals the full
+ *   render away from the crop's cut edges (REACH feature pixels inside). */
+static void t_source_locality(int guidance)
+{
+    enum { H = 14, W = 17, R = GS_RENDERER_REACH };
+    gs_renderer_config cfg = {32, 16, guidance, 2, GS_GUIDE_SRC_SOURCE};
+    size_t np = gs_renderer_param_count(&cfg), na = gs_renderer_act_size(&cfg, H, W);
+    size_t nx = (size_t)32 * H * W, nout = (size_t)48 * H * W;
+    float *params = xcalloc(np), *acts = xcalloc(na), *x = xcalloc(nx);
+    float *src = xcalloc(nx), *tau = xcalloc(16), *o1 = xcalloc(nout);
+    float *o2 = xcalloc(nout), *a = xcalloc(32);
+    gs_renderer_params p;
+    CHECK_EQ_INT(gs_renderer_init(&cfg, params, np, 3), GS_OK);
+    CHECK_EQ_INT(gs_renderer_bind(&cfg, params, np, &p), GS_OK);
+    fill(p.value_w, 32 * 32, 0.3f);
+    fill(p.value_b, 32, 0.5f);
+    fill(x, nx, 1), fill(src, nx, 1), fill(tau, 16, 2);
+    CHECK_EQ_INT(gs_renderer_forward_src(&cfg, &p, x, tau, src, H, W, acts, na,
+                                         o1, NULL), GS_OK);
+    CHECK_EQ_INT(gs_renderer_guide_vector(&cfg, &p, src, tau, H, W, acts, na,
+                                          a, NULL), GS_OK);
+    CHECK_EQ_INT(gs_renderer_forward_vec(&cfg, &p, x, a, H, W, acts, na, o2,
+                                         NULL), GS_OK);
+    CHECK(memcmp(o1, o2, nout * sizeof(float)) == 0);
+    /* an impulse at (5, 8) in every channel */
+    int pi = 5, pj = 8, edge = 0;
+    for (int c = 0; c < 32; c++)
+        x[((size_t)c * H + pi) * W + pj] += 0.7f;
+    CHECK_EQ_INT(gs_renderer_forward_vec(&cfg, &p, x, a, H, W, acts, na, o2,
+                                         NULL), GS_OK);
+    int bad = 0;
+    for (int c = 0; c < 3; c++)
+        for (int y = 0; y < 4 * H; y++)
+            for (int z = 0; z < 4 * W; z++) {
+                size_t k = ((size_t)c * 4 * H + y) * 4 * W + z;
+                int inside = y >= 4 * (pi - R) && y < 4 * (pi + R + 1) &&
+                             z >= 4 * (pj - R) && z < 4 * (pj + R + 1);
+                if (o1[k] != o2[k] && !inside)
+                    bad++;
+                if (o1[k] != o2[k] && (y < 4 * (pi - R + 1) || z < 4 * (pj - R + 1)))
+                    edge = 1;
+            }
+    CHECK_MSG(bad == 0, "%d output values changed outside the reach", bad);
+    CHECK_MSG(edge, "the reach bound is not tight (REACH could be smaller)");
+    /* a crop [y0, y1) x [x0, x1) against the full render */
+    int y0 = 3, y1 = 11, x0 = 4, x1 = 13, h = y1 - y0, w = x1 - x0;
+    float *xc = xcalloc((size_t)32 * h * w), *oc = xcalloc((size_t)48 * h * w);
+    for (int c = 0; c < 32; c++)
+        for (int y = 0; y < h; y++)
+            memcpy(xc + ((size_t)c * h + y) * w, x + ((size_t)c * H + y + y0) * W + x0,
+                   (size_t)w * sizeof(float));
+    size_t nac = gs_renderer_act_size(&cfg, h, w);
+    float *actc = xcalloc(nac);
+    CHECK_EQ_INT(gs_renderer_forward_vec(&cfg, &p, xc, a, h, w, actc, nac, oc,
+                                         NULL), GS_OK);
+    double worst = 0.0;
+    for (int c = 0; c < 3; c++)
+        for (int y = 4 * R; y < 4 * (h - R); y++)
+            for (int z = 4 * R; z < 4 * (w - R); z++) {
+                float got = oc[((size_t)c * 4 * h + y) * 4 * w + z];
+                float want = o2[((size_t)c * 4 * H + y + 4 * y0) * 4 * W + z + 4 * x0];
+                worst = fmax(worst, fabs((double)got - want));
+            }
+    CHECK_MSG(worst <= 1e-6, "crop differs from the full render by %.3g", worst);
+    free(xc); free(oc); free(actc);
+    free(params); free(acts); free(x); free(src); free(tau); free(o1);
+    free(o2); free(a);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -399,6 +475,8 @@ int main(void)
     t_threads(GS_GUIDE_NONE);
     t_threads(GS_GUIDE_ADDITIVE);
     t_threads(GS_GUIDE_MULTIPLICATIVE);
+    t_source_locality(GS_GUIDE_ADDITIVE);
+    t_source_locality(GS_GUIDE_MULTIPLICATIVE);
     t_default_size();
     t_bad_args();
     GS_TEST_END();

@@ -114,5 +114,14 @@ int main(void)
     done.count = 2;
     done.seconds = 0.5;
     dump("done", "DONE for request 7: 2 images in 0.5 s", T(DONE), 7, key, &done.base);
+
+    Gazesplat__LiveSetting st = GAZESPLAT__LIVE_SETTING__INIT, *sets[1] = {&st};
+    st.key = "strength";
+    st.value = "0.5";
+    Gazesplat__LivePolicyRequest lp = GAZESPLAT__LIVE_POLICY_REQUEST__INIT;
+    lp.n_set = 1;
+    lp.set = sets;
+    dump("live_policy", "LIVE_POLICY, request 3: set strength to 0.5", T(LIVE_POLICY), 3, NULL,
+         &lp.base);
     return 0;
 }

@@ -53,6 +53,10 @@ before=$(count 'capture: streaming')
 echo vivid.0 > /sys/bus/platform/drivers/vivid/unbind || fail "unbind"
 sleep 1
 grep -q 'capture lost' /tmp/live.log || fail "loss not noticed"
+# While the camera is gone the loopback carries "no video" frames (10/s).
+timeout 5 v4l2-ctl -d /dev/video9 --stream-mmap --stream-count=3 --stream-to=/tmp/ph.yuv 2>/dev/null
+say "while unbound: read $(wc -c < /tmp/ph.yuv 2>/dev/null || echo 0) bytes of placeholder frames (want $((3 * 640 * 480 * 2)))"
+rm -f /tmp/ph.yuv
 echo vivid.0 > /sys/bus/platform/drivers/vivid/bind || fail "bind"
 tb=$(now)
 while [ "$(count 'capture: streaming')" -le "$before" ]; do

@@ -156,18 +156,33 @@ void gs_cap_close(gs_cap *cap);
 /* ---- v4l2loopback output -------------------------------------------------- */
 
 /* A writer on a V4L2 OUTPUT device (v4l2loopback): YUYV, even width, set
- * with S_FMT on the OUTPUT type, frames handed over with write(). A write
- * error closes the device; the next write reopens it after a delay. */
+ * with S_FMT on the OUTPUT type, frames handed over with write(). The
+ * format given at create is kept for the writer's life and re-applied on
+ * every reopen: a frame of another size (a camera back at another
+ * resolution) is letterboxed into it, so readers never see the format
+ * change. A write error closes the device; the next write reopens it after
+ * a delay. */
 typedef struct gs_cap_out gs_cap_out;
 
 int gs_cap_out_create(const char *path, int width, int height, int fps,
                       const gs_cap_ops *ops, gs_cap_out **out, gs_error *err);
 void gs_cap_out_destroy(gs_cap_out *o);
 
-/* Converts an RGB frame to YUYV and writes it. A frame of another size
- * renegotiates the format first. */
+/* Converts an RGB frame to YUYV and writes it. A frame of another size is
+ * scaled into the output's format (aspect kept, black bars). */
 int gs_cap_out_write(gs_cap_out *o, const uint8_t *rgb, size_t stride, int width,
                      int height, gs_error *err);
+
+/* Writes the "no video" frame (dark grey, "NO VIDEO" in light grey) in the
+ * output's format: the pipeline sends it while the camera is gone so that
+ * video-call apps keep a live stream. */
+int gs_cap_out_write_placeholder(gs_cap_out *o, gs_error *err);
+
+/* Draws the placeholder into an RGB image of any size. */
+void gs_cap_placeholder_rgb(uint8_t *rgb, size_t stride, int width, int height);
+
+/* The output's format (fixed at create). */
+void gs_cap_out_size(const gs_cap_out *o, int *width, int *height);
 
 /* ---- choosing a camera ---------------------------------------------------- */
 
@@ -242,6 +257,15 @@ typedef struct gs_cap_policy_config {
 
 gs_cap_policy_config gs_cap_policy_config_default(void);
 
+/* Sets one field by name ("enabled" takes yes/no/true/false/on/off/1/0;
+ * the others a number), without the range check. GS_ERR_ARG for an
+ * unknown key or an unparsable value. */
+int gs_cap_policy_config_set(gs_cap_policy_config *c, const char *key, const char *value,
+                             gs_error *err);
+/* Applies "k=v,k=v,..." and checks the result; *c is changed only when
+ * every setting parsed and the whole config passed the check. */
+int gs_cap_policy_config_parse(gs_cap_policy_config *c, const char *list, gs_error *err);
+
 /* Ranges: strength in [0,1]; 0 <= low < high <= 90 for each pair;
  * smooth_s in [0, 10]; blink_openness in [0,1]; blink_hold_max_s in [0, 10]. */
 int gs_cap_policy_config_check(const gs_cap_policy_config *c, gs_error *err);
@@ -307,6 +331,8 @@ typedef struct gs_cap_pipe_config {
     const gs_cap_ops *clock;   /* now_ns for latencies, the capture's clock (NULL: system) */
     gs_cap_pipe_log_fn log;    /* may be NULL */
     void *log_user;
+    int placeholder_ms;        /* no frame this long: the output gets the "no
+                                  video" frame, 10 per second (0: 500; < 0: never) */
 } gs_cap_pipe_config;
 
 /* Latency percentiles in milliseconds over the last GS_CAP_PIPE_WINDOW frames. */
@@ -318,6 +344,7 @@ typedef struct gs_cap_latency {
 typedef struct gs_cap_pipe_stats {
     uint64_t in, out;          /* frames captured, frames written */
     uint64_t ring_drops;       /* overwritten in a ring: a later stage was slower */
+    uint64_t placeholders;     /* "no video" frames written while the camera was gone */
     gs_cap_stats cap;
     gs_cap_latency capture;    /* driver timestamp -> frame in the first ring */
     gs_cap_latency process;    /* taken by the stage -> stage done */

@@ -23,10 +23,18 @@ typedef struct gs_model_spec {
     int guidance;           /* 0 none, 1 additive (released), 2 Eq. 9 */
     int two_stream;         /* 0: single stream */
     int eye_rotation;       /* 0: no explicit eye rotation */
+    int guide_source;       /* 0: each renderer block attends over its own
+                               features (released code); 1: one vector from
+                               the face stream's map (local renderer, exact
+                               incremental gaze sweeps; the default) */
 } gs_model_spec;
 void gs_model_spec_default(gs_model_spec *s);
 int gs_model_new(const gs_model_spec *spec, uint64_t seed, gs_model **out,
                  gs_error *err);
+/* Changes the guidance source of a model in memory (same tensors, so a
+ * model trained with one source can continue training with the other).
+ * GS_ERR_ARG for a value other than 0 or 1. */
+int gs_model_set_guide_source(gs_model *m, int source, gs_error *err);
 /* Writes a model file atomically (safetensors, docs/model.md). */
 int gs_model_write(const gs_model *m, const char *path, gs_error *err);
 
