@@ -466,6 +466,9 @@ static int normalize_photo(gsd_worker *w, const Gazesplat__Intrinsics *k, photo_
     }
     gs_face_opts o;
     gs_face_opts_default(&o);
+    /* The head frame of the synthetic training labels (see cmd_redirect.c
+     * and docs/face.md). */
+    o.pose_model = GS_FACE_POSE_SYNTH;
     o.norm_size = info->image_size;
     o.norm_distance_mm = info->distance_mm;
     o.norm_focal = info->focal;

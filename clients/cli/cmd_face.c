@@ -33,6 +33,9 @@ const cli_command cli_face_command = {
     "  --min-size PX        smallest face the cascade looks for (default:\n"
     "                       1/16 of the photo's shorter side, at least 24)\n"
     "  --min-neighbors N    cascade votes a face needs (default 5)\n"
+    "  --pose-model M       generic (default): the common 6-point face model;\n"
+    "                       synth: the mean synthetic head, whose head frame\n"
+    "                       the trained models use (as `gazesplat redirect`)\n"
     "  --list               only list the faces found (boxes)\n"
     "  --json               print one JSON object instead of text\n"
     "\n"
@@ -44,7 +47,7 @@ const cli_command cli_face_command = {
 
 enum {
     O_IMAGE, O_INDEX, O_BOX, O_NORM, O_MASK, O_SIZE, O_FOCAL, O_CASCADE, O_MODEL, O_MINSIZE,
-    O_MINNB, O_LIST, O_JSON, O_N
+    O_MINNB, O_LIST, O_JSON, O_POSE, O_N
 };
 
 #define MAX_LIST 64
@@ -98,6 +101,15 @@ static int parse_opts(const cli_opt *o, gs_face_opts *fo)
             return cli_usage_error(cmd, "--min-size: want 8..100000; got '%s'",
                                    o[O_MINSIZE].value);
         fo->detect.min_size = (int)v;
+    }
+    if (o[O_POSE].value) {
+        if (!strcmp(o[O_POSE].value, "generic"))
+            fo->pose_model = GS_FACE_POSE_GENERIC;
+        else if (!strcmp(o[O_POSE].value, "synth"))
+            fo->pose_model = GS_FACE_POSE_SYNTH;
+        else
+            return cli_usage_error(cmd, "--pose-model: want generic or synth; got '%s'",
+                                   o[O_POSE].value);
     }
     if (o[O_MINNB].value) {
         if (cli_parse_long(o[O_MINNB].value, 0, 100, &v))
@@ -261,7 +273,8 @@ static int run_face(int argc, char **argv)
                       {"--out-norm", 1, NULL}, {"--out-mask", 1, NULL}, {"--size", 1, NULL},
                       {"--focal", 1, NULL},   {"--cascade", 1, NULL}, {"--model", 1, NULL},
                       {"--min-size", 1, NULL}, {"--min-neighbors", 1, NULL},
-                      {"--list", 0, NULL}, {"--json", 0, NULL}};
+                      {"--list", 0, NULL}, {"--json", 0, NULL},
+                      {"--pose-model", 1, NULL}};
     int rc = cli_parse(&cli_face_command, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cli_face_command.usage, stdout);

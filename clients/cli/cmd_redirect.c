@@ -222,6 +222,10 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
     gs_face_opts fo;
     gs_face_opts_default(&fo);
     fo.index = index;
+    /* The model was trained on synthetic heads, whose labels use the
+     * synthetic head frame: solve the pose against the mean synthetic head
+     * so the normalization and the head angles are in that frame. */
+    fo.pose_model = GS_FACE_POSE_SYNTH;
     fo.norm_size = S;
     fo.norm_distance_mm = info.distance_mm;
     fo.norm_focal = info.focal;

@@ -15,7 +15,7 @@ const cli_command cli_synth_command = {
     "synth",
     "render synthetic heads with exact gaze labels (dataset, contact sheet, template)",
     "usage: gazesplat synth [--out DIR] [--sheet FILE.png] [--template FILE.ply]\n"
-    "                       [options]\n"
+    "                       [--face-model6] [options]\n"
     "\n"
     "  --out DIR             write a dataset: DIR/images/*.png, DIR/masks/*.png,\n"
     "                        DIR/labels.jsonl and DIR/README.md (all fields)\n"
@@ -41,6 +41,9 @@ const cli_command cli_synth_command = {
     "                        (0 head, 1 face, 2 left eye, 3 right eye) and a\n"
     "                        'landmark' element with the 68 3D landmarks\n"
     "  --spacing MM          template point spacing (default 2)\n"
+    "  --face-model6         print the 6-point face model of the mean head (iBUG\n"
+    "                        36, 39, 42, 45, 31, 35; head frame, mm) as the C\n"
+    "                        initialiser of gs_geom_face_model6_synth\n"
     "\n"
     "Everything is deterministic: the same options give the same bytes.\n",
     run_synth,
@@ -48,7 +51,7 @@ const cli_command cli_synth_command = {
 
 enum {
     O_OUT, O_COUNT, O_FIRST, O_SPLIT, O_IDS, O_SEED, O_SIZE, O_RIG, O_SS,
-    O_NOMASKS, O_THREADS, O_SHEET, O_ROWS, O_TEMPLATE, O_SPACING, O_N
+    O_NOMASKS, O_THREADS, O_SHEET, O_ROWS, O_TEMPLATE, O_SPACING, O_MODEL6, O_N
 };
 
 static void progress(void *ctx, uint64_t done, uint64_t total)
@@ -205,6 +208,26 @@ static int do_template(const char *path, double spacing, gs_pool *pool)
     return CLI_OK;
 }
 
+/* The six points of the mean head's landmarks, as pasted into
+ * lib/geom/geom.c (the landmarks do not depend on the point spacing, so a
+ * coarse template is enough). */
+static int do_face_model6(gs_pool *pool)
+{
+    static const int ibug[6] = {36, 39, 42, 45, 31, 35};
+    gs_synth_template t;
+    gs_error err = {0, ""};
+    if (gs_synth_template_build(20.0, pool, &t, &err) != GS_OK)
+        return cli_fail(&cli_synth_command, "%s", err.msg);
+    printf("    /* iBUG 36, 39, 42, 45, 31, 35 of the mean synthetic head, mm */\n");
+    printf("    static const double m[6][3] = {\n");
+    for (int i = 0; i < 6; i++) {
+        const double *p = t.landmarks[ibug[i]];
+        printf("        {%.4f, %.4f, %.4f}%s\n", p[0], p[1], p[2], i < 5 ? "," : "};");
+    }
+    gs_synth_template_free(&t);
+    return CLI_OK;
+}
+
 static int run_synth(int argc, char **argv)
 {
     cli_opt o[O_N] = {
@@ -212,7 +235,8 @@ static int run_synth(int argc, char **argv)
         {"--seed-split", 1, NULL}, {"--identities", 1, NULL}, {"--seed", 1, NULL},
         {"--size", 1, NULL},       {"--rig", 1, NULL},     {"--supersample", 1, NULL},
         {"--no-masks", 0, NULL},   {"--threads", 1, NULL}, {"--sheet", 1, NULL},
-        {"--rows", 1, NULL},       {"--template", 1, NULL}, {"--spacing", 1, NULL}};
+        {"--rows", 1, NULL},       {"--template", 1, NULL}, {"--spacing", 1, NULL},
+        {"--face-model6", 0, NULL}};
     int rc = cli_parse(&cli_synth_command, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cli_synth_command.usage, stdout);
@@ -220,9 +244,9 @@ static int run_synth(int argc, char **argv)
     }
     if (rc != CLI_PARSED)
         return rc;
-    if (!o[O_OUT].value && !o[O_SHEET].value && !o[O_TEMPLATE].value)
-        return cli_usage_error(&cli_synth_command, "nothing to do: give --out, --sheet or "
-                               "--template");
+    if (!o[O_OUT].value && !o[O_SHEET].value && !o[O_TEMPLATE].value && !o[O_MODEL6].value)
+        return cli_usage_error(&cli_synth_command, "nothing to do: give --out, --sheet, "
+                               "--template or --face-model6");
     gs_synth_gen_config c;
     long count = 100, first = 0, threads = 0, rows = 4;
     double spacing = 2.0;
@@ -245,6 +269,8 @@ static int run_synth(int argc, char **argv)
         rc = do_sheet(o[O_SHEET].value, &c, (int)rows, pool);
     if (rc == CLI_OK && o[O_TEMPLATE].value)
         rc = do_template(o[O_TEMPLATE].value, spacing, pool);
+    if (rc == CLI_OK && o[O_MODEL6].value)
+        rc = do_face_model6(pool);
     gs_pool_destroy(pool);
     return rc;
 }

@@ -30,7 +30,24 @@ static int check_k(const double k[9], gs_error *err)
     return GS_OK;
 }
 
+int gs_face_model6(gs_face_pose_model model, double out[6][3])
+{
+    if (model == GS_FACE_POSE_GENERIC)
+        gs_geom_face_model6(out);
+    else if (model == GS_FACE_POSE_SYNTH)
+        gs_geom_face_model6_synth(out);
+    else
+        return GS_ERR_ARG;
+    return GS_OK;
+}
+
 int gs_face_head_pose(const double uv[][2], const double k[9], gs_face_pose *out, gs_error *err)
+{
+    return gs_face_head_pose_model(uv, k, GS_FACE_POSE_GENERIC, out, err);
+}
+
+int gs_face_head_pose_model(const double uv[][2], const double k[9], gs_face_pose_model which,
+                            gs_face_pose *out, gs_error *err)
 {
     if (!uv || !k || !out)
         return gs_error_set(err, GS_ERR_ARG, "head pose: NULL argument");
@@ -39,7 +56,8 @@ int gs_face_head_pose(const double uv[][2], const double k[9], gs_face_pose *out
         return rc;
     /* The model centred on its face centre, so that t is the face centre. */
     double model[6][3], centre[3], img[6][2];
-    gs_geom_face_model6(model);
+    if (gs_face_model6(which, model) != GS_OK)
+        return gs_error_set(err, GS_ERR_ARG, "head pose: unknown face model %d", (int)which);
     gs_geom_face_centre6((const double(*)[3])model, centre);
     for (int i = 0; i < 6; i++) {
         for (int j = 0; j < 3; j++)
@@ -76,6 +94,7 @@ int gs_face_head_pose(const double uv[][2], const double k[9], gs_face_pose *out
 void gs_face_opts_default(gs_face_opts *o)
 {
     memset(o, 0, sizeof *o);
+    o->pose_model = GS_FACE_POSE_GENERIC;
     o->norm_size = 512;
     o->norm_distance_mm = GS_GEOM_NORM_DISTANCE_MM;
     o->norm_focal = 0; /* gs_geom_norm_focal(norm_size) */
@@ -172,7 +191,8 @@ int gs_face_analyze(gs_face_detector *det, const gs_face_shape_model *sp, const 
     if (!rc)
         rc = landmarks(sp, img, &res, err);
     if (!rc)
-        rc = gs_face_head_pose((const double(*)[2])res.uv, res.k, &res.pose, err);
+        rc = gs_face_head_pose_model((const double(*)[2])res.uv, res.k, opts->pose_model,
+                                     &res.pose, err);
     if (!rc)
         rc = normalize(opts, &res, err);
     if (rc)

@@ -79,6 +79,23 @@ static float rmax(const sd_ell *e)
     return e->rmax;
 }
 
+/* The lid opening: the wedge between the margins at angles th_u (upper)
+ * and th_l (lower) about the lid axis, measured from the eye's front
+ * (-z made normal to the axis) toward up (-y). */
+static void set_lid_wedge(eye_model *e, float th_u, float th_l)
+{
+    v3 u = e->lid_x;
+    v3 f0 = v3_make(0, 0, -1);
+    f0 = v3_norm(v3_sub(f0, v3_scale(u, v3_dot(u, f0))));
+    v3 up0 = v3_make(0, -1, 0);
+    up0 = v3_sub(up0, v3_scale(u, v3_dot(u, up0)));
+    up0 = v3_norm(v3_sub(up0, v3_scale(f0, v3_dot(f0, up0))));
+    e->up_dir = v3_add(v3_scale(f0, cosf(th_u)), v3_scale(up0, sinf(th_u)));
+    e->lo_dir = v3_add(v3_scale(f0, cosf(th_l)), v3_scale(up0, sinf(th_l)));
+    e->n_up = v3_add(v3_scale(f0, -sinf(th_u)), v3_scale(up0, cosf(th_u)));
+    e->n_lo = v3_add(v3_scale(f0, sinf(th_l)), v3_scale(up0, -cosf(th_l)));
+}
+
 static void build_eye(const build_ctx *b, const float *p,
                       const gs_synth_expression *ex, double gp, double gy,
                       int side, eye_model *e)
@@ -120,21 +137,13 @@ static void build_eye(const build_ctx *b, const float *p,
     v3 u = v3_norm(v3_make(s * cosf(yawc) * cosf(tilt), -sinf(tilt),
                            sinf(yawc) * cosf(tilt)));
     e->lid_x = u;
-    v3 f0 = v3_make(0, 0, -1);
-    f0 = v3_norm(v3_sub(f0, v3_scale(u, v3_dot(u, f0))));
-    v3 up0 = v3_make(0, -1, 0);
-    up0 = v3_sub(up0, v3_scale(u, v3_dot(u, up0)));
-    up0 = v3_norm(v3_sub(up0, v3_scale(f0, v3_dot(f0, up0))));
     float open = p[GS_SYNTH_ID_EYE_OPENING];
     float th_u = (22.0f + 4.0f * open) * DEG + 0.85f * (float)gp -
                  10.0f * DEG * ex->squint;
     float th_l = -(17.0f + 3.0f * open) * DEG + 0.3f * (float)gp +
                  8.0f * DEG * ex->squint;
     th_u = mixf(th_u, th_l - 1.0f * DEG, clampf(ex->blink, 0.0f, 1.0f));
-    e->up_dir = v3_add(v3_scale(f0, cosf(th_u)), v3_scale(up0, sinf(th_u)));
-    e->lo_dir = v3_add(v3_scale(f0, cosf(th_l)), v3_scale(up0, sinf(th_l)));
-    e->n_up = v3_add(v3_scale(f0, -sinf(th_u)), v3_scale(up0, cosf(th_u)));
-    e->n_lo = v3_add(v3_scale(f0, sinf(th_l)), v3_scale(up0, -cosf(th_l)));
+    set_lid_wedge(e, th_u, th_l);
 }
 
 static void build_appearance(const gs_synth_identity *id, head_model *h)
@@ -438,6 +447,12 @@ void gs_synth_head_build(const gs_synth_identity *id,
     gs_geom_face_centre6(six, fc);
     build_raw(id, ex, gaze_pitch, gaze_yaw,
               v3_make((float)fc[0], (float)fc[1], (float)fc[2]), h);
+}
+
+void gs_synth_head_open_lids(head_model *h)
+{
+    for (int i = 0; i < 2; i++)
+        set_lid_wedge(&h->eye[i], 85.0f * DEG, -85.0f * DEG);
 }
 
 /* ---- distance field ---- */

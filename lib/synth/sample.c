@@ -104,6 +104,8 @@ int gs_synth_render(const gs_synth_scene *scene, const gs_synth_camera *cam,
         return gs_error_set(err, GS_ERR_NOMEM, "synth: out of memory");
     gs_synth_head_build(&scene->identity, &scene->expr, scene->gaze_pitch,
                         scene->gaze_yaw, &r->head);
+    if (opts && opts->open_lids)
+        gs_synth_head_open_lids(&r->head);
     gs_synth_render_setup(r, scene, cam, ss);
     r->out = out;
     gs_synth_render_pixels(r, pool);

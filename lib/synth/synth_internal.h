@@ -180,6 +180,11 @@ void gs_synth_head_build(const gs_synth_identity *id,
                          const gs_synth_expression *ex, double gaze_pitch,
                          double gaze_yaw, head_model *h);
 
+/* Pulls both lids of a built head back to 85 degrees above and below the
+ * eye's front (gs_synth_render_opts.open_lids): the wedge between them
+ * leaves the cornea and iris in the open for any gaze of the range. */
+void gs_synth_head_open_lids(head_model *h);
+
 /* Signed distance (mm) of the head surface, eyeballs excluded. */
 float gs_synth_head_sdf(const head_model *h, v3 p);
 /* The same field with every part evaluated (no skipping): tests only. */

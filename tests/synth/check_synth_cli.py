@@ -1,6 +1,6 @@
 """End-to-end check of `gazesplat synth`: dataset files, labels.jsonl
-fields and conventions, contact sheet, template PLY, determinism across
-runs and thread counts, usage errors.
+fields and conventions, contact sheet, template PLY, the printed 6-point
+face model, determinism across runs and thread counts, usage errors.
 
 usage: check_synth_cli.py GAZESPLAT"""
 import json
@@ -106,6 +106,19 @@ def main():
     check("element landmark 68" in header, "template lacks landmarks")
     check(len(raw) == end + nv * 28 + 68 * 12, "template PLY size")
     check(nv > 1000, "template has %d points" % nv)
+
+    # The 6-point face model printed for lib/geom equals the template's
+    # landmarks 36, 39, 42, 45, 31, 35 (float32 in the PLY).
+    out = run(exe, ["--face-model6"]).stdout
+    rows = [[float(v) for v in line.strip().strip("{},;").replace("}", "").split(",")]
+            for line in out.splitlines() if line.strip().startswith("{")]
+    lm = struct.unpack("<%df" % (68 * 3), raw[len(raw) - 68 * 12:])
+    check(len(rows) == 6 and all(len(r) == 3 for r in rows),
+          "--face-model6 printed %r" % out)
+    if len(rows) == 6:
+        worst = max(abs(rows[i][j] - lm[3 * k + j])
+                    for i, k in enumerate((36, 39, 42, 45, 31, 35)) for j in range(3))
+        check(worst < 1e-3, "--face-model6 vs template landmarks: %g mm" % worst)
 
     # Usage errors.
     run(exe, [], want=2)

@@ -74,7 +74,7 @@ int main(void)
     gs_synth_camera_single(37, 600, 260, &cam);
     cam.height = 23;
     cam.K[5] = 11.5;
-    gs_synth_render_opts o2 = {2};
+    gs_synth_render_opts o2 = {2, 0};
     CHECK(gs_synth_render(&sc, &cam, &o2, NULL, &odd, NULL) == GS_OK);
     uint64_t ref = sample_hash(&odd);
     for (int t = 0; t < 4; t++) {

@@ -1,6 +1,9 @@
 /* Geometry of the head model:
  * - eyelids (and the rest of the head) never cut into an eyeball, for
- *   random identities, gazes, squints and blinks;
+ *   random identities, gazes, squints and blinks, and for every corner of
+ *   the gaze range (+-40 deg pitch x +-50 deg yaw) with the eyes open,
+ *   squinting, half and fully closed, and with the lids opened
+ *   (render option open_lids);
  * - the 4-wide field equals the scalar field bit for bit, and the field's
  *   part skipping leaves the surface unchanged;
  * - analytic gradients match finite differences;
@@ -30,6 +33,26 @@ static void random_head(gs_rng *r, int i, head_model *h)
                         gs_rng_uniform(r, -50, 50) * DEG, h);
 }
 
+/* Heads at the extremes: a corner of the gaze range (4), with no, full
+ * squint, half and full blink (4), lids as built or opened (2). */
+enum { EXTREME_HEADS = 32 };
+static void extreme_head(gs_rng *r, int i, head_model *h)
+{
+    gs_synth_identity id;
+    gs_synth_identity_from_seed(gs_synth_split_seed(GS_SYNTH_TEST, (uint64_t)i),
+                                &id);
+    gs_synth_expression ex;
+    gs_synth_expression_neutral(&ex);
+    int corner = i % 4, lids = (i / 4) % 4;
+    ex.squint = lids == 1 ? 1.0f : 0.0f;
+    ex.blink = lids == 2 ? 0.5f : (lids == 3 ? 1.0f : 0.0f);
+    ex.pupil = (float)gs_rng_uniform(r, -1, 1);
+    gs_synth_head_build(&id, &ex, (corner & 1 ? 40 : -40) * DEG,
+                        (corner & 2 ? 50 : -50) * DEG, h);
+    if (i >= 16)
+        gs_synth_head_open_lids(h);
+}
+
 /* Uniform point on a sphere. */
 static v3 sphere_point(gs_rng *r)
 {
@@ -44,9 +67,12 @@ static void test_lids_clear_eyeballs(void)
     gs_rng_seed(&r, 1);
     double worst = 1e9;
     int n = 0;
-    for (int i = 0; i < 60; i++) {
+    for (int i = 0; i < 60 + EXTREME_HEADS; i++) {
         head_model h;
-        random_head(&r, i, &h);
+        if (i < 60)
+            random_head(&r, i, &h);
+        else
+            extreme_head(&r, i - 60, &h);
         for (int e = 0; e < 2; e++) {
             const eye_model *eye = &h.eye[e];
             for (int k = 0; k < 400; k++) {

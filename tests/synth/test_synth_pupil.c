@@ -1,15 +1,22 @@
 /* Geometry: the projected pupil centre label lies within 0.5 px of the
- * centroid of the dark pupil found in the rendered pixels, for random
- * gazes across the whole range and random head poses. Each eye is rendered
- * by a camera zoomed on it (4 px per mm at 600 mm), 2x2 supersampled, with
- * a light low-contrast iris and no specular highlight so that the pupil is
- * the only dark blob. Eyes whose pupil is partly hidden (lid, nose, seen
- * through the sclera) are skipped; the test requires enough visible ones. */
+ * centroid of the dark pupil found in the rendered pixels, for gazes over
+ * the whole range (+-50 deg yaw, +-40 deg pitch in the head frame, drawn
+ * stratified so every fifth of each range is hit) and head poses over
+ * theirs (+-60 deg yaw, +-40 deg pitch, +-10 deg roll). Each eye is
+ * rendered by a camera zoomed on it (4 px per mm at 600 mm), 2x2
+ * supersampled, with a light low-contrast iris and no specular highlight so
+ * that the pupil is the only dark blob, and with the render option
+ * open_lids: the lids follow gaze pitch and would otherwise cover part of
+ * the pupil when looking down (below about -13 deg), which biases a
+ * centroid. Eyes whose pupil is still hidden (by the nose or the other
+ * side of the face at large head yaw, or seen too obliquely) are skipped;
+ * the test requires enough visible ones in every fifth of both gaze
+ * ranges. */
 #include "gs_test.h"
 #include "synth_internal.h"
 #include "synth_test_util.h"
 
-enum { SIZE = 72, TRIALS = 40 };
+enum { SIZE = 72, TRIALS = 75, BINS = 5 };
 
 /* True when a circle 1.2 mm outside the pupil rim is seen through the
  * cornea with nothing of the head in front: the pupil and the iris ring
@@ -97,16 +104,28 @@ static void dark_centroid(const gs_synth_sample *s, double u, double v,
     out[1] = sy / sw;
 }
 
+/* Uniform in the k-th of BINS equal parts of [-range, range]. */
+static double stratified(gs_rng *rng, int k, double range)
+{
+    return -range + 2.0 * range * (k + gs_rng_uniform(rng, 0, 1)) / BINS;
+}
+
+static int bin_of(double v, double range)
+{
+    int b = (int)floor((v + range) / (2.0 * range) * BINS);
+    return b < 0 ? 0 : (b >= BINS ? BINS - 1 : b);
+}
+
 int main(void)
 {
     gs_rng rng;
     gs_rng_seed(&rng, 77);
     gs_synth_sample s;
     CHECK(gs_synth_sample_alloc(&s, SIZE, SIZE, NULL) == GS_OK);
-    gs_synth_render_opts opts = {2};
-    int tested = 0;
+    gs_synth_render_opts opts = {2, 1};
+    int tested = 0, pitch_bins[BINS] = {0}, yaw_bins[BINS] = {0};
     double worst = 0.0, sum = 0.0, rsum = 0.0, yaw_lo = 0, yaw_hi = 0,
-           pitch_lo = 0, pitch_hi = 0;
+           pitch_lo = 0, pitch_hi = 0, hy_max = 0, hp_max = 0;
     for (int trial = 0; trial < TRIALS; trial++) {
         gs_synth_scene sc;
         gs_synth_scene_default(&sc, 600.0);
@@ -118,14 +137,15 @@ int main(void)
         sc.expr.pupil = (float)gs_rng_uniform(&rng, -1, 1);
         sc.specular = 0;
         sc.ambient[0] = sc.ambient[1] = sc.ambient[2] = 0.7f;
-        gs_geom_rot_from_pitchyaw(gs_rng_uniform(&rng, -20, 20) * DEG,
-                                  gs_rng_uniform(&rng, -30, 30) * DEG, 0.0,
-                                  sc.head_R);
-        sc.gaze_pitch = gs_rng_uniform(&rng, -40, 40) * DEG;
-        sc.gaze_yaw = gs_rng_uniform(&rng, -50, 50) * DEG;
+        double hp = gs_rng_uniform(&rng, -40, 40), hy = gs_rng_uniform(&rng, -60, 60);
+        gs_geom_rot_from_pitchyaw(hp * DEG, hy * DEG,
+                                  gs_rng_uniform(&rng, -10, 10) * DEG, sc.head_R);
+        sc.gaze_pitch = stratified(&rng, trial % BINS, 40) * DEG;
+        sc.gaze_yaw = stratified(&rng, (trial / BINS) % BINS, 50) * DEG;
         head_model h;
         gs_synth_head_build(&sc.identity, &sc.expr, sc.gaze_pitch, sc.gaze_yaw,
                             &h);
+        gs_synth_head_open_lids(&h);
         for (int e = 0; e < 2; e++) {
             gs_synth_labels l;
             gs_synth_camera cam;
@@ -144,10 +164,11 @@ int main(void)
             snprintf(name, sizeof name, "pupil_%02d_%d", trial, e);
             dump_ppm(&s, name);
             CHECK_MSG(err <= 0.5,
-                      "trial %d eye %d (gaze %.1f %.1f deg): pupil label "
-                      "(%.2f, %.2f) vs dark centroid (%.2f, %.2f): %.3f px > "
-                      "0.5", trial, e, sc.gaze_pitch / DEG, sc.gaze_yaw / DEG,
-                      l.pupil_uv[e][0], l.pupil_uv[e][1], c[0], c[1], err);
+                      "trial %d eye %d (gaze %.1f %.1f deg, head %.1f %.1f "
+                      "deg): pupil label (%.2f, %.2f) vs dark centroid (%.2f, "
+                      "%.2f): %.3f px > 0.5", trial, e, sc.gaze_pitch / DEG,
+                      sc.gaze_yaw / DEG, hp, hy, l.pupil_uv[e][0],
+                      l.pupil_uv[e][1], c[0], c[1], err);
             worst = err > worst ? err : worst;
             sum += err;
             rsum += rp;
@@ -155,14 +176,31 @@ int main(void)
             yaw_hi = fmax(yaw_hi, sc.gaze_yaw / DEG);
             pitch_lo = fmin(pitch_lo, sc.gaze_pitch / DEG);
             pitch_hi = fmax(pitch_hi, sc.gaze_pitch / DEG);
+            hy_max = fmax(hy_max, fabs(hy));
+            hp_max = fmax(hp_max, fabs(hp));
+            pitch_bins[bin_of(sc.gaze_pitch / DEG, 40)]++;
+            yaw_bins[bin_of(sc.gaze_yaw / DEG, 50)]++;
             tested++;
         }
     }
-    printf("pupil centroid: %d eyes, gaze pitch %.0f..%.0f yaw %.0f..%.0f deg, "
-           "pupil radius %.1f px: error mean %.3f px, worst %.3f px\n",
-           tested, pitch_lo, pitch_hi, yaw_lo, yaw_hi,
+    printf("pupil centroid: %d of %d eyes visible, gaze pitch %.0f..%.0f yaw "
+           "%.0f..%.0f deg, head |pitch| <= %.0f |yaw| <= %.0f deg, pupil "
+           "radius %.1f px: error mean %.3f px, worst %.3f px\n", tested,
+           2 * TRIALS, pitch_lo, pitch_hi, yaw_lo, yaw_hi, hp_max, hy_max,
            tested ? rsum / tested : 0.0, tested ? sum / tested : 0.0, worst);
-    CHECK_MSG(tested >= TRIALS / 2, "only %d visible pupils", tested);
+    printf("  eyes per fifth of gaze pitch (-40..40):");
+    for (int b = 0; b < BINS; b++)
+        printf(" %d", pitch_bins[b]);
+    printf("; of gaze yaw (-50..50):");
+    for (int b = 0; b < BINS; b++)
+        printf(" %d", yaw_bins[b]);
+    printf("\n");
+    CHECK_MSG(tested >= TRIALS / 2, "only %d of %d pupils visible", tested,
+              2 * TRIALS);
+    for (int b = 0; b < BINS; b++)
+        CHECK_MSG(pitch_bins[b] >= 5 && yaw_bins[b] >= 5,
+                  "fifth %d of the gaze range: %d eyes (pitch), %d (yaw), "
+                  "fewer than 5", b, pitch_bins[b], yaw_bins[b]);
     gs_synth_sample_free(&s);
     GS_TEST_END();
 }

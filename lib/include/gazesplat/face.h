@@ -7,8 +7,9 @@
  *               of regression trees (Kazemi & Sullivan 2014), reading dlib's
  *               shape_predictor_68_face_landmarks.dat; identical to dlib's
  *               own points for the same box
- *   pose        solvePnP (EPnP, then Levenberg-Marquardt) of the 6-point face
- *               model of geom.h; t is the face centre
+ *   pose        solvePnP (EPnP, then Levenberg-Marquardt) of a 6-point face
+ *               model of geom.h (generic or the synthetic mean head); t is
+ *               the face centre
  *   normalize   gs_geom_normalize + a perspective warp (and its inverse)
  *   masks       face and eye regions from the landmarks, at any size
  *   paste-back  a redirected normalized face blended into the photo through
@@ -132,6 +133,27 @@ gs_face_box gs_face_box_from_cascade(int x, int y, int w, int h);
  * no distortion. */
 void gs_face_default_intrinsics(int width, int height, double k[9]);
 
+/* Which 6-point face model the pose is solved against. The two head frames
+ * differ by about 12 deg of pitch, and their shapes differ too (the
+ * synthetic head's nose wings stand 21 mm in front of its inner eye
+ * corners, the generic model's 7 mm): on the mean synthetic head the
+ * generic model errs by 14 deg on average (docs/face.md). Pick the model
+ * whose frame the consumer of the pose uses:
+ *   GENERIC  gs_geom_face_model6, the widely used generic model: head angles
+ *            comparable with other tools (the default of gs_face_opts).
+ *   SYNTH    gs_geom_face_model6_synth, the mean synthetic head of
+ *            lib/synth: the head frame the synthetic labels, and so every
+ *            model trained on them, use (`gazesplat redirect`, the
+ *            daemon's photo input). */
+typedef enum gs_face_pose_model {
+    GS_FACE_POSE_GENERIC = 0,
+    GS_FACE_POSE_SYNTH = 1
+} gs_face_pose_model;
+
+/* The model's six points (iBUG 36, 39, 42, 45, 31, 35), head frame, mm.
+ * GS_ERR_ARG for an unknown model. */
+int gs_face_model6(gs_face_pose_model model, double out[6][3]);
+
 typedef struct gs_face_pose {
     double R[9];        /* head to camera rotation (geom.h head frame) */
     double rvec[3];     /* the same, axis-angle */
@@ -141,11 +163,15 @@ typedef struct gs_face_pose {
 } gs_face_pose;
 
 /* Head pose from the 68 landmarks (uv, geom.h pixels) and intrinsics k:
- * solvePnP of the 6-point model (iBUG 36, 39, 42, 45, 31, 35) centred on
- * its face centre, EPnP then iterative Levenberg-Marquardt. GS_ERR_ARG when
+ * solvePnP of the generic 6-point model (iBUG 36, 39, 42, 45, 31, 35)
+ * centred on its face centre, EPnP then iterative Levenberg-Marquardt. GS_ERR_ARG when
  * the solution puts the face behind the camera. */
 int gs_face_head_pose(const double uv[][2], const double k[9],
                       gs_face_pose *out, gs_error *err);
+/* The same against either model (gs_face_head_pose is GENERIC). */
+int gs_face_head_pose_model(const double uv[][2], const double k[9],
+                            gs_face_pose_model model, gs_face_pose *out,
+                            gs_error *err);
 
 /* ---- the whole analysis ---- */
 
@@ -155,6 +181,7 @@ typedef struct gs_face_opts {
     gs_face_box box;
     int use_k;              /* 1: camera intrinsics `k`; 0: the default */
     double k[9];
+    gs_face_pose_model pose_model; /* default GS_FACE_POSE_GENERIC */
     int norm_size;          /* normalized image side (default 512) */
     double norm_distance_mm; /* d_n (default GS_GEOM_NORM_DISTANCE_MM) */
     double norm_focal;      /* f_n (default gs_geom_norm_focal(norm_size)) */

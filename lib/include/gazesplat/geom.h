@@ -98,6 +98,12 @@ int gs_geom_gaze_from_target(const double origin[3], const double target[3],
 /* The generic 6-point face model (iBUG 36, 39, 42, 45, 31, 35), head-frame
  * axes, millimetres, origin as published (not the face centre). */
 void gs_geom_face_model6(double out[6][3]);
+/* The same six points measured on the mean synthetic head of lib/synth
+ * (mean identity, neutral expression; gs_synth_template_build's
+ * landmarks), head frame, origin at its face centre. Regenerate with
+ * `gazesplat synth --face-model6`; tests/synth/test_synth_face_model.c
+ * checks them against the template. */
+void gs_geom_face_model6_synth(double out[6][3]);
 /* Face centre of six points in that order: mean of (mean of the 4 eye
  * corners, mean of the 2 nose wings). */
 void gs_geom_face_centre6(const double pts[6][3], double centre[3]);

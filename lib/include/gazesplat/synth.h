@@ -249,10 +249,18 @@ static inline uint8_t *gs_synth_sample_mask(const gs_synth_sample *s, int m)
 
 typedef struct gs_synth_render_opts {
     int supersample;   /* 1 (default) or 2: 2x2 samples per pixel */
+    int open_lids;     /* 0 (default). 1, for tests of the eyes: both lids
+                          pulled back to 85 deg above and below the eye's
+                          front, so lids never cover the iris (gaze pitch
+                          moves the lids, which would hide part of the
+                          pupil). The eye landmarks (36-47) then lie on the
+                          opened margins; the eye corners, the face centre
+                          and every other label are unchanged. */
 } gs_synth_render_opts;
 
 /* Renders `scene` through `cam` into `out` (allocated to the camera's
- * size) and fills all labels. `pool` may be NULL. */
+ * size) and fills all labels. `pool` may be NULL; opts may be NULL (the
+ * defaults). */
 int gs_synth_render(const gs_synth_scene *scene, const gs_synth_camera *cam,
                     const gs_synth_render_opts *opts, gs_pool *pool,
                     gs_synth_sample *out, gs_error *err);
