@@ -745,8 +745,11 @@ static void face_backward(gs_model_ctx *c, const gs_model_params *gp,
         const float *in = pass == 0 ? c->fe_in : c->fp_in;
         const float *act = pass == 0 ? c->fe_act : c->fp_act;
         int dw = mlp->dims[0];
-        /* The pose MLP's input gradient only matters for the features. */
-        int need_din = gp || (pass == 0 && fg);
+        /* The pose MLP's input gradient matters for the features and, in
+         * the single-stream ablation, for the gaze it also sees (rvec(R)
+         * is a stop-gradient, docs/model.md). */
+        int gz = pass == 1 && fg && !c->m->cfg.two_stream;
+        int need_din = gp || (pass == 0 && fg) || gz;
         if (need_din)
             memset(dinp, 0, (size_t)nf * dw * sizeof(float));
         gs_mlp_backward(mlp, gm, in, nf, act, d_o, need_din ? dinp : NULL, sc);
@@ -760,6 +763,13 @@ static void face_backward(gs_model_ctx *c, const gs_model_params *gp,
             if (pass == 0 && fg)
                 for (int k = 0; k < D; k++)
                     fg->code[k] += di[F + k];
+        }
+        if (gz) { /* P's input: [f | PE(rvec) | PE(gaze)] */
+            float dpe[GS_PE_DIM(2)] = {0};
+            for (int i = 0; i < nf; i++)
+                for (int k = 0; k < GS_PE_DIM(2); k++)
+                    dpe[k] += dinp[(size_t)i * dw + F + GS_PE_DIM(3) + k];
+            gs_model_pe_backward(c->fr.gaze, 2, dpe, fg->gaze);
         }
     }
 }
