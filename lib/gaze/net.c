@@ -49,7 +49,7 @@ int gz_ctx_from_rgb(gz_ctx *c, const uint8_t *rgb, int w, int h, size_t stride)
         const uint8_t *row = rgb + (size_t)y * stride;
         for (int x = 0; x < w; x++)
             for (int k = 0; k < 3; k++)
-                c->img[k * plane + (size_t)y * w + x] = row[3 * x + k] * (1.0f / 255.0f);
+                c->img[k * plane + (size_t)y * w + x] = row[3 * x + k] / 255.0f;
     }
     return GS_OK;
 }

@@ -82,7 +82,8 @@ void gs_gaze_net_spec(const gs_gaze_net *n, gs_gaze_spec *s);
 size_t gs_gaze_net_param_count(const gs_gaze_net *n);
 float *gs_gaze_net_params(gs_gaze_net *n);
 
-/* rgb: any size (resized inside), 8-bit RGB, stride bytes per row.
+/* rgb: any size (resized inside), 8-bit RGB, stride bytes per row; the
+ * net sees value / 255.0f, as the float path.
  * out[4] = gaze pitch, gaze yaw, head pitch, head yaw (radians, normalized
  * camera). Sizes 1..GS_GAZE_MAX_IMAGE_SIDE. */
 int gs_gaze_net_predict(gs_gaze_net *n, gs_pool *pool, const uint8_t *rgb,
@@ -112,6 +113,8 @@ typedef void (*gs_gaze_log_fn)(void *ctx, const char *fmt, ...)
 
 typedef struct gs_gaze_train_options {
     long steps;            /* total steps (a resumed run continues to it) */
+    long stop_after;       /* > 0: stop after this step, keeping the schedule
+                              of `steps` (time-boxed runs); 0: run to steps */
     int batch;             /* images per step (16) */
     double lr;             /* Adam peak learning rate (1e-3), cosine decay */
     uint64_t seed;         /* sample stream (the net's init seed is separate) */
