@@ -32,8 +32,8 @@ const cli_command cli_train_estimator_command = {
     "  --batch N           images per step (16)\n"
     "  --lr X              peak Adam learning rate, cosine decay (1e-3)\n"
     "  --input N           net input size, 32..256, a multiple of 16 (64)\n"
-    "  --widths A,B,C,D    channels of the 4 stages (16,32,64,96)\n"
-    "  --hidden N          fully connected hidden units (128)\n"
+    "  --widths A,B,C,D    channels of the 4 stages (12,24,48,64)\n"
+    "  --hidden N          fully connected hidden units (96)\n"
     "  --cache N           rendered samples kept and re-drawn (2048)\n"
     "  --fresh N           new samples rendered per step (4)\n"
     "  --identities N      training identities drawn from (20000)\n"
@@ -118,7 +118,7 @@ static int run_train_est(int argc, char **argv)
     gs_gaze_train_options_default(&t);
     long seed = 1, steps = t.steps, batch = t.batch, input = 64, cache = t.cache,
          fresh = t.fresh, ids = (long)t.identities, threads = 2, ckpt = t.checkpoint_every,
-         logev = t.log_every, hidden = 128;
+         logev = t.log_every, hidden = 96;
     if (opt_long(cmd, &o[T_SEED], 0, 4294967295L, &seed) ||
         opt_long(cmd, &o[T_STEPS], 1, 100000000L, &steps) ||
         opt_long(cmd, &o[T_BATCH], 1, 4096, &batch) ||

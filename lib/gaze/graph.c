@@ -23,11 +23,11 @@ int gs_gaze_arch_from_name(const char *name)
 
 void gs_gaze_spec_default(gs_gaze_spec *s, int arch)
 {
-    static const int w[GS_GAZE_STAGES] = {16, 32, 64, 96};
+    static const int w[GS_GAZE_STAGES] = {12, 24, 48, 64};
     s->arch = arch;
     s->input_size = 64;
     memcpy(s->widths, w, sizeof w);
-    s->hidden = 128;
+    s->hidden = 96;
 }
 
 int gz_spec_check(const gs_gaze_spec *s, gs_error *err)

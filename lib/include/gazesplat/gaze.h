@@ -58,7 +58,7 @@ typedef struct gs_gaze_spec {
     int hidden;                 /* fully connected hidden units, 1..4096 */
 } gs_gaze_spec;
 
-/* The shipped configuration: input 64, widths 16 32 64 96, hidden 128. */
+/* The shipped configuration: input 64, widths 12 24 48 64, hidden 96. */
 void gs_gaze_spec_default(gs_gaze_spec *s, int arch);
 
 typedef struct gs_gaze_net gs_gaze_net;
