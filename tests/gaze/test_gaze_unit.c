@@ -300,18 +300,24 @@ static void test_training_lowers_loss(void)
     gs_gaze_net_destroy(n);
 }
 
-int main(void)
+/* usage: test_gaze_unit [train]: "train" runs only the training run (a
+ * separate ctest case labelled slow: seconds in a release build, minutes
+ * under ASan). */
+int main(int argc, char **argv)
 {
     gs_nn_blas_set_threads(1);
     if (!mkdtemp(dir)) {
         perror("mkdtemp");
         return 1;
     }
-    test_predict_and_args();
-    test_angular_error();
-    test_loader();
-    test_determinism_and_resume();
-    test_training_lowers_loss();
+    if (argc > 1 && !strcmp(argv[1], "train")) {
+        test_training_lowers_loss();
+    } else {
+        test_predict_and_args();
+        test_angular_error();
+        test_loader();
+        test_determinism_and_resume();
+    }
     rmdir(dir);
     GS_TEST_END();
 }
