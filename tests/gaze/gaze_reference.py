@@ -10,7 +10,8 @@ and the gradients of sum(dout * out) for the image and every tensor, all
 computed by torch in float64 from the float32 values:
   <arch>.img [3,H,W], <arch>.dout [4], <arch>.out [4], <arch>.dimg [3,H,W],
   <arch>.grad.<tensor name>.
-The net (docs/gaze.md): area resize to N x N, minus 0.5, the layers, fc.
+The net (docs/gaze.md): area resize to N x N and of the eye window to
+N/2 x 5N/4, minus 0.5, the face and eye branches, fc1 + fc1e, fc2.
 """
 import json
 import math
@@ -28,12 +29,18 @@ HIDDEN = 7
 N = 32
 
 
-def area_matrix(n, m):
-    """[m, n] weights of the area resize from n samples to m."""
+EYE = (0.1875, 0.8125, 0.28125, 0.53125)  # x0, x1, y0, y1 fractions
+
+
+def area_matrix(n, m, f0=0.0, f1=1.0):
+    """[m, n] weights of the area resize of the window [f0 n, f1 n) of n
+    samples to m."""
     M = np.zeros((m, n))
+    w = (f1 - f0) * n / m
     for o in range(m):
-        a, b = o * n / m, (o + 1) * n / m
-        for i in range(math.floor(a), min(math.ceil(b), n)):
+        a = f0 * n + o * w
+        b = a + w
+        for i in range(max(math.floor(a), 0), min(math.ceil(b), n)):
             lo, hi = max(i, a), min(i + 1, b)
             if hi > lo:
                 M[o, i] = (hi - lo) / (b - a)
@@ -55,8 +62,12 @@ def layers(arch):
             for _ in range(2 if s < 3 else 1):
                 out.append((f"conv{k}", "conv3", chans, WIDTHS[s]))
                 chans, k = WIDTHS[s], k + 1
+    out += [("eye1", "conv3", 3, WIDTHS[0]), ("eye2", "conv3", WIDTHS[0], WIDTHS[0]),
+            ("eye3", "conv3", WIDTHS[0], WIDTHS[1]), ("eye4", "conv3", WIDTHS[1], WIDTHS[2])]
     side = N // 16
-    out += [("fc1", "fc", WIDTHS[3] * side * side, HIDDEN), ("fc2", "fc", HIDDEN, 4)]
+    eh, ew = N // 2, 8 * ((5 * N + 16) // 32)
+    out += [("fc1", "fc", WIDTHS[3] * side * side, HIDDEN),
+            ("fc1e", "fc", WIDTHS[2] * (eh // 8) * (ew // 8), HIDDEN), ("fc2", "fc", HIDDEN, 4)]
     return out
 
 
@@ -77,6 +88,14 @@ def net(arch, P, img):
     Ry = torch.tensor(area_matrix(H, N), dtype=torch.float64)
     Rx = torch.tensor(area_matrix(W, N), dtype=torch.float64)
     x = (torch.einsum("oy,cyx,px->cop", Ry, img, Rx) - 0.5)[None]
+    eh, ew = N // 2, 8 * ((5 * N + 16) // 32)
+    Ey = torch.tensor(area_matrix(H, eh, EYE[2], EYE[3]), dtype=torch.float64)
+    Ex = torch.tensor(area_matrix(W, ew, EYE[0], EYE[1]), dtype=torch.float64)
+    e = (torch.einsum("oy,cyx,px->cop", Ey, img, Ex) - 0.5)[None]
+    e = F.relu(c3(F.relu(c3(e, "eye1")), "eye2"))
+    e = F.avg_pool2d(e, 2)
+    e = F.avg_pool2d(F.relu(c3(e, "eye3")), 2)
+    e = F.avg_pool2d(F.relu(c3(e, "eye4")), 2)
     if arch == "resnet":
         x = F.relu(c3(F.relu(c3(x, "stem1")), "stem2"))
         for s in range(1, 4):
@@ -91,7 +110,8 @@ def net(arch, P, img):
                 x = F.relu(c3(x, f"conv{k}"))
                 k += 1
             x = F.avg_pool2d(x, 2)
-    x = F.relu(F.linear(x.reshape(1, -1), P["fc1.w"], P["fc1.b"]))
+    x = F.relu(F.linear(x.reshape(1, -1), P["fc1.w"], P["fc1.b"]) +
+               F.linear(e.reshape(1, -1), P["fc1e.w"], P["fc1e.b"]))
     return F.linear(x, P["fc2.w"], P["fc2.b"])[0]
 
 
