@@ -3,7 +3,9 @@
  * Input: a normalized face image (the model's normalized camera, see
  * geom.h; 256 x 256 for the CPU model) of any size. The net resizes it to
  * its own input size (input_size x input_size, 64 by default) with area
- * (box) weights, subtracts 0.5 and runs one of two architectures:
+ * (box) weights, and the eye band (a fixed window around both eyes) to
+ * input_size/2 x 5 input_size/4, subtracts 0.5 and runs a face branch of
+ * one of two architectures plus a small eye branch:
  *   GS_GAZE_RESNET  a small ResNet (the evaluation estimator)
  *   GS_GAZE_VGG     a plain conv stack (the loss estimator)
  * Output, 4 floats, radians, normalized camera frame (ETH-XGaze signs, the
