@@ -208,18 +208,23 @@ static inline void vcentre_range(vf x0, vf x1, vf *lo, vf *hi)
  * tiles), narrowed to the tiles that the bounding box of its sigma <= thr
  * ellipse reaches. Values are clamped before rounding, so the conversions
  * stay in range. */
-static inline void vsplat_tiles(const gs_raster *r, vf mx, vf my, vf rad, vf ex, vf ey,
-                                vf box[4])
+typedef struct {
+    vf t[4]; /* x0, x1, y0, y1 */
+} vbox;
+
+static inline vbox vsplat_tiles(const gs_raster *r, vf mx, vf my, vf rad, vf ex, vf ey)
 {
+    vbox box;
     const vf rT = splat(1.0f / (float)TS), zero = splat(0.0f);
     vf tx = splat((float)r->tiles_x), ty = splat((float)r->tiles_y);
     vf big_x = tx + splat(1.0f), big_y = ty + splat(1.0f);
-    box[0] = vmin(vmax(vfloor(vmax((mx - rad) * rT, splat(-1.0f))), zero), tx);
-    box[1] = vmin(vmax(-vfloor(-vmin((mx + rad) * rT, big_x)), zero), tx);
-    box[2] = vmin(vmax(vfloor(vmax((my - rad) * rT, splat(-1.0f))), zero), ty);
-    box[3] = vmin(vmax(-vfloor(-vmin((my + rad) * rT, big_y)), zero), ty);
-    vcentre_range(mx - ex, mx + ex, &box[0], &box[1]);
-    vcentre_range(my - ey, my + ey, &box[2], &box[3]);
+    box.t[0] = vmin(vmax(vfloor(vmax((mx - rad) * rT, splat(-1.0f))), zero), tx);
+    box.t[1] = vmin(vmax(-vfloor(-vmin((mx + rad) * rT, big_x)), zero), tx);
+    box.t[2] = vmin(vmax(vfloor(vmax((my - rad) * rT, splat(-1.0f))), zero), ty);
+    box.t[3] = vmin(vmax(-vfloor(-vmin((my + rad) * rT, big_y)), zero), ty);
+    vcentre_range(mx - ex, mx + ex, &box.t[0], &box.t[1]);
+    vcentre_range(my - ey, my + ey, &box.t[2], &box.t[3]);
+    return box;
 }
 
 /* Projects Gaussians [i0, i1) (i0 a multiple of 8) into r->proj and
@@ -274,11 +279,10 @@ static void project_fast(gs_raster *r, int i0, int i1)
                 splat(0.01f);
         vf ey = vsqrt(vmax(splat(2.0f) * thr * a / cdet, splat(0.0f))) +
                 splat(0.01f);
-        vf box[4];
         vf z0 = splat(0.0f); /* culled lanes may hold NaN: keep them out */
-        vsplat_tiles(r, vsel(ok, mx, z0), vsel(ok, my, z0), vsel(ok, rad, z0), vsel(ok, ex, z0),
-                     vsel(ok, ey, z0), box);
-        lanes lbox[4] = {{box[0]}, {box[1]}, {box[2]}, {box[3]}};
+        vbox box = vsplat_tiles(r, vsel(ok, mx, z0), vsel(ok, my, z0), vsel(ok, rad, z0),
+                                vsel(ok, ex, z0), vsel(ok, ey, z0));
+        lanes lbox[4] = {{box.t[0]}, {box.t[1]}, {box.t[2]}, {box.t[3]}};
         lanes lmx = {mx}, lmy = {my}, la = {a}, lb = {bb}, lc = {cc}, lz = {c.z}, lop = {op};
         lanes lcomp = {comp}, lrad = {rad}, lthr = {thr}, lex = {ex}, ley = {ey};
         unsigned vis = (unsigned)mask_bits(ok);
@@ -313,8 +317,13 @@ static inline void scatter_add(float *a, int stride, int k, vf v, unsigned mask,
 
 /* v_Sigma2 (full symmetric 2x2) from the conic and opacity gradients
  * (raster.c's conic_vjp). */
-static inline void vconic_vjp(const gs_raster *r, int b, int n, vf vs[4])
+typedef struct {
+    vf s[4]; /* 00 01 10 11 */
+} vsym2;
+
+static inline vsym2 vconic_vjp(const gs_raster *r, int b, int n)
 {
+    vsym2 out;
     vf a = gather_aos(r->proj.conic + 3 * (size_t)b, 3, 0, n);
     vf bb = gather_aos(r->proj.conic + 3 * (size_t)b, 3, 1, n);
     vf c = gather_aos(r->proj.conic + 3 * (size_t)b, 3, 2, n);
@@ -323,12 +332,12 @@ static inline void vconic_vjp(const gs_raster *r, int b, int n, vf vs[4])
     vf g11 = gather_aos(vq, 3, 2, n);
     vf pg00 = a * g00 + bb * g01, pg01 = a * g01 + bb * g11;
     vf pg10 = bb * g00 + c * g01, pg11 = bb * g01 + c * g11;
-    vs[0] = -(pg00 * a + pg01 * bb);
-    vs[1] = -(pg00 * bb + pg01 * c);
-    vs[2] = -(pg10 * a + pg11 * bb);
-    vs[3] = -(pg10 * bb + pg11 * c);
+    out.s[0] = -(pg00 * a + pg01 * bb);
+    out.s[1] = -(pg00 * bb + pg01 * c);
+    out.s[2] = -(pg10 * a + pg11 * bb);
+    out.s[3] = -(pg10 * bb + pg11 * c);
     if (!r->opt.antialiased)
-        return;
+        return out;
     vf comp = gather_aos(r->proj.comp + b, 1, 0, n);
     vf lo = gather_aos(r->g.opacity_logits + b, 1, 0, n);
     vf sig = splat(1.0f) / (splat(1.0f) + vexp_any(-lo));
@@ -337,10 +346,11 @@ static inline void vconic_vjp(const gs_raster *r, int b, int n, vf vs[4])
     vf k = vsel(pos, v_comp * splat(0.5f) / vsel(pos, comp, splat(1.0f)), splat(0.0f));
     vf one = splat(1.0f) - comp * comp, detp = a * c - bb * bb;
     vf eps = splat(GS_RASTER_EPS2D);
-    vs[0] += k * (one * a - eps * detp);
-    vs[1] += k * one * bb;
-    vs[2] += k * one * bb;
-    vs[3] += k * (one * c - eps * detp);
+    out.s[0] += k * (one * a - eps * detp);
+    out.s[1] += k * one * bb;
+    out.s[2] += k * one * bb;
+    out.s[3] += k * (one * c - eps * detp);
+    return out;
 }
 
 /* Gradient of the projection of Gaussians [i0, i1) (i0 a multiple of 8)
@@ -360,8 +370,8 @@ static void project_backward_fast(gs_raster *r, int i0, int i1, gs_gaussian_grad
         vto_camera(r, b, n, &cg);
         const vf *Sc6 = cg.Sc;
         vf Sc[9] = {Sc6[0], Sc6[1], Sc6[2], Sc6[1], Sc6[3], Sc6[4], Sc6[2], Sc6[4], Sc6[5]};
-        vf vS2[4];
-        vconic_vjp(r, b, n, vS2);
+        vsym2 vjp = vconic_vjp(r, b, n);
+        const vf *vS2 = vjp.s;
         vf zero = splat(0.0f);
         vf Jm[6] = {cg.j00, zero, cg.j02, zero, cg.j11, cg.j12};
         vf vSc[9], JS[6], vJ[6];
