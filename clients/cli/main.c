@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "cli.h"
+#include "gazesplat/nn.h"
 
 static const cli_command *const commands[] = {
     &cli_face_command,
@@ -57,6 +58,8 @@ static int help(int argc, char **argv)
 
 int main(int argc, char **argv)
 {
+    /* May run the program again with OpenBLAS's AVX kernels selected (nn.h). */
+    gs_nn_blas_select_kernels(argv);
     if (argc < 2) {
         overview(stderr);
         return CLI_USAGE;

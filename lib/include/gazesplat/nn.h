@@ -45,6 +45,24 @@ extern "C" {
 void gs_nn_blas_set_threads(int n);
 int gs_nn_blas_threads(void);
 
+/* OpenBLAS's kernels for this CPU (process-wide policy, for programs).
+ * OpenBLAS chooses its kernels when it is loaded, from the CPU model; on a
+ * CPU it does not recognise (virtual machines) it falls back to its SSE3
+ * "Prescott" kernels, about 4x slower than the AVX-512 ones. When
+ * OPENBLAS_CORETYPE is unset, OpenBLAS chose such a fallback, and CPUID shows
+ * AVX-512 (F, CD, BW, DQ, VL) or AVX2 + FMA, this sets OPENBLAS_CORETYPE to
+ * SkylakeX or Haswell and executes the program again (/proc/self/exe, same
+ * argv, same process id, open descriptors kept): call it first thing in
+ * main, before threads, files or sockets. It does not return then. Returns 0
+ * when there is nothing to do (the variable is set, by the user or by the
+ * exec, or OpenBLAS recognised the CPU, or the CPU lacks the features), or
+ * GS_ERR_UNSUPPORTED when the exec failed (the program goes on unchanged).
+ * Set OPENBLAS_CORETYPE yourself to keep another choice. */
+int gs_nn_blas_select_kernels(char **argv);
+
+/* OpenBLAS's name of the kernels in use ("SkylakeX", "Prescott", ...). */
+const char *gs_nn_blas_core(void);
+
 /* ---- Linear and convolutions ------------------------------------------ */
 
 /* out[B,OC] = in[B,IC] . w[OC,IC]^T + b[OC]. b may be NULL (no bias). */
