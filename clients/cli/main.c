@@ -15,6 +15,7 @@ static const cli_command *const commands[] = {
     &cli_fit_command,
     &cli_redirect_command,
     &cli_live_command,
+    &cli_eval_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
 
