@@ -1,5 +1,7 @@
 /* gazesplat eval: measure gaze redirection on held-out synthetic heads
  * (docs/eval.md), and write the fixed pairing file it reads. */
+#define _POSIX_C_SOURCE 200809L /* clock_gettime */
+
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
