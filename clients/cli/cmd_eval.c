@@ -141,6 +141,7 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
     int S = ev->S;
     size_t st = 3 * (size_t)S;
     gs_error err = {0, ""};
+    /* Labels as the estimator is trained: normalized gaze and head. */
     const gs_synth_labels *l = &gt->labels;
     r->m[M_PSNR] = gs_eval_psnr(ev->out, st, gt->rgb, gt->stride, S, S, NULL);
     r->m[M_SSIM] = gs_eval_ssim(ev->out, st, gt->rgb, gt->stride, S, S, NULL,
@@ -157,13 +158,15 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
     float o[4];
     int bad_est = predict(ev, ev->out, o);
     r->m[M_GAZE] = ang(o[0], o[1], gt_est[0], gt_est[1]);
-    r->m[M_GAZE_LABEL] = ang(o[0], o[1], l->gaze_cam_pitch, l->gaze_cam_yaw);
+    r->m[M_GAZE_LABEL] = ang(o[0], o[1], l->gaze_norm_pitch,
+                             l->gaze_norm_yaw);
     r->m[M_HEAD] = ang(o[2], o[3], gt_est[2], gt_est[3]);
-    r->m[M_HEAD_LABEL] = ang(o[2], o[3], l->head_pitch, l->head_yaw);
-    r->m[M_FLOOR_GAZE] = ang(gt_est[0], gt_est[1], l->gaze_cam_pitch,
-                             l->gaze_cam_yaw);
-    r->m[M_FLOOR_HEAD] = ang(gt_est[2], gt_est[3], l->head_pitch,
-                             l->head_yaw);
+    r->m[M_HEAD_LABEL] = ang(o[2], o[3], l->head_norm_pitch,
+                             l->head_norm_yaw);
+    r->m[M_FLOOR_GAZE] = ang(gt_est[0], gt_est[1], l->gaze_norm_pitch,
+                             l->gaze_norm_yaw);
+    r->m[M_FLOOR_HEAD] = ang(gt_est[2], gt_est[3], l->head_norm_pitch,
+                             l->head_norm_yaw);
     /* Every metric that should exist must be finite. */
     for (int k = 0; k < M_COUNT; k++) {
         int eye_metric = k == M_EYE_PSNR || k == M_EYE_SSIM;

@@ -15,6 +15,9 @@ static const cli_command *const commands[] = {
     &cli_fit_command,
     &cli_redirect_command,
     &cli_live_command,
+    &cli_train_estimator_command,
+    &cli_estimate_command,
+    &cli_eval_estimator_command,
     &cli_eval_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
@@ -25,7 +28,7 @@ static void overview(FILE *f)
           "       gazesplat help COMMAND\n\n"
           "Commands:\n", f);
     for (int i = 0; i < NCOMMANDS; i++)
-        fprintf(f, "  %-8s %s\n", commands[i]->name, commands[i]->summary);
+        fprintf(f, "  %-15s %s\n", commands[i]->name, commands[i]->summary);
     fputs("\nExit status: 0 success, 1 failure, 2 bad usage.\n", f);
 }
 

@@ -13,6 +13,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "gazesplat/gaze.h"
 #include "gazesplat/nn.h"
 #include "gazesplat/train.h"
 #include "gs_test.h"
@@ -122,10 +123,11 @@ static char *check_csv(const char *path)
             methods[1] += strcmp(cols[0], "warp") == 0;
             methods[2] += strcmp(cols[0], "identity") == 0;
             bad += strcmp(cols[10], "ok") != 0;
-            /* PSNR, SSIM, id PSNR, id SSIM (cols 20, 21, 24, 25) always;
-             * eye metrics unless the eyes are closed. */
-            for (int k = 20; k < 26 && nc == 26; k++)
-                bad += !isfinite(strtod(cols[k], NULL)) && k != 22 && k != 23;
+            /* Angles (cols 14-19), PSNR, SSIM, id PSNR, id SSIM (20, 21,
+             * 24, 25) always; eye metrics unless the eyes are closed. */
+            for (int k = 14; k < 26 && nc == 26; k++)
+                bad += (*cols[k] == 0 || !isfinite(strtod(cols[k], NULL))) &&
+                       k != 22 && k != 23;
             if (strcmp(cols[0], "model") == 0)
                 bad += !(strtod(cols[11], NULL) > 0) ||
                        !isfinite(strtod(cols[12], NULL));
@@ -199,6 +201,16 @@ int main(int argc, char **argv)
     snprintf(out1, sizeof out1, "%s/run1", dir);
     snprintf(out2, sizeof out2, "%s/run2", dir);
     train_tiny(model);
+    /* An untrained estimator: random weights still give finite angles. */
+    char est[256];
+    snprintf(est, sizeof est, "%s/est.safetensors", dir);
+    gs_gaze_spec gsp;
+    gs_gaze_spec_default(&gsp, GS_GAZE_RESNET);
+    gs_gaze_net *net = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_gaze_net_create(&gsp, 3, &net, &err) == GS_OK);
+    CHECK_MSG(gs_gaze_net_save(net, est, &err) == GS_OK, "%s", err.msg);
+    gs_gaze_net_destroy(net);
 
     const char *mk[] = {"eval", "--make-pairs", pairs, "--identities", "2",
                         "--inputs", "1", "--targets", "2", NULL};
@@ -207,7 +219,8 @@ int main(int argc, char **argv)
 
     const char *ev1[] = {"eval", "--model", model, "--pairs", pairs,
                          "--out", out1, "--method", "model,warp,identity",
-                         "--iters", "4", "--threads", "2", NULL};
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, NULL};
     CHECK_EQ_INT(run(ev1), 0);
     snprintf(csv, sizeof csv, "%s/pairs.csv", out1);
     char *a = check_csv(csv);
@@ -221,7 +234,8 @@ int main(int argc, char **argv)
     /* The same thread count gives the same numbers (timings aside). */
     const char *ev2[] = {"eval", "--model", model, "--pairs", pairs,
                          "--out", out2, "--method", "model,warp,identity",
-                         "--iters", "4", "--threads", "2", NULL};
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, NULL};
     CHECK_EQ_INT(run(ev2), 0);
     snprintf(csv, sizeof csv, "%s/pairs.csv", out2);
     char *b = check_csv(csv);

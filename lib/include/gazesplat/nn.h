@@ -131,6 +131,14 @@ int gs_nn_upsample2x_backward(float *dinp, const float *dout, int C, int H,
 int gs_nn_blur_forward(float *out, const float *in, int C, int H, int W);
 int gs_nn_blur_backward(float *dinp, const float *dout, int C, int H, int W);
 
+/* 2x2 average pooling, stride 2 (PyTorch AvgPool2d(2)) for even H, W:
+ * in[C,H,W] -> out[C,H/2,W/2], out[c,y,x] = mean of in[c,2y..2y+1,2x..2x+1].
+ * GS_ERR_ARG for an odd H or W. */
+int gs_nn_avgpool2x_forward(float *out, const float *in, int C, int H, int W);
+/* dinp[C,H,W] += dout[C,H/2,W/2] / 4 spread over each 2x2 window. */
+int gs_nn_avgpool2x_backward(float *dinp, const float *dout, int C, int H,
+                             int W);
+
 /* ---- Cross-attention of a code vector over the pixels ------------------- */
 
 /* GazeGaussian renderer attention. For x[C,HW], code[D], wk[D,C], bk[D],

@@ -1,0 +1,325 @@
+/* gazesplat train-estimator / estimate / eval-estimator: the gaze and
+ * head-pose estimator of lib/gaze. */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "cli.h"
+#include "gazesplat/gaze.h"
+#include "gazesplat/geom.h"
+#include "gazesplat/image_io.h"
+#include "gazesplat/nn.h"
+#include "gazesplat/synth.h"
+
+#define DEG 57.29577951308232
+
+static int run_train_est(int argc, char **argv);
+static int run_estimate(int argc, char **argv);
+static int run_eval_est(int argc, char **argv);
+
+const cli_command cli_train_estimator_command = {
+    "train-estimator",
+    "train the gaze/head-pose estimator on synthetic faces",
+    "usage: gazesplat train-estimator --arch resnet|vgg --out FILE [options]\n"
+    "\n"
+    "  --arch A            resnet (evaluation estimator) or vgg (loss estimator)\n"
+    "  --out FILE          estimator file; checkpoints overwrite it atomically\n"
+    "                      and FILE.opt keeps the optimizer state\n"
+    "  --seed N            weight initialisation and sample stream (1)\n"
+    "  --steps N           total steps (1000)\n"
+    "  --batch N           images per step (16)\n"
+    "  --lr X              peak Adam learning rate, cosine decay (1e-3)\n"
+    "  --input N           net input size, 32..256, a multiple of 16 (64)\n"
+    "  --cache N           rendered samples kept and re-drawn (2048)\n"
+    "  --fresh N           new samples rendered per step (4)\n"
+    "  --identities N      training identities drawn from (20000)\n"
+    "  --threads N         worker threads (2)\n"
+    "  --checkpoint N      save every N steps (500)\n"
+    "  --log-every N       progress line every N steps (50)\n"
+    "  --resume            continue the run saved in FILE and FILE.opt\n",
+    run_train_est,
+};
+
+const cli_command cli_estimate_command = {
+    "estimate",
+    "print gaze and head pose of a normalized face image",
+    "usage: gazesplat estimate --model FILE --image PNG|JPEG\n"
+    "\n"
+    "Prints gaze pitch, gaze yaw, head pitch, head yaw in degrees\n"
+    "(normalized camera; pitch > 0 up, yaw > 0 toward image left).\n",
+    run_estimate,
+};
+
+const cli_command cli_eval_estimator_command = {
+    "eval-estimator",
+    "error of an estimator on ground-truth synthetic images",
+    "usage: gazesplat eval-estimator --model FILE [options]\n"
+    "\n"
+    "  --split S           test (default), val or train identities\n"
+    "  --count N           images, each of its own identity (500)\n"
+    "  --size N            image size, px (256, the model's)\n"
+    "  --seed N            scene stream (7)\n"
+    "  --threads N         render threads (2)\n"
+    "  --csv FILE          per-image labels, predictions and errors\n"
+    "\n"
+    "Prints mean, median and 90th percentile of the angular gaze and head\n"
+    "errors in degrees (angle between the 3D directions).\n",
+    run_eval_est,
+};
+
+static void log_line(void *ctx, const char *fmt, ...)
+{
+    (void)ctx;
+    va_list ap;
+    va_start(ap, fmt);
+    fputs("gazesplat train-estimator: ", stderr);
+    vfprintf(stderr, fmt, ap);
+    fputc('\n', stderr);
+    va_end(ap);
+}
+
+enum { T_ARCH, T_OUT, T_SEED, T_STEPS, T_BATCH, T_LR, T_INPUT, T_CACHE, T_FRESH, T_IDS,
+       T_THREADS, T_CKPT, T_LOG, T_RESUME, T_N };
+
+/* Reads an optional integer option into *v; nonzero (usage printed) when bad. */
+static int opt_long(const cli_command *cmd, const cli_opt *o, long lo, long hi, long *v)
+{
+    if (o->value && cli_parse_long(o->value, lo, hi, v)) {
+        cli_usage_error(cmd, "%s: want %ld..%ld; got '%s'", o->name, lo, hi, o->value);
+        return 1;
+    }
+    return 0;
+}
+
+static int run_train_est(int argc, char **argv)
+{
+    cli_opt o[T_N] = {{"--arch", 1, NULL},    {"--out", 1, NULL},     {"--seed", 1, NULL},
+                      {"--steps", 1, NULL},   {"--batch", 1, NULL},   {"--lr", 1, NULL},
+                      {"--input", 1, NULL},   {"--cache", 1, NULL},   {"--fresh", 1, NULL},
+                      {"--identities", 1, NULL}, {"--threads", 1, NULL},
+                      {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
+                      {"--resume", 0, NULL}};
+    const cli_command *cmd = &cli_train_estimator_command;
+    int rc = cli_parse(cmd, argc, argv, o, T_N);
+    if (rc == CLI_HELP)
+        return fputs(cmd->usage, stdout), CLI_OK;
+    if (rc != CLI_PARSED)
+        return rc;
+    if (!o[T_OUT].value)
+        return cli_usage_error(cmd, "missing --out");
+    int arch = gs_gaze_arch_from_name(o[T_ARCH].value);
+    if (arch < 0)
+        return cli_usage_error(cmd, "--arch: want resnet or vgg");
+    gs_gaze_train_options t;
+    gs_gaze_train_options_default(&t);
+    long seed = 1, steps = t.steps, batch = t.batch, input = 64, cache = t.cache,
+         fresh = t.fresh, ids = (long)t.identities, threads = 2, ckpt = t.checkpoint_every,
+         logev = t.log_every;
+    if (opt_long(cmd, &o[T_SEED], 0, 4294967295L, &seed) ||
+        opt_long(cmd, &o[T_STEPS], 1, 100000000L, &steps) ||
+        opt_long(cmd, &o[T_BATCH], 1, 4096, &batch) ||
+        opt_long(cmd, &o[T_INPUT], 32, 256, &input) ||
+        opt_long(cmd, &o[T_CACHE], 1, 1000000, &cache) ||
+        opt_long(cmd, &o[T_FRESH], 1, 1000000, &fresh) ||
+        opt_long(cmd, &o[T_IDS], 1, 1000000000L, &ids) ||
+        opt_long(cmd, &o[T_THREADS], 1, 256, &threads) ||
+        opt_long(cmd, &o[T_CKPT], 0, 100000000L, &ckpt) ||
+        opt_long(cmd, &o[T_LOG], 0, 100000000L, &logev))
+        return CLI_USAGE;
+    if (input % 16)
+        return cli_usage_error(cmd, "--input: want a multiple of 16");
+    if (fresh > cache)
+        return cli_usage_error(cmd, "--fresh: want <= --cache");
+    if (o[T_LR].value) {
+        float lr;
+        if (cli_parse_floats(o[T_LR].value, &lr, 1) || !(lr > 0 && lr < 1))
+            return cli_usage_error(cmd, "--lr: want 0 < X < 1");
+        t.lr = lr;
+    }
+    t.steps = steps, t.batch = (int)batch, t.seed = (uint64_t)seed, t.cache = (int)cache;
+    t.fresh = (int)fresh, t.identities = (uint64_t)ids, t.checkpoint_every = ckpt;
+    t.log_every = logev, t.out_path = o[T_OUT].value, t.resume = o[T_RESUME].value != NULL;
+    t.log = log_line;
+
+    gs_nn_blas_set_threads(1);
+    gs_error err = {0, ""};
+    gs_gaze_net *n = NULL;
+    gs_gaze_spec spec;
+    gs_gaze_spec_default(&spec, arch);
+    spec.input_size = (int)input;
+    rc = t.resume ? gs_gaze_net_load(t.out_path, &n, &err)
+                  : gs_gaze_net_create(&spec, (uint64_t)seed, &n, &err);
+    if (rc)
+        return cli_fail(cmd, "%s", err.msg);
+    gs_gaze_net_spec(n, &spec);
+    if (t.resume && spec.arch != arch)
+        return gs_gaze_net_destroy(n),
+               cli_fail(cmd, "%s is a %s estimator, not %s", t.out_path,
+                        gs_gaze_arch_name(spec.arch), gs_gaze_arch_name(arch));
+    gs_pool *pool = threads > 1 ? gs_pool_create((int)threads) : NULL;
+    gs_gaze_train_report rep;
+    rc = gs_gaze_train(n, &t, pool, &rep, &err);
+    gs_pool_destroy(pool);
+    gs_gaze_net_destroy(n);
+    if (rc)
+        return cli_fail(cmd, "%s", err.msg);
+    printf("gazesplat train-estimator: %ld steps in %.1f s, final loss %.4f rad -> %s\n",
+           rep.steps, rep.seconds, rep.final_loss, t.out_path);
+    return CLI_OK;
+}
+
+static int run_estimate(int argc, char **argv)
+{
+    cli_opt o[2] = {{"--model", 1, NULL}, {"--image", 1, NULL}};
+    const cli_command *cmd = &cli_estimate_command;
+    int rc = cli_parse(cmd, argc, argv, o, 2);
+    if (rc == CLI_HELP)
+        return fputs(cmd->usage, stdout), CLI_OK;
+    if (rc != CLI_PARSED)
+        return rc;
+    if (!o[0].value || !o[1].value)
+        return cli_usage_error(cmd, "need --model and --image");
+    gs_nn_blas_set_threads(1);
+    gs_error err = {0, ""};
+    gs_gaze_net *n = NULL;
+    gs_io_image img = {0};
+    float out[4];
+    rc = gs_gaze_net_load(o[0].value, &n, &err);
+    if (!rc)
+        rc = gs_io_image_read(o[1].value, NULL, &img, &err);
+    if (!rc)
+        rc = gs_gaze_net_predict(n, NULL, img.data, img.width, img.height, img.stride, out,
+                                 &err);
+    gs_io_image_free(&img);
+    gs_gaze_net_destroy(n);
+    if (rc)
+        return cli_fail(cmd, "%s", err.msg);
+    printf("gaze_pitch_deg %.2f\ngaze_yaw_deg %.2f\nhead_pitch_deg %.2f\nhead_yaw_deg %.2f\n",
+           out[0] * DEG, out[1] * DEG, out[2] * DEG, out[3] * DEG);
+    return CLI_OK;
+}
+
+/* ---- eval-estimator ------------------------------------------------------- */
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Prints mean, median and p90 of v[n] (sorted in place), degrees. */
+static void summary(const char *what, double *v, int n)
+{
+    double s = 0;
+    for (int i = 0; i < n; i++)
+        s += v[i];
+    qsort(v, (size_t)n, sizeof *v, cmp_double);
+    printf("%s error (deg): mean %.2f  median %.2f  p90 %.2f\n", what, s / n * DEG,
+           v[n / 2] * DEG, v[(int)(0.9 * (n - 1))] * DEG);
+}
+
+static double angle_between(double p1, double y1, double p2, double y2)
+{
+    double a[3], b[3];
+    gs_geom_pitchyaw_to_vec(p1, y1, a);
+    gs_geom_pitchyaw_to_vec(p2, y2, b);
+    return gs_geom_vec3_angle(a, b);
+}
+
+enum { E_MODEL, E_SPLIT, E_COUNT, E_SIZE, E_SEED, E_THREADS, E_CSV, E_N };
+
+static int eval_loop(gs_gaze_net *n, const gs_synth_gen_config *gc, long count, gs_pool *pool,
+                     FILE *csv, double *eg, double *eh, gs_error *err)
+{
+    gs_synth_sample s;
+    int rc = gs_synth_sample_alloc(&s, gc->size, gc->size, err);
+    for (long i = 0; !rc && i < count; i++) {
+        float out[4];
+        rc = gs_synth_gen_sample(gc, (uint64_t)i, pool, &s, err);
+        if (!rc)
+            rc = gs_gaze_net_predict(n, pool, s.rgb, s.width, s.height, s.stride, out, err);
+        if (rc)
+            break;
+        const gs_synth_labels *l = &s.labels;
+        eg[i] = angle_between(out[0], out[1], l->gaze_norm_pitch, l->gaze_norm_yaw);
+        eh[i] = angle_between(out[2], out[3], l->head_norm_pitch, l->head_norm_yaw);
+        if (csv)
+            fprintf(csv, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", i,
+                    l->gaze_norm_pitch * DEG, l->gaze_norm_yaw * DEG, l->head_norm_pitch * DEG,
+                    l->head_norm_yaw * DEG, out[0] * DEG, out[1] * DEG, out[2] * DEG,
+                    out[3] * DEG, eg[i] * DEG, eh[i] * DEG);
+        if ((i + 1) % 50 == 0)
+            fprintf(stderr, "gazesplat eval-estimator: %ld/%ld\n", i + 1, count);
+    }
+    gs_synth_sample_free(&s);
+    return rc;
+}
+
+static int run_eval_est(int argc, char **argv)
+{
+    cli_opt o[E_N] = {{"--model", 1, NULL}, {"--split", 1, NULL}, {"--count", 1, NULL},
+                      {"--size", 1, NULL},  {"--seed", 1, NULL},  {"--threads", 1, NULL},
+                      {"--csv", 1, NULL}};
+    const cli_command *cmd = &cli_eval_estimator_command;
+    int rc = cli_parse(cmd, argc, argv, o, E_N);
+    if (rc == CLI_HELP)
+        return fputs(cmd->usage, stdout), CLI_OK;
+    if (rc != CLI_PARSED)
+        return rc;
+    if (!o[E_MODEL].value)
+        return cli_usage_error(cmd, "missing --model");
+    long count = 500, size = 256, seed = 7, threads = 2;
+    if (opt_long(cmd, &o[E_COUNT], 1, 1000000, &count) ||
+        opt_long(cmd, &o[E_SIZE], 16, 4096, &size) ||
+        opt_long(cmd, &o[E_SEED], 0, 4294967295L, &seed) ||
+        opt_long(cmd, &o[E_THREADS], 1, 256, &threads))
+        return CLI_USAGE;
+    gs_synth_gen_config gc;
+    gs_synth_gen_config_default(&gc);
+    const char *sp = o[E_SPLIT].value ? o[E_SPLIT].value : "test";
+    if (strcmp(sp, "test") == 0)
+        gc.split = GS_SYNTH_TEST;
+    else if (strcmp(sp, "val") == 0)
+        gc.split = GS_SYNTH_VAL;
+    else if (strcmp(sp, "train") == 0)
+        gc.split = GS_SYNTH_TRAIN;
+    else
+        return cli_usage_error(cmd, "--split: want test, val or train; got '%s'", sp);
+    gc.identities = (uint64_t)count;
+    gc.seed = (uint64_t)seed;
+    gc.size = (int)size;
+    gc.rig = GS_SYNTH_RIG_NORMALIZED;
+    gc.supersample = 1;
+
+    gs_nn_blas_set_threads(1);
+    gs_error err = {0, ""};
+    gs_gaze_net *n = NULL;
+    if (gs_gaze_net_load(o[E_MODEL].value, &n, &err))
+        return cli_fail(cmd, "%s", err.msg);
+    FILE *csv = o[E_CSV].value ? fopen(o[E_CSV].value, "w") : NULL;
+    if (o[E_CSV].value && !csv)
+        return gs_gaze_net_destroy(n), cli_fail(cmd, "cannot write %s", o[E_CSV].value);
+    if (csv)
+        fputs("index,gaze_pitch_deg,gaze_yaw_deg,head_pitch_deg,head_yaw_deg,"
+              "pred_gaze_pitch_deg,pred_gaze_yaw_deg,pred_head_pitch_deg,pred_head_yaw_deg,"
+              "gaze_err_deg,head_err_deg\n", csv);
+    double *eg = malloc((size_t)count * sizeof *eg), *eh = malloc((size_t)count * sizeof *eh);
+    gs_pool *pool = threads > 1 ? gs_pool_create((int)threads) : NULL;
+    rc = eg && eh ? eval_loop(n, &gc, count, pool, csv, eg, eh, &err)
+                  : gs_error_set(&err, GS_ERR_NOMEM, "out of memory");
+    if (!rc) {
+        printf("%s: %ld %s-split images of %ld px (seed %ld)\n", o[E_MODEL].value, count, sp,
+               size, seed);
+        summary("gaze", eg, (int)count);
+        summary("head", eh, (int)count);
+    }
+    gs_pool_destroy(pool);
+    if (csv)
+        fclose(csv);
+    free(eg);
+    free(eh);
+    gs_gaze_net_destroy(n);
+    return rc ? cli_fail(cmd, "%s", err.msg) : CLI_OK;
+}
