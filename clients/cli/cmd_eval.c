@@ -24,7 +24,7 @@ const cli_command cli_eval_command = {
     "measure redirection (model, warp baseline, identity) on held-out heads",
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
-    "                      [--threads N]\n"
+    "                      [--threads N] [--reuse-fits]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N]\n"
     "\n"
@@ -40,6 +40,9 @@ const cli_command cli_eval_command = {
     "  --iters N         fit iteration cap (default 200)\n"
     "  --threads N       worker threads (default 2); results are the same\n"
     "                    for a given count, timings aside\n"
+    "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
+    "                    every run) when there: rescoring with another\n"
+    "                    estimator or method list costs no fitting\n"
     "  --make-pairs FILE write a pairing: --identities test identities\n"
     "                    (15) x --inputs scenes each (10) x --targets (10),\n"
     "                    --seed (1); deterministic\n",
@@ -48,7 +51,7 @@ const cli_command cli_eval_command = {
 
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
-    O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_N
+    O_REUSE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_N
 };
 
 static double now_s(void)
@@ -112,6 +115,8 @@ typedef struct evaluator {
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
     eval_row *rows;
     int nrows;
+    const char *dir;            /* --out */
+    int reuse_fits, fits_reused;
 } evaluator;
 
 /* Angular error in degrees of two (pitch, yaw) predictions; NaN if either
@@ -238,6 +243,39 @@ static int fit_input(evaluator *ev, const gs_synth_sample *in,
     return rc;
 }
 
+/* Fits are the slow part: each successful fit is kept as DIR/fits/N.bin
+ * (fit seconds, then the gs_subject_encode bytes), and --reuse-fits
+ * takes them from there instead of fitting again (same model and
+ * options assumed: the file does not record them). */
+static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
+                      gs_subject *sub, double *secs, gs_error *err)
+{
+    char path[4200];
+    uint8_t buf[8 + GS_SUBJECT_ENCODED_MAX + 1];
+    snprintf(path, sizeof path, "%s/fits/%05d.bin", ev->dir, input);
+    FILE *f = ev->reuse_fits ? fopen(path, "rb") : NULL;
+    if (f) {
+        size_t n = fread(buf, 1, sizeof buf, f);
+        fclose(f);
+        if (n > 8 && gs_subject_decode(buf + 8, n - 8, sub, NULL) == GS_OK) {
+            memcpy(secs, buf, 8);
+            ev->fits_reused++;
+            return GS_OK;
+        }
+    }
+    int rc = fit_input(ev, in, sub, secs, err);
+    if (rc)
+        return rc;
+    memcpy(buf, secs, 8);
+    size_t n = 8 + gs_subject_encode(sub, buf + 8, sizeof buf - 8);
+    f = fopen(path, "wb");
+    if (!f || fwrite(buf, 1, n, f) != n)
+        fprintf(stderr, "gazesplat eval: cannot write %s\n", path);
+    if (f)
+        fclose(f);
+    return GS_OK;
+}
+
 /* One input and all its targets [first, last), every method. */
 static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
                       int last, FILE *csv)
@@ -259,7 +297,8 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
     double fit_s = NAN;
     for (int k = 0; k < ev->nmethods; k++)
         if (ev->methods[k] == EVAL_MODEL) {
-            rc = fit_input(ev, &in, &sub, &fit_s, &err);
+            rc = cached_fit(ev, ps->p[first].input, &in, &sub, &fit_s,
+                            &err);
             if (rc) {
                 fit_status = rc == GS_ERR_NONFINITE ? EVAL_ROW_DIVERGED
                                                     : EVAL_ROW_ERROR;
@@ -397,6 +436,7 @@ static int evaluate(evaluator *ev, const cli_opt *o, const gs_eval_pairs *ps,
     if (!rc && !md)
         rc = cli_fail(cmd, "cannot write %s", path);
     if (md) {
+        info->fits_reused = ev->fits_reused;
         eval_summary(md, info, ev->rows, ev->nrows, ps, ev->methods,
                      ev->nmethods);
         if (fclose(md))
@@ -434,17 +474,16 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     int rc = read_pairs(o[O_PAIRS].value, &ps);
     if (rc)
         return rc;
-    if (!make_dir(o[O_OUT].value))
-        rc = cli_fail(cmd, "cannot create %s", o[O_OUT].value);
+    char fits[4200];
+    snprintf(fits, sizeof fits, "%s/fits", o[O_OUT].value);
+    if (!make_dir(o[O_OUT].value) || !make_dir(fits))
+        rc = cli_fail(cmd, "cannot create %s", fits);
     gs_nn_blas_set_threads(1);
     if (!rc && gs_model_load(o[O_MODEL].value, &ev->m, &err))
         rc = cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
-    if (!rc && o[O_EST].value) {
-        double t0 = now_s();
-        if (eval_estimator_load(o[O_EST].value, &ev->est, &err))
-            rc = cli_fail(cmd, "%s: %s", o[O_EST].value, err.msg);
-        info->est_load_s = now_s() - t0;
-    }
+    if (!rc && o[O_EST].value &&
+        eval_estimator_load(o[O_EST].value, &ev->est, &err))
+        rc = cli_fail(cmd, "%s: %s", o[O_EST].value, err.msg);
     if (!rc) {
         gs_model_info mi;
         gs_model_get_info(ev->m, &mi);
@@ -474,7 +513,8 @@ static int run_eval(int argc, char **argv)
         {"--model", 1, NULL},   {"--pairs", 1, NULL},  {"--out", 1, NULL},
         {"--estimator", 1, NULL}, {"--method", 1, NULL},
         {"--limit-inputs", 1, NULL}, {"--iters", 1, NULL},
-        {"--threads", 1, NULL}, {"--make-pairs", 1, NULL},
+        {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
+        {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -516,6 +556,8 @@ static int run_eval(int argc, char **argv)
                                              &threads))
         return cli_usage_error(cmd, "--threads: want 1..256");
     ev.iters = (int)iters;
+    ev.dir = o[O_OUT].value;
+    ev.reuse_fits = o[O_REUSE].value != NULL;
     char line[2048];
     command_line(argc, argv, line, sizeof line);
     eval_run_info info = {o[O_MODEL].value, o[O_EST].value, o[O_PAIRS].value,

@@ -167,7 +167,7 @@ static void method_counts(FILE *f, const eval_row *rows, int n, int method)
         fprintf(f, "- fit: %d fits, mean %.2f s, median %.2f s, max %.2f s\n",
                 nfit, s / nfit, fits[nfit / 2], fits[nfit - 1]);
     }
-    if (ok && render > 0)
+    if (ok && render > 0 && method != EVAL_IDENTITY)
         fprintf(f, "- render: mean %.1f ms per image, %.1f images/s\n",
                 render / ok, 1000.0 * ok / render);
     free(fits);
@@ -182,6 +182,9 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                "iterations cap %d; %d threads\n", info->model,
             info->image_size, info->pairs, info->inputs, info->iters,
             info->threads);
+    if (info->fits_reused)
+        fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
+                   "their fit times are that run's\n", info->fits_reused);
     if (info->estimator)
         fprintf(f, "- estimator: `%s`; floor = its error on the ground-truth "
                    "target against the true label\n", info->estimator);

@@ -31,7 +31,7 @@ typedef struct eval_row {
 typedef struct eval_run_info {
     const char *model, *estimator, *pairs, *command;
     int threads, iters, inputs, image_size;
-    double est_load_s;
+    int fits_reused;      /* fits taken from an earlier run's DIR/fits */
 } eval_run_info;
 
 void eval_csv_header(FILE *f);

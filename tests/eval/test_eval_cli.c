@@ -240,6 +240,19 @@ int main(int argc, char **argv)
     snprintf(csv, sizeof csv, "%s/pairs.csv", out2);
     char *b = check_csv(csv);
     CHECK_MSG(a && b && strcmp(a, b) == 0, "runs differ:\n%s\n---\n%s", a, b);
+    /* Rescoring with the fits of run 2 gives the same numbers again. */
+    const char *ev3[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", NULL};
+    CHECK_EQ_INT(run(ev3), 0);
+    char *c = check_csv(csv);
+    CHECK_MSG(a && c && strcmp(a, c) == 0, "rescored run differs:\n%s", c);
+    free(c);
+    free(sum);
+    snprintf(md, sizeof md, "%s/summary.md", out2);
+    sum = slurp(md);
+    CHECK_MSG(sum && strstr(sum, "2 fits reused"), "%s", sum ? sum : "");
     free(a);
     free(b);
     free(sum);
