@@ -313,7 +313,10 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
         float gt_est[4];
         int bad_gt = rc ? 0 : predict(ev, gt.rgb, gt_est);
         if (!rc)
-            gs_eval_regions(&gt, ev->eye, ev->face);
+            rc = gs_eval_regions(&gt, ev->eye, ev->face);
+        if (rc)
+            fprintf(stderr, "gazesplat eval: pair %d: ground truth: %s\n", i,
+                    err.msg[0] ? err.msg : gs_strerror(rc));
         for (int k = 0; k < ev->nmethods; k++) {
             int mth = ev->methods[k];
             eval_row *r = new_row(ev, mth, i);

@@ -125,15 +125,12 @@ double gs_eval_ssim(const uint8_t *a, size_t sa, const uint8_t *b, size_t sb,
     return s / (3.0 * (double)n);
 }
 
-void gs_eval_mask_dilate(const uint8_t *in, int w, int h, int r, uint8_t *out)
+int gs_eval_mask_dilate(const uint8_t *in, int w, int h, int r, uint8_t *out)
 {
     /* Rows then columns: a (2r+1)^2 square. */
-    uint8_t *tmp = out;
     uint8_t *row = malloc((size_t)w * h);
-    if (!row) {
-        memcpy(out, in, (size_t)w * h);
-        return;
-    }
+    if (!row)
+        return GS_ERR_NOMEM;
     for (int y = 0; y < h; y++)
         for (int x = 0; x < w; x++) {
             uint8_t v = 0;
@@ -150,9 +147,10 @@ void gs_eval_mask_dilate(const uint8_t *in, int w, int h, int r, uint8_t *out)
                 int yy = y + k;
                 v = yy >= 0 && yy < h && row[(size_t)yy * w + x];
             }
-            tmp[(size_t)y * w + x] = v ? 255 : 0;
+            out[(size_t)y * w + x] = v ? 255 : 0;
         }
     free(row);
+    return GS_OK;
 }
 
 size_t gs_eval_mask_count(const uint8_t *m, int w, int h)
@@ -163,7 +161,7 @@ size_t gs_eval_mask_count(const uint8_t *m, int w, int h)
     return n;
 }
 
-void gs_eval_regions(const gs_synth_sample *gt, uint8_t *eye, uint8_t *face)
+int gs_eval_regions(const gs_synth_sample *gt, uint8_t *eye, uint8_t *face)
 {
     int w = gt->width, h = gt->height;
     size_t n = (size_t)w * h;
@@ -173,7 +171,10 @@ void gs_eval_regions(const gs_synth_sample *gt, uint8_t *eye, uint8_t *face)
     for (size_t i = 0; i < n; i++)
         face[i] = le[i] || re[i] ? 255 : 0; /* scratch: both eyeballs */
     int r = w / 64 > 1 ? w / 64 : 1;
-    gs_eval_mask_dilate(face, w, h, r, eye);
+    int rc = gs_eval_mask_dilate(face, w, h, r, eye);
+    if (rc)
+        return rc;
     for (size_t i = 0; i < n; i++)
         face[i] = fm[i] && !eye[i] ? 255 : 0;
+    return GS_OK;
 }

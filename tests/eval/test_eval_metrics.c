@@ -80,7 +80,7 @@ int main(void)
     uint8_t d[W * H];
     memset(mask, 0, sizeof mask);
     mask[10 * W + 20] = 255;
-    gs_eval_mask_dilate(mask, W, H, 2, d);
+    CHECK(gs_eval_mask_dilate(mask, W, H, 2, d) == GS_OK);
     CHECK_EQ_INT(gs_eval_mask_count(d, W, H), 25);
     CHECK(d[8 * W + 18] && d[12 * W + 22] && !d[7 * W + 20] && !d[10 * W + 23]);
     mask[0] = 255; /* clipped at the corner: 3 x 3 */
@@ -95,7 +95,7 @@ int main(void)
     CHECK_MSG(gs_eval_render_scene(&sc, 96, 680, 300, NULL, &smp, &err) ==
               GS_OK, "%s", err.msg);
     uint8_t eye[96 * 96], face[96 * 96];
-    gs_eval_regions(&smp, eye, face);
+    CHECK(gs_eval_regions(&smp, eye, face) == GS_OK);
     const uint8_t *le = gs_synth_sample_mask(&smp, GS_SYNTH_MASK_LEFT_EYE);
     const uint8_t *re = gs_synth_sample_mask(&smp, GS_SYNTH_MASK_RIGHT_EYE);
     const uint8_t *head = gs_synth_sample_mask(&smp, GS_SYNTH_MASK_HEAD);

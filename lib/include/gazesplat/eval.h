@@ -117,8 +117,9 @@ double gs_eval_psnr(const uint8_t *a, size_t sa, const uint8_t *b, size_t sb,
 double gs_eval_ssim(const uint8_t *a, size_t sa, const uint8_t *b, size_t sb,
                     int w, int h, const uint8_t *mask, gs_error *err);
 
-/* Square dilation of a mask by r pixels (out must not alias in). */
-void gs_eval_mask_dilate(const uint8_t *in, int w, int h, int r, uint8_t *out);
+/* Square dilation of a mask by r pixels (out must not alias in).
+ * GS_ERR_NOMEM leaves out unchanged. */
+int gs_eval_mask_dilate(const uint8_t *in, int w, int h, int r, uint8_t *out);
 /* Pixels set in a mask. */
 size_t gs_eval_mask_count(const uint8_t *m, int w, int h);
 
@@ -126,7 +127,7 @@ size_t gs_eval_mask_count(const uint8_t *m, int w, int h);
  * visible eyeballs dilated by size/64 px, so the lid margins count) and
  * the face without the eyes (face mask minus the eye region), the region
  * of the identity-consistency metric. */
-void gs_eval_regions(const gs_synth_sample *gt, uint8_t *eye, uint8_t *face);
+int gs_eval_regions(const gs_synth_sample *gt, uint8_t *eye, uint8_t *face);
 
 /* Angle in degrees between two (pitch, yaw) directions, radians. */
 double gs_eval_angle_deg(double p0, double y0, double p1, double y1);
