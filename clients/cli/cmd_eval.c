@@ -14,6 +14,7 @@
 #include "eval_report.h"
 #include "gazesplat/eval.h"
 #include "gazesplat/geom.h"
+#include "gazesplat/image_io.h"
 #include "gazesplat/model.h"
 #include "gazesplat/nn.h"
 
@@ -24,7 +25,7 @@ const cli_command cli_eval_command = {
     "measure redirection (model, warp baseline, identity) on held-out heads",
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
-    "                      [--threads N] [--reuse-fits]\n"
+    "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N]\n"
     "\n"
@@ -43,6 +44,8 @@ const cli_command cli_eval_command = {
     "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
     "                    every run) when there: rescoring with another\n"
     "                    estimator or method list costs no fitting\n"
+    "  --save-images N   write the input, target and outputs of the first N\n"
+    "                    pairs as DIR/images/PAIR_WHAT.png\n"
     "  --make-pairs FILE write a pairing: --identities test identities\n"
     "                    (15) x --inputs scenes each (10) x --targets (10),\n"
     "                    --seed (1); deterministic\n",
@@ -51,7 +54,7 @@ const cli_command cli_eval_command = {
 
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
-    O_REUSE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_N
+    O_REUSE, O_SAVE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_N
 };
 
 static double now_s(void)
@@ -117,6 +120,7 @@ typedef struct evaluator {
     int nrows;
     const char *dir;            /* --out */
     int reuse_fits, fits_reused;
+    int save_images;            /* pairs [0, save_images) as PNG */
 } evaluator;
 
 /* Angular error in degrees of two (pitch, yaw) predictions; NaN if either
@@ -276,6 +280,18 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     return GS_OK;
 }
 
+/* DIR/images/PAIR_NAME.png, for looking at the outputs. */
+static void save_png(const evaluator *ev, int pair, const char *name,
+                     const uint8_t *rgb, size_t stride)
+{
+    char path[4200];
+    snprintf(path, sizeof path, "%s/images/%05d_%s.png", ev->dir, pair, name);
+    gs_io_image img = {ev->S, ev->S, stride, (unsigned char *)rgb};
+    gs_error err = {0, ""};
+    if (gs_io_image_write(path, &img, GS_IO_PNG, 0, &err))
+        fprintf(stderr, "gazesplat eval: %s: %s\n", path, err.msg);
+}
+
 /* One input and all its targets [first, last), every method. */
 static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
                       int last, FILE *csv)
@@ -314,6 +330,10 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
         int bad_gt = rc ? 0 : predict(ev, gt.rgb, gt_est);
         if (!rc)
             rc = gs_eval_regions(&gt, ev->eye, ev->face);
+        if (!rc && i < ev->save_images) {
+            save_png(ev, i, "input", in.rgb, in.stride);
+            save_png(ev, i, "target", gt.rgb, gt.stride);
+        }
         if (rc)
             fprintf(stderr, "gazesplat eval: pair %d: ground truth: %s\n", i,
                     err.msg[0] ? err.msg : gs_strerror(rc));
@@ -336,6 +356,9 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
                     fprintf(stderr, "gazesplat eval: pair %d %s: %s\n", i,
                             eval_method_names[mth], e2.msg);
                 } else {
+                    if (i < ev->save_images)
+                        save_png(ev, i, eval_method_names[mth], ev->out,
+                                 3 * (size_t)ev->S);
                     measure(ev, &gt, gt_est, r);
                     r->nonfinite += bad_gt;
                 }
@@ -481,6 +504,9 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     snprintf(fits, sizeof fits, "%s/fits", o[O_OUT].value);
     if (!make_dir(o[O_OUT].value) || !make_dir(fits))
         rc = cli_fail(cmd, "cannot create %s", fits);
+    snprintf(fits, sizeof fits, "%s/images", o[O_OUT].value);
+    if (!rc && ev->save_images && !make_dir(fits))
+        rc = cli_fail(cmd, "cannot create %s", fits);
     gs_nn_blas_set_threads(1);
     if (!rc && gs_model_load(o[O_MODEL].value, &ev->m, &err))
         rc = cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
@@ -517,6 +543,7 @@ static int run_eval(int argc, char **argv)
         {"--estimator", 1, NULL}, {"--method", 1, NULL},
         {"--limit-inputs", 1, NULL}, {"--iters", 1, NULL},
         {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
+        {"--save-images", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}};
@@ -558,6 +585,10 @@ static int run_eval(int argc, char **argv)
     if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256,
                                              &threads))
         return cli_usage_error(cmd, "--threads: want 1..256");
+    long save = 0;
+    if (o[O_SAVE].value && cli_parse_long(o[O_SAVE].value, 0, 100000, &save))
+        return cli_usage_error(cmd, "--save-images: want 0..100000");
+    ev.save_images = (int)save;
     ev.iters = (int)iters;
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;

@@ -220,8 +220,13 @@ int main(int argc, char **argv)
     const char *ev1[] = {"eval", "--model", model, "--pairs", pairs,
                          "--out", out1, "--method", "model,warp,identity",
                          "--iters", "4", "--threads", "2", "--estimator",
-                         est, NULL};
+                         est, "--save-images", "1", NULL};
     CHECK_EQ_INT(run(ev1), 0);
+    char png[320];
+    snprintf(png, sizeof png, "%s/images/00000_warp.png", out1);
+    CHECK_MSG(access(png, R_OK) == 0, "no %s", png);
+    snprintf(png, sizeof png, "%s/images/00001_model.png", out1);
+    CHECK_MSG(access(png, R_OK) != 0, "%s: only pair 0 was asked for", png);
     snprintf(csv, sizeof csv, "%s/pairs.csv", out1);
     char *a = check_csv(csv);
     snprintf(md, sizeof md, "%s/summary.md", out1);
