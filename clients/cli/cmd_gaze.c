@@ -32,6 +32,8 @@ const cli_command cli_train_estimator_command = {
     "  --batch N           images per step (16)\n"
     "  --lr X              peak Adam learning rate, cosine decay (1e-3)\n"
     "  --input N           net input size, 32..256, a multiple of 16 (64)\n"
+    "  --widths A,B,C,D    channels of the 4 stages (12,24,48,64)\n"
+    "  --hidden N          fully connected hidden units (96)\n"
     "  --cache N           rendered samples kept and re-drawn (2048)\n"
     "  --fresh N           new samples rendered per step (4)\n"
     "  --identities N      training identities drawn from (20000)\n"
@@ -81,7 +83,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 }
 
 enum { T_ARCH, T_OUT, T_SEED, T_STEPS, T_BATCH, T_LR, T_INPUT, T_CACHE, T_FRESH, T_IDS,
-       T_THREADS, T_CKPT, T_LOG, T_RESUME, T_N };
+       T_THREADS, T_CKPT, T_LOG, T_RESUME, T_WIDTHS, T_HIDDEN, T_N };
 
 /* Reads an optional integer option into *v; nonzero (usage printed) when bad. */
 static int opt_long(const cli_command *cmd, const cli_opt *o, long lo, long hi, long *v)
@@ -100,7 +102,7 @@ static int run_train_est(int argc, char **argv)
                       {"--input", 1, NULL},   {"--cache", 1, NULL},   {"--fresh", 1, NULL},
                       {"--identities", 1, NULL}, {"--threads", 1, NULL},
                       {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
-                      {"--resume", 0, NULL}};
+                      {"--resume", 0, NULL}, {"--widths", 1, NULL}, {"--hidden", 1, NULL}};
     const cli_command *cmd = &cli_train_estimator_command;
     int rc = cli_parse(cmd, argc, argv, o, T_N);
     if (rc == CLI_HELP)
@@ -116,7 +118,7 @@ static int run_train_est(int argc, char **argv)
     gs_gaze_train_options_default(&t);
     long seed = 1, steps = t.steps, batch = t.batch, input = 64, cache = t.cache,
          fresh = t.fresh, ids = (long)t.identities, threads = 2, ckpt = t.checkpoint_every,
-         logev = t.log_every;
+         logev = t.log_every, hidden = 96;
     if (opt_long(cmd, &o[T_SEED], 0, 4294967295L, &seed) ||
         opt_long(cmd, &o[T_STEPS], 1, 100000000L, &steps) ||
         opt_long(cmd, &o[T_BATCH], 1, 4096, &batch) ||
@@ -126,8 +128,15 @@ static int run_train_est(int argc, char **argv)
         opt_long(cmd, &o[T_IDS], 1, 1000000000L, &ids) ||
         opt_long(cmd, &o[T_THREADS], 1, 256, &threads) ||
         opt_long(cmd, &o[T_CKPT], 0, 100000000L, &ckpt) ||
-        opt_long(cmd, &o[T_LOG], 0, 100000000L, &logev))
+        opt_long(cmd, &o[T_LOG], 0, 100000000L, &logev) ||
+        opt_long(cmd, &o[T_HIDDEN], 1, 4096, &hidden))
         return CLI_USAGE;
+    float wf[GS_GAZE_STAGES];
+    if (o[T_WIDTHS].value && cli_parse_floats(o[T_WIDTHS].value, wf, GS_GAZE_STAGES))
+        return cli_usage_error(cmd, "--widths: want 4 comma-separated integers");
+    for (int i = 0; o[T_WIDTHS].value && i < GS_GAZE_STAGES; i++)
+        if (!(wf[i] >= 1 && wf[i] <= 512) || wf[i] != (float)(int)wf[i])
+            return cli_usage_error(cmd, "--widths: want integers in 1..512");
     if (input % 16)
         return cli_usage_error(cmd, "--input: want a multiple of 16");
     if (fresh > cache)
@@ -149,6 +158,9 @@ static int run_train_est(int argc, char **argv)
     gs_gaze_spec spec;
     gs_gaze_spec_default(&spec, arch);
     spec.input_size = (int)input;
+    spec.hidden = (int)hidden;
+    for (int i = 0; o[T_WIDTHS].value && i < GS_GAZE_STAGES; i++)
+        spec.widths[i] = (int)wf[i];
     rc = t.resume ? gs_gaze_net_load(t.out_path, &n, &err)
                   : gs_gaze_net_create(&spec, (uint64_t)seed, &n, &err);
     if (rc)

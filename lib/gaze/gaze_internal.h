@@ -31,6 +31,9 @@ typedef struct gz_buf {
     size_t off, len;  /* in the activation array */
 } gz_buf;
 
+/* Buffer 0 is the whole face [3,N,N]; buffer 1 the eye band [3,Eh,Ew], the
+ * window gz_eye_window of the image (both eyes for head poses within the
+ * training range), at twice the face's resolution. */
 typedef struct gz_graph {
     int nops, nbufs, ntensors;
     gz_op op[GZ_MAX_OPS];
@@ -59,6 +62,7 @@ struct gs_gaze_net {
 /* graph.c */
 int gz_spec_check(const gs_gaze_spec *s, gs_error *err);
 int gz_graph_build(const gs_gaze_spec *s, gz_graph *g, gs_error *err);
+void gz_eye_size(int N, int *Eh, int *Ew);
 int gz_net_alloc(const gs_gaze_spec *s, gs_gaze_net **out, gs_error *err);
 
 /* net.c */
@@ -72,11 +76,15 @@ int gz_backward(const gz_graph *g, const float *params, gz_ctx *c,
 int gz_ctx_from_rgb(gz_ctx *c, const uint8_t *rgb, int w, int h,
                     size_t stride);
 
-/* resize.c: area (box) resize of [C,h,w] to [C,N,N] and its adjoint.
- * tmp: C * h * N floats. */
+/* resize.c: area (box) resize of a window of [C,h,w] (fractions of the
+ * width and height) to [C,Nh,Nw], and its adjoint. tmp: C * h * Nw floats. */
+typedef struct gz_window {
+    double x0, x1, y0, y1;
+} gz_window;
+extern const gz_window gz_full_window, gz_eye_window;
 void gz_resize_forward(float *out, const float *in, int C, int w, int h,
-                       int N, float *tmp);
+                       const gz_window *wd, int Nw, int Nh, float *tmp);
 void gz_resize_adjoint(float *din, const float *dout, int C, int w, int h,
-                       int N, float *tmp);
+                       const gz_window *wd, int Nw, int Nh, float *tmp);
 
 #endif

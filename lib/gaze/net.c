@@ -49,7 +49,7 @@ int gz_ctx_from_rgb(gz_ctx *c, const uint8_t *rgb, int w, int h, size_t stride)
         const uint8_t *row = rgb + (size_t)y * stride;
         for (int x = 0; x < w; x++)
             for (int k = 0; k < 3; k++)
-                c->img[k * plane + (size_t)y * w + x] = row[3 * x + k] * (1.0f / 255.0f);
+                c->img[k * plane + (size_t)y * w + x] = row[3 * x + k] / 255.0f;
     }
     return GS_OK;
 }
@@ -126,14 +126,14 @@ static int op_backward(const gz_graph *g, const gz_op *o, const float *P, gz_ctx
 int gz_forward(const gz_graph *g, const float *P, gz_ctx *c, const float *img,
                int w, int h, float out[4])
 {
-    int N = g->buf[0].H;
+    const gz_buf *f = &g->buf[0], *e = &g->buf[1];
     c->have_forward = 0;
-    if (reserve(&c->tmp, &c->tmp_cap, 3 * (size_t)h * (size_t)N))
+    if (reserve(&c->tmp, &c->tmp_cap, 3 * (size_t)h * (size_t)(f->W > e->W ? f->W : e->W)))
         return GS_ERR_NOMEM;
-    float *x = c->act;
-    gz_resize_forward(x, img, 3, w, h, N, c->tmp);
-    for (size_t i = 0; i < g->buf[0].len; i++)
-        x[i] -= 0.5f;
+    gz_resize_forward(c->act + f->off, img, 3, w, h, &gz_full_window, f->W, f->H, c->tmp);
+    gz_resize_forward(c->act + e->off, img, 3, w, h, &gz_eye_window, e->W, e->H, c->tmp);
+    for (size_t i = 0; i < f->len + e->len; i++) /* buffers 0 and 1 are adjacent */
+        c->act[i] -= 0.5f;
     for (int i = 0; i < g->nops; i++) {
         int rc = op_forward(g, &g->op[i], P, c);
         if (rc)
@@ -154,12 +154,17 @@ int gz_backward(const gz_graph *g, const float *P, gz_ctx *c, const float dout[4
     memcpy(c->dact + g->buf[g->nbufs - 1].off, dout, GS_GAZE_OUTPUTS * sizeof(float));
     for (int i = g->nops - 1; i >= 0; i--) {
         const gz_op *o = &g->op[i];
-        int rc = op_backward(g, o, P, c, dP, o->in != 0 || dimg != NULL);
+        int rc = op_backward(g, o, P, c, dP, o->in > 1 || dimg != NULL);
         if (rc)
             return rc;
     }
-    if (dimg)
-        gz_resize_adjoint(dimg, c->dact, 3, c->src_w, c->src_h, g->buf[0].H, c->tmp);
+    const gz_buf *f = &g->buf[0], *e = &g->buf[1];
+    if (dimg) {
+        gz_resize_adjoint(dimg, c->dact + f->off, 3, c->src_w, c->src_h, &gz_full_window, f->W,
+                          f->H, c->tmp);
+        gz_resize_adjoint(dimg, c->dact + e->off, 3, c->src_w, c->src_h, &gz_eye_window, e->W,
+                          e->H, c->tmp);
+    }
     return GS_OK;
 }
 

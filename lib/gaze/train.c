@@ -127,7 +127,7 @@ static void batch_task(void *ctx, int b, int worker)
         for (int y = 0; y < S; y++)
             for (int x = 0; x < S; x++)
                 img[k * plane + (size_t)y * S + x] =
-                    src[k * plane + (size_t)y * S + (flip ? S - 1 - x : x)] * (1.0f / 255.0f);
+                    src[k * plane + (size_t)y * S + (flip ? S - 1 - x : x)] / 255.0f;
     memcpy(lab, t->ring_lab + 4 * slot, sizeof lab);
     if (flip) /* a mirror image looks the other way: yaws change sign */
         lab[1] = -lab[1], lab[3] = -lab[3];
@@ -294,7 +294,8 @@ static int refill(trainer *t, long s, gs_error *err)
 
 static double lr_at(const gs_gaze_train_options *o, long s)
 {
-    double warm = s < 100 ? (s + 1) / 100.0 : 1.0;
+    long w = o->steps / 10 < 100 ? o->steps / 10 : 100; /* warm-up steps */
+    double warm = s < w ? (double)(s + 1) / (double)w : 1.0;
     double cosv = 0.5 * (1.0 + cos(3.141592653589793 * (double)s / (double)o->steps));
     return o->lr * warm * (0.02 + 0.98 * cosv);
 }
@@ -330,7 +331,7 @@ static int options_check(const gs_gaze_train_options *o, gs_error *err)
     if (o->steps < 1 || o->batch < 1 || o->batch > 4096 || !(o->lr > 0) ||
         o->identities < 1 || o->identities > GS_SYNTH_SEED_SPLIT_COUNT || o->cache < 1 ||
         o->cache > 1000000 || o->fresh < 1 || o->fresh > o->cache ||
-        o->checkpoint_every < 0 || o->log_every < 0)
+        o->checkpoint_every < 0 || o->log_every < 0 || o->stop_after < 0)
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: option out of range");
     if ((o->checkpoint_every || o->resume) && !o->out_path)
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: checkpoints need out_path");
@@ -354,7 +355,8 @@ int gs_gaze_train(gs_gaze_net *n, const gs_gaze_train_options *o, gs_pool *pool,
         rc = refill(&t, start, err);
     double t0 = now_s(), tl = t0, wl = 0, we = 0, last = 0;
     long wn = 0, done = 0;
-    for (t.step = start; !rc && t.step < o->steps; t.step++) {
+    long end = o->stop_after > 0 && o->stop_after < o->steps ? o->stop_after : o->steps;
+    for (t.step = start; !rc && t.step < end; t.step++) {
         double loss, gerr;
         rc = run_step(&t, &loss, &gerr, err);
         if (rc)

@@ -3,7 +3,9 @@
  * Input: a normalized face image (the model's normalized camera, see
  * geom.h; 256 x 256 for the CPU model) of any size. The net resizes it to
  * its own input size (input_size x input_size, 64 by default) with area
- * (box) weights, subtracts 0.5 and runs one of two architectures:
+ * (box) weights, and the eye band (a fixed window around both eyes) to
+ * input_size/2 x 5 input_size/4, subtracts 0.5 and runs a face branch of
+ * one of two architectures plus a small eye branch:
  *   GS_GAZE_RESNET  a small ResNet (the evaluation estimator)
  *   GS_GAZE_VGG     a plain conv stack (the loss estimator)
  * Output, 4 floats, radians, normalized camera frame (ETH-XGaze signs, the
@@ -58,7 +60,7 @@ typedef struct gs_gaze_spec {
     int hidden;                 /* fully connected hidden units, 1..4096 */
 } gs_gaze_spec;
 
-/* The shipped configuration: input 64, widths 16 32 64 96, hidden 128. */
+/* The shipped configuration: input 64, widths 12 24 48 64, hidden 96. */
 void gs_gaze_spec_default(gs_gaze_spec *s, int arch);
 
 typedef struct gs_gaze_net gs_gaze_net;
@@ -82,7 +84,8 @@ void gs_gaze_net_spec(const gs_gaze_net *n, gs_gaze_spec *s);
 size_t gs_gaze_net_param_count(const gs_gaze_net *n);
 float *gs_gaze_net_params(gs_gaze_net *n);
 
-/* rgb: any size (resized inside), 8-bit RGB, stride bytes per row.
+/* rgb: any size (resized inside), 8-bit RGB, stride bytes per row; the
+ * net sees value / 255.0f, as the float path.
  * out[4] = gaze pitch, gaze yaw, head pitch, head yaw (radians, normalized
  * camera). Sizes 1..GS_GAZE_MAX_IMAGE_SIDE. */
 int gs_gaze_net_predict(gs_gaze_net *n, gs_pool *pool, const uint8_t *rgb,
@@ -112,6 +115,8 @@ typedef void (*gs_gaze_log_fn)(void *ctx, const char *fmt, ...)
 
 typedef struct gs_gaze_train_options {
     long steps;            /* total steps (a resumed run continues to it) */
+    long stop_after;       /* > 0: stop after this step, keeping the schedule
+                              of `steps` (time-boxed runs); 0: run to steps */
     int batch;             /* images per step (16) */
     double lr;             /* Adam peak learning rate (1e-3), cosine decay */
     uint64_t seed;         /* sample stream (the net's init seed is separate) */
