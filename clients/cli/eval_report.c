@@ -136,10 +136,13 @@ static int cmp_double(const void *a, const void *b)
 }
 
 /* Counts and timings of one method. */
-static void method_counts(FILE *f, const eval_row *rows, int n, int method)
+static void method_counts(FILE *f, const eval_row *rows, int n,
+                          const gs_eval_pairs *ps, int method)
 {
     int pairs = 0, ok = 0, div = 0, errs = 0, nonf = 0, noeye = 0, nfit = 0;
-    double render = 0, *fits = malloc(sizeof(double) * (size_t)(n + 1));
+    int nr[2] = {0, 0};
+    double render = 0, rs[2] = {0, 0};
+    double *fits = malloc(sizeof(double) * (size_t)(n + 1));
     for (int i = 0; i < n; i++) {
         const eval_row *r = &rows[i];
         if (r->method != method)
@@ -150,8 +153,12 @@ static void method_counts(FILE *f, const eval_row *rows, int n, int method)
         errs += r->status == EVAL_ROW_ERROR;
         nonf += r->nonfinite;
         noeye += r->no_eye;
-        if (isfinite(r->render_ms))
+        if (isfinite(r->render_ms)) {
+            int hc = ps->p[r->pair].head_change != 0;
             render += r->render_ms;
+            rs[hc] += r->render_ms;
+            nr[hc]++;
+        }
         if (fits && r->fit_row && isfinite(r->fit_s))
             fits[nfit++] = r->fit_s;
     }
@@ -167,9 +174,16 @@ static void method_counts(FILE *f, const eval_row *rows, int n, int method)
         fprintf(f, "- fit: %d fits, mean %.2f s, median %.2f s, max %.2f s\n",
                 nfit, s / nfit, fits[nfit / 2], fits[nfit - 1]);
     }
-    if (ok && render > 0 && method != EVAL_IDENTITY)
-        fprintf(f, "- render: mean %.1f ms per image, %.1f images/s\n",
-                render / ok, 1000.0 * ok / render);
+    if (ok && render > 0 && method != EVAL_IDENTITY) {
+        char g[32] = "–", h[32] = "–";
+        if (nr[0])
+            snprintf(g, sizeof g, "%.1f ms", rs[0] / nr[0]);
+        if (nr[1])
+            snprintf(h, sizeof h, "%.1f ms", rs[1] / nr[1]);
+        fprintf(f, "- render: mean %.1f ms per image, %.1f images/s (gaze "
+                   "only: %s; with a head change: %s)\n", render / ok,
+                1000.0 * ok / render, g, h);
+    }
     free(fits);
 }
 
@@ -205,7 +219,7 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
     }
     for (int k = 0; k < nmethods; k++) {
         fprintf(f, "\n## %s\n\n", eval_method_names[methods[k]]);
-        method_counts(f, rows, n, methods[k]);
+        method_counts(f, rows, n, ps, methods[k]);
         fputc('\n', f);
         table_header(f, "pairs");
         for (int g = 0; g < G_COUNT; g++) {
