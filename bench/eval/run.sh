@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Remakes the committed evaluation report (bench/eval/README.md): the shipped
-# default model, the warp baseline and identity over the first 15 inputs of
-# the committed pairing (one per test identity, every class) x 10 targets.
+# default model, the warp baseline and identity over the first 30 inputs of
+# the committed pairing (two per test identity: every class) x 10 targets.
 # Usage: bench/eval/run.sh [BUILD_DIR] [OUT_DIR]
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
@@ -18,5 +18,5 @@ fi
 # --reuse-fits: a rerun (say with a new estimator) reuses the fits in $out/fits.
 nice -n 10 "$G" eval --model "$root/models/gazegaussian-cpu.safetensors" \
   "${est[@]}" --pairs "$root/bench/eval/pairs.csv" \
-  --method model,warp,identity --limit-inputs 15 --threads 2 --reuse-fits \
+  --method model,warp,identity --limit-inputs 30 --threads 2 --reuse-fits \
   --out "$out"

@@ -154,7 +154,7 @@ static int pick_input(const gs_eval_pairs_spec *sp, int k, int i,
     gs_synth_ranges r;
     gs_eval_ranges(&r);
     uint64_t id = gs_synth_split_seed(GS_SYNTH_TEST, (uint64_t)k);
-    /* The class rotates with the identity so that the first inputs of
+    /* The class rotates with the identity so that the first two inputs of
      * every identity (a prefix of the file) already cover all classes. */
     int c = (i + 2 * k) % 10;
     int want_bin = c % 3, narrowed = c == 3, harsh = c == 4;

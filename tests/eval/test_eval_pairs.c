@@ -62,6 +62,15 @@ static void schedule(const gs_eval_pairs *ps, const gs_eval_pairs_spec *sp)
             bad += p->head_change_deg > 1e-6;
     }
     CHECK_MSG(bad == 0, "%d schedule violations", bad);
+    /* The first two inputs of every identity already hold every class. */
+    int seen[10] = {0}, nseen = 0;
+    for (int q = 0; q < 2 * sp->identities * sp->targets; q += sp->targets) {
+        int in = q / sp->targets;
+        int c = (in / sp->identities + 2 * (in % sp->identities)) % 10;
+        nseen += !seen[c];
+        seen[c] = 1;
+    }
+    CHECK_EQ_INT(nseen, 10);
     CHECK(nar > 0 && harsh > 0);
     CHECK(headbin[0] > 0 && headbin[1] > 0 && headbin[2] > 0);
 }

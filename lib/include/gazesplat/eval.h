@@ -76,10 +76,11 @@ void gs_eval_pairs_spec_default(gs_eval_pairs_spec *s);
 /* Draws the pairing (deterministic). Input i of identity k has class
  * c = (i + 2k) mod 10: head-pose bin c mod 3, narrowed or blinking eyes
  * when c = 3, harsh lighting when c = 4 (neither otherwise). Inputs are
- * ordered input-major (i * identities + k), so a prefix of the file
- * covers every identity and every class. Targets cycle through the
- * gaze-change bins and alternate gaze-only / gaze-and-head. Free with
- * gs_eval_pairs_free. */
+ * ordered input-major (i * identities + k): the first 2 x identities
+ * inputs (two per identity) cover every class; the first `identities`
+ * inputs only the even ones (every head bin and harsh lighting, no
+ * narrowed eyes). Targets cycle through the gaze-change bins and alternate
+ * gaze-only / gaze-and-head. Free with gs_eval_pairs_free. */
 int gs_eval_pairs_make(const gs_eval_pairs_spec *spec, gs_eval_pairs *out,
                        gs_error *err);
 void gs_eval_pairs_free(gs_eval_pairs *ps);
