@@ -57,14 +57,15 @@ const cli_command cli_estimate_command = {
 const cli_command cli_eval_estimator_command = {
     "eval-estimator",
     "error of an estimator on ground-truth synthetic images",
-    "usage: gazesplat eval-estimator --model FILE [options]\n"
+    "usage: gazesplat eval-estimator --model FILE[,FILE...] [options]\n"
     "\n"
+    "  --model F[,F...]    up to 4 estimators, evaluated on the same images\n"
     "  --split S           test (default), val or train identities\n"
     "  --count N           images, each of its own identity (500)\n"
     "  --size N            image size, px (256, the model's)\n"
     "  --seed N            scene stream (7)\n"
     "  --threads N         render threads (2)\n"
-    "  --csv FILE          per-image labels, predictions and errors\n"
+    "  --csv FILE          per model and image: labels, predictions, errors\n"
     "\n"
     "Prints mean, median and 90th percentile of the angular gaze and head\n"
     "errors in degrees (angle between the 3D directions).\n",
@@ -241,32 +242,113 @@ static double angle_between(double p1, double y1, double p2, double y2)
 }
 
 enum { E_MODEL, E_SPLIT, E_COUNT, E_SIZE, E_SEED, E_THREADS, E_CSV, E_N };
+enum { MAX_MODELS = 4 };
 
-static int eval_loop(gs_gaze_net *n, const gs_synth_gen_config *gc, long count, gs_pool *pool,
-                     FILE *csv, double *eg, double *eh, gs_error *err)
+typedef struct eval_set {
+    int nmodels;
+    char path[MAX_MODELS][1024];
+    gs_gaze_net *net[MAX_MODELS];
+    double *eg[MAX_MODELS], *eh[MAX_MODELS]; /* [count] angular errors */
+} eval_set;
+
+/* One image: every model's prediction and errors, and its CSV rows. */
+static int eval_image(eval_set *es, const gs_synth_sample *s, long i, FILE *csv, gs_error *err)
+{
+    const gs_synth_labels *l = &s->labels;
+    for (int m = 0; m < es->nmodels; m++) {
+        float out[4];
+        int rc = gs_gaze_net_predict(es->net[m], NULL, s->rgb, s->width, s->height, s->stride,
+                                     out, err);
+        if (rc)
+            return rc;
+        es->eg[m][i] = angle_between(out[0], out[1], l->gaze_norm_pitch, l->gaze_norm_yaw);
+        es->eh[m][i] = angle_between(out[2], out[3], l->head_norm_pitch, l->head_norm_yaw);
+        if (csv)
+            fprintf(csv, "%d,%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", m, i,
+                    l->gaze_norm_pitch * DEG, l->gaze_norm_yaw * DEG, l->head_norm_pitch * DEG,
+                    l->head_norm_yaw * DEG, out[0] * DEG, out[1] * DEG, out[2] * DEG,
+                    out[3] * DEG, es->eg[m][i] * DEG, es->eh[m][i] * DEG);
+    }
+    return GS_OK;
+}
+
+static int eval_loop(eval_set *es, const gs_synth_gen_config *gc, long count, gs_pool *pool,
+                     FILE *csv, gs_error *err)
 {
     gs_synth_sample s;
     int rc = gs_synth_sample_alloc(&s, gc->size, gc->size, err);
     for (long i = 0; !rc && i < count; i++) {
-        float out[4];
         rc = gs_synth_gen_sample(gc, (uint64_t)i, pool, &s, err);
         if (!rc)
-            rc = gs_gaze_net_predict(n, pool, s.rgb, s.width, s.height, s.stride, out, err);
-        if (rc)
-            break;
-        const gs_synth_labels *l = &s.labels;
-        eg[i] = angle_between(out[0], out[1], l->gaze_norm_pitch, l->gaze_norm_yaw);
-        eh[i] = angle_between(out[2], out[3], l->head_norm_pitch, l->head_norm_yaw);
-        if (csv)
-            fprintf(csv, "%ld,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f\n", i,
-                    l->gaze_norm_pitch * DEG, l->gaze_norm_yaw * DEG, l->head_norm_pitch * DEG,
-                    l->head_norm_yaw * DEG, out[0] * DEG, out[1] * DEG, out[2] * DEG,
-                    out[3] * DEG, eg[i] * DEG, eh[i] * DEG);
-        if ((i + 1) % 50 == 0)
+            rc = eval_image(es, &s, i, csv, err);
+        if (!rc && (i + 1) % 50 == 0)
             fprintf(stderr, "gazesplat eval-estimator: %ld/%ld\n", i + 1, count);
     }
     gs_synth_sample_free(&s);
     return rc;
+}
+
+/* Splits "A,B,..." into es->path; -1 when empty or too many. */
+static int split_models(const char *list, eval_set *es)
+{
+    const char *p = list;
+    es->nmodels = 0;
+    while (*p) {
+        const char *c = strchr(p, ',');
+        size_t n = c ? (size_t)(c - p) : strlen(p);
+        if (n == 0 || n >= sizeof es->path[0] || es->nmodels == MAX_MODELS)
+            return -1;
+        memcpy(es->path[es->nmodels], p, n);
+        es->path[es->nmodels++][n] = '\0';
+        p += n + (c ? 1 : 0);
+        if (c && !*p)
+            return -1;
+    }
+    return es->nmodels ? 0 : -1;
+}
+
+static void eval_free(eval_set *es)
+{
+    for (int m = 0; m < es->nmodels; m++) {
+        gs_gaze_net_destroy(es->net[m]);
+        free(es->eg[m]);
+        free(es->eh[m]);
+    }
+}
+
+static int eval_run(const cli_command *cmd, eval_set *es, const gs_synth_gen_config *gc,
+                    long count, long threads, const char *csv_path, const char *split)
+{
+    gs_error err = {0, ""};
+    for (int m = 0; m < es->nmodels; m++) {
+        if (gs_gaze_net_load(es->path[m], &es->net[m], &err))
+            return cli_fail(cmd, "%s", err.msg);
+        es->eg[m] = malloc((size_t)count * sizeof(double));
+        es->eh[m] = malloc((size_t)count * sizeof(double));
+        if (!es->eg[m] || !es->eh[m])
+            return cli_fail(cmd, "out of memory");
+    }
+    FILE *csv = csv_path ? fopen(csv_path, "w") : NULL;
+    if (csv_path && !csv)
+        return cli_fail(cmd, "cannot write %s", csv_path);
+    if (csv)
+        fputs("model,index,gaze_pitch_deg,gaze_yaw_deg,head_pitch_deg,head_yaw_deg,"
+              "pred_gaze_pitch_deg,pred_gaze_yaw_deg,pred_head_pitch_deg,pred_head_yaw_deg,"
+              "gaze_err_deg,head_err_deg\n", csv);
+    gs_pool *pool = threads > 1 ? gs_pool_create((int)threads) : NULL;
+    int rc = eval_loop(es, gc, count, pool, csv, &err);
+    gs_pool_destroy(pool);
+    if (csv)
+        fclose(csv);
+    if (rc)
+        return cli_fail(cmd, "%s", err.msg);
+    for (int m = 0; m < es->nmodels; m++) {
+        printf("%s: %ld %s-split images of %d px (seed %llu)\n", es->path[m], count, split,
+               gc->size, (unsigned long long)gc->seed);
+        summary("gaze", es->eg[m], (int)count);
+        summary("head", es->eh[m], (int)count);
+    }
+    return CLI_OK;
 }
 
 static int run_eval_est(int argc, char **argv)
@@ -280,8 +362,10 @@ static int run_eval_est(int argc, char **argv)
         return fputs(cmd->usage, stdout), CLI_OK;
     if (rc != CLI_PARSED)
         return rc;
-    if (!o[E_MODEL].value)
-        return cli_usage_error(cmd, "missing --model");
+    static eval_set es;
+    memset(&es, 0, sizeof es);
+    if (!o[E_MODEL].value || split_models(o[E_MODEL].value, &es))
+        return cli_usage_error(cmd, "--model: want FILE[,FILE...] (up to %d)", MAX_MODELS);
     long count = 500, size = 256, seed = 7, threads = 2;
     if (opt_long(cmd, &o[E_COUNT], 1, 1000000, &count) ||
         opt_long(cmd, &o[E_SIZE], 16, 4096, &size) ||
@@ -304,34 +388,8 @@ static int run_eval_est(int argc, char **argv)
     gc.size = (int)size;
     gc.rig = GS_SYNTH_RIG_NORMALIZED;
     gc.supersample = 1;
-
     gs_nn_blas_set_threads(1);
-    gs_error err = {0, ""};
-    gs_gaze_net *n = NULL;
-    if (gs_gaze_net_load(o[E_MODEL].value, &n, &err))
-        return cli_fail(cmd, "%s", err.msg);
-    FILE *csv = o[E_CSV].value ? fopen(o[E_CSV].value, "w") : NULL;
-    if (o[E_CSV].value && !csv)
-        return gs_gaze_net_destroy(n), cli_fail(cmd, "cannot write %s", o[E_CSV].value);
-    if (csv)
-        fputs("index,gaze_pitch_deg,gaze_yaw_deg,head_pitch_deg,head_yaw_deg,"
-              "pred_gaze_pitch_deg,pred_gaze_yaw_deg,pred_head_pitch_deg,pred_head_yaw_deg,"
-              "gaze_err_deg,head_err_deg\n", csv);
-    double *eg = malloc((size_t)count * sizeof *eg), *eh = malloc((size_t)count * sizeof *eh);
-    gs_pool *pool = threads > 1 ? gs_pool_create((int)threads) : NULL;
-    rc = eg && eh ? eval_loop(n, &gc, count, pool, csv, eg, eh, &err)
-                  : gs_error_set(&err, GS_ERR_NOMEM, "out of memory");
-    if (!rc) {
-        printf("%s: %ld %s-split images of %ld px (seed %ld)\n", o[E_MODEL].value, count, sp,
-               size, seed);
-        summary("gaze", eg, (int)count);
-        summary("head", eh, (int)count);
-    }
-    gs_pool_destroy(pool);
-    if (csv)
-        fclose(csv);
-    free(eg);
-    free(eh);
-    gs_gaze_net_destroy(n);
-    return rc ? cli_fail(cmd, "%s", err.msg) : CLI_OK;
+    rc = eval_run(cmd, &es, &gc, count, threads, o[E_CSV].value, sp);
+    eval_free(&es);
+    return rc;
 }

@@ -28,7 +28,7 @@ static void overview(FILE *f)
           "       gazesplat help COMMAND\n\n"
           "Commands:\n", f);
     for (int i = 0; i < NCOMMANDS; i++)
-        fprintf(f, "  %-15s %s\n", commands[i]->name, commands[i]->summary);
+        fprintf(f, "  %-8s %s\n", commands[i]->name, commands[i]->summary);
     fputs("\nExit status: 0 success, 1 failure, 2 bad usage.\n", f);
 }
 

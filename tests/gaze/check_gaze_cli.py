@@ -43,7 +43,8 @@ with tempfile.TemporaryDirectory() as d:
                  ["estimate"], ["estimate", "--model", est],
                  ["estimate", "--model", est, "--image", "x.png", "extra"],
                  ["eval-estimator"], ["eval-estimator", "--model", est, "--split", "all"],
-                 ["eval-estimator", "--model", est, "--count", "0"]):
+                 ["eval-estimator", "--model", est, "--count", "0"],
+                 ["eval-estimator", "--model", est + ","]):
         expect(2, args, usage)
     expect(1, ["estimate", "--model", os.path.join(d, "missing.safetensors"),
                "--image", "x.png"], "gazesplat estimate:")
@@ -63,11 +64,11 @@ with tempfile.TemporaryDirectory() as d:
     if len(out.split("\n")) != 5:
         failures += 1
         print(f"FAIL estimate printed {out!r}")
-    expect(0, ["eval-estimator", "--model", est, "--count", "3", "--size", "48",
+    expect(0, ["eval-estimator", "--model", est + "," + est, "--count", "3", "--size", "48",
                "--csv", os.path.join(d, "e.csv")], "gaze error (deg): mean", "stdout")
     with open(os.path.join(d, "e.csv")) as f:
         rows = f.read().splitlines()
-    if len(rows) != 4 or not rows[0].startswith("index,gaze_pitch_deg"):
+    if len(rows) != 7 or not rows[0].startswith("model,index,gaze_pitch_deg"):
         failures += 1
         print(f"FAIL eval-estimator csv: {rows[:2]}")
 
