@@ -19,6 +19,7 @@ static const cli_command *const commands[] = {
     &cli_train_estimator_command,
     &cli_estimate_command,
     &cli_eval_estimator_command,
+    &cli_eval_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
 
