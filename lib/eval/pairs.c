@@ -404,7 +404,7 @@ int gs_eval_render_scene(const gs_synth_scene *scene, int size, double d_n_mm,
         rc = gs_synth_sample_alloc(out, size, size, err);
     if (rc)
         return rc;
-    gs_synth_render_opts o = {1};
+    gs_synth_render_opts o = {.supersample = 1};
     rc = gs_synth_render(scene, &cam, &o, pool, out, err);
     if (rc) {
         gs_synth_sample_free(out);
