@@ -694,10 +694,10 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
  * pixels rewritten join c->rgb_dirty. */
 static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
 {
-    const int R = GS_RENDERER_REACH, fs = c->fs, C = c->C, S = c->S;
-    int in[4], keep[4];
-    box_grow(d, 2 * R, fs, in);   /* what the kept pixels read */
-    box_grow(d, R, fs, keep);     /* what the change can reach */
+    const int R = GS_RENDERER_REACH_PX, fs = c->fs, C = c->C, S = c->S;
+    int in[4], keep[4], d4[4] = {4 * d[0], 4 * d[1], 4 * d[2], 4 * d[3]};
+    box_grow(d, (2 * R + 3) / 4, fs, in); /* what the kept pixels read */
+    box_grow(d4, R, S, keep);             /* what the change can reach */
     int w = in[2] - in[0], h = in[3] - in[1];
     float *x = c->v_fmap, *out = c->v_rgb; /* scratch here */
     for (int k = 0; k < C; k++)
@@ -711,13 +711,12 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
         return rc;
     int W4 = 4 * w, H4 = 4 * h;
     for (int k = 0; k < 3; k++)
-        for (int y = 4 * keep[1]; y < 4 * keep[3]; y++)
-            memcpy(c->rgb + ((size_t)k * S + y) * S + 4 * keep[0],
-                   out + ((size_t)k * H4 + y - 4 * in[1]) * W4 +
-                       4 * (keep[0] - in[0]),
-                   (size_t)(4 * (keep[2] - keep[0])) * sizeof(float));
-    int px[4] = {4 * keep[0], 4 * keep[1], 4 * keep[2], 4 * keep[3]};
-    box_union(c->rgb_dirty, px);
+        for (int y = keep[1]; y < keep[3]; y++)
+            memcpy(c->rgb + ((size_t)k * S + y) * S + keep[0],
+                   out + ((size_t)k * H4 + y - 4 * in[1]) * W4 + keep[0] -
+                       4 * in[0],
+                   (size_t)(keep[2] - keep[0]) * sizeof(float));
+    box_union(c->rgb_dirty, keep);
     return GS_OK;
 }
 
