@@ -24,6 +24,7 @@
 
 #include "frame.h"
 #include "gazesplat/geom.h"
+#include "gazesplat/nn.h"
 
 /* ---- small rotation helpers (wxyz quaternions) ---- */
 
@@ -181,6 +182,13 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->k_opac = falloc(n, &fail);
     c->k_feat = falloc(n * c->C, &fail);
     c->sweep_n = GS_MODEL_SWEEP_CACHE_DEFAULT;
+    int h0 = p->eye.dims[1], fd = c->F + c->D;
+    c->eye_w0 = falloc((size_t)h0 * fd, &fail);
+    c->eye_base = falloc(ne * h0, &fail);
+    c->eye_v = falloc((size_t)h0, &fail);
+    for (int o = 0; c->eye_w0 && o < h0; o++) /* W0's [f | tau] columns */
+        memcpy(c->eye_w0 + (size_t)o * fd, p->eye.w[0] + (size_t)o * p->eye.dims[0],
+               (size_t)fd * sizeof(float));
     c->raster = gs_raster_create();
     c->raster_face = gs_raster_create();
     c->raster_crop = gs_raster_create();
@@ -213,7 +221,8 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->scratch, &c->fmap_face, &c->v_fmap_face,
                       &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
                       &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,
-                      &c->k_scale, &c->k_quat, &c->k_opac, &c->k_feat};
+                      &c->k_scale, &c->k_quat, &c->k_opac, &c->k_feat,
+                      &c->eye_w0, &c->eye_base, &c->eye_v};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(*bufs[i]);
     free(c->rgb8);
@@ -322,7 +331,47 @@ static void face_assemble(gs_model_ctx *c, const double qR[4])
 
 /* ---- eye stream ---- */
 
-static void eye_forward(gs_model_ctx *c, const gs_frame *fr)
+/* The eye MLP for a render (no backward follows): its first layer's
+ * input is [f_i, tau, PE(gaze)], so W0 [f_i, tau] + b0, fixed for a
+ * subject, is kept, and a gaze adds only W0 PE(gaze), one vector for every
+ * Gaussian; half the MLP's work. The sums are grouped differently from
+ * gs_mlp_forward's: equal within float rounding. */
+static void eye_mlp_render(gs_model_ctx *c, const gs_frame *fr)
+{
+    const gs_mlp *m = &c->m->p.eye;
+    int ne = c->ne, F = c->F, D = c->D, fd = F + D, ic = m->dims[0],
+        h = m->dims[1];
+    if (!c->eye_base_valid ||
+        memcmp(c->eye_base_code, fr->code, (size_t)D * sizeof(float))) {
+        for (int i = 0; i < ne; i++) { /* [f_i | tau] rows in e_in */
+            float *a = c->e_in + (size_t)i * fd;
+            memcpy(a, c->m->p.e_feat + (size_t)i * F, F * sizeof(float));
+            memcpy(a + F, fr->code, D * sizeof(float));
+        }
+        gs_nn_linear_forward(c->eye_base, c->e_in, c->eye_w0, m->b[0], ne, fd,
+                             h);
+        memcpy(c->eye_base_code, fr->code, (size_t)D * sizeof(float));
+        c->eye_base_valid = 1;
+    }
+    for (int o = 0; o < h; o++) {
+        const float *w = m->w[0] + (size_t)o * ic + fd;
+        float s = 0.0f;
+        for (int k = 0; k < GS_PE_DIM(2); k++)
+            s += w[k] * c->er_in[k];
+        c->eye_v[o] = s;
+    }
+    for (int i = 0; i < ne; i++) {
+        const float *b = c->eye_base + (size_t)i * h;
+        float *pre = c->e_act + (size_t)i * h;
+        for (int o = 0; o < h; o++)
+            pre[o] = b[o] + c->eye_v[o];
+    }
+    gs_mlp_forward_after_first(m, ne, c->e_act, c->e_out);
+}
+
+/* Eye stream: rotations and centres, the MLP (for_render: eye_mlp_render),
+ * the Gaussians in the head frame. */
+static void eye_forward(gs_model_ctx *c, const gs_frame *fr, int for_render)
 {
     const gs_model *m = c->m;
     const gs_model_params *p = &m->p;
@@ -353,13 +402,17 @@ static void eye_forward(gs_model_ctx *c, const gs_frame *fr)
             c->eye_c[e][k] = s;
         }
     }
-    for (int i = 0; i < ne; i++) {
-        float *a = c->e_in + (size_t)i * de;
-        memcpy(a, p->e_feat + (size_t)i * F, F * sizeof(float));
-        memcpy(a + F, fr->code, D * sizeof(float));
-        memcpy(a + F + D, c->er_in, GS_PE_DIM(2) * sizeof(float));
+    if (for_render) {
+        eye_mlp_render(c, fr);
+    } else {
+        for (int i = 0; i < ne; i++) {
+            float *a = c->e_in + (size_t)i * de;
+            memcpy(a, p->e_feat + (size_t)i * F, F * sizeof(float));
+            memcpy(a + F, fr->code, D * sizeof(float));
+            memcpy(a + F + D, c->er_in, GS_PE_DIM(2) * sizeof(float));
+        }
+        gs_mlp_forward(&p->eye, c->e_in, ne, c->e_act, c->e_out);
     }
-    gs_mlp_forward(&p->eye, c->e_in, ne, c->e_act, c->e_out);
     for (int i = 0; i < ne; i++) {
         int e = i < each ? 0 : 1;
         const double *R = c->eye_R[e];
@@ -429,7 +482,7 @@ void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
         c->face_fresh = 0;
     }
     if (c->ne) {
-        eye_forward(c, fr);
+        eye_forward(c, fr, 0);
         to_camera(c, fr, c->nf, c->n, qR);
     }
     c->fr = *fr;
@@ -798,6 +851,7 @@ static int sweep_slot_alloc(const gs_model_ctx *c, gs_sweep_slot *s)
 static void sweep_drop(gs_model_ctx *c)
 {
     c->inc_valid = 0;
+    c->eye_base_valid = 0;
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         c->slots[i].valid = 0;
 }
@@ -882,7 +936,7 @@ static void eye_streams(gs_model_ctx *c, const gs_frame *fr)
 {
     double qR[4];
     mat_to_quat(fr->head_R, qR);
-    eye_forward(c, fr);
+    eye_forward(c, fr, 1);
     to_camera(c, fr, c->nf, c->n, qR);
     c->fr = *fr;
 }

@@ -73,6 +73,12 @@ struct gs_model_ctx {
     gs_raster *raster_eye;
     float *fmap_eye, *alpha_eye, *v_fmap_eye; /* the eye stream alone */
     float *bg_crop;                   /* [C, fs*fs] background of a crop */
+    /* the eye MLP's first layer for renders: W0 [f_i, tau] + b0 of every
+     * eye Gaussian for the code eye_base_code (W0's [f | tau] columns are
+     * copied to eye_w0 [h, F+D]; PE(gaze) adds one vector to all) */
+    float *eye_w0, *eye_base, *eye_v;  /* [h, F+D], [ne, h], [h] */
+    float eye_base_code[GS_MODEL_MAX_CODE];
+    int eye_base_valid;
     /* incremental renders (gs_frame_render): fmap and rgb hold the full
      * render of inc_key; inc_rect the eye stream's footprint in it; the
      * face part of g_* is inc_key's and fbox its screen boxes */

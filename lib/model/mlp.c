@@ -62,6 +62,33 @@ void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,
     }
 }
 
+void gs_mlp_forward_after_first(const gs_mlp *m, int n, float *acts,
+                                float *out)
+{
+    int h = m->dims[1];
+    if (m->nl == 1) {
+        memcpy(out, acts, (size_t)n * h * sizeof(float));
+        return;
+    }
+    float *post = acts + (size_t)n * h;
+    leaky_forward(post, acts, GS_MLP_SLOPE, (size_t)n * h);
+    const float *x = post;
+    acts += 2 * (size_t)n * h;
+    for (int l = 1; l < m->nl; l++) {
+        int ic = m->dims[l], oc = m->dims[l + 1];
+        if (l + 1 == m->nl) {
+            gs_nn_linear_forward(out, x, m->w[l], m->b[l], n, ic, oc);
+            break;
+        }
+        float *pre = acts;
+        post = acts + (size_t)n * oc;
+        gs_nn_linear_forward(pre, x, m->w[l], m->b[l], n, ic, oc);
+        leaky_forward(post, pre, GS_MLP_SLOPE, (size_t)n * oc);
+        x = post;
+        acts += 2 * (size_t)n * oc;
+    }
+}
+
 /* dout[n, dims[nl]] is read only. scratch: gs_mlp_scratch_size floats
  * (two ping-pong buffers for the hidden-layer gradients). */
 void gs_mlp_backward(const gs_mlp *m, const gs_mlp *g, const float *in, int n,
