@@ -878,7 +878,7 @@ static void sweep_stash(gs_model_ctx *c)
         if (!v || s->used < v->used)
             v = s;
     }
-    if (!v->g_mean && sweep_slot_alloc(c, v) != GS_OK)
+    if (!v || (!v->g_mean && sweep_slot_alloc(c, v) != GS_OK))
         return;
     sweep_swap(c, v);
     v->used = ++c->sweep_clock;
