@@ -795,6 +795,11 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
     swap_f(&c->g_quat, &s->g_quat), swap_f(&c->g_opac, &s->g_opac);
     swap_f(&c->g_feat, &s->g_feat), swap_f(&c->fmap, &s->fmap);
     swap_f(&c->rgb, &s->rgb), swap_f(&c->gvec, &s->gvec);
+    swap_f(&c->eye_base, &s->eye_base);
+    float code[GS_MODEL_MAX_CODE];
+    memcpy(code, c->eye_base_code, sizeof code);
+    memcpy(c->eye_base_code, s->eye_base_code, sizeof code);
+    memcpy(s->eye_base_code, code, sizeof code);
     int16_t *fb = c->fbox;
     c->fbox = s->fbox, s->fbox = fb;
     uint8_t *r8 = c->rgb8;
@@ -806,6 +811,8 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
     memcpy(r, c->inc_rect, sizeof r), memcpy(c->inc_rect, s->rect, sizeof r);
     memcpy(s->rect, r, sizeof r);
     t = c->rgb8_valid, c->rgb8_valid = s->rgb8_valid, s->rgb8_valid = t;
+    t = c->eye_base_valid, c->eye_base_valid = s->eye_base_valid;
+    s->eye_base_valid = t;
     float tf[6];
     memcpy(tf, c->rgb8_tf, sizeof tf), memcpy(c->rgb8_tf, s->rgb8_tf, sizeof tf);
     memcpy(s->rgb8_tf, tf, sizeof tf);
@@ -819,7 +826,7 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
 static void sweep_slot_free(gs_sweep_slot *s)
 {
     float *f[] = {s->g_mean, s->g_scale, s->g_quat, s->g_opac,
-                  s->g_feat, s->fmap, s->rgb, s->gvec};
+                  s->g_feat, s->fmap, s->rgb, s->gvec, s->eye_base};
     for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
         free(f[i]);
     free(s->fbox);
@@ -838,6 +845,7 @@ static int sweep_slot_alloc(const gs_model_ctx *c, gs_sweep_slot *s)
     s->g_feat = falloc(n * c->C, &fail);
     s->fmap = falloc(fsz * c->C, &fail), s->rgb = falloc(isz * 3, &fail);
     s->gvec = falloc((size_t)c->C, &fail);
+    s->eye_base = falloc((size_t)(c->ne ? c->ne : 1) * c->m->p.eye.dims[1], &fail);
     s->fbox = calloc((size_t)(c->nf ? c->nf : 1), 4 * sizeof(int16_t));
     s->rgb8 = malloc(isz * 3);
     if (fail || !s->fbox || !s->rgb8) {
@@ -853,7 +861,7 @@ static void sweep_drop(gs_model_ctx *c)
     c->inc_valid = 0;
     c->eye_base_valid = 0;
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
-        c->slots[i].valid = 0;
+        c->slots[i].valid = c->slots[i].eye_base_valid = 0;
 }
 
 /* Puts the live render (if any) into a free or the least recently used

@@ -31,6 +31,9 @@ typedef struct gs_sweep_slot {
     gs_frame key;
     int rect[4];
     float *g_mean, *g_scale, *g_quat, *g_opac, *g_feat, *fmap, *rgb, *gvec;
+    float *eye_base;
+    float eye_base_code[GS_MODEL_MAX_CODE];
+    int eye_base_valid;
     int16_t *fbox;
     uint8_t *rgb8;
     int rgb8_valid;
