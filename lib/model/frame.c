@@ -574,28 +574,27 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 
 /* Pixel box (x0 y0 x1 y1, exclusive) that contains the rasterizer's
  * radius box of a Gaussian at camera position x with largest log-scale ls,
- * in the full map (camera cam) and in any crop of it. The projected
- * covariance's largest eigenvalue is at most (f s / z)^2 (1 + a^2 + b^2),
- * a and b the Jacobian's x/z and y/z after its frustum clamp: that clamp
- * keeps them within max(|x/z|, e / f), e the farthest a crop's widened
- * edge (0.15 of its size, at most the map's) lies from the centre. Then
- * the 0.3 px^2 dilation and gsplat's eigenvalue floor (sqrt(0.01)), and
- * radius = ceil(3 sqrt(lambda)); one pixel more against the rounding of a
- * crop camera's centre. A box that cannot be bounded covers everything. */
+ * in the full map (camera cam) and in any crop of it rendered with cam's
+ * frustum (raster_box). The projected covariance's largest eigenvalue is at
+ * most (f s / z)^2 (1 + a^2 + b^2), a and b the Jacobian's x/z and y/z after
+ * its frustum clamp, which only moves them toward the centre: |x/z| and
+ * |y/z| bound them. Then the 0.3 px^2 dilation and gsplat's eigenvalue
+ * floor (its square-root term floored at 0.1: lambda grows by 0.1 at most),
+ * and radius = ceil(3 sqrt(lambda)) (+1), with 0.1 px against rounding (the
+ * rasterizer works in float). The tiles the rasterizer bins to are those
+ * its radius box meets, so they meet this box. A box that cannot be
+ * bounded covers everything. */
 static void splat_box(const gs_camera *cam, const float *x, const float *ls,
                       int b[4])
 {
-    double z = x[2], f = fmin(cam->fx, cam->fy), big = 1e6;
+    double z = x[2], big = 1e6;
     if (!(z > GS_RASTER_NEAR)) { /* culled by the rasterizer */
         b[0] = b[1] = b[2] = b[3] = 0;
         return;
     }
-    const double M = GS_RASTER_CLAMP_MARGIN;
-    double ex = fmax(fabs((1 + M) * cam->width - cam->cx), cam->cx + M * cam->width);
-    double ey = fmax(fabs((1 + M) * cam->height - cam->cy), cam->cy + M * cam->height);
-    double a = fmax(fabs(x[0] / z), ex / f), c = fmax(fabs(x[1] / z), ey / f);
+    double a = x[0] / z, c = x[1] / z;
     double s = fmax(cam->fx, cam->fy) * exp(fmax(ls[0], fmax(ls[1], ls[2]))) / z;
-    double r = 3.0 * sqrt(s * s * (1.0 + a * a + c * c) + 0.4 + 0.05) + 2.0;
+    double r = 3.0 * sqrt(s * s * (1.0 + a * a + c * c) + 0.4) + 1.1;
     double u = cam->fx * x[0] / z + cam->cx, v = cam->fy * x[1] / z + cam->cy;
     double lo[2] = {u - r, v - r}, hi[2] = {u + r, v + r};
     int lim[2] = {cam->width, cam->height};
@@ -701,9 +700,21 @@ static int gather_crop(gs_model_ctx *c, const int d[4])
     return k;
 }
 
-/* Rasterizes the Gaussians that can reach the box d (tile-aligned) into
- * c->fmap; ch is the bounding box of the feature pixels that changed
- * (empty when none did): the renderer need only revisit that. */
+/* A feature value moved by more than float rounding. The crop's camera
+ * has its centre shifted, which rounds the splats' pixel offsets
+ * differently from the full render's: values then differ by a few ulps
+ * all over the crop (about 1e-7 of 0.4), which are not changes: what
+ * moves by less than 4e-7 (1 + |old|) keeps its value. */
+static int moved(float old, float now)
+{
+    return fabsf(now - old) > 4e-7f * (1.0f + fabsf(old)) || isnan(now);
+}
+
+/* Rasterizes the Gaussians that can reach the box d (tile-aligned) and
+ * writes into c->fmap the values that moved; ch is the bounding box of
+ * those feature pixels (empty when none did): the renderer need only
+ * revisit that. A value that did not move keeps the one the image was
+ * rendered from. */
 static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
                       const int d[4], int ch[4], gs_error *err)
 {
@@ -715,14 +726,18 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
     for (int k = 0; k < C; k++) /* the background is constant per channel */
         for (size_t i = 0; i < plane; i++)
             c->bg_crop[k * plane + i] = c->bg[(size_t)k * fs * fs];
+    /* the full map's frustum: the Jacobian's clamp as in the full render */
+    int rc = gs_raster_set_frustum(c->raster_crop, full, err);
+    if (rc)
+        return rc;
     gs_gaussians g = {.n = gather_crop(c, d), .channels = C,
                       .means = c->k_mean, .log_scales = c->k_scale,
                       .quats = c->k_quat, .opacity_logits = c->k_opac,
                       .features = c->k_feat};
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
     float *out = c->v_fmap, *alpha = c->v_fmap_face; /* scratch here */
-    int rc = gs_raster_forward(c->raster_crop, pool, &cam, &g, c->bg_crop, &ro,
-                               out, alpha, NULL, err);
+    rc = gs_raster_forward(c->raster_crop, pool, &cam, &g, c->bg_crop, &ro,
+                           out, alpha, NULL, err);
     if (rc)
         return rc;
     ch[0] = ch[1] = INT_MAX, ch[2] = ch[3] = INT_MIN;
@@ -731,12 +746,12 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
             float *dst = c->fmap + ((size_t)k * fs + d[1] + y) * fs + d[0];
             const float *src = out + k * plane + (size_t)y * w;
             for (int x = 0; x < w; x++)
-                if (dst[x] != src[x]) {
+                if (moved(dst[x], src[x])) {
                     int gx = d[0] + x, gy = d[1] + y;
                     ch[0] = gx < ch[0] ? gx : ch[0], ch[2] = gx >= ch[2] ? gx + 1 : ch[2];
                     ch[1] = gy < ch[1] ? gy : ch[1], ch[3] = gy >= ch[3] ? gy + 1 : ch[3];
+                    dst[x] = src[x];
                 }
-            memcpy(dst, src, (size_t)w * sizeof(float));
         }
     if (ch[0] == INT_MAX)
         ch[0] = ch[1] = ch[2] = ch[3] = 0;
