@@ -28,6 +28,7 @@
 #define E(x) GAZESPLAT__ERROR_CODE__##x
 #define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
 #define DEG (M_PI / 180.0)
+#define GSD_RECENT_MAX 64
 
 struct gsd_model {
 #ifdef GSD_HAVE_MODEL
@@ -48,7 +49,16 @@ struct gsd_worker {
     gsd_model *model; /* the model ctx was made for (a reference) */
 #ifdef GSD_HAVE_MODEL
     gs_model_ctx *ctx;
+    /* the subject of the last FIT, rendered once its reply is out so that
+     * the context keeps its render for incremental REDIRECTs */
+    int prime;
+    gs_subject prime_subj;
 #endif
+    /* keys of the subjects rendered lately (a ring, newest at recent_n - 1
+     * modulo GSD_RECENT_MAX): the queue prefers giving their REDIRECTs to
+     * this worker (work.c) */
+    uint8_t recent[GSD_RECENT_MAX][GS_FRAME_KEY_SIZE];
+    int recent_n, recent_cap;
 };
 
 /* ---- hashing: FNV-1a, 128-bit, for model ids and content keys ---------- */
@@ -325,6 +335,9 @@ gsd_worker *gsd_worker_create(gsd_server *s, int index)
             threads = 1;
     }
     w->pool = threads > 1 ? gs_pool_create(threads) : NULL;
+    w->recent_cap = s->cfg.sweep_subjects < 1 ? 1
+                    : s->cfg.sweep_subjects > GSD_RECENT_MAX ? GSD_RECENT_MAX
+                    : s->cfg.sweep_subjects;
     return w;
 }
 
@@ -351,6 +364,31 @@ void gsd_worker_destroy(gsd_worker *w)
 static int64_t now_ms(void)
 {
     return ev_now_ms();
+}
+
+static int key_zero(const uint8_t *k)
+{
+    for (int i = 0; i < GS_FRAME_KEY_SIZE; i++)
+        if (k[i])
+            return 0;
+    return 1;
+}
+
+static int recent_find(const gsd_worker *w, const uint8_t *key)
+{
+    int n = w->recent_n < w->recent_cap ? w->recent_n : w->recent_cap;
+    for (int i = 0; i < n; i++)
+        if (!memcmp(w->recent[i], key, GS_FRAME_KEY_SIZE))
+            return i;
+    return -1;
+}
+
+int gsd_worker_prefers(const gsd_worker *w, const gsd_job *j)
+{
+    if (j->type != T(REDIRECT) || key_zero(j->key))
+        return 0;
+    const Gazesplat__RedirectRequest *r = (const Gazesplat__RedirectRequest *)j->req;
+    return !r->image && recent_find(w, j->key) >= 0;
 }
 
 /* Why a job must stop now (0: go on). */
@@ -391,6 +429,15 @@ static gsd_out *run_sleep(gsd_server *s, gsd_job *j, int64_t t0)
 #ifdef GSD_HAVE_MODEL
 /* ---- model jobs ------------------------------------------------------------ */
 
+/* Notes that this worker's context now keeps the render of `key`. */
+static void recent_add(gsd_worker *w, const uint8_t *key)
+{
+    if (key_zero(key) || recent_find(w, key) >= 0)
+        return;
+    memcpy(w->recent[w->recent_n % w->recent_cap], key, GS_FRAME_KEY_SIZE);
+    w->recent_n++;
+}
+
 /* Makes sure the worker's context belongs to the current model. */
 static int worker_bind_model(gsd_worker *w)
 {
@@ -404,6 +451,10 @@ static int worker_bind_model(gsd_worker *w)
     worker_drop_model(w);
     w->model = m;
     w->ctx = gs_model_ctx_create(m->m);
+    w->recent_n = 0; /* a new context keeps nothing */
+    w->prime = 0;
+    if (w->ctx)
+        gs_model_ctx_set_sweep_cache(w->ctx, w->recent_cap, NULL);
     return w->ctx ? 0 : -1;
 }
 
@@ -529,13 +580,6 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
     hash_out(&h, key);
 }
 
-static int key_zero(const uint8_t *k)
-{
-    for (int i = 0; i < 16; i++)
-        if (k[i])
-            return 0;
-    return 1;
-}
 
 static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj)
 {
@@ -645,6 +689,9 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
         return stop_frame(s, j, why);
     if (cached)
         atomic_fetch_add(&s->ctr.fits_cached, 1);
+    w->prime = 1; /* after the reply: gsd_worker_run */
+    w->prime_subj = subj;
+    recent_add(w, j->key);
     Gazesplat__Angles gaze = GAZESPLAT__ANGLES__INIT, head = GAZESPLAT__ANGLES__INIT;
     subject_angles(&subj, &gaze, &head);
     Gazesplat__FitResult m = GAZESPLAT__FIT_RESULT__INIT;
@@ -752,6 +799,14 @@ static int paste_back(const photo_input *p, paste_state *ps, int whole_face, con
     return 0;
 }
 
+/* Adds the last render's path to the STATS counters. */
+static void count_render(gsd_worker *w)
+{
+    gs_model_ctx_stats st;
+    gs_model_ctx_get_stats(w->ctx, &st);
+    atomic_fetch_add(st.last_incremental ? &w->srv->ctr.renders_incremental : &w->srv->ctr.renders_full, 1);
+}
+
 /* Renders target i into rgb (the normalized face) and posts it, pasted
  * back into the photo when the request asks for it. */
 static int render_target(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
@@ -775,6 +830,7 @@ static int render_target(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReq
         snprintf(msg, cap, "render target %zu: %s", i, err.msg);
         return E(ERR_INTERNAL);
     }
+    count_render(w);
     gs_io_image norm = {size, size, (size_t)size * 3, rgb};
     if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK)
         return post_image(w, j, r, i, &norm, msg, cap);
@@ -804,6 +860,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         gs_frame_key_hex(j->key, hex);
         return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
     }
+    recent_add(w, j->key);
     int size = w->model->info.image_size;
     uint8_t *rgb = malloc((size_t)size * size * 3);
     paste_state ps;
@@ -833,12 +890,40 @@ static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
         return gsd_error_frame(j, E(ERR_NO_MODEL), "no model loaded");
     return j->type == T(FIT) ? run_fit(w, j, t0) : run_redirect(w, j, t0);
 }
+
+/* Renders the last FIT's subject at its own gaze and pose (the image is
+ * dropped): the context then keeps that render, and a REDIRECT of the
+ * subject renders only the eyes' reach, even the first one. */
+static void worker_prime(gsd_worker *w)
+{
+    if (!w->prime || !w->ctx)
+        return;
+    w->prime = 0;
+    int size = w->model->info.image_size;
+    uint8_t *rgb = malloc((size_t)size * size * 3);
+    gs_view v;
+    memset(&v, 0, sizeof v);
+    v.gaze_pitch = w->prime_subj.gaze_pitch;
+    v.gaze_yaw = w->prime_subj.gaze_yaw;
+    gs_error err;
+    gs_error_clear(&err);
+    if (rgb && gs_model_render(w->ctx, w->pool, &w->prime_subj, &v, rgb, (size_t)size * 3, &err) == GS_OK)
+        count_render(w);
+    else
+        LOG_W("worker %d: render after FIT: %s", w->index, rgb ? err.msg : "out of memory");
+    free(rgb);
+}
 #else
 static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
 {
     (void)w;
     (void)t0;
     return gsd_error_frame(j, E(ERR_NO_MODEL), "built without the model module");
+}
+
+static void worker_prime(gsd_worker *w)
+{
+    (void)w;
 }
 #endif
 
@@ -859,4 +944,5 @@ void gsd_worker_run(gsd_worker *w, gsd_job *j)
         o->job_ms = (uint64_t)(now_ms() - t0);
     }
     gsd_post(s, o);
+    worker_prime(w); /* the job is the loop's now; only w is used */
 }

@@ -33,6 +33,7 @@ static const key_def keys[] = {
     {"workers", T_INT, OFF(workers), 1, 64, "1"},
     {"threads", T_INT, OFF(threads), 0, 256, "0"},
     {"queue_depth", T_INT, OFF(queue_depth), 1, 4096, "16"},
+    {"sweep_subjects", T_INT, OFF(sweep_subjects), 1, 64, "8"},
     {"max_payload", T_INT, OFF(max_payload), 4096, 256 << 20, "16777216"},
     {"max_targets", T_INT, OFF(max_targets), 1, 1024, "64"},
     {"max_inflight", T_INT, OFF(max_inflight), 1, 1024, "8"},

@@ -37,6 +37,7 @@ typedef struct gsd_counters {
     atomic_ullong req_hello, req_health, req_stats, req_fit, req_redirect, req_cancel, req_sleep;
     atomic_ullong busy, cancelled, deadline_exceeded;
     atomic_ullong fits, fits_cached, images_out, jobs_done;
+    atomic_ullong renders_full, renders_incremental;
     atomic_ullong model_loads, model_load_failures, reloads, cache_saves, cache_save_failures;
 } gsd_counters;
 
@@ -51,6 +52,7 @@ typedef struct gsd_job {
     uint8_t key[GS_FRAME_KEY_SIZE];
     int64_t deadline_ms;         /* monotonic */
     int64_t enqueued_ms;
+    int skips;                   /* times a later job was taken first (queue lock) */
     atomic_int stop;             /* 0, or ERR_CANCELLED / ERR_DEADLINE / ERR_SHUTTING_DOWN */
     int max_side;                /* image limits when the job was accepted */
     size_t max_pixels;
@@ -76,6 +78,7 @@ typedef struct gsd_work {
     int running;      /* jobs being run */
     int stopping;
     int nworkers;
+    int planned;                 /* workers started (set before the first) */
     pthread_t *threads;
 } gsd_work;
 
@@ -184,6 +187,10 @@ gsd_worker *gsd_worker_create(gsd_server *s, int index);
 void gsd_worker_destroy(gsd_worker *w);
 /* Runs a job, posting its frames; the last one is final. */
 void gsd_worker_run(gsd_worker *w, gsd_job *job);
+/* 1 when the worker rendered the job's subject lately (its renders are
+ * kept: REDIRECT renders incrementally there). Called under the queue
+ * lock; reads only the worker's own recent keys and the job's key. */
+int gsd_worker_prefers(const gsd_worker *w, const gsd_job *job);
 
 /* Starts loading cfg.model in a background thread (LOADING until done). */
 void gsd_model_start_load(gsd_server *s);

@@ -22,6 +22,34 @@ static gsd_job *pop(gsd_work *w)
     return j;
 }
 
+/* How far a worker looks past the head for a REDIRECT of a subject whose
+ * render it keeps, and how often the head may be passed over. */
+#define PREFER_WINDOW 8
+
+/* The next job for worker wk: with several workers, a REDIRECT of a
+ * subject this worker rendered lately (it renders incrementally here)
+ * among the first PREFER_WINDOW jobs, unless the head was passed over
+ * often enough; otherwise the head. Order within a connection does not
+ * matter (replies carry request ids). */
+static gsd_job *pop_for(gsd_work *w, const gsd_worker *wk)
+{
+    if (w->planned < 2 || !wk || w->head->skips >= 2 * w->planned)
+        return pop(w);
+    gsd_job *prev = w->head;
+    for (int k = 1; k < PREFER_WINDOW && prev->qnext; k++, prev = prev->qnext) {
+        gsd_job *j = prev->qnext;
+        if (!gsd_worker_prefers(wk, j))
+            continue;
+        prev->qnext = j->qnext;
+        if (w->tail == j)
+            w->tail = prev;
+        w->length--;
+        w->head->skips++;
+        return j;
+    }
+    return pop(w);
+}
+
 static void *worker_main(void *p)
 {
     worker_arg a = *(worker_arg *)p;
@@ -34,7 +62,7 @@ static void *worker_main(void *p)
             pthread_cond_wait(&w->cv, &w->mu);
         if (!w->head)
             break; /* stopping with an empty queue */
-        gsd_job *j = pop(w);
+        gsd_job *j = pop_for(w, wk);
         w->running++;
         pthread_mutex_unlock(&w->mu);
         if (wk)
@@ -55,6 +83,7 @@ int gsd_work_start(gsd_server *s, int nworkers, int depth)
     pthread_mutex_init(&w->mu, NULL);
     pthread_cond_init(&w->cv, NULL);
     w->depth = depth;
+    w->planned = nworkers; /* before any worker reads it */
     w->threads = calloc((size_t)nworkers, sizeof *w->threads);
     if (!w->threads)
         return -1;

@@ -1,14 +1,23 @@
 """REDIRECT throughput and latency of gazesplatd for cached subjects:
 N clients, each sending one-target REDIRECT requests back to back for a
-fixed time; reports requests/s (= images/s) and p50/p99 latency per client
-count. Starts its own daemon on a model (default: an untrained "cpu"
+fixed time, cycling over the fitted subjects; reports requests/s (=
+images/s), p50/p99 latency, the daemon's CPU time per image and its
+renders by path (STATS renders_incremental / renders_full) per client
+count. Starts its own daemons on a model (default: an untrained "cpu"
 preset model, 256 px; speed does not depend on training).
 
 usage: bench_redirect.py [--build DIR] [--model FILE] [--clients 1,8,32]
-                         [--seconds S] [--format raw|png]
+                         [--seconds S] [--format raw|png|jpeg]
+                         [--workers N] [--threads N] [--subjects N]
+                         [--fit-iters N] [--compare]
        bench_redirect.py --overhead    (round trips of HEALTH, answered by
                          the loop, and of a 0 ms SLEEP, which goes through
                          the queue and a worker: the daemon's own cost)
+
+--compare runs a second daemon with sweep_subjects = 1 beside the first
+(each worker keeps one subject's render: with the clients cycling over the
+subjects, every request renders in full), the two measured in turn at each
+client count, and prints the ratios: the machine's load hits both alike.
 """
 import argparse
 import os
@@ -58,6 +67,43 @@ def run_clients(gc, addr, keys, n, seconds, fmt):
     return lat, time.time() - t0, errors
 
 
+def cpu_seconds(pid):
+    """User + system CPU time of a process (all its threads), seconds."""
+    with open("/proc/%d/stat" % pid) as f:
+        fields = f.read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def measure(gc, d, keys, n, a):
+    """One point: clients, images/s, p50, p99, CPU ms/image, renders."""
+    addr = "unix:" + d.sock
+    with gc.Client(addr) as c:
+        st0 = c.stats()
+    cpu0 = cpu_seconds(d.proc.pid)
+    lat, wall, errors = run_clients(gc, addr, keys, n, a.seconds, a.format)
+    cpu = cpu_seconds(d.proc.pid) - cpu0
+    with gc.Client(addr) as c:
+        st1 = c.stats()
+    if errors:
+        print("errors:", errors[:3])
+    inc = st1.get("renders_incremental", 0) - st0.get("renders_incremental", 0)
+    full = st1.get("renders_full", 0) - st0.get("renders_full", 0)
+    return (len(lat) / wall, 1000 * percentile(lat, 50), 1000 * percentile(lat, 99),
+            1000 * cpu / max(1, len(lat)), inc, full)
+
+
+def start_daemon(gc, Daemon, a, model, sweep):
+    d = Daemon(os.path.join(a.build, "daemon", "gazesplatd"),
+               ["--model", model, "--set", "queue_depth=64", "--set", "workers=%d" % a.workers,
+                "--set", "threads=%d" % a.threads, "--set", "sweep_subjects=%d" % sweep]).start()
+    addr = "unix:" + d.sock
+    while True:
+        with gc.Client(addr) as c:
+            h = c.health()
+        if h.state != gc.pb.Health.LOADING:
+            return d, h
+
+
 def overhead(gc, Daemon, a, n=5000):
     d = Daemon(os.path.join(a.build, "daemon", "gazesplatd"), ["--set", "debug_requests=yes"]).start()
     try:
@@ -83,6 +129,10 @@ def main():
     ap.add_argument("--seconds", type=float, default=10.0)
     ap.add_argument("--format", default="raw", choices=["raw", "png", "jpeg"])
     ap.add_argument("--workers", type=int, default=1)
+    ap.add_argument("--threads", type=int, default=0)
+    ap.add_argument("--subjects", type=int, default=2)
+    ap.add_argument("--compare", action="store_true")
+    ap.add_argument("--fit-iters", type=int, default=4)  # distinct subjects need a few
     ap.add_argument("--overhead", action="store_true")
     a = ap.parse_args()
     os.environ.setdefault("GAZESPLAT_PB2_DIR", os.path.join(a.build, "python"))
@@ -98,32 +148,37 @@ def main():
         model = os.path.join(work, "cpu.safetensors")
         subprocess.run([cli, "train", "--out", model, "--preset", "cpu", "--steps", "1"],
                        check=True, capture_output=True)
-    d = Daemon(os.path.join(a.build, "daemon", "gazesplatd"),
-               ["--model", model, "--set", "queue_depth=64", "--set", "workers=%d" % a.workers]).start()
+    runs = [("kept", 8)] + ([("sweep_subjects=1", 1)] if a.compare else [])
+    daemons = []
     try:
-        addr = "unix:" + d.sock
-        while True:
-            with gc.Client(addr) as c:
-                h = c.health()
-            if h.state != gc.pb.Health.LOADING:
-                break
-            time.sleep(0.05)
-        size = h.image_size
-        imgs = faces(cli, work, size, 2)
-        with gc.Client(addr) as c:
-            keys = [c.fit(img, max_iters=1).subject_key for img in imgs]
-            list(c.redirect([(0, 0)], subject=keys[0], fmt=a.format))  # warm-up
-        print("model %s, %d px, %d worker(s), %s output, %d CPUs, %.0f s per point"
-              % (os.path.basename(model), size, a.workers, a.format, os.cpu_count(), a.seconds))
-        print("%8s %10s %10s %10s" % ("clients", "images/s", "p50 ms", "p99 ms"))
+        keys = None
+        for name, sweep in runs:
+            d, h = start_daemon(gc, Daemon, a, model, sweep)
+            daemons.append((name, d))
+            size = h.image_size
+            imgs = faces(cli, work, size, a.subjects)
+            with gc.Client("unix:" + d.sock) as c:
+                # the same images and labels: the same subject keys in both
+                keys = [c.fit(img, max_iters=a.fit_iters).subject_key for img in imgs]
+                list(c.redirect([(0, 0)], subject=keys[0], fmt=a.format))  # warm-up
+        print("model %s, %d px, %d worker(s) x %s thread(s), %s output, %d subjects, %d CPUs, %.0f s per point"
+              % (os.path.basename(model), size, a.workers, a.threads or "auto", a.format, len(keys),
+                 os.cpu_count(), a.seconds))
+        print("%-18s %7s %9s %8s %8s %12s %6s %6s" % ("daemon", "clients", "images/s", "p50 ms", "p99 ms",
+                                                 "CPU ms/img", "inc", "full"))
         for n in (int(x) for x in a.clients.split(",")):
-            lat, wall, errors = run_clients(gc, addr, keys, n, a.seconds, a.format)
-            if errors:
-                print("errors:", errors[:3])
-            print("%8d %10.1f %10.1f %10.1f" % (n, len(lat) / wall, 1000 * percentile(lat, 50),
-                                                 1000 * percentile(lat, 99)))
+            res = []
+            for name, d in daemons:
+                r = measure(gc, d, keys, n, a)
+                res.append(r)
+                print("%-18s %7d %9.1f %8.1f %8.1f %12.1f %6d %6d" % ((name, n) + r))
+            if len(res) == 2:
+                print("%-18s %7d %8.2fx %7.2fx %7.2fx %11.2fx" % ("ratio", n, res[0][0] / res[1][0],
+                      res[1][1] / res[0][1], res[1][2] / res[0][2], res[1][3] / res[0][3]))
+            sys.stdout.flush()
     finally:
-        d.stop()
+        for _, d in daemons:
+            d.stop()
     return 0
 
 

@@ -3,8 +3,11 @@
  * eye stream's tiles are re-rasterized and the renderer re-runs over their
  * reach), on the calling thread and on a gs_pool of 2 threads.
  *
- *   bench_model_render [--model FILE] [--reps N] [--quick]
+ *   bench_model_render [--model FILE] [--reps N] [--quick] [--threads N]
+ *                      [--only full|inc]
  *
+ * --threads N times pools of 1 and N threads (default 2); --only runs one
+ * path (for a profiler: `perf record` or callgrind over the loop alone).
  * Without --model, a cpu-preset model as initialised (the timing does not
  * depend on training). A model
  * trained with BLOCK guidance renders in full either way; the bench then
@@ -37,6 +40,15 @@ static double now_ms(void)
     return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
 }
 
+/* CPU time of the whole process (every thread of the pool): what the
+ * render costs, whatever else the machine runs. */
+static double cpu_ms(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
+}
+
 static int cmp_double(const void *a, const void *b)
 {
     double x = *(const double *)a, y = *(const double *)b;
@@ -59,10 +71,10 @@ static void die(const char *what, const gs_error *err)
  * nothing is reused; otherwise one pose for the whole grid. Returns ms per
  * image; images go to out[NVIEW][...] when out is not NULL. */
 static double pass(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
-                   int full, int S, uint8_t *out, int *rep_no)
+                   int full, int S, uint8_t *out, int *rep_no, double *cpu)
 {
     gs_error err = {0, ""};
-    double t0 = now_ms();
+    double t0 = now_ms(), c0 = cpu_ms();
     for (int k = 0; k < NVIEW; k++) {
         gs_view v = {0};
         v.gaze_pitch = (-20.0 + 10.0 * (k / GRID)) * BENCH_PI / 180;
@@ -82,13 +94,15 @@ static double pass(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
         if (gs_model_render(c, pool, s, &v, dst, 3 * (size_t)S, &err))
             die("render", &err);
     }
+    if (cpu)
+        *cpu = (cpu_ms() - c0) / NVIEW;
     return (now_ms() - t0) / NVIEW;
 }
 
 int main(int argc, char **argv)
 {
-    const char *path = NULL;
-    int reps = 9;
+    const char *path = NULL, *only = NULL;
+    int reps = 9, nthreads = 2;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--model") && i + 1 < argc)
             path = argv[++i];
@@ -96,9 +110,14 @@ int main(int argc, char **argv)
             reps = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--quick"))
             reps = 3;
+        else if (!strcmp(argv[i], "--threads") && i + 1 < argc)
+            nthreads = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--only") && i + 1 < argc)
+            only = argv[++i];
         else {
             fprintf(stderr, "usage: bench_model_render [--model FILE] "
-                            "[--reps N] [--quick]\n");
+                            "[--reps N] [--quick] [--threads N] "
+                            "[--only full|inc]\n");
             return 2;
         }
     }
@@ -127,15 +146,28 @@ int main(int argc, char **argv)
     s.head_t[2] = info.distance_mm;
     for (int k = 0; k < 3; k++)
         s.colour_gain[k] = 1.0f;
-    gs_pool *pool2 = gs_pool_create(2);
+    nthreads = nthreads < 1 ? 1 : nthreads > 64 ? 64 : nthreads;
+    gs_pool *pool2 = nthreads > 1 ? gs_pool_create(nthreads) : NULL;
     gs_model_ctx *c = gs_model_ctx_create(m);
-    if (!pool2 || !c)
+    if ((nthreads > 1 && !pool2) || !c)
         die("setup", NULL);
+    int rep_no = 0;
+    if (only) { /* one path on the calling thread, for a profiler */
+        int full = !strcmp(only, "full");
+        for (int r = 0; r < reps; r++) {
+            double cpu, ms = pass(c, pool2, &s, full, S, NULL, &rep_no, &cpu);
+            printf("%s: %.1f ms/img, CPU %.1f ms/img\n",
+                   full ? "full" : "incremental", ms, cpu);
+        }
+        gs_model_ctx_destroy(c);
+        gs_pool_destroy(pool2);
+        gs_model_destroy(m);
+        return 0;
+    }
     /* the error side: incremental against full images of the same views */
     size_t isz = 3 * (size_t)S * S;
     uint8_t *inc = malloc(NVIEW * isz), *ful = malloc(NVIEW * isz);
-    int rep_no = 0;
-    pass(c, pool2, &s, 0, S, inc, &rep_no);
+    pass(c, pool2, &s, 0, S, inc, &rep_no, NULL);
     int maxd = 0;
     for (int k = 0; k < NVIEW; k++) {
         gs_model_ctx *f = gs_model_ctx_create(m);
@@ -150,23 +182,30 @@ int main(int argc, char **argv)
         int d = abs((int)inc[i] - (int)ful[i]);
         maxd = d > maxd ? d : maxd;
     }
-    double t[4][MAX_REPS];
-    for (int r = 0; r < reps; r++) /* interleaved: full/inc x 1/2 threads */
+    double t[4][MAX_REPS], u[4][MAX_REPS];
+    for (int r = 0; r < reps; r++) /* interleaved: full/inc x 1/N threads */
         for (int k = 0; k < 4; k++)
-            t[k][r] = pass(c, k & 2 ? pool2 : NULL, &s, !(k & 1), S, NULL, &rep_no);
-    double med[4];
-    for (int k = 0; k < 4; k++)
+            t[k][r] = pass(c, k & 2 ? pool2 : NULL, &s, !(k & 1), S, NULL,
+                           &rep_no, &u[k][r]);
+    double med[4], cpu[4];
+    for (int k = 0; k < 4; k++) {
         med[k] = median(t[k], reps);
+        cpu[k] = median(u[k], reps);
+    }
     printf("gs_model_render, %s, %d^2 features -> %d^2, %d + %d Gaussians, "
            "%d x %d gaze grid, median of %d\n\n",
            path ? path : "cpu preset, as initialised", info.feat_size, S,
            info.n_face, info.n_eye, GRID, GRID, reps);
     printf("| threads | full ms/img | incremental ms/img | speed-up | "
-           "incremental img/s | max 8-bit diff |\n|---|---|---|---|---|---|\n");
+           "incremental img/s | full CPU ms/img | incremental CPU ms/img | "
+           "CPU speed-up | max 8-bit diff |\n"
+           "|---|---|---|---|---|---|---|---|---|\n");
     for (int th = 0; th < 2; th++)
-        printf("| %d | %.1f | %.1f | %.2fx | %.1f | %d |\n", th + 1,
-               med[2 * th], med[2 * th + 1], med[2 * th] / med[2 * th + 1],
-               1000.0 / med[2 * th + 1], maxd);
+        printf("| %d | %.1f | %.1f | %.2fx | %.1f | %.1f | %.1f | %.2fx | %d |\n",
+               th ? nthreads : 1, med[2 * th], med[2 * th + 1],
+               med[2 * th] / med[2 * th + 1], 1000.0 / med[2 * th + 1],
+               cpu[2 * th], cpu[2 * th + 1], cpu[2 * th] / cpu[2 * th + 1],
+               maxd);
     free(inc);
     free(ful);
     gs_model_ctx_destroy(c);

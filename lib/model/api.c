@@ -1,5 +1,6 @@
 /* The public face of the model: subjects, rendering and fitting. */
 #define _POSIX_C_SOURCE 200809L
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -185,26 +186,56 @@ static float srgb_byte(float v)
     return floorf(v * 255.0f + 0.5f);
 }
 
-/* Writes the frame's image with the subject's colour transform; refuses a
- * non-finite pixel. */
-static int write_image(const gs_model_ctx *c, const gs_subject *s,
-                       uint8_t *rgb, size_t stride, gs_error *err)
+/* rgb8 over the image box b from the float image under the colour
+ * transform tf (gain, bias); refuses a non-finite pixel. */
+static int convert_box(gs_model_ctx *c, const float tf[6], const int b[4],
+                       gs_error *err)
 {
     int S = c->S;
     size_t plane = (size_t)S * S;
-    for (int y = 0; y < S; y++) {
-        uint8_t *row = rgb + (size_t)y * stride;
-        for (int x = 0; x < S; x++)
-            for (int k = 0; k < 3; k++) {
-                float v = c->rgb[k * plane + (size_t)y * S + x];
-                v = s->colour_gain[k] * v + s->colour_bias[k];
-                if (!isfinite(v))
-                    return gs_error_set(err, GS_ERR_NONFINITE,
-                                        "render: non-finite pixel (%d,%d)", x,
-                                        y);
-                row[3 * x + k] = (uint8_t)srgb_byte(v);
+    for (int y = b[1]; y < b[3]; y++) {
+        uint8_t *row = c->rgb8 + (size_t)y * 3 * S;
+        for (int k = 0; k < 3; k++) {
+            const float *src = c->rgb + k * plane + (size_t)y * S;
+            int bad = 0;
+            for (int x = b[0]; x < b[2]; x++) {
+                float v = tf[k] * src[x] + tf[3 + k];
+                bad |= !(fabsf(v) <= FLT_MAX); /* NaN or infinite */
+                row[3 * x + k] = (uint8_t)srgb_byte(bad ? 0.0f : v);
             }
+            if (bad)
+                return gs_error_set(err, GS_ERR_NONFINITE,
+                                    "render: non-finite pixel in row %d", y);
+        }
     }
+    return GS_OK;
+}
+
+/* Writes the frame's image with the subject's colour transform; refuses a
+ * non-finite pixel. The context keeps its 8-bit image: when the transform
+ * is the last one, only what the render changed is converted again. */
+static int write_image(gs_model_ctx *c, const gs_subject *s, uint8_t *rgb,
+                       size_t stride, gs_error *err)
+{
+    int S = c->S, all[4] = {0, 0, S, S};
+    float tf[6];
+    memcpy(tf, s->colour_gain, 3 * sizeof(float));
+    memcpy(tf + 3, s->colour_bias, 3 * sizeof(float));
+    const int *box = all;
+    if (c->rgb8_valid && !memcmp(tf, c->rgb8_tf, sizeof tf))
+        box = c->rgb_dirty;
+    c->rgb8_valid = 0;
+    if (box[0] < box[2] && box[1] < box[3]) {
+        int rc = convert_box(c, tf, box, err);
+        if (rc)
+            return rc;
+    }
+    c->rgb8_valid = 1;
+    memcpy(c->rgb8_tf, tf, sizeof tf);
+    memset(c->rgb_dirty, 0, sizeof c->rgb_dirty);
+    for (int y = 0; y < S; y++)
+        memcpy(rgb + (size_t)y * stride, c->rgb8 + (size_t)y * 3 * S,
+               3 * (size_t)S);
     return GS_OK;
 }
 

@@ -24,6 +24,7 @@
 
 #include "frame.h"
 #include "gazesplat/geom.h"
+#include "gazesplat/nn.h"
 
 /* ---- small rotation helpers (wxyz quaternions) ---- */
 
@@ -93,6 +94,10 @@ static float *falloc(size_t n, int *fail)
         *fail = 1;
     return p;
 }
+
+static void sweep_slot_free(gs_sweep_slot *s);
+static void sweep_drop(gs_model_ctx *c);
+static void sweep_stash(gs_model_ctx *c);
 
 int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
 {
@@ -169,12 +174,26 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->v_fmap_eye = falloc(fsz * c->C, &fail);
     c->alpha_eye = falloc(fsz, &fail);
     c->gvec = falloc((size_t)c->C, &fail);
-    c->tmp8 = malloc(isz * 3);
+    c->rgb8 = malloc(isz * 3);
+    c->fbox = calloc(nf ? nf : 1, 4 * sizeof(int16_t));
+    c->k_mean = falloc(n * 3, &fail);
+    c->k_scale = falloc(n * 3, &fail);
+    c->k_quat = falloc(n * 4, &fail);
+    c->k_opac = falloc(n, &fail);
+    c->k_feat = falloc(n * c->C, &fail);
+    c->sweep_n = GS_MODEL_SWEEP_CACHE_DEFAULT;
+    int h0 = p->eye.dims[1], fd = c->F + c->D;
+    c->eye_w0 = falloc((size_t)h0 * fd, &fail);
+    c->eye_base = falloc(ne * h0, &fail);
+    c->eye_v = falloc((size_t)h0, &fail);
+    for (int o = 0; c->eye_w0 && o < h0; o++) /* W0's [f | tau] columns */
+        memcpy(c->eye_w0 + (size_t)o * fd, p->eye.w[0] + (size_t)o * p->eye.dims[0],
+               (size_t)fd * sizeof(float));
     c->raster = gs_raster_create();
     c->raster_face = gs_raster_create();
     c->raster_crop = gs_raster_create();
     c->raster_eye = gs_raster_create();
-    if (fail || !c->tmp8 || !c->raster || !c->raster_face || !c->raster_crop ||
+    if (fail || !c->rgb8 || !c->fbox || !c->raster || !c->raster_face || !c->raster_crop ||
         !c->raster_eye)
         return GS_ERR_NOMEM;
     const gs_renderer_config *rc = &m->rcfg;
@@ -201,10 +220,16 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->r_grad,
                       &c->scratch, &c->fmap_face, &c->v_fmap_face,
                       &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
-                      &c->v_fmap_eye, &c->alpha_eye};
+                      &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,
+                      &c->k_scale, &c->k_quat, &c->k_opac, &c->k_feat,
+                      &c->eye_w0, &c->eye_base, &c->eye_v};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(*bufs[i]);
-    free(c->tmp8);
+    free(c->rgb8);
+    free(c->fbox);
+    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
+        sweep_slot_free(&c->slots[i]);
+    free(c->slots);
     gs_raster_destroy(c->raster);
     gs_raster_destroy(c->raster_face);
     gs_raster_destroy(c->raster_crop);
@@ -306,7 +331,47 @@ static void face_assemble(gs_model_ctx *c, const double qR[4])
 
 /* ---- eye stream ---- */
 
-static void eye_forward(gs_model_ctx *c, const gs_frame *fr)
+/* The eye MLP for a render (no backward follows): its first layer's
+ * input is [f_i, tau, PE(gaze)], so W0 [f_i, tau] + b0, fixed for a
+ * subject, is kept, and a gaze adds only W0 PE(gaze), one vector for every
+ * Gaussian; half the MLP's work. The sums are grouped differently from
+ * gs_mlp_forward's: equal within float rounding. */
+static void eye_mlp_render(gs_model_ctx *c, const gs_frame *fr)
+{
+    const gs_mlp *m = &c->m->p.eye;
+    int ne = c->ne, F = c->F, D = c->D, fd = F + D, ic = m->dims[0],
+        h = m->dims[1];
+    if (!c->eye_base_valid ||
+        memcmp(c->eye_base_code, fr->code, (size_t)D * sizeof(float))) {
+        for (int i = 0; i < ne; i++) { /* [f_i | tau] rows in e_in */
+            float *a = c->e_in + (size_t)i * fd;
+            memcpy(a, c->m->p.e_feat + (size_t)i * F, F * sizeof(float));
+            memcpy(a + F, fr->code, D * sizeof(float));
+        }
+        gs_nn_linear_forward(c->eye_base, c->e_in, c->eye_w0, m->b[0], ne, fd,
+                             h);
+        memcpy(c->eye_base_code, fr->code, (size_t)D * sizeof(float));
+        c->eye_base_valid = 1;
+    }
+    for (int o = 0; o < h; o++) {
+        const float *w = m->w[0] + (size_t)o * ic + fd;
+        float s = 0.0f;
+        for (int k = 0; k < GS_PE_DIM(2); k++)
+            s += w[k] * c->er_in[k];
+        c->eye_v[o] = s;
+    }
+    for (int i = 0; i < ne; i++) {
+        const float *b = c->eye_base + (size_t)i * h;
+        float *pre = c->e_act + (size_t)i * h;
+        for (int o = 0; o < h; o++)
+            pre[o] = b[o] + c->eye_v[o];
+    }
+    gs_mlp_forward_after_first(m, ne, c->e_act, c->e_out);
+}
+
+/* Eye stream: rotations and centres, the MLP (for_render: eye_mlp_render),
+ * the Gaussians in the head frame. */
+static void eye_forward(gs_model_ctx *c, const gs_frame *fr, int for_render)
 {
     const gs_model *m = c->m;
     const gs_model_params *p = &m->p;
@@ -337,13 +402,17 @@ static void eye_forward(gs_model_ctx *c, const gs_frame *fr)
             c->eye_c[e][k] = s;
         }
     }
-    for (int i = 0; i < ne; i++) {
-        float *a = c->e_in + (size_t)i * de;
-        memcpy(a, p->e_feat + (size_t)i * F, F * sizeof(float));
-        memcpy(a + F, fr->code, D * sizeof(float));
-        memcpy(a + F + D, c->er_in, GS_PE_DIM(2) * sizeof(float));
+    if (for_render) {
+        eye_mlp_render(c, fr);
+    } else {
+        for (int i = 0; i < ne; i++) {
+            float *a = c->e_in + (size_t)i * de;
+            memcpy(a, p->e_feat + (size_t)i * F, F * sizeof(float));
+            memcpy(a + F, fr->code, D * sizeof(float));
+            memcpy(a + F + D, c->er_in, GS_PE_DIM(2) * sizeof(float));
+        }
+        gs_mlp_forward(&p->eye, c->e_in, ne, c->e_act, c->e_out);
     }
-    gs_mlp_forward(&p->eye, c->e_in, ne, c->e_act, c->e_out);
     for (int i = 0; i < ne; i++) {
         int e = i < each ? 0 : 1;
         const double *R = c->eye_R[e];
@@ -408,11 +477,12 @@ void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
         c->face_valid = 1;
         c->face_fresh = 1;
         c->face_map_valid = 0;
+        c->inc_valid = 0; /* g_* no longer holds inc_key's face */
     } else {
         c->face_fresh = 0;
     }
     if (c->ne) {
-        eye_forward(c, fr);
+        eye_forward(c, fr, 0);
         to_camera(c, fr, c->nf, c->n, qR);
     }
     c->fr = *fr;
@@ -451,9 +521,14 @@ static int face_map(gs_model_ctx *c, gs_pool *pool, gs_error *err)
 int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                      int stream, int force_face, gs_error *err)
 {
+    if (force_face) /* training: the parameters change between calls */
+        sweep_drop(c);
+    else /* fmap, rgb and g_* are overwritten: keep the render elsewhere */
+        sweep_stash(c);
+    c->inc_valid = 0;
+    c->rgb8_valid = 0;
     gs_frame_forward_streams(c, fr, force_face);
     c->stream = stream;
-    c->inc_valid = 0; /* fmap and rgb are overwritten */
     int first = 0, count = c->n;
     if (stream == GS_STREAM_FACE)
         count = c->nf;
@@ -497,37 +572,68 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 
 /* ---- incremental renders ---- */
 
+/* Pixel box (x0 y0 x1 y1, exclusive) that contains the rasterizer's
+ * radius box of a Gaussian at camera position x with largest log-scale ls,
+ * in the full map (camera cam) and in any crop of it rendered with cam's
+ * frustum (raster_box). The projected covariance's largest eigenvalue is at
+ * most (f s / z)^2 (1 + a^2 + b^2), a and b the Jacobian's x/z and y/z after
+ * its frustum clamp, which only moves them toward the centre: |x/z| and
+ * |y/z| bound them. Then the 0.3 px^2 dilation and gsplat's eigenvalue
+ * floor (its square-root term floored at 0.1: lambda grows by 0.1 at most),
+ * and radius = ceil(3 sqrt(lambda)) (+1), with 0.1 px against rounding (the
+ * rasterizer works in float). The tiles the rasterizer bins to are those
+ * its radius box meets, so they meet this box. A box that cannot be
+ * bounded covers everything. */
+static void splat_box(const gs_camera *cam, const float *x, const float *ls,
+                      int b[4])
+{
+    double z = x[2], big = 1e6;
+    if (!(z > GS_RASTER_NEAR)) { /* culled by the rasterizer */
+        b[0] = b[1] = b[2] = b[3] = 0;
+        return;
+    }
+    double a = x[0] / z, c = x[1] / z;
+    double s = fmax(cam->fx, cam->fy) * exp(fmax(ls[0], fmax(ls[1], ls[2]))) / z;
+    double r = 3.0 * sqrt(s * s * (1.0 + a * a + c * c) + 0.4) + 1.1;
+    double u = cam->fx * x[0] / z + cam->cx, v = cam->fy * x[1] / z + cam->cy;
+    double lo[2] = {u - r, v - r}, hi[2] = {u + r, v + r};
+    int lim[2] = {cam->width, cam->height};
+    for (int k = 0; k < 2; k++) {
+        if (!(lo[k] > -big && hi[k] < big)) /* also NaN: keep it */
+            lo[k] = -big, hi[k] = big;
+        b[k] = (int)floor(fmax(lo[k], -1.0));
+        b[k + 2] = (int)ceil(fmin(hi[k], lim[k] + 1.0));
+    }
+}
+
 /* Tile-aligned box (feature pixels, x0 y0 x1 y1, x1 y1 exclusive, clipped
  * to the map; empty when x0 >= x1) of every tile the eye stream's
  * Gaussians can reach. The rasterizer bins a Gaussian to each tile its
  * 3-sigma box touches and composites it on any pixel of those tiles where
- * its alpha passes 1/255, so its reach is a set of whole tiles. The box
- * here is a superset: isotropic eye Gaussians, sigma bounded by
- * 1.25 f s / z (perspective stretch off the axis) plus the 0.3 px^2
- * screen dilation. */
+ * its alpha passes 1/255, so its reach is a set of whole tiles: those of
+ * the union of splat_box. */
 static void eye_tiles(const gs_model_ctx *c, const gs_camera *cam, int r[4])
 {
-    double lo[2] = {1e30, 1e30}, hi[2] = {-1e30, -1e30};
+    int lo[2] = {INT_MAX, INT_MAX}, hi[2] = {INT_MIN, INT_MIN};
     for (int i = c->nf; i < c->n; i++) {
-        const float *x = c->g_mean + 3 * (size_t)i, *ls = c->g_scale + 3 * (size_t)i;
-        double z = x[2];
-        if (!(z > GS_RASTER_NEAR)) /* behind the camera: never drawn */
+        int b[4];
+        splat_box(cam, c->g_mean + 3 * (size_t)i, c->g_scale + 3 * (size_t)i, b);
+        if (b[0] >= b[2] || b[1] >= b[3]) /* behind the camera */
             continue;
-        double smax = exp(fmax(ls[0], fmax(ls[1], ls[2])));
-        double rad = 3.0 * (1.25 * cam->fx * smax / z + 0.6) + 1.0;
-        double u = cam->fx * x[0] / z + cam->cx, v = cam->fy * x[1] / z + cam->cy;
-        lo[0] = fmin(lo[0], u - rad), hi[0] = fmax(hi[0], u + rad);
-        lo[1] = fmin(lo[1], v - rad), hi[1] = fmax(hi[1], v + rad);
+        for (int k = 0; k < 2; k++) {
+            lo[k] = b[k] < lo[k] ? b[k] : lo[k];
+            hi[k] = b[k + 2] > hi[k] ? b[k + 2] : hi[k];
+        }
     }
     const int T = GS_RASTER_TILE, lim[2] = {cam->width, cam->height};
     for (int k = 0; k < 2; k++) {
-        double a = fmax(lo[k], 0.0), b = fmin(hi[k], (double)lim[k]);
-        if (!(a < b)) {
+        int a = lo[k] > 0 ? lo[k] : 0, e = hi[k] < lim[k] ? hi[k] : lim[k];
+        if (a >= e) {
             r[0] = r[1] = r[2] = r[3] = 0;
             return;
         }
-        int t0 = (int)floor(a / T) * T, t1 = (int)ceil(b / T) * T;
-        r[k] = t0;
+        int t1 = (e + T - 1) / T * T;
+        r[k] = a / T * T;
         r[k + 2] = t1 < lim[k] ? t1 : lim[k];
     }
 }
@@ -551,9 +657,64 @@ static void box_grow(const int b[4], int m, int n, int o[4])
     o[2] = b[2] + m < n ? b[2] + m : n, o[3] = b[3] + m < n ? b[3] + m : n;
 }
 
-/* Rasterizes every Gaussian over the box d (tile-aligned) into c->fmap;
- * ch is the bounding box of the feature pixels that changed (empty when
- * none did): the renderer need only revisit that. */
+/* The face Gaussians' boxes of the current pose, for gather_crop. */
+static void face_boxes(gs_model_ctx *c, const gs_camera *cam)
+{
+    for (int i = 0; i < c->nf; i++) {
+        int b[4];
+        splat_box(cam, c->g_mean + 3 * (size_t)i, c->g_scale + 3 * (size_t)i, b);
+        for (int k = 0; k < 4; k++) /* within [-1, edge + 1] */
+            c->fbox[4 * (size_t)i + k] = (int16_t)b[k];
+    }
+}
+
+/* Copies into k_* the face Gaussians whose box meets the box d, then the
+ * eye stream, and returns their count. The order is kept, and the
+ * rasterizer sorts by (depth, index) and culls what misses the image, so
+ * the crop renders exactly as with every Gaussian: only the projection of
+ * the far ones (most of the face) is saved. */
+static void gather_one(gs_model_ctx *c, int i, int k)
+{
+    int C = c->C;
+    memcpy(c->k_mean + 3 * (size_t)k, c->g_mean + 3 * (size_t)i,
+           3 * sizeof(float));
+    memcpy(c->k_scale + 3 * (size_t)k, c->g_scale + 3 * (size_t)i,
+           3 * sizeof(float));
+    memcpy(c->k_quat + 4 * (size_t)k, c->g_quat + 4 * (size_t)i,
+           4 * sizeof(float));
+    c->k_opac[k] = c->g_opac[i];
+    memcpy(c->k_feat + (size_t)k * C, c->g_feat + (size_t)i * C,
+           (size_t)C * sizeof(float));
+}
+
+static int gather_crop(gs_model_ctx *c, const int d[4])
+{
+    int k = 0;
+    for (int i = 0; i < c->nf; i++) {
+        const int16_t *b = c->fbox + 4 * (size_t)i;
+        if (b[0] < d[2] && b[2] > d[0] && b[1] < d[3] && b[3] > d[1])
+            gather_one(c, i, k++);
+    }
+    for (int i = c->nf; i < c->n; i++)
+        gather_one(c, i, k++);
+    return k;
+}
+
+/* A feature value moved by more than float rounding. The crop's camera
+ * has its centre shifted, which rounds the splats' pixel offsets
+ * differently from the full render's: values then differ by a few ulps
+ * all over the crop (about 1e-7 of 0.4), which are not changes: what
+ * moves by less than 4e-7 (1 + |old|) keeps its value. */
+static int moved(float old, float now)
+{
+    return fabsf(now - old) > 4e-7f * (1.0f + fabsf(old)) || isnan(now);
+}
+
+/* Rasterizes the Gaussians that can reach the box d (tile-aligned) and
+ * writes into c->fmap the values that moved; ch is the bounding box of
+ * those feature pixels (empty when none did): the renderer need only
+ * revisit that. A value that did not move keeps the one the image was
+ * rendered from. */
 static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
                       const int d[4], int ch[4], gs_error *err)
 {
@@ -565,11 +726,18 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
     for (int k = 0; k < C; k++) /* the background is constant per channel */
         for (size_t i = 0; i < plane; i++)
             c->bg_crop[k * plane + i] = c->bg[(size_t)k * fs * fs];
-    gs_gaussians g = gaussians_of(c, 0, c->n);
+    /* the full map's frustum: the Jacobian's clamp as in the full render */
+    int rc = gs_raster_set_frustum(c->raster_crop, full, err);
+    if (rc)
+        return rc;
+    gs_gaussians g = {.n = gather_crop(c, d), .channels = C,
+                      .means = c->k_mean, .log_scales = c->k_scale,
+                      .quats = c->k_quat, .opacity_logits = c->k_opac,
+                      .features = c->k_feat};
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
     float *out = c->v_fmap, *alpha = c->v_fmap_face; /* scratch here */
-    int rc = gs_raster_forward(c->raster_crop, pool, &cam, &g, c->bg_crop, &ro,
-                               out, alpha, NULL, err);
+    rc = gs_raster_forward(c->raster_crop, pool, &cam, &g, c->bg_crop, &ro,
+                           out, alpha, NULL, err);
     if (rc)
         return rc;
     ch[0] = ch[1] = INT_MAX, ch[2] = ch[3] = INT_MIN;
@@ -578,25 +746,26 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
             float *dst = c->fmap + ((size_t)k * fs + d[1] + y) * fs + d[0];
             const float *src = out + k * plane + (size_t)y * w;
             for (int x = 0; x < w; x++)
-                if (dst[x] != src[x]) {
+                if (moved(dst[x], src[x])) {
                     int gx = d[0] + x, gy = d[1] + y;
                     ch[0] = gx < ch[0] ? gx : ch[0], ch[2] = gx >= ch[2] ? gx + 1 : ch[2];
                     ch[1] = gy < ch[1] ? gy : ch[1], ch[3] = gy >= ch[3] ? gy + 1 : ch[3];
+                    dst[x] = src[x];
                 }
-            memcpy(dst, src, (size_t)w * sizeof(float));
         }
     if (ch[0] == INT_MAX)
         ch[0] = ch[1] = ch[2] = ch[3] = 0;
     return GS_OK;
 }
 
-/* Re-renders the output over the reach of the feature box d. */
+/* Re-renders the output over the reach of the feature box d; the image
+ * pixels rewritten join c->rgb_dirty. */
 static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
 {
-    const int R = GS_RENDERER_REACH, fs = c->fs, C = c->C, S = c->S;
-    int in[4], keep[4];
-    box_grow(d, 2 * R, fs, in);   /* what the kept pixels read */
-    box_grow(d, R, fs, keep);     /* what the change can reach */
+    const int R = GS_RENDERER_REACH_PX, fs = c->fs, C = c->C, S = c->S;
+    int in[4], keep[4], d4[4] = {4 * d[0], 4 * d[1], 4 * d[2], 4 * d[3]};
+    box_grow(d, (2 * R + 3) / 4, fs, in); /* what the kept pixels read */
+    box_grow(d4, R, S, keep);             /* what the change can reach */
     int w = in[2] - in[0], h = in[3] - in[1];
     float *x = c->v_fmap, *out = c->v_rgb; /* scratch here */
     for (int k = 0; k < C; k++)
@@ -610,11 +779,12 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
         return rc;
     int W4 = 4 * w, H4 = 4 * h;
     for (int k = 0; k < 3; k++)
-        for (int y = 4 * keep[1]; y < 4 * keep[3]; y++)
-            memcpy(c->rgb + ((size_t)k * S + y) * S + 4 * keep[0],
-                   out + ((size_t)k * H4 + y - 4 * in[1]) * W4 +
-                       4 * (keep[0] - in[0]),
-                   (size_t)(4 * (keep[2] - keep[0])) * sizeof(float));
+        for (int y = keep[1]; y < keep[3]; y++)
+            memcpy(c->rgb + ((size_t)k * S + y) * S + keep[0],
+                   out + ((size_t)k * H4 + y - 4 * in[1]) * W4 + keep[0] -
+                       4 * in[0],
+                   (size_t)(keep[2] - keep[0]) * sizeof(float));
+    box_union(c->rgb_dirty, keep);
     return GS_OK;
 }
 
@@ -625,35 +795,204 @@ static int same_subject_pose(const gs_frame *a, const gs_frame *b)
            !memcmp(a->head_t, b->head_t, sizeof a->head_t);
 }
 
-int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
-                    int *incremental, gs_error *err)
+/* ---- other subjects' renders (the sweep cache) ---- */
+
+static void swap_f(float **a, float **b)
+{
+    float *t = *a;
+    *a = *b, *b = t;
+}
+
+/* Exchanges the live render state with slot s's. */
+static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
+{
+    swap_f(&c->g_mean, &s->g_mean), swap_f(&c->g_scale, &s->g_scale);
+    swap_f(&c->g_quat, &s->g_quat), swap_f(&c->g_opac, &s->g_opac);
+    swap_f(&c->g_feat, &s->g_feat), swap_f(&c->fmap, &s->fmap);
+    swap_f(&c->rgb, &s->rgb), swap_f(&c->gvec, &s->gvec);
+    swap_f(&c->eye_base, &s->eye_base);
+    float code[GS_MODEL_MAX_CODE];
+    memcpy(code, c->eye_base_code, sizeof code);
+    memcpy(c->eye_base_code, s->eye_base_code, sizeof code);
+    memcpy(s->eye_base_code, code, sizeof code);
+    int16_t *fb = c->fbox;
+    c->fbox = s->fbox, s->fbox = fb;
+    uint8_t *r8 = c->rgb8;
+    c->rgb8 = s->rgb8, s->rgb8 = r8;
+    gs_frame key = c->inc_key;
+    c->inc_key = s->key, s->key = key;
+    int t = c->inc_valid, r[4];
+    c->inc_valid = s->valid, s->valid = t;
+    memcpy(r, c->inc_rect, sizeof r), memcpy(c->inc_rect, s->rect, sizeof r);
+    memcpy(s->rect, r, sizeof r);
+    t = c->rgb8_valid, c->rgb8_valid = s->rgb8_valid, s->rgb8_valid = t;
+    t = c->eye_base_valid, c->eye_base_valid = s->eye_base_valid;
+    s->eye_base_valid = t;
+    float tf[6];
+    memcpy(tf, c->rgb8_tf, sizeof tf), memcpy(c->rgb8_tf, s->rgb8_tf, sizeof tf);
+    memcpy(s->rgb8_tf, tf, sizeof tf);
+    memcpy(r, c->rgb_dirty, sizeof r), memcpy(c->rgb_dirty, s->rgb_dirty, sizeof r);
+    memcpy(s->rgb_dirty, r, sizeof r);
+    /* the face cache's outputs are not what g_* now holds */
+    c->face_valid = 0;
+    c->face_map_valid = 0;
+}
+
+static void sweep_slot_free(gs_sweep_slot *s)
+{
+    float *f[] = {s->g_mean, s->g_scale, s->g_quat, s->g_opac,
+                  s->g_feat, s->fmap, s->rgb, s->gvec, s->eye_base};
+    for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
+        free(f[i]);
+    free(s->fbox);
+    free(s->rgb8);
+    memset(s, 0, sizeof *s);
+}
+
+/* Buffers of the live state's sizes for slot s. */
+static int sweep_slot_alloc(const gs_model_ctx *c, gs_sweep_slot *s)
+{
+    size_t n = (size_t)c->n, fsz = (size_t)c->fs * c->fs,
+           isz = (size_t)c->S * c->S;
+    int fail = 0;
+    s->g_mean = falloc(n * 3, &fail), s->g_scale = falloc(n * 3, &fail);
+    s->g_quat = falloc(n * 4, &fail), s->g_opac = falloc(n, &fail);
+    s->g_feat = falloc(n * c->C, &fail);
+    s->fmap = falloc(fsz * c->C, &fail), s->rgb = falloc(isz * 3, &fail);
+    s->gvec = falloc((size_t)c->C, &fail);
+    s->eye_base = falloc((size_t)(c->ne ? c->ne : 1) * c->m->p.eye.dims[1], &fail);
+    s->fbox = calloc((size_t)(c->nf ? c->nf : 1), 4 * sizeof(int16_t));
+    s->rgb8 = malloc(isz * 3);
+    if (fail || !s->fbox || !s->rgb8) {
+        sweep_slot_free(s);
+        return GS_ERR_NOMEM;
+    }
+    return GS_OK;
+}
+
+/* Forgets every kept render (the parameters may change: training). */
+static void sweep_drop(gs_model_ctx *c)
+{
+    c->inc_valid = 0;
+    c->eye_base_valid = 0;
+    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
+        c->slots[i].valid = c->slots[i].eye_base_valid = 0;
+}
+
+/* Puts the live render (if any) into a free or the least recently used
+ * slot before something overwrites it; with no slot to spare it is lost.
+ * Afterwards the live state is not valid. */
+static void sweep_stash(gs_model_ctx *c)
+{
+    if (!c->inc_valid || c->sweep_n < 2)
+        return;
+    if (!c->slots) {
+        c->slots = calloc((size_t)c->sweep_n - 1, sizeof *c->slots);
+        if (!c->slots)
+            return;
+    }
+    gs_sweep_slot *v = NULL;
+    for (int i = 0; i < c->sweep_n - 1; i++) {
+        gs_sweep_slot *s = &c->slots[i];
+        if (!s->valid) {
+            v = s;
+            break;
+        }
+        if (!v || s->used < v->used)
+            v = s;
+    }
+    if (!v || (!v->g_mean && sweep_slot_alloc(c, v) != GS_OK))
+        return;
+    sweep_swap(c, v);
+    v->used = ++c->sweep_clock;
+    c->inc_valid = 0;
+}
+
+/* Makes fr's subject and pose the live render state when a slot has it;
+ * otherwise stashes the live one. */
+static void sweep_select(gs_model_ctx *c, const gs_frame *fr)
+{
+    for (int i = 0; c->slots && i < c->sweep_n - 1; i++) {
+        gs_sweep_slot *s = &c->slots[i];
+        if (s->valid && same_subject_pose(&s->key, fr)) {
+            sweep_swap(c, s);
+            s->used = ++c->sweep_clock;
+            return;
+        }
+    }
+    sweep_stash(c);
+}
+
+int gs_model_ctx_set_sweep_cache(gs_model_ctx *c, int n, gs_error *err)
+{
+    if (!c || n < 1 || n > GS_MODEL_MAX_SWEEP_CACHE)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "sweep cache of %d subjects outside 1..%d", n,
+                            GS_MODEL_MAX_SWEEP_CACHE);
+    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
+        sweep_slot_free(&c->slots[i]);
+    free(c->slots);
+    c->slots = NULL;
+    c->sweep_n = n;
+    c->inc_valid = 0;
+    return GS_OK;
+}
+
+void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st)
+{
+    memset(st, 0, sizeof *st);
+    if (!c)
+        return;
+    st->renders_full = c->n_full;
+    st->renders_incremental = c->n_inc;
+    st->last_incremental = c->last_inc;
+    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
+        st->sweep_kept += c->slots[i].valid;
+    st->sweep_kept += c->inc_valid;
+}
+
+/* ---- rendering for display ---- */
+
+/* Only the eye stream, into the camera (the face part of g_* is the live
+ * render's). */
+static void eye_streams(gs_model_ctx *c, const gs_frame *fr)
+{
+    double qR[4];
+    mat_to_quat(fr->head_R, qR);
+    eye_forward(c, fr, 1);
+    to_camera(c, fr, c->nf, c->n, qR);
+    c->fr = *fr;
+}
+
+static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                       gs_error *err)
+{
+    int rc = gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
+    if (rc)
+        return rc;
+    if (c->src_mode) {
+        rc = gs_renderer_guide_vector(&c->m->rcfg, &c->m->p.rend,
+                                      c->fmap_face, fr->code, c->fs, c->fs,
+                                      c->r_act, c->r_act_len, c->gvec, pool);
+        if (rc)
+            return gs_error_set(err, rc, "model: guidance vector failed");
+    }
+    gs_camera cam;
+    gs_frame_camera(c->m, fr->head_t, &cam);
+    eye_tiles(c, &cam, c->inc_rect);
+    face_boxes(c, &cam);
+    c->inc_key = *fr;
+    c->inc_valid = 1;
+    c->n_full++;
+    return GS_OK;
+}
+
+static int render_inc(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                      gs_error *err)
 {
     gs_camera cam;
-    int rc;
-    if (incremental)
-        *incremental = 0;
-    if (!c->inc_ok)
-        return gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
-    if (!c->inc_valid || !same_subject_pose(&c->inc_key, fr)) {
-        rc = gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
-        if (rc)
-            return rc;
-        if (c->src_mode) {
-            rc = gs_renderer_guide_vector(&c->m->rcfg, &c->m->p.rend,
-                                          c->fmap_face, fr->code, c->fs, c->fs,
-                                          c->r_act, c->r_act_len, c->gvec,
-                                          pool);
-            if (rc)
-                return gs_error_set(err, rc, "model: guidance vector failed");
-        }
-        gs_frame_camera(c->m, fr->head_t, &cam);
-        eye_tiles(c, &cam, c->inc_rect);
-        c->inc_key = *fr;
-        c->inc_valid = 1;
-        return GS_OK;
-    }
     c->inc_valid = 0; /* until the update is complete */
-    gs_frame_forward_streams(c, fr, 0);
+    eye_streams(c, fr);
     gs_frame_camera(c->m, fr->head_t, &cam);
     int now[4], dirty[4];
     eye_tiles(c, &cam, now);
@@ -661,7 +1000,7 @@ int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     box_union(dirty, now);
     if (dirty[0] < dirty[2] && dirty[1] < dirty[3]) {
         int changed[4];
-        rc = raster_box(c, pool, &cam, dirty, changed, err);
+        int rc = raster_box(c, pool, &cam, dirty, changed, err);
         if (rc)
             return rc;
         if (changed[0] < changed[2])
@@ -674,8 +1013,31 @@ int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     memcpy(c->inc_rect, now, sizeof now);
     c->inc_key = *fr;
     c->inc_valid = 1;
+    c->n_inc++;
+    return GS_OK;
+}
+
+int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                    int *incremental, gs_error *err)
+{
+    int rc, inc = 0;
+    c->last_inc = 0;
     if (incremental)
-        *incremental = 1;
+        *incremental = 0;
+    if (!c->inc_ok) {
+        rc = gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
+        c->n_full += rc == GS_OK;
+        return rc;
+    }
+    if (!c->inc_valid || !same_subject_pose(&c->inc_key, fr))
+        sweep_select(c, fr);
+    inc = c->inc_valid && same_subject_pose(&c->inc_key, fr);
+    rc = inc ? render_inc(c, pool, fr, err) : render_full(c, pool, fr, err);
+    if (rc)
+        return rc;
+    c->last_inc = inc;
+    if (incremental)
+        *incremental = inc;
     return GS_OK;
 }
 
@@ -947,6 +1309,8 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       gs_frame_grad *fg, gs_error *err)
 {
     size_t fsz = (size_t)c->fs * c->fs * c->C;
+    if (grads) /* parameter gradients: training, the parameters change */
+        sweep_drop(c);
     if (d_fmap)
         memcpy(c->v_fmap, d_fmap, fsz * sizeof(float));
     else

@@ -23,6 +23,24 @@ typedef struct gs_frame_grad {
 /* Which streams to rasterize. */
 enum { GS_STREAM_BOTH = 0, GS_STREAM_FACE = 1, GS_STREAM_EYE = 2 };
 
+/* A subject's (code + head pose) render kept for later incremental ones:
+ * the fields of gs_model_ctx with the same names (swapped, never copied). */
+typedef struct gs_sweep_slot {
+    int valid;
+    uint64_t used;                    /* sweep_clock at the last use */
+    gs_frame key;
+    int rect[4];
+    float *g_mean, *g_scale, *g_quat, *g_opac, *g_feat, *fmap, *rgb, *gvec;
+    float *eye_base;
+    float eye_base_code[GS_MODEL_MAX_CODE];
+    int eye_base_valid;
+    int16_t *fbox;
+    uint8_t *rgb8;
+    int rgb8_valid;
+    float rgb8_tf[6];
+    int rgb_dirty[4];
+} gs_sweep_slot;
+
 struct gs_model_ctx {
     const gs_model *m;
     int nf, ne, n;         /* face, eye, total Gaussians */
@@ -58,14 +76,36 @@ struct gs_model_ctx {
     gs_raster *raster_eye;
     float *fmap_eye, *alpha_eye, *v_fmap_eye; /* the eye stream alone */
     float *bg_crop;                   /* [C, fs*fs] background of a crop */
+    /* the eye MLP's first layer for renders: W0 [f_i, tau] + b0 of every
+     * eye Gaussian for the code eye_base_code (W0's [f | tau] columns are
+     * copied to eye_w0 [h, F+D]; PE(gaze) adds one vector to all) */
+    float *eye_w0, *eye_base, *eye_v;  /* [h, F+D], [ne, h], [h] */
+    float eye_base_code[GS_MODEL_MAX_CODE];
+    int eye_base_valid;
     /* incremental renders (gs_frame_render): fmap and rgb hold the full
-     * render of inc_key; inc_rect the eye stream's footprint in it */
+     * render of inc_key; inc_rect the eye stream's footprint in it; the
+     * face part of g_* is inc_key's and fbox its screen boxes */
     int inc_ok;                       /* the model allows them */
     int inc_valid;
     gs_frame inc_key;
     int inc_rect[4];                  /* x0, y0, x1, y1 (exclusive), feat px */
+    int16_t *fbox;                    /* [nf, 4] face Gaussian pixel boxes */
     gs_raster *raster_crop;
     double inc_stats[2];              /* feature px re-rasterized, changed */
+    /* the crop's Gaussians: the face ones whose box meets it, then the eye
+     * stream, [n x ...] at most */
+    float *k_mean, *k_scale, *k_quat, *k_opac, *k_feat;
+    /* 8-bit image of rgb (gs_model_render): rgb8 is rgb under the colour
+     * transform rgb8_tf (gain, bias) except over rgb_dirty (image px) */
+    int rgb8_valid;
+    float rgb8_tf[6];
+    int rgb_dirty[4];
+    /* other subjects' renders, swapped in and out of the fields above */
+    gs_sweep_slot *slots;             /* [sweep_n - 1], allocated lazily */
+    int sweep_n;                      /* subjects kept, the live one too */
+    uint64_t sweep_clock;
+    uint64_t n_full, n_inc;           /* renders by path */
+    int last_inc;
     float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */
     float *v_fmap, *v_rgb;
     float *r_act;
@@ -79,8 +119,7 @@ struct gs_model_ctx {
     int stream;
     int face_valid;                   /* fe/fp outputs match fr */
     gs_frame face_key;                /* the frame the face cache is for */
-    /* subject-level render cache for gs_model_render */
-    uint8_t *tmp8;
+    uint8_t *rgb8;                    /* [S, S, 3] */
 };
 
 int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m);

@@ -27,6 +27,23 @@ size_t gs_mlp_scratch_size(const gs_mlp *m, int n)
     return 2 * (size_t)n * (size_t)widest;
 }
 
+/* out[n] = in > 0 ? in : slope in, the same values as gs_nn's LeakyReLU,
+ * with the choice made as a bitwise blend on the sign-tested bits: GCC
+ * keeps the float compare as a branch that random signs make mispredict,
+ * while this form vectorises (renderer_ops.c's select_pos). */
+static void leaky_forward(float *out, const float *in, float slope, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        float b = slope * in[i];
+        int32_t k, ib, r;
+        memcpy(&k, &in[i], sizeof k);
+        memcpy(&ib, &b, sizeof ib);
+        int32_t m = -(int32_t)(k > 0);
+        r = (k & m) | (ib & ~m);
+        memcpy(&out[i], &r, sizeof r);
+    }
+}
+
 void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,
                     float *out)
 {
@@ -39,7 +56,34 @@ void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,
         }
         float *pre = acts, *post = acts + (size_t)n * oc;
         gs_nn_linear_forward(pre, x, m->w[l], m->b[l], n, ic, oc);
-        gs_nn_leaky_relu_forward(post, pre, GS_MLP_SLOPE, (size_t)n * oc);
+        leaky_forward(post, pre, GS_MLP_SLOPE, (size_t)n * oc);
+        x = post;
+        acts += 2 * (size_t)n * oc;
+    }
+}
+
+void gs_mlp_forward_after_first(const gs_mlp *m, int n, float *acts,
+                                float *out)
+{
+    int h = m->dims[1];
+    if (m->nl == 1) {
+        memcpy(out, acts, (size_t)n * h * sizeof(float));
+        return;
+    }
+    float *post = acts + (size_t)n * h;
+    leaky_forward(post, acts, GS_MLP_SLOPE, (size_t)n * h);
+    const float *x = post;
+    acts += 2 * (size_t)n * h;
+    for (int l = 1; l < m->nl; l++) {
+        int ic = m->dims[l], oc = m->dims[l + 1];
+        if (l + 1 == m->nl) {
+            gs_nn_linear_forward(out, x, m->w[l], m->b[l], n, ic, oc);
+            break;
+        }
+        float *pre = acts;
+        post = acts + (size_t)n * oc;
+        gs_nn_linear_forward(pre, x, m->w[l], m->b[l], n, ic, oc);
+        leaky_forward(post, pre, GS_MLP_SLOPE, (size_t)n * oc);
         x = post;
         acts += 2 * (size_t)n * oc;
     }

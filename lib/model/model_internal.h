@@ -136,6 +136,10 @@ size_t gs_mlp_act_size(const gs_mlp *m, int n);
  * layers. acts: gs_mlp_act_size floats, kept for the backward. */
 void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,
                     float *out);
+/* The rest of gs_mlp_forward when the first layer's pre-activations
+ * (n x dims[1]) are already in acts (where gs_mlp_forward puts them). */
+void gs_mlp_forward_after_first(const gs_mlp *m, int n, float *acts,
+                                float *out);
 /* Accumulates weight gradients into g and din[n, dims[0]] (may be NULL). */
 void gs_mlp_backward(const gs_mlp *m, const gs_mlp *g, const float *in, int n,
                      const float *acts, const float *dout, float *din,

@@ -81,6 +81,12 @@ typedef struct gs_renderer_config {
  * operators are the 3x3 blurs, the bilinear 2x upsamplings and the pixel
  * shuffles (test_renderer checks the bound on impulses). */
 #define GS_RENDERER_REACH 2
+/* The same in output pixels: a change of feature pixel (i, j) reaches
+ * output rows (and columns) 4 i - 6 .. 4 i + 9 and no further, the bilinear
+ * upsamplings and the blurs of the RGB path adding 1 + 1 pixels at 2x and
+ * 1 + 1 at 4x. Conversely an output pixel of a crop at least this far from
+ * the crop's cut edges equals the full render's. */
+#define GS_RENDERER_REACH_PX 6
 
 /* GS_OK, or GS_ERR_ARG with a message naming the bad field. */
 int gs_renderer_config_validate(const gs_renderer_config *cfg, gs_error *err);

@@ -43,6 +43,24 @@ gs_raster *gs_raster_create(void)
     return calloc(1, sizeof(gs_raster));
 }
 
+int gs_raster_set_frustum(gs_raster *r, const gs_camera *frustum,
+                          gs_error *err)
+{
+    if (!r)
+        return gs_error_set(err, GS_ERR_ARG, "raster: no workspace");
+    r->has_frustum = 0;
+    if (!frustum)
+        return GS_OK;
+    if (!(frustum->fx > 0.0f && frustum->fy > 0.0f && isfinite(frustum->fx) &&
+          isfinite(frustum->fy) && isfinite(frustum->cx) && isfinite(frustum->cy)) ||
+        frustum->width < 1 || frustum->height < 1 || frustum->width > GS_RASTER_MAX_SIZE ||
+        frustum->height > GS_RASTER_MAX_SIZE)
+        return gs_error_set(err, GS_ERR_ARG, "raster: bad frustum camera");
+    r->frustum = *frustum;
+    r->has_frustum = 1;
+    return GS_OK;
+}
+
 void gs_raster_destroy(gs_raster *r)
 {
     if (!r)
@@ -532,7 +550,7 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     if (opt && opt->path != GS_RASTER_FAST && opt->path != GS_RASTER_SCALAR)
         return gs_error_set(err, GS_ERR_ARG, "raster: unknown path %d", (int)opt->path);
     r->cam = *cam;
-    clamp_limits(cam, r->clamp_lim);
+    clamp_limits(r->has_frustum ? &r->frustum : cam, r->clamp_lim);
     r->g = *g;
     r->background = background;
     r->opt = opt ? *opt : defaults;

@@ -47,6 +47,8 @@ struct gs_raster {
     int have_forward;
     gs_camera cam;
     float clamp_lim[4];   /* x/z, y/z limits of the Jacobian clamp */
+    int has_frustum;      /* gs_raster_set_frustum: clamp to frustum's */
+    gs_camera frustum;
     gs_gaussians g;
     const float *background;
     gs_raster_options opt;

@@ -72,8 +72,21 @@ def test_fit_and_redirect(t, addr, imgs, size):
                 "known gaze kept: %s" % r3.gaze)
         t.check(abs(r3.head.yaw_deg - 10) < 0.01, "known head kept: %s" % r3.head)
 
+        # The worker renders each fitted subject once the FIT reply is out
+        # and keeps those renders: a sweep of a fitted subject is
+        # incremental from the first target on. (This REDIRECT also waits
+        # for that render of the last FIT.)
+        list(c.redirect([(1, 1)], subject=key))
+        st0 = c.stats()
         targets = [(0, 0), (15, -20), (-10, 30)]
         res = list(c.redirect(targets, subject=r1.subject_key))
+        st1 = c.stats()
+        inc = st1["renders_incremental"] - st0["renders_incremental"]
+        full = st1["renders_full"] - st0["renders_full"]
+        t.check(inc == 3 and full == 0, "sweep renders: %d incremental, %d full" % (inc, full))
+        t.check(st0["renders_full"] == 2 and st0["renders_incremental"] == 2,
+                "renders after 3 FITs and a REDIRECT: %d full, %d incremental"
+                % (st0["renders_full"], st0["renders_incremental"]))
         t.check([r.index for r in res] == [0, 1, 2], "indices %s" % [r.index for r in res])
         for r in res:
             d = r.image.data

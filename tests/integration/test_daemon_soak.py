@@ -75,8 +75,10 @@ def main():
     os.makedirs(state, exist_ok=True)
     for f in os.listdir(state):
         os.unlink(os.path.join(state, f))
+    # Two workers: the queue gives a REDIRECT to the worker that keeps its
+    # subject's render (work.c); no reply may be lost or mixed up by that.
     args = ["--model", model, "--state-dir", state, "--set", "queue_depth=64", "--set", "photo_input=no",
-            "--set", "max_connections=128"]
+            "--set", "max_connections=128", "--set", "workers=2", "--set", "threads=1"]
     d = Daemon(daemon, args).start()
     try:
         addr = "unix:" + d.sock
@@ -93,6 +95,8 @@ def main():
             st = c.stats()
             t.check(st["protocol_errors"] == 0 and st["images_out"] >= 2 * CLIENTS * REQUESTS // 10,
                     "stats %s" % st)
+            t.check(st["renders_incremental"] > 10 * st["renders_full"],
+                    "renders: %d incremental, %d full" % (st["renders_incremental"], st["renders_full"]))
             # kill -9 in the middle of a long FIT.
             c.send(gc.FT.FRAME_FIT, gc.pb.FitRequest(
                 image=gc.pb.Image(format=gc.pb.FORMAT_PNG, data=imgs[2]), max_iters=100000), 77,

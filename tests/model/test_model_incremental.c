@@ -124,13 +124,164 @@ static void sweep(int guidance, int feat_size, gs_pool *pool, const char *name)
     fr.code[0] += 0.25f;
     CHECK(gs_frame_render(inc, pool, &fr, &was_inc, &err) == GS_OK);
     CHECK_MSG(was_inc == 0, "%s: a new code must render in full", name);
-    /* a forward for fitting in between invalidates the cache */
-    CHECK(gs_frame_forward(inc, pool, &fr, GS_STREAM_BOTH, 0, &err) == GS_OK);
+    /* a forward for fitting in between overwrites the maps: the render is
+     * kept aside first, and the next one starts from it */
+    gs_frame other = fr;
+    other.head_t[1] += 3.0;
+    CHECK(gs_frame_forward(inc, pool, &other, GS_STREAM_BOTH, 0, &err) == GS_OK);
     fr.gaze[1] = 0.1;
     CHECK(gs_frame_render(inc, pool, &fr, &was_inc, &err) == GS_OK);
-    CHECK_MSG(was_inc == 0, "%s: render after a forward must be full", name);
+    CHECK_MSG(was_inc == 1, "%s: the render before a forward was not kept", name);
+    gs_model_ctx_destroy(full);
+    full = gs_model_ctx_create(m);
+    CHECK(gs_frame_forward(full, pool, &fr, GS_STREAM_BOTH, 0, &err) == GS_OK);
+    double d = max_diff(inc->rgb, full->rgb, nrgb);
+    CHECK_MSG(d <= TOL, "%s: render after a forward differs by %.3g", name, d);
+    /* training (a forced face stream) drops every kept render */
+    CHECK(gs_frame_forward(inc, pool, &other, GS_STREAM_BOTH, 1, &err) == GS_OK);
+    fr.gaze[1] = 0.2;
+    CHECK(gs_frame_render(inc, pool, &fr, &was_inc, &err) == GS_OK);
+    CHECK_MSG(was_inc == 0, "%s: render after training must be full", name);
     gs_model_ctx_destroy(inc);
     gs_model_ctx_destroy(full);
+    gs_model_destroy(m);
+}
+
+/* Several subjects (codes) and poses in turn through one context: the
+ * sweep cache keeps each one's render, so every return to a kept one is
+ * incremental and equals the full render; least recently used renders are
+ * evicted; a cache of one keeps only the last. */
+static void subjects(gs_pool *pool)
+{
+    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32);
+    CHECK(m != NULL);
+    if (!m)
+        return;
+    gs_model_ctx *inc = gs_model_ctx_create(m);
+    gs_error err = {0, ""};
+    gs_frame fr[3];
+    for (int k = 0; k < 3; k++) {
+        frame_default(m, &fr[k]);
+        fr[k].code[1] += 0.3f * (float)k;     /* another subject */
+    }
+    fr[2].head_t[0] += 2.0;                     /* ... in another pose */
+    size_t nrgb = 3 * (size_t)m->cfg.image_size * m->cfg.image_size;
+    /* cache of 3: A B C (full), then A B C A C ... all incremental */
+    static const int order[] = {0, 1, 2, 0, 1, 2, 0, 2, 1, 1, 0};
+    int n = (int)(sizeof order / sizeof order[0]);
+    double worst = 0.0;
+    CHECK(gs_model_ctx_set_sweep_cache(inc, 3, &err) == GS_OK);
+    for (int k = 0; k < n; k++) {
+        gs_frame f = fr[order[k]];
+        f.gaze[0] = 0.05 * (k % 5) - 0.1;
+        f.gaze[1] = 0.3 - 0.07 * k;
+        int was_inc = -1;
+        CHECK_MSG(gs_frame_render(inc, pool, &f, &was_inc, &err) == GS_OK, "%s",
+                  err.msg);
+        CHECK_MSG(was_inc == (k >= 3), "subjects step %d: incremental = %d", k,
+                  was_inc);
+        gs_model_ctx *full = gs_model_ctx_create(m);
+        CHECK(gs_frame_forward(full, pool, &f, GS_STREAM_BOTH, 0, &err) == GS_OK);
+        worst = fmax(worst, max_diff(inc->rgb, full->rgb, nrgb));
+        gs_model_ctx_destroy(full);
+    }
+    CHECK_MSG(worst <= TOL, "subjects: incremental differs by %.3g", worst);
+    gs_model_ctx_stats st;
+    gs_model_ctx_get_stats(inc, &st);
+    CHECK_MSG(st.renders_full == 3 && st.renders_incremental == (uint64_t)n - 3 &&
+              st.last_incremental == 1 && st.sweep_kept == 3,
+              "stats: %llu full, %llu incremental, last %d, kept %d",
+              (unsigned long long)st.renders_full,
+              (unsigned long long)st.renders_incremental, st.last_incremental,
+              st.sweep_kept);
+    /* cache of 2: A B C evicts A */
+    int was_inc = -1;
+    CHECK(gs_model_ctx_set_sweep_cache(inc, 2, &err) == GS_OK);
+    for (int k = 0; k < 3; k++)
+        CHECK(gs_frame_render(inc, pool, &fr[k], &was_inc, &err) == GS_OK);
+    CHECK(gs_frame_render(inc, pool, &fr[0], &was_inc, &err) == GS_OK);
+    CHECK_MSG(was_inc == 0, "LRU: the oldest subject was not evicted");
+    CHECK(gs_frame_render(inc, pool, &fr[2], &was_inc, &err) == GS_OK);
+    CHECK_MSG(was_inc == 1, "LRU: the newer subject was evicted");
+    /* cache of 1: only the last */
+    CHECK(gs_model_ctx_set_sweep_cache(inc, 1, &err) == GS_OK);
+    for (int k = 0; k < 4; k++) {
+        CHECK(gs_frame_render(inc, pool, &fr[k % 2], &was_inc, &err) == GS_OK);
+        CHECK_MSG(was_inc == 0, "cache of 1: step %d incremental", k);
+    }
+    CHECK(gs_model_ctx_set_sweep_cache(inc, 0, &err) == GS_ERR_ARG);
+    CHECK(gs_model_ctx_set_sweep_cache(inc, GS_MODEL_MAX_SWEEP_CACHE + 1,
+                                       &err) == GS_ERR_ARG);
+    gs_model_ctx_destroy(inc);
+    gs_model_destroy(m);
+}
+
+/* The public render through the cache: every pixel of the caller's buffer
+ * is written (the 8-bit image is updated only where the render changed,
+ * then copied whole), the stride's padding is not, and a colour transform
+ * that changes between calls applies to every pixel. */
+static void api_sweep(void)
+{
+    gs_model *m = make_model(GS_GUIDE_MULTIPLICATIVE, 32);
+    CHECK(m != NULL);
+    if (!m)
+        return;
+    gs_model_info info;
+    gs_model_get_info(m, &info);
+    int S = info.image_size;
+    size_t stride = 3 * (size_t)S + 5, bytes = stride * S;
+    uint8_t *a = malloc(bytes), *b = malloc(bytes);
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    gs_subject sub[2];
+    for (int k = 0; k < 2; k++) {
+        gs_frame fr;
+        frame_default(m, &fr);
+        memset(&sub[k], 0, sizeof sub[k]);
+        sub[k].code_dim = info.code_dim;
+        memcpy(sub[k].code, fr.code, sizeof(float) * (size_t)info.code_dim);
+        sub[k].code[0] += 0.4f * (float)k;
+        memcpy(sub[k].head_R, fr.head_R, sizeof fr.head_R);
+        memcpy(sub[k].head_t, fr.head_t, sizeof fr.head_t);
+        for (int j = 0; j < 3; j++)
+            sub[k].colour_gain[j] = 1.0f;
+    }
+    gs_error err = {0, ""};
+    int worst = 0, pad_ok = 1;
+    for (int k = 0; k < 10; k++) {
+        gs_subject s = sub[k % 2];
+        if (k == 6) /* the same subject and view, another transform */
+            s.colour_gain[1] = 0.8f, s.colour_bias[2] = 0.1f;
+        gs_view v = {0};
+        v.gaze_pitch = k == 6 ? 0.05 * 5 - 0.2 : 0.05 * k - 0.2;
+        v.gaze_yaw = k == 6 ? 0.4 - 0.09 * 5 : 0.4 - 0.09 * k;
+        memset(a, 0xAB, bytes);
+        memset(b, 0x5C, bytes);
+        CHECK_MSG(gs_model_render(c, NULL, &s, &v, a, stride, &err) == GS_OK,
+                  "%s", err.msg);
+        gs_model_ctx *f = gs_model_ctx_create(m);
+        CHECK(gs_model_render(f, NULL, &s, &v, b, stride, &err) == GS_OK);
+        gs_model_ctx_destroy(f);
+        for (int y = 0; y < S; y++) {
+            for (size_t x = 0; x < 3 * (size_t)S; x++) {
+                int d = abs((int)a[y * stride + x] - (int)b[y * stride + x]);
+                worst = d > worst ? d : worst;
+            }
+            for (size_t x = 3 * (size_t)S; x < stride; x++)
+                pad_ok &= a[y * stride + x] == 0xAB;
+        }
+    }
+    CHECK_MSG(worst <= 1, "api sweep: 8-bit images differ by %d", worst);
+    CHECK_MSG(pad_ok, "api sweep: the stride's padding was written");
+    gs_model_ctx_stats st;
+    gs_model_ctx_get_stats(c, &st);
+    CHECK_MSG(st.renders_full == 2 && st.renders_incremental == 8,
+              "api sweep: %llu full, %llu incremental",
+              (unsigned long long)st.renders_full,
+              (unsigned long long)st.renders_incremental);
+    printf("api sweep: 2 subjects, 10 renders, max 8-bit diff %d\n", worst);
+    free(a);
+    free(b);
+    gs_model_ctx_destroy(c);
     gs_model_destroy(m);
 }
 
@@ -162,6 +313,8 @@ int main(void)
     sweep(GS_GUIDE_MULTIPLICATIVE, 32, pool, "multiplicative 32^2, 2 threads");
     sweep(GS_GUIDE_NONE, 32, NULL, "no guidance 32^2");
     sweep(GS_GUIDE_ADDITIVE, 64, pool, "additive 64^2, 2 threads");
+    subjects(pool);
+    api_sweep();
     block_is_full();
     gs_pool_destroy(pool);
     GS_TEST_END();

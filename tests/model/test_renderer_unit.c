@@ -437,6 +437,22 @@ static void t_source_locality(int guidance)
             }
     CHECK_MSG(bad == 0, "%d output values changed outside the reach", bad);
     CHECK_MSG(edge, "the reach bound is not tight (REACH could be smaller)");
+    /* the same in output pixels (GS_RENDERER_REACH_PX) */
+    const int RP = GS_RENDERER_REACH_PX;
+    int bad_px = 0, edge_px = 0;
+    for (int c = 0; c < 3; c++)
+        for (int y = 0; y < 4 * H; y++)
+            for (int z = 0; z < 4 * W; z++) {
+                size_t k = ((size_t)c * 4 * H + y) * 4 * W + z;
+                if (o1[k] == o2[k])
+                    continue;
+                bad_px += y < 4 * pi - RP || y >= 4 * pi + 4 + RP ||
+                          z < 4 * pj - RP || z >= 4 * pj + 4 + RP;
+                edge_px |= y == 4 * pi - RP || y == 4 * pi + 3 + RP ||
+                           z == 4 * pj - RP || z == 4 * pj + 3 + RP;
+            }
+    CHECK_MSG(bad_px == 0, "%d output values changed beyond %d px", bad_px, RP);
+    CHECK_MSG(edge_px, "the reach bound in pixels is not tight");
     /* a crop [y0, y1) x [x0, x1) against the full render */
     int y0 = 3, y1 = 11, x0 = 4, x1 = 13, h = y1 - y0, w = x1 - x0;
     float *xc = xcalloc((size_t)32 * h * w), *oc = xcalloc((size_t)48 * h * w);
@@ -457,6 +473,16 @@ static void t_source_locality(int guidance)
                 worst = fmax(worst, fabs((double)got - want));
             }
     CHECK_MSG(worst <= 1e-6, "crop differs from the full render by %.3g", worst);
+    worst = 0.0; /* and REACH_PX output pixels inside */
+    const int RQ = GS_RENDERER_REACH_PX;
+    for (int c = 0; c < 3; c++)
+        for (int y = RQ; y < 4 * h - RQ; y++)
+            for (int z = RQ; z < 4 * w - RQ; z++) {
+                float got = oc[((size_t)c * 4 * h + y) * 4 * w + z];
+                float want = o2[((size_t)c * 4 * H + y + 4 * y0) * 4 * W + z + 4 * x0];
+                worst = fmax(worst, fabs((double)got - want));
+            }
+    CHECK_MSG(worst <= 1e-6, "crop differs %d px inside its edges by %.3g", RQ, worst);
     free(xc); free(oc); free(actc);
     free(params); free(acts); free(x); free(src); free(tau); free(o1);
     free(o2); free(a);

@@ -94,11 +94,34 @@ gs_model_ctx *gs_model_ctx_create(const gs_model *m);
 void gs_model_ctx_destroy(gs_model_ctx *c);
 
 /* Renders `view` of subject `s` into rgb (image_size^2, 8-bit sRGB RGB,
- * `stride` bytes per row). Consecutive calls for the same subject and
- * head pose reuse the cached face stream: only the eye stream is redone. */
+ * `stride` bytes per row; every pixel is written). Consecutive calls for the
+ * same subject and head pose reuse the cached face stream: only the eye
+ * stream is redone, and with models that allow it (SOURCE or no guidance,
+ * two streams; docs/model.md "Gaze sweeps") only the eyes' reach in the
+ * image is re-rendered. The result equals a render from a fresh context
+ * within float rounding. */
 int gs_model_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
                     const gs_view *view, uint8_t *rgb, size_t stride,
                     gs_error *err);
+
+/* Gaze sweeps over several subjects: a context keeps the renders of the
+ * last n (subject, head pose) pairs it rendered (n = 1: the last only), so
+ * that returning to any of them renders incrementally. Each costs about
+ * 4 MB at the cpu configuration, allocated when first needed. A context
+ * assumes its model's parameters do not change; training drops the kept
+ * renders itself, and this call drops them too. */
+#define GS_MODEL_SWEEP_CACHE_DEFAULT 4
+#define GS_MODEL_MAX_SWEEP_CACHE 64
+int gs_model_ctx_set_sweep_cache(gs_model_ctx *c, int n, gs_error *err);
+
+/* What a context's renders did (gs_model_render; counters since create). */
+typedef struct gs_model_ctx_stats {
+    uint64_t renders_full;         /* everything rasterized and rendered */
+    uint64_t renders_incremental;  /* only the eyes' reach */
+    int last_incremental;          /* the last successful render's path */
+    int sweep_kept;                /* renders kept for incremental reuse */
+} gs_model_ctx_stats;
+void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st);
 
 /* ---- fitting a new face ---- */
 typedef struct gs_fit_options {

@@ -123,6 +123,16 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
                       const gs_raster_options *opt, float *out_features,
                       float *out_alpha, float *out_depth, gs_error *err);
 
+/* Crops of a larger image: later forwards clamp the Jacobian (above) to
+ * the frustum of `frustum` (its fx, fy, cx, cy, width and height) instead
+ * of each call's camera; NULL restores that. Rendered through the image's
+ * camera with cx, cy shifted by a tile-aligned offset (x0, y0) and sized to
+ * the crop, with the image's camera here, a crop composites each of its
+ * pixels from the same Gaussians, with the same footprints, as the whole
+ * image does (to float rounding of the shifted centre). */
+int gs_raster_set_frustum(gs_raster *r, const gs_camera *frustum,
+                          gs_error *err);
+
 /* Gradients of the last forward. v_features (C x H x W) is required;
  * v_alpha and v_depth (H x W) may be NULL (zero). Adds into grads and
  * v_background (C x H x W, may be NULL). */
