@@ -10,8 +10,12 @@
  * determinant cancels for thin Gaussians, and with the scalar path's
  * rounding the two paths' images stay as close as the compositing alone
  * makes them (alpha within 4e-7 instead of 1.5e-6 on the path tests). */
+#if defined(__clang__)
+#pragma clang fp contract(off)
+#else
 #pragma GCC push_options
 #pragma GCC optimize("fp-contract=off")
+#endif
 
 /* exp(x) for any x: Cody-Waite reduction and the polynomial of vexp_neg;
  * +inf above 88.37, 0 below -87.33 (no denormal results). */
@@ -469,4 +473,8 @@ static void project_backward_fast(gs_raster *r, int i0, int i1, gs_gaussian_grad
     }
 }
 
+#if defined(__clang__)
+#pragma clang fp contract(on) /* clang's default */
+#else
 #pragma GCC pop_options
+#endif
