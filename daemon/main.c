@@ -5,6 +5,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gazesplat/nn.h"
+
 #include "config.h"
 #include "log.h"
 #include "server.h"
@@ -124,6 +126,9 @@ static void on_sighup(gsd_server *s)
 
 int main(int argc, char **argv)
 {
+    /* Before anything is opened: may run the program again with OpenBLAS's
+     * AVX kernels selected (nn.h); on failure it goes on with the slow ones. */
+    gs_nn_blas_select_kernels(argv);
     app a = {argc, argv, NULL};
     gsd_config cfg;
     int check = 0;

@@ -27,6 +27,8 @@ PACKAGES=(
   cppcheck clang libclang-rt-14-dev
   # face tests: dlib as the landmark reference, skimage's photos
   libdlib-dev python3-skimage
+  # bench/eval: the speed-against-error plot
+  python3-matplotlib
   # VM tier (tests/vm): the emulator, the guest's shell and tools, depmod and
   # a kernel module build (the kernel itself is fetched by scripts/vm/prepare.sh
   # with apt-get download, never installed on the host)

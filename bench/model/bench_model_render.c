@@ -122,6 +122,7 @@ int main(int argc, char **argv)
         }
     }
     reps = reps < 1 ? 1 : reps > MAX_REPS ? MAX_REPS : reps;
+    gs_nn_blas_select_kernels(argv); /* as the daemon and the CLI do */
     gs_nn_blas_set_threads(1);
     gs_error err = {0, ""};
     gs_model *m = NULL;

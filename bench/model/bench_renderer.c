@@ -4,7 +4,11 @@
  * on the calling thread and on a gs_pool of 2 threads (OpenBLAS pinned to
  * one thread: the pool splits the passes).
  *
- *   bench_renderer [--quick] [--reps N]
+ *   bench_renderer [--quick] [--reps N] [--blas-as-installed]
+ *
+ * Like the programs, it selects OpenBLAS's AVX kernels on CPUs that OpenBLAS
+ * does not recognise (gs_nn_blas_select_kernels); --blas-as-installed keeps
+ * the kernels OpenBLAS picked itself, for the comparison.
  *
  * Prints a Markdown table; bench/README.md records its output. Times are
  * medians over reps; the configurations run interleaved rep by rep. */
@@ -126,14 +130,20 @@ static double median(double *x, int n)
 
 int main(int argc, char **argv)
 {
-    int reps = 9, quick = 0;
+    int reps = 9, quick = 0, as_installed = 0;
+    for (int i = 1; i < argc; i++)
+        as_installed |= !strcmp(argv[i], "--blas-as-installed");
+    if (!as_installed)
+        gs_nn_blas_select_kernels(argv);
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--quick"))
             quick = 1;
+        else if (!strcmp(argv[i], "--blas-as-installed"))
+            continue;
         else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
             reps = atoi(argv[++i]);
         else {
-            fprintf(stderr, "usage: bench_renderer [--quick] [--reps N]\n");
+            fprintf(stderr, "usage: bench_renderer [--quick] [--reps N] [--blas-as-installed]\n");
             return 2;
         }
     }
@@ -156,6 +166,7 @@ int main(int argc, char **argv)
     for (int r = 0; r < reps; r++)
         for (int i = 0; i < ncases; i++)
             run_once(&cases[i], r);
+    printf("OpenBLAS kernels: %s\n\n", gs_nn_blas_core());
     printf("| features -> image | guidance | threads | fwd ms | fwd+bwd ms | "
            "fwd CPU ms | fwd+bwd CPU ms | activations MB |\n");
     printf("|---|---|---|---|---|---|---|---|\n");

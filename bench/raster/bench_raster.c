@@ -3,8 +3,10 @@
  * on a seeded head-like scene: Gaussians on the surface of an ellipsoid head
  * with two eyeballs, 32 feature channels, camera framing the head.
  *
- *   bench_raster [--quick] [--reps N]
+ *   bench_raster [--quick] [--reps N] [--fast-only] [--size 128|512]
  *
+ * --fast-only skips the scalar path (no speed-up columns: quicker runs while
+ * tuning); --size keeps one of the two scenes.
  * Prints a Markdown table; bench/README.md records its output. Times are
  * medians over reps; ratios compare paths measured side by side. */
 #define _POSIX_C_SOURCE 200809L
@@ -187,14 +189,18 @@ static double median(double *x, int n)
 
 int main(int argc, char **argv)
 {
-    int reps = 15;
+    int reps = 15, fast_only = 0, only_size = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--quick"))
             reps = 3;
+        else if (!strcmp(argv[i], "--fast-only"))
+            fast_only = 1;
+        else if (!strcmp(argv[i], "--size") && i + 1 < argc)
+            only_size = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
             reps = atoi(argv[++i]);
         else {
-            fprintf(stderr, "usage: bench_raster [--quick] [--reps N]\n");
+            fprintf(stderr, "usage: bench_raster [--quick] [--reps N] [--fast-only] [--size 128|512]\n");
             return 2;
         }
     }
@@ -204,6 +210,8 @@ int main(int argc, char **argv)
     printf("| Gaussians, size, C | path | threads | fwd ms | bwd ms | fwd speed-up | bwd speed-up | "
            "contributors/px | tile pairs |\n|---|---|---|---|---|---|---|---|---|\n");
     for (int c = 0; c < 2; c++) {
+        if (only_size && only_size != cases[c].size)
+            continue;
         scene s;
         make_scene(&s, cases[c].n, 32, cases[c].size == 128 ? 1.4 : 0.9);
         problem pb;
@@ -215,17 +223,22 @@ int main(int argc, char **argv)
         config_init(&cf[2], &pb, GS_RASTER_FAST, 2, nrep);
         /* Interleaved: every rep runs each configuration once, so a change in
          * machine load hits all of them alike. k = -1 warms up. */
+        int j0 = fast_only ? 1 : 0;
         for (int k = -1; k < nrep; k++)
-            for (int j = 0; j < 3; j++)
+            for (int j = j0; j < 3; j++)
                 if (config_rep(&cf[j], &pb, k))
                     return 1;
         double px = (double)cases[c].size * cases[c].size;
-        double rf = median(cf[0].tf, nrep), rb = median(cf[0].tb, nrep);
+        double rf = fast_only ? NAN : median(cf[0].tf, nrep);
+        double rb = fast_only ? NAN : median(cf[0].tb, nrep);
         for (int j = 0; j < 3; j++) {
-            double f = median(cf[j].tf, nrep), b = median(cf[j].tb, nrep);
-            printf("| %dk, %d², 32 | %s | %d | %.2f | %.2f | %.1f× | %.1f× | %.1f | %zu |\n",
-                   cases[c].n / 1000, cases[c].size, j ? "fast" : "scalar", cf[j].threads, f, b,
-                   rf / f, rb / b, cf[j].st.contributions / px, cf[j].st.intersections);
+            if (j >= j0) {
+                double f = median(cf[j].tf, nrep), b = median(cf[j].tb, nrep);
+                printf("| %dk, %d², 32 | %s | %d | %.2f | %.2f | %.1f× | %.1f× | %.1f | %zu |\n",
+                       cases[c].n / 1000, cases[c].size, j ? "fast" : "scalar", cf[j].threads,
+                       f, b, rf / f, rb / b, cf[j].st.contributions / px,
+                       cf[j].st.intersections);
+            }
             config_free(&cf[j]);
         }
         free(pb.vF);

@@ -27,6 +27,10 @@ extern const cli_command cli_train_command;
 extern const cli_command cli_fit_command;
 extern const cli_command cli_redirect_command;
 extern const cli_command cli_live_command;
+extern const cli_command cli_train_estimator_command;
+extern const cli_command cli_estimate_command;
+extern const cli_command cli_eval_estimator_command;
+extern const cli_command cli_eval_command;
 
 /* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */
 typedef struct cli_opt {

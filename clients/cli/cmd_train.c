@@ -1,9 +1,11 @@
 /* gazesplat train: makes a model and trains it on synthetic heads. */
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "cli.h"
+#include "gazesplat/gaze.h"
 #include "gazesplat/nn.h"
 #include "gazesplat/train.h"
 
@@ -31,7 +33,10 @@ const cli_command cli_train_command = {
     "                      block (each block attends over its own features);\n"
     "                      with --resume, switches a model's source\n"
     "  --single-stream     ablation: one stream, gaze through the pose MLP\n"
-    "  --no-eye-rotation   ablation: eyes deformed like the face\n",
+    "  --no-eye-rotation   ablation: eyes deformed like the face\n"
+    "  --gaze-loss FILE    add the gaze loss: angular error of this gaze\n"
+    "                      estimator (gazesplat train-estimator) on the render\n"
+    "  --gaze-weight X     its weight (0.1, the paper's)\n",
     run_train,
 };
 
@@ -47,7 +52,8 @@ static void log_line(void *ctx, const char *fmt, ...)
 }
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
-       O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_N };
+       O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
+       O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -57,7 +63,8 @@ static int run_train(int argc, char **argv)
         {"--threads", 1, NULL}, {"--resume", 0, NULL},
         {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
         {"--guidance", 1, NULL}, {"--single-stream", 0, NULL},
-        {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL}};
+        {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL},
+        {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -126,6 +133,12 @@ static int run_train(int argc, char **argv)
         if (spec.guide_source == -2)
             return cli_usage_error(cmd, "--guide-source: face or block");
     }
+    if (o[O_GW].value) {
+        char *end = NULL;
+        t.gaze_weight = strtod(o[O_GW].value, &end);
+        if (!end || *end || !(t.gaze_weight >= 0 && t.gaze_weight <= 100))
+            return cli_usage_error(cmd, "--gaze-weight: want 0..100");
+    }
     if (o[O_SINGLE].value)
         spec.two_stream = 0;
     if (o[O_NOEYE].value)
@@ -144,10 +157,20 @@ static int run_train(int argc, char **argv)
         gs_model_destroy(m);
         return cli_fail(cmd, "%s", err.msg);
     }
+    gs_gaze_net *gnet = NULL;
+    if (o[O_GLOSS].value) {
+        rc = gs_gaze_net_load(o[O_GLOSS].value, &gnet, &err);
+        if (rc) {
+            gs_model_destroy(m);
+            return cli_fail(cmd, "%s", err.msg);
+        }
+        t.gaze_net = gnet;
+    }
     gs_pool *pool = threads > 1 ? gs_pool_create((int)threads) : NULL;
     gs_train_report rep;
     rc = gs_train(m, &t, pool, &rep, &err);
     gs_pool_destroy(pool);
+    gs_gaze_net_destroy(gnet);
     gs_model_destroy(m);
     if (rc)
         return cli_fail(cmd, "%s", err.msg);

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "cli.h"
+#include "gazesplat/nn.h"
 
 static const cli_command *const commands[] = {
     &cli_face_command,
@@ -15,6 +16,10 @@ static const cli_command *const commands[] = {
     &cli_fit_command,
     &cli_redirect_command,
     &cli_live_command,
+    &cli_train_estimator_command,
+    &cli_estimate_command,
+    &cli_eval_estimator_command,
+    &cli_eval_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
 
@@ -54,6 +59,8 @@ static int help(int argc, char **argv)
 
 int main(int argc, char **argv)
 {
+    /* May run the program again with OpenBLAS's AVX kernels selected (nn.h). */
+    gs_nn_blas_select_kernels(argv);
     if (argc < 2) {
         overview(stderr);
         return CLI_USAGE;

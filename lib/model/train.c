@@ -15,6 +15,7 @@
 #include <time.h>
 
 #include "frame.h"
+#include "gazesplat/gaze.h"
 #include "gazesplat/nn.h"
 #include "gazesplat/safetensors.h"
 #include "gazesplat/synth.h"
@@ -28,6 +29,7 @@ void gs_train_options_default(gs_train_options *o)
     o->seed = 1;
     o->checkpoint_every = 500;
     o->log_every = 50;
+    o->gaze_weight = 0.1;
 }
 
 /* The 12 light values of a scene in its head frame: sum over lights of
@@ -66,6 +68,9 @@ typedef struct trainer {
     float *target, *wl1, *dimg, *ftarget, *dfmap, *ssim;
     float *fmask, *dfmap_face; /* face-only render: mask [fs^2], gradient */
     float *emask, *dfmap_eye;  /* eye-only render: eye area [fs^2], gradient */
+    float gaze_label[2];       /* normalized-camera gaze of the sample */
+    gs_gaze_net *gnet;         /* the loss estimator, or NULL */
+    double gaze_w, gaze_rad;   /* its weight; the last angle */
     size_t ssim_len;
     double light_sum[GS_MODEL_LIGHT_DIM];
     long light_n;
@@ -89,6 +94,8 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
 {
     memset(t, 0, sizeof *t);
     t->m = m;
+    t->gnet = o->gaze_net;
+    t->gaze_w = o->gaze_weight;
     t->c = gs_model_ctx_create(m);
     t->grad = calloc(m->nparams, sizeof(float));
     if (!t->c || !t->grad)
@@ -202,6 +209,8 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
     memcpy(fr->head_t, lab->head_t, sizeof fr->head_t);
     fr->gaze[0] = lab->gaze_head_pitch;
     fr->gaze[1] = lab->gaze_head_yaw;
+    t->gaze_label[0] = (float)lab->gaze_norm_pitch;
+    t->gaze_label[1] = (float)lab->gaze_norm_yaw;
     /* Targets: white outside the head; eyes weighted 5x in the L1. */
     int S = mc->image_size, fs = mc->feat_size;
     size_t plane = (size_t)S * S;
@@ -251,8 +260,24 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
     return GS_OK;
 }
 
+/* The gaze loss: gaze_w x the angle between the estimator's gaze on the
+ * render and the label; its image gradient added into t->dimg. NAN when
+ * the estimator fails (the step is then skipped as non-finite). */
+static double gaze_loss(trainer *t, gs_pool *pool)
+{
+    gs_model_ctx *c = t->c;
+    float out[4], da[2];
+    if (gs_gaze_net_forward(t->gnet, pool, c->rgb, c->S, c->S, out, NULL))
+        return NAN;
+    t->gaze_rad = gs_gaze_angular_error(out, t->gaze_label, da);
+    float dout[4] = {(float)t->gaze_w * da[0], (float)t->gaze_w * da[1], 0, 0};
+    if (gs_gaze_net_backward(t->gnet, pool, dout, t->dimg, NULL, NULL))
+        return NAN;
+    return t->gaze_w * t->gaze_rad;
+}
+
 /* Loss of the current frame and its gradients into t->dimg / t->dfmap. */
-static double losses(trainer *t, double *psnr)
+static double losses(trainer *t, gs_pool *pool, double *psnr)
 {
     gs_model_ctx *c = t->c;
     int S = c->S, fs = c->fs;
@@ -293,7 +318,8 @@ static double losses(trainer *t, double *psnr)
         gs_nn_l1_backward(t->dfmap_eye, 5.0f, c->fmap_eye, t->ftarget,
                           t->emask, 3, (int)fplane);
     }
-    return (double)l1 + 0.1 * ls + lf + lface + 5.0 * leye;
+    double lg = t->gnet ? gaze_loss(t, pool) : 0.0;
+    return (double)l1 + 0.1 * ls + lf + lface + 5.0 * leye + lg;
 }
 
 static int save_checkpoint(trainer *t, const char *path, long step,
@@ -394,6 +420,9 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (m->cfg.n_train_ids < 1 || !m->p.codes)
         return gs_error_set(err, GS_ERR_ARG,
                             "train: the model has no training codes");
+    if (o->gaze_net && !(o->gaze_weight >= 0 && o->gaze_weight <= 100))
+        return gs_error_set(err, GS_ERR_ARG, "train: gaze weight %g not in 0..100",
+                            o->gaze_weight);
     trainer t;
     int rc = trainer_init(&t, m, o, err);
     long step = 0;
@@ -401,7 +430,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         rc = load_optimizer(&t, o->out_path, &step, err);
     double t0 = now_s(), run_mean = 0, last_log = t0;
     long skipped = 0, done = 0;
-    double psnr_acc = 0, loss_acc = 0;
+    double psnr_acc = 0, loss_acc = 0, gaze_acc = 0, gaze_mean = 0;
     int acc_n = 0;
     for (; !rc && step < o->steps; step++) {
         gs_frame fr;
@@ -413,7 +442,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         if (rc)
             break;
         double psnr;
-        double loss = losses(&t, &psnr);
+        double loss = losses(&t, pool, &psnr);
         int skip = !isfinite(loss) || (done > 50 && loss > 4 * run_mean);
         if (!skip) {
             gs_nn_adam_zero_grad(t.adam);
@@ -448,17 +477,23 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         run_mean = done == 1 ? loss : 0.98 * run_mean + 0.02 * loss;
         psnr_acc += psnr;
         loss_acc += loss;
+        gaze_acc += t.gaze_rad;
+        gaze_mean = done == 1 ? t.gaze_rad : 0.98 * gaze_mean + 0.02 * t.gaze_rad;
         acc_n++;
         if (o->log && o->log_every > 0 && (step + 1) % o->log_every == 0) {
             double el = now_s() - t0, rate = done / el;
+            char gz[48] = "";
+            if (t.gnet)
+                snprintf(gz, sizeof gz, "  gaze %.2f deg",
+                         gaze_acc / acc_n * 180.0 / GS_MODEL_PI);
             o->log(o->log_ctx,
-                   "step %ld/%ld loss %.4f psnr %.2f dB  %.0f ms/step  "
+                   "step %ld/%ld loss %.4f psnr %.2f dB%s  %.0f ms/step  "
                    "eta %.0f s  skipped %ld",
-                   step + 1, o->steps, loss_acc / acc_n, psnr_acc / acc_n,
+                   step + 1, o->steps, loss_acc / acc_n, psnr_acc / acc_n, gz,
                    1000.0 * (now_s() - last_log) / acc_n,
                    (o->steps - step - 1) / (rate > 0 ? rate : 1), skipped);
             last_log = now_s();
-            psnr_acc = loss_acc = 0;
+            psnr_acc = loss_acc = gaze_acc = 0;
             acc_n = 0;
         }
         if (o->checkpoint_every > 0 && (step + 1) % o->checkpoint_every == 0)
@@ -471,6 +506,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         rep->skipped = skipped;
         rep->seconds = now_s() - t0;
         rep->final_loss = run_mean;
+        rep->final_gaze_deg = gaze_mean * 180.0 / GS_MODEL_PI;
     }
     trainer_free(&t);
     return rc;

@@ -262,10 +262,9 @@ typedef struct {
 
 #define PROJ_CHUNK 1024
 
-static void tile_range(const gs_raster *r, int i, int32_t t[4]);
-static void ellipse_tiles(const gs_splat *sp, int32_t t[4]);
-
-static void project_one(gs_raster *r, int i, int fast)
+/* The scalar path's projection of Gaussian i (the fast path's, 8 at a time
+ * with the same formulas, is in raster_proj.c). */
+static void project_one(gs_raster *r, int i)
 {
     const gs_camera *cam = &r->cam;
     const gs_gaussians *g = &r->g;
@@ -305,20 +304,6 @@ static void project_one(gs_raster *r, int i, int fast)
     float op = 1.0f / (1.0f + expf(-lo));
     if (r->opt.antialiased)
         op *= comp;
-    if (fast) {
-        /* Opacity-aware cull: no pixel can reach alpha 1/255. The small
-         * margin keeps the test conservative against rounding. */
-        float thr = logf(255.0f * op);
-        if (!(thr > -1e-3f))
-            return;
-        thr = thr * 1.0001f + 1e-4f;
-        float cdet = a * c - b * b;
-        gs_splat *sp = r->splats + i;
-        sp->mx = mx, sp->my = my, sp->a = a, sp->b = b, sp->c = c;
-        sp->op = op, sp->z = z, sp->thr = thr;
-        sp->ex = sqrtf(max_f(2.0f * thr * c / cdet, 0.0f)) + 0.01f;
-        sp->ey = sqrtf(max_f(2.0f * thr * a / cdet, 0.0f)) + 0.01f;
-    }
     P->mean2d[2 * i] = mx;
     P->mean2d[2 * i + 1] = my;
     P->conic[3 * i] = a;
@@ -328,10 +313,6 @@ static void project_one(gs_raster *r, int i, int fast)
     P->opacity[i] = op;
     P->comp[i] = comp;
     P->radius[i] = rad;
-    if (fast) {
-        tile_range(r, i, r->splats[i].tiles);
-        ellipse_tiles(r->splats + i, r->splats[i].tiles);
-    }
 }
 
 static void project_chunk(void *vctx, int task, int worker)
@@ -341,8 +322,12 @@ static void project_chunk(void *vctx, int task, int worker)
     int i0 = task * PROJ_CHUNK, i1 = i0 + PROJ_CHUNK;
     if (i1 > ctx->r->g.n)
         i1 = ctx->r->g.n;
+    if (ctx->fast) {
+        fast_kernels()->project(ctx->r, i0, i1);
+        return;
+    }
     for (int i = i0; i < i1; i++)
-        project_one(ctx->r, i, ctx->fast);
+        project_one(ctx->r, i);
 }
 
 /* ---- sorting and binning ------------------------------------------------ */
@@ -397,14 +382,6 @@ static void centre_range(float x0, float x1, int32_t *lo, int32_t *hi)
     int32_t i0 = (int32_t)f0, i1 = (int32_t)f1;
     *lo = i0 + ((float)i0 < f0);
     *hi = i1 > *lo ? i1 : *lo;
-}
-
-/* Fast path: narrows the radius box t to the tiles that the bounding box of
- * the splat's sigma <= thr ellipse reaches. */
-static void ellipse_tiles(const gs_splat *sp, int32_t t[4])
-{
-    centre_range(sp->mx - sp->ex, sp->mx + sp->ex, &t[0], &t[1]);
-    centre_range(sp->my - sp->ey, sp->my + sp->ey, &t[2], &t[3]);
 }
 
 /* Fast path only: tiles [*a, *b) of tile row ty whose pixel centres the
@@ -800,6 +777,7 @@ static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
 typedef struct {
     gs_raster *r;
     gs_gaussian_grads *grads;
+    int fast;
 } pback_ctx;
 
 static void project_backward_chunk(void *vctx, int task, int worker)
@@ -809,6 +787,10 @@ static void project_backward_chunk(void *vctx, int task, int worker)
     int i0 = task * PROJ_CHUNK, i1 = i0 + PROJ_CHUNK;
     if (i1 > c->r->g.n)
         i1 = c->r->g.n;
+    if (c->fast) {
+        fast_kernels()->project_backward(c->r, i0, i1, c->grads);
+        return;
+    }
     for (int i = i0; i < i1; i++)
         project_backward_one(c->r, i, c->grads);
 }
@@ -923,7 +905,7 @@ int gs_raster_backward(gs_raster *r, gs_pool *pool, const float *v_f, const floa
     } else {
         gs_raster_scalar_backward(r, v_f, v_alpha, v_depth, grads->features, v_bg);
     }
-    pback_ctx pc = {r, grads};
+    pback_ctx pc = {r, grads, fast};
     int chunks = (int)((n + PROJ_CHUNK - 1) / PROJ_CHUNK);
     gs_pool_for(fast ? pool : NULL, chunks, project_backward_chunk, &pc);
     return GS_OK;

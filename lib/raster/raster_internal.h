@@ -109,6 +109,9 @@ typedef struct gs_raster_kernels {
                      size_t slot0, const float *v_f, const float *v_alpha,
                      const float *v_depth, float *v_bg);
     int (*all_finite)(const float *x, size_t n);
+    /* Projection of Gaussians [i0, i1) and its gradient; i0 a multiple of 8. */
+    void (*project)(gs_raster *r, int i0, int i1);
+    void (*project_backward)(gs_raster *r, int i0, int i1, gs_gaussian_grads *grads);
 } gs_raster_kernels;
 
 extern const gs_raster_kernels gs_raster_kernels_generic;

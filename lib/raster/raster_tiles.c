@@ -33,7 +33,7 @@ static inline vf splat(float x)
     return (vf){x, x, x, x, x, x, x, x};
 }
 
-#ifdef __AVX2__
+#if defined(__AVX2__) || defined(__SSE2__)
 #include <immintrin.h>
 #endif
 
@@ -791,4 +791,7 @@ static int all_finite(const float *x, size_t n)
     return s == 0.0f;
 }
 
-const gs_raster_kernels GS_KERNELS = {fast_forward, fast_backward, all_finite};
+#include "raster_proj.c"
+
+const gs_raster_kernels GS_KERNELS = {fast_forward, fast_backward, all_finite, project_fast,
+                                      project_backward_fast};

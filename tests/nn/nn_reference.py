@@ -131,6 +131,8 @@ def kernels():
                                        align_corners=False)[0])
     case("blur", {"in": uniform((2, 5, 6))}, lambda **t: blur(t["in"]))
     case("blur_2x2", {"in": uniform((1, 2, 2))}, lambda **t: blur(t["in"]))
+    for nm, shape in (("avgpool2x", (3, 4, 6)), ("avgpool2x_2x2", (1, 2, 2))):
+        case(nm, {"in": uniform(shape)}, lambda **t: F.avg_pool2d(t["in"][None], 2)[0])
     C, D, HW, temp = 8, 12, 30, 3.0
     case("attention",
          {"x": uniform((C, HW)), "code": uniform(D), "wk": uniform((D, C)),

@@ -211,7 +211,7 @@ static void test_activation(nn_rng *r, int kind, const char *what)
 }
 
 /* ---- resampling ------------------------------------------------------------ */
-enum { RS_SHUFFLE, RS_UP, RS_BLUR };
+enum { RS_SHUFFLE, RS_UP, RS_BLUR, RS_POOL };
 typedef struct { float *in; int C, H, W, kind; } rs_ctx;
 
 static void rs_fwd(void *c, float *out)
@@ -221,8 +221,10 @@ static void rs_fwd(void *c, float *out)
         gs_nn_pixel_shuffle_forward(out, k->in, k->C, k->H, k->W);
     else if (k->kind == RS_UP)
         gs_nn_upsample2x_forward(out, k->in, k->C, k->H, k->W);
-    else
+    else if (k->kind == RS_BLUR)
         gs_nn_blur_forward(out, k->in, k->C, k->H, k->W);
+    else
+        gs_nn_avgpool2x_forward(out, k->in, k->C, k->H, k->W);
 }
 
 static void test_resample(nn_rng *r, int kind, int C, int H, int W,
@@ -230,7 +232,7 @@ static void test_resample(nn_rng *r, int kind, int C, int H, int W,
 {
     size_t hw = (size_t)H * (size_t)W;
     size_t nin = (kind == RS_SHUFFLE ? 4 : 1) * (size_t)C * hw;
-    size_t nout = (kind == RS_BLUR ? 1 : 4) * (size_t)C * hw;
+    size_t nout = (kind == RS_BLUR ? 4 : kind == RS_POOL ? 1 : 16) * (size_t)C * hw / 4;
     rs_ctx k = {nn_alloc(nin), C, H, W, kind};
     float *din = nn_alloc(nin), *R = nn_alloc(nout), *out = nn_alloc(nout);
     nn_fill(r, k.in, nin, -1, 1);
@@ -240,8 +242,10 @@ static void test_resample(nn_rng *r, int kind, int C, int H, int W,
         rc = gs_nn_pixel_shuffle_backward(din, R, C, H, W);
     else if (kind == RS_UP)
         rc = gs_nn_upsample2x_backward(din, R, C, H, W);
-    else
+    else if (kind == RS_BLUR)
         rc = gs_nn_blur_backward(din, R, C, H, W);
+    else
+        rc = gs_nn_avgpool2x_backward(din, R, C, H, W);
     CHECK_EQ_INT(rc, GS_OK);
     fd_fun f = {rs_fwd, &k, out, R, nout};
     fd_check(what, &f, k.in, din, nin, LIN_H, LIN_ATOL, LIN_RTOL);
@@ -368,6 +372,8 @@ int main(void)
     test_resample(&r, RS_UP, 1, 1, 2, "upsample2x dinp 1x2");
     test_resample(&r, RS_BLUR, 2, 4, 5, "blur dinp");
     test_resample(&r, RS_BLUR, 1, 2, 3, "blur dinp 2x3");
+    test_resample(&r, RS_POOL, 2, 4, 6, "avgpool2x dinp");
+    test_resample(&r, RS_POOL, 1, 2, 2, "avgpool2x dinp 2x2");
     test_attention(&r);
     test_l1(&r, 0);
     test_l1(&r, 1);

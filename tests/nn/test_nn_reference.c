@@ -254,7 +254,7 @@ static void t_activation(const char *kase)
     free(out); free(din);
 }
 
-enum { RS_SHUFFLE, RS_UP, RS_BLUR };
+enum { RS_SHUFFLE, RS_UP, RS_BLUR, RS_POOL };
 
 static void t_resample(const char *kase, int kind)
 {
@@ -272,9 +272,12 @@ static void t_resample(const char *kase, int kind)
     } else if (kind == RS_UP) {
         rc1 = gs_nn_upsample2x_forward(out, in, C, H, W);
         rc2 = gs_nn_upsample2x_backward(din, dout, C, H, W);
-    } else {
+    } else if (kind == RS_BLUR) {
         rc1 = gs_nn_blur_forward(out, in, C, H, W);
         rc2 = gs_nn_blur_backward(din, dout, C, H, W);
+    } else {
+        rc1 = gs_nn_avgpool2x_forward(out, in, C, H, W);
+        rc2 = gs_nn_avgpool2x_backward(din, dout, C, H, W);
     }
     CHECK_EQ_INT(rc1, GS_OK);
     CHECK_EQ_INT(rc2, GS_OK);
@@ -412,6 +415,8 @@ int main(int argc, char **argv)
     t_resample("upsample2x_1x3", RS_UP);
     t_resample("blur", RS_BLUR);
     t_resample("blur_2x2", RS_BLUR);
+    t_resample("avgpool2x", RS_POOL);
+    t_resample("avgpool2x_2x2", RS_POOL);
     t_attention();
     t_l1("l1", 0);
     t_l1("l1_mask", 1);

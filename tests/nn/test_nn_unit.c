@@ -464,6 +464,25 @@ static void test_adam_bad_config(void)
     gs_nn_adam_destroy(NULL);
 }
 
+/* 2x2 pooling: window means, odd or too small sizes refused. */
+static void test_avgpool(void)
+{
+    float in[2 * 2 * 4] = {1, 2, 3, 4, 5, 6, 7, 8, -1, -1, 0, 0, 1, 1, 2, 6};
+    float out[2 * 1 * 2], din[16] = {0}, dout[4] = {4, 8, -4, 0};
+    CHECK_EQ_INT(gs_nn_avgpool2x_forward(out, in, 2, 2, 4), GS_OK);
+    CHECK_CLOSE(out[0], 3.5, 0, 0);
+    CHECK_CLOSE(out[1], 5.5, 0, 0);
+    CHECK_CLOSE(out[2], 0.0, 0, 0);
+    CHECK_CLOSE(out[3], 2.0, 0, 0);
+    CHECK_EQ_INT(gs_nn_avgpool2x_backward(din, dout, 2, 2, 4), GS_OK);
+    CHECK_CLOSE(din[0], 1.0, 0, 0);
+    CHECK_CLOSE(din[6], 2.0, 0, 0);
+    CHECK_CLOSE(din[9], -1.0, 0, 0);
+    CHECK_EQ_INT(gs_nn_avgpool2x_forward(out, in, 2, 3, 4), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_nn_avgpool2x_forward(out, in, 2, 2, 1), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_nn_avgpool2x_backward(NULL, dout, 2, 2, 4), GS_ERR_ARG);
+}
+
 int main(void)
 {
     test_bad_args();
@@ -471,6 +490,7 @@ int main(void)
     test_pixel_shuffle();
     test_upsample();
     test_blur();
+    test_avgpool();
     test_activations();
     test_accumulates();
     test_conv3x3_bands();

@@ -45,6 +45,24 @@ extern "C" {
 void gs_nn_blas_set_threads(int n);
 int gs_nn_blas_threads(void);
 
+/* OpenBLAS's kernels for this CPU (process-wide policy, for programs).
+ * OpenBLAS chooses its kernels when it is loaded, from the CPU model; on a
+ * CPU it does not recognise (virtual machines) it falls back to its SSE3
+ * "Prescott" kernels, about 4x slower than the AVX-512 ones. When
+ * OPENBLAS_CORETYPE is unset, OpenBLAS chose such a fallback, and CPUID shows
+ * AVX-512 (F, CD, BW, DQ, VL) or AVX2 + FMA, this sets OPENBLAS_CORETYPE to
+ * SkylakeX or Haswell and executes the program again (/proc/self/exe, same
+ * argv, same process id, open descriptors kept): call it first thing in
+ * main, before threads, files or sockets. It does not return then. Returns 0
+ * when there is nothing to do (the variable is set, by the user or by the
+ * exec, or OpenBLAS recognised the CPU, or the CPU lacks the features), or
+ * GS_ERR_UNSUPPORTED when the exec failed (the program goes on unchanged).
+ * Set OPENBLAS_CORETYPE yourself to keep another choice. */
+int gs_nn_blas_select_kernels(char **argv);
+
+/* OpenBLAS's name of the kernels in use ("SkylakeX", "Prescott", ...). */
+const char *gs_nn_blas_core(void);
+
 /* ---- Linear and convolutions ------------------------------------------ */
 
 /* out[B,OC] = in[B,IC] . w[OC,IC]^T + b[OC]. b may be NULL (no bias). */
@@ -130,6 +148,14 @@ int gs_nn_upsample2x_backward(float *dinp, const float *dout, int C, int H,
  * in[C,H,W] -> out[C,H,W]. */
 int gs_nn_blur_forward(float *out, const float *in, int C, int H, int W);
 int gs_nn_blur_backward(float *dinp, const float *dout, int C, int H, int W);
+
+/* 2x2 average pooling, stride 2 (PyTorch AvgPool2d(2)) for even H, W:
+ * in[C,H,W] -> out[C,H/2,W/2], out[c,y,x] = mean of in[c,2y..2y+1,2x..2x+1].
+ * GS_ERR_ARG for an odd H or W. */
+int gs_nn_avgpool2x_forward(float *out, const float *in, int C, int H, int W);
+/* dinp[C,H,W] += dout[C,H/2,W/2] / 4 spread over each 2x2 window. */
+int gs_nn_avgpool2x_backward(float *dinp, const float *dout, int C, int H,
+                             int W);
 
 /* ---- Cross-attention of a code vector over the pixels ------------------- */
 

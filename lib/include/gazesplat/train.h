@@ -52,12 +52,19 @@ typedef struct gs_train_options {
     long log_every;
     gs_train_log_fn log;
     void *log_ctx;
+    /* The gaze loss (paper: 0.1 x the angular error of a frozen gaze
+     * estimator on the render against the label); NULL: none. The net
+     * is the caller's (gazesplat/gaze.h); its weights are not changed,
+     * and nothing else may use it while gs_train runs. */
+    struct gs_gaze_net *gaze_net;
+    double gaze_weight;     /* 0.1 by default */
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
 
 typedef struct gs_train_report {
     long steps, skipped;
     double seconds, final_loss;
+    double final_gaze_deg;  /* running mean gaze loss angle (with a net) */
 } gs_train_report;
 
 /* Trains m in place. */

@@ -1,0 +1,600 @@
+/* gazesplat eval: measure gaze redirection on held-out synthetic heads
+ * (docs/eval.md), and write the fixed pairing file it reads. */
+#define _POSIX_C_SOURCE 200809L /* clock_gettime */
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#include "cli.h"
+#include "eval_estimator.h"
+#include "eval_report.h"
+#include "gazesplat/eval.h"
+#include "gazesplat/geom.h"
+#include "gazesplat/image_io.h"
+#include "gazesplat/model.h"
+#include "gazesplat/nn.h"
+
+static int run_eval(int argc, char **argv);
+
+const cli_command cli_eval_command = {
+    "eval",
+    "measure redirection (model, warp baseline, identity) on held-out heads",
+    "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
+    "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
+    "                      [--threads N] [--reuse-fits] [--save-images N]\n"
+    "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
+    "                      [--targets N] [--seed N]\n"
+    "\n"
+    "  --model FILE      the model to evaluate (its image size and camera)\n"
+    "  --pairs FILE      the pairing (bench/eval/pairs.csv; --make-pairs)\n"
+    "  --out DIR         writes DIR/pairs.csv (one row per pair and method)\n"
+    "                    and DIR/summary.md (created if needed)\n"
+    "  --estimator FILE  gaze/head estimator for the angular errors; without\n"
+    "                    it only the image metrics are measured\n"
+    "  --method LIST     comma-separated: model, warp (2D eye warping),\n"
+    "                    identity (output = input); default model\n"
+    "  --limit-inputs N  only the first N inputs of the file\n"
+    "  --iters N         fit iteration cap (default 200)\n"
+    "  --threads N       worker threads (default 2); results are the same\n"
+    "                    for a given count, timings aside\n"
+    "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
+    "                    every run) when there: rescoring with another\n"
+    "                    estimator or method list costs no fitting\n"
+    "  --save-images N   write the input, target and outputs of the first N\n"
+    "                    pairs as DIR/images/PAIR_WHAT.png\n"
+    "  --make-pairs FILE write a pairing: --identities test identities\n"
+    "                    (15) x --inputs scenes each (10) x --targets (10),\n"
+    "                    --seed (1); deterministic\n",
+    run_eval,
+};
+
+enum {
+    O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
+    O_REUSE, O_SAVE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_N
+};
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int make_pairs(const cli_opt *o)
+{
+    const cli_command *cmd = &cli_eval_command;
+    gs_eval_pairs_spec sp;
+    gs_eval_pairs_spec_default(&sp);
+    long v;
+    if (o[O_IDS].value) {
+        if (cli_parse_long(o[O_IDS].value, 1, 100000, &v))
+            return cli_usage_error(cmd, "--identities: want 1..100000");
+        sp.identities = (int)v;
+    }
+    if (o[O_INPUTS].value) {
+        if (cli_parse_long(o[O_INPUTS].value, 1, 1000, &v))
+            return cli_usage_error(cmd, "--inputs: want 1..1000");
+        sp.inputs = (int)v;
+    }
+    if (o[O_TARGETS].value) {
+        if (cli_parse_long(o[O_TARGETS].value, 1, 1000, &v))
+            return cli_usage_error(cmd, "--targets: want 1..1000");
+        sp.targets = (int)v;
+    }
+    if (o[O_SEED].value) {
+        if (cli_parse_long(o[O_SEED].value, 0, 4294967295L, &v))
+            return cli_usage_error(cmd, "--seed: want 0..4294967295");
+        sp.seed = (uint64_t)v;
+    }
+    gs_eval_pairs ps;
+    gs_error err = {0, ""};
+    if (gs_eval_pairs_make(&sp, &ps, &err))
+        return cli_fail(cmd, "%s", err.msg);
+    FILE *f = fopen(o[O_MAKE].value, "w");
+    int rc = CLI_OK;
+    if (!f || gs_eval_pairs_write(f, &ps, &err) || fclose(f)) {
+        rc = cli_fail(cmd, "cannot write %s", o[O_MAKE].value);
+        f = NULL;
+    }
+    if (!rc)
+        printf("gazesplat eval: %d pairs -> %s\n", ps.n, o[O_MAKE].value);
+    gs_eval_pairs_free(&ps);
+    return rc;
+}
+
+/* Everything one evaluation run holds. */
+typedef struct evaluator {
+    gs_model *m;
+    gs_model_ctx *c;
+    eval_estimator *est;
+    gs_pool *pool;
+    int S, iters;
+    double focal, d_n;
+    int methods[EVAL_METHODS], nmethods;
+    uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
+    eval_row *rows;
+    int nrows;
+    const char *dir;            /* --out */
+    int reuse_fits, fits_reused;
+    int save_images;            /* pairs [0, save_images) as PNG */
+} evaluator;
+
+/* Angular error in degrees of two (pitch, yaw) predictions; NaN if either
+ * is missing. */
+static double ang(double p0, double y0, double p1, double y1)
+{
+    if (!isfinite(p0) || !isfinite(y0) || !isfinite(p1) || !isfinite(y1))
+        return NAN;
+    return gs_eval_angle_deg(p0, y0, p1, y1);
+}
+
+static int predict(evaluator *ev, const uint8_t *rgb, float out[4])
+{
+    gs_error err = {0, ""};
+    for (int k = 0; k < 4; k++)
+        out[k] = NAN;
+    if (!ev->est)
+        return 0;
+    return eval_estimator_predict(ev->est, ev->pool, rgb, ev->S, ev->S,
+                                  3 * (size_t)ev->S, out, &err) != GS_OK;
+}
+
+/* Image and angle metrics of ev->out against the GT target. */
+static void measure(evaluator *ev, const gs_synth_sample *gt,
+                    const float gt_est[4], eval_row *r)
+{
+    int S = ev->S;
+    size_t st = 3 * (size_t)S;
+    gs_error err = {0, ""};
+    /* Labels as the estimator is trained: normalized gaze and head. */
+    const gs_synth_labels *l = &gt->labels;
+    r->m[M_PSNR] = gs_eval_psnr(ev->out, st, gt->rgb, gt->stride, S, S, NULL);
+    r->m[M_SSIM] = gs_eval_ssim(ev->out, st, gt->rgb, gt->stride, S, S, NULL,
+                                &err);
+    r->no_eye = gs_eval_mask_count(ev->eye, S, S) == 0;
+    r->m[M_EYE_PSNR] = gs_eval_psnr(ev->out, st, gt->rgb, gt->stride, S, S,
+                                    ev->eye);
+    r->m[M_EYE_SSIM] = gs_eval_ssim(ev->out, st, gt->rgb, gt->stride, S, S,
+                                    ev->eye, &err);
+    r->m[M_ID_PSNR] = gs_eval_psnr(ev->out, st, gt->rgb, gt->stride, S, S,
+                                   ev->face);
+    r->m[M_ID_SSIM] = gs_eval_ssim(ev->out, st, gt->rgb, gt->stride, S, S,
+                                   ev->face, &err);
+    float o[4];
+    int bad_est = predict(ev, ev->out, o);
+    r->m[M_GAZE] = ang(o[0], o[1], gt_est[0], gt_est[1]);
+    r->m[M_GAZE_LABEL] = ang(o[0], o[1], l->gaze_norm_pitch,
+                             l->gaze_norm_yaw);
+    r->m[M_HEAD] = ang(o[2], o[3], gt_est[2], gt_est[3]);
+    r->m[M_HEAD_LABEL] = ang(o[2], o[3], l->head_norm_pitch,
+                             l->head_norm_yaw);
+    r->m[M_FLOOR_GAZE] = ang(gt_est[0], gt_est[1], l->gaze_norm_pitch,
+                             l->gaze_norm_yaw);
+    r->m[M_FLOOR_HEAD] = ang(gt_est[2], gt_est[3], l->head_norm_pitch,
+                             l->head_norm_yaw);
+    /* Every metric that should exist must be finite. */
+    for (int k = 0; k < M_COUNT; k++) {
+        int eye_metric = k == M_EYE_PSNR || k == M_EYE_SSIM;
+        int angle = k <= M_FLOOR_HEAD;
+        if ((eye_metric && r->no_eye) || (angle && !ev->est))
+            continue;
+        r->nonfinite += !isfinite(r->m[k]);
+    }
+    r->nonfinite += bad_est;
+}
+
+static eval_row *new_row(evaluator *ev, int method, int pair)
+{
+    eval_row *r = &ev->rows[ev->nrows++];
+    memset(r, 0, sizeof *r);
+    r->method = method;
+    r->pair = pair;
+    r->fit_s = r->fit_psnr = r->render_ms = NAN;
+    for (int k = 0; k < M_COUNT; k++)
+        r->m[k] = NAN;
+    return r;
+}
+
+/* Produces the method's output for one target into ev->out. */
+static int produce(evaluator *ev, int method, const gs_subject *sub,
+                   const gs_synth_sample *in, const gs_synth_sample *gt,
+                   const gs_synth_scene *tscene, double *ms, gs_error *err)
+{
+    size_t st = 3 * (size_t)ev->S;
+    double t0 = now_s();
+    int rc = GS_OK;
+    if (method == EVAL_MODEL) {
+        gs_view v = {0};
+        v.gaze_pitch = tscene->gaze_pitch;
+        v.gaze_yaw = tscene->gaze_yaw;
+        v.use_head = 1;
+        memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
+        memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
+        rc = gs_model_render(ev->c, ev->pool, sub, &v, ev->out, st, err);
+    } else if (method == EVAL_WARP) {
+        rc = gs_eval_warp_redirect(in, tscene->gaze_pitch, tscene->gaze_yaw,
+                                   ev->out, st, err);
+    } else {
+        for (int y = 0; y < ev->S; y++)
+            memcpy(ev->out + y * st, in->rgb + (size_t)y * in->stride, st);
+    }
+    *ms = 1000.0 * (now_s() - t0);
+    return rc;
+}
+
+/* Fits the model to the input with its true head pose and gaze. */
+static int fit_input(evaluator *ev, const gs_synth_sample *in,
+                     gs_subject *sub, double *secs, gs_error *err)
+{
+    gs_fit_options o;
+    gs_fit_options_default(&o);
+    o.max_iters = ev->iters;
+    o.known_gaze = 1;
+    o.gaze_pitch = in->labels.gaze_head_pitch;
+    o.gaze_yaw = in->labels.gaze_head_yaw;
+    o.known_head = 1;
+    memcpy(o.head_R, in->labels.head_R, sizeof o.head_R);
+    memcpy(o.head_t, in->labels.head_t, sizeof o.head_t);
+    gs_fit_report rep;
+    double t0 = now_s();
+    int rc = gs_model_fit(ev->c, ev->pool, in->rgb, in->stride, &o, sub, &rep,
+                          err);
+    *secs = now_s() - t0;
+    return rc;
+}
+
+/* Fits are the slow part: each successful fit is kept as DIR/fits/N.bin
+ * (fit seconds, then the gs_subject_encode bytes), and --reuse-fits
+ * takes them from there instead of fitting again (same model and
+ * options assumed: the file does not record them). */
+static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
+                      gs_subject *sub, double *secs, gs_error *err)
+{
+    char path[4200];
+    uint8_t buf[8 + GS_SUBJECT_ENCODED_MAX + 1];
+    snprintf(path, sizeof path, "%s/fits/%05d.bin", ev->dir, input);
+    FILE *f = ev->reuse_fits ? fopen(path, "rb") : NULL;
+    if (f) {
+        size_t n = fread(buf, 1, sizeof buf, f);
+        fclose(f);
+        if (n > 8 && gs_subject_decode(buf + 8, n - 8, sub, NULL) == GS_OK) {
+            memcpy(secs, buf, 8);
+            ev->fits_reused++;
+            return GS_OK;
+        }
+    }
+    int rc = fit_input(ev, in, sub, secs, err);
+    if (rc)
+        return rc;
+    memcpy(buf, secs, 8);
+    size_t n = 8 + gs_subject_encode(sub, buf + 8, sizeof buf - 8);
+    f = fopen(path, "wb");
+    if (!f || fwrite(buf, 1, n, f) != n)
+        fprintf(stderr, "gazesplat eval: cannot write %s\n", path);
+    if (f)
+        fclose(f);
+    return GS_OK;
+}
+
+/* DIR/images/PAIR_NAME.png, for looking at the outputs. */
+static void save_png(const evaluator *ev, int pair, const char *name,
+                     const uint8_t *rgb, size_t stride)
+{
+    char path[4200];
+    snprintf(path, sizeof path, "%s/images/%05d_%s.png", ev->dir, pair, name);
+    gs_io_image img = {ev->S, ev->S, stride, (unsigned char *)rgb};
+    gs_error err = {0, ""};
+    if (gs_io_image_write(path, &img, GS_IO_PNG, 0, &err))
+        fprintf(stderr, "gazesplat eval: %s: %s\n", path, err.msg);
+}
+
+/* One input and all its targets [first, last), every method. */
+static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
+                      int last, FILE *csv)
+{
+    gs_synth_scene iscene, tscene;
+    gs_synth_sample in = {0}, gt = {0};
+    gs_error err = {0, ""};
+    gs_eval_pair_scenes(&ps->p[first], &iscene, &tscene);
+    int rc = gs_eval_render_scene(&iscene, ev->S, ev->d_n, ev->focal,
+                                  ev->pool, &in, &err);
+    if (rc) {
+        fprintf(stderr, "gazesplat eval: input %d: %s\n", ps->p[first].input,
+                err.msg);
+        return rc;
+    }
+    gs_subject sub;
+    memset(&sub, 0, sizeof sub);
+    int fit_status = EVAL_ROW_OK;
+    double fit_s = NAN;
+    for (int k = 0; k < ev->nmethods; k++)
+        if (ev->methods[k] == EVAL_MODEL) {
+            rc = cached_fit(ev, ps->p[first].input, &in, &sub, &fit_s,
+                            &err);
+            if (rc) {
+                fit_status = rc == GS_ERR_NONFINITE ? EVAL_ROW_DIVERGED
+                                                    : EVAL_ROW_ERROR;
+                fprintf(stderr, "gazesplat eval: input %d: fit: %s\n",
+                        ps->p[first].input, err.msg);
+            }
+        }
+    for (int i = first; i < last; i++) {
+        gs_eval_pair_scenes(&ps->p[i], &iscene, &tscene);
+        rc = gs_eval_render_scene(&tscene, ev->S, ev->d_n, ev->focal,
+                                  ev->pool, &gt, &err);
+        float gt_est[4];
+        int bad_gt = rc ? 0 : predict(ev, gt.rgb, gt_est);
+        if (!rc)
+            rc = gs_eval_regions(&gt, ev->eye, ev->face);
+        if (!rc && i < ev->save_images) {
+            save_png(ev, i, "input", in.rgb, in.stride);
+            save_png(ev, i, "target", gt.rgb, gt.stride);
+        }
+        if (rc)
+            fprintf(stderr, "gazesplat eval: pair %d: ground truth: %s\n", i,
+                    err.msg[0] ? err.msg : gs_strerror(rc));
+        for (int k = 0; k < ev->nmethods; k++) {
+            int mth = ev->methods[k];
+            eval_row *r = new_row(ev, mth, i);
+            if (mth == EVAL_MODEL) {
+                r->fit_s = fit_s;
+                r->fit_row = i == first;
+                r->fit_psnr = fit_status == EVAL_ROW_OK ? sub.fit_psnr : NAN;
+                r->status = fit_status;
+            }
+            if (rc)
+                r->status = EVAL_ROW_ERROR;
+            if (r->status == EVAL_ROW_OK) {
+                gs_error e2 = {0, ""};
+                if (produce(ev, mth, &sub, &in, &gt, &tscene, &r->render_ms,
+                            &e2)) {
+                    r->status = EVAL_ROW_ERROR;
+                    fprintf(stderr, "gazesplat eval: pair %d %s: %s\n", i,
+                            eval_method_names[mth], e2.msg);
+                } else {
+                    if (i < ev->save_images)
+                        save_png(ev, i, eval_method_names[mth], ev->out,
+                                 3 * (size_t)ev->S);
+                    measure(ev, &gt, gt_est, r);
+                    r->nonfinite += bad_gt;
+                }
+            }
+            eval_csv_row(csv, r, &ps->p[i]);
+        }
+        gs_synth_sample_free(&gt);
+        rc = GS_OK;
+    }
+    fflush(csv);
+    gs_synth_sample_free(&in);
+    return GS_OK;
+}
+
+static int parse_methods(const char *s, evaluator *ev)
+{
+    ev->nmethods = 0;
+    while (*s) {
+        size_t len = strcspn(s, ",");
+        int k = 0;
+        while (k < EVAL_METHODS && (strlen(eval_method_names[k]) != len ||
+                                    strncmp(eval_method_names[k], s, len)))
+            k++;
+        if (k == EVAL_METHODS)
+            return -1;
+        for (int j = 0; j < ev->nmethods; j++)
+            if (ev->methods[j] == k)
+                return -1;
+        ev->methods[ev->nmethods++] = k;
+        s += len;
+        if (*s == ',' && *++s == '\0')
+            return -1;
+    }
+    return ev->nmethods ? 0 : -1;
+}
+
+static int make_dir(const char *path)
+{
+    struct stat st;
+    return mkdir(path, 0777) == 0 ||
+           (stat(path, &st) == 0 && S_ISDIR(st.st_mode));
+}
+
+/* The command line as run, for the summary. */
+static void command_line(int argc, char **argv, char *buf, size_t cap)
+{
+    size_t n = (size_t)snprintf(buf, cap, "gazesplat");
+    for (int i = 0; i < argc && n < cap; i++)
+        n += (size_t)snprintf(buf + n, cap - n, " %s", argv[i]);
+}
+
+/* Number of inputs to run and the pair count they cover. */
+static int count_inputs(const gs_eval_pairs *ps, long limit, int *npairs)
+{
+    int inputs = 0, i = 0;
+    while (i < ps->n && (limit <= 0 || inputs < limit)) {
+        int in = ps->p[i].input;
+        while (i < ps->n && ps->p[i].input == in)
+            i++;
+        inputs++;
+    }
+    *npairs = i;
+    return inputs;
+}
+
+static int evaluate(evaluator *ev, const cli_opt *o, const gs_eval_pairs *ps,
+                    long limit, eval_run_info *info)
+{
+    const cli_command *cmd = &cli_eval_command;
+    int npairs;
+    info->inputs = count_inputs(ps, limit, &npairs);
+    char path[4096];
+    snprintf(path, sizeof path, "%s/pairs.csv", o[O_OUT].value);
+    FILE *csv = fopen(path, "w");
+    if (!csv)
+        return cli_fail(cmd, "cannot write %s", path);
+    eval_csv_header(csv);
+    ev->rows = calloc((size_t)npairs * ev->nmethods + 1, sizeof *ev->rows);
+    size_t S = (size_t)ev->S;
+    ev->out = malloc(3 * S * S);
+    ev->eye = malloc(S * S);
+    ev->face = malloc(S * S);
+    int rc = CLI_OK;
+    if (!ev->rows || !ev->out || !ev->eye || !ev->face)
+        rc = cli_fail(cmd, "out of memory");
+    double t0 = now_s();
+    for (int i = 0, done = 0; !rc && i < npairs; done++) {
+        int j = i;
+        while (j < npairs && ps->p[j].input == ps->p[i].input)
+            j++;
+        eval_input(ev, ps, i, j, csv);
+        i = j;
+        fprintf(stderr, "\rgazesplat eval: input %d/%d, %.0f s", done + 1,
+                info->inputs, now_s() - t0);
+    }
+    fputc('\n', stderr);
+    if (fclose(csv) && !rc)
+        rc = cli_fail(cmd, "cannot write %s", path);
+    snprintf(path, sizeof path, "%s/summary.md", o[O_OUT].value);
+    FILE *md = rc ? NULL : fopen(path, "w");
+    if (!rc && !md)
+        rc = cli_fail(cmd, "cannot write %s", path);
+    if (md) {
+        info->fits_reused = ev->fits_reused;
+        eval_summary(md, info, ev->rows, ev->nrows, ps, ev->methods,
+                     ev->nmethods);
+        if (fclose(md))
+            rc = cli_fail(cmd, "cannot write %s", path);
+        else
+            printf("gazesplat eval: %d pairs x %d methods -> %s/pairs.csv, "
+                   "%s\n", npairs, ev->nmethods, o[O_OUT].value, path);
+    }
+    free(ev->rows);
+    free(ev->out);
+    free(ev->eye);
+    free(ev->face);
+    return rc;
+}
+
+static int read_pairs(const char *path, gs_eval_pairs *ps)
+{
+    gs_error err = {0, ""};
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return cli_fail(&cli_eval_command, "cannot open %s", path);
+    int rc = gs_eval_pairs_read(f, ps, &err);
+    fclose(f);
+    if (rc)
+        return cli_fail(&cli_eval_command, "%s: %s", path, err.msg);
+    return CLI_OK;
+}
+
+static int run_checked(const cli_opt *o, evaluator *ev, long limit,
+                       long threads, eval_run_info *info)
+{
+    const cli_command *cmd = &cli_eval_command;
+    gs_eval_pairs ps = {0, NULL};
+    gs_error err = {0, ""};
+    int rc = read_pairs(o[O_PAIRS].value, &ps);
+    if (rc)
+        return rc;
+    char fits[4200];
+    snprintf(fits, sizeof fits, "%s/fits", o[O_OUT].value);
+    if (!make_dir(o[O_OUT].value) || !make_dir(fits))
+        rc = cli_fail(cmd, "cannot create %s", fits);
+    snprintf(fits, sizeof fits, "%s/images", o[O_OUT].value);
+    if (!rc && ev->save_images && !make_dir(fits))
+        rc = cli_fail(cmd, "cannot create %s", fits);
+    gs_nn_blas_set_threads(1);
+    if (!rc && gs_model_load(o[O_MODEL].value, &ev->m, &err))
+        rc = cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
+    if (!rc && o[O_EST].value &&
+        eval_estimator_load(o[O_EST].value, &ev->est, &err))
+        rc = cli_fail(cmd, "%s: %s", o[O_EST].value, err.msg);
+    if (!rc) {
+        gs_model_info mi;
+        gs_model_get_info(ev->m, &mi);
+        ev->S = mi.image_size;
+        ev->focal = mi.focal;
+        ev->d_n = mi.distance_mm;
+        info->image_size = mi.image_size;
+        ev->c = gs_model_ctx_create(ev->m);
+        ev->pool = gs_pool_create((int)threads);
+        if (!ev->c || !ev->pool)
+            rc = cli_fail(cmd, "out of memory");
+    }
+    if (!rc)
+        rc = evaluate(ev, o, &ps, limit, info);
+    gs_pool_destroy(ev->pool);
+    gs_model_ctx_destroy(ev->c);
+    eval_estimator_free(ev->est);
+    gs_model_destroy(ev->m);
+    gs_eval_pairs_free(&ps);
+    return rc;
+}
+
+static int run_eval(int argc, char **argv)
+{
+    const cli_command *cmd = &cli_eval_command;
+    cli_opt o[O_N] = {
+        {"--model", 1, NULL},   {"--pairs", 1, NULL},  {"--out", 1, NULL},
+        {"--estimator", 1, NULL}, {"--method", 1, NULL},
+        {"--limit-inputs", 1, NULL}, {"--iters", 1, NULL},
+        {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
+        {"--save-images", 1, NULL},
+        {"--make-pairs", 1, NULL},
+        {"--identities", 1, NULL}, {"--inputs", 1, NULL},
+        {"--targets", 1, NULL}, {"--seed", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, O_N);
+    if (rc == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (rc != CLI_PARSED)
+        return rc;
+    if (o[O_MAKE].value) {
+        for (int k = 0; k < O_MAKE; k++)
+            if (o[k].value)
+                return cli_usage_error(cmd, "--make-pairs takes only "
+                                       "--identities, --inputs, --targets "
+                                       "and --seed");
+        return make_pairs(o);
+    }
+    for (int k = O_IDS; k < O_N; k++)
+        if (o[k].value)
+            return cli_usage_error(cmd, "%s goes with --make-pairs",
+                                   o[k].name);
+    if (!o[O_MODEL].value || !o[O_PAIRS].value || !o[O_OUT].value)
+        return cli_usage_error(cmd, "--model, --pairs and --out are needed");
+    evaluator ev;
+    memset(&ev, 0, sizeof ev);
+    ev.iters = 200;
+    ev.nmethods = 1;
+    long limit = 0, threads = 2, iters = 200;
+    if (o[O_METHOD].value && parse_methods(o[O_METHOD].value, &ev))
+        return cli_usage_error(cmd, "--method: want a list of model, warp, "
+                               "identity; got '%s'", o[O_METHOD].value);
+    if (o[O_LIMIT].value && cli_parse_long(o[O_LIMIT].value, 1, 100000000L,
+                                           &limit))
+        return cli_usage_error(cmd, "--limit-inputs: want 1 or more");
+    if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000,
+                                           &iters))
+        return cli_usage_error(cmd, "--iters: want 1..100000");
+    if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256,
+                                             &threads))
+        return cli_usage_error(cmd, "--threads: want 1..256");
+    long save = 0;
+    if (o[O_SAVE].value && cli_parse_long(o[O_SAVE].value, 0, 100000, &save))
+        return cli_usage_error(cmd, "--save-images: want 0..100000");
+    ev.save_images = (int)save;
+    ev.iters = (int)iters;
+    ev.dir = o[O_OUT].value;
+    ev.reuse_fits = o[O_REUSE].value != NULL;
+    char line[2048];
+    command_line(argc, argv, line, sizeof line);
+    eval_run_info info = {o[O_MODEL].value, o[O_EST].value, o[O_PAIRS].value,
+                          line, (int)threads, (int)iters, 0, 0, 0};
+    return run_checked(o, &ev, limit, threads, &info);
+}

@@ -1,0 +1,232 @@
+/* gazesplat eval: the per-pair CSV and the Markdown summary. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "eval_report.h"
+
+const char *const eval_method_names[EVAL_METHODS] = {"model", "warp",
+                                                     "identity"};
+const char *const eval_metric_names[M_COUNT] = {
+    "gaze_err_deg", "gaze_err_label_deg", "head_err_deg",
+    "head_err_label_deg", "est_gt_gaze_err_deg", "est_gt_head_err_deg",
+    "psnr", "ssim", "eye_psnr", "eye_ssim", "id_psnr", "id_ssim"};
+
+void eval_csv_header(FILE *f)
+{
+    fputs("method,pair,input,identity,gaze_change_deg,head_deg,head_change,"
+          "head_change_deg,narrowed,harsh,status,fit_s,fit_psnr,render_ms",
+          f);
+    for (int k = 0; k < M_COUNT; k++)
+        fprintf(f, ",%s", eval_metric_names[k]);
+    fputc('\n', f);
+}
+
+static void put_num(FILE *f, double v, int prec)
+{
+    if (isfinite(v))
+        fprintf(f, ",%.*f", prec, v);
+    else
+        fputs(isnan(v) ? "," : ",inf", f);
+}
+
+void eval_csv_row(FILE *f, const eval_row *r, const gs_eval_pair *p)
+{
+    static const char *const st[3] = {"ok", "diverged", "error"};
+    fprintf(f, "%s,%d,%d,%d,%.3f,%.3f,%d,%.3f,%d,%d,%s",
+            eval_method_names[r->method], r->pair, p->input, p->identity,
+            p->gaze_change_deg, p->head_deg, p->head_change,
+            p->head_change_deg, p->narrowed, p->harsh, st[r->status]);
+    put_num(f, r->fit_s, 3);
+    put_num(f, r->fit_psnr, 3);
+    put_num(f, r->render_ms, 2);
+    for (int k = 0; k < M_COUNT; k++)
+        put_num(f, r->m[k], 4);
+    fputc('\n', f);
+}
+
+/* Row groups of the summary: a predicate on the pair. */
+enum { G_ALL, G_GAZE0, G_GAZE1, G_GAZE2, G_HEAD0, G_HEAD1, G_HEAD2, G_HEAD3,
+       G_SAME_HEAD, G_NEW_HEAD, G_NARROWED, G_HARSH, G_COUNT };
+static const char *const group_names[G_COUNT] = {
+    "**all pairs**", "gaze change 0-15°", "gaze change 15-30°",
+    "gaze change 30-50°", "head pose 0-15°", "head pose 15-30°",
+    "head pose 30-50°", "head pose 50°+", "gaze only (same head pose)",
+    "gaze and head pose change", "narrowed / blinking eyes",
+    "harsh lighting"};
+
+static int in_group(int g, const gs_eval_pair *p)
+{
+    switch (g) {
+    case G_ALL: return 1;
+    case G_GAZE0: case G_GAZE1: case G_GAZE2:
+        return gs_eval_angle_bin(p->gaze_change_deg) == g - G_GAZE0;
+    case G_HEAD0: case G_HEAD1: case G_HEAD2: case G_HEAD3:
+        return gs_eval_angle_bin(p->head_deg) == g - G_HEAD0;
+    case G_SAME_HEAD: return !p->head_change;
+    case G_NEW_HEAD: return p->head_change;
+    case G_NARROWED: return p->narrowed;
+    case G_HARSH: return p->harsh;
+    }
+    return 0;
+}
+
+typedef struct stats {
+    int n;                /* pairs in the group */
+    int cnt[M_COUNT];     /* finite values per metric */
+    double sum[M_COUNT];
+} stats;
+
+static void gather(const eval_row *rows, int n, const gs_eval_pairs *ps,
+                   int method, int g, stats *s)
+{
+    memset(s, 0, sizeof *s);
+    for (int i = 0; i < n; i++) {
+        const eval_row *r = &rows[i];
+        if (r->method != method || !in_group(g, &ps->p[r->pair]))
+            continue;
+        s->n++;
+        for (int k = 0; k < M_COUNT; k++)
+            if (isfinite(r->m[k])) {
+                s->cnt[k]++;
+                s->sum[k] += r->m[k];
+            }
+    }
+}
+
+static void put_mean(FILE *f, const stats *s, int k, int prec)
+{
+    if (s->cnt[k])
+        fprintf(f, " %.*f |", prec, s->sum[k] / s->cnt[k]);
+    else
+        fputs(" – |", f);
+}
+
+static const int table_metrics[] = {M_GAZE, M_GAZE_LABEL, M_FLOOR_GAZE,
+                                    M_HEAD, M_HEAD_LABEL, M_FLOOR_HEAD,
+                                    M_PSNR, M_SSIM, M_EYE_PSNR, M_EYE_SSIM,
+                                    M_ID_PSNR, M_ID_SSIM};
+#define NTABLE (int)(sizeof table_metrics / sizeof table_metrics[0])
+
+static void table_header(FILE *f, const char *first)
+{
+    fprintf(f, "| %s | n | gaze° | gaze° vs label | floor gaze° | head° | "
+               "head° vs label | floor head° | PSNR | SSIM | eye PSNR | "
+               "eye SSIM | id PSNR | id SSIM |\n|---|---:|", first);
+    for (int k = 0; k < NTABLE; k++)
+        fputs("---:|", f);
+    fputc('\n', f);
+}
+
+static void table_row(FILE *f, const char *name, const stats *s)
+{
+    fprintf(f, "| %s | %d |", name, s->n);
+    for (int k = 0; k < NTABLE; k++) {
+        int m = table_metrics[k];
+        put_mean(f, s, m, m == M_SSIM || m == M_EYE_SSIM || m == M_ID_SSIM
+                              ? 4 : 2);
+    }
+    fputc('\n', f);
+}
+
+static int cmp_double(const void *a, const void *b)
+{
+    double x = *(const double *)a, y = *(const double *)b;
+    return (x > y) - (x < y);
+}
+
+/* Counts and timings of one method. */
+static void method_counts(FILE *f, const eval_row *rows, int n,
+                          const gs_eval_pairs *ps, int method)
+{
+    int pairs = 0, ok = 0, div = 0, errs = 0, nonf = 0, noeye = 0, nfit = 0;
+    int nr[2] = {0, 0};
+    double render = 0, rs[2] = {0, 0};
+    double *fits = malloc(sizeof(double) * (size_t)(n + 1));
+    for (int i = 0; i < n; i++) {
+        const eval_row *r = &rows[i];
+        if (r->method != method)
+            continue;
+        pairs++;
+        ok += r->status == EVAL_ROW_OK;
+        div += r->status == EVAL_ROW_DIVERGED;
+        errs += r->status == EVAL_ROW_ERROR;
+        nonf += r->nonfinite;
+        noeye += r->no_eye;
+        if (isfinite(r->render_ms)) {
+            int hc = ps->p[r->pair].head_change != 0;
+            render += r->render_ms;
+            rs[hc] += r->render_ms;
+            nr[hc]++;
+        }
+        if (fits && r->fit_row && isfinite(r->fit_s))
+            fits[nfit++] = r->fit_s;
+    }
+    fprintf(f, "- pairs %d: evaluated %d, **diverged fits %d, errors %d, "
+               "non-finite outputs %d** (goal: zero); closed eyes (no eye "
+               "region, eye metrics n/a) %d\n", pairs, ok, div, errs, nonf,
+            noeye);
+    if (nfit) {
+        qsort(fits, (size_t)nfit, sizeof *fits, cmp_double);
+        double s = 0;
+        for (int i = 0; i < nfit; i++)
+            s += fits[i];
+        fprintf(f, "- fit: %d fits, mean %.2f s, median %.2f s, max %.2f s\n",
+                nfit, s / nfit, fits[nfit / 2], fits[nfit - 1]);
+    }
+    if (ok && render > 0 && method != EVAL_IDENTITY) {
+        char g[32] = "–", h[32] = "–";
+        if (nr[0])
+            snprintf(g, sizeof g, "%.1f ms", rs[0] / nr[0]);
+        if (nr[1])
+            snprintf(h, sizeof h, "%.1f ms", rs[1] / nr[1]);
+        fprintf(f, "- render: mean %.1f ms per image, %.1f images/s (gaze "
+                   "only: %s; with a head change: %s)\n", render / ok,
+                1000.0 * ok / render, g, h);
+    }
+    free(fits);
+}
+
+void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
+                  int n, const gs_eval_pairs *ps, const int *methods,
+                  int nmethods)
+{
+    fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
+    fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
+               "iterations cap %d; %d threads\n", info->model,
+            info->image_size, info->pairs, info->inputs, info->iters,
+            info->threads);
+    if (info->fits_reused)
+        fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
+                   "their fit times are that run's\n", info->fits_reused);
+    if (info->estimator)
+        fprintf(f, "- estimator: `%s`; floor = its error on the ground-truth "
+                   "target against the true label\n", info->estimator);
+    else
+        fputs("- no estimator given: gaze and head errors are not "
+              "measured\n", f);
+    fputs("- degrees: mean angular error; gaze°/head° = estimator(output) vs "
+          "estimator(GT target); PSNR dB and SSIM against the GT target "
+          "(white outside the head); eye = eye region; id = face without "
+          "the eyes (identity consistency). docs/eval.md explains each.\n\n",
+          f);
+    fputs("## All methods, all pairs\n\n", f);
+    table_header(f, "method");
+    for (int k = 0; k < nmethods; k++) {
+        stats s;
+        gather(rows, n, ps, methods[k], G_ALL, &s);
+        table_row(f, eval_method_names[methods[k]], &s);
+    }
+    for (int k = 0; k < nmethods; k++) {
+        fprintf(f, "\n## %s\n\n", eval_method_names[methods[k]]);
+        method_counts(f, rows, n, ps, methods[k]);
+        fputc('\n', f);
+        table_header(f, "pairs");
+        for (int g = 0; g < G_COUNT; g++) {
+            stats s;
+            gather(rows, n, ps, methods[k], g, &s);
+            if (s.n || g == G_ALL)
+                table_row(f, group_names[g], &s);
+        }
+    }
+}

@@ -1,0 +1,44 @@
+/* gazesplat eval: per-pair results and the reports written from them. */
+#ifndef GS_CLI_EVAL_REPORT_H
+#define GS_CLI_EVAL_REPORT_H
+
+#include <stdio.h>
+
+#include "gazesplat/eval.h"
+
+enum { EVAL_MODEL = 0, EVAL_WARP = 1, EVAL_IDENTITY = 2, EVAL_METHODS = 3 };
+extern const char *const eval_method_names[EVAL_METHODS];
+
+enum { EVAL_ROW_OK = 0, EVAL_ROW_DIVERGED = 1, EVAL_ROW_ERROR = 2 };
+
+/* The metrics of one pair, in the order of the CSV columns. */
+enum {
+    M_GAZE, M_GAZE_LABEL, M_HEAD, M_HEAD_LABEL, M_FLOOR_GAZE, M_FLOOR_HEAD,
+    M_PSNR, M_SSIM, M_EYE_PSNR, M_EYE_SSIM, M_ID_PSNR, M_ID_SSIM,
+    M_COUNT
+};
+extern const char *const eval_metric_names[M_COUNT];
+
+typedef struct eval_row {
+    int method, pair, status;
+    int nonfinite;          /* metrics that should exist but are not finite */
+    int no_eye;             /* eye region empty (closed eyes): eye metrics n/a */
+    int fit_row;            /* this row carries its input's fit time */
+    double fit_s, fit_psnr, render_ms;
+    double m[M_COUNT];      /* NaN where not measured */
+} eval_row;
+
+typedef struct eval_run_info {
+    const char *model, *estimator, *pairs, *command;
+    int threads, iters, inputs, image_size;
+    int fits_reused;      /* fits taken from an earlier run's DIR/fits */
+} eval_run_info;
+
+void eval_csv_header(FILE *f);
+void eval_csv_row(FILE *f, const eval_row *r, const gs_eval_pair *p);
+/* Markdown summary of every method in rows[0..n). */
+void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
+                  int n, const gs_eval_pairs *ps, const int *methods,
+                  int nmethods);
+
+#endif

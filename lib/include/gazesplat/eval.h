@@ -1,0 +1,164 @@
+/* gs_eval: the redirection evaluation protocol on synthetic heads.
+ *
+ * A pairing says which held-out (test split) identity is shown in which
+ * input scene and which target each input is redirected to. Every sample
+ * is a pure function of (identity seed, scene seed) through
+ * gs_synth_scene_random with gs_eval_ranges, so the generator reproduces it
+ * byte for byte. A target keeps everything of its input scene (identity,
+ * expression, lights, background) and takes the gaze, and when
+ * head_change is set also the head pose, of the scene drawn from its own
+ * scene seed. See docs/eval.md for the protocol, metrics and bins.
+ *
+ * Images are 8-bit sRGB RGB interleaved with an explicit stride; masks are
+ * width*height bytes, 0 = outside. */
+#ifndef GAZESPLAT_EVAL_H
+#define GAZESPLAT_EVAL_H
+
+#include <stddef.h>
+#include <stdint.h>
+#include <stdio.h>
+
+#include "gazesplat/error.h"
+#include "gazesplat/synth.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ---- pairs ---- */
+
+/* Ranges of the evaluation scenes: the model's training ranges for gaze
+ * (yaw +-40, pitch +-30 deg), head yaw +-50, pitch +-30, roll +-5 deg (the
+ * 30-50 deg head bin reaches past training), blinks 10% of the time. */
+void gs_eval_ranges(gs_synth_ranges *r);
+
+/* Bins. Gaze change: angle between input and target gaze (head frame).
+ * Head pose: angle between the target head's forward axis and the optical
+ * axis of its normalized camera. */
+enum { GS_EVAL_BIN_0_15 = 0, GS_EVAL_BIN_15_30 = 1, GS_EVAL_BIN_30_50 = 2,
+       GS_EVAL_BIN_OVER_50 = 3, GS_EVAL_BINS = 4 };
+/* Bin of an angle in degrees: [0,15) [15,30) [30,50) [50,inf). */
+int gs_eval_angle_bin(double deg);
+/* "0-15", "15-30", "30-50", "50+". */
+const char *gs_eval_bin_name(int bin);
+
+/* Eyes narrowed or blinking: squint >= 0.35 or blink >= 0.3. */
+int gs_eval_expr_narrowed(const gs_synth_expression *ex);
+/* Harsh lighting: one light only, ambient < 0.2 and the key light more
+ * than 30 deg to the side (|dir.x| >= 0.5): hard shadows on half a face. */
+int gs_eval_scene_harsh(const gs_synth_scene *s);
+
+typedef struct gs_eval_pair {
+    int input;                 /* index of the input group (0-based) */
+    int identity;              /* k of gs_synth_split_seed(TEST, k) */
+    uint64_t identity_seed;
+    uint64_t input_scene, target_scene;
+    int head_change;           /* 1: the target takes its own head pose */
+    /* derived (recomputed and checked when a file is read) */
+    double gaze_change_deg, head_deg, head_change_deg;
+    int narrowed, harsh;
+} gs_eval_pair;
+
+typedef struct gs_eval_pairs {
+    int n;
+    gs_eval_pair *p;           /* grouped by input, inputs in order */
+} gs_eval_pairs;
+
+typedef struct gs_eval_pairs_spec {
+    int identities;            /* test identities 0..identities-1 */
+    int inputs;                /* input scenes per identity */
+    int targets;               /* targets per input */
+    uint64_t seed;             /* pairing stream */
+} gs_eval_pairs_spec;
+/* 15 identities x 10 inputs x 10 targets, seed 1. */
+void gs_eval_pairs_spec_default(gs_eval_pairs_spec *s);
+
+/* Draws the pairing (deterministic). Input i of identity k has class
+ * c = (i + 2k) mod 10: head-pose bin c mod 3, narrowed or blinking eyes
+ * when c = 3, harsh lighting when c = 4 (neither otherwise). Inputs are
+ * ordered input-major (i * identities + k): the first 2 x identities
+ * inputs (two per identity) cover every class; the first `identities`
+ * inputs only the even ones (every head bin and harsh lighting, no
+ * narrowed eyes). Targets cycle through the gaze-change bins and alternate
+ * gaze-only / gaze-and-head. Free with gs_eval_pairs_free. */
+int gs_eval_pairs_make(const gs_eval_pairs_spec *spec, gs_eval_pairs *out,
+                       gs_error *err);
+void gs_eval_pairs_free(gs_eval_pairs *ps);
+
+/* The input and target scenes of a pair. */
+void gs_eval_pair_scenes(const gs_eval_pair *p, gs_synth_scene *input,
+                         gs_synth_scene *target);
+/* Fills the derived fields of *p from its seeds. */
+int gs_eval_pair_derive(gs_eval_pair *p, gs_error *err);
+
+/* CSV with a header line (docs/eval.md). Reading recomputes the derived
+ * columns and refuses a file whose values differ (a different generator)
+ * with GS_ERR_FORMAT naming the line. */
+int gs_eval_pairs_write(FILE *f, const gs_eval_pairs *ps, gs_error *err);
+int gs_eval_pairs_read(FILE *f, gs_eval_pairs *out, gs_error *err);
+
+/* Renders a scene at the normalized camera of a model (size px, distance
+ * d_n_mm, focal f_n at that size) with the background outside the head
+ * mask made white, as the model is trained. out is allocated here (free
+ * with gs_synth_sample_free). */
+int gs_eval_render_scene(const gs_synth_scene *scene, int size, double d_n_mm,
+                         double f_n, gs_pool *pool, gs_synth_sample *out,
+                         gs_error *err);
+
+/* ---- metrics ---- */
+
+/* PSNR in dB over the pixels where mask != 0 (all when mask is NULL), 3
+ * channels, peak 255. 100 dB for identical pixels; NaN for an empty mask. */
+double gs_eval_psnr(const uint8_t *a, size_t sa, const uint8_t *b, size_t sb,
+                    int w, int h, const uint8_t *mask);
+/* SSIM (Gaussian window sigma 1.5, 11 taps, C1 = 0.01^2, C2 = 0.03^2 on
+ * [0,1] values; the window is renormalised at the border) per pixel and
+ * channel, averaged over the pixels where mask != 0 (all when NULL) and the
+ * 3 channels. 1 for identical images; NaN for an empty mask. */
+double gs_eval_ssim(const uint8_t *a, size_t sa, const uint8_t *b, size_t sb,
+                    int w, int h, const uint8_t *mask, gs_error *err);
+
+/* Square dilation of a mask by r pixels (out must not alias in).
+ * GS_ERR_NOMEM leaves out unchanged. */
+int gs_eval_mask_dilate(const uint8_t *in, int w, int h, int r, uint8_t *out);
+/* Pixels set in a mask. */
+size_t gs_eval_mask_count(const uint8_t *m, int w, int h);
+
+/* Evaluation regions of a ground-truth sample: the eye region (both
+ * visible eyeballs dilated by size/64 px, so the lid margins count) and
+ * the face without the eyes (face mask minus the eye region), the region
+ * of the identity-consistency metric. */
+int gs_eval_regions(const gs_synth_sample *gt, uint8_t *eye, uint8_t *face);
+
+/* Angle in degrees between two (pitch, yaw) directions, radians. */
+double gs_eval_angle_deg(double p0, double y0, double p1, double y1);
+
+/* ---- the 2D warping baseline ---- */
+
+/* Moves the content of one eye opening by disp (pixels): inside the mask a
+ * pixel p takes the input at p - w(p) disp, w rising from 0 at the mask
+ * border to 1 at falloff_px inside it (smoothstep), so the iris moves
+ * rigidly and the lid margins stay put; a source outside the mask takes
+ * `fill` (the sclera colour). Pixels outside the mask are not written, so
+ * both eyes can be warped into one copy of the input. dst must not alias
+ * src. */
+int gs_eval_warp_eye(const uint8_t *src, size_t ss, uint8_t *dst, size_t ds,
+                     int w, int h, const uint8_t *mask, const double disp[2],
+                     double falloff_px, const uint8_t fill[3], gs_error *err);
+
+/* Pixel displacement of eye e's pupil when the gaze (head frame) of the
+ * labelled image changes to (pitch, yaw): the pupil centre rotates about
+ * the eyeball centre with the gaze, both projected through the image's K. */
+int gs_eval_pupil_shift(const gs_synth_labels *l, int e, double pitch,
+                        double yaw, double disp[2], gs_error *err);
+
+/* The baseline: output = the input with both eye openings warped toward
+ * the target gaze (head frame), using the input's labels and eye masks
+ * only. No 3D: the head pose never changes. */
+int gs_eval_warp_redirect(const gs_synth_sample *in, double pitch, double yaw,
+                          uint8_t *out, size_t stride, gs_error *err);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,269 @@
+/* gazesplat eval end to end: a tiny model trained here for seconds, a
+ * pairing of 2 inputs x 2 targets, all three methods; the CSV and the
+ * summary exist with finite numbers and the run is deterministic; usage
+ * errors exit 2. usage: test_eval_cli PATH_TO_GAZESPLAT */
+#define _POSIX_C_SOURCE 200809L /* posix_spawn, mkdtemp */
+
+#include <fcntl.h>
+#include <math.h>
+#include <spawn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "gazesplat/gaze.h"
+#include "gazesplat/nn.h"
+#include "gazesplat/train.h"
+#include "gs_test.h"
+
+extern char **environ;
+
+static const char *exe;
+static char dir[] = "eval_test_XXXXXX";
+
+/* Runs gazesplat with args (NULL-terminated), output to dir/log.txt;
+ * returns the exit code (-1 when killed). */
+static int run(const char *const *args)
+{
+    const char *argv[32];
+    char logp[256];
+    int n = 0;
+    argv[n++] = exe;
+    while (args[n - 1] && n < 31) {
+        argv[n] = args[n - 1];
+        n++;
+    }
+    argv[n] = NULL;
+    snprintf(logp, sizeof logp, "%s/log.txt", dir);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, logp, O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    pid_t pid;
+    int st = 0, status = -1;
+    if (posix_spawn(&pid, exe, &fa, NULL, (char *const *)argv, environ) == 0 &&
+        waitpid(pid, &st, 0) == pid && WIFEXITED(st))
+        status = WEXITSTATUS(st);
+    posix_spawn_file_actions_destroy(&fa);
+    if (status != 0) {
+        char buf[2048];
+        FILE *f = fopen(logp, "r");
+        size_t k = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
+        buf[k] = 0;
+        if (f)
+            fclose(f);
+        printf("exit %d: %s", status, buf);
+    }
+    return status;
+}
+
+static char *slurp(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    char *buf = malloc(1 << 20);
+    size_t n = buf ? fread(buf, 1, (1 << 20) - 1, f) : 0;
+    if (buf)
+        buf[n] = 0;
+    fclose(f);
+    return buf;
+}
+
+static void train_tiny(const char *path)
+{
+    gs_nn_blas_set_threads(1);
+    gs_model_spec spec;
+    gs_model_spec_default(&spec);
+    spec.preset = "tiny";
+    spec.train_identities = 2;
+    gs_model *m = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
+    gs_train_options to;
+    gs_train_options_default(&to);
+    to.out_path = path;
+    to.steps = 4;
+    to.checkpoint_every = 0;
+    gs_train_report rep;
+    CHECK_MSG(gs_train(m, &to, NULL, &rep, &err) == GS_OK, "%s", err.msg);
+    gs_model_destroy(m);
+}
+
+/* Checks the per-pair CSV: rows, methods, statuses and finite metrics.
+ * Returns the text with the timing columns (fit_s, render_ms) blanked. */
+static char *check_csv(const char *path)
+{
+    char *text = slurp(path);
+    CHECK_MSG(text != NULL, "no %s", path);
+    if (!text)
+        return NULL;
+    int rows = 0, bad = 0, methods[3] = {0};
+    char *save = NULL, *copy = strdup(text);
+    char *out = calloc(strlen(text) + 1, 1);
+    for (char *line = strtok_r(copy, "\n", &save); line;
+         line = strtok_r(NULL, "\n", &save)) {
+        /* Split on commas, keeping empty fields. */
+        char *cols[40];
+        int nc = 0;
+        char *lc = strdup(line);
+        for (char *c = lc; c && nc < 40;) {
+            cols[nc++] = c;
+            c = strchr(c, ',');
+            if (c)
+                *c++ = 0;
+        }
+        if (rows++ == 0) {
+            CHECK_MSG(strncmp(line, "method,pair,", 12) == 0, "%s", line);
+            CHECK_EQ_INT(nc, 26);
+        } else {
+            methods[0] += strcmp(cols[0], "model") == 0;
+            methods[1] += strcmp(cols[0], "warp") == 0;
+            methods[2] += strcmp(cols[0], "identity") == 0;
+            bad += strcmp(cols[10], "ok") != 0;
+            /* Angles (cols 14-19), PSNR, SSIM, id PSNR, id SSIM (20, 21,
+             * 24, 25) always; eye metrics unless the eyes are closed. */
+            for (int k = 14; k < 26 && nc == 26; k++)
+                bad += (*cols[k] == 0 || !isfinite(strtod(cols[k], NULL))) &&
+                       k != 22 && k != 23;
+            if (strcmp(cols[0], "model") == 0)
+                bad += !(strtod(cols[11], NULL) > 0) ||
+                       !isfinite(strtod(cols[12], NULL));
+        }
+        /* Keep everything but columns 11 (fit_s) and 13 (render_ms). */
+        int col = 0;
+        for (const char *p = line; *p; p++) {
+            if (*p == ',')
+                col++;
+            if ((col == 11 || col == 13) && *p != ',')
+                continue;
+            strncat(out, p, 1);
+        }
+        strcat(out, "\n");
+        free(lc);
+    }
+    CHECK_EQ_INT(rows, 1 + 4 * 3);
+    CHECK(methods[0] == 4 && methods[1] == 4 && methods[2] == 4);
+    CHECK_MSG(bad == 0, "%d bad values in %s:\n%s", bad, path, text);
+    free(copy);
+    free(text);
+    return out;
+}
+
+static void usage_errors(const char *model, const char *pairs)
+{
+    const char *none[] = {"eval", NULL};
+    CHECK_EQ_INT(run(none), 2);
+    const char *bad_method[] = {"eval", "--model", model, "--pairs", pairs,
+                                "--out", dir, "--method", "model,nope", NULL};
+    CHECK_EQ_INT(run(bad_method), 2);
+    const char *dup_method[] = {"eval", "--model", model, "--pairs", pairs,
+                                "--out", dir, "--method", "warp,warp", NULL};
+    CHECK_EQ_INT(run(dup_method), 2);
+    const char *iters0[] = {"eval", "--model", model, "--pairs", pairs,
+                            "--out", dir, "--iters", "0", NULL};
+    CHECK_EQ_INT(run(iters0), 2);
+    const char *mixed[] = {"eval", "--make-pairs", pairs, "--model", model,
+                           NULL};
+    CHECK_EQ_INT(run(mixed), 2);
+    const char *stray[] = {"eval", "--model", model, "--pairs", pairs,
+                           "--out", dir, "--targets", "3", NULL};
+    CHECK_EQ_INT(run(stray), 2);
+    const char *ids0[] = {"eval", "--make-pairs", pairs, "--identities", "0",
+                          NULL};
+    CHECK_EQ_INT(run(ids0), 2);
+    const char *positional[] = {"eval", "extra", NULL};
+    CHECK_EQ_INT(run(positional), 2);
+    /* Runtime failures exit 1. */
+    char missing[256];
+    snprintf(missing, sizeof missing, "%s/missing.csv", dir);
+    const char *nopairs[] = {"eval", "--model", model, "--pairs", missing,
+                             "--out", dir, NULL};
+    CHECK_EQ_INT(run(nopairs), 1);
+    const char *nomodel[] = {"eval", "--model", missing, "--pairs", pairs,
+                             "--out", dir, NULL};
+    CHECK_EQ_INT(run(nomodel), 1);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc != 2) {
+        fprintf(stderr, "usage: test_eval_cli PATH_TO_GAZESPLAT\n");
+        return 2;
+    }
+    exe = argv[1];
+    CHECK(mkdtemp(dir) != NULL);
+    char model[256], pairs[256], out1[256], out2[256], csv[300], md[300];
+    snprintf(model, sizeof model, "%s/tiny.safetensors", dir);
+    snprintf(pairs, sizeof pairs, "%s/pairs.csv", dir);
+    snprintf(out1, sizeof out1, "%s/run1", dir);
+    snprintf(out2, sizeof out2, "%s/run2", dir);
+    train_tiny(model);
+    /* An untrained estimator: random weights still give finite angles. */
+    char est[256];
+    snprintf(est, sizeof est, "%s/est.safetensors", dir);
+    gs_gaze_spec gsp;
+    gs_gaze_spec_default(&gsp, GS_GAZE_RESNET);
+    gs_gaze_net *net = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_gaze_net_create(&gsp, 3, &net, &err) == GS_OK);
+    CHECK_MSG(gs_gaze_net_save(net, est, &err) == GS_OK, "%s", err.msg);
+    gs_gaze_net_destroy(net);
+
+    const char *mk[] = {"eval", "--make-pairs", pairs, "--identities", "2",
+                        "--inputs", "1", "--targets", "2", NULL};
+    CHECK_EQ_INT(run(mk), 0);
+    usage_errors(model, pairs);
+
+    const char *ev1[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out1, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--save-images", "1", NULL};
+    CHECK_EQ_INT(run(ev1), 0);
+    char png[320];
+    snprintf(png, sizeof png, "%s/images/00000_warp.png", out1);
+    CHECK_MSG(access(png, R_OK) == 0, "no %s", png);
+    snprintf(png, sizeof png, "%s/images/00001_model.png", out1);
+    CHECK_MSG(access(png, R_OK) != 0, "%s: only pair 0 was asked for", png);
+    snprintf(csv, sizeof csv, "%s/pairs.csv", out1);
+    char *a = check_csv(csv);
+    snprintf(md, sizeof md, "%s/summary.md", out1);
+    char *sum = slurp(md);
+    CHECK_MSG(sum && strstr(sum, "diverged fits 0, errors 0, non-finite "
+                                 "outputs 0") &&
+                  strstr(sum, "| warp |") && strstr(sum, "gaze change 0-15°"),
+              "summary:\n%s", sum ? sum : "(none)");
+    CHECK(sum && !strstr(sum, "nan") && !strstr(sum, "inf"));
+    /* The same thread count gives the same numbers (timings aside). */
+    const char *ev2[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, NULL};
+    CHECK_EQ_INT(run(ev2), 0);
+    snprintf(csv, sizeof csv, "%s/pairs.csv", out2);
+    char *b = check_csv(csv);
+    CHECK_MSG(a && b && strcmp(a, b) == 0, "runs differ:\n%s\n---\n%s", a, b);
+    /* Rescoring with the fits of run 2 gives the same numbers again. */
+    const char *ev3[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", NULL};
+    CHECK_EQ_INT(run(ev3), 0);
+    char *c = check_csv(csv);
+    CHECK_MSG(a && c && strcmp(a, c) == 0, "rescored run differs:\n%s", c);
+    free(c);
+    free(sum);
+    snprintf(md, sizeof md, "%s/summary.md", out2);
+    sum = slurp(md);
+    CHECK_MSG(sum && strstr(sum, "2 fits reused"), "%s", sum ? sum : "");
+    free(a);
+    free(b);
+    free(sum);
+    char cmd[600];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    if (gs_test_failures == 0 && system(cmd) != 0)
+        fprintf(stderr, "could not remove %s\n", dir);
+    GS_TEST_END();
+}
