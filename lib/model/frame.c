@@ -704,10 +704,10 @@ static int gather_crop(gs_model_ctx *c, const int d[4])
  * has its centre shifted, which rounds the splats' pixel offsets
  * differently from the full render's: values then differ by a few ulps
  * all over the crop (about 1e-7 of 0.4), which are not changes: what
- * moves by less than 4e-7 (1 + |old|) keeps its value. */
+ * moves by less than 1e-6 (1 + |old|) keeps its value. */
 static int moved(float old, float now)
 {
-    return fabsf(now - old) > 4e-7f * (1.0f + fabsf(old)) || isnan(now);
+    return fabsf(now - old) > 1e-6f * (1.0f + fabsf(old)) || isnan(now);
 }
 
 /* Rasterizes the Gaussians that can reach the box d (tile-aligned) and
