@@ -108,7 +108,8 @@ int main(void)
     CHECK(out.writes >= st.out);
     CHECK(out.last_write && out.last_write[0] == 235 && out.last_write_len == 160 * 120 * 2);
     CHECK(st.total.p50_ms > 0 && st.total.p99_ms >= st.total.p50_ms);
-    CHECK_MSG(st.total.p99_ms < 100, "fast stage: total p99 %.1f ms", st.total.p99_ms);
+    /* loose: a sanity bound, not a speed test (sanitizers, loaded hosts) */
+    CHECK_MSG(st.total.p99_ms < 500, "fast stage: total p99 %.1f ms", st.total.p99_ms);
     fake_free(&out);
 
     /* Stage at 100 ms a frame: ~10 fps out, the rest dropped in the ring,
@@ -116,7 +117,10 @@ int main(void)
     run(100, 1, 1000, &st, &out);
     CHECK_MSG(st.out >= 5 && st.out <= 12, "slow stage: %llu out", (unsigned long long)st.out);
     CHECK_MSG(st.ring_drops >= 10, "slow stage: %llu drops", (unsigned long long)st.ring_drops);
-    CHECK_MSG(st.total.max_ms < 300, "slow stage: total max %.1f ms", st.total.max_ms);
+    /* A queue would grow by ~20 frames a second here (latency ~2 s by the
+     * end); the newest-frame ring keeps it near one stage time. The bound
+     * sits between the two, far from both. */
+    CHECK_MSG(st.total.max_ms < 1000, "slow stage: total max %.1f ms", st.total.max_ms);
     CHECK(st.process.p50_ms >= 99);
     fake_free(&out);
     GS_TEST_END();
