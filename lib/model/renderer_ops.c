@@ -456,20 +456,30 @@ static void guide_query(float *s, const gs_rop_guide *gd, const float *tau)
         s[c] /= gd->temp;
 }
 
+/* out[p] = src_p . v over band t of pixels; returns its first pixel and
+ * sets *n to its length. */
+static size_t band_dot(const guide_job *j, int t, const float *v, float *out,
+                       size_t *n)
+{
+    size_t p0 = (size_t)t * j->band;
+    *n = j->hw - p0 < j->band ? j->hw - p0 : j->band;
+    for (size_t i = 0; i < *n; i++)
+        out[p0 + i] = 0.0f;
+    for (int c = 0; c < j->gd->C; c++) {
+        const float *sc = j->src + (size_t)c * j->hw + p0;
+        for (size_t i = 0; i < *n; i++)
+            out[p0 + i] += sc[i] * v[c];
+    }
+    return p0;
+}
+
 /* Band t of pixels: att_p = src_p . s (the logits) */
 static void logits_task(void *ctx, int t, int worker)
 {
     (void)worker;
     const guide_job *j = ctx;
-    size_t p0 = (size_t)t * j->band, n = j->hw - p0 < j->band ? j->hw - p0 : j->band;
-    float *att = j->att_out + p0;
-    for (size_t i = 0; i < n; i++)
-        att[i] = 0.0f;
-    for (int c = 0; c < j->gd->C; c++) {
-        const float *sc = j->src + (size_t)c * j->hw + p0;
-        for (size_t i = 0; i < n; i++)
-            att[i] += sc[i] * j->s[c];
-    }
+    size_t n;
+    band_dot(j, t, j->s, j->att_out, &n);
 }
 
 static void pool_task(void *ctx, int c, int worker)
@@ -555,15 +565,8 @@ static void r_task(void *ctx, int t, int worker)
 {
     (void)worker;
     const guide_job *j = ctx;
-    size_t p0 = (size_t)t * j->band, n = j->hw - p0 < j->band ? j->hw - p0 : j->band;
+    size_t n, p0 = band_dot(j, t, j->dxbar, j->r, &n);
     float *r = j->r + p0;
-    for (size_t i = 0; i < n; i++)
-        r[i] = 0.0f;
-    for (int c = 0; c < j->gd->C; c++) {
-        const float *sc = j->src + (size_t)c * j->hw + p0;
-        for (size_t i = 0; i < n; i++)
-            r[i] += sc[i] * j->dxbar[c];
-    }
     for (size_t i = 0; i < n; i++)
         r[i] = j->att[p0 + i] * (float)((double)r[i] - j->S);
 }
