@@ -7,21 +7,26 @@
 
 /* A small model: coarse template, few eye Gaussians, narrow MLPs, 16^2
  * features -> 64^2 images. */
+static inline void tiny_config(gs_model_config *cfg)
+{
+    gs_model_config_default(cfg);
+    cfg->template_spacing_mm = 6.0;
+    cfg->n_eye_each = 40;
+    cfg->feat_dim = 8;
+    cfg->id_dim = 4;
+    cfg->hidden = 16;
+    cfg->channels = 8;
+    cfg->feat_size = 32;
+    cfg->image_size = 128;
+    cfg->focal = 1600.0 * 128 / 512;
+    cfg->n_train_ids = 3;
+}
+
 static inline gs_model *tiny_model(int guidance, uint64_t seed)
 {
     gs_model_config cfg;
-    gs_model_config_default(&cfg);
-    cfg.template_spacing_mm = 6.0;
-    cfg.n_eye_each = 40;
-    cfg.feat_dim = 8;
-    cfg.id_dim = 4;
-    cfg.hidden = 16;
-    cfg.channels = 8;
-    cfg.feat_size = 32;
-    cfg.image_size = 128;
-    cfg.focal = 1600.0 * 128 / 512;
+    tiny_config(&cfg);
     cfg.guidance = guidance;
-    cfg.n_train_ids = 3;
     gs_model *m = NULL;
     gs_error err;
     if (gs_model_create(&cfg, seed, &m, &err) != GS_OK) {

@@ -61,17 +61,7 @@ static float uni(float bound) /* uniform in [-bound, bound) */
 static gs_model *make_model(const stream_case *sc)
 {
     gs_model_config cfg;
-    gs_model_config_default(&cfg);
-    cfg.template_spacing_mm = 6.0;
-    cfg.n_eye_each = 40;
-    cfg.feat_dim = 8;
-    cfg.id_dim = 4;
-    cfg.hidden = 16;
-    cfg.channels = 8;
-    cfg.feat_size = 32;
-    cfg.image_size = 128;
-    cfg.focal = 1600.0 * 128 / 512;
-    cfg.n_train_ids = 3;
+    tiny_config(&cfg);
     cfg.two_stream = sc->two_stream;
     gs_model *m = NULL;
     gs_error err;
