@@ -14,6 +14,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import matplotlib.ticker  # noqa: E402
 
 LABELS = {"real": "real only", "real+ours": "real + ours (model)",
           "real+warp": "real + warp baseline"}
@@ -43,6 +44,7 @@ def main():
     for cond, label in LABELS.items():
         ks = sorted(k for c, k in m if c == cond)
         ax.plot(ks, [m[(cond, k)] for k in ks], marker="o", label=label)
+    ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
     ax.set_xlabel("k (real images of the test person)")
     ax.set_ylabel("gaze error on the test images (deg)")
     ax.set_title("Fine-tuning the gaze estimator per person")
