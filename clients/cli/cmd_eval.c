@@ -226,57 +226,26 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
     return rc;
 }
 
-/* Fits the model to the input with its true head pose and gaze. */
-static int fit_input(evaluator *ev, const gs_synth_sample *in,
-                     gs_subject *sub, double *secs, gs_error *err)
-{
-    gs_fit_options o;
-    gs_fit_options_default(&o);
-    o.max_iters = ev->iters;
-    o.known_gaze = 1;
-    o.gaze_pitch = in->labels.gaze_head_pitch;
-    o.gaze_yaw = in->labels.gaze_head_yaw;
-    o.known_head = 1;
-    memcpy(o.head_R, in->labels.head_R, sizeof o.head_R);
-    memcpy(o.head_t, in->labels.head_t, sizeof o.head_t);
-    gs_fit_report rep;
-    double t0 = now_s();
-    int rc = gs_model_fit(ev->c, ev->pool, in->rgb, in->stride, &o, sub, &rep,
-                          err);
-    *secs = now_s() - t0;
-    return rc;
-}
-
 /* Fits are the slow part: each successful fit is kept as DIR/fits/N.bin
- * (fit seconds, then the gs_subject_encode bytes), and --reuse-fits
- * takes them from there instead of fitting again (same model and
- * options assumed: the file does not record them). */
+ * (gs_eval_fit_cache_write), and --reuse-fits takes them from there
+ * instead of fitting again (same model and options assumed: the file does
+ * not record them). */
 static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
                       gs_subject *sub, double *secs, gs_error *err)
 {
     char path[4200];
-    uint8_t buf[8 + GS_SUBJECT_ENCODED_MAX + 1];
     snprintf(path, sizeof path, "%s/fits/%05d.bin", ev->dir, input);
-    FILE *f = ev->reuse_fits ? fopen(path, "rb") : NULL;
-    if (f) {
-        size_t n = fread(buf, 1, sizeof buf, f);
-        fclose(f);
-        if (n > 8 && gs_subject_decode(buf + 8, n - 8, sub, NULL) == GS_OK) {
-            memcpy(secs, buf, 8);
-            ev->fits_reused++;
-            return GS_OK;
-        }
+    if (ev->reuse_fits &&
+        gs_eval_fit_cache_read(path, sub, secs, NULL) == GS_OK) {
+        ev->fits_reused++;
+        return GS_OK;
     }
-    int rc = fit_input(ev, in, sub, secs, err);
+    int rc = gs_eval_fit_sample(ev->c, ev->pool, in, ev->iters, sub, secs,
+                                err);
     if (rc)
         return rc;
-    memcpy(buf, secs, 8);
-    size_t n = 8 + gs_subject_encode(sub, buf + 8, sizeof buf - 8);
-    f = fopen(path, "wb");
-    if (!f || fwrite(buf, 1, n, f) != n)
+    if (gs_eval_fit_cache_write(path, sub, *secs, NULL))
         fprintf(stderr, "gazesplat eval: cannot write %s\n", path);
-    if (f)
-        fclose(f);
     return GS_OK;
 }
 

@@ -20,6 +20,7 @@ static const cli_command *const commands[] = {
     &cli_estimate_command,
     &cli_eval_estimator_command,
     &cli_eval_command,
+    &cli_eval_downstream_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])
 

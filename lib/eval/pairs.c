@@ -7,6 +7,7 @@
 
 #include "gazesplat/eval.h"
 #include "gazesplat/geom.h"
+#include "eval_internal.h"
 
 #define DEG (3.14159265358979323846 / 180.0)
 /* Rejection sampling gives up after this many draws (never reached with
@@ -392,14 +393,21 @@ int gs_eval_pairs_read(FILE *f, gs_eval_pairs *out, gs_error *err)
     return rc;
 }
 
+int gs_eval_scene_camera(const gs_synth_scene *scene, int size, double d_n_mm,
+                         double f_n, gs_synth_camera *cam, gs_error *err)
+{
+    gs_synth_camera base;
+    gs_synth_camera_single(size, 600.0, 260.0, &base);
+    return gs_synth_camera_normalized(scene, &base, size, d_n_mm, f_n, cam,
+                                      err);
+}
+
 int gs_eval_render_scene(const gs_synth_scene *scene, int size, double d_n_mm,
                          double f_n, gs_pool *pool, gs_synth_sample *out,
                          gs_error *err)
 {
-    gs_synth_camera base, cam;
-    gs_synth_camera_single(size, 600.0, 260.0, &base);
-    int rc = gs_synth_camera_normalized(scene, &base, size, d_n_mm, f_n, &cam,
-                                        err);
+    gs_synth_camera cam;
+    int rc = gs_eval_scene_camera(scene, size, d_n_mm, f_n, &cam, err);
     if (!rc)
         rc = gs_synth_sample_alloc(out, size, size, err);
     if (rc)

@@ -19,6 +19,8 @@
 #include <stdio.h>
 
 #include "gazesplat/error.h"
+#include "gazesplat/gaze.h"
+#include "gazesplat/model.h"
 #include "gazesplat/synth.h"
 
 #ifdef __cplusplus
@@ -157,6 +159,98 @@ int gs_eval_pupil_shift(const gs_synth_labels *l, int e, double pitch,
  * only. No 3D: the head pose never changes. */
 int gs_eval_warp_redirect(const gs_synth_sample *in, double pitch, double yaw,
                           uint8_t *out, size_t stride, gs_error *err);
+
+/* ---- fitting an input (the protocol's fit) and the fit cache ---- */
+
+/* Fits m's subject to a ground-truth sample with its true head pose and
+ * gaze given and kept fixed (known_head, known_gaze), no mask, iteration
+ * cap iters (<= 0: 200), the default plateau stop. secs: wall time (may be
+ * NULL). GS_ERR_NONFINITE when the fit diverges. */
+int gs_eval_fit_sample(gs_model_ctx *c, gs_pool *pool,
+                       const gs_synth_sample *in, int iters, gs_subject *sub,
+                       double *secs, gs_error *err);
+
+/* A cached fit: 8 bytes of fit seconds (a native double), then the
+ * gs_subject_encode bytes. The file does not record the model or the fit
+ * options: a cache belongs to one model and one set of options. read:
+ * GS_ERR_IO when there is no such file, GS_ERR_FORMAT when it is bad. */
+int gs_eval_fit_cache_read(const char *path, gs_subject *sub, double *secs,
+                           gs_error *err);
+int gs_eval_fit_cache_write(const char *path, const gs_subject *sub,
+                            double secs, gs_error *err);
+
+/* ---- downstream: adapting a gaze estimator to a new person ---- */
+
+/* The paper's gaze-estimation experiment on synthetic heads (docs/eval.md
+ * "Downstream"). Per held-out identity: a pool of GS_EVAL_DS_POOL real
+ * (ground-truth) images, test images of the same person, and set_size
+ * redirected images made from real sample 1 by the model and by the warp
+ * baseline. For k = 1..max_k a copy of the estimator is fine-tuned on
+ *   REAL  the k real images,
+ *   OURS  the k real images + set_size - k model renders,
+ *   WARP  the k real images + set_size - k warped images,
+ * and its mean gaze angle against the true labels of the test images is
+ * measured. k = 0 is the estimator as given. */
+#define GS_EVAL_DS_POOL 9
+enum { GS_EVAL_DS_REAL = 0, GS_EVAL_DS_OURS = 1, GS_EVAL_DS_WARP = 2,
+       GS_EVAL_DS_CONDITIONS = 3 };
+/* "real", "real+ours", "real+warp"; "?" out of range. */
+const char *gs_eval_ds_condition_name(int c);
+
+typedef struct gs_eval_ds_options {
+    int test_images;       /* per identity (50) */
+    int set_size;          /* training set of the mixed conditions (200),
+                              > max_k */
+    int max_k;             /* 1..GS_EVAL_DS_POOL (9) */
+    int steps;             /* fine-tuning steps per run (60) */
+    int batch;             /* images per step (8) */
+    double lr;             /* Adam learning rate, constant (1e-4) */
+    double real_fraction;  /* mixed conditions: at least this share of each
+                              batch is real images (0.25), and never less
+                              than the real images' share k / set_size */
+    int fit_iters;         /* fit iteration cap (200) */
+    uint64_t seed;         /* scenes, targets and batch draws (1) */
+} gs_eval_ds_options;
+void gs_eval_ds_options_default(gs_eval_ds_options *o);
+/* GS_ERR_ARG with a message for options outside their ranges:
+ * test_images 1..100000, steps 1..1000000, batch 1..4096, lr in (0, 1],
+ * real_fraction in [0, 1], fit_iters 1..100000. */
+int gs_eval_ds_options_check(const gs_eval_ds_options *o, gs_error *err);
+
+/* Scene of sample `index` of test identity `identity` (the identity seed
+ * gs_synth_split_seed(GS_SYNTH_TEST, identity)): index 0..8 are the real
+ * pool (real sample 1 is index 0), GS_EVAL_DS_POOL + i test image i. A
+ * gs_synth_scene_random draw with gs_eval_ranges. */
+void gs_eval_ds_scene(uint64_t seed, int identity, int index,
+                      gs_synth_scene *s);
+/* Target gaze j (head frame, radians) of the redirected samples: uniform
+ * in the gaze ranges of gs_eval_ranges. */
+void gs_eval_ds_target(uint64_t seed, int identity, int j, double *pitch,
+                       double *yaw);
+
+typedef struct gs_eval_ds_result {
+    /* mean gaze angle on the test images, degrees; [0][c] = the estimator
+     * as given (the same for every c); rows k > max_k are NaN */
+    double err[GS_EVAL_DS_POOL + 1][GS_EVAL_DS_CONDITIONS];
+    double fit_s;          /* fit wall time (from the cache when reused) */
+    int fit_reused;
+    double fit_psnr;       /* the fit on real sample 1 */
+    long renders_incremental, renders_full; /* the model's renders */
+    double finetune_s;     /* mean wall time of one fine-tune */
+    int cache_write_failed;
+} gs_eval_ds_result;
+
+/* The whole experiment for one identity. est is not changed. fit_path:
+ * this identity's fit cache file (NULL: no cache); with reuse_fit the fit
+ * is read from it when there and valid, and every new fit is written to it
+ * (a failed write sets cache_write_failed, nothing else). pool may be
+ * NULL. Deterministic: every number but the times is the same for any
+ * thread count. */
+int gs_eval_downstream_identity(const gs_model *m, const gs_gaze_net *est,
+                                const gs_eval_ds_options *o, int identity,
+                                const char *fit_path, int reuse_fit,
+                                gs_pool *pool, gs_eval_ds_result *res,
+                                gs_error *err);
 
 #ifdef __cplusplus
 }

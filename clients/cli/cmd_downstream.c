@@ -1,0 +1,356 @@
+/* gazesplat eval-downstream: how much redirected images help a gaze
+ * estimator adapt to a new person (docs/eval.md "Downstream"). The
+ * experiment is lib/eval's gs_eval_downstream_identity; this file runs it
+ * over the identities and writes the CSV and the Markdown summary. */
+#define _POSIX_C_SOURCE 200809L /* clock_gettime */
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <time.h>
+
+#include "cli.h"
+#include "gazesplat/eval.h"
+#include "gazesplat/nn.h"
+
+static int run_downstream(int argc, char **argv);
+
+const cli_command cli_eval_downstream_command = {
+    "eval-downstream",
+    "fine-tune a gaze estimator with real + redirected images, error vs k",
+    "usage: gazesplat eval-downstream --model M --out DIR [options]\n"
+    "\n"
+    "Per held-out (test split) identity: 9 real images and --test-images\n"
+    "images of the same person; the model is fitted on real image 1 and\n"
+    "renders --set-size images at random gazes, the warp baseline warps\n"
+    "that image to the same gazes. For k = 1..--max-k a copy of the\n"
+    "estimator is fine-tuned on k real images alone, k real + the model's,\n"
+    "k real + the warp's (set of --set-size) and its mean gaze error\n"
+    "against the true labels of the test images is measured; k = 0 is the\n"
+    "estimator as given.\n"
+    "\n"
+    "  --model FILE        the redirection model\n"
+    "  --out DIR           writes DIR/downstream.csv, DIR/downstream.md and\n"
+    "                      DIR/fits/ (created if needed); plot with\n"
+    "                      bench/eval/downstream_plot.py DIR\n"
+    "  --estimator FILE    the estimator to fine-tune\n"
+    "                      (models/gaze-resnet.safetensors)\n"
+    "  --identities N      test identities 0..N-1 (15)\n"
+    "  --test-images N     test images per identity (50)\n"
+    "  --set-size N        real + redirected images per mixed set (200)\n"
+    "  --max-k N           largest k, 1..9 (9)\n"
+    "  --steps N           fine-tuning steps (60)\n"
+    "  --batch N           images per step (8)\n"
+    "  --lr X              Adam learning rate, constant (1e-4)\n"
+    "  --real-fraction X   mixed sets: real images fill at least this share\n"
+    "                      of each batch, and at least k/set-size (0.25)\n"
+    "  --iters N           fit iteration cap (200)\n"
+    "  --seed N            scenes, targets and batches (1)\n"
+    "  --threads N         worker threads (2); the numbers are the same for\n"
+    "                      any count, timings aside\n"
+    "  --reuse-fits        take each identity's fit from DIR/fits/ when\n"
+    "                      there (same model and --iters assumed)\n",
+    run_downstream,
+};
+
+enum {
+    O_MODEL, O_OUT, O_EST, O_IDS, O_TESTS, O_SET, O_MAXK, O_STEPS, O_BATCH,
+    O_LR, O_FRAC, O_ITERS, O_SEED, O_THREADS, O_REUSE, O_N
+};
+
+typedef struct ds_cli {
+    gs_eval_ds_options o;
+    int identities, threads, reuse;
+    const char *model, *est, *out;
+    char line[2048];          /* the command as run */
+} ds_cli;
+
+static double now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+static int make_dir(const char *path)
+{
+    struct stat st;
+    return mkdir(path, 0777) == 0 ||
+           (stat(path, &st) == 0 && S_ISDIR(st.st_mode));
+}
+
+/* An integer option in [lo, hi] into *v when given; -1 when bad. */
+static int opt_int(const cli_opt *o, long lo, long hi, int *v)
+{
+    long x;
+    if (!o->value)
+        return 0;
+    if (cli_parse_long(o->value, lo, hi, &x))
+        return -1;
+    *v = (int)x;
+    return 0;
+}
+
+static int opt_real(const cli_opt *o, double lo, double hi, int open_lo,
+                    double *v)
+{
+    float x;
+    if (!o->value)
+        return 0;
+    if (cli_parse_floats(o->value, &x, 1) || x > hi || x < lo ||
+        (open_lo && x == lo))
+        return -1;
+    *v = x;
+    return 0;
+}
+
+static int parse(const cli_opt *o, ds_cli *d)
+{
+    const cli_command *cmd = &cli_eval_downstream_command;
+    gs_eval_ds_options *p = &d->o;
+    long seed = 1;
+    if (!o[O_MODEL].value || !o[O_OUT].value)
+        return cli_usage_error(cmd, "--model and --out are needed");
+    if (opt_int(&o[O_IDS], 1, 100000, &d->identities))
+        return cli_usage_error(cmd, "--identities: want 1..100000");
+    if (opt_int(&o[O_TESTS], 1, 100000, &p->test_images))
+        return cli_usage_error(cmd, "--test-images: want 1..100000");
+    if (opt_int(&o[O_MAXK], 1, GS_EVAL_DS_POOL, &p->max_k))
+        return cli_usage_error(cmd, "--max-k: want 1..%d", GS_EVAL_DS_POOL);
+    if (opt_int(&o[O_SET], p->max_k + 1, 100000, &p->set_size))
+        return cli_usage_error(cmd, "--set-size: want %d..100000 (more "
+                               "than --max-k)", p->max_k + 1);
+    if (opt_int(&o[O_STEPS], 1, 1000000, &p->steps))
+        return cli_usage_error(cmd, "--steps: want 1..1000000");
+    if (opt_int(&o[O_BATCH], 1, 4096, &p->batch))
+        return cli_usage_error(cmd, "--batch: want 1..4096");
+    if (opt_real(&o[O_LR], 0, 1, 1, &p->lr))
+        return cli_usage_error(cmd, "--lr: want a number in (0, 1]");
+    if (opt_real(&o[O_FRAC], 0, 1, 0, &p->real_fraction))
+        return cli_usage_error(cmd, "--real-fraction: want 0..1");
+    if (opt_int(&o[O_ITERS], 1, 100000, &p->fit_iters))
+        return cli_usage_error(cmd, "--iters: want 1..100000");
+    if (o[O_SEED].value && cli_parse_long(o[O_SEED].value, 0, 4294967295L,
+                                          &seed))
+        return cli_usage_error(cmd, "--seed: want 0..4294967295");
+    p->seed = (uint64_t)seed;
+    if (opt_int(&o[O_THREADS], 1, 256, &d->threads))
+        return cli_usage_error(cmd, "--threads: want 1..256");
+    d->model = o[O_MODEL].value;
+    d->out = o[O_OUT].value;
+    if (o[O_EST].value)
+        d->est = o[O_EST].value;
+    d->reuse = o[O_REUSE].value != NULL;
+    return CLI_OK;
+}
+
+static void csv_rows(FILE *f, int id, const gs_eval_ds_result *r,
+                     int max_k)
+{
+    unsigned long long seed = gs_synth_split_seed(GS_SYNTH_TEST,
+                                                  (uint64_t)id);
+    for (int k = 0; k <= max_k; k++)
+        for (int c = 0; c < GS_EVAL_DS_CONDITIONS; c++)
+            fprintf(f, "%d,%llu,%d,%s,%.4f\n", id, seed, k,
+                    gs_eval_ds_condition_name(c), r->err[k][c]);
+}
+
+/* Mean over the identities that finished, per k and condition. */
+static void md_table(FILE *f, const gs_eval_ds_result *res, const int *ok,
+                     int n, int max_k)
+{
+    fputs("| k | real only | real + ours | real + warp |\n"
+          "|---:|---:|---:|---:|\n", f);
+    for (int k = 0; k <= max_k; k++) {
+        fprintf(f, "| %d", k);
+        for (int c = 0; c < GS_EVAL_DS_CONDITIONS; c++) {
+            double s = 0;
+            int m = 0;
+            for (int i = 0; i < n; i++)
+                if (ok[i])
+                    s += res[i].err[k][c], m++;
+            fprintf(f, " | %.2f", m ? s / m : NAN);
+        }
+        fputs(" |\n", f);
+    }
+}
+
+static void md_write(FILE *f, const ds_cli *d, const gs_eval_ds_result *res,
+                     const int *ok)
+{
+    const gs_eval_ds_options *o = &d->o;
+    int n = d->identities, done = 0, reused = 0;
+    double fit = 0, tune = 0, psnr = 0;
+    long inc = 0, full = 0;
+    for (int i = 0; i < n; i++)
+        if (ok[i]) {
+            done++, reused += res[i].fit_reused;
+            fit += res[i].fit_s, tune += res[i].finetune_s;
+            psnr += res[i].fit_psnr;
+            inc += res[i].renders_incremental, full += res[i].renders_full;
+        }
+    fprintf(f, "# Downstream: fine-tuning a gaze estimator with redirected "
+               "images\n\n```sh\n%s\n```\n\n", d->line);
+    fprintf(f, "Model `%s`, estimator `%s`. %d test identities (%d "
+               "finished), %d test images each, %d real images, sets of "
+               "%d, %d steps of batch %d at lr %g, real images at least "
+               "%.0f %% of each mixed batch, fit cap %d iterations, seed "
+               "%llu.\n\n",
+            d->model, d->est, n, done, o->test_images, GS_EVAL_DS_POOL,
+            o->set_size, o->steps, o->batch, o->lr, 100 * o->real_fraction,
+            o->fit_iters, (unsigned long long)o->seed);
+    fputs("Mean gaze angle (degrees) of the fine-tuned estimator against "
+          "the true labels of each identity's test images, mean over "
+          "identities; k = 0 is the estimator as given.\n\n", f);
+    md_table(f, res, ok, n, o->max_k);
+    if (done)
+        fprintf(f, "\nPer identity: fit %.1f s (mean, %d reused), fit PSNR "
+                   "%.2f dB; model renders %ld incremental, %ld full; one "
+                   "fine-tune %.2f s (mean, %d threads).\n",
+                fit / done, reused, psnr / done, inc, full, tune / done,
+                d->threads);
+    fprintf(f, "\nFailed identities: %d.\n", n - done);
+}
+
+static int write_md(const ds_cli *d, const gs_eval_ds_result *res,
+                    const int *ok)
+{
+    char path[4200];
+    snprintf(path, sizeof path, "%s/downstream.md", d->out);
+    FILE *f = fopen(path, "w");
+    if (!f)
+        return cli_fail(&cli_eval_downstream_command, "cannot write %s",
+                        path);
+    md_write(f, d, res, ok);
+    if (fclose(f))
+        return cli_fail(&cli_eval_downstream_command, "cannot write %s",
+                        path);
+    return CLI_OK;
+}
+
+/* Runs every identity, appending its rows to the CSV as it finishes. */
+static int run_all(const ds_cli *d, const gs_model *m, const gs_gaze_net *est,
+                   gs_pool *pool, FILE *csv, gs_eval_ds_result *res, int *ok)
+{
+    const cli_command *cmd = &cli_eval_downstream_command;
+    int failed = 0;
+    double t0 = now_s();
+    for (int i = 0; i < d->identities; i++) {
+        char fit[4300];
+        snprintf(fit, sizeof fit, "%s/fits/seed%llu_%05d.bin", d->out,
+                 (unsigned long long)d->o.seed, i);
+        gs_error err = {0, ""};
+        ok[i] = gs_eval_downstream_identity(m, est, &d->o, i, fit, d->reuse,
+                                            pool, &res[i], &err) == GS_OK;
+        if (!ok[i]) {
+            fprintf(stderr, "gazesplat eval-downstream: identity %d: %s\n",
+                    i, err.msg);
+            failed++;
+            continue;
+        }
+        if (res[i].cache_write_failed)
+            fprintf(stderr, "gazesplat eval-downstream: cannot write %s\n",
+                    fit);
+        csv_rows(csv, i, &res[i], d->o.max_k);
+        fflush(csv);
+        fprintf(stderr, "gazesplat eval-downstream: identity %d/%d: k=%d "
+                "real %.2f ours %.2f warp %.2f (k=0 %.2f), fit %.0f s, "
+                "%.2f s per fine-tune, %.0f s in all\n", i + 1,
+                d->identities, d->o.max_k, res[i].err[d->o.max_k][0],
+                res[i].err[d->o.max_k][1], res[i].err[d->o.max_k][2],
+                res[i].err[0][0], res[i].fit_s, res[i].finetune_s,
+                now_s() - t0);
+    }
+    return failed ? cli_fail(cmd, "%d of %d identities failed", failed,
+                             d->identities)
+                  : CLI_OK;
+}
+
+static int run_loaded(const ds_cli *d, const gs_model *m,
+                      const gs_gaze_net *est)
+{
+    const cli_command *cmd = &cli_eval_downstream_command;
+    char path[4200];
+    snprintf(path, sizeof path, "%s/downstream.csv", d->out);
+    FILE *csv = fopen(path, "w");
+    gs_eval_ds_result *res = calloc((size_t)d->identities, sizeof *res);
+    int *ok = calloc((size_t)d->identities, sizeof *ok);
+    gs_pool *pool = gs_pool_create(d->threads);
+    int rc = CLI_OK;
+    if (!csv)
+        rc = cli_fail(cmd, "cannot write %s", path);
+    else if (!res || !ok || !pool)
+        rc = cli_fail(cmd, "out of memory");
+    if (!rc) {
+        fputs("identity,identity_seed,k,condition,gaze_err_deg\n", csv);
+        rc = run_all(d, m, est, pool, csv, res, ok);
+    }
+    if (csv && fclose(csv) && !rc)
+        rc = cli_fail(cmd, "cannot write %s", path);
+    int md = res && ok ? write_md(d, res, ok) : CLI_FAIL;
+    if (!rc && !md)
+        printf("gazesplat eval-downstream: %d identities -> %s, "
+               "%s/downstream.md\n", d->identities, path, d->out);
+    gs_pool_destroy(pool);
+    free(res);
+    free(ok);
+    return rc ? rc : md;
+}
+
+static int run_checked(const ds_cli *d)
+{
+    const cli_command *cmd = &cli_eval_downstream_command;
+    char fits[4200];
+    snprintf(fits, sizeof fits, "%s/fits", d->out);
+    if (!make_dir(d->out) || !make_dir(fits))
+        return cli_fail(cmd, "cannot create %s", fits);
+    gs_nn_blas_set_threads(1); /* one image per thread (gaze.h) */
+    gs_error err = {0, ""};
+    gs_model *m = NULL;
+    gs_gaze_net *est = NULL;
+    int rc = CLI_OK;
+    if (gs_model_load(d->model, &m, &err))
+        rc = cli_fail(cmd, "%s: %s", d->model, err.msg);
+    else if (gs_gaze_net_load(d->est, &est, &err))
+        rc = cli_fail(cmd, "%s: %s", d->est, err.msg);
+    if (!rc)
+        rc = run_loaded(d, m, est);
+    gs_gaze_net_destroy(est);
+    gs_model_destroy(m);
+    return rc;
+}
+
+static int run_downstream(int argc, char **argv)
+{
+    const cli_command *cmd = &cli_eval_downstream_command;
+    cli_opt o[O_N] = {
+        {"--model", 1, NULL}, {"--out", 1, NULL}, {"--estimator", 1, NULL},
+        {"--identities", 1, NULL}, {"--test-images", 1, NULL},
+        {"--set-size", 1, NULL}, {"--max-k", 1, NULL},
+        {"--steps", 1, NULL}, {"--batch", 1, NULL}, {"--lr", 1, NULL},
+        {"--real-fraction", 1, NULL}, {"--iters", 1, NULL},
+        {"--seed", 1, NULL}, {"--threads", 1, NULL},
+        {"--reuse-fits", 0, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, O_N);
+    if (rc == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (rc != CLI_PARSED)
+        return rc;
+    ds_cli d;
+    memset(&d, 0, sizeof d);
+    gs_eval_ds_options_default(&d.o);
+    d.identities = 15;
+    d.threads = 2;
+    d.est = "models/gaze-resnet.safetensors";
+    rc = parse(o, &d);
+    if (rc)
+        return rc;
+    size_t n = (size_t)snprintf(d.line, sizeof d.line, "gazesplat");
+    for (int i = 0; i < argc && n < sizeof d.line; i++)
+        n += (size_t)snprintf(d.line + n, sizeof d.line - n, " %s", argv[i]);
+    return run_checked(&d);
+}

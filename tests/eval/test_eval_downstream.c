@@ -1,0 +1,299 @@
+/* gazesplat eval-downstream end to end on a tiny model (trained here for
+ * seconds) and a tiny untrained estimator: the CSV has every row with
+ * finite errors, k = 0 is the given estimator's error on the test images
+ * (recomputed here from the documented scenes), fine-tuning changes it,
+ * reruns give the same bytes (1 and 2 threads, fits reused), the summary
+ * and the plot are written, usage errors exit 2 and runtime failures 1.
+ * usage: test_eval_downstream GAZESPLAT PYTHON PLOT_SCRIPT */
+#define _POSIX_C_SOURCE 200809L /* posix_spawn, mkdtemp */
+
+#include <fcntl.h>
+#include <math.h>
+#include <spawn.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "gazesplat/eval.h"
+#include "gazesplat/gaze.h"
+#include "gazesplat/nn.h"
+#include "gazesplat/train.h"
+#include "gs_test.h"
+
+extern char **environ;
+
+static char dir[] = "downstream_test_XXXXXX";
+enum { IDS = 2, TESTS = 3, MAXK = 2 };
+
+/* Runs prog with args (NULL-terminated, args[0] the program), output to
+ * dir/log.txt; returns the exit code (-1 when killed). */
+static int spawn(const char *const *args)
+{
+    char logp[256];
+    snprintf(logp, sizeof logp, "%s/log.txt", dir);
+    posix_spawn_file_actions_t fa;
+    posix_spawn_file_actions_init(&fa);
+    posix_spawn_file_actions_addopen(&fa, 1, logp,
+                                     O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    posix_spawn_file_actions_adddup2(&fa, 1, 2);
+    pid_t pid;
+    int st = 0, status = -1;
+    if (posix_spawn(&pid, args[0], &fa, NULL, (char *const *)args,
+                    environ) == 0 &&
+        waitpid(pid, &st, 0) == pid && WIFEXITED(st))
+        status = WEXITSTATUS(st);
+    posix_spawn_file_actions_destroy(&fa);
+    if (status != 0) {
+        char buf[2048];
+        FILE *f = fopen(logp, "r");
+        size_t k = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
+        buf[k] = 0;
+        if (f)
+            fclose(f);
+        printf("%s: exit %d: %s", args[0], status, buf);
+    }
+    return status;
+}
+
+static char *slurp(const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return NULL;
+    char *buf = malloc(1 << 16);
+    size_t n = buf ? fread(buf, 1, (1 << 16) - 1, f) : 0;
+    if (buf)
+        buf[n] = 0;
+    fclose(f);
+    return buf;
+}
+
+static void train_tiny(const char *path)
+{
+    gs_nn_blas_set_threads(1);
+    gs_model_spec spec;
+    gs_model_spec_default(&spec);
+    spec.preset = "tiny";
+    spec.train_identities = 2;
+    gs_model *m = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
+    gs_train_options to;
+    gs_train_options_default(&to);
+    to.out_path = path;
+    to.steps = 2;
+    to.checkpoint_every = 0;
+    gs_train_report rep;
+    CHECK_MSG(gs_train(m, &to, NULL, &rep, &err) == GS_OK, "%s", err.msg);
+    gs_model_destroy(m);
+}
+
+/* The smallest estimator: its error is meaningless, its arithmetic is
+ * the shipped one's. */
+static void tiny_estimator(const char *path)
+{
+    gs_gaze_spec s = {GS_GAZE_RESNET, 32, {4, 4, 6, 6}, 8};
+    gs_gaze_net *net = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_gaze_net_create(&s, 3, &net, &err) == GS_OK);
+    CHECK_MSG(gs_gaze_net_save(net, path, &err) == GS_OK, "%s", err.msg);
+    gs_gaze_net_destroy(net);
+}
+
+/* k = 0 as documented: the estimator on test images POOL..POOL+TESTS-1 of
+ * the identity (seed 1), mean angle to the true normalized gaze. */
+static double k0_error(const char *model, const char *est, int identity)
+{
+    gs_model *m = NULL;
+    gs_gaze_net *net = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_model_load(model, &m, &err) == GS_OK);
+    CHECK(gs_gaze_net_load(est, &net, &err) == GS_OK);
+    if (!m || !net)
+        return NAN;
+    gs_model_info mi;
+    gs_model_get_info(m, &mi);
+    double sum = 0;
+    for (int t = 0; t < TESTS; t++) {
+        gs_synth_scene sc;
+        gs_synth_sample smp = {0};
+        float out[4];
+        gs_eval_ds_scene(1, identity, GS_EVAL_DS_POOL + t, &sc);
+        CHECK(gs_eval_render_scene(&sc, mi.image_size, mi.distance_mm,
+                                   mi.focal, NULL, &smp, &err) == GS_OK);
+        CHECK(gs_gaze_net_predict(net, NULL, smp.rgb, smp.width, smp.height,
+                                  smp.stride, out, &err) == GS_OK);
+        sum += gs_eval_angle_deg(out[0], out[1], smp.labels.gaze_norm_pitch,
+                                 smp.labels.gaze_norm_yaw);
+        gs_synth_sample_free(&smp);
+    }
+    gs_gaze_net_destroy(net);
+    gs_model_destroy(m);
+    return sum / TESTS;
+}
+
+/* Checks the CSV rows and returns its text. */
+static char *check_csv(const char *out, const double *k0)
+{
+    char path[320];
+    snprintf(path, sizeof path, "%s/downstream.csv", out);
+    char *text = slurp(path);
+    CHECK_MSG(text != NULL, "no %s", path);
+    if (!text)
+        return NULL;
+    const char *head = "identity,identity_seed,k,condition,gaze_err_deg\n";
+    CHECK_MSG(strncmp(text, head, strlen(head)) == 0, "header: %.60s", text);
+    int rows = 0, changed = 0;
+    const char *p = strchr(text, '\n');
+    while (p && p[1]) {
+        int id, k;
+        unsigned long long seed;
+        char cond[32];
+        double e;
+        CHECK_MSG(sscanf(p + 1, "%d,%llu,%d,%31[^,],%lf", &id, &seed, &k,
+                         cond, &e) == 5, "bad row %.40s", p + 1);
+        int expect_cond = rows % 3, expect_k = (rows / 3) % (MAXK + 1);
+        CHECK_EQ_INT(id, rows / (3 * (MAXK + 1)));
+        CHECK_EQ_INT(k, expect_k);
+        CHECK_MSG(strcmp(cond, gs_eval_ds_condition_name(expect_cond)) == 0,
+                  "row %d: %s", rows, cond);
+        CHECK(seed == gs_synth_split_seed(GS_SYNTH_TEST, (uint64_t)id));
+        CHECK_MSG(isfinite(e) && e >= 0 && e <= 180, "row %d: %g", rows, e);
+        if (k == 0 && id < IDS)
+            CHECK_MSG(fabs(e - k0[id]) <= 6e-5, "identity %d: k=0 %.6f, "
+                      "the estimator as given %.6f", id, e, k0[id]);
+        else if (id < IDS)
+            changed += fabs(e - k0[id]) > 1e-3;
+        rows++;
+        p = strchr(p + 1, '\n');
+    }
+    CHECK_EQ_INT(rows, IDS * (MAXK + 1) * 3);
+    CHECK_MSG(changed > 0, "fine-tuning changed no error");
+    return text;
+}
+
+static void usage_errors(const char *exe, const char *model, const char *est)
+{
+    const char *none[] = {exe, "eval-downstream", NULL};
+    CHECK_EQ_INT(spawn(none), 2);
+    const char *bad[][4] = {
+        {"--steps", "0"}, {"--max-k", "10"}, {"--max-k", "0"},
+        {"--set-size", "5"}, {"--real-fraction", "1.5"}, {"--lr", "0"},
+        {"--lr", "x"}, {"--identities", "0"}, {"--threads", "0"},
+        {"--test-images", "-1"}, {"--batch", "0"}, {"--iters", "0"},
+        {"--seed", "-2"}, {"--bogus", "1"}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        const char *a[] = {exe, "eval-downstream", "--model", model,
+                           "--estimator", est, "--out", dir, bad[i][0],
+                           bad[i][1], i == 3 ? "--max-k" : NULL, "9", NULL};
+        CHECK_MSG(spawn(a) == 2, "%s %s should be a usage error", bad[i][0],
+                  bad[i][1]);
+    }
+    const char *noout[] = {exe, "eval-downstream", "--model", model, NULL};
+    CHECK_EQ_INT(spawn(noout), 2);
+    const char *positional[] = {exe, "eval-downstream", "extra", NULL};
+    CHECK_EQ_INT(spawn(positional), 2);
+    char missing[256];
+    snprintf(missing, sizeof missing, "%s/missing.safetensors", dir);
+    const char *nomodel[] = {exe, "eval-downstream", "--model", missing,
+                             "--estimator", est, "--out", dir, NULL};
+    CHECK_EQ_INT(spawn(nomodel), 1);
+    const char *noest[] = {exe, "eval-downstream", "--model", model,
+                           "--estimator", missing, "--out", dir, NULL};
+    CHECK_EQ_INT(spawn(noest), 1);
+}
+
+static void fit_cache(const char *out)
+{
+    gs_subject s;
+    double secs = -1;
+    char path[320];
+    snprintf(path, sizeof path, "%s/fits/seed1_00001.bin", out);
+    CHECK(gs_eval_fit_cache_read(path, &s, &secs, NULL) == GS_OK);
+    CHECK(secs >= 0);
+    snprintf(path, sizeof path, "%s/fits/none.bin", out);
+    CHECK(gs_eval_fit_cache_read(path, &s, &secs, NULL) == GS_ERR_IO);
+    FILE *f = fopen(path, "wb");
+    CHECK(f && fwrite("12345678garbage", 1, 15, f) == 15 && fclose(f) == 0);
+    CHECK(gs_eval_fit_cache_read(path, &s, &secs, NULL) == GS_ERR_FORMAT);
+}
+
+static int run_ds(const char *exe, const char *model, const char *est,
+                  const char *out, const char *threads, int reuse)
+{
+    const char *a[] = {exe, "eval-downstream", "--model", model,
+                       "--estimator", est, "--out", out, "--identities", "2",
+                       "--test-images", "3", "--set-size", "10", "--max-k",
+                       "2", "--steps", "3", "--batch", "4", "--lr", "1e-3",
+                       "--iters", "2", "--threads", threads,
+                       reuse ? "--reuse-fits" : NULL, NULL};
+    return spawn(a);
+}
+
+int main(int argc, char **argv)
+{
+    if (argc != 4) {
+        fprintf(stderr, "usage: test_eval_downstream GAZESPLAT PYTHON "
+                        "PLOT_SCRIPT\n");
+        return 2;
+    }
+    const char *exe = argv[1];
+    CHECK(mkdtemp(dir) != NULL);
+    char model[256], est[256], out1[256], out2[256], md[320], png[320];
+    snprintf(model, sizeof model, "%s/tiny.safetensors", dir);
+    snprintf(est, sizeof est, "%s/est.safetensors", dir);
+    snprintf(out1, sizeof out1, "%s/run1", dir);
+    snprintf(out2, sizeof out2, "%s/run2", dir);
+    train_tiny(model);
+    tiny_estimator(est);
+    usage_errors(exe, model, est);
+
+    double k0[IDS];
+    for (int i = 0; i < IDS; i++)
+        k0[i] = k0_error(model, est, i);
+    CHECK_EQ_INT(run_ds(exe, model, est, out1, "2", 0), 0);
+    char *a = check_csv(out1, k0);
+    snprintf(md, sizeof md, "%s/downstream.md", out1);
+    char *sum = slurp(md);
+    if (!sum)
+        sum = strdup("(none)");
+    CHECK_MSG(strstr(sum, "| k | real only | real + ours | real + warp |") &&
+                  strstr(sum, "Failed identities: 0.") &&
+                  strstr(sum, "gazesplat eval-downstream --model") &&
+                  !strstr(sum, "nan"),
+              "summary:\n%s", sum);
+    free(sum);
+    fit_cache(out1);
+
+    /* Determinism: another thread count, then the fits reused. */
+    CHECK_EQ_INT(run_ds(exe, model, est, out2, "1", 0), 0);
+    char *b = check_csv(out2, k0);
+    CHECK_MSG(a && b && strcmp(a, b) == 0, "1 and 2 threads differ:\n%s\n"
+              "---\n%s", a, b);
+    free(b);
+    CHECK_EQ_INT(run_ds(exe, model, est, out2, "2", 1), 0);
+    b = check_csv(out2, k0);
+    CHECK_MSG(a && b && strcmp(a, b) == 0, "fits reused differ:\n%s", b);
+    snprintf(md, sizeof md, "%s/downstream.md", out2);
+    sum = slurp(md);
+    CHECK_MSG(sum && strstr(sum, "2 reused"), "%s", sum ? sum : "");
+    free(sum);
+    free(a);
+    free(b);
+
+    /* The plot script on the first run's CSV. */
+    const char *plot[] = {argv[2], argv[3], out1, NULL};
+    CHECK_EQ_INT(spawn(plot), 0);
+    snprintf(png, sizeof png, "%s/downstream.png", out1);
+    struct stat st;
+    CHECK_MSG(stat(png, &st) == 0 && st.st_size > 1000, "no plot %s", png);
+
+    char cmd[600];
+    snprintf(cmd, sizeof cmd, "rm -rf '%s'", dir);
+    if (gs_test_failures == 0 && system(cmd) != 0)
+        fprintf(stderr, "could not remove %s\n", dir);
+    GS_TEST_END();
+}
