@@ -123,6 +123,7 @@ def render_table(rows):
 
 def plot(runs, rows, path):
     import matplotlib
+    import matplotlib.ticker
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.5))
@@ -141,6 +142,8 @@ def plot(runs, rows, path):
         ax.annotate(f"{r['threads']}t", (r["render_ms"], r["psnr"]),
                     fontsize=6, xytext=(3, 2), textcoords="offset points")
     ax.set_xscale("log")
+    ax.xaxis.set_major_formatter(matplotlib.ticker.ScalarFormatter())
+    ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_xlabel("render time per image, ms (log)")
     ax.set_ylabel("PSNR against the ground-truth target, dB")
     ax.set_title("render settings (fits reused)")
