@@ -121,7 +121,7 @@ typedef struct evaluator {
     gs_model *m;
     gs_model_ctx *c;
     gs_model *pm;               /* pruned model (--prune), or NULL */
-    gs_model_ctx *rc;           /* renders the model method: c, or pm's */
+    gs_model_ctx *rctx;         /* renders the model method: c, or pm's */
     double prune_pct;           /* --prune P%: P; else 0 */
     long prune_k;               /* --prune K: K; else 0 */
     gs_model_render_options ro;
@@ -229,7 +229,7 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
         v.use_head = 1;
         memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
         memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
-        rc = gs_model_render(ev->rc, ev->pool, sub, &v, ev->out, st, err);
+        rc = gs_model_render(ev->rctx, ev->pool, sub, &v, ev->out, st, err);
     } else if (method == EVAL_WARP) {
         rc = gs_eval_warp_redirect(in, tscene->gaze_pitch, tscene->gaze_yaw,
                                    ev->out, st, err);
@@ -539,15 +539,15 @@ static int render_setup(evaluator *ev, eval_run_info *info)
         k = k < 1 ? 1 : k;
     }
     k = k > 0 && k < mi.n_face ? k : mi.n_face;
-    ev->rc = ev->c;
+    ev->rctx = ev->c;
     if (k < mi.n_face) {
         if (gs_model_prune(ev->m, ev->pool, (int)k, &ev->pm, &err))
             return cli_fail(cmd, "--prune: %s", err.msg);
-        ev->rc = gs_model_ctx_create(ev->pm);
-        if (!ev->rc)
+        ev->rctx = gs_model_ctx_create(ev->pm);
+        if (!ev->rctx)
             return cli_fail(cmd, "out of memory");
     }
-    if (gs_model_ctx_set_render_options(ev->rc, &ev->ro, &err))
+    if (gs_model_ctx_set_render_options(ev->rctx, &ev->ro, &err))
         return cli_usage_error(cmd, "--feature-scale: %s", err.msg);
     info->face_kept = (int)k;
     info->n_face = mi.n_face;
@@ -595,8 +595,8 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     if (!rc)
         rc = evaluate(ev, o, &ps, limit, info);
     gs_pool_destroy(ev->pool);
-    if (ev->rc != ev->c)
-        gs_model_ctx_destroy(ev->rc);
+    if (ev->rctx != ev->c)
+        gs_model_ctx_destroy(ev->rctx);
     gs_model_ctx_destroy(ev->c);
     gs_model_destroy(ev->pm);
     eval_estimator_free(ev->est);
