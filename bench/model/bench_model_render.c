@@ -4,10 +4,14 @@
  * reach), on the calling thread and on a gs_pool of 2 threads.
  *
  *   bench_model_render [--model FILE] [--reps N] [--quick] [--threads N]
- *                      [--only full|inc]
+ *                      [--only full|inc] [--prune K] [--feature-scale S]
  *
  * --threads N times pools of 1 and N threads (default 2); --only runs one
  * path (for a profiler: `perf record` or callgrind over the loop alone).
+ * --prune K renders with the K most important face Gaussians
+ * (gs_model_prune) and --feature-scale S with the feature map rasterized at
+ * S x its size (gs_model_ctx_set_render_options; below 1 the "incremental"
+ * column renders in full too), for the render side of the speed grid.
  * Without --model, a cpu-preset model as initialised (the timing does not
  * depend on training). A model
  * trained with BLOCK guidance renders in full either way; the bench then
@@ -102,7 +106,9 @@ static double pass(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
 int main(int argc, char **argv)
 {
     const char *path = NULL, *only = NULL;
-    int reps = 9, nthreads = 2;
+    int reps = 9, nthreads = 2, prune = 0;
+    gs_model_render_options ro;
+    gs_model_render_options_default(&ro);
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--model") && i + 1 < argc)
             path = argv[++i];
@@ -114,10 +120,15 @@ int main(int argc, char **argv)
             nthreads = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--only") && i + 1 < argc)
             only = argv[++i];
+        else if (!strcmp(argv[i], "--prune") && i + 1 < argc)
+            prune = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--feature-scale") && i + 1 < argc)
+            ro.feature_scale = atof(argv[++i]);
         else {
             fprintf(stderr, "usage: bench_model_render [--model FILE] "
                             "[--reps N] [--quick] [--threads N] "
-                            "[--only full|inc]\n");
+                            "[--only full|inc] [--prune K] "
+                            "[--feature-scale S]\n");
             return 2;
         }
     }
@@ -136,6 +147,13 @@ int main(int argc, char **argv)
         if (gs_model_new(&spec, 3, &m, &err))
             die("model", &err);
     }
+    if (prune > 0) {
+        gs_model *pm = NULL;
+        if (gs_model_prune(m, NULL, prune, &pm, &err))
+            die("prune", &err);
+        gs_model_destroy(m);
+        m = pm;
+    }
     gs_model_info info;
     gs_model_get_info(m, &info);
     int S = info.image_size;
@@ -151,6 +169,8 @@ int main(int argc, char **argv)
     gs_model_ctx *c = gs_model_ctx_create(m);
     if ((nthreads > 1 && !pool2) || !c)
         die("setup", NULL);
+    if (gs_model_ctx_set_render_options(c, &ro, &err))
+        die("--feature-scale", &err);
     int rep_no = 0;
     if (only) { /* one path on the calling thread, for a profiler */
         int full = !strcmp(only, "full");
@@ -171,6 +191,8 @@ int main(int argc, char **argv)
     int maxd = 0;
     for (int k = 0; k < NVIEW; k++) {
         gs_model_ctx *f = gs_model_ctx_create(m);
+        if (!f || gs_model_ctx_set_render_options(f, &ro, &err))
+            die("setup", &err);
         gs_view v = {0};
         v.gaze_pitch = (-20.0 + 10.0 * (k / GRID)) * BENCH_PI / 180;
         v.gaze_yaw = (-30.0 + 15.0 * (k % GRID)) * BENCH_PI / 180;
@@ -193,9 +215,9 @@ int main(int argc, char **argv)
         cpu[k] = median(u[k], reps);
     }
     printf("gs_model_render, %s, %d^2 features -> %d^2, %d + %d Gaussians, "
-           "%d x %d gaze grid, median of %d\n\n",
+           "feature scale %g, %d x %d gaze grid, median of %d\n\n",
            path ? path : "cpu preset, as initialised", info.feat_size, S,
-           info.n_face, info.n_eye, GRID, GRID, reps);
+           info.n_face, info.n_eye, ro.feature_scale, GRID, GRID, reps);
     printf("| threads | full ms/img | incremental ms/img | speed-up | "
            "incremental img/s | full CPU ms/img | incremental CPU ms/img | "
            "CPU speed-up | max 8-bit diff |\n"

@@ -26,6 +26,7 @@ const cli_command cli_eval_command = {
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
+    "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N]\n"
     "\n"
@@ -46,6 +47,14 @@ const cli_command cli_eval_command = {
     "                    estimator or method list costs no fitting\n"
     "  --save-images N   write the input, target and outputs of the first N\n"
     "                    pairs as DIR/images/PAIR_WHAT.png\n"
+    "  render settings of the model method (speed against error; the fit\n"
+    "  always runs the whole model, so fits can be reused across them):\n"
+    "  --prune K|P%      render with only the K (or P percent of the) most\n"
+    "                    important face Gaussians (gs_model_prune)\n"
+    "  --feature-scale S rasterize the feature map at S x its size, S in\n"
+    "                    (0, 1] (default 1), resampled for the renderer\n"
+    "  --full-render     every render from scratch (no incremental sweeps,\n"
+    "                    no cached face stream)\n"
     "  --make-pairs FILE write a pairing: --identities test identities\n"
     "                    (15) x --inputs scenes each (10) x --targets (10),\n"
     "                    --seed (1); deterministic\n",
@@ -54,7 +63,8 @@ const cli_command cli_eval_command = {
 
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
-    O_REUSE, O_SAVE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_N
+    O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_MAKE, O_IDS, O_INPUTS,
+    O_TARGETS, O_SEED, O_N
 };
 
 static double now_s(void)
@@ -110,6 +120,11 @@ static int make_pairs(const cli_opt *o)
 typedef struct evaluator {
     gs_model *m;
     gs_model_ctx *c;
+    gs_model *pm;               /* pruned model (--prune), or NULL */
+    gs_model_ctx *rctx;         /* renders the model method: c, or pm's */
+    double prune_pct;           /* --prune P%: P; else 0 */
+    long prune_k;               /* --prune K: K; else 0 */
+    gs_model_render_options ro;
     eval_estimator *est;
     gs_pool *pool;
     int S, iters;
@@ -214,7 +229,7 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
         v.use_head = 1;
         memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
         memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
-        rc = gs_model_render(ev->c, ev->pool, sub, &v, ev->out, st, err);
+        rc = gs_model_render(ev->rctx, ev->pool, sub, &v, ev->out, st, err);
     } else if (method == EVAL_WARP) {
         rc = gs_eval_warp_redirect(in, tscene->gaze_pitch, tscene->gaze_yaw,
                                    ev->out, st, err);
@@ -342,6 +357,25 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
     return GS_OK;
 }
 
+/* --prune K or P% */
+static int parse_prune(const char *s, evaluator *ev)
+{
+    size_t n = strlen(s);
+    if (n > 1 && s[n - 1] == '%') {
+        char num[64];
+        float p;
+        if (n > sizeof num)
+            return -1;
+        memcpy(num, s, n - 1);
+        num[n - 1] = '\0';
+        if (cli_parse_floats(num, &p, 1) || !(p > 0.0f && p <= 100.0f))
+            return -1;
+        ev->prune_pct = p;
+        return 0;
+    }
+    return cli_parse_long(s, 1, 100000000L, &ev->prune_k);
+}
+
 static int parse_methods(const char *s, evaluator *ev)
 {
     ev->nmethods = 0;
@@ -460,6 +494,37 @@ static int read_pairs(const char *path, gs_eval_pairs *ps)
     return CLI_OK;
 }
 
+/* The context that renders the model method: the fit's own, or one on
+ * the pruned model; then the render options. */
+static int render_setup(evaluator *ev, eval_run_info *info)
+{
+    const cli_command *cmd = &cli_eval_command;
+    gs_error err = {0, ""};
+    gs_model_info mi;
+    gs_model_get_info(ev->m, &mi);
+    long k = ev->prune_k;
+    if (ev->prune_pct > 0) {
+        k = lround(ev->prune_pct / 100.0 * mi.n_face);
+        k = k < 1 ? 1 : k;
+    }
+    k = k > 0 && k < mi.n_face ? k : mi.n_face;
+    ev->rctx = ev->c;
+    if (k < mi.n_face) {
+        if (gs_model_prune(ev->m, ev->pool, (int)k, &ev->pm, &err))
+            return cli_fail(cmd, "--prune: %s", err.msg);
+        ev->rctx = gs_model_ctx_create(ev->pm);
+        if (!ev->rctx)
+            return cli_fail(cmd, "out of memory");
+    }
+    if (gs_model_ctx_set_render_options(ev->rctx, &ev->ro, &err))
+        return cli_usage_error(cmd, "--feature-scale: %s", err.msg);
+    info->face_kept = (int)k;
+    info->n_face = mi.n_face;
+    info->feature_scale = ev->ro.feature_scale;
+    info->full_render = ev->ro.full;
+    return CLI_OK;
+}
+
 static int run_checked(const cli_opt *o, evaluator *ev, long limit,
                        long threads, eval_run_info *info)
 {
@@ -495,9 +560,14 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
             rc = cli_fail(cmd, "out of memory");
     }
     if (!rc)
+        rc = render_setup(ev, info);
+    if (!rc)
         rc = evaluate(ev, o, &ps, limit, info);
     gs_pool_destroy(ev->pool);
+    if (ev->rctx != ev->c)
+        gs_model_ctx_destroy(ev->rctx);
     gs_model_ctx_destroy(ev->c);
+    gs_model_destroy(ev->pm);
     eval_estimator_free(ev->est);
     gs_model_destroy(ev->m);
     gs_eval_pairs_free(&ps);
@@ -512,7 +582,8 @@ static int run_eval(int argc, char **argv)
         {"--estimator", 1, NULL}, {"--method", 1, NULL},
         {"--limit-inputs", 1, NULL}, {"--iters", 1, NULL},
         {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
-        {"--save-images", 1, NULL},
+        {"--save-images", 1, NULL}, {"--prune", 1, NULL},
+        {"--feature-scale", 1, NULL}, {"--full-render", 0, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}};
@@ -558,12 +629,25 @@ static int run_eval(int argc, char **argv)
     if (o[O_SAVE].value && cli_parse_long(o[O_SAVE].value, 0, 100000, &save))
         return cli_usage_error(cmd, "--save-images: want 0..100000");
     ev.save_images = (int)save;
+    if (o[O_PRUNE].value && parse_prune(o[O_PRUNE].value, &ev))
+        return cli_usage_error(cmd, "--prune: want a count K >= 1 or a "
+                               "percentage P%% in (0, 100]; got '%s'",
+                               o[O_PRUNE].value);
+    gs_model_render_options_default(&ev.ro);
+    float fscale = 1.0f;
+    if (o[O_FSCALE].value && (cli_parse_floats(o[O_FSCALE].value, &fscale, 1) ||
+                              !(fscale > 0.0f && fscale <= 1.0f)))
+        return cli_usage_error(cmd, "--feature-scale: want a number in "
+                               "(0, 1]; got '%s'", o[O_FSCALE].value);
+    ev.ro.feature_scale = fscale;
+    ev.ro.full = o[O_FULL].value != NULL;
     ev.iters = (int)iters;
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     char line[2048];
     command_line(argc, argv, line, sizeof line);
     eval_run_info info = {o[O_MODEL].value, o[O_EST].value, o[O_PAIRS].value,
-                          line, (int)threads, (int)iters, 0, 0, 0};
+                          line, (int)threads, (int)iters, 0, 0, 0,
+                          0, 0, 1.0, 0};
     return run_checked(o, &ev, limit, threads, &info);
 }

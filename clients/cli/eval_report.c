@@ -196,6 +196,14 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                "iterations cap %d; %d threads\n", info->model,
             info->image_size, info->pairs, info->inputs, info->iters,
             info->threads);
+    if (info->n_face > 0)
+        fprintf(f, "- model renders: %d of %d face Gaussians (%.0f %%), "
+                   "feature scale %.3g, %s\n", info->face_kept,
+                info->n_face, 100.0 * info->face_kept / info->n_face,
+                info->feature_scale,
+                info->full_render ? "every render from scratch "
+                                    "(--full-render)"
+                                  : "incremental where possible");
     if (info->fits_reused)
         fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
                    "their fit times are that run's\n", info->fits_reused);

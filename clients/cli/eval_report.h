@@ -32,6 +32,11 @@ typedef struct eval_run_info {
     const char *model, *estimator, *pairs, *command;
     int threads, iters, inputs, image_size;
     int fits_reused;      /* fits taken from an earlier run's DIR/fits */
+    /* render settings of the model method (--prune, --feature-scale,
+     * --full-render): face Gaussians kept of n_face, the scale, 0/1 */
+    int face_kept, n_face;
+    double feature_scale;
+    int full_render;
 } eval_run_info;
 
 void eval_csv_header(FILE *f);

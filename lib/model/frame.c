@@ -182,6 +182,7 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->k_opac = falloc(n, &fail);
     c->k_feat = falloc(n * c->C, &fail);
     c->sweep_n = GS_MODEL_SWEEP_CACHE_DEFAULT;
+    c->render_fs = c->face_map_fs = c->fs;
     int h0 = p->eye.dims[1], fd = c->F + c->D;
     c->eye_w0 = falloc((size_t)h0 * fd, &fail);
     c->eye_base = falloc(ne * h0, &fail);
@@ -501,25 +502,56 @@ static gs_gaussians gaussians_of(const gs_model_ctx *c, int first, int count)
     return g;
 }
 
-/* The face stream alone into c->fmap_face (the guidance source and the
- * face-only training render), unless it is current. */
-static int face_map(gs_model_ctx *c, gs_pool *pool, gs_error *err)
+/* Rasterizes g into out [C, fs, fs] at the feature size fsr: at fs
+ * directly; below, through a camera of the same view at fsr pixels into
+ * lo [C, fsr, fsr] (scratch), resampled bilinearly to fs. Only renders
+ * (no backward follows) ask for fsr < fs. */
+static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
+                     const gs_gaussians *g, int fsr, float *out, float *alpha,
+                     float *lo, gs_error *err)
 {
-    if (c->face_map_valid)
-        return GS_OK;
-    gs_gaussians g = gaussians_of(c, 0, c->nf);
     gs_camera cam;
     gs_frame_camera(c->m, c->fr.head_t, &cam);
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
-    int rc = gs_raster_forward(c->raster_face, pool, &cam, &g, c->bg, &ro,
-                               c->fmap_face, c->alpha_face, NULL, err);
-    if (!rc)
-        c->face_map_valid = 1;
+    if (fsr == c->fs)
+        return gs_raster_forward(r, pool, &cam, g, c->bg, &ro, out, alpha,
+                                 NULL, err);
+    float s = (float)fsr / (float)c->fs;
+    cam.fx *= s, cam.fy *= s;
+    cam.cx = cam.cy = 0.5f * (float)fsr;
+    cam.width = cam.height = fsr;
+    size_t plane = (size_t)fsr * fsr;
+    for (int k = 0; k < c->C; k++) /* the background is constant per channel */
+        for (size_t i = 0; i < plane; i++)
+            c->bg_crop[k * plane + i] = c->bg[(size_t)k * c->fs * c->fs];
+    int rc = gs_raster_forward(r, pool, &cam, g, c->bg_crop, &ro, lo, alpha,
+                               NULL, err);
+    if (!rc && gs_nn_resize_bilinear_forward(out, lo, c->C, fsr, fsr, c->fs,
+                                             c->fs))
+        rc = gs_error_set(err, GS_ERR_STATE, "model: feature resampling");
     return rc;
 }
 
-int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
-                     int stream, int force_face, gs_error *err)
+/* The face stream alone into c->fmap_face (the guidance source and the
+ * face-only training render) at feature size fsr, unless it is current. */
+static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, gs_error *err)
+{
+    if (c->face_map_valid && c->face_map_fs == fsr)
+        return GS_OK;
+    c->face_map_valid = 0;
+    gs_gaussians g = gaussians_of(c, 0, c->nf);
+    int rc = raster_at(c, c->raster_face, pool, &g, fsr, c->fmap_face,
+                       c->alpha_face, c->v_fmap_face, err);
+    if (!rc) {
+        c->face_map_valid = 1;
+        c->face_map_fs = fsr;
+    }
+    return rc;
+}
+
+/* gs_frame_forward with the feature map rasterized at fsr pixels. */
+static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                      int stream, int force_face, int fsr, gs_error *err)
 {
     if (force_face) /* training: the parameters change between calls */
         sweep_drop(c);
@@ -537,11 +569,8 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         count = c->ne;
     }
     gs_gaussians g = gaussians_of(c, first, count);
-    gs_camera cam;
-    gs_frame_camera(c->m, fr->head_t, &cam);
-    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
-    int rc = gs_raster_forward(c->raster, pool, &cam, &g, c->bg, &ro, c->fmap,
-                               c->alpha, NULL, err);
+    int rc = raster_at(c, c->raster, pool, &g, fsr, c->fmap, c->alpha,
+                       c->v_fmap, err);
     if (rc)
         return rc;
     /* the face-only map: the guidance source, or a training loss term */
@@ -549,13 +578,16 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->used_face_map = c->ne > 0 && stream == GS_STREAM_BOTH &&
                        (c->used_src || c->face_loss);
     if (c->used_face_map) {
-        rc = face_map(c, pool, err);
+        rc = face_map(c, pool, fsr, err);
         if (rc)
             return rc;
     }
     c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss;
     if (c->used_eye_map) { /* the eye stream alone, for its training loss */
         gs_gaussians ge = gaussians_of(c, c->nf, c->ne);
+        gs_camera cam;
+        gs_frame_camera(c->m, fr->head_t, &cam);
+        gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
         rc = gs_raster_forward(c->raster_eye, pool, &cam, &ge, c->bg, &ro,
                                c->fmap_eye, c->alpha_eye, NULL, err);
         if (rc)
@@ -568,6 +600,12 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     if (rc)
         return gs_error_set(err, rc, "model: renderer forward failed");
     return GS_OK;
+}
+
+int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                     int stream, int force_face, gs_error *err)
+{
+    return forward_at(c, pool, fr, stream, force_face, c->fs, err);
 }
 
 /* ---- incremental renders ---- */
@@ -938,6 +976,30 @@ int gs_model_ctx_set_sweep_cache(gs_model_ctx *c, int n, gs_error *err)
     return GS_OK;
 }
 
+void gs_model_render_options_default(gs_model_render_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->feature_scale = 1.0;
+}
+
+int gs_model_ctx_set_render_options(gs_model_ctx *c,
+                                    const gs_model_render_options *o,
+                                    gs_error *err)
+{
+    if (!c || !o)
+        return gs_error_set(err, GS_ERR_ARG, "render options: NULL argument");
+    double s = o->feature_scale;
+    long fsr = s > 0 && s <= 1 ? lround(s * c->fs) : 0;
+    if (fsr < 4 || fsr > c->fs)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "feature scale %g: want (0, 1] and at least 4 "
+                            "of the %d feature pixels", s, c->fs);
+    sweep_drop(c); /* kept renders were made with the old settings */
+    c->render_fs = (int)fsr;
+    c->render_full = o->full != 0;
+    return GS_OK;
+}
+
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st)
 {
     memset(st, 0, sizeof *st);
@@ -1024,8 +1086,12 @@ int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->last_inc = 0;
     if (incremental)
         *incremental = 0;
-    if (!c->inc_ok) {
-        rc = gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
+    /* Without incremental renders: the model does not allow them, the
+     * feature map is rasterized at another size than the crops would be,
+     * or every render starts from scratch (face stream included). */
+    if (!c->inc_ok || c->render_fs != c->fs || c->render_full) {
+        rc = forward_at(c, pool, fr, GS_STREAM_BOTH, c->render_full,
+                        c->render_fs, err);
         c->n_full += rc == GS_OK;
         return rc;
     }

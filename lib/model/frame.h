@@ -105,6 +105,11 @@ struct gs_model_ctx {
     int sweep_n;                      /* subjects kept, the live one too */
     uint64_t sweep_clock;
     uint64_t n_full, n_inc;           /* renders by path */
+    /* gs_model_render_options: the feature size renders rasterize at
+     * (fs: the normal path) and whether every render starts from scratch */
+    int render_fs;
+    int render_full;
+    int face_map_fs;                  /* the size fmap_face was made at */
     int last_inc;
     float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */
     float *v_fmap, *v_rgb;

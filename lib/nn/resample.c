@@ -102,6 +102,51 @@ int gs_nn_upsample2x_forward(float *out, const float *in, int C, int H, int W)
     return GS_OK;
 }
 
+/* Taps of output index o of n_out along an axis of n input samples for
+ * any ratio, as PyTorch's bilinear interpolate(size=...) with
+ * align_corners=False computes them in float: scale = n / n_out. With
+ * n_out = 2n these are taps2x's exactly. */
+static taps taps_any(int o, int n, float scale)
+{
+    taps t;
+    float src = scale * ((float)o + 0.5f) - 0.5f;
+    if (src < 0.0f)
+        src = 0.0f;
+    t.i0 = (int)src;
+    if (t.i0 > n - 1)
+        t.i0 = n - 1;
+    t.i1 = t.i0 + (t.i0 < n - 1 ? 1 : 0);
+    t.l1 = src - (float)t.i0;
+    t.l0 = 1.0f - t.l1;
+    return t;
+}
+
+/* out[C,OH,OW] = bilinear resize of in[C,H,W], align_corners=False */
+int gs_nn_resize_bilinear_forward(float *out, const float *in, int C, int H,
+                                  int W, int OH, int OW)
+{
+    if (!out || !in || C < 1 || H < 1 || W < 1 || OH < 1 || OW < 1 ||
+        (long long)C * OH * OW > INT_MAX || (long long)C * H * W > INT_MAX)
+        return GS_ERR_ARG;
+    float sy = (float)H / (float)OH, sx = (float)W / (float)OW;
+    for (int c = 0; c < C; c++) {
+        const float *src = in + (size_t)c * H * W;
+        float *dst = out + (size_t)c * OH * OW;
+        for (int oy = 0; oy < OH; oy++) {
+            taps ty = taps_any(oy, H, sy);
+            const float *r0 = src + (size_t)ty.i0 * (size_t)W;
+            const float *r1 = src + (size_t)ty.i1 * (size_t)W;
+            float *d = dst + (size_t)oy * (size_t)OW;
+            for (int ox = 0; ox < OW; ox++) {
+                taps tx = taps_any(ox, W, sx);
+                d[ox] = ty.l0 * (tx.l0 * r0[tx.i0] + tx.l1 * r0[tx.i1]) +
+                        ty.l1 * (tx.l0 * r1[tx.i0] + tx.l1 * r1[tx.i1]);
+            }
+        }
+    }
+    return GS_OK;
+}
+
 /* dinp[C,H,W] += the adjoint of the forward interpolation applied to
  * dout[C,2H,2W] */
 int gs_nn_upsample2x_backward(float *dinp, const float *dout, int C, int H,

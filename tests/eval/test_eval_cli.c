@@ -176,6 +176,26 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK_EQ_INT(run(ids0), 2);
     const char *positional[] = {"eval", "extra", NULL};
     CHECK_EQ_INT(run(positional), 2);
+    /* Render settings: --prune K or P%, --feature-scale in (0, 1]. */
+    const char *bad_render[][2] = {
+        {"--prune", "0"},          {"--prune", "0%"},
+        {"--prune", "150%"},       {"--prune", "many"},
+        {"--prune", "%"},          {"--feature-scale", "0"},
+        {"--feature-scale", "1.5"}, {"--feature-scale", "half"},
+        {"--feature-scale", "nan"},
+        {"--feature-scale", "0.1"}}; /* 3 of the tiny model's 32 px */
+    for (size_t k = 0; k < sizeof bad_render / sizeof bad_render[0]; k++) {
+        const char *args[] = {"eval", "--model", model, "--pairs", pairs,
+                              "--out", dir, bad_render[k][0],
+                              bad_render[k][1], "--limit-inputs", "1",
+                              "--iters", "1", NULL};
+        int code = run(args);
+        CHECK_MSG(code == 2, "%s %s: exit %d", bad_render[k][0],
+                  bad_render[k][1], code);
+    }
+    const char *full_arg[] = {"eval", "--model", model, "--pairs", pairs,
+                              "--out", dir, "--full-render", "yes", NULL};
+    CHECK_EQ_INT(run(full_arg), 2);
     /* Runtime failures exit 1. */
     char missing[256];
     snprintf(missing, sizeof missing, "%s/missing.csv", dir);
@@ -258,6 +278,32 @@ int main(int argc, char **argv)
     snprintf(md, sizeof md, "%s/summary.md", out2);
     sum = slurp(md);
     CHECK_MSG(sum && strstr(sum, "2 fits reused"), "%s", sum ? sum : "");
+    /* Render settings on run 2's fits: 100 % and scale 1 are the normal
+     * path (same numbers); pruned, coarse and full renders stay finite. */
+    const char *ev4[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", "--prune", "100%",
+                         "--feature-scale", "1", NULL};
+    CHECK_EQ_INT(run(ev4), 0);
+    c = check_csv(csv);
+    CHECK_MSG(a && c && strcmp(a, c) == 0, "100 %% / 1.0 differs:\n%s", c);
+    free(c);
+    const char *ev5[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "1", "--estimator",
+                         est, "--reuse-fits", "--prune", "10%",
+                         "--feature-scale", "0.5", "--full-render", NULL};
+    CHECK_EQ_INT(run(ev5), 0);
+    c = check_csv(csv);
+    CHECK_MSG(a && c && strcmp(a, c) != 0, "pruned renders are the same");
+    free(c);
+    free(sum);
+    sum = slurp(md);
+    CHECK_MSG(sum && strstr(sum, "face Gaussians (10 %), feature scale "
+                                 "0.5, every render from scratch") &&
+                  strstr(sum, "non-finite outputs 0"),
+              "%s", sum ? sum : "");
     free(a);
     free(b);
     free(sum);

@@ -123,6 +123,46 @@ typedef struct gs_model_ctx_stats {
 } gs_model_ctx_stats;
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st);
 
+/* ---- speed against quality at render time (docs/model.md) ---- */
+
+/* Settings of a context's gs_model_render; fitting and training through the
+ * same context always run the model as it is. */
+typedef struct gs_model_render_options {
+    /* Rasterize the feature map at round(feature_scale * feat_size) pixels
+     * and resample it bilinearly (align_corners = False) to feat_size for
+     * the renderer. (0, 1]; 1 is the normal path, bit for bit. Below 1
+     * every render is a full one (the incremental path works at the
+     * model's resolution). */
+    double feature_scale;
+    /* 1: every render from scratch: no incremental sweep, no cached face
+     * stream (what a render costs with nothing to reuse). */
+    int full;
+} gs_model_render_options;
+void gs_model_render_options_default(gs_model_render_options *o);
+/* Takes effect from the next render; drops the context's kept renders.
+ * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */
+int gs_model_ctx_set_render_options(gs_model_ctx *c,
+                                    const gs_model_render_options *o,
+                                    gs_error *err);
+
+/* Importance of each face-stream Gaussian: its accumulated blending
+ * weight sum_p T_p alpha_p (the share of the feature map it supplies),
+ * summed over GS_MODEL_PRUNE_VIEWS normalized views of the mean code with
+ * the eyes in place (head yaw -30, 0, 30 deg x pitch -15, 0, 15 deg, gaze
+ * ahead). out: info.n_face values. pool may be NULL; the values are the
+ * same for any thread count. */
+#define GS_MODEL_PRUNE_VIEWS 9
+int gs_model_face_importance(const gs_model *m, gs_pool *pool, double *out,
+                             gs_error *err);
+
+/* A new model with only the keep_face most important face Gaussians
+ * (gs_model_face_importance; ties by index), kept in their original
+ * order, and the whole eye stream; everything else is copied. keep_face
+ * >= n_face gives an exact copy (same renders, bit for bit). Subjects
+ * fitted with m render with the pruned model. keep_face < 1: GS_ERR_ARG. */
+int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
+                   gs_model **out, gs_error *err);
+
 /* ---- fitting a new face ---- */
 typedef struct gs_fit_options {
     int max_iters;       /* <= 0: default 200 */

@@ -142,6 +142,13 @@ int gs_nn_pixel_shuffle_backward(float *dinp, const float *dout, int C, int H,
 int gs_nn_upsample2x_forward(float *out, const float *in, int C, int H, int W);
 int gs_nn_upsample2x_backward(float *dinp, const float *dout, int C, int H,
                               int W);
+/* Bilinear resize to any size, PyTorch interpolate(size=(OH, OW),
+ * mode='bilinear', align_corners=False): in[C,H,W] -> out[C,OH,OW].
+ * Along each axis src = (n / n_out) (o + 0.5) - 0.5 in float, clamped below
+ * at 0, with the taps above; OH = 2H gives gs_nn_upsample2x_forward's
+ * values exactly. Forward only (render-time feature resampling). */
+int gs_nn_resize_bilinear_forward(float *out, const float *in, int C, int H,
+                                  int W, int OH, int OW);
 
 /* Fixed blur [1,2,1] x [1,2,1] / 16 per channel, reflect border (PyTorch
  * pad mode 'reflect': index -1 reads 1, index n reads n - 2), so H, W >= 2.
