@@ -335,7 +335,7 @@ typedef struct {
 
 /* Room for one more record in arena a, growing it up to cap records;
  * returns 0 when there is none (the tile is then not recorded). */
-static int rec_room(gs_rec_arena *a, size_t cap)
+static __attribute__((noinline)) int rec_room(gs_rec_arena *a, size_t cap)
 {
     if (a->n < a->cap)
         return 1;
@@ -406,6 +406,11 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
     gs_rec_arena *ar = r->arenas + worker;
     size_t rec0 = ar->n;
     int rec = ti.e - ti.s < GS_REC_MAX_PAIRS;
+    /* The arena's fields in locals: through ar they would be reloaded after
+     * every store to the tile's buffers. */
+    size_t rn = ar->n, rcap = ar->cap;
+    uint32_t *rhdr = ar->hdr;
+    float *rvis = ar->vis;
 
     float *scratch = (float *)r->scratch + (size_t)worker * ctx->per_worker;
     vf *acc = (vf *)scratch; /* TPIX x nv */
@@ -475,12 +480,16 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
                 unsigned bits = (unsigned)mask_bits(valid);
                 contributions += (size_t)__builtin_popcount(bits);
                 if (bits && rec) {
-                    if (rec_room(ar, ctx->rec_cap)) {
-                        ar->hdr[ar->n] = (k - ti.s) << GS_REC_PAIR_SHIFT | (uint32_t)v << 8 | bits;
-                        memcpy(ar->vis + ar->n * L, &ge.vis, sizeof ge.vis);
-                        ar->n++;
-                    } else
-                        rec = 0;
+                    if (rn == rcap) {
+                        ar->n = rn;
+                        rec = rec_room(ar, ctx->rec_cap);
+                        rcap = ar->cap, rhdr = ar->hdr, rvis = ar->vis;
+                    }
+                    if (rec) {
+                        rhdr[rn] = (k - ti.s) << GS_REC_PAIR_SHIFT | (uint32_t)v << 8 | bits;
+                        memcpy(rvis + rn * L, &ge.vis, sizeof ge.vis);
+                        rn++;
+                    }
                 }
                 vf w = vsel(valid, ge.alpha * T, splat(0.0f));
                 st.T[v] = vsel(valid, next_T, T);
@@ -501,9 +510,8 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
     gs_tile_rec *tr = r->tile_rec + tile;
     tr->worker = (uint32_t)worker;
     tr->off = rec0;
-    tr->n = rec ? (uint32_t)(ar->n - rec0) : GS_REC_NONE;
-    if (!rec)
-        ar->n = rec0;
+    tr->n = rec ? (uint32_t)(rn - rec0) : GS_REC_NONE;
+    ar->n = rec ? rn : rec0;
     write_tile(ctx, &ti, acc, &st, nv);
 }
 
