@@ -791,6 +791,44 @@ static inline vi lanes_of(unsigned bits)
     return (one & ((vi){0} + (int32_t)bits)) != 0;
 }
 
+/* The gradients of one pair from its records (hdr: group << 8 | lanes,
+ * vis: 8 exponentials each), in the forward's group order. The pair's
+ * sums live in locals here: through bp they could alias the tile buffers. */
+static inline __attribute__((always_inline)) void
+pair_grad_nv(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, const uint32_t *hdr,
+             const float *vis, size_t nrec, const int nv)
+{
+    bwd_pair p = *bp;
+    for (size_t e = 0; e < nrec; e++) {
+        int v = (int)(hdr[e] >> 8 & 31);
+        float dy = p.my - ((float)(v / GROUPS) + 0.5f);
+        group_eval ge;
+        ge.dx = splat(p.mx - (float)(v % GROUPS * L)) - lane_centre;
+        memcpy(&ge.vis, vis + e * L, sizeof ge.vis);
+        ge.alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(p.op) * ge.vis);
+        group_grad(&p, st, buf, vpix, v, dy, &ge, lanes_of(hdr[e] & 0xff), nv);
+    }
+    *bp = p;
+}
+
+/* One out-of-line copy for both ways of finding the records, so that the
+ * compiler cannot round them differently (fused multiply-adds). */
+static __attribute__((noinline)) void pair_grad(bwd_pair *bp, const bwd_state *st, vf *buf,
+                                                const vf *vpix, const uint32_t *hdr,
+                                                const float *vis, size_t nrec, int nv)
+{
+    switch (nv) {
+    case 1: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 1); break;
+    case 2: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 2); break;
+    case 3: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 3); break;
+    case 4: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 4); break;
+    case 5: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 5); break;
+    case 6: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 6); break;
+    case 7: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 7); break;
+    default: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, MAX_NV); break;
+    }
+}
+
 /* Pairs [ti.s, ti.e) back to front, replaying the forward's records of the
  * tile: only the groups where a pixel took part, with their exponentials. */
 static inline __attribute__((always_inline)) void
@@ -820,22 +858,15 @@ replay_pairs(bwd_ctx *ctx, const tile_info *ti, const gs_tile_rec *tr, const bwd
         uint32_t i = r->isect[k];
         bwd_pair bp;
         pair_begin(&bp, r, r->splats + i, ti, i, nv);
-        for (size_t e = beg; e < end; e++) {
-            int v = (int)(hdr[e] >> 8 & 31);
-            float dy = bp.my - ((float)(v / GROUPS) + 0.5f);
-            group_eval ge;
-            ge.dx = splat(bp.mx - (float)(v % GROUPS * L)) - lane_centre;
-            memcpy(&ge.vis, vis + e * L, sizeof ge.vis);
-            ge.alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(bp.op) * ge.vis);
-            group_grad(&bp, st, buf, vpix, v, dy, &ge, lanes_of(hdr[e] & 0xff), nv);
-        }
+        pair_grad(&bp, st, buf, vpix, hdr + beg, vis + beg * L, end - beg, nv);
         pair_end(&bp, slot, C, nv);
         end = beg;
     }
 }
 
-/* The same for a tile without records: every pair's window evaluated again
- * (the forward's alphas, recomputed by the same code). */
+/* The same for a tile without records: each pair's window is evaluated
+ * again (the forward's code, so the same groups and exponentials) into
+ * records of the pair, which then take the replay's way. */
 static inline __attribute__((always_inline)) void
 evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, const vf *vpix,
                const int nv)
@@ -843,6 +874,8 @@ evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, 
     gs_raster *r = ctx->r;
     const int C = r->g.channels;
     const size_t stride = GS_SLOT_HEAD + (size_t)C;
+    uint32_t hdr[TPIX / L];
+    float vis[TPIX] __attribute__((aligned(32)));
     for (uint32_t k = ti->e; k-- > ti->s && k + PREFETCH_AHEAD >= ti->e;)
         prefetch_pair(r, k, ti->s, ti->e);
     for (uint32_t k = ti->e; k-- > ti->s;) {
@@ -854,31 +887,35 @@ evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, 
         int r0, r1, g0, g1;
         if (!splat_window(sp, ti, &r0, &r1, &g0, &g1))
             continue;
-        bwd_pair bp;
-        pair_begin(&bp, r, sp, ti, i, nv);
+        float mx = sp->mx - (float)ti->x0, my = sp->my - (float)ti->y0;
         vi pos = (vi){0} + (int32_t)(k - ti->s);
-        int touched = 0;
+        size_t nrec = 0;
         for (int row = r0; row <= r1; row++) {
-            float dy = bp.my - ((float)row + 0.5f);
+            float dy = my - ((float)row + 0.5f);
             for (int gi = g0; gi <= g1; gi++) {
                 int v = row * GROUPS + gi;
                 vi before_last = pos < st->last[v];
                 if (!any(before_last))
                     continue; /* behind every pixel's last contributor */
                 group_eval ge;
-                if (!group_sigma(&ge, bp.mx, dy, bp.q[0], bp.q[1], bp.q[2], bp.thr,
-                                 (float)(gi * L), before_last))
+                if (!group_sigma(&ge, mx, dy, sp->a, sp->b, sp->c, sp->thr, (float)(gi * L),
+                                 before_last))
                     continue;
-                group_alpha(&ge, bp.op);
-                vi valid = ge.ok & before_last;
-                if (!any(valid))
+                group_alpha(&ge, sp->op);
+                unsigned bits = (unsigned)mask_bits(ge.ok & before_last);
+                if (!bits)
                     continue;
-                touched = 1;
-                group_grad(&bp, st, buf, vpix, v, dy, &ge, valid, nv);
+                hdr[nrec] = (uint32_t)v << 8 | bits;
+                memcpy(vis + nrec * L, &ge.vis, sizeof ge.vis);
+                nrec++;
             }
         }
-        if (touched)
-            pair_end(&bp, slot, C, nv);
+        if (!nrec)
+            continue;
+        bwd_pair bp;
+        pair_begin(&bp, r, sp, ti, i, nv);
+        pair_grad(&bp, st, buf, vpix, hdr, vis, nrec, nv);
+        pair_end(&bp, slot, C, nv);
     }
 }
 
