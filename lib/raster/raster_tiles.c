@@ -705,13 +705,13 @@ typedef struct {
 } bwd_pair;
 
 static inline __attribute__((always_inline)) void
-pair_begin(bwd_pair *bp, const gs_raster *r, const gs_splat *sp, const tile_info *ti, uint32_t i,
+pair_begin(bwd_pair *bp, const gs_splat *sp, const float *f, int C, float x0, float y0,
            const int nv)
 {
     bp->q[0] = sp->a, bp->q[1] = sp->b, bp->q[2] = sp->c;
-    bp->mx = sp->mx - (float)ti->x0, bp->my = sp->my - (float)ti->y0;
+    bp->mx = sp->mx - x0, bp->my = sp->my - y0;
     bp->op = sp->op, bp->z = sp->z, bp->thr = sp->thr;
-    load_features(r->g.features + (size_t)i * (size_t)r->g.channels, r->g.channels, nv, bp->fv);
+    load_features(f, C, nv, bp->fv);
     for (int c = 0; c < nv; c++)
         bp->pf[c] = splat(0.0f);
     for (int h = 0; h < GS_SLOT_HEAD; h++)
@@ -791,14 +791,18 @@ static inline vi lanes_of(unsigned bits)
     return (one & ((vi){0} + (int32_t)bits)) != 0;
 }
 
-/* The gradients of one pair from its records (hdr: group << 8 | lanes,
- * vis: 8 exponentials each), in the forward's group order. The pair's
- * sums live in locals here: through bp they could alias the tile buffers. */
+/* The gradients of pair sp (features f) from its records (hdr: group << 8
+ * | lanes, vis: 8 exponentials each), in the forward's group order, into
+ * its slot. Everything of the pair lives in locals: through pointers it
+ * could alias the tile buffers and be reloaded at every store. */
 static inline __attribute__((always_inline)) void
-pair_grad_nv(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, const uint32_t *hdr,
-             const float *vis, size_t nrec, const int nv)
+pair_grad_nv(const gs_splat *sp, const float *f, int C, float x0, float y0,
+             const bwd_state *state, vf *buf, const vf *vpix, const uint32_t *hdr,
+             const float *vis, size_t nrec, float *slot, const int nv)
 {
-    bwd_pair p = *bp;
+    bwd_pair p;
+    bwd_state st = *state;
+    pair_begin(&p, sp, f, C, x0, y0, nv);
     for (size_t e = 0; e < nrec; e++) {
         int v = (int)(hdr[e] >> 8 & 31);
         float dy = p.my - ((float)(v / GROUPS) + 0.5f);
@@ -806,27 +810,30 @@ pair_grad_nv(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, const u
         ge.dx = splat(p.mx - (float)(v % GROUPS * L)) - lane_centre;
         memcpy(&ge.vis, vis + e * L, sizeof ge.vis);
         ge.alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(p.op) * ge.vis);
-        group_grad(&p, st, buf, vpix, v, dy, &ge, lanes_of(hdr[e] & 0xff), nv);
+        group_grad(&p, &st, buf, vpix, v, dy, &ge, lanes_of(hdr[e] & 0xff), nv);
     }
-    *bp = p;
+    pair_end(&p, slot, C, nv);
 }
 
 /* One out-of-line copy for both ways of finding the records, so that the
  * compiler cannot round them differently (fused multiply-adds). */
-static __attribute__((noinline)) void pair_grad(bwd_pair *bp, const bwd_state *st, vf *buf,
-                                                const vf *vpix, const uint32_t *hdr,
-                                                const float *vis, size_t nrec, int nv)
+static __attribute__((noinline)) void
+pair_grad(const gs_splat *sp, const float *f, int C, float x0, float y0, const bwd_state *st,
+          vf *buf, const vf *vpix, const uint32_t *hdr, const float *vis, size_t nrec,
+          float *slot, int nv)
 {
+#define PAIR_GRAD(n) pair_grad_nv(sp, f, C, x0, y0, st, buf, vpix, hdr, vis, nrec, slot, n)
     switch (nv) {
-    case 1: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 1); break;
-    case 2: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 2); break;
-    case 3: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 3); break;
-    case 4: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 4); break;
-    case 5: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 5); break;
-    case 6: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 6); break;
-    case 7: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, 7); break;
-    default: pair_grad_nv(bp, st, buf, vpix, hdr, vis, nrec, MAX_NV); break;
+    case 1: PAIR_GRAD(1); break;
+    case 2: PAIR_GRAD(2); break;
+    case 3: PAIR_GRAD(3); break;
+    case 4: PAIR_GRAD(4); break;
+    case 5: PAIR_GRAD(5); break;
+    case 6: PAIR_GRAD(6); break;
+    case 7: PAIR_GRAD(7); break;
+    default: PAIR_GRAD(MAX_NV); break;
     }
+#undef PAIR_GRAD
 }
 
 /* Pairs [ti.s, ti.e) back to front, replaying the forward's records of the
@@ -856,10 +863,8 @@ replay_pairs(bwd_ctx *ctx, const tile_info *ti, const gs_tile_rec *tr, const bwd
             continue;
         }
         uint32_t i = r->isect[k];
-        bwd_pair bp;
-        pair_begin(&bp, r, r->splats + i, ti, i, nv);
-        pair_grad(&bp, st, buf, vpix, hdr + beg, vis + beg * L, end - beg, nv);
-        pair_end(&bp, slot, C, nv);
+        pair_grad(r->splats + i, r->g.features + (size_t)i * (size_t)C, C, (float)ti->x0,
+                  (float)ti->y0, st, buf, vpix, hdr + beg, vis + beg * L, end - beg, slot, nv);
         end = beg;
     }
 }
@@ -912,10 +917,8 @@ evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, 
         }
         if (!nrec)
             continue;
-        bwd_pair bp;
-        pair_begin(&bp, r, sp, ti, i, nv);
-        pair_grad(&bp, st, buf, vpix, hdr, vis, nrec, nv);
-        pair_end(&bp, slot, C, nv);
+        pair_grad(sp, r->g.features + (size_t)i * (size_t)C, C, (float)ti->x0, (float)ti->y0,
+                  st, buf, vpix, hdr, vis, nrec, slot, nv);
     }
 }
 
