@@ -806,10 +806,14 @@ pair_grad_nv(const gs_splat *sp, const float *f, int C, float x0, float y0,
     for (size_t e = 0; e < nrec; e++) {
         int v = (int)(hdr[e] >> 8 & 31);
         float dy = p.my - ((float)(v / GROUPS) + 0.5f);
-        group_eval ge;
-        ge.dx = splat(p.mx - (float)(v % GROUPS * L)) - lane_centre;
-        memcpy(&ge.vis, vis + e * L, sizeof ge.vis);
-        ge.alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(p.op) * ge.vis);
+        vf ex;
+        memcpy(&ex, vis + e * L, sizeof ex);
+        /* sigma and ok are not needed here (the lanes are known) */
+        group_eval ge = {.dx = splat(p.mx - (float)(v % GROUPS * L)) - lane_centre,
+                         .sigma = splat(0.0f),
+                         .vis = ex,
+                         .alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(p.op) * ex),
+                         .ok = {0}};
         group_grad(&p, &st, buf, vpix, v, dy, &ge, lanes_of(hdr[e] & 0xff), nv);
     }
     pair_end(&p, slot, C, nv);
