@@ -80,6 +80,12 @@ void gs_raster_destroy(gs_raster *r)
     free(r->last);
     free(r->slots);
     free(r->scratch);
+    for (int w = 0; w < r->n_arenas; w++) {
+        free(r->arenas[w].hdr);
+        free(r->arenas[w].vis);
+    }
+    free(r->arenas);
+    free(r->tile_rec);
     free(r);
 }
 
@@ -834,6 +840,8 @@ static void gather_task(void *vctx, int task, int worker)
     gs_proj_grad *G = &r->pgrad;
     for (uint32_t k = r->tile_off[c->t0]; k < r->tile_off[c->t1]; k++) {
         const float *s = r->slots + (k - c->slot0) * stride;
+        if (s[GS_SLOT_HEAD - 1] == 0.0f)
+            continue; /* the pair changed no pixel */
         size_t i = r->isect[k];
         if (task > 0) {
             add_row(c->v_features + i * C + c0, s + GS_SLOT_HEAD + c0, n);

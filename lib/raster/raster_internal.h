@@ -40,8 +40,33 @@ typedef struct gs_proj_grad {
 
 /* Gradients per (tile, Gaussian) intersection in the fast backward, so that
  * sums never depend on thread scheduling: mean2d 2, conic 3, opacity 1,
- * depth 1, pad 1, then C feature values. */
+ * depth 1, then 1 when the pair changed a pixel (0: the rest is unset and
+ * the gather skips it), then C feature values. */
 #define GS_SLOT_HEAD 8
+
+/* The forward's record of what each tile composited, replayed by the fast
+ * backward instead of evaluating the Gaussians again: one record per
+ * (Gaussian, 8-pixel group) pair with at least one contributing pixel.
+ * Each worker appends the records of the tiles it composites to its own
+ * arena; a tile whose records do not fit (GS_RASTER_REC_BUDGET) or whose
+ * list is too long to encode is evaluated again by the backward, with the
+ * same results. */
+typedef struct gs_rec_arena {
+    uint32_t *hdr; /* per record: pair in the tile's list << 13 | group << 8 | lanes */
+    float *vis;    /* per record: exp(-sigma) of the group's 8 pixels */
+    size_t n, cap;
+} gs_rec_arena;
+
+/* Bytes of records kept per forward, all workers together (36 per record). */
+#define GS_RASTER_REC_BUDGET ((size_t)64 << 20)
+#define GS_REC_PAIR_SHIFT 13
+#define GS_REC_MAX_PAIRS ((uint32_t)1 << (32 - GS_REC_PAIR_SHIFT))
+#define GS_REC_NONE UINT32_MAX
+
+typedef struct gs_tile_rec {
+    uint32_t worker, n; /* n: GS_REC_NONE when the tile was not recorded */
+    size_t off;         /* first record in the worker's arena */
+} gs_tile_rec;
 
 struct gs_raster {
     int have_forward;
@@ -85,6 +110,12 @@ struct gs_raster {
 
     float *slots;         /* fast backward scratch */
     size_t cap_slots;
+
+    gs_rec_arena *arenas; /* one per worker of the last fast forward */
+    int n_arenas;
+    gs_tile_rec *tile_rec; /* per tile */
+    size_t cap_tile_rec;
+    size_t rec_budget;    /* bytes of records in all; 0: GS_RASTER_REC_BUDGET */
 
     int visible;
     size_t contributions;

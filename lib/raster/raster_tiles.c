@@ -329,8 +329,31 @@ typedef struct {
     const float *bg;
     float *out_f, *out_alpha, *out_depth;
     size_t per_worker; /* floats of scratch per worker */
+    size_t rec_cap;    /* records per worker arena at most */
     _Atomic size_t contributions; /* integer sum: order-independent */
 } fwd_ctx;
+
+/* Room for one more record in arena a, growing it up to cap records;
+ * returns 0 when there is none (the tile is then not recorded). */
+static __attribute__((noinline)) int rec_room(gs_rec_arena *a, size_t cap)
+{
+    if (a->n < a->cap)
+        return 1;
+    size_t want = a->cap ? 2 * a->cap : 4096;
+    want = want < cap ? want : cap;
+    if (want <= a->n)
+        return 0;
+    uint32_t *h = realloc(a->hdr, want * sizeof *h);
+    if (!h)
+        return 0;
+    a->hdr = h;
+    float *v = realloc(a->vis, want * L * sizeof *v);
+    if (!v)
+        return 0;
+    a->vis = v;
+    a->cap = want;
+    return 1;
+}
 
 /* Group vectors of a tile's pixel state, each TPIX / L long. */
 typedef struct {
@@ -378,7 +401,16 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
 {
     gs_raster *r = ctx->r;
     const int C = r->g.channels;
-    tile_info ti = get_tile(r, (int)r->tile_order[t]);
+    int tile = (int)r->tile_order[t];
+    tile_info ti = get_tile(r, tile);
+    gs_rec_arena *ar = r->arenas + worker;
+    size_t rec0 = ar->n;
+    int rec = ti.e - ti.s < GS_REC_MAX_PAIRS;
+    /* The arena's fields in locals: through ar they would be reloaded after
+     * every store to the tile's buffers. */
+    size_t rn = ar->n, rcap = ar->cap;
+    uint32_t *rhdr = ar->hdr;
+    float *rvis = ar->vis;
 
     float *scratch = (float *)r->scratch + (size_t)worker * ctx->per_worker;
     vf *acc = (vf *)scratch; /* TPIX x nv */
@@ -447,6 +479,18 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
                 }
                 unsigned bits = (unsigned)mask_bits(valid);
                 contributions += (size_t)__builtin_popcount(bits);
+                if (bits && rec) {
+                    if (rn == rcap) {
+                        ar->n = rn;
+                        rec = rec_room(ar, ctx->rec_cap);
+                        rcap = ar->cap, rhdr = ar->hdr, rvis = ar->vis;
+                    }
+                    if (rec) {
+                        rhdr[rn] = (k - ti.s) << GS_REC_PAIR_SHIFT | (uint32_t)v << 8 | bits;
+                        memcpy(rvis + rn * L, &ge.vis, sizeof ge.vis);
+                        rn++;
+                    }
+                }
                 vf w = vsel(valid, ge.alpha * T, splat(0.0f));
                 st.T[v] = vsel(valid, next_T, T);
                 st.last[v] = vseli(valid, pos, st.last[v]);
@@ -463,6 +507,11 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
     }
 
     atomic_fetch_add_explicit(&ctx->contributions, contributions, memory_order_relaxed);
+    gs_tile_rec *tr = r->tile_rec + tile;
+    tr->worker = (uint32_t)worker;
+    tr->off = rec0;
+    tr->n = rec ? (uint32_t)(rn - rec0) : GS_REC_NONE;
+    ar->n = rec ? rn : rec0;
     write_tile(ctx, &ti, acc, &st, nv);
 }
 
@@ -552,6 +601,27 @@ static int order_tiles(gs_raster *r, int t0, int t1)
     return GS_OK;
 }
 
+/* Per-tile record entries and one empty arena per worker (arenas keep their
+ * memory across calls). */
+static int reserve_records(gs_raster *r, gs_pool *pool, int ntiles)
+{
+    if (gs_raster_reserve((void **)&r->tile_rec, &r->cap_tile_rec,
+                          (size_t)(ntiles ? ntiles : 1), sizeof(gs_tile_rec)))
+        return GS_ERR_NOMEM;
+    int threads = gs_pool_threads(pool);
+    if (threads > r->n_arenas) {
+        gs_rec_arena *a = realloc(r->arenas, (size_t)threads * sizeof *a);
+        if (!a)
+            return GS_ERR_NOMEM;
+        memset(a + r->n_arenas, 0, (size_t)(threads - r->n_arenas) * sizeof *a);
+        r->arenas = a;
+        r->n_arenas = threads;
+    }
+    for (int w = 0; w < r->n_arenas; w++)
+        r->arenas[w].n = 0;
+    return GS_OK;
+}
+
 static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out_f,
                         float *out_alpha, float *out_depth)
 {
@@ -559,9 +629,12 @@ static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out
     if (reserve_scratch(r, pool, per))
         return GS_ERR_NOMEM;
     int ntiles = r->tiles_x * r->tiles_y;
-    if (order_tiles(r, 0, ntiles))
+    if (order_tiles(r, 0, ntiles) || reserve_records(r, pool, ntiles))
         return GS_ERR_NOMEM;
-    fwd_ctx ctx = {r, bg, out_f, out_alpha, out_depth, per, 0};
+    int threads = gs_pool_threads(pool);
+    size_t budget = r->rec_budget ? r->rec_budget : GS_RASTER_REC_BUDGET;
+    size_t rec_cap = budget / (sizeof(uint32_t) + L * sizeof(float)) / (size_t)threads;
+    fwd_ctx ctx = {r, bg, out_f, out_alpha, out_depth, per, rec_cap, 0};
     gs_pool_for(pool, ntiles, tile_forward, &ctx);
     r->contributions = atomic_load(&ctx.contributions);
     return GS_OK;
@@ -624,14 +697,242 @@ load_tile(bwd_ctx *ctx, const tile_info *ti, vf *vpix, const bwd_state *st, cons
         }
 }
 
+/* What one (tile, Gaussian) pair of the backward works with. */
+typedef struct {
+    vf fv[MAX_NV], pf[MAX_NV]; /* features; their gradient */
+    vf part[GS_SLOT_HEAD];     /* partial sums of the slot's head */
+    float q[3], mx, my, op, z, thr;
+} bwd_pair;
+
 static inline __attribute__((always_inline)) void
-tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
+pair_begin(bwd_pair *bp, const gs_splat *sp, const float *f, int C, float x0, float y0,
+           const int nv)
+{
+    bp->q[0] = sp->a, bp->q[1] = sp->b, bp->q[2] = sp->c;
+    bp->mx = sp->mx - x0, bp->my = sp->my - y0;
+    bp->op = sp->op, bp->z = sp->z, bp->thr = sp->thr;
+    load_features(f, C, nv, bp->fv);
+    for (int c = 0; c < nv; c++)
+        bp->pf[c] = splat(0.0f);
+    for (int h = 0; h < GS_SLOT_HEAD; h++)
+        bp->part[h] = splat(0.0f);
+}
+
+/* The pair's slot: the head's sums, a 1 in its last element (the gather
+ * skips slots without it), the feature gradient. */
+static inline __attribute__((always_inline)) void
+pair_end(const bwd_pair *bp, float *slot, int C, const int nv)
+{
+    for (int h = 0; h < GS_SLOT_HEAD - 1; h++)
+        slot[h] = hsum(bp->part[h]);
+    slot[GS_SLOT_HEAD - 1] = 1.0f;
+    for (int c = 0; c < nv; c++)
+        store_n(slot + GS_SLOT_HEAD + c * L, bp->pf[c], C - c * L < L ? C - c * L : L);
+}
+
+/* Gradients of one group v (row dy) whose pixels in valid took part, with
+ * ge's dx, vis and alpha: undoes the group's step of the forward in the
+ * pixel state, adds into the pair's sums. */
+static inline __attribute__((always_inline)) void
+group_grad(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, int v, float dy,
+           const group_eval *ge, vi valid, const int nv)
+{
+    const float *q = bp->q;
+    vf *pf = bp->pf, *part = bp->part;
+    const vf *fv = bp->fv;
+    vf ra = splat(1.0f) / vmax(splat(1.0f) - ge->alpha, splat(GS_RASTER_ONE_MINUS_ALPHA_FLOOR));
+    ra = vsel(valid, ra, splat(1.0f));
+    vf T = st->T[v] * ra;
+    st->T[v] = T;
+    vf fac = vsel(valid, ge->alpha * T, splat(0.0f));
+    /* Channels of each contributing pixel: the feature part of the alpha
+     * gradient, the running sums behind it and the Gaussian's feature
+     * gradient. */
+    lanes Tl = {T}, ral = {ra}, facl = {fac}, val = {splat(0.0f)};
+    unsigned bits = (unsigned)mask_bits(valid);
+    while (bits) {
+        int j = __builtin_ctz(bits);
+        bits &= bits - 1;
+        size_t p = ((size_t)v * L + (size_t)j) * (size_t)nv;
+        vf facj = splat(facl.f[j]), sf = splat(0.0f), sb = splat(0.0f);
+        switch (nv) {
+        default: BWD_BLOCK(7); /* fallthrough */
+        case 7: BWD_BLOCK(6); /* fallthrough */
+        case 6: BWD_BLOCK(5); /* fallthrough */
+        case 5: BWD_BLOCK(4); /* fallthrough */
+        case 4: BWD_BLOCK(3); /* fallthrough */
+        case 3: BWD_BLOCK(2); /* fallthrough */
+        case 2: BWD_BLOCK(1); /* fallthrough */
+        case 1: BWD_BLOCK(0);
+        }
+        /* sum_ch (f T - buf ra) v_pix */
+        val.f[j] = hsum(splat(Tl.f[j]) * sf - splat(ral.f[j]) * sb);
+    }
+    vf z = splat(bp->z);
+    vf va = val.v + st->tfin[v] * ra * st->vres[v] + st->vdep[v] * (z * T - st->bufd[v] * ra);
+    st->bufd[v] += z * fac;
+    part[6] += fac * st->vdep[v];
+    vi grad_ok = valid & (splat(bp->op) * ge->vis <= splat(GS_RASTER_MAX_ALPHA));
+    va = vsel(grad_ok, va, splat(0.0f));
+    vf vsig = -ge->alpha * va;
+    vf dx = ge->dx, vdy = splat(dy);
+    part[0] += vsig * (splat(q[0]) * dx + splat(q[1] * dy));
+    part[1] += vsig * (splat(q[1]) * dx + splat(q[2] * dy));
+    part[2] += splat(0.5f) * vsig * dx * dx;
+    part[3] += vsig * dx * vdy;
+    part[4] += splat(0.5f) * vsig * vdy * vdy;
+    part[5] += ge->vis * va;
+}
+
+/* Lane masks from the bits of a record. */
+static inline vi lanes_of(unsigned bits)
+{
+    const vi one = {1, 2, 4, 8, 16, 32, 64, 128};
+    return (one & ((vi){0} + (int32_t)bits)) != 0;
+}
+
+/* The gradients of pair sp (features f) from its records (hdr: group << 8
+ * | lanes, vis: 8 exponentials each), in the forward's group order, into
+ * its slot. Everything of the pair lives in locals: through pointers it
+ * could alias the tile buffers and be reloaded at every store. */
+static inline __attribute__((always_inline)) void
+pair_grad_nv(const gs_splat *sp, const float *f, int C, float x0, float y0,
+             const bwd_state *state, vf *buf, const vf *vpix, const uint32_t *hdr,
+             const float *vis, size_t nrec, float *slot, const int nv)
+{
+    bwd_pair p;
+    bwd_state st = *state;
+    pair_begin(&p, sp, f, C, x0, y0, nv);
+    for (size_t e = 0; e < nrec; e++) {
+        int v = (int)(hdr[e] >> 8 & 31);
+        float dy = p.my - ((float)(v / GROUPS) + 0.5f);
+        vf ex;
+        memcpy(&ex, vis + e * L, sizeof ex);
+        /* sigma and ok are not needed here (the lanes are known) */
+        group_eval ge = {.dx = splat(p.mx - (float)(v % GROUPS * L)) - lane_centre,
+                         .sigma = splat(0.0f),
+                         .vis = ex,
+                         .alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(p.op) * ex),
+                         .ok = {0}};
+        group_grad(&p, &st, buf, vpix, v, dy, &ge, lanes_of(hdr[e] & 0xff), nv);
+    }
+    pair_end(&p, slot, C, nv);
+}
+
+/* One out-of-line copy for both ways of finding the records, so that the
+ * compiler cannot round them differently (fused multiply-adds). */
+static __attribute__((noinline)) void
+pair_grad(const gs_splat *sp, const float *f, int C, float x0, float y0, const bwd_state *st,
+          vf *buf, const vf *vpix, const uint32_t *hdr, const float *vis, size_t nrec,
+          float *slot, int nv)
+{
+#define PAIR_GRAD(n) pair_grad_nv(sp, f, C, x0, y0, st, buf, vpix, hdr, vis, nrec, slot, n)
+    switch (nv) {
+    case 1: PAIR_GRAD(1); break;
+    case 2: PAIR_GRAD(2); break;
+    case 3: PAIR_GRAD(3); break;
+    case 4: PAIR_GRAD(4); break;
+    case 5: PAIR_GRAD(5); break;
+    case 6: PAIR_GRAD(6); break;
+    case 7: PAIR_GRAD(7); break;
+    default: PAIR_GRAD(MAX_NV); break;
+    }
+#undef PAIR_GRAD
+}
+
+/* Pairs [ti.s, ti.e) back to front, replaying the forward's records of the
+ * tile: only the groups where a pixel took part, with their exponentials. */
+static inline __attribute__((always_inline)) void
+replay_pairs(bwd_ctx *ctx, const tile_info *ti, const gs_tile_rec *tr, const bwd_state *st,
+             vf *buf, const vf *vpix, const int nv)
 {
     gs_raster *r = ctx->r;
     const int C = r->g.channels;
     const size_t stride = GS_SLOT_HEAD + (size_t)C;
+    const gs_rec_arena *ar = r->arenas + tr->worker;
+    const uint32_t *hdr = ar->hdr + tr->off;
+    const float *vis = ar->vis + tr->off * L;
+    size_t end = tr->n;
+    for (uint32_t k = ti->e; k-- > ti->s && k + PREFETCH_AHEAD >= ti->e;)
+        prefetch_pair(r, k, ti->s, ti->e);
+    for (uint32_t k = ti->e; k-- > ti->s;) {
+        prefetch_pair(r, k - PREFETCH_AHEAD, ti->s, ti->e);
+        float *slot = r->slots + (k - ctx->slot0) * stride;
+        uint32_t pl = k - ti->s;
+        size_t beg = end;
+        while (beg > 0 && hdr[beg - 1] >> GS_REC_PAIR_SHIFT == pl)
+            beg--;
+        if (beg == end) {
+            slot[GS_SLOT_HEAD - 1] = 0.0f; /* untouched */
+            continue;
+        }
+        uint32_t i = r->isect[k];
+        pair_grad(r->splats + i, r->g.features + (size_t)i * (size_t)C, C, (float)ti->x0,
+                  (float)ti->y0, st, buf, vpix, hdr + beg, vis + beg * L, end - beg, slot, nv);
+        end = beg;
+    }
+}
+
+/* The same for a tile without records: each pair's window is evaluated
+ * again (the forward's code, so the same groups and exponentials) into
+ * records of the pair, which then take the replay's way. */
+static inline __attribute__((always_inline)) void
+evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, const vf *vpix,
+               const int nv)
+{
+    gs_raster *r = ctx->r;
+    const int C = r->g.channels;
+    const size_t stride = GS_SLOT_HEAD + (size_t)C;
+    uint32_t hdr[TPIX / L];
+    float vis[TPIX] __attribute__((aligned(32)));
+    for (uint32_t k = ti->e; k-- > ti->s && k + PREFETCH_AHEAD >= ti->e;)
+        prefetch_pair(r, k, ti->s, ti->e);
+    for (uint32_t k = ti->e; k-- > ti->s;) {
+        prefetch_pair(r, k - PREFETCH_AHEAD, ti->s, ti->e);
+        uint32_t i = r->isect[k];
+        const gs_splat *sp = r->splats + i;
+        float *slot = r->slots + (k - ctx->slot0) * stride;
+        slot[GS_SLOT_HEAD - 1] = 0.0f;
+        int r0, r1, g0, g1;
+        if (!splat_window(sp, ti, &r0, &r1, &g0, &g1))
+            continue;
+        float mx = sp->mx - (float)ti->x0, my = sp->my - (float)ti->y0;
+        vi pos = (vi){0} + (int32_t)(k - ti->s);
+        size_t nrec = 0;
+        for (int row = r0; row <= r1; row++) {
+            float dy = my - ((float)row + 0.5f);
+            for (int gi = g0; gi <= g1; gi++) {
+                int v = row * GROUPS + gi;
+                vi before_last = pos < st->last[v];
+                if (!any(before_last))
+                    continue; /* behind every pixel's last contributor */
+                group_eval ge;
+                if (!group_sigma(&ge, mx, dy, sp->a, sp->b, sp->c, sp->thr, (float)(gi * L),
+                                 before_last))
+                    continue;
+                group_alpha(&ge, sp->op);
+                unsigned bits = (unsigned)mask_bits(ge.ok & before_last);
+                if (!bits)
+                    continue;
+                hdr[nrec] = (uint32_t)v << 8 | bits;
+                memcpy(vis + nrec * L, &ge.vis, sizeof ge.vis);
+                nrec++;
+            }
+        }
+        if (!nrec)
+            continue;
+        pair_grad(sp, r->g.features + (size_t)i * (size_t)C, C, (float)ti->x0, (float)ti->y0,
+                  st, buf, vpix, hdr, vis, nrec, slot, nv);
+    }
+}
+
+static inline __attribute__((always_inline)) void
+tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
+{
+    gs_raster *r = ctx->r;
     const int NV = TPIX / L;
-    tile_info ti = get_tile(r, (int)r->tile_order[task]);
+    int tile = (int)r->tile_order[task];
+    tile_info ti = get_tile(r, tile);
 
     vf *buf = (vf *)((float *)r->scratch + (size_t)worker * ctx->per_worker); /* TPIX x nv */
     vf *vpix = buf + (size_t)nv * TPIX;                                       /* TPIX x nv */
@@ -642,7 +943,6 @@ tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
     st.vdep = st.vres + NV;
     st.bufd = st.vdep + NV;
     st.last = (void *)(st.bufd + NV);
-    vf *part = (void *)(st.last + NV); /* GS_SLOT_HEAD partial sums */
 
     /* vpix needs no clearing: load_tile fills every pixel of the image and
      * pixels outside it are never valid (their last contributor is 0). */
@@ -652,97 +952,11 @@ tile_backward_nv(bwd_ctx *ctx, int task, int worker, const int nv)
         st.last[v] = (vi){0};
     }
     load_tile(ctx, &ti, vpix, &st, nv);
-
-    for (uint32_t k = ti.e; k-- > ti.s && k + PREFETCH_AHEAD >= ti.e;)
-        prefetch_pair(r, k, ti.s, ti.e);
-    for (uint32_t k = ti.e; k-- > ti.s;) {
-        prefetch_pair(r, k - PREFETCH_AHEAD, ti.s, ti.e);
-        uint32_t i = r->isect[k];
-        const gs_splat *sp = r->splats + i;
-        float *slot = r->slots + (k - ctx->slot0) * stride;
-        memset(slot, 0, stride * sizeof(float));
-        int r0, r1, g0, g1;
-        if (!splat_window(sp, &ti, &r0, &r1, &g0, &g1))
-            continue;
-        const float q[3] = {sp->a, sp->b, sp->c};
-        float mx = sp->mx - (float)ti.x0, op = sp->op, z = sp->z, thr = sp->thr;
-        float my = sp->my - (float)ti.y0;
-        vf fv[MAX_NV], pf[MAX_NV];
-        load_features(r->g.features + (size_t)i * C, C, nv, fv);
-        for (int c = 0; c < nv; c++)
-            pf[c] = splat(0.0f);
-        vi pos = (vi){0} + (int32_t)(k - ti.s);
-        int touched = 0;
-        for (int h = 0; h < GS_SLOT_HEAD; h++)
-            part[h] = splat(0.0f);
-        for (int row = r0; row <= r1; row++) {
-            float dy = my - ((float)row + 0.5f);
-            for (int gi = g0; gi <= g1; gi++) {
-                int v = row * GROUPS + gi;
-                vi before_last = pos < st.last[v];
-                if (!any(before_last))
-                    continue; /* behind every pixel's last contributor */
-                group_eval ge;
-                if (!group_sigma(&ge, mx, dy, q[0], q[1], q[2], thr, (float)(gi * L),
-                                 before_last))
-                    continue;
-                group_alpha(&ge, op);
-                vi valid = ge.ok & before_last;
-                if (!any(valid))
-                    continue;
-                touched = 1;
-                vf ra = splat(1.0f) /
-                        vmax(splat(1.0f) - ge.alpha, splat(GS_RASTER_ONE_MINUS_ALPHA_FLOOR));
-                ra = vsel(valid, ra, splat(1.0f));
-                vf T = st.T[v] * ra;
-                st.T[v] = T;
-                vf fac = vsel(valid, ge.alpha * T, splat(0.0f));
-                /* Channels of each contributing pixel: the feature part of
-                 * the alpha gradient, the running sums behind it and the
-                 * Gaussian's feature gradient. */
-                lanes Tl = {T}, ral = {ra}, facl = {fac}, val = {splat(0.0f)};
-                unsigned bits = (unsigned)mask_bits(valid);
-                while (bits) {
-                    int j = __builtin_ctz(bits);
-                    bits &= bits - 1;
-                    size_t p = ((size_t)v * L + (size_t)j) * (size_t)nv;
-                    vf facj = splat(facl.f[j]), sf = splat(0.0f), sb = splat(0.0f);
-                    switch (nv) {
-                    default: BWD_BLOCK(7); /* fallthrough */
-                    case 7: BWD_BLOCK(6); /* fallthrough */
-                    case 6: BWD_BLOCK(5); /* fallthrough */
-                    case 5: BWD_BLOCK(4); /* fallthrough */
-                    case 4: BWD_BLOCK(3); /* fallthrough */
-                    case 3: BWD_BLOCK(2); /* fallthrough */
-                    case 2: BWD_BLOCK(1); /* fallthrough */
-                    case 1: BWD_BLOCK(0);
-                    }
-                    /* sum_ch (f T - buf ra) v_pix */
-                    val.f[j] = hsum(splat(Tl.f[j]) * sf - splat(ral.f[j]) * sb);
-                }
-                vf va = val.v + st.tfin[v] * ra * st.vres[v] +
-                      st.vdep[v] * (splat(z) * T - st.bufd[v] * ra);
-                st.bufd[v] += splat(z) * fac;
-                part[6] += fac * st.vdep[v];
-                vi grad_ok = valid & (splat(op) * ge.vis <= splat(GS_RASTER_MAX_ALPHA));
-                va = vsel(grad_ok, va, splat(0.0f));
-                vf vsig = -ge.alpha * va;
-                vf dx = ge.dx, vdy = splat(dy);
-                part[0] += vsig * (splat(q[0]) * dx + splat(q[1] * dy));
-                part[1] += vsig * (splat(q[1]) * dx + splat(q[2] * dy));
-                part[2] += splat(0.5f) * vsig * dx * dx;
-                part[3] += vsig * dx * vdy;
-                part[4] += splat(0.5f) * vsig * vdy * vdy;
-                part[5] += ge.vis * va;
-            }
-        }
-        if (touched) {
-            for (int h = 0; h < GS_SLOT_HEAD; h++)
-                slot[h] = hsum(part[h]);
-            for (int c = 0; c < nv; c++)
-                store_n(slot + GS_SLOT_HEAD + c * L, pf[c], C - c * L < L ? C - c * L : L);
-        }
-    }
+    const gs_tile_rec *tr = r->tile_rec + tile;
+    if (tr->n != GS_REC_NONE)
+        replay_pairs(ctx, &ti, tr, &st, buf, vpix, nv);
+    else
+        evaluate_pairs(ctx, &ti, &st, buf, vpix, nv);
 }
 
 static void tile_backward(void *vctx, int task, int worker)

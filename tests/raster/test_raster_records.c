@@ -1,0 +1,113 @@
+/* The fast backward replays records of the forward's contributions; tiles
+ * whose records did not fit the budget are evaluated again. Both ways must
+ * give the same bytes, whichever tiles fit (that depends on which worker
+ * composited which tile, so on scheduling): this runs one scene with the
+ * default budget, with none (every tile evaluated again) and with budgets
+ * that record only some tiles, on 1, 2 and 3 threads, and compares bytes. */
+#include "raster_internal.h"
+#include "rt_util.h"
+
+/* Tiles of the last forward that kept their records (of them, *filled
+ * with at least one), and tiles in all. */
+static void count_recorded(const gs_raster *r, int *rec, int *filled, int *all)
+{
+    *all = r->tiles_x * r->tiles_y;
+    *rec = *filled = 0;
+    for (int t = 0; t < *all; t++) {
+        *rec += r->tile_rec[t].n != GS_REC_NONE;
+        *filled += r->tile_rec[t].n != GS_REC_NONE && r->tile_rec[t].n > 0;
+    }
+}
+
+static int same(const char *what, const rt_result *a, const rt_result *b)
+{
+    size_t np = (size_t)a->W * a->H, nf = np * a->C, n = (size_t)a->n;
+    struct {
+        const char *name;
+        const float *x, *y;
+        size_t count;
+    } arr[] = {{"features", a->features, b->features, nf},
+               {"alpha", a->alpha, b->alpha, np},
+               {"grad means", a->g_means, b->g_means, n * 3},
+               {"grad log_scales", a->g_log_scales, b->g_log_scales, n * 3},
+               {"grad quats", a->g_quats, b->g_quats, n * 4},
+               {"grad opacity", a->g_opacity, b->g_opacity, n},
+               {"grad features", a->g_features, b->g_features, n * a->C},
+               {"grad background", a->g_background, b->g_background, nf}};
+    for (size_t i = 0; i < sizeof arr / sizeof arr[0]; i++)
+        for (size_t k = 0; k < arr[i].count; k++)
+            if (memcmp(&arr[i].x[k], &arr[i].y[k], sizeof(float)) != 0) {
+                CHECK_MSG(0, "%s: %s differ first at [%zu]: %.9g vs %.9g", what, arr[i].name,
+                          k, arr[i].x[k], arr[i].y[k]);
+                return 0;
+            }
+    return 1;
+}
+
+static void run_scene(uint64_t seed, int n, int C, int W, int H, int aa)
+{
+    rt_scene s;
+    rt_random_scene(&s, seed, n, C, W, H);
+    s.antialiased = aa;
+    rt_scene_add_background(&s);
+    rt_rng rng = {seed + 7};
+    for (size_t i = 0; i < (size_t)C * W * H; i++)
+        s.background[i] = (float)rt_uniform(&rng, 0, 1);
+    rt_upstream u;
+    rt_upstream_random(&u, &s, seed + 8);
+    printf("scene: %d Gaussians, %dx%d, C=%d%s\n", n, W, H, C, aa ? ", antialiased" : "");
+
+    rt_result ref;
+    gs_raster *r = gs_raster_create();
+    rt_run_with(r, &s, GS_RASTER_FAST, NULL, &u, &ref);
+    CHECK(ref.fwd_status == GS_OK && ref.bwd_status == GS_OK);
+    int rec, filled, all;
+    count_recorded(r, &rec, &filled, &all);
+    CHECK_MSG(rec == all, "default budget: %d of %d tiles recorded", rec, all);
+    size_t total = 0;
+    for (int w = 0; w < r->n_arenas; w++)
+        total += r->arenas[w].n;
+    gs_raster_destroy(r);
+    printf("  default budget: %d of %d tiles recorded, %zu records\n", rec, all, total);
+
+    /* Bytes per record: a header and 8 floats. Budgets for none, about a
+     * third and about two thirds of the records (per worker: divided by
+     * the thread count). */
+    const size_t per = sizeof(uint32_t) + 8 * sizeof(float);
+    size_t budgets[] = {1, per * (total / 3 + 1), per * (2 * total / 3 + 1)};
+    int saw_mixed = 0;
+    for (size_t b = 0; b < sizeof budgets / sizeof budgets[0]; b++)
+        for (int t = 1; t <= 3; t++) {
+            gs_pool *pool = gs_pool_create(t);
+            r = gs_raster_create();
+            CHECK(pool && r);
+            r->rec_budget = budgets[b] * (size_t)t;
+            rt_result o;
+            rt_run_with(r, &s, GS_RASTER_FAST, pool, &u, &o);
+            CHECK(o.fwd_status == GS_OK && o.bwd_status == GS_OK);
+            count_recorded(r, &rec, &filled, &all);
+            saw_mixed |= filled > 0 && rec < all;
+            char what[96];
+            snprintf(what, sizeof what, "budget %zu B/worker, %d thread(s), %d of %d tiles",
+                     budgets[b], t, rec, all);
+            if (same(what, &o, &ref))
+                printf("  %s: bit-identical\n", what);
+            if (b == 0)
+                CHECK_MSG(filled == 0, "%s: no records should fit", what);
+            rt_result_free(&o);
+            gs_raster_destroy(r);
+            gs_pool_destroy(pool);
+        }
+    CHECK_MSG(saw_mixed, "no run recorded only some tiles");
+    rt_result_free(&ref);
+    rt_upstream_free(&u);
+    rt_scene_free(&s);
+}
+
+int main(void)
+{
+    run_scene(1101, 3000, 32, 128, 96, 0);
+    run_scene(2202, 1500, 3, 100, 75, 1);
+    run_scene(3303, 800, 64, 61, 47, 0);
+    GS_TEST_END();
+}
