@@ -55,8 +55,18 @@ sleep 1
 grep -q 'capture lost' /tmp/live.log || fail "loss not noticed"
 # While the camera is gone the loopback carries "no video" frames (10/s).
 timeout 5 v4l2-ctl -d /dev/video9 --stream-mmap --stream-count=3 --stream-to=/tmp/ph.yuv 2>/dev/null
-say "while unbound: read $(wc -c < /tmp/ph.yuv 2>/dev/null || echo 0) bytes of placeholder frames (want $((3 * 640 * 480 * 2)))"
-rm -f /tmp/ph.yuv
+fs=$((640 * 480 * 2))
+size=$(wc -c < /tmp/ph.yuv 2>/dev/null || echo 0)
+say "while unbound: read $size bytes of placeholder frames (want $((3 * fs)))"
+[ "$size" -eq $((3 * fs)) ] || fail "no placeholder frames while the camera is gone"
+# The placeholder is one still frame, dark grey (luma 43) with light text;
+# vivid's colour bars start with a white column.
+dd if=/tmp/ph.yuv of=/tmp/ph0 bs=$fs count=1 2>/dev/null
+dd if=/tmp/ph.yuv of=/tmp/ph2 bs=$fs skip=2 count=1 2>/dev/null
+cmp -s /tmp/ph0 /tmp/ph2 || fail "placeholder frames differ from each other"
+luma=$(od -An -tu1 -N1 /tmp/ph0 | tr -d ' ')
+[ "${luma:-255}" -lt 64 ] || fail "not the placeholder: first luma ${luma:-none}"
+rm -f /tmp/ph.yuv /tmp/ph0 /tmp/ph2
 echo vivid.0 > /sys/bus/platform/drivers/vivid/bind || fail "bind"
 tb=$(now)
 while [ "$(count 'capture: streaming')" -le "$before" ]; do
