@@ -18,7 +18,7 @@
 #include "gazesplat/train.h"
 #include "gs_test.h"
 
-extern char **environ;
+#include "eval_fixture.h"
 
 static const char *exe;
 static char dir[] = "eval_test_XXXXXX";
@@ -28,7 +28,6 @@ static char dir[] = "eval_test_XXXXXX";
 static int run(const char *const *args)
 {
     const char *argv[32];
-    char logp[256];
     int n = 0;
     argv[n++] = exe;
     while (args[n - 1] && n < 31) {
@@ -36,67 +35,14 @@ static int run(const char *const *args)
         n++;
     }
     argv[n] = NULL;
-    snprintf(logp, sizeof logp, "%s/log.txt", dir);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, logp, O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    pid_t pid;
-    int st = 0, status = -1;
-    if (posix_spawn(&pid, exe, &fa, NULL, (char *const *)argv, environ) == 0 &&
-        waitpid(pid, &st, 0) == pid && WIFEXITED(st))
-        status = WEXITSTATUS(st);
-    posix_spawn_file_actions_destroy(&fa);
-    if (status != 0) {
-        char buf[2048];
-        FILE *f = fopen(logp, "r");
-        size_t k = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
-        buf[k] = 0;
-        if (f)
-            fclose(f);
-        printf("exit %d: %s", status, buf);
-    }
-    return status;
-}
-
-static char *slurp(const char *path)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    char *buf = malloc(1 << 20);
-    size_t n = buf ? fread(buf, 1, (1 << 20) - 1, f) : 0;
-    if (buf)
-        buf[n] = 0;
-    fclose(f);
-    return buf;
-}
-
-static void train_tiny(const char *path)
-{
-    gs_nn_blas_set_threads(1);
-    gs_model_spec spec;
-    gs_model_spec_default(&spec);
-    spec.preset = "tiny";
-    spec.train_identities = 2;
-    gs_model *m = NULL;
-    gs_error err = {0, ""};
-    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
-    gs_train_options to;
-    gs_train_options_default(&to);
-    to.out_path = path;
-    to.steps = 4;
-    to.checkpoint_every = 0;
-    gs_train_report rep;
-    CHECK_MSG(gs_train(m, &to, NULL, &rep, &err) == GS_OK, "%s", err.msg);
-    gs_model_destroy(m);
+    return ev_spawn(dir, argv);
 }
 
 /* Checks the per-pair CSV: rows, methods, statuses and finite metrics.
  * Returns the text with the timing columns (fit_s, render_ms) blanked. */
 static char *check_csv(const char *path)
 {
-    char *text = slurp(path);
+    char *text = ev_slurp(path);
     CHECK_MSG(text != NULL, "no %s", path);
     if (!text)
         return NULL;
@@ -220,7 +166,7 @@ int main(int argc, char **argv)
     snprintf(pairs, sizeof pairs, "%s/pairs.csv", dir);
     snprintf(out1, sizeof out1, "%s/run1", dir);
     snprintf(out2, sizeof out2, "%s/run2", dir);
-    train_tiny(model);
+    ev_train_tiny(model, 4);
     /* An untrained estimator: random weights still give finite angles. */
     char est[256];
     snprintf(est, sizeof est, "%s/est.safetensors", dir);
@@ -250,7 +196,7 @@ int main(int argc, char **argv)
     snprintf(csv, sizeof csv, "%s/pairs.csv", out1);
     char *a = check_csv(csv);
     snprintf(md, sizeof md, "%s/summary.md", out1);
-    char *sum = slurp(md);
+    char *sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "diverged fits 0, errors 0, non-finite "
                                  "outputs 0") &&
                   strstr(sum, "| warp |") && strstr(sum, "gaze change 0-15°"),
@@ -276,7 +222,7 @@ int main(int argc, char **argv)
     free(c);
     free(sum);
     snprintf(md, sizeof md, "%s/summary.md", out2);
-    sum = slurp(md);
+    sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "2 fits reused"), "%s", sum ? sum : "");
     /* Render settings on run 2's fits: 100 % and scale 1 are the normal
      * path (same numbers); pruned, coarse and full renders stay finite. */
@@ -299,7 +245,7 @@ int main(int argc, char **argv)
     CHECK_MSG(a && c && strcmp(a, c) != 0, "pruned renders are the same");
     free(c);
     free(sum);
-    sum = slurp(md);
+    sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "face Gaussians (10 %), feature scale "
                                  "0.5, every render from scratch") &&
                   strstr(sum, "non-finite outputs 0"),

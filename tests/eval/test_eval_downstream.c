@@ -23,73 +23,10 @@
 #include "gazesplat/train.h"
 #include "gs_test.h"
 
-extern char **environ;
+#include "eval_fixture.h"
 
 static char dir[] = "downstream_test_XXXXXX";
 enum { IDS = 2, TESTS = 3, MAXK = 2 };
-
-/* Runs prog with args (NULL-terminated, args[0] the program), output to
- * dir/log.txt; returns the exit code (-1 when killed). */
-static int spawn(const char *const *args)
-{
-    char logp[256];
-    snprintf(logp, sizeof logp, "%s/log.txt", dir);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 1, logp,
-                                     O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_adddup2(&fa, 1, 2);
-    pid_t pid;
-    int st = 0, status = -1;
-    if (posix_spawn(&pid, args[0], &fa, NULL, (char *const *)args,
-                    environ) == 0 &&
-        waitpid(pid, &st, 0) == pid && WIFEXITED(st))
-        status = WEXITSTATUS(st);
-    posix_spawn_file_actions_destroy(&fa);
-    if (status != 0) {
-        char buf[2048];
-        FILE *f = fopen(logp, "r");
-        size_t k = f ? fread(buf, 1, sizeof buf - 1, f) : 0;
-        buf[k] = 0;
-        if (f)
-            fclose(f);
-        printf("%s: exit %d: %s", args[0], status, buf);
-    }
-    return status;
-}
-
-static char *slurp(const char *path)
-{
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return NULL;
-    char *buf = malloc(1 << 16);
-    size_t n = buf ? fread(buf, 1, (1 << 16) - 1, f) : 0;
-    if (buf)
-        buf[n] = 0;
-    fclose(f);
-    return buf;
-}
-
-static void train_tiny(const char *path)
-{
-    gs_nn_blas_set_threads(1);
-    gs_model_spec spec;
-    gs_model_spec_default(&spec);
-    spec.preset = "tiny";
-    spec.train_identities = 2;
-    gs_model *m = NULL;
-    gs_error err = {0, ""};
-    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
-    gs_train_options to;
-    gs_train_options_default(&to);
-    to.out_path = path;
-    to.steps = 2;
-    to.checkpoint_every = 0;
-    gs_train_report rep;
-    CHECK_MSG(gs_train(m, &to, NULL, &rep, &err) == GS_OK, "%s", err.msg);
-    gs_model_destroy(m);
-}
 
 /* The smallest estimator: its error is meaningless, its arithmetic is
  * the shipped one's. */
@@ -140,7 +77,7 @@ static char *check_csv(const char *out, const double *k0)
 {
     char path[320];
     snprintf(path, sizeof path, "%s/downstream.csv", out);
-    char *text = slurp(path);
+    char *text = ev_slurp(path);
     CHECK_MSG(text != NULL, "no %s", path);
     if (!text)
         return NULL;
@@ -178,7 +115,7 @@ static char *check_csv(const char *out, const double *k0)
 static void usage_errors(const char *exe, const char *model, const char *est)
 {
     const char *none[] = {exe, "eval-downstream", NULL};
-    CHECK_EQ_INT(spawn(none), 2);
+    CHECK_EQ_INT(ev_spawn(dir, none), 2);
     const char *bad[][4] = {
         {"--steps", "0"}, {"--max-k", "10"}, {"--max-k", "0"},
         {"--set-size", "5"}, {"--real-fraction", "1.5"}, {"--lr", "0"},
@@ -189,21 +126,21 @@ static void usage_errors(const char *exe, const char *model, const char *est)
         const char *a[] = {exe, "eval-downstream", "--model", model,
                            "--estimator", est, "--out", dir, bad[i][0],
                            bad[i][1], i == 3 ? "--max-k" : NULL, "9", NULL};
-        CHECK_MSG(spawn(a) == 2, "%s %s should be a usage error", bad[i][0],
+        CHECK_MSG(ev_spawn(dir, a) == 2, "%s %s should be a usage error", bad[i][0],
                   bad[i][1]);
     }
     const char *noout[] = {exe, "eval-downstream", "--model", model, NULL};
-    CHECK_EQ_INT(spawn(noout), 2);
+    CHECK_EQ_INT(ev_spawn(dir, noout), 2);
     const char *positional[] = {exe, "eval-downstream", "extra", NULL};
-    CHECK_EQ_INT(spawn(positional), 2);
+    CHECK_EQ_INT(ev_spawn(dir, positional), 2);
     char missing[256];
     snprintf(missing, sizeof missing, "%s/missing.safetensors", dir);
     const char *nomodel[] = {exe, "eval-downstream", "--model", missing,
                              "--estimator", est, "--out", dir, NULL};
-    CHECK_EQ_INT(spawn(nomodel), 1);
+    CHECK_EQ_INT(ev_spawn(dir, nomodel), 1);
     const char *noest[] = {exe, "eval-downstream", "--model", model,
                            "--estimator", missing, "--out", dir, NULL};
-    CHECK_EQ_INT(spawn(noest), 1);
+    CHECK_EQ_INT(ev_spawn(dir, noest), 1);
 }
 
 static void fit_cache(const char *out)
@@ -230,7 +167,7 @@ static int run_ds(const char *exe, const char *model, const char *est,
                        "2", "--steps", "3", "--batch", "4", "--lr", "1e-3",
                        "--iters", "2", "--threads", threads,
                        reuse ? "--reuse-fits" : NULL, NULL};
-    return spawn(a);
+    return ev_spawn(dir, a);
 }
 
 int main(int argc, char **argv)
@@ -247,7 +184,7 @@ int main(int argc, char **argv)
     snprintf(est, sizeof est, "%s/est.safetensors", dir);
     snprintf(out1, sizeof out1, "%s/run1", dir);
     snprintf(out2, sizeof out2, "%s/run2", dir);
-    train_tiny(model);
+    ev_train_tiny(model, 2);
     tiny_estimator(est);
     usage_errors(exe, model, est);
 
@@ -257,7 +194,7 @@ int main(int argc, char **argv)
     CHECK_EQ_INT(run_ds(exe, model, est, out1, "2", 0), 0);
     char *a = check_csv(out1, k0);
     snprintf(md, sizeof md, "%s/downstream.md", out1);
-    char *sum = slurp(md);
+    char *sum = ev_slurp(md);
     if (!sum)
         sum = strdup("(none)");
     CHECK_MSG(strstr(sum, "| k | real only | real + ours | real + warp |") &&
@@ -278,7 +215,7 @@ int main(int argc, char **argv)
     b = check_csv(out2, k0);
     CHECK_MSG(a && b && strcmp(a, b) == 0, "fits reused differ:\n%s", b);
     snprintf(md, sizeof md, "%s/downstream.md", out2);
-    sum = slurp(md);
+    sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "2 reused"), "%s", sum ? sum : "");
     free(sum);
     free(a);
@@ -286,7 +223,7 @@ int main(int argc, char **argv)
 
     /* The plot script on the first run's CSV. */
     const char *plot[] = {argv[2], argv[3], out1, NULL};
-    CHECK_EQ_INT(spawn(plot), 0);
+    CHECK_EQ_INT(ev_spawn(dir, plot), 0);
     snprintf(png, sizeof png, "%s/downstream.png", out1);
     struct stat st;
     CHECK_MSG(stat(png, &st) == 0 && st.st_size > 1000, "no plot %s", png);
