@@ -1369,6 +1369,16 @@ static void eye_backward(gs_model_ctx *c, const gs_model_params *gp,
     }
 }
 
+void gs_frame_clear_gaussian_grads(gs_model_ctx *c)
+{
+    size_t n = (size_t)c->n;
+    memset(c->v_mean, 0, n * 3 * sizeof(float));
+    memset(c->v_scale, 0, n * 3 * sizeof(float));
+    memset(c->v_quat, 0, n * 4 * sizeof(float));
+    memset(c->v_opac, 0, n * sizeof(float));
+    memset(c->v_feat, 0, n * (size_t)c->C * sizeof(float));
+}
+
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap, const float *d_fmap_face,
                       const float *d_fmap_eye, const gs_model_params *grads,
@@ -1397,12 +1407,7 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         if (rc)
             return gs_error_set(err, rc, "model: renderer backward failed");
     }
-    size_t n = (size_t)c->n;
-    memset(c->v_mean, 0, n * 3 * sizeof(float));
-    memset(c->v_scale, 0, n * 3 * sizeof(float));
-    memset(c->v_quat, 0, n * 4 * sizeof(float));
-    memset(c->v_opac, 0, n * sizeof(float));
-    memset(c->v_feat, 0, n * c->C * sizeof(float));
+    gs_frame_clear_gaussian_grads(c);
     int first = c->stream == GS_STREAM_EYE ? c->nf : 0;
     gs_gaussian_grads gg = {c->v_mean + 3 * (size_t)first,
                             c->v_scale + 3 * (size_t)first,

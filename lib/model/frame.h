@@ -168,6 +168,10 @@ int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 void gs_frame_backward_streams(gs_model_ctx *c, const gs_model_params *grads,
                                gs_frame_grad *fg);
 
+/* Zeroes the camera-frame Gaussian gradients c->v_mean .. v_feat (all n
+ * Gaussians) before a rasterizer backward adds into them. */
+void gs_frame_clear_gaussian_grads(gs_model_ctx *c);
+
 /* The camera the model renders a frame with at feature resolution. */
 void gs_frame_camera(const gs_model *m, const double head_t[3],
                      gs_camera *cam);

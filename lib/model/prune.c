@@ -29,12 +29,7 @@ static int view_weights(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     int rc = gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 1, err);
     if (rc)
         return rc;
-    size_t n = (size_t)c->n;
-    memset(c->v_mean, 0, n * 3 * sizeof(float));
-    memset(c->v_scale, 0, n * 3 * sizeof(float));
-    memset(c->v_quat, 0, n * 4 * sizeof(float));
-    memset(c->v_opac, 0, n * sizeof(float));
-    memset(c->v_feat, 0, n * c->C * sizeof(float));
+    gs_frame_clear_gaussian_grads(c);
     gs_gaussian_grads gg = {c->v_mean, c->v_scale, c->v_quat, c->v_opac,
                             c->v_feat};
     rc = gs_raster_backward(c->raster, pool, ones, NULL, NULL, &gg, NULL,
