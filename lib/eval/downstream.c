@@ -338,11 +338,7 @@ static void batch_task(void *ctx, int b, int worker)
                                    out, NULL);
     if (r->rc[b])
         return;
-    float scale = 1.0f / (4.0f * (float)r->o->batch);
-    for (int k = 0; k < 4; k++) {
-        float e = out[k] - lab[k];
-        d[k] = e > 0 ? scale : e < 0 ? -scale : 0.0f;
-    }
+    gs_gaze_l1_loss(out, lab, 1.0f / (4.0f * (float)r->o->batch), d);
     r->rc[b] = gs_gaze_net_backward(r->work[worker], NULL, d, NULL, g, NULL);
 }
 

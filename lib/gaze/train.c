@@ -54,6 +54,18 @@ typedef struct trainer {
     uint64_t first, count;/* generator indices of a render pass */
 } trainer;
 
+float gs_gaze_l1_loss(const float out[4], const float lab[4], float scale,
+                      float dout[4])
+{
+    float loss = 0.0f;
+    for (int k = 0; k < 4; k++) {
+        float e = out[k] - lab[k];
+        loss += fabsf(e);
+        dout[k] = e > 0 ? scale : e < 0 ? -scale : 0.0f;
+    }
+    return loss / 4.0f;
+}
+
 static double now_s(void)
 {
     struct timespec ts;
@@ -136,13 +148,7 @@ static void batch_task(void *ctx, int b, int worker)
     t->task_rc[b] = gz_forward(&t->n->g, t->n->params, &t->ctx[worker], img, S, S, out);
     if (t->task_rc[b])
         return;
-    float scale = 1.0f / (4.0f * (float)t->o->batch), loss = 0.0f;
-    for (int k = 0; k < 4; k++) {
-        float e = out[k] - lab[k];
-        loss += fabsf(e);
-        d[k] = e > 0 ? scale : e < 0 ? -scale : 0.0f;
-    }
-    t->sloss[b] = loss / 4.0f;
+    t->sloss[b] = gs_gaze_l1_loss(out, lab, 1.0f / (4.0f * (float)t->o->batch), d);
     t->serr[b] = (float)gs_gaze_angular_error(out, lab, NULL);
     t->task_rc[b] = gz_backward(&t->n->g, t->n->params, &t->ctx[worker], d, NULL, g);
 }

@@ -126,6 +126,20 @@ static int write_edited(gs_gaze_net *n, const edit *e, uint8_t **buf, size_t *le
     return rc;
 }
 
+/* The training loss: mean |out - lab| and a sign seed scaled by `scale`,
+ * zero where a prediction is exact. */
+static void test_l1_loss(void)
+{
+    const float out[4] = {1.0f, 0.0f, 2.0f, -1.0f}, lab[4] = {0.0f, 0.0f, 3.0f, -1.0f};
+    float d[4];
+    float loss = gs_gaze_l1_loss(out, lab, 0.5f, d);
+    CHECK_CLOSE(loss, 0.5, 0.0, 0.0);
+    CHECK_CLOSE(d[0], 0.5, 0.0, 0.0);
+    CHECK_CLOSE(d[1], 0.0, 0.0, 0.0);
+    CHECK_CLOSE(d[2], -0.5, 0.0, 0.0);
+    CHECK_CLOSE(d[3], 0.0, 0.0, 0.0);
+}
+
 static void expect_refused(gs_gaze_net *n, const edit *e, int code, const char *what)
 {
     uint8_t *buf = NULL;
@@ -315,6 +329,7 @@ int main(int argc, char **argv)
     } else {
         test_predict_and_args();
         test_angular_error();
+        test_l1_loss();
         test_loader();
         test_determinism_and_resume();
     }

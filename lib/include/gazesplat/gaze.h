@@ -103,6 +103,13 @@ int gs_gaze_net_forward(gs_gaze_net *n, gs_pool *pool, const float *img,
 int gs_gaze_net_backward(gs_gaze_net *n, gs_pool *pool, const float dout[4],
                          float *dimg, float *dparams, gs_error *err);
 
+/* The estimator's training loss on one sample: L1 over the four angles.
+ * Returns mean |out - lab| and sets dout[k] = scale * sign(out[k] - lab[k])
+ * (0 where equal), the seed of gs_gaze_net_backward; scale carries the
+ * mean's 1/4 and the batch's 1/B. */
+float gs_gaze_l1_loss(const float out[4], const float lab[4], float scale,
+                      float dout[4]);
+
 /* Angle between the gaze directions of (pitch, yaw) a and b, radians, and
  * its gradient with respect to a (da may be NULL). 0 gradient where the
  * angle is 0 (the subgradient PyTorch's acos would not give). */
