@@ -197,6 +197,41 @@ static inline void rt_result_free(rt_result *o)
 }
 
 /* Upstream gradients for a scene's image size; owned by the caller. */
+/* memcmp of every output and gradient; names the first array that
+ * differs. Stats (visible, intersections, contributions) must match too. */
+static inline int rt_same_bytes(const char *what, const rt_result *a, const rt_result *b)
+{
+    size_t np = (size_t)a->W * a->H, nf = np * a->C, n = (size_t)a->n;
+    struct {
+        const char *name;
+        const float *x, *y;
+        size_t count;
+    } arr[] = {{"features", a->features, b->features, nf},
+               {"alpha", a->alpha, b->alpha, np},
+               {"depth", a->depth, b->depth, np},
+               {"grad means", a->g_means, b->g_means, n * 3},
+               {"grad log_scales", a->g_log_scales, b->g_log_scales, n * 3},
+               {"grad quats", a->g_quats, b->g_quats, n * 4},
+               {"grad opacity", a->g_opacity, b->g_opacity, n},
+               {"grad features", a->g_features, b->g_features, n * a->C},
+               {"grad background", a->g_background, b->g_background, nf}};
+    for (size_t i = 0; i < sizeof arr / sizeof arr[0]; i++) {
+        if (memcmp(arr[i].x, arr[i].y, arr[i].count * sizeof(float)) != 0) {
+            size_t k = 0;
+            while (memcmp(&arr[i].x[k], &arr[i].y[k], sizeof(float)) == 0)
+                k++;
+            CHECK_MSG(0, "%s: %s differ first at [%zu]: %.9g vs %.9g", what,
+                      arr[i].name, k, arr[i].x[k], arr[i].y[k]);
+            return 0;
+        }
+    }
+    CHECK_MSG(a->stats.visible == b->stats.visible &&
+                  a->stats.intersections == b->stats.intersections &&
+                  a->stats.contributions == b->stats.contributions,
+              "%s: stats differ", what);
+    return 1;
+}
+
 typedef struct rt_upstream {
     float *v_features, *v_alpha, *v_depth;
 } rt_upstream;

@@ -8,41 +8,6 @@
  * (entries below 1e-5 max|ref| may differ in <= 0.1% of entries). */
 #include "rt_util.h"
 
-/* memcmp of every output and gradient; names the first array that
- * differs. */
-static int same_bytes(const char *what, const rt_result *a, const rt_result *b)
-{
-    size_t np = (size_t)a->W * a->H, nf = np * a->C, n = (size_t)a->n;
-    struct {
-        const char *name;
-        const float *x, *y;
-        size_t count;
-    } arr[] = {{"features", a->features, b->features, nf},
-               {"alpha", a->alpha, b->alpha, np},
-               {"depth", a->depth, b->depth, np},
-               {"grad means", a->g_means, b->g_means, n * 3},
-               {"grad log_scales", a->g_log_scales, b->g_log_scales, n * 3},
-               {"grad quats", a->g_quats, b->g_quats, n * 4},
-               {"grad opacity", a->g_opacity, b->g_opacity, n},
-               {"grad features", a->g_features, b->g_features, n * a->C},
-               {"grad background", a->g_background, b->g_background, nf}};
-    for (size_t i = 0; i < sizeof arr / sizeof arr[0]; i++) {
-        if (memcmp(arr[i].x, arr[i].y, arr[i].count * sizeof(float)) != 0) {
-            size_t k = 0;
-            while (memcmp(&arr[i].x[k], &arr[i].y[k], sizeof(float)) == 0)
-                k++;
-            CHECK_MSG(0, "%s: %s differ first at [%zu]: %.9g vs %.9g", what,
-                      arr[i].name, k, arr[i].x[k], arr[i].y[k]);
-            return 0;
-        }
-    }
-    CHECK_MSG(a->stats.visible == b->stats.visible &&
-                  a->stats.intersections == b->stats.intersections &&
-                  a->stats.contributions == b->stats.contributions,
-              "%s: stats differ", what);
-    return 1;
-}
-
 static void compare_paths(const rt_result *fast, const rt_result *ref)
 {
     size_t np = (size_t)ref->W * ref->H, nf = np * ref->C, n = (size_t)ref->n;
@@ -80,7 +45,7 @@ static void check_threads(const rt_scene *s, const rt_upstream *u, const rt_resu
         rt_run(s, GS_RASTER_FAST, pool, u, &o);
         char what[64];
         snprintf(what, sizeof what, "fast, %d thread(s) vs no pool", t);
-        if (same_bytes(what, &o, fast0))
+        if (rt_same_bytes(what, &o, fast0))
             printf("  %s: bit-identical\n", what);
         rt_result_free(&o);
         gs_pool_destroy(pool);
@@ -105,7 +70,7 @@ static void check_reuse(const rt_scene *s, const rt_upstream *u, gs_raster_path 
     rt_run_with(r, s, path, pool, u, &again);
     char what[64];
     snprintf(what, sizeof what, "%s, reused gs_raster, 3 threads", rt_path_name(path));
-    if (same_bytes(what, &first, fresh) && same_bytes(what, &again, fresh))
+    if (rt_same_bytes(what, &first, fresh) && rt_same_bytes(what, &again, fresh))
         printf("  %s: bit-identical\n", what);
     rt_result_free(&first);
     rt_result_free(&mid);

@@ -19,31 +19,6 @@ static void count_recorded(const gs_raster *r, int *rec, int *filled, int *all)
     }
 }
 
-static int same(const char *what, const rt_result *a, const rt_result *b)
-{
-    size_t np = (size_t)a->W * a->H, nf = np * a->C, n = (size_t)a->n;
-    struct {
-        const char *name;
-        const float *x, *y;
-        size_t count;
-    } arr[] = {{"features", a->features, b->features, nf},
-               {"alpha", a->alpha, b->alpha, np},
-               {"grad means", a->g_means, b->g_means, n * 3},
-               {"grad log_scales", a->g_log_scales, b->g_log_scales, n * 3},
-               {"grad quats", a->g_quats, b->g_quats, n * 4},
-               {"grad opacity", a->g_opacity, b->g_opacity, n},
-               {"grad features", a->g_features, b->g_features, n * a->C},
-               {"grad background", a->g_background, b->g_background, nf}};
-    for (size_t i = 0; i < sizeof arr / sizeof arr[0]; i++)
-        for (size_t k = 0; k < arr[i].count; k++)
-            if (memcmp(&arr[i].x[k], &arr[i].y[k], sizeof(float)) != 0) {
-                CHECK_MSG(0, "%s: %s differ first at [%zu]: %.9g vs %.9g", what, arr[i].name,
-                          k, arr[i].x[k], arr[i].y[k]);
-                return 0;
-            }
-    return 1;
-}
-
 static void run_scene(uint64_t seed, int n, int C, int W, int H, int aa)
 {
     rt_scene s;
@@ -90,7 +65,7 @@ static void run_scene(uint64_t seed, int n, int C, int W, int H, int aa)
             char what[96];
             snprintf(what, sizeof what, "budget %zu B/worker, %d thread(s), %d of %d tiles",
                      budgets[b], t, rec, all);
-            if (same(what, &o, &ref))
+            if (rt_same_bytes(what, &o, &ref))
                 printf("  %s: bit-identical\n", what);
             if (b == 0)
                 CHECK_MSG(filled == 0, "%s: no records should fit", what);
