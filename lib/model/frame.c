@@ -505,11 +505,13 @@ static gs_gaussians gaussians_of(const gs_model_ctx *c, int first, int count)
 /* Rasterizes g into out [C, fs, fs] at the feature size fsr: at fs
  * directly; below, through a camera of the same view at fsr pixels into
  * lo [C, fsr, fsr] (scratch), resampled bilinearly to fs. Only renders
- * (no backward follows) ask for fsr < fs. */
+ * (no backward follows) ask for fsr < fs. render: no backward follows, so
+ * the rasterizer keeps no records for one. */
 static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
-                     const gs_gaussians *g, int fsr, float *out, float *alpha,
-                     float *lo, gs_error *err)
+                     const gs_gaussians *g, int fsr, int render, float *out,
+                     float *alpha, float *lo, gs_error *err)
 {
+    gs_raster_set_records(r, !render);
     gs_camera cam;
     gs_frame_camera(c->m, c->fr.head_t, &cam);
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
@@ -534,13 +536,14 @@ static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
 
 /* The face stream alone into c->fmap_face (the guidance source and the
  * face-only training render) at feature size fsr, unless it is current. */
-static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, gs_error *err)
+static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, int render,
+                    gs_error *err)
 {
     if (c->face_map_valid && c->face_map_fs == fsr)
         return GS_OK;
     c->face_map_valid = 0;
     gs_gaussians g = gaussians_of(c, 0, c->nf);
-    int rc = raster_at(c, c->raster_face, pool, &g, fsr, c->fmap_face,
+    int rc = raster_at(c, c->raster_face, pool, &g, fsr, render, c->fmap_face,
                        c->alpha_face, c->v_fmap_face, err);
     if (!rc) {
         c->face_map_valid = 1;
@@ -549,9 +552,11 @@ static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, gs_error *err)
     return rc;
 }
 
-/* gs_frame_forward with the feature map rasterized at fsr pixels. */
+/* gs_frame_forward with the feature map rasterized at fsr pixels; render:
+ * no backward follows (gs_frame_render). */
 static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
-                      int stream, int force_face, int fsr, gs_error *err)
+                      int stream, int force_face, int fsr, int render,
+                      gs_error *err)
 {
     if (force_face) /* training: the parameters change between calls */
         sweep_drop(c);
@@ -569,7 +574,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         count = c->ne;
     }
     gs_gaussians g = gaussians_of(c, first, count);
-    int rc = raster_at(c, c->raster, pool, &g, fsr, c->fmap, c->alpha,
+    int rc = raster_at(c, c->raster, pool, &g, fsr, render, c->fmap, c->alpha,
                        c->v_fmap, err);
     if (rc)
         return rc;
@@ -578,7 +583,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->used_face_map = c->ne > 0 && stream == GS_STREAM_BOTH &&
                        (c->used_src || c->face_loss);
     if (c->used_face_map) {
-        rc = face_map(c, pool, fsr, err);
+        rc = face_map(c, pool, fsr, render, err);
         if (rc)
             return rc;
     }
@@ -605,7 +610,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                      int stream, int force_face, gs_error *err)
 {
-    return forward_at(c, pool, fr, stream, force_face, c->fs, err);
+    return forward_at(c, pool, fr, stream, force_face, c->fs, 0, err);
 }
 
 /* ---- incremental renders ---- */
@@ -774,6 +779,7 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
                       .features = c->k_feat};
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
     float *out = c->v_fmap, *alpha = c->v_fmap_face; /* scratch here */
+    gs_raster_set_records(c->raster_crop, 0); /* renders only */
     rc = gs_raster_forward(c->raster_crop, pool, &cam, &g, c->bg_crop, &ro,
                            out, alpha, NULL, err);
     if (rc)
@@ -1029,7 +1035,7 @@ static void eye_streams(gs_model_ctx *c, const gs_frame *fr)
 static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                        gs_error *err)
 {
-    int rc = gs_frame_forward(c, pool, fr, GS_STREAM_BOTH, 0, err);
+    int rc = forward_at(c, pool, fr, GS_STREAM_BOTH, 0, c->fs, 1, err);
     if (rc)
         return rc;
     if (c->src_mode) {
@@ -1091,7 +1097,7 @@ int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
      * or every render starts from scratch (face stream included). */
     if (!c->inc_ok || c->render_fs != c->fs || c->render_full) {
         rc = forward_at(c, pool, fr, GS_STREAM_BOTH, c->render_full,
-                        c->render_fs, err);
+                        c->render_fs, 1, err);
         c->n_full += rc == GS_OK;
         return rc;
     }

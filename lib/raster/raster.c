@@ -61,6 +61,12 @@ int gs_raster_set_frustum(gs_raster *r, const gs_camera *frustum,
     return GS_OK;
 }
 
+void gs_raster_set_records(gs_raster *r, int on)
+{
+    if (r)
+        r->no_records = !on;
+}
+
 void gs_raster_destroy(gs_raster *r)
 {
     if (!r)

@@ -116,6 +116,7 @@ struct gs_raster {
     gs_tile_rec *tile_rec; /* per tile */
     size_t cap_tile_rec;
     size_t rec_budget;    /* bytes of records in all; 0: GS_RASTER_REC_BUDGET */
+    int no_records;       /* gs_raster_set_records(r, 0): forwards keep none */
 
     int visible;
     size_t contributions;

@@ -405,7 +405,7 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
     tile_info ti = get_tile(r, tile);
     gs_rec_arena *ar = r->arenas + worker;
     size_t rec0 = ar->n;
-    int rec = ti.e - ti.s < GS_REC_MAX_PAIRS;
+    int rec = ctx->rec_cap > 0 && ti.e - ti.s < GS_REC_MAX_PAIRS;
     /* The arena's fields in locals: through ar they would be reloaded after
      * every store to the tile's buffers. */
     size_t rn = ar->n, rcap = ar->cap;
@@ -633,7 +633,8 @@ static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out
         return GS_ERR_NOMEM;
     int threads = gs_pool_threads(pool);
     size_t budget = r->rec_budget ? r->rec_budget : GS_RASTER_REC_BUDGET;
-    size_t rec_cap = budget / (sizeof(uint32_t) + L * sizeof(float)) / (size_t)threads;
+    size_t rec_cap = r->no_records ? 0
+                     : budget / (sizeof(uint32_t) + L * sizeof(float)) / (size_t)threads;
     fwd_ctx ctx = {r, bg, out_f, out_alpha, out_depth, per, rec_cap, 0};
     gs_pool_for(pool, ntiles, tile_forward, &ctx);
     r->contributions = atomic_load(&ctx.contributions);

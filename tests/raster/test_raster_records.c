@@ -3,7 +3,8 @@
  * give the same bytes, whichever tiles fit (that depends on which worker
  * composited which tile, so on scheduling): this runs one scene with the
  * default budget, with none (every tile evaluated again) and with budgets
- * that record only some tiles, on 1, 2 and 3 threads, and compares bytes. */
+ * that record only some tiles, on 1, 2 and 3 threads, and with records
+ * switched off (gs_raster_set_records), and compares bytes. */
 #include "raster_internal.h"
 #include "rt_util.h"
 
@@ -74,6 +75,27 @@ static void run_scene(uint64_t seed, int n, int C, int W, int H, int aa)
             gs_pool_destroy(pool);
         }
     CHECK_MSG(saw_mixed, "no run recorded only some tiles");
+
+    /* Records switched off (renders no backward follows): no tile keeps
+     * any, and the outputs and a backward still give the same bytes. */
+    for (int t = 1; t <= 2; t++) {
+        gs_pool *pool = gs_pool_create(t);
+        r = gs_raster_create();
+        CHECK(pool && r);
+        gs_raster_set_records(r, 0);
+        rt_result o;
+        rt_run_with(r, &s, GS_RASTER_FAST, pool, &u, &o);
+        CHECK(o.fwd_status == GS_OK && o.bwd_status == GS_OK);
+        count_recorded(r, &rec, &filled, &all);
+        CHECK_MSG(rec == 0, "records off, %d thread(s): %d of %d tiles recorded", t, rec, all);
+        char what[64];
+        snprintf(what, sizeof what, "records off, %d thread(s)", t);
+        if (rt_same_bytes(what, &o, &ref))
+            printf("  %s: bit-identical\n", what);
+        rt_result_free(&o);
+        gs_raster_destroy(r);
+        gs_pool_destroy(pool);
+    }
     rt_result_free(&ref);
     rt_upstream_free(&u);
     rt_scene_free(&s);
