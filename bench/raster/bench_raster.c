@@ -106,6 +106,7 @@ static int cmp_double(const void *a, const void *b)
  * workspace and buffers. */
 typedef struct {
     gs_raster_path path;
+    const char *isa; /* fast path's instruction set */
     int threads;
     gs_raster *r;
     gs_pool *pool;
@@ -137,17 +138,25 @@ static void problem_init(problem *pb, const scene *s, int size)
         pb->vF[i] = (float)(i % 7) * 0.01f - 0.03f;
 }
 
-static void config_init(config *c, const problem *pb, gs_raster_path path, int threads, int reps)
+static int config_init(config *c, const problem *pb, gs_raster_path path, const char *isa,
+                       int threads, int reps)
 {
     c->path = path;
+    c->isa = isa;
     c->threads = threads;
     c->r = gs_raster_create();
+    gs_error err;
+    if (isa && gs_raster_set_isa(c->r, isa, &err)) {
+        fprintf(stderr, "bench_raster: %s\n", err.msg);
+        return 1;
+    }
     c->pool = path == GS_RASTER_FAST ? gs_pool_create(threads) : NULL;
     c->F = malloc(sizeof(float) * pb->C * pb->HW);
     c->A = malloc(sizeof(float) * pb->HW);
     c->grad = calloc(pb->n * (11 + pb->C), sizeof(float));
     c->tf = malloc(sizeof(double) * reps);
     c->tb = malloc(sizeof(double) * reps);
+    return 0;
 }
 
 static int config_rep(config *c, const problem *pb, int k)
@@ -187,9 +196,14 @@ static double median(double *x, int n)
     return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
 }
 
+#define MAX_ISA 3
+#define MAX_CONFIGS (1 + 2 * MAX_ISA)
+
 int main(int argc, char **argv)
 {
-    int reps = 15, fast_only = 0, only_size = 0;
+    int reps = 15, fast_only = 0, only_size = 0, n_isa = 0;
+    const char *isa[MAX_ISA];
+    char isa_list[64] = "";
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--quick"))
             reps = 3;
@@ -199,13 +213,32 @@ int main(int argc, char **argv)
             only_size = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
             reps = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--isa") && i + 1 < argc && strlen(argv[i + 1]) < sizeof isa_list)
+            strcpy(isa_list, argv[++i]);
         else {
-            fprintf(stderr, "usage: bench_raster [--quick] [--reps N] [--fast-only] [--size 128|512]\n");
+            fprintf(stderr, "usage: bench_raster [--quick] [--reps N] [--fast-only] [--size 128|512]\n"
+                            "                    [--isa avx512,avx2,generic]\n"
+                            "  --isa: the fast path's instruction sets to compare, interleaved\n"
+                            "         (default: avx512 and avx2, those this CPU runs)\n");
             return 2;
         }
     }
     if (reps < 1)
         reps = 1;
+    if (isa_list[0]) {
+        for (char *tok = strtok(isa_list, ","); tok; tok = strtok(NULL, ","))
+            if (n_isa < MAX_ISA)
+                isa[n_isa++] = tok;
+    } else {
+        static const char *const dflt[] = {"avx512", "avx2"};
+        gs_raster *probe = gs_raster_create();
+        for (int k = 0; k < 2; k++)
+            if (!gs_raster_set_isa(probe, dflt[k], NULL))
+                isa[n_isa++] = dflt[k];
+        gs_raster_destroy(probe);
+        if (!n_isa)
+            isa[n_isa++] = "generic";
+    }
     struct { int n, size; } cases[] = {{20000, 128}, {30000, 512}};
     printf("| Gaussians, size, C | path | threads | fwd ms | bwd ms | fwd speed-up | bwd speed-up | "
            "contributors/px | tile pairs |\n|---|---|---|---|---|---|---|---|---|\n");
@@ -217,27 +250,32 @@ int main(int argc, char **argv)
         problem pb;
         problem_init(&pb, &s, cases[c].size);
         int nrep = cases[c].size > 128 && reps > 5 ? 5 : reps;
-        config cf[3];
-        config_init(&cf[0], &pb, GS_RASTER_SCALAR, 1, nrep);
-        config_init(&cf[1], &pb, GS_RASTER_FAST, 1, nrep);
-        config_init(&cf[2], &pb, GS_RASTER_FAST, 2, nrep);
+        config cf[MAX_CONFIGS];
+        int ncf = 0;
+        if (config_init(&cf[ncf++], &pb, GS_RASTER_SCALAR, NULL, 1, nrep))
+            return 1;
+        for (int k = 0; k < n_isa; k++)
+            for (int t = 1; t <= 2; t++)
+                if (config_init(&cf[ncf++], &pb, GS_RASTER_FAST, isa[k], t, nrep))
+                    return 1;
         /* Interleaved: every rep runs each configuration once, so a change in
          * machine load hits all of them alike. k = -1 warms up. */
         int j0 = fast_only ? 1 : 0;
         for (int k = -1; k < nrep; k++)
-            for (int j = j0; j < 3; j++)
+            for (int j = j0; j < ncf; j++)
                 if (config_rep(&cf[j], &pb, k))
                     return 1;
         double px = (double)cases[c].size * cases[c].size;
         double rf = fast_only ? NAN : median(cf[0].tf, nrep);
         double rb = fast_only ? NAN : median(cf[0].tb, nrep);
-        for (int j = 0; j < 3; j++) {
+        for (int j = 0; j < ncf; j++) {
             if (j >= j0) {
                 double f = median(cf[j].tf, nrep), b = median(cf[j].tb, nrep);
+                char path[32];
+                snprintf(path, sizeof path, "%s%s", j ? "fast " : "scalar", j ? cf[j].isa : "");
                 printf("| %dk, %d², 32 | %s | %d | %.2f | %.2f | %.1f× | %.1f× | %.1f | %zu |\n",
-                       cases[c].n / 1000, cases[c].size, j ? "fast" : "scalar", cf[j].threads,
-                       f, b, rf / f, rb / b, cf[j].st.contributions / px,
-                       cf[j].st.intersections);
+                       cases[c].n / 1000, cases[c].size, path, cf[j].threads, f, b, rf / f,
+                       rb / b, cf[j].st.contributions / px, cf[j].st.intersections);
             }
             config_free(&cf[j]);
         }

@@ -2,6 +2,7 @@
  * sort, tile binning, and the dispatch to the compositing paths. */
 #include <math.h>
 #include <stdatomic.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -29,18 +30,92 @@ int gs_raster_reserve(void **buf, size_t *cap, size_t want, size_t elem)
     return GS_OK;
 }
 
-static const gs_raster_kernels *fast_kernels(void)
+/* The fast path's kernel sets, best first, and whether this CPU runs each. */
+static int kernels_supported(const gs_raster_kernels *k)
 {
 #if defined(__x86_64__) || defined(__i386__)
-    if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma"))
-        return &gs_raster_kernels_avx2;
+    if (k == &gs_raster_kernels_avx512)
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+               __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512bw") &&
+               __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+    if (k == &gs_raster_kernels_avx2)
+        return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+#else
+    if (k != &gs_raster_kernels_generic)
+        return 0;
 #endif
+    return 1;
+}
+
+static const gs_raster_kernels *const all_kernels[] = {
+    &gs_raster_kernels_avx512, &gs_raster_kernels_avx2, &gs_raster_kernels_generic};
+#define N_KERNELS (sizeof all_kernels / sizeof *all_kernels)
+
+static const gs_raster_kernels *best_kernels(void)
+{
+    for (size_t k = 0; k < N_KERNELS; k++)
+        if (kernels_supported(all_kernels[k]))
+            return all_kernels[k];
     return &gs_raster_kernels_generic;
+}
+
+/* The set called name ("auto": the best), or NULL when there is none or
+ * this CPU cannot run it. */
+static const gs_raster_kernels *kernels_named(const char *name)
+{
+    if (!strcmp(name, "auto"))
+        return best_kernels();
+    for (size_t k = 0; k < N_KERNELS; k++)
+        if (!strcmp(name, all_kernels[k]->name))
+            return kernels_supported(all_kernels[k]) ? all_kernels[k] : NULL;
+    return NULL;
+}
+
+/* Argument checks give the same answer with every set. */
+static const gs_raster_kernels *fast_kernels(void)
+{
+    return best_kernels();
 }
 
 gs_raster *gs_raster_create(void)
 {
-    return calloc(1, sizeof(gs_raster));
+    gs_raster *r = calloc(1, sizeof(gs_raster));
+    if (!r)
+        return NULL;
+    r->kern = best_kernels();
+    const char *env = getenv("GS_RASTER_ISA");
+    if (env && *env) {
+        const gs_raster_kernels *k = kernels_named(env);
+        if (k)
+            r->kern = k;
+        else
+            snprintf(r->isa_error, sizeof r->isa_error, "%.40s", env);
+    }
+    return r;
+}
+
+int gs_raster_set_isa(gs_raster *r, const char *isa, gs_error *err)
+{
+    if (!r || !isa)
+        return gs_error_set(err, GS_ERR_ARG, "raster: no workspace or instruction set");
+    const gs_raster_kernels *k = kernels_named(isa);
+    if (!k) {
+        for (size_t i = 0; i < N_KERNELS; i++)
+            if (!strcmp(isa, all_kernels[i]->name))
+                return gs_error_set(err, GS_ERR_UNSUPPORTED,
+                                    "raster: this CPU cannot run instruction set '%s'", isa);
+        return gs_error_set(err, GS_ERR_ARG,
+                            "raster: unknown instruction set '%s' (avx512, avx2, generic, auto)",
+                            isa);
+    }
+    r->kern = k;
+    r->isa_error[0] = '\0';
+    return GS_OK;
+}
+
+const char *gs_raster_isa(const gs_raster *r)
+{
+    return r ? r->kern->name : best_kernels()->name;
 }
 
 int gs_raster_set_frustum(gs_raster *r, const gs_camera *frustum,
@@ -335,7 +410,7 @@ static void project_chunk(void *vctx, int task, int worker)
     if (i1 > ctx->r->g.n)
         i1 = ctx->r->g.n;
     if (ctx->fast) {
-        fast_kernels()->project(ctx->r, i0, i1);
+        ctx->r->kern->project(ctx->r, i0, i1);
         return;
     }
     for (int i = i0; i < i1; i++)
@@ -555,6 +630,11 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     if (!r || !out_f || !out_alpha)
         return gs_error_set(err, GS_ERR_ARG, "raster: workspace and outputs are required");
     r->have_forward = 0;
+    if (r->isa_error[0])
+        return gs_error_set(err, GS_ERR_ARG,
+                            "raster: GS_RASTER_ISA=%s is unknown or not supported by this CPU "
+                            "(avx512, avx2, generic, auto)",
+                            r->isa_error);
     int rc = check_inputs(cam, g, background, err);
     if (rc)
         return rc;
@@ -619,7 +699,8 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
         return rc;
 
     if (fast) {
-        if (fast_kernels()->forward(r, pool, background, out_f, out_alpha, out_depth))
+        r->fwd_kern = r->kern;
+        if (r->kern->forward(r, pool, background, out_f, out_alpha, out_depth))
             return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tile buffers");
     } else
         gs_raster_scalar_forward(r, background, out_f, out_alpha, out_depth);
@@ -800,7 +881,7 @@ static void project_backward_chunk(void *vctx, int task, int worker)
     if (i1 > c->r->g.n)
         i1 = c->r->g.n;
     if (c->fast) {
-        fast_kernels()->project_backward(c->r, i0, i1, c->grads);
+        c->r->fwd_kern->project_backward(c->r, i0, i1, c->grads);
         return;
     }
     for (int i = i0; i < i1; i++)
@@ -889,7 +970,7 @@ static int fast_backward(gs_raster *r, gs_pool *pool, const float *v_f, const fl
         if (gs_raster_reserve((void **)&r->slots, &r->cap_slots, nslots * stride + 1,
                               sizeof(float)))
             return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory in backward");
-        if (fast_kernels()->backward(r, pool, t0, t1, r->tile_off[t0], v_f, v_alpha, v_depth,
+        if (r->fwd_kern->backward(r, pool, t0, t1, r->tile_off[t0], v_f, v_alpha, v_depth,
                                      v_bg))
             return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tile buffers");
         gather_slots(r, pool, t0, t1, r->tile_off[t0], v_features);

@@ -46,21 +46,22 @@ typedef struct gs_proj_grad {
 
 /* The forward's record of what each tile composited, replayed by the fast
  * backward instead of evaluating the Gaussians again: one record per
- * (Gaussian, 8-pixel group) pair with at least one contributing pixel.
+ * (Gaussian, L-pixel group) pair with at least one contributing pixel.
  * Each worker appends the records of the tiles it composites to its own
  * arena; a tile whose records do not fit (GS_RASTER_REC_BUDGET) or whose
  * list is too long to encode is evaluated again by the backward, with the
- * same results. */
+ * same results. The layout belongs to the kernel table that wrote it
+ * (raster_tiles.c): L is 8 or 16 lanes. */
 typedef struct gs_rec_arena {
-    uint32_t *hdr; /* per record: pair in the tile's list << 13 | group << 8 | lanes */
-    float *vis;    /* per record: exp(-sigma) of the group's 8 pixels */
+    uint32_t *hdr; /* per record: pair in the tile's list << group bits | group */
+    float *vis;    /* per record: exp(-sigma) of the group's L pixels, -1 where
+                      a pixel did not contribute */
     size_t n, cap;
 } gs_rec_arena;
 
-/* Bytes of records kept per forward, all workers together (36 per record). */
+/* Bytes of records kept per forward, all workers together (4 + 4 L per
+ * record). */
 #define GS_RASTER_REC_BUDGET ((size_t)64 << 20)
-#define GS_REC_PAIR_SHIFT 13
-#define GS_REC_MAX_PAIRS ((uint32_t)1 << (32 - GS_REC_PAIR_SHIFT))
 #define GS_REC_NONE UINT32_MAX
 
 typedef struct gs_tile_rec {
@@ -118,6 +119,10 @@ struct gs_raster {
     size_t rec_budget;    /* bytes of records in all; 0: GS_RASTER_REC_BUDGET */
     int no_records;       /* gs_raster_set_records(r, 0): forwards keep none */
 
+    const struct gs_raster_kernels *kern;     /* fast path's set for the next forward */
+    const struct gs_raster_kernels *fwd_kern; /* the set the last fast forward used */
+    char isa_error[64];   /* GS_RASTER_ISA named no usable set: forwards fail */
+
     int visible;
     size_t contributions;
 };
@@ -134,6 +139,7 @@ void gs_raster_scalar_backward(gs_raster *r, const float *v_f,
 
 /* Fast compositing (raster_tiles.c, built per instruction set). */
 typedef struct gs_raster_kernels {
+    const char *name; /* "avx512", "avx2", "generic" */
     int (*forward)(gs_raster *r, gs_pool *pool, const float *bg, float *out_f,
                    float *out_alpha, float *out_depth);
     /* Composites tiles [t0, t1) backward into r->slots. */
@@ -148,5 +154,6 @@ typedef struct gs_raster_kernels {
 
 extern const gs_raster_kernels gs_raster_kernels_generic;
 extern const gs_raster_kernels gs_raster_kernels_avx2;
+extern const gs_raster_kernels gs_raster_kernels_avx512;
 
 #endif

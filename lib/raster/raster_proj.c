@@ -1,4 +1,4 @@
-/* Fast path projection and its gradient, 8 Gaussians per vector: the
+/* Fast path projection and its gradient, L (8 or 16) Gaussians per vector: the
  * formulas of raster.c's project_one and project_backward_one (the scalar
  * path's, which document them) with branches turned into lane selects.
  * Included by raster_tiles.c, so it is built once per instruction set and
@@ -75,9 +75,11 @@ static inline vf vlog_pos(vf x)
 /* Square root per lane (correctly rounded, as sqrtf). */
 static inline vf vsqrt(vf x)
 {
-#if defined(__AVX__)
+#if L == 16 && defined(__AVX512F__)
+    return (vf)_mm512_sqrt_ps((__m512)x);
+#elif L == 8 && defined(__AVX__)
     return (vf)_mm256_sqrt_ps((__m256)x);
-#elif defined(__SSE2__)
+#elif L == 8 && defined(__SSE2__)
     vf4 lo = __builtin_shufflevector(x, x, 0, 1, 2, 3), hi = __builtin_shufflevector(x, x, 4, 5, 6, 7);
     lo = (vf4)_mm_sqrt_ps((__m128)lo);
     hi = (vf4)_mm_sqrt_ps((__m128)hi);

@@ -20,17 +20,32 @@
 #define GS_KERNELS gs_raster_kernels_generic
 #endif
 
-#define L 8 /* lanes */
+#ifndef GS_LANES
+#define GS_LANES 8
+#endif
+#define L GS_LANES /* lanes: 8 (AVX2, SSE2, plain C) or 16 (AVX-512) */
+#if L != 8 && L != 16
+#error "GS_LANES must be 8 or 16"
+#endif
 #define TS GS_RASTER_TILE
 #define TPIX (TS * TS)
-#define GROUPS (TS / L)
+#define GROUPS (TS / L)  /* groups per tile row */
+#define NGROUPS (TPIX / L) /* groups per tile */
+#define GROUP_BITS (L == 8 ? 5 : 4) /* log2(NGROUPS) */
+/* Records (raster_internal.h): header pair << GROUP_BITS | group; exp(-sigma)
+ * of the group's lanes, -1 in the lanes that did not contribute. */
+#define REC_MAX_PAIRS ((uint32_t)1 << (32 - GROUP_BITS))
 
-typedef float vf __attribute__((vector_size(32), aligned(32)));
-typedef int32_t vi __attribute__((vector_size(32), aligned(32)));
+typedef float vf __attribute__((vector_size(4 * L), aligned(4 * L)));
+typedef int32_t vi __attribute__((vector_size(4 * L), aligned(4 * L)));
 
 static inline vf splat(float x)
 {
+#if L == 8
     return (vf){x, x, x, x, x, x, x, x};
+#else
+    return (vf){x, x, x, x, x, x, x, x, x, x, x, x, x, x, x, x};
+#endif
 }
 
 #if defined(__AVX2__) || defined(__SSE2__)
@@ -40,7 +55,7 @@ static inline vf splat(float x)
 /* m ? a : b per lane (C has no vector ?:); m lanes are 0 or -1. */
 static inline vf vsel(vi m, vf a, vf b)
 {
-#ifdef __AVX2__
+#if L == 8 && defined(__AVX2__)
     return (vf)_mm256_blendv_ps((__m256)b, (__m256)a, (__m256)m);
 #else
     return (vf)(((vi)a & m) | ((vi)b & ~m));
@@ -62,7 +77,12 @@ static inline vf vmax(vf a, vf b)
     return vsel(a > b, a, b);
 }
 
-#ifdef __AVX2__
+#if L == 16 && defined(__AVX512DQ__)
+static inline int mask_bits(vi m)
+{
+    return (int)_mm512_movepi32_mask((__m512i)m);
+}
+#elif L == 8 && defined(__AVX2__)
 static inline int mask_bits(vi m)
 {
     return _mm256_movemask_ps((__m256)m);
@@ -83,15 +103,27 @@ static inline int any(vi m)
 }
 
 typedef float vf4 __attribute__((vector_size(16)));
+typedef float vf8 __attribute__((vector_size(32)));
 
-/* Lane sum in a fixed order (pairwise), the same on every path:
+/* Lane sum of 8 in a fixed order (pairwise), the same on every path:
  * ((v0 + v4) + (v2 + v6)) + ((v1 + v5) + (v3 + v7)), as three shuffles and
  * three adds. */
-static inline float hsum(vf v)
+static inline float hsum8(vf8 v)
 {
     vf4 h = __builtin_shufflevector(v, v, 0, 1, 2, 3) + __builtin_shufflevector(v, v, 4, 5, 6, 7);
     h = h + __builtin_shufflevector(h, h, 2, 3, 0, 1);
     return h[0] + h[1];
+}
+
+/* 16 lanes: the two halves added lane by lane first, then as above. */
+static inline float hsum(vf v)
+{
+#if L == 8
+    return hsum8(v);
+#else
+    return hsum8(__builtin_shufflevector(v, v, 0, 1, 2, 3, 4, 5, 6, 7) +
+                 __builtin_shufflevector(v, v, 8, 9, 10, 11, 12, 13, 14, 15));
+#endif
 }
 
 /* exp(x) for x <= 0: Cody-Waite reduction x = n ln2 + r, degree-6 minimax
@@ -121,8 +153,12 @@ static inline vf vexp_neg(vf x)
     return vsel(tiny, splat(0.0f), p * scale);
 }
 
-/* Lane offsets 0.5, 1.5, ... 7.5: pixel centres of a group. */
-static const vf lane_centre = {0.5f, 1.5f, 2.5f, 3.5f, 4.5f, 5.5f, 6.5f, 7.5f};
+/* Lane offsets 0.5, 1.5, ...: pixel centres of a group. */
+static const vf lane_centre = {0.5f,  1.5f,  2.5f,  3.5f,  4.5f,  5.5f,  6.5f,  7.5f,
+#if L == 16
+                               8.5f,  9.5f,  10.5f, 11.5f, 12.5f, 13.5f, 14.5f, 15.5f
+#endif
+};
 
 typedef struct {
     int x0, y0, w, h;      /* tile origin and size inside the image */
@@ -301,25 +337,85 @@ static inline void load_features(const float *f, int C, int nv, vf *fv)
         fv[c] = load_n(f + c * L, C - c * L < L ? C - c * L : L);
 }
 
-/* In-place transpose of 8 vectors (rows) into 8 vectors (columns). */
-static inline void transpose8(vf m[L])
+/* In-place transpose of 8 vectors of 8 (rows) into 8 vectors (columns). */
+static inline __attribute__((always_inline)) void transpose8x8(vf8 m[8])
 {
-    vf t[L], u[L];
-    for (int k = 0; k < L; k += 2) {
+    vf8 t[8], u[8];
+#pragma GCC unroll 16
+    for (int k = 0; k < 8; k += 2) {
         t[k] = __builtin_shufflevector(m[k], m[k + 1], 0, 8, 1, 9, 4, 12, 5, 13);
         t[k + 1] = __builtin_shufflevector(m[k], m[k + 1], 2, 10, 3, 11, 6, 14, 7, 15);
     }
-    for (int k = 0; k < L; k += 4)
+#pragma GCC unroll 16
+    for (int k = 0; k < 8; k += 4)
+    #pragma GCC unroll 16
         for (int h = 0; h < 2; h++) {
             u[k + 2 * h] =
                 __builtin_shufflevector(t[k + h], t[k + h + 2], 0, 1, 8, 9, 4, 5, 12, 13);
             u[k + 2 * h + 1] =
                 __builtin_shufflevector(t[k + h], t[k + h + 2], 2, 3, 10, 11, 6, 7, 14, 15);
         }
+#pragma GCC unroll 16
     for (int k = 0; k < 4; k++) {
         m[k] = __builtin_shufflevector(u[k], u[k + 4], 0, 1, 2, 3, 8, 9, 10, 11);
         m[k + 4] = __builtin_shufflevector(u[k], u[k + 4], 4, 5, 6, 7, 12, 13, 14, 15);
     }
+}
+
+/* In-place transpose of L vectors (rows) into L vectors (columns). */
+static inline __attribute__((always_inline)) void transpose(vf m[L])
+{
+#if L == 8
+    vf8 a[8];
+#pragma GCC unroll 16
+    for (int k = 0; k < 8; k++)
+        a[k] = m[k];
+    transpose8x8(a);
+#pragma GCC unroll 16
+    for (int k = 0; k < 8; k++)
+        m[k] = a[k];
+#else
+    /* Interleave pairs of rows, then pairs of pairs: u[4i + j] holds, in
+     * its 128-bit block b, rows 4i..4i+3 of column 4b + j. */
+    vf t[16], u[16];
+#pragma GCC unroll 16
+    for (int k = 0; k < 16; k += 2) {
+        t[k] = __builtin_shufflevector(m[k], m[k + 1], 0, 16, 1, 17, 4, 20, 5, 21, 8, 24, 9, 25,
+                                       12, 28, 13, 29);
+        t[k + 1] = __builtin_shufflevector(m[k], m[k + 1], 2, 18, 3, 19, 6, 22, 7, 23, 10, 26, 11,
+                                           27, 14, 30, 15, 31);
+    }
+#pragma GCC unroll 16
+    for (int k = 0; k < 16; k += 4)
+    #pragma GCC unroll 16
+        for (int h = 0; h < 2; h++) {
+            u[k + 2 * h] = __builtin_shufflevector(t[k + h], t[k + h + 2], 0, 1, 16, 17, 4, 5, 20,
+                                                   21, 8, 9, 24, 25, 12, 13, 28, 29);
+            u[k + 2 * h + 1] = __builtin_shufflevector(t[k + h], t[k + h + 2], 2, 3, 18, 19, 6, 7,
+                                                       22, 23, 10, 11, 26, 27, 14, 15, 30, 31);
+        }
+    /* Then gather the blocks: row 4b + j is u[j], u[4+j], u[8+j], u[12+j]'s
+     * block b. */
+#pragma GCC unroll 16
+    for (int j = 0; j < 4; j++) {
+        vf w0 = __builtin_shufflevector(u[j], u[4 + j], 0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11,
+                                        24, 25, 26, 27);
+        vf w1 = __builtin_shufflevector(u[j], u[4 + j], 4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14,
+                                        15, 28, 29, 30, 31);
+        vf x0 = __builtin_shufflevector(u[8 + j], u[12 + j], 0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10,
+                                        11, 24, 25, 26, 27);
+        vf x1 = __builtin_shufflevector(u[8 + j], u[12 + j], 4, 5, 6, 7, 20, 21, 22, 23, 12, 13,
+                                        14, 15, 28, 29, 30, 31);
+        m[j] = __builtin_shufflevector(w0, x0, 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21, 22,
+                                       23);
+        m[8 + j] = __builtin_shufflevector(w0, x0, 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27,
+                                           28, 29, 30, 31);
+        m[4 + j] = __builtin_shufflevector(w1, x1, 0, 1, 2, 3, 4, 5, 6, 7, 16, 17, 18, 19, 20, 21,
+                                           22, 23);
+        m[12 + j] = __builtin_shufflevector(w1, x1, 8, 9, 10, 11, 12, 13, 14, 15, 24, 25, 26, 27,
+                                            28, 29, 30, 31);
+    }
+#endif
 }
 
 /* ---- forward ------------------------------------------------------------ */
@@ -376,9 +472,10 @@ write_tile(fwd_ctx *ctx, const tile_info *ti, const vf *acc, const fwd_state *st
             vf T = st->T[v];
             for (int cb = 0; cb < nv; cb++) {
                 vf m[L];
+#pragma GCC unroll 16
                 for (int j = 0; j < L; j++)
                     m[j] = acc[(size_t)(v * L + j) * nv + cb];
-                transpose8(m);
+                transpose(m);
                 for (int k = 0; k < L && cb * L + k < C; k++) {
                     size_t off = (size_t)(cb * L + k) * HW + pix0;
                     vf o = m[k];
@@ -405,7 +502,7 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
     tile_info ti = get_tile(r, tile);
     gs_rec_arena *ar = r->arenas + worker;
     size_t rec0 = ar->n;
-    int rec = ctx->rec_cap > 0 && ti.e - ti.s < GS_REC_MAX_PAIRS;
+    int rec = ctx->rec_cap > 0 && ti.e - ti.s < REC_MAX_PAIRS;
     /* The arena's fields in locals: through ar they would be reloaded after
      * every store to the tile's buffers. */
     size_t rn = ar->n, rcap = ar->cap;
@@ -486,8 +583,9 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
                         rcap = ar->cap, rhdr = ar->hdr, rvis = ar->vis;
                     }
                     if (rec) {
-                        rhdr[rn] = (k - ti.s) << GS_REC_PAIR_SHIFT | (uint32_t)v << 8 | bits;
-                        memcpy(rvis + rn * L, &ge.vis, sizeof ge.vis);
+                        vf rv = vsel(valid, ge.vis, splat(-1.0f));
+                        rhdr[rn] = (k - ti.s) << GROUP_BITS | (uint32_t)v;
+                        memcpy(rvis + rn * L, &rv, sizeof rv);
                         rn++;
                     }
                 }
@@ -524,9 +622,11 @@ static void tile_forward(void *vctx, int t, int worker)
     case 2: tile_forward_nv(ctx, t, worker, 2); break;
     case 3: tile_forward_nv(ctx, t, worker, 3); break;
     case 4: tile_forward_nv(ctx, t, worker, 4); break;
+#if MAX_NV > 4
     case 5: tile_forward_nv(ctx, t, worker, 5); break;
     case 6: tile_forward_nv(ctx, t, worker, 6); break;
     case 7: tile_forward_nv(ctx, t, worker, 7); break;
+#endif
     default: tile_forward_nv(ctx, t, worker, MAX_NV); break;
     }
 }
@@ -689,7 +789,8 @@ load_tile(bwd_ctx *ctx, const tile_info *ti, vf *vpix, const bwd_state *st, cons
                         store_n(ctx->v_bg + off, load_n(ctx->v_bg + off, n) + T * m[k], n);
                     }
                 }
-                transpose8(m);
+                transpose(m);
+#pragma GCC unroll 16
                 for (int j = 0; j < L; j++)
                     vpix[(size_t)(v * L + j) * nv + cb] = m[j];
             }
@@ -785,15 +886,9 @@ group_grad(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, int v, fl
     part[5] += ge->vis * va;
 }
 
-/* Lane masks from the bits of a record. */
-static inline vi lanes_of(unsigned bits)
-{
-    const vi one = {1, 2, 4, 8, 16, 32, 64, 128};
-    return (one & ((vi){0} + (int32_t)bits)) != 0;
-}
-
-/* The gradients of pair sp (features f) from its records (hdr: group << 8
- * | lanes, vis: 8 exponentials each), in the forward's group order, into
+/* The gradients of pair sp (features f) from its records (hdr: group in the
+ * low GROUP_BITS; vis: L exponentials each, -1 in lanes that did not
+ * contribute), in the forward's group order, into
  * its slot. Everything of the pair lives in locals: through pointers it
  * could alias the tile buffers and be reloaded at every store. */
 static inline __attribute__((always_inline)) void
@@ -805,7 +900,7 @@ pair_grad_nv(const gs_splat *sp, const float *f, int C, float x0, float y0,
     bwd_state st = *state;
     pair_begin(&p, sp, f, C, x0, y0, nv);
     for (size_t e = 0; e < nrec; e++) {
-        int v = (int)(hdr[e] >> 8 & 31);
+        int v = (int)(hdr[e] & (NGROUPS - 1));
         float dy = p.my - ((float)(v / GROUPS) + 0.5f);
         vf ex;
         memcpy(&ex, vis + e * L, sizeof ex);
@@ -815,7 +910,7 @@ pair_grad_nv(const gs_splat *sp, const float *f, int C, float x0, float y0,
                          .vis = ex,
                          .alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(p.op) * ex),
                          .ok = {0}};
-        group_grad(&p, &st, buf, vpix, v, dy, &ge, lanes_of(hdr[e] & 0xff), nv);
+        group_grad(&p, &st, buf, vpix, v, dy, &ge, ex >= splat(0.0f), nv);
     }
     pair_end(&p, slot, C, nv);
 }
@@ -833,9 +928,11 @@ pair_grad(const gs_splat *sp, const float *f, int C, float x0, float y0, const b
     case 2: PAIR_GRAD(2); break;
     case 3: PAIR_GRAD(3); break;
     case 4: PAIR_GRAD(4); break;
+#if MAX_NV > 4
     case 5: PAIR_GRAD(5); break;
     case 6: PAIR_GRAD(6); break;
     case 7: PAIR_GRAD(7); break;
+#endif
     default: PAIR_GRAD(MAX_NV); break;
     }
 #undef PAIR_GRAD
@@ -861,7 +958,7 @@ replay_pairs(bwd_ctx *ctx, const tile_info *ti, const gs_tile_rec *tr, const bwd
         float *slot = r->slots + (k - ctx->slot0) * stride;
         uint32_t pl = k - ti->s;
         size_t beg = end;
-        while (beg > 0 && hdr[beg - 1] >> GS_REC_PAIR_SHIFT == pl)
+        while (beg > 0 && hdr[beg - 1] >> GROUP_BITS == pl)
             beg--;
         if (beg == end) {
             slot[GS_SLOT_HEAD - 1] = 0.0f; /* untouched */
@@ -884,8 +981,8 @@ evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, 
     gs_raster *r = ctx->r;
     const int C = r->g.channels;
     const size_t stride = GS_SLOT_HEAD + (size_t)C;
-    uint32_t hdr[TPIX / L];
-    float vis[TPIX] __attribute__((aligned(32)));
+    uint32_t hdr[NGROUPS];
+    float vis[TPIX] __attribute__((aligned(64)));
     for (uint32_t k = ti->e; k-- > ti->s && k + PREFETCH_AHEAD >= ti->e;)
         prefetch_pair(r, k, ti->s, ti->e);
     for (uint32_t k = ti->e; k-- > ti->s;) {
@@ -912,11 +1009,12 @@ evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, 
                                  before_last))
                     continue;
                 group_alpha(&ge, sp->op);
-                unsigned bits = (unsigned)mask_bits(ge.ok & before_last);
-                if (!bits)
+                vi valid = ge.ok & before_last;
+                if (!any(valid))
                     continue;
-                hdr[nrec] = (uint32_t)v << 8 | bits;
-                memcpy(vis + nrec * L, &ge.vis, sizeof ge.vis);
+                vf rv = vsel(valid, ge.vis, splat(-1.0f));
+                hdr[nrec] = (uint32_t)v;
+                memcpy(vis + nrec * L, &rv, sizeof rv);
                 nrec++;
             }
         }
@@ -968,9 +1066,11 @@ static void tile_backward(void *vctx, int task, int worker)
     case 2: tile_backward_nv(ctx, task, worker, 2); break;
     case 3: tile_backward_nv(ctx, task, worker, 3); break;
     case 4: tile_backward_nv(ctx, task, worker, 4); break;
+#if MAX_NV > 4
     case 5: tile_backward_nv(ctx, task, worker, 5); break;
     case 6: tile_backward_nv(ctx, task, worker, 6); break;
     case 7: tile_backward_nv(ctx, task, worker, 7); break;
+#endif
     default: tile_backward_nv(ctx, task, worker, MAX_NV); break;
     }
 }
@@ -1008,5 +1108,13 @@ static int all_finite(const float *x, size_t n)
 
 #include "raster_proj.c"
 
-const gs_raster_kernels GS_KERNELS = {fast_forward, fast_backward, all_finite, project_fast,
+#if L == 16
+#define KERNELS_NAME "avx512"
+#elif defined(__AVX2__)
+#define KERNELS_NAME "avx2"
+#else
+#define KERNELS_NAME "generic"
+#endif
+
+const gs_raster_kernels GS_KERNELS = {KERNELS_NAME, fast_forward, fast_backward, all_finite, project_fast,
                                       project_backward_fast};

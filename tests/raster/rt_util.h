@@ -14,6 +14,27 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* ------------------------------------------------------- instruction set */
+
+/* The raster tests also run with GS_RASTER_ISA naming each of the fast
+ * path's instruction sets (tests/raster/CMakeLists.txt); on a CPU that
+ * cannot run the named set the test is skipped (ctest's code 77) instead
+ * of failing in every forward. */
+__attribute__((constructor)) static void rt_isa_check(void)
+{
+    const char *isa = getenv("GS_RASTER_ISA");
+    if (!isa || !*isa)
+        return;
+    gs_raster *r = gs_raster_create();
+    int rc = r ? gs_raster_set_isa(r, isa, NULL) : 0;
+    gs_raster_destroy(r);
+    if (rc) {
+        printf("skipped: GS_RASTER_ISA=%s is not supported here\n", isa);
+        exit(77);
+    }
+    printf("fast path instruction set: %s\n", isa);
+}
+
 /* ------------------------------------------------------------------ RNG */
 
 typedef struct rt_rng {

@@ -141,6 +141,22 @@ int gs_raster_set_frustum(gs_raster *r, const gs_camera *frustum,
  * same gradients, evaluating every tile again. */
 void gs_raster_set_records(gs_raster *r, int on);
 
+/* The fast path's instruction set for later forwards: "avx512" (16-pixel
+ * groups, AVX-512 F/VL/DQ/BW with FMA), "avx2" (8-pixel groups, AVX2 with
+ * FMA), "generic" (8-pixel groups, the compiler's baseline vectors) or
+ * "auto" (the best this CPU runs; the default). A new workspace takes the
+ * environment variable GS_RASTER_ISA when it is set; if that names a set
+ * that is unknown or that this CPU cannot run, its forwards fail with an
+ * error saying so. Each set is deterministic and bit-identical across
+ * thread counts; sets differ from each other in rounding only (fused
+ * multiply-adds, lane sums). A backward uses its forward's set.
+ * gs_raster_set_isa returns GS_ERR_ARG for an unknown name and
+ * GS_ERR_UNSUPPORTED for a set this CPU cannot run, and then leaves the
+ * workspace's set as it was. */
+int gs_raster_set_isa(gs_raster *r, const char *isa, gs_error *err);
+/* The set the next forward uses. */
+const char *gs_raster_isa(const gs_raster *r);
+
 /* Gradients of the last forward. v_features (C x H x W) is required;
  * v_alpha and v_depth (H x W) may be NULL (zero). Adds into grads and
  * v_background (C x H x W, may be NULL). */
