@@ -138,6 +138,8 @@ static void problem_init(problem *pb, const scene *s, int size)
         pb->vF[i] = (float)(i % 7) * 0.01f - 0.03f;
 }
 
+static int spin_us = -1; /* --spin: the pools' spin time; -1 keeps the default */
+
 static int config_init(config *c, const problem *pb, gs_raster_path path, const char *isa,
                        int threads, int reps)
 {
@@ -151,6 +153,8 @@ static int config_init(config *c, const problem *pb, gs_raster_path path, const 
         return 1;
     }
     c->pool = path == GS_RASTER_FAST ? gs_pool_create(threads) : NULL;
+    if (c->pool && spin_us >= 0)
+        gs_pool_set_spin_us(c->pool, spin_us);
     c->F = malloc(sizeof(float) * pb->C * pb->HW);
     c->A = malloc(sizeof(float) * pb->HW);
     c->grad = calloc(pb->n * (11 + pb->C), sizeof(float));
@@ -213,13 +217,17 @@ int main(int argc, char **argv)
             only_size = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
             reps = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--spin") && i + 1 < argc)
+            spin_us = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--isa") && i + 1 < argc && strlen(argv[i + 1]) < sizeof isa_list)
             strcpy(isa_list, argv[++i]);
         else {
             fprintf(stderr, "usage: bench_raster [--quick] [--reps N] [--fast-only] [--size 128|512]\n"
-                            "                    [--isa avx512,avx2,generic]\n"
+                            "                    [--isa avx512,avx2,generic] [--spin US]\n"
                             "  --isa: the fast path's instruction sets to compare, interleaved\n"
-                            "         (default: avx512 and avx2, those this CPU runs)\n");
+                            "         (default: avx512 and avx2, those this CPU runs)\n"
+                            "  --spin: microseconds the pools spin between jobs (default %d)\n",
+                    GS_POOL_DEFAULT_SPIN_US);
             return 2;
         }
     }

@@ -1,12 +1,30 @@
-/* Thread pool: workers sleep on a condition variable between jobs. A job is
- * (fn, ctx, ntasks); tasks are claimed with an atomic counter so a slow
- * worker never holds up the rest. The caller works as worker 0. */
+/* Thread pool. A job is (fn, ctx, ntasks); tasks are claimed with an
+ * atomic counter so a slow worker never holds up the rest, and the caller
+ * works as worker 0.
+ *
+ * Between jobs a worker first spins on the job generation for the pool's
+ * spin time, then sleeps on a condition variable; the caller waits for the
+ * workers the same way. Waking a sleeping thread costs a system call and,
+ * on a virtual machine, the hypervisor's wake-up of a halted virtual CPU
+ * (tens of microseconds and more), paid twice per job; the rasterizer and
+ * the network run a few jobs per call back to back, so a short spin keeps
+ * the threads hot across them. Spinning uses `pause`, and the time it may
+ * burn is bounded per job. */
+#define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #include "gazesplat/pool.h"
 
 #include <pthread.h>
 #include <stdatomic.h>
 #include <stdlib.h>
+#include <time.h>
 #include <unistd.h>
+
+#if defined(__x86_64__) || defined(__i386__)
+#include <immintrin.h>
+#define cpu_relax() _mm_pause()
+#else
+#define cpu_relax() ((void)0)
+#endif
 
 struct gs_pool {
     int nthreads;
@@ -15,9 +33,12 @@ struct gs_pool {
     pthread_mutex_t lock;
     pthread_cond_t wake;       /* a new job or shutdown */
     pthread_cond_t done;       /* the last worker left the job */
-    unsigned long generation;  /* bumped per job, guarded by lock */
-    int busy;                  /* workers still inside the job */
-    int shutdown;
+    atomic_ulong generation;   /* bumped per job (under lock) */
+    atomic_int busy;           /* workers still inside the job */
+    atomic_int shutdown;
+    int sleepers;              /* workers in cond_wait (under lock) */
+    int caller_sleeping;       /* the caller in cond_wait on done (under lock) */
+    atomic_long spin_ns;       /* spin before sleeping, nanoseconds */
     gs_pool_fn fn;
     void *ctx;
     int ntasks;
@@ -28,6 +49,28 @@ typedef struct {
     gs_pool *pool;
     int index;
 } worker_arg;
+
+static long long now_ns(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
+}
+
+/* Spins until cond(p) holds or spin_ns have passed; returns cond(p). The
+ * clock is read every 64 pauses. */
+#define SPIN_UNTIL(p, cond)                                                           \
+    do {                                                                              \
+        long spin_ = atomic_load_explicit(&(p)->spin_ns, memory_order_relaxed);      \
+        if (spin_ > 0 && !(cond)) {                                                   \
+            long long end_ = now_ns() + spin_;                                        \
+            for (unsigned k_ = 1; !(cond); k_++) {                                    \
+                cpu_relax();                                                          \
+                if (k_ % 64 == 0 && now_ns() >= end_)                                 \
+                    break;                                                            \
+            }                                                                         \
+        }                                                                             \
+    } while (0)
 
 static void run_tasks(gs_pool *p, int worker)
 {
@@ -46,20 +89,31 @@ static void *worker_main(void *arg)
     int index = wa->index;
     unsigned long seen = 0;
     free(wa);
-    pthread_mutex_lock(&p->lock);
     for (;;) {
-        while (!p->shutdown && p->generation == seen)
-            pthread_cond_wait(&p->wake, &p->lock);
-        if (p->shutdown)
+#define NEW_JOB                                                                  \
+    (atomic_load_explicit(&p->generation, memory_order_acquire) != seen ||      \
+     atomic_load_explicit(&p->shutdown, memory_order_acquire))
+        SPIN_UNTIL(p, NEW_JOB);
+        if (!NEW_JOB) {
+            pthread_mutex_lock(&p->lock);
+            p->sleepers++;
+            while (!NEW_JOB)
+                pthread_cond_wait(&p->wake, &p->lock);
+            p->sleepers--;
+            pthread_mutex_unlock(&p->lock);
+        }
+#undef NEW_JOB
+        if (atomic_load_explicit(&p->shutdown, memory_order_acquire))
             break;
-        seen = p->generation;
-        pthread_mutex_unlock(&p->lock);
+        seen = atomic_load_explicit(&p->generation, memory_order_acquire);
         run_tasks(p, index);
-        pthread_mutex_lock(&p->lock);
-        if (--p->busy == 0)
-            pthread_cond_signal(&p->done);
+        if (atomic_fetch_sub_explicit(&p->busy, 1, memory_order_acq_rel) == 1) {
+            pthread_mutex_lock(&p->lock);
+            if (p->caller_sleeping)
+                pthread_cond_signal(&p->done);
+            pthread_mutex_unlock(&p->lock);
+        }
     }
-    pthread_mutex_unlock(&p->lock);
     return NULL;
 }
 
@@ -79,6 +133,10 @@ gs_pool *gs_pool_create(int nthreads)
     pthread_mutex_init(&p->lock, NULL);
     pthread_cond_init(&p->wake, NULL);
     pthread_cond_init(&p->done, NULL);
+    atomic_init(&p->generation, 0);
+    atomic_init(&p->busy, 0);
+    atomic_init(&p->shutdown, 0);
+    atomic_init(&p->spin_ns, (long)GS_POOL_DEFAULT_SPIN_US * 1000);
     atomic_init(&p->next, 0);
     if (nthreads > 1) {
         p->threads = calloc((size_t)nthreads - 1, sizeof *p->threads);
@@ -108,7 +166,7 @@ void gs_pool_destroy(gs_pool *p)
     if (!p)
         return;
     pthread_mutex_lock(&p->lock);
-    p->shutdown = 1;
+    atomic_store_explicit(&p->shutdown, 1, memory_order_release);
     pthread_cond_broadcast(&p->wake);
     pthread_mutex_unlock(&p->lock);
     for (int i = 1; i < p->nthreads; i++)
@@ -126,6 +184,12 @@ int gs_pool_threads(const gs_pool *p)
     return p ? p->nthreads : 1;
 }
 
+void gs_pool_set_spin_us(gs_pool *p, int us)
+{
+    if (p)
+        atomic_store_explicit(&p->spin_ns, us > 0 ? (long)us * 1000 : 0, memory_order_relaxed);
+}
+
 void gs_pool_for(gs_pool *p, int ntasks, gs_pool_fn fn, void *ctx)
 {
     if (ntasks <= 0)
@@ -141,16 +205,25 @@ void gs_pool_for(gs_pool *p, int ntasks, gs_pool_fn fn, void *ctx)
     p->ctx = ctx;
     p->ntasks = ntasks;
     atomic_store_explicit(&p->next, 0, memory_order_relaxed);
-    p->busy = p->nthreads - 1;
-    p->generation++;
-    pthread_cond_broadcast(&p->wake);
+    atomic_store_explicit(&p->busy, p->nthreads - 1, memory_order_relaxed);
+    /* The release publishes the job to workers spinning on the generation. */
+    atomic_fetch_add_explicit(&p->generation, 1, memory_order_release);
+    if (p->sleepers)
+        pthread_cond_broadcast(&p->wake);
     pthread_mutex_unlock(&p->lock);
 
     run_tasks(p, 0);
 
-    pthread_mutex_lock(&p->lock);
-    while (p->busy > 0)
-        pthread_cond_wait(&p->done, &p->lock);
-    pthread_mutex_unlock(&p->lock);
+#define JOB_DONE (atomic_load_explicit(&p->busy, memory_order_acquire) == 0)
+    SPIN_UNTIL(p, JOB_DONE);
+    if (!JOB_DONE) {
+        pthread_mutex_lock(&p->lock);
+        p->caller_sleeping = 1;
+        while (!JOB_DONE)
+            pthread_cond_wait(&p->done, &p->lock);
+        p->caller_sleeping = 0;
+        pthread_mutex_unlock(&p->lock);
+    }
+#undef JOB_DONE
     pthread_mutex_unlock(&p->call_lock);
 }

@@ -148,7 +148,7 @@ void gs_raster_destroy(gs_raster *r)
         return;
     free(r->n_block);
     free(r->splats);
-    free(r->rects);
+    free(r->bin_counts);
     free(r->order);
     free(r->order_tmp);
     free(r->keys);
@@ -500,39 +500,43 @@ static void band_tiles(const gs_raster *r, const gs_splat *sp, int ty, int tx0, 
     *a = lo, *b = hi;
 }
 
-/* Tile rows are binned in bands, one task each; every task walks all
- * visible Gaussians in depth order, so a tile's list comes out sorted and
- * only its own band's task writes it. */
+/* The visible Gaussians, in depth order, are split into chunks, one task
+ * each. The count pass tallies each chunk's pairs per tile; a prefix sum
+ * over (tile, chunk) then gives every chunk its own run inside each tile's
+ * list, which the fill pass writes in the chunk's order. Chunks are
+ * consecutive in depth, so every list comes out sorted whatever the chunk
+ * count, and no two tasks write the same element. */
 typedef struct {
     gs_raster *r;
-    const int32_t *rect; /* m x 4: tx0, tx1, ty0, ty1 per sorted Gaussian */
-    int m, fast, band, fill;
-    uint32_t *cursor;     /* fill pass: next free slot per tile */
+    int m, fast, chunk, fill, ntiles;
+    uint32_t *counts;     /* tasks x tiles: pairs per (chunk, tile); fill: cursors */
     _Atomic size_t total; /* count pass: pairs so far (for the limit) */
 } bin_ctx;
 
-static void bin_band(void *vctx, int task, int worker)
+static void bin_chunk(void *vctx, int task, int worker)
 {
     (void)worker;
     bin_ctx *ctx = vctx;
     gs_raster *r = ctx->r;
-    int y0 = task * ctx->band, y1 = y0 + ctx->band < r->tiles_y ? y0 + ctx->band : r->tiles_y;
-    uint32_t *count = r->tile_off + 1;
+    int k0 = task * ctx->chunk, k1 = k0 + ctx->chunk < ctx->m ? k0 + ctx->chunk : ctx->m;
+    uint32_t *count = ctx->counts + (size_t)task * (size_t)ctx->ntiles;
     size_t local = 0;
-    for (int k = 0; k < ctx->m; k++) {
-        const int32_t *t = ctx->rect + 4 * (size_t)k;
-        if (t[3] <= y0 || t[2] >= y1)
-            continue;
+    for (int k = k0; k < k1; k++) {
         uint32_t i = r->order[k];
-        int ya = t[2] > y0 ? t[2] : y0, yb = t[3] < y1 ? t[3] : y1;
-        for (int ty = ya; ty < yb; ty++) {
+        int32_t box[4];
+        const int32_t *t = box;
+        if (ctx->fast)
+            t = r->splats[i].tiles;
+        else
+            tile_range(r, (int)i, box);
+        for (int ty = t[2]; ty < t[3]; ty++) {
             int a = t[0], b = t[1];
             if (ctx->fast && b - a > 2 && t[3] - t[2] > 2)
                 band_tiles(r, r->splats + i, ty, t[0], t[1], &a, &b);
             size_t row = (size_t)ty * r->tiles_x;
             if (ctx->fill) {
                 for (int tx = a; tx < b; tx++)
-                    r->isect[ctx->cursor[row + tx]++] = i;
+                    r->isect[count[row + tx]++] = i;
             } else {
                 for (int tx = a; tx < b; tx++)
                     count[row + tx]++;
@@ -553,43 +557,43 @@ static void bin_band(void *vctx, int task, int worker)
 static int bin_tiles(gs_raster *r, gs_pool *pool, int m, int fast, gs_error *err)
 {
     size_t ntiles = (size_t)r->tiles_x * (size_t)r->tiles_y;
-    if (gs_raster_reserve((void **)&r->tile_off, &r->cap_tiles, ntiles + 1, sizeof(uint32_t)) ||
-        gs_raster_reserve((void **)&r->rects, &r->cap_rects, 4 * (size_t)(m ? m : 1),
-                          sizeof(int32_t)))
-        return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tiles");
-    for (int k = 0; k < m; k++) {
-        int32_t *t = r->rects + 4 * (size_t)k;
-        if (fast)
-            memcpy(t, r->splats[r->order[k]].tiles, sizeof r->splats->tiles);
-        else
-            tile_range(r, (int)r->order[k], t);
-    }
-    uint32_t *off = r->tile_off;
-    memset(off, 0, (ntiles + 1) * sizeof *off);
     int threads = fast ? gs_pool_threads(pool) : 1;
-    /* Few bands: every band walks all Gaussians, and the test of whether one
-     * overlaps the band is an unpredictable branch. */
-    int tasks = threads > 1 ? 2 * threads : 1;
-    tasks = tasks < r->tiles_y ? tasks : r->tiles_y;
-    bin_ctx ctx = {r, r->rects, m, fast, (r->tiles_y + tasks - 1) / tasks, 0, NULL, 0};
-    tasks = (r->tiles_y + ctx.band - 1) / ctx.band;
-    gs_pool_for(fast ? pool : NULL, tasks, bin_band, &ctx);
+    /* A few chunks per thread: Gaussians differ in how many tiles they
+     * reach, and the pool hands chunks out as workers come free. */
+    int tasks = threads > 1 ? 4 * threads : 1;
+    int chunk = m > 0 ? (m + tasks - 1) / tasks : 1;
+    tasks = m > 0 ? (m + chunk - 1) / chunk : 0;
+    if (gs_raster_reserve((void **)&r->tile_off, &r->cap_tiles, ntiles + 1, sizeof(uint32_t)) ||
+        gs_raster_reserve((void **)&r->bin_counts, &r->cap_bin_counts,
+                          (size_t)(tasks ? tasks : 1) * ntiles, sizeof(uint32_t)))
+        return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tiles");
+    uint32_t *off = r->tile_off, *counts = r->bin_counts;
+    memset(counts, 0, (size_t)tasks * ntiles * sizeof *counts);
+    bin_ctx ctx = {r, m, fast, chunk, 0, (int)ntiles, counts, 0};
+    gs_pool_for(fast ? pool : NULL, tasks, bin_chunk, &ctx);
     size_t total = atomic_load(&ctx.total);
     if (total > GS_RASTER_MAX_ISECT)
         return gs_error_set(err, GS_ERR_LIMIT,
                             "raster: more than %zu tile intersections (Gaussians too large?)",
                             GS_RASTER_MAX_ISECT);
-    for (size_t t = 0; t < ntiles; t++)
-        off[t + 1] += off[t];
+    /* Offsets per tile, and per (chunk, tile) the cursor where the chunk's
+     * run in that tile's list starts. */
+    uint32_t pos = 0;
+    for (size_t t = 0; t < ntiles; t++) {
+        off[t] = pos;
+        for (int c = 0; c < tasks; c++) {
+            uint32_t *cnt = counts + (size_t)c * ntiles + t, n = *cnt;
+            *cnt = pos;
+            pos += n;
+        }
+    }
+    off[ntiles] = pos;
     if (gs_raster_reserve((void **)&r->isect, &r->cap_isect, total ? total : 1, sizeof(uint32_t)))
         return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for %zu intersections",
                             total);
     r->n_isect = total;
-    /* The sort is done, so its scratch (at least max(n, tiles) long) is free. */
-    ctx.cursor = r->keys_tmp;
-    memcpy(ctx.cursor, off, ntiles * sizeof *ctx.cursor);
     ctx.fill = 1;
-    gs_pool_for(fast ? pool : NULL, tasks, bin_band, &ctx);
+    gs_pool_for(fast ? pool : NULL, tasks, bin_chunk, &ctx);
     return GS_OK;
 }
 

@@ -91,8 +91,8 @@ struct gs_raster {
     uint32_t *keys, *keys_tmp;
     size_t cap_order;
 
-    int32_t *rects;       /* visible x 4: radius box in tiles, in depth order */
-    size_t cap_rects;
+    uint32_t *bin_counts; /* binning: pairs per (chunk of Gaussians, tile) */
+    size_t cap_bin_counts;
     uint32_t *tile_off;   /* tiles + 1 offsets into isect */
     uint32_t *tile_order; /* fast path: tiles by decreasing list length */
     size_t cap_tile_order;
