@@ -119,10 +119,9 @@ static void *worker_main(void *arg)
 
 gs_pool *gs_pool_create(int nthreads)
 {
-    if (nthreads <= 0) {
-        long n = sysconf(_SC_NPROCESSORS_ONLN);
-        nthreads = n > 0 ? (int)n : 1;
-    }
+    long cpus = sysconf(_SC_NPROCESSORS_ONLN);
+    if (nthreads <= 0)
+        nthreads = cpus > 0 ? (int)cpus : 1;
     if (nthreads > GS_POOL_MAX_THREADS)
         nthreads = GS_POOL_MAX_THREADS;
     gs_pool *p = calloc(1, sizeof *p);
@@ -136,7 +135,9 @@ gs_pool *gs_pool_create(int nthreads)
     atomic_init(&p->generation, 0);
     atomic_init(&p->busy, 0);
     atomic_init(&p->shutdown, 0);
-    atomic_init(&p->spin_ns, (long)GS_POOL_DEFAULT_SPIN_US * 1000);
+    /* More threads than CPUs: a spinning thread would hold a CPU that
+     * another of them needs, so they sleep at once. */
+    atomic_init(&p->spin_ns, cpus > 0 && nthreads > cpus ? 0 : (long)GS_POOL_DEFAULT_SPIN_US * 1000);
     atomic_init(&p->next, 0);
     if (nthreads > 1) {
         p->threads = calloc((size_t)nthreads - 1, sizeof *p->threads);

@@ -24,8 +24,10 @@ void gs_pool_destroy(gs_pool *pool);
 /* Between jobs, workers (and the caller waiting for them) spin for up to
  * this many microseconds before they sleep, so jobs that follow each other
  * closely start without a wake-up (a system call, and on a virtual machine
- * the hypervisor's wake-up of a halted CPU). gs_pool_set_spin_us changes it
- * (0: sleep at once, the lowest CPU use when jobs are rare). */
+ * the hypervisor's wake-up of a halted CPU). A pool with more threads than
+ * online CPUs starts at 0 (a spinning thread would hold a CPU another one
+ * needs). gs_pool_set_spin_us changes it (0: sleep at once, the lowest CPU
+ * use when jobs are rare). */
 #define GS_POOL_DEFAULT_SPIN_US 200
 void gs_pool_set_spin_us(gs_pool *pool, int us);
 
