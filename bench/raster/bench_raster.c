@@ -112,6 +112,7 @@ typedef struct {
     gs_pool *pool;
     float *F, *A, *grad;
     double *tf, *tb;
+    double *ph[4]; /* per rep: projection, sort, binning, compositing ms */
     gs_raster_stats st;
 } config;
 
@@ -160,6 +161,8 @@ static int config_init(config *c, const problem *pb, gs_raster_path path, const 
     c->grad = calloc(pb->n * (11 + pb->C), sizeof(float));
     c->tf = malloc(sizeof(double) * reps);
     c->tb = malloc(sizeof(double) * reps);
+    for (int q = 0; q < 4; q++)
+        c->ph[q] = malloc(sizeof(double) * reps);
     return 0;
 }
 
@@ -181,9 +184,12 @@ static int config_rep(config *c, const problem *pb, int k)
         fprintf(stderr, "bench_raster: %s\n", err.msg);
         return rc;
     }
-    if (k >= 0)
-        c->tf[k] = t1 - t0, c->tb[k] = t2 - t1;
     gs_raster_get_stats(c->r, &c->st);
+    if (k >= 0) {
+        c->tf[k] = t1 - t0, c->tb[k] = t2 - t1;
+        c->ph[0][k] = c->st.ms_project, c->ph[1][k] = c->st.ms_sort;
+        c->ph[2][k] = c->st.ms_bin, c->ph[3][k] = c->st.ms_composite;
+    }
     return 0;
 }
 
@@ -192,6 +198,8 @@ static void config_free(config *c)
     gs_raster_destroy(c->r);
     gs_pool_destroy(c->pool);
     free(c->F), free(c->A), free(c->grad), free(c->tf), free(c->tb);
+    for (int q = 0; q < 4; q++)
+        free(c->ph[q]);
 }
 
 static double median(double *x, int n)
@@ -285,8 +293,19 @@ int main(int argc, char **argv)
                        cases[c].n / 1000, cases[c].size, path, cf[j].threads, f, b, rf / f,
                        rb / b, cf[j].st.contributions / px, cf[j].st.intersections);
             }
-            config_free(&cf[j]);
         }
+        /* Where the forward's time goes: medians of each phase. */
+        printf("\n| forward phases, %dk, %d² | path | threads | projection ms | sort ms | "
+               "binning ms | compositing ms |\n|---|---|---|---|---|---|---|\n",
+               cases[c].n / 1000, cases[c].size);
+        for (int j = j0; j < ncf; j++)
+            printf("| | %s%s | %d | %.2f | %.2f | %.2f | %.2f |\n", j ? "fast " : "scalar",
+                   j ? cf[j].isa : "", cf[j].threads, median(cf[j].ph[0], nrep),
+                   median(cf[j].ph[1], nrep), median(cf[j].ph[2], nrep),
+                   median(cf[j].ph[3], nrep));
+        printf("\n");
+        for (int j = 0; j < ncf; j++)
+            config_free(&cf[j]);
         free(pb.vF);
         free(s.means), free(s.log_scales), free(s.quats), free(s.opac), free(s.feat);
     }

@@ -125,6 +125,7 @@ struct gs_raster {
 
     int visible;
     size_t contributions;
+    double ms_phase[4]; /* last forward: projection, sort, binning, compositing */
 };
 
 /* Growth helper: ensures *buf holds at least want elements of size elem. */
