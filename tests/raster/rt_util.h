@@ -282,6 +282,21 @@ static inline void rt_upstream_free(rt_upstream *u)
     memset(u, 0, sizeof *u);
 }
 
+/* A random scene (rt_random_scene) with a uniform [0, 1) background drawn
+ * from bg_seed and random upstream gradients from up_seed; prints it. */
+static inline void rt_scene_for_grads(rt_scene *s, rt_upstream *u, uint64_t seed, int n, int C,
+                                      int W, int H, int aa, uint64_t bg_seed, uint64_t up_seed)
+{
+    rt_random_scene(s, seed, n, C, W, H);
+    s->antialiased = aa;
+    rt_scene_add_background(s);
+    rt_rng rng = {bg_seed};
+    for (size_t i = 0; i < (size_t)C * W * H; i++)
+        s->background[i] = (float)rt_uniform(&rng, 0, 1);
+    rt_upstream_random(u, s, up_seed);
+    printf("scene: %d Gaussians, %dx%d, C=%d%s\n", n, W, H, C, aa ? ", antialiased" : "");
+}
+
 /* Runs forward and (when u is not NULL) backward on a fresh gs_raster.
  * Gradients start at zero. Statuses are returned in o; a failed step
  * leaves the remaining outputs at their zero/NaN fill. */

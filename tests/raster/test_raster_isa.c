@@ -58,15 +58,8 @@ static void compare_to_generic(const char *isa, const rt_result *a, const rt_res
 static void run_scene(uint64_t seed, int n, int C, int W, int H, int aa)
 {
     rt_scene s;
-    rt_random_scene(&s, seed, n, C, W, H);
-    s.antialiased = aa;
-    rt_scene_add_background(&s);
-    rt_rng rng = {seed + 3};
-    for (size_t i = 0; i < (size_t)C * W * H; i++)
-        s.background[i] = (float)rt_uniform(&rng, 0, 1);
     rt_upstream u;
-    rt_upstream_random(&u, &s, seed + 4);
-    printf("scene: %d Gaussians, %dx%d, C=%d%s\n", n, W, H, C, aa ? ", antialiased" : "");
+    rt_scene_for_grads(&s, &u, seed, n, C, W, H, aa, seed + 3, seed + 4);
 
     gs_pool *p2 = gs_pool_create(2), *p3 = gs_pool_create(3);
     rt_result gen;

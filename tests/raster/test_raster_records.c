@@ -23,15 +23,8 @@ static void count_recorded(const gs_raster *r, int *rec, int *filled, int *all)
 static void run_scene(uint64_t seed, int n, int C, int W, int H, int aa)
 {
     rt_scene s;
-    rt_random_scene(&s, seed, n, C, W, H);
-    s.antialiased = aa;
-    rt_scene_add_background(&s);
-    rt_rng rng = {seed + 7};
-    for (size_t i = 0; i < (size_t)C * W * H; i++)
-        s.background[i] = (float)rt_uniform(&rng, 0, 1);
     rt_upstream u;
-    rt_upstream_random(&u, &s, seed + 8);
-    printf("scene: %d Gaussians, %dx%d, C=%d%s\n", n, W, H, C, aa ? ", antialiased" : "");
+    rt_scene_for_grads(&s, &u, seed, n, C, W, H, aa, seed + 7, seed + 8);
 
     rt_result ref;
     gs_raster *r = gs_raster_create();
