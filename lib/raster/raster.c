@@ -61,22 +61,16 @@ static const gs_raster_kernels *best_kernels(void)
     return &gs_raster_kernels_generic;
 }
 
-/* The set called name ("auto": the best), or NULL when there is none or
- * this CPU cannot run it. */
+/* The set called name ("auto": the best this CPU runs), or NULL when there
+ * is none; the caller checks kernels_supported. */
 static const gs_raster_kernels *kernels_named(const char *name)
 {
     if (!strcmp(name, "auto"))
         return best_kernels();
     for (size_t k = 0; k < N_KERNELS; k++)
         if (!strcmp(name, all_kernels[k]->name))
-            return kernels_supported(all_kernels[k]) ? all_kernels[k] : NULL;
+            return all_kernels[k];
     return NULL;
-}
-
-/* Argument checks give the same answer with every set. */
-static const gs_raster_kernels *fast_kernels(void)
-{
-    return best_kernels();
 }
 
 gs_raster *gs_raster_create(void)
@@ -88,7 +82,7 @@ gs_raster *gs_raster_create(void)
     const char *env = getenv("GS_RASTER_ISA");
     if (env && *env) {
         const gs_raster_kernels *k = kernels_named(env);
-        if (k)
+        if (k && kernels_supported(k))
             r->kern = k;
         else
             snprintf(r->isa_error, sizeof r->isa_error, "%.40s", env);
@@ -101,15 +95,13 @@ int gs_raster_set_isa(gs_raster *r, const char *isa, gs_error *err)
     if (!r || !isa)
         return gs_error_set(err, GS_ERR_ARG, "raster: no workspace or instruction set");
     const gs_raster_kernels *k = kernels_named(isa);
-    if (!k) {
-        for (size_t i = 0; i < N_KERNELS; i++)
-            if (!strcmp(isa, all_kernels[i]->name))
-                return gs_error_set(err, GS_ERR_UNSUPPORTED,
-                                    "raster: this CPU cannot run instruction set '%s'", isa);
+    if (!k)
         return gs_error_set(err, GS_ERR_ARG,
                             "raster: unknown instruction set '%s' (avx512, avx2, generic, auto)",
                             isa);
-    }
+    if (!kernels_supported(k))
+        return gs_error_set(err, GS_ERR_UNSUPPORTED,
+                            "raster: this CPU cannot run instruction set '%s'", isa);
     r->kern = k;
     r->isa_error[0] = '\0';
     return GS_OK;
@@ -208,7 +200,7 @@ static inline float min_f(float x, float hi)
 
 static int finite_array(const float *x, size_t n)
 {
-    return fast_kernels()->all_finite(x, n);
+    return best_kernels()->all_finite(x, n); /* the same answer with every set */
 }
 
 static int check_inputs(const gs_camera *cam, const gs_gaussians *g,
