@@ -153,12 +153,16 @@ static int fill(pframe *f, const gs_cap_frame *src)
 static void streaming_message(gs_cap_pipe *p)
 {
     gs_cap_format fmt;
-    char msg[160];
+    gs_cap_stats st;
+    char msg[200];
     if (gs_cap_get_format(p->cfg.cap, &fmt) != GS_OK)
         return;
-    snprintf(msg, sizeof msg, "streaming %dx%d %s at %d/%d fps, %d buffers", fmt.width,
-             fmt.height, fmt.pixfmt == GS_CAP_PIX_MJPEG ? "MJPEG" : "YUYV", fmt.fps_num,
-             fmt.fps_den ? fmt.fps_den : 1, fmt.nbuffers);
+    gs_cap_get_stats(p->cfg.cap, &st);
+    snprintf(msg, sizeof msg,
+             "streaming %dx%d %s at %d/%d fps, %d buffers, first frame %.1f ms after open",
+             fmt.width, fmt.height, fmt.pixfmt == GS_CAP_PIX_MJPEG ? "MJPEG" : "YUYV",
+             fmt.fps_num, fmt.fps_den ? fmt.fps_den : 1, fmt.nbuffers,
+             (double)st.first_frame_ns / 1e6);
     logf_(p, GS_CAP_EV_STREAMING, msg);
 }
 

@@ -43,6 +43,8 @@ struct gs_cap {
     uint32_t last_seq;
     int have_seq;
     uint64_t skipped_base; /* stale + bad + gaps at the last delivered frame */
+    int64_t open_start_ns; /* when the current open began */
+    int awaiting_first;    /* opened, no frame delivered yet */
     gs_cap_stats stats;
 };
 
@@ -287,6 +289,7 @@ static int ensure_rgb(gs_cap *cap, gs_error *err)
  * failure. */
 static int open_device(gs_cap *cap, gs_error *err)
 {
+    cap->open_start_ns = now_ns(cap);
     int fd = cap->ops->open(cap->ops->ctx, cap->path, O_RDWR | O_NONBLOCK);
     if (fd < 0)
         return gs_error_set(err, GS_ERR_IO, "%s: open: %s", cap->path, strerror(-fd));
@@ -321,6 +324,7 @@ static int open_device(gs_cap *cap, gs_error *err)
     }
     cap->fmt.nbuffers = cap->nbufs;
     cap->have_fmt = 1;
+    cap->awaiting_first = 1;
     cap->stats.opens++;
     return GS_OK;
 }
@@ -460,6 +464,10 @@ static void deliver(gs_cap *cap, const struct v4l2_buffer *b, int64_t t, gs_cap_
     f->skipped = (int)(skipped - cap->skipped_base);
     cap->skipped_base = skipped;
     cap->stats.frames++;
+    if (cap->awaiting_first) {
+        cap->stats.first_frame_ns = (uint64_t)(t > cap->open_start_ns ? t - cap->open_start_ns : 0);
+        cap->awaiting_first = 0;
+    }
     cap->backoff_ms = cap->cfg.backoff_min_ms;
 }
 

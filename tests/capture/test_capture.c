@@ -158,6 +158,12 @@ static void test_reopen(void)
     int64_t waited = f.open_t[1] - t_lost;
     CHECK_MSG(waited >= 100000000 && waited < 120000000, "reopened after %lld ns",
               (long long)waited);
+    /* The driver's share of the recovery: from the open to the first frame,
+     * which the fake delivers at its next 1/30 s tick. */
+    gs_cap_stats st;
+    gs_cap_get_stats(cap, &st);
+    CHECK_EQ_INT((long long)st.first_frame_ns, (long long)(f.t_ns - f.open_t[1]));
+    CHECK(st.first_frame_ns > 0 && st.first_frame_ns <= 1000000000 / 30 + 1);
 
     /* Unbound driver: EINVAL on every ioctl, not ENODEV. */
     f.unbound = 1;

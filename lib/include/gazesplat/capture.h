@@ -121,6 +121,9 @@ typedef struct gs_cap_stats {
     uint64_t gaps;           /* sequence numbers the driver skipped */
     uint64_t opens;          /* successful (re)opens */
     uint64_t failures;       /* device lost, open failed, timeouts */
+    uint64_t first_frame_ns; /* latest successful open: from the start of the open to
+                              * its first delivered frame (the driver's share of a
+                              * recovery; the back-off wait comes before it) */
 } gs_cap_stats;
 
 typedef struct gs_cap gs_cap;
