@@ -27,6 +27,8 @@ const cli_command cli_eval_command = {
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
+    "                      [--finetune N] [--finetune-parts LIST]\n"
+    "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N]\n"
     "\n"
@@ -55,6 +57,16 @@ const cli_command cli_eval_command = {
     "                    (0, 1] (default 1), resampled for the renderer\n"
     "  --full-render     every render from scratch (no incremental sweeps,\n"
     "                    no cached face stream)\n"
+    "  --finetune N      after each fit, fine-tune a copy of the model on the\n"
+    "                    input for N Adam steps (gs_model_finetune) and render\n"
+    "                    that input's targets with it; fit time includes it\n"
+    "  --finetune-parts LIST  what is tuned, comma-separated: face (face\n"
+    "                    Gaussians' colours and features), eye, renderer,\n"
+    "                    mlp, geometry; default face,renderer\n"
+    "  --finetune-lr X   Adam's base rate (default 0.001)\n"
+    "  --finetune-eye-weight W  weight of the input's eye region in the\n"
+    "                    fine-tuning loss, 0..1 (default 1; 0 leaves the\n"
+    "                    eyes to the shared model)\n"
     "  --make-pairs FILE write a pairing: --identities test identities\n"
     "                    (15) x --inputs scenes each (10) x --targets (10),\n"
     "                    --seed (1); deterministic\n",
@@ -63,7 +75,8 @@ const cli_command cli_eval_command = {
 
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
-    O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_MAKE, O_IDS, O_INPUTS,
+    O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
+    O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_N
 };
 
@@ -136,6 +149,13 @@ typedef struct evaluator {
     const char *dir;            /* --out */
     int reuse_fits, fits_reused;
     int save_images;            /* pairs [0, save_images) as PNG */
+    gs_finetune_options fo;     /* --finetune: fo.iters > 0 */
+    double ft_eye_w;            /* --finetune-eye-weight */
+    uint8_t *ftmask, *fteye;    /* its loss weights, the input's eyes */
+    gs_model *ftm;              /* the copy that is fine-tuned per input */
+    gs_model_ctx *ftctx;        /* renders it */
+    int ft_n;                   /* inputs fine-tuned */
+    double ft_s, ft_psnr_first, ft_psnr_best; /* their sums */
 } evaluator;
 
 /* Angular error in degrees of two (pitch, yaw) predictions; NaN if either
@@ -276,6 +296,56 @@ static void save_png(const evaluator *ev, int pair, const char *name,
         fprintf(stderr, "gazesplat eval: %s: %s\n", path, err.msg);
 }
 
+/* --finetune: the model copy gets the shared model's parameters back, is
+ * fine-tuned on this input's fit, and a fresh context on it renders the
+ * targets (a context's kept renders belong to the parameters it saw). */
+static int finetune_input(evaluator *ev, const gs_synth_sample *in,
+                          const gs_subject *sub, double *secs, float *psnr,
+                          gs_error *err)
+{
+    gs_model_ctx_destroy(ev->ftctx);
+    ev->ftctx = NULL;
+    ev->rctx = NULL;
+    int rc = gs_model_copy_params(ev->ftm, ev->m, err);
+    gs_finetune_report rep;
+    memset(&rep, 0, sizeof rep);
+    gs_finetune_options fo = ev->fo;
+    if (!rc && ev->ft_eye_w < 1.0) {
+        size_t n = (size_t)ev->S * ev->S;
+        if (!ev->ftmask)
+            ev->ftmask = malloc(n);
+        if (!ev->fteye)
+            ev->fteye = malloc(n);
+        uint8_t *face = malloc(n);
+        if (!ev->ftmask || !ev->fteye || !face)
+            rc = gs_error_set(err, GS_ERR_NOMEM, "out of memory");
+        if (!rc)
+            rc = gs_eval_regions(in, ev->fteye, face);
+        free(face);
+        uint8_t w = (uint8_t)lround(255.0 * ev->ft_eye_w);
+        for (size_t i = 0; !rc && i < n; i++)
+            ev->ftmask[i] = ev->fteye[i] ? w : 255;
+        fo.mask = ev->ftmask;
+    }
+    if (!rc)
+        rc = gs_model_finetune(ev->ftm, ev->pool, sub, in->rgb, in->stride,
+                               &fo, &rep, err);
+    *secs = rep.seconds;
+    if (!rc && !(ev->ftctx = gs_model_ctx_create(ev->ftm)))
+        rc = gs_error_set(err, GS_ERR_NOMEM, "out of memory");
+    if (!rc)
+        rc = gs_model_ctx_set_render_options(ev->ftctx, &ev->ro, err);
+    if (rc)
+        return rc;
+    ev->rctx = ev->ftctx;
+    *psnr = rep.psnr_best;
+    ev->ft_n++;
+    ev->ft_s += rep.seconds;
+    ev->ft_psnr_first += rep.psnr_first;
+    ev->ft_psnr_best += rep.psnr_best;
+    return GS_OK;
+}
+
 /* One input and all its targets [first, last), every method. */
 static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
                       int last, FILE *csv)
@@ -306,6 +376,18 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
                         ps->p[first].input, err.msg);
             }
         }
+    float fit_psnr = sub.fit_psnr;
+    if (fit_status == EVAL_ROW_OK && ev->fo.iters > 0 && ev->nmethods > 0) {
+        double ft_s = 0;
+        rc = finetune_input(ev, &in, &sub, &ft_s, &fit_psnr, &err);
+        if (rc) {
+            fit_status = rc == GS_ERR_NONFINITE ? EVAL_ROW_DIVERGED
+                                                : EVAL_ROW_ERROR;
+            fprintf(stderr, "gazesplat eval: input %d: fine-tune: %s\n",
+                    ps->p[first].input, err.msg);
+        }
+        fit_s += ft_s;
+    }
     for (int i = first; i < last; i++) {
         gs_eval_pair_scenes(&ps->p[i], &iscene, &tscene);
         rc = gs_eval_render_scene(&tscene, ev->S, ev->d_n, ev->focal,
@@ -327,7 +409,7 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
             if (mth == EVAL_MODEL) {
                 r->fit_s = fit_s;
                 r->fit_row = i == first;
-                r->fit_psnr = fit_status == EVAL_ROW_OK ? sub.fit_psnr : NAN;
+                r->fit_psnr = fit_status == EVAL_ROW_OK ? fit_psnr : NAN;
                 r->status = fit_status;
             }
             if (rc)
@@ -374,6 +456,33 @@ static int parse_prune(const char *s, evaluator *ev)
         return 0;
     }
     return cli_parse_long(s, 1, 100000000L, &ev->prune_k);
+}
+
+/* --finetune-parts: GS_FT_* names */
+static int parse_parts(const char *s, unsigned *parts)
+{
+    static const struct {
+        const char *name;
+        unsigned bit;
+    } names[] = {{"face", GS_FT_FACE}, {"eye", GS_FT_EYE},
+                 {"renderer", GS_FT_RENDERER}, {"mlp", GS_FT_MLP},
+                 {"geometry", GS_FT_GEOMETRY}};
+    *parts = 0;
+    while (*s) {
+        size_t n = strcspn(s, ",");
+        int found = 0;
+        for (size_t k = 0; k < sizeof names / sizeof names[0]; k++)
+            if (strlen(names[k].name) == n && !strncmp(s, names[k].name, n)) {
+                *parts |= names[k].bit;
+                found = 1;
+            }
+        if (!found)
+            return -1;
+        s += n;
+        if (*s == ',' && *++s == '\0')
+            return -1;
+    }
+    return *parts ? 0 : -1;
 }
 
 static int parse_methods(const char *s, evaluator *ev)
@@ -466,6 +575,12 @@ static int evaluate(evaluator *ev, const cli_opt *o, const gs_eval_pairs *ps,
         rc = cli_fail(cmd, "cannot write %s", path);
     if (md) {
         info->fits_reused = ev->fits_reused;
+        info->ft_n = ev->ft_n;
+        if (ev->ft_n) {
+            info->ft_s = ev->ft_s / ev->ft_n;
+            info->ft_psnr_first = ev->ft_psnr_first / ev->ft_n;
+            info->ft_psnr_best = ev->ft_psnr_best / ev->ft_n;
+        }
         eval_summary(md, info, ev->rows, ev->nrows, ps, ev->methods,
                      ev->nmethods);
         if (fclose(md))
@@ -509,6 +624,12 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     }
     k = k > 0 && k < mi.n_face ? k : mi.n_face;
     ev->rctx = ev->c;
+    if (ev->fo.iters > 0) {
+        if (k < mi.n_face)
+            return cli_usage_error(cmd, "--finetune does not go with --prune");
+        if (gs_model_clone(ev->m, &ev->ftm, &err))
+            return cli_fail(cmd, "--finetune: %s", err.msg);
+    }
     if (k < mi.n_face) {
         if (gs_model_prune(ev->m, ev->pool, (int)k, &ev->pm, &err))
             return cli_fail(cmd, "--prune: %s", err.msg);
@@ -564,8 +685,12 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     if (!rc)
         rc = evaluate(ev, o, &ps, limit, info);
     gs_pool_destroy(ev->pool);
-    if (ev->rctx != ev->c)
+    if (ev->rctx != ev->c && ev->rctx != ev->ftctx)
         gs_model_ctx_destroy(ev->rctx);
+    gs_model_ctx_destroy(ev->ftctx);
+    gs_model_destroy(ev->ftm);
+    free(ev->ftmask);
+    free(ev->fteye);
     gs_model_ctx_destroy(ev->c);
     gs_model_destroy(ev->pm);
     eval_estimator_free(ev->est);
@@ -584,6 +709,8 @@ static int run_eval(int argc, char **argv)
         {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
         {"--save-images", 1, NULL}, {"--prune", 1, NULL},
         {"--feature-scale", 1, NULL}, {"--full-render", 0, NULL},
+        {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
+        {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}};
@@ -641,13 +768,52 @@ static int run_eval(int argc, char **argv)
                                "(0, 1]; got '%s'", o[O_FSCALE].value);
     ev.ro.feature_scale = fscale;
     ev.ro.full = o[O_FULL].value != NULL;
+    gs_finetune_options_default(&ev.fo);
+    ev.fo.iters = 0;
+    if (o[O_FT].value) {
+        long n;
+        if (cli_parse_long(o[O_FT].value, 1, 100000, &n))
+            return cli_usage_error(cmd, "--finetune: want 1..100000 steps");
+        ev.fo.iters = (int)n;
+    }
+    if (o[O_FT_PARTS].value && parse_parts(o[O_FT_PARTS].value, &ev.fo.parts))
+        return cli_usage_error(cmd, "--finetune-parts: want a list of face, "
+                               "eye, renderer, mlp, geometry; got '%s'",
+                               o[O_FT_PARTS].value);
+    if (o[O_FT_LR].value) {
+        float lr;
+        if (cli_parse_floats(o[O_FT_LR].value, &lr, 1) || !(lr > 0 && lr <= 1))
+            return cli_usage_error(cmd, "--finetune-lr: want a rate in (0, 1]");
+        ev.fo.lr = lr;
+    }
+    ev.ft_eye_w = 1.0;
+    if (o[O_FT_EYE].value) {
+        float w;
+        if (cli_parse_floats(o[O_FT_EYE].value, &w, 1) || !(w >= 0 && w <= 1))
+            return cli_usage_error(cmd, "--finetune-eye-weight: want 0..1");
+        ev.ft_eye_w = w;
+    }
+    if ((o[O_FT_PARTS].value || o[O_FT_LR].value || o[O_FT_EYE].value) &&
+        !ev.fo.iters)
+        return cli_usage_error(cmd, "--finetune-parts, --finetune-lr and "
+                               "--finetune-eye-weight go with --finetune N");
     ev.iters = (int)iters;
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     char line[2048];
     command_line(argc, argv, line, sizeof line);
-    eval_run_info info = {o[O_MODEL].value, o[O_EST].value, o[O_PAIRS].value,
-                          line, (int)threads, (int)iters, 0, 0, 0,
-                          0, 0, 1.0, 0};
+    eval_run_info info;
+    memset(&info, 0, sizeof info);
+    info.model = o[O_MODEL].value;
+    info.estimator = o[O_EST].value;
+    info.pairs = o[O_PAIRS].value;
+    info.command = line;
+    info.threads = (int)threads;
+    info.iters = (int)iters;
+    info.feature_scale = 1.0;
+    info.ft_iters = ev.fo.iters;
+    info.ft_parts = ev.fo.parts;
+    info.ft_lr = ev.fo.lr;
+    info.ft_eye_w = ev.ft_eye_w;
     return run_checked(o, &ev, limit, threads, &info);
 }

@@ -204,6 +204,22 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                 info->full_render ? "every render from scratch "
                                     "(--full-render)"
                                   : "incremental where possible");
+    if (info->ft_iters > 0) {
+        static const char *pn[] = {"face", "eye", "renderer", "mlp", "geometry"};
+        char parts[64] = "";
+        for (int k = 0; k < 5; k++)
+            if (info->ft_parts & (1u << k)) {
+                if (parts[0])
+                    strcat(parts, ",");
+                strcat(parts, pn[k]);
+            }
+        fprintf(f, "- fine-tuned per input (--finetune %d, parts %s, rate %g, "
+                   "eye weight %g): %d inputs, mean %.2f s each (in the fit "
+                   "times), input PSNR %.2f -> %.2f dB on average (weighted "
+                   "pixels)\n", info->ft_iters, parts, info->ft_lr,
+                info->ft_eye_w, info->ft_n, info->ft_s, info->ft_psnr_first,
+                info->ft_psnr_best);
+    }
     if (info->fits_reused)
         fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
                    "their fit times are that run's\n", info->fits_reused);

@@ -37,6 +37,12 @@ typedef struct eval_run_info {
     int face_kept, n_face;
     double feature_scale;
     int full_render;
+    /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
+    int ft_iters;
+    unsigned ft_parts;
+    double ft_lr, ft_eye_w;
+    int ft_n;
+    double ft_s, ft_psnr_first, ft_psnr_best;
 } eval_run_info;
 
 void eval_csv_header(FILE *f);

@@ -592,3 +592,240 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     fit_bufs_free(&b);
     return rc;
 }
+
+/* ---- per-image fine-tuning ---- */
+
+void gs_finetune_options_default(gs_finetune_options *o)
+{
+    memset(o, 0, sizeof *o);
+    o->iters = 50;
+    o->lr = 1e-3;
+    o->parts = GS_FT_DEFAULT;
+}
+
+/* The GS_FT_* part a tensor belongs to (0: never tuned: codes and fixed
+ * tensors). */
+static unsigned tensor_part(const gs_ptensor *t)
+{
+    const char *n = t->name;
+    if (t->group == GS_PG_CODES || t->group == GS_PG_FIXED)
+        return 0;
+    if (!strcmp(n, "face.colour") || !strcmp(n, "face.feat"))
+        return GS_FT_FACE;
+    if (!strcmp(n, "eye.colour") || !strcmp(n, "eye.feat"))
+        return GS_FT_EYE;
+    if (t->group == GS_PG_RENDERER)
+        return GS_FT_RENDERER;
+    if (t->group == GS_PG_MLP)
+        return GS_FT_MLP;
+    return GS_FT_GEOMETRY; /* xyz, scales, rotations, opacities */
+}
+
+/* Learning-rate multipliers of the training run (train.c). */
+static double part_lr(int group)
+{
+    switch (group) {
+    case GS_PG_GAUSS_XYZ: return 10.0;
+    case GS_PG_GAUSS_FEAT: return 5.0;
+    default: return 1.0;
+    }
+}
+
+typedef struct ft_run {
+    gs_model *m;
+    gs_model_ctx *c;
+    float *grad, *orig, *best; /* grad: all parameters; orig/best: tuned */
+    int idx[GS_MODEL_MAX_TENSORS], n;
+    size_t tuned;
+    gs_model_params g;
+    gs_nn_adam *adam;
+} ft_run;
+
+/* Copies the tuned tensors between the model and a packed buffer. */
+static void ft_pack(ft_run *r, float *buf, int to_model)
+{
+    size_t o = 0;
+    for (int i = 0; i < r->n; i++) {
+        const gs_ptensor *t = &r->m->t[r->idx[i]];
+        float *p = r->m->params + t->offset;
+        if (to_model)
+            memcpy(p, buf + o, t->count * sizeof(float));
+        else
+            memcpy(buf + o, p, t->count * sizeof(float));
+        o += t->count;
+    }
+}
+
+static void ft_free(ft_run *r)
+{
+    gs_model_ctx_destroy(r->c);
+    gs_nn_adam_destroy(r->adam);
+    free(r->grad);
+    free(r->orig);
+    free(r->best);
+}
+
+static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
+{
+    memset(r, 0, sizeof *r);
+    r->m = m;
+    gs_nn_param_group groups[GS_MODEL_MAX_TENSORS];
+    for (int i = 0; i < m->ntensors; i++)
+        if (tensor_part(&m->t[i]) & parts) {
+            r->idx[r->n++] = i;
+            r->tuned += m->t[i].count;
+        }
+    if (!r->n)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "finetune: parts 0x%x name no tensor", parts);
+    r->c = gs_model_ctx_create(m);
+    r->grad = calloc(m->nparams, sizeof(float));
+    r->orig = malloc(r->tuned * sizeof(float));
+    r->best = malloc(r->tuned * sizeof(float));
+    if (!r->c || !r->grad || !r->orig || !r->best)
+        return gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
+    gs_model_bind(m, r->grad, &r->g);
+    for (int i = 0; i < r->n; i++) {
+        const gs_ptensor *t = &m->t[r->idx[i]];
+        groups[i].param = m->params + t->offset;
+        groups[i].grad = r->grad + t->offset;
+        groups[i].n = t->count;
+        groups[i].lr_mult = part_lr(t->group);
+    }
+    gs_nn_adam_config ac = gs_nn_adam_default_config();
+    int rc = gs_nn_adam_create(&r->adam, groups, r->n, &ac, err);
+    if (rc)
+        return rc;
+    ft_pack(r, r->orig, 0);
+    memcpy(r->best, r->orig, r->tuned * sizeof(float));
+    return GS_OK;
+}
+
+/* PSNR over the weighted pixels of the composite in b->pred. */
+static float weighted_psnr(const fit_bufs *b, int S)
+{
+    size_t plane = (size_t)S * S;
+    double se = 0, wsum = 0;
+    for (int k = 0; k < 3; k++)
+        for (size_t i = 0; i < plane; i++) {
+            double e = b->pred[k * plane + i] - b->target[k * plane + i];
+            se += e * e;
+            wsum += b->w[i];
+        }
+    double mse = wsum > 0 ? se / wsum : 0;
+    return (float)(mse > 1e-12 ? -10.0 * log10(mse) : 120.0);
+}
+
+int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
+                      const uint8_t *rgb, size_t stride,
+                      const gs_finetune_options *opt,
+                      gs_finetune_report *report, gs_error *err)
+{
+    if (!m || !s || !rgb)
+        return gs_error_set(err, GS_ERR_ARG, "finetune: NULL argument");
+    gs_finetune_options o;
+    if (opt)
+        o = *opt;
+    else
+        gs_finetune_options_default(&o);
+    int iters = o.iters > 0 ? o.iters : 50;
+    double lr = o.lr > 0 ? o.lr : 1e-3;
+    unsigned parts = o.parts ? o.parts : GS_FT_DEFAULT;
+    if (!isfinite(o.lr) || o.lr > 1.0 || iters > 100000 ||
+        (parts & ~0x1fu))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "finetune: lr %g (want <= 1), iterations %d "
+                            "(<= 100000) or parts 0x%x out of range",
+                            o.lr, o.iters, parts);
+    int rc = check_subject(m, s, err);
+    if (rc)
+        return rc;
+    if ((size_t)m->cfg.image_size * 3 > stride)
+        return gs_error_set(err, GS_ERR_ARG, "finetune: stride %zu < %d",
+                            stride, 3 * m->cfg.image_size);
+    ft_run r;
+    fit_bufs b;
+    memset(&b, 0, sizeof b);
+    fit_state *fs = calloc(1, sizeof *fs);
+    rc = fs ? ft_init(&r, m, parts, err)
+            : gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
+    if (!rc && fit_bufs_init(&b, r.c, rgb, stride, o.mask))
+        rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
+    if (rc) {
+        if (fs)
+            ft_free(&r);
+        free(fs);
+        fit_bufs_free(&b);
+        return rc;
+    }
+    /* The subject's colour transform, fixed: image_loss reads it here. */
+    for (int k = 0; k < 3; k++) {
+        fs->x[V_GAIN + k] = s->colour_gain[k];
+        fs->x[V_BIAS + k] = s->colour_bias[k];
+    }
+    gs_frame fr;
+    frame_of(s, NULL, &fr);
+    double t0 = now_s(), best = INFINITY, first = NAN;
+    float psnr_first = NAN, psnr_best = NAN;
+    int it = 0;
+    for (; it <= iters; it++) {
+        rc = gs_frame_forward(r.c, pool, &fr, GS_STREAM_BOTH, 1, err);
+        if (rc)
+            break;
+        double dg[3], db[3];
+        double loss = image_loss(r.c, &b, fs, dg, db);
+        if (!isfinite(loss)) {
+            rc = gs_error_set(err, GS_ERR_NONFINITE,
+                              "finetune diverged at step %d (loss %g, "
+                              "first %g)", it, loss, first);
+            break;
+        }
+        if (it == 0) {
+            first = loss;
+            psnr_first = weighted_psnr(&b, r.c->S);
+        }
+        if (loss < best) {
+            best = loss;
+            psnr_best = weighted_psnr(&b, r.c->S);
+            if (it > 0)
+                ft_pack(&r, r.best, 0);
+        }
+        if (it == iters)
+            break; /* the last step's result is measured, not stepped from */
+        gs_nn_adam_zero_grad(r.adam);
+        gs_frame_grad fg;
+        memset(&fg, 0, sizeof fg);
+        rc = gs_frame_backward(r.c, pool, b.dpred, NULL, NULL, NULL, &r.g,
+                               &fg, err);
+        if (rc)
+            break;
+        double gn = 0;
+        rc = gs_nn_adam_step(r.adam, lr, &gn);
+        if (rc == GS_ERR_NONFINITE) {
+            rc = gs_error_set(err, GS_ERR_NONFINITE,
+                              "finetune: non-finite gradient at step %d "
+                              "(loss %g)", it, loss);
+            break;
+        }
+        if (rc) {
+            rc = gs_error_set(err, rc, "finetune: optimizer step failed");
+            break;
+        }
+    }
+    /* The best iterate, or on any error the parameters of before. */
+    ft_pack(&r, rc ? r.orig : r.best, 1);
+    if (report) {
+        memset(report, 0, sizeof *report);
+        report->iters = it;
+        report->seconds = now_s() - t0;
+        report->loss_first = first;
+        report->loss_best = best;
+        report->psnr_first = psnr_first;
+        report->psnr_best = psnr_best;
+        report->params_tuned = r.tuned;
+    }
+    ft_free(&r);
+    free(fs);
+    fit_bufs_free(&b);
+    return rc;
+}

@@ -178,3 +178,27 @@ int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
     *out = o;
     return GS_OK;
 }
+
+int gs_model_clone(const gs_model *m, gs_model **out, gs_error *err)
+{
+    if (!m || !out)
+        return gs_error_set(err, GS_ERR_ARG, "clone: NULL argument");
+    /* Keeping every face Gaussian copies each tensor whole (no scores). */
+    return gs_model_prune(m, NULL, m->cfg.n_face, out, err);
+}
+
+int gs_model_copy_params(gs_model *dst, const gs_model *src, gs_error *err)
+{
+    if (!dst || !src)
+        return gs_error_set(err, GS_ERR_ARG, "copy params: NULL argument");
+    int same = dst->nparams == src->nparams && dst->ntensors == src->ntensors;
+    for (int i = 0; same && i < src->ntensors; i++)
+        same = dst->t[i].offset == src->t[i].offset &&
+               dst->t[i].count == src->t[i].count &&
+               !strcmp(dst->t[i].name, src->t[i].name);
+    if (!same)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "copy params: the models' layouts differ");
+    memcpy(dst->params, src->params, src->nparams * sizeof(float));
+    return GS_OK;
+}

@@ -192,6 +192,54 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                  size_t stride, const gs_fit_options *opt, gs_subject *out,
                  gs_fit_report *report, gs_error *err);
 
+/* ---- per-image fine-tuning (the paper's last step) ---- */
+
+/* A copy of m with its own parameters (same configuration), for
+ * fine-tuning one subject without touching the shared model. */
+int gs_model_clone(const gs_model *m, gs_model **out, gs_error *err);
+/* Puts src's parameters back into dst (a clone of src or of the same
+ * configuration): GS_ERR_ARG when the layouts differ. */
+int gs_model_copy_params(gs_model *dst, const gs_model *src, gs_error *err);
+
+/* What gs_model_finetune adjusts (bits). */
+enum {
+    GS_FT_FACE = 1,     /* face Gaussians' colour and features */
+    GS_FT_EYE = 2,      /* eye Gaussians' colour and features */
+    GS_FT_RENDERER = 4, /* the neural renderer's weights */
+    GS_FT_MLP = 8,      /* the deformation MLPs and the eyeball shift */
+    GS_FT_GEOMETRY = 16 /* Gaussian positions, scales, rotations, opacities */
+};
+#define GS_FT_DEFAULT (GS_FT_FACE | GS_FT_RENDERER)
+
+typedef struct gs_finetune_options {
+    int iters;            /* <= 0: 50 */
+    double lr;            /* Adam's base rate, <= 0: 1e-3; each part scaled
+                             as in training (features x5, positions x10) */
+    unsigned parts;       /* GS_FT_* bits; 0: GS_FT_DEFAULT */
+    const uint8_t *mask;  /* as gs_fit_options.mask */
+} gs_finetune_options;
+void gs_finetune_options_default(gs_finetune_options *o);
+
+typedef struct gs_finetune_report {
+    int iters;            /* steps taken */
+    double seconds;
+    double loss_first, loss_best;
+    float psnr_first, psnr_best; /* on the weighted region, dB */
+    size_t params_tuned;  /* floats adjusted */
+} gs_finetune_report;
+
+/* Fine-tunes the chosen parts of m (a clone: gs_model_clone) so that it
+ * renders the fitted subject s (gs_model_fit on the same image) closer to
+ * that image: Adam on the fit's loss, the subject kept fixed, the best
+ * iterate kept. Contexts made for m before the call must not be used after
+ * it (their kept renders are stale): make new ones. A step with a
+ * non-finite loss or gradient ends the call with GS_ERR_NONFINITE and m
+ * restored to its parameters before the call. */
+int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
+                      const uint8_t *rgb, size_t stride,
+                      const gs_finetune_options *opt,
+                      gs_finetune_report *report, gs_error *err);
+
 #ifdef __cplusplus
 }
 #endif

@@ -1,0 +1,228 @@
+/* Per-image fine-tuning (gs_model_finetune) on a tiny model trained for a
+ * few steps: the copy renders its input better, only the chosen parts
+ * move, the shared model is untouched, 1 and 2 threads give the same
+ * bytes, a non-finite step restores the parameters, bad input is refused.
+ * Also gs_model_clone and gs_model_copy_params. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "gazesplat/nn.h"
+#include "gazesplat/synth.h"
+#include "gazesplat/train.h"
+#include "gs_test.h"
+#include "model_test_util.h"
+
+static double psnr_u8(const uint8_t *a, const uint8_t *b, size_t n)
+{
+    double se = 0;
+    for (size_t i = 0; i < n; i++) {
+        double d = ((double)a[i] - (double)b[i]) / 255.0;
+        se += d * d;
+    }
+    return -10.0 * log10(se / (double)n + 1e-12);
+}
+
+/* 1 when tensor i of the two models holds the same bytes. */
+static int tensor_same(const gs_model *a, const gs_model *b, int i)
+{
+    return !memcmp(a->params + a->t[i].offset, b->params + b->t[i].offset,
+                   a->t[i].count * sizeof(float));
+}
+
+static int is_tuned_default(const char *name)
+{
+    return !strcmp(name, "face.colour") || !strcmp(name, "face.feat") ||
+           !strncmp(name, "renderer.", 9);
+}
+
+int main(void)
+{
+    gs_nn_blas_set_threads(1);
+    char path[128];
+    snprintf(path, sizeof path, "test_model_finetune_%d.safetensors", (int)getpid());
+    gs_model_spec spec;
+    gs_model_spec_default(&spec);
+    spec.preset = "tiny";
+    spec.train_identities = 2;
+    gs_model *m = NULL;
+    gs_error err = {0, ""};
+    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
+    gs_train_options to;
+    gs_train_options_default(&to);
+    to.out_path = path;
+    to.steps = 4;
+    to.checkpoint_every = 0;
+    CHECK_MSG(gs_train(m, &to, NULL, NULL, &err) == GS_OK, "%s", err.msg);
+    int S = m->cfg.image_size;
+    size_t isz = 3 * (size_t)S * S;
+
+    /* A held-out face, fitted with its true head pose. */
+    gs_synth_gen_config g;
+    gs_synth_gen_config_default(&g);
+    g.split = GS_SYNTH_TEST;
+    g.size = S;
+    g.rig = GS_SYNTH_RIG_NORMALIZED;
+    gs_synth_sample smp;
+    CHECK(gs_synth_sample_alloc(&smp, S, S, &err) == GS_OK);
+    CHECK(gs_synth_gen_sample(&g, 7, NULL, &smp, &err) == GS_OK);
+    gs_fit_options fo;
+    gs_fit_options_default(&fo);
+    fo.max_iters = 6;
+    fo.known_head = 1;
+    memcpy(fo.head_R, smp.labels.head_R, sizeof fo.head_R);
+    memcpy(fo.head_t, smp.labels.head_t, sizeof fo.head_t);
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    gs_subject sub;
+    CHECK_MSG(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &sub, NULL, &err) == GS_OK,
+              "%s", err.msg);
+
+    /* A clone holds the same bytes and renders the same image. */
+    gs_model *ft = NULL;
+    CHECK(gs_model_clone(m, &ft, &err) == GS_OK);
+    CHECK(ft->nparams == m->nparams && ft->params != m->params);
+    CHECK(!memcmp(ft->params, m->params, m->nparams * sizeof(float)));
+    float *orig = malloc(m->nparams * sizeof(float));
+    memcpy(orig, m->params, m->nparams * sizeof(float));
+    uint8_t *before = malloc(isz), *after = malloc(isz), *img = malloc(isz);
+    gs_view v = {0};
+    v.gaze_pitch = sub.gaze_pitch;
+    v.gaze_yaw = sub.gaze_yaw;
+    CHECK(gs_model_render(c, NULL, &sub, &v, before, 3 * (size_t)S, &err) == GS_OK);
+    gs_model_ctx *fc = gs_model_ctx_create(ft);
+    CHECK(gs_model_render(fc, NULL, &sub, &v, img, 3 * (size_t)S, &err) == GS_OK);
+    CHECK(!memcmp(before, img, isz));
+    gs_model_ctx_destroy(fc);
+
+    /* Fine-tuning the default parts, on two threads. */
+    gs_finetune_options o;
+    gs_finetune_options_default(&o);
+    CHECK(o.iters == 50 && o.parts == GS_FT_DEFAULT && o.lr == 1e-3);
+    o.iters = 12;
+    gs_finetune_report rep;
+    gs_pool *pool2 = gs_pool_create(2);
+    CHECK_MSG(gs_model_finetune(ft, pool2, &sub, smp.rgb, smp.stride, &o, &rep, &err) == GS_OK,
+              "%s", err.msg);
+    printf("finetune: %d steps, loss %.4f -> %.4f, PSNR %.2f -> %.2f dB, %zu floats, %.2f s\n",
+           rep.iters, rep.loss_first, rep.loss_best, rep.psnr_first, rep.psnr_best,
+           rep.params_tuned, rep.seconds);
+    CHECK(rep.iters == 12);
+    CHECK(rep.loss_best < rep.loss_first);
+    CHECK(rep.psnr_best > rep.psnr_first + 0.3f);
+    CHECK(fabsf(rep.psnr_first - sub.fit_psnr) < 1e-3f);
+    size_t want = 0;
+    for (int i = 0; i < m->ntensors; i++)
+        if (is_tuned_default(m->t[i].name))
+            want += m->t[i].count;
+    CHECK_EQ_INT(rep.params_tuned, want);
+    /* Only the chosen parts moved; the shared model did not. */
+    int moved = 0, stray = 0;
+    for (int i = 0; i < m->ntensors; i++) {
+        if (is_tuned_default(m->t[i].name))
+            moved += !tensor_same(m, ft, i);
+        else if (!tensor_same(m, ft, i)) {
+            stray++;
+            fprintf(stderr, "moved outside the parts: %s\n", m->t[i].name);
+        }
+    }
+    CHECK(moved >= 3 && stray == 0);
+    CHECK(!memcmp(orig, m->params, m->nparams * sizeof(float)));
+    /* A fresh context on the copy renders the input better. */
+    fc = gs_model_ctx_create(ft);
+    CHECK(gs_model_render(fc, NULL, &sub, &v, after, 3 * (size_t)S, &err) == GS_OK);
+    double p0 = psnr_u8(before, smp.rgb, isz), p1 = psnr_u8(after, smp.rgb, isz);
+    printf("render of the input: %.2f -> %.2f dB\n", p0, p1);
+    CHECK(p1 > p0 + 0.3);
+    /* Other gazes still render, and differently from each other. */
+    gs_view v2 = v;
+    v2.gaze_yaw = v.gaze_yaw > 0 ? v.gaze_yaw - 0.4 : v.gaze_yaw + 0.4;
+    CHECK(gs_model_render(fc, NULL, &sub, &v2, img, 3 * (size_t)S, &err) == GS_OK);
+    CHECK(memcmp(img, after, isz) != 0);
+    gs_model_ctx_destroy(fc);
+
+    /* One thread gives the same bytes as two. */
+    float *tuned2 = malloc(m->nparams * sizeof(float));
+    memcpy(tuned2, ft->params, m->nparams * sizeof(float));
+    CHECK(gs_model_copy_params(ft, m, &err) == GS_OK);
+    CHECK(!memcmp(ft->params, m->params, m->nparams * sizeof(float)));
+    CHECK(gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &o, NULL, &err) == GS_OK);
+    CHECK_MSG(!memcmp(ft->params, tuned2, m->nparams * sizeof(float)),
+              "1 and 2 threads differ");
+
+    /* Other parts: the eyes only. */
+    CHECK(gs_model_copy_params(ft, m, &err) == GS_OK);
+    o.parts = GS_FT_EYE;
+    o.iters = 3;
+    CHECK(gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &o, &rep, &err) == GS_OK);
+    for (int i = 0; i < m->ntensors; i++) {
+        int eye = !strcmp(m->t[i].name, "eye.colour") || !strcmp(m->t[i].name, "eye.feat");
+        if (!eye)
+            CHECK_MSG(tensor_same(m, ft, i), "%s moved", m->t[i].name);
+    }
+
+    /* A non-finite loss: error, parameters as before the call. */
+    CHECK(gs_model_copy_params(ft, m, &err) == GS_OK);
+    int ri = -1;
+    for (int i = 0; i < m->ntensors && ri < 0; i++)
+        if (!strncmp(m->t[i].name, "renderer.", 9))
+            ri = i;
+    CHECK(ri >= 0);
+    ft->params[ft->t[ri].offset] = NAN;
+    float *poisoned = malloc(m->nparams * sizeof(float));
+    memcpy(poisoned, ft->params, m->nparams * sizeof(float));
+    o.parts = GS_FT_DEFAULT;
+    o.iters = 3;
+    int rc = gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &o, NULL, &err);
+    CHECK_MSG(rc == GS_ERR_NONFINITE, "rc %d: %s", rc, err.msg);
+    CHECK(!memcmp(ft->params, poisoned, m->nparams * sizeof(float)));
+    CHECK(gs_model_copy_params(ft, m, &err) == GS_OK);
+
+    /* Bad input. */
+    gs_finetune_options bad = o;
+    CHECK(gs_model_finetune(NULL, NULL, &sub, smp.rgb, smp.stride, &o, NULL, &err) == GS_ERR_ARG);
+    CHECK(gs_model_finetune(ft, NULL, NULL, smp.rgb, smp.stride, &o, NULL, &err) == GS_ERR_ARG);
+    CHECK(gs_model_finetune(ft, NULL, &sub, NULL, smp.stride, &o, NULL, &err) == GS_ERR_ARG);
+    CHECK(gs_model_finetune(ft, NULL, &sub, smp.rgb, 3 * (size_t)S - 1, &o, NULL, &err) ==
+          GS_ERR_ARG);
+    bad.parts = 0x40;
+    CHECK(gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &bad, NULL, &err) == GS_ERR_ARG);
+    CHECK(strstr(err.msg, "finetune") != NULL);
+    bad = o;
+    bad.lr = NAN;
+    CHECK(gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &bad, NULL, &err) == GS_ERR_ARG);
+    bad.lr = 5.0;
+    CHECK(gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &bad, NULL, &err) == GS_ERR_ARG);
+    gs_subject bs = sub;
+    bs.code_dim = sub.code_dim + 1;
+    CHECK(gs_model_finetune(ft, NULL, &bs, smp.rgb, smp.stride, &o, NULL, &err) == GS_ERR_ARG);
+    bs = sub;
+    bs.code[0] = NAN;
+    CHECK(gs_model_finetune(ft, NULL, &bs, smp.rgb, smp.stride, &o, NULL, &err) ==
+          GS_ERR_NONFINITE);
+    CHECK(!memcmp(ft->params, m->params, m->nparams * sizeof(float)));
+    /* copy_params refuses another layout. */
+    gs_model *pruned = NULL;
+    CHECK(gs_model_prune(m, NULL, m->cfg.n_face / 2, &pruned, &err) == GS_OK);
+    CHECK(gs_model_copy_params(pruned, m, &err) == GS_ERR_ARG);
+    CHECK(gs_model_clone(NULL, &pruned, &err) == GS_ERR_ARG);
+
+    gs_model_destroy(pruned);
+    free(poisoned);
+    free(tuned2);
+    free(orig);
+    free(before);
+    free(after);
+    free(img);
+    gs_pool_destroy(pool2);
+    gs_model_ctx_destroy(c);
+    gs_model_destroy(ft);
+    gs_synth_sample_free(&smp);
+    gs_model_destroy(m);
+    unlink(path);
+    char opt[160];
+    snprintf(opt, sizeof opt, "%s.opt", path);
+    unlink(opt);
+    GS_TEST_END();
+}
