@@ -129,7 +129,10 @@ static void usage_errors(const char *model, const char *pairs)
         {"--prune", "%"},          {"--feature-scale", "0"},
         {"--feature-scale", "1.5"}, {"--feature-scale", "half"},
         {"--feature-scale", "nan"},
-        {"--feature-scale", "0.1"}}; /* 3 of the tiny model's 32 px */
+        {"--feature-scale", "0.1"}, /* 3 of the tiny model's 32 px */
+        {"--finetune", "0"},        {"--finetune", "-3"},
+        {"--finetune-parts", "face"}, /* without --finetune N */
+        {"--finetune-lr", "0.01"},   {"--finetune-eye-weight", "0.5"}};
     for (size_t k = 0; k < sizeof bad_render / sizeof bad_render[0]; k++) {
         const char *args[] = {"eval", "--model", model, "--pairs", pairs,
                               "--out", dir, bad_render[k][0],
@@ -138,6 +141,24 @@ static void usage_errors(const char *model, const char *pairs)
         int code = run(args);
         CHECK_MSG(code == 2, "%s %s: exit %d", bad_render[k][0],
                   bad_render[k][1], code);
+    }
+    const char *bad_ft[][2] = {{"--finetune-parts", "face,nose"},
+                               {"--finetune-parts", "face,"},
+                               {"--finetune-parts", ""},
+                               {"--finetune-lr", "0"},
+                               {"--finetune-lr", "2"},
+                               {"--finetune-lr", "nan"},
+                               {"--finetune-eye-weight", "1.5"},
+                               {"--finetune-eye-weight", "-1"},
+                               {"--prune", "50%"}};
+    for (size_t k = 0; k < sizeof bad_ft / sizeof bad_ft[0]; k++) {
+        const char *args[] = {"eval", "--model", model, "--pairs", pairs,
+                              "--out", dir, "--finetune", "2", bad_ft[k][0],
+                              bad_ft[k][1], "--limit-inputs", "1",
+                              "--iters", "1", NULL};
+        int code = run(args);
+        CHECK_MSG(code == 2, "--finetune 2 %s %s: exit %d", bad_ft[k][0],
+                  bad_ft[k][1], code);
     }
     const char *full_arg[] = {"eval", "--model", model, "--pairs", pairs,
                               "--out", dir, "--full-render", "yes", NULL};
@@ -250,6 +271,31 @@ int main(int argc, char **argv)
                                  "0.5, every render from scratch") &&
                   strstr(sum, "non-finite outputs 0"),
               "%s", sum ? sum : "");
+    /* Fine-tuned per input on run 2's fits: finite, deterministic, other
+     * numbers than without, the input reproduced better. */
+    const char *ev6[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", "--finetune", "6",
+                         "--finetune-eye-weight", "0", NULL};
+    CHECK_EQ_INT(run(ev6), 0);
+    c = check_csv(csv);
+    CHECK_MSG(a && c && strcmp(a, c) != 0, "fine-tuning changed nothing");
+    CHECK_EQ_INT(run(ev6), 0);
+    char *d = check_csv(csv);
+    CHECK_MSG(c && d && strcmp(c, d) == 0, "fine-tuned runs differ");
+    free(c);
+    free(d);
+    free(sum);
+    sum = ev_slurp(md);
+    double p0 = NAN, p1 = NAN;
+    const char *ft = sum ? strstr(sum, "input PSNR ") : NULL;
+    CHECK_MSG(sum && strstr(sum, "fine-tuned per input (--finetune 6, parts "
+                                 "face,renderer, rate 0.001, eye weight 0)") &&
+                  strstr(sum, "non-finite outputs 0") && ft &&
+                  sscanf(ft, "input PSNR %lf -> %lf", &p0, &p1) == 2,
+              "%s", sum ? sum : "");
+    CHECK_MSG(p1 > p0, "input PSNR %.2f -> %.2f", p0, p1);
     free(a);
     free(b);
     free(sum);
