@@ -34,8 +34,7 @@ static int tensor_same(const gs_model *a, const gs_model *b, int i)
 
 static int is_tuned_default(const char *name)
 {
-    return !strcmp(name, "face.colour") || !strcmp(name, "face.feat") ||
-           !strncmp(name, "renderer.", 9);
+    return !strcmp(name, "face.colour") || !strcmp(name, "face.feat");
 }
 
 int main(void)
@@ -101,6 +100,7 @@ int main(void)
     gs_finetune_options_default(&o);
     CHECK(o.iters == 50 && o.parts == GS_FT_DEFAULT && o.lr == 1e-3);
     o.iters = 12;
+    o.lr = 5e-3; /* a tiny model trained for 4 steps: larger steps */
     gs_finetune_report rep;
     gs_pool *pool2 = gs_pool_create(2);
     CHECK_MSG(gs_model_finetune(ft, pool2, &sub, smp.rgb, smp.stride, &o, &rep, &err) == GS_OK,
@@ -110,7 +110,7 @@ int main(void)
            rep.params_tuned, rep.seconds);
     CHECK(rep.iters == 12);
     CHECK(rep.loss_best < rep.loss_first);
-    CHECK(rep.psnr_best > rep.psnr_first + 0.3f);
+    CHECK(rep.psnr_best > rep.psnr_first + 1.0f);
     CHECK(fabsf(rep.psnr_first - sub.fit_psnr) < 1e-3f);
     size_t want = 0;
     for (int i = 0; i < m->ntensors; i++)
@@ -127,14 +127,14 @@ int main(void)
             fprintf(stderr, "moved outside the parts: %s\n", m->t[i].name);
         }
     }
-    CHECK(moved >= 3 && stray == 0);
+    CHECK(moved == 2 && stray == 0);
     CHECK(!memcmp(orig, m->params, m->nparams * sizeof(float)));
     /* A fresh context on the copy renders the input better. */
     fc = gs_model_ctx_create(ft);
     CHECK(gs_model_render(fc, NULL, &sub, &v, after, 3 * (size_t)S, &err) == GS_OK);
     double p0 = psnr_u8(before, smp.rgb, isz), p1 = psnr_u8(after, smp.rgb, isz);
     printf("render of the input: %.2f -> %.2f dB\n", p0, p1);
-    CHECK(p1 > p0 + 0.3);
+    CHECK(p1 > p0 + 1.0);
     /* Other gazes still render, and differently from each other. */
     gs_view v2 = v;
     v2.gaze_yaw = v.gaze_yaw > 0 ? v.gaze_yaw - 0.4 : v.gaze_yaw + 0.4;
@@ -172,7 +172,7 @@ int main(void)
     ft->params[ft->t[ri].offset] = NAN;
     float *poisoned = malloc(m->nparams * sizeof(float));
     memcpy(poisoned, ft->params, m->nparams * sizeof(float));
-    o.parts = GS_FT_DEFAULT;
+    o.parts = GS_FT_FACE | GS_FT_RENDERER;
     o.iters = 3;
     int rc = gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &o, NULL, &err);
     CHECK_MSG(rc == GS_ERR_NONFINITE, "rc %d: %s", rc, err.msg);

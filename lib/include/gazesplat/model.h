@@ -209,7 +209,7 @@ enum {
     GS_FT_MLP = 8,      /* the deformation MLPs and the eyeball shift */
     GS_FT_GEOMETRY = 16 /* Gaussian positions, scales, rotations, opacities */
 };
-#define GS_FT_DEFAULT (GS_FT_FACE | GS_FT_RENDERER)
+#define GS_FT_DEFAULT GS_FT_FACE
 
 typedef struct gs_finetune_options {
     int iters;            /* <= 0: 50 */
