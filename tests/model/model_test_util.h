@@ -4,6 +4,8 @@
 
 #include "../../lib/model/frame.h"
 #include "gazesplat/geom.h"
+#include "gazesplat/synth.h"
+#include "gazesplat/train.h"
 
 /* A small model: coarse template, few eye Gaussians, narrow MLPs, 16^2
  * features -> 64^2 images. */
@@ -45,5 +47,42 @@ static inline void frame_default(const gs_model *m, gs_frame *fr)
     fr->gaze[1] = -0.25;
     for (int k = 0; k < gs_model_code_dim(&m->cfg); k++)
         fr->code[k] = 0.1f * (float)((k * 7) % 5 - 2);
+}
+/* The tiny preset (2 training identities, seed 5) trained for `steps`
+ * steps; checkpoints go to path and path.opt. NULL on failure (err). */
+static inline gs_model *trained_tiny(const char *path, int steps,
+                                     gs_train_report *rep, gs_error *err)
+{
+    gs_model_spec spec;
+    gs_model_spec_default(&spec);
+    spec.preset = "tiny";
+    spec.train_identities = 2;
+    gs_model *m = NULL;
+    if (gs_model_new(&spec, 5, &m, err) != GS_OK)
+        return NULL;
+    gs_train_options to;
+    gs_train_options_default(&to);
+    to.out_path = path;
+    to.steps = steps;
+    to.checkpoint_every = 0;
+    if (gs_train(m, &to, NULL, rep, err) != GS_OK) {
+        gs_model_destroy(m);
+        return NULL;
+    }
+    return m;
+}
+
+/* Sample `index` of the held-out identities: a normalized S x S face with
+ * its labels (smp allocated here). */
+static inline int held_out_face(int S, uint64_t index, gs_synth_sample *smp,
+                                gs_error *err)
+{
+    gs_synth_gen_config g;
+    gs_synth_gen_config_default(&g);
+    g.split = GS_SYNTH_TEST;
+    g.size = S;
+    g.rig = GS_SYNTH_RIG_NORMALIZED;
+    int rc = gs_synth_sample_alloc(smp, S, S, err);
+    return rc ? rc : gs_synth_gen_sample(&g, index, NULL, smp, err);
 }
 #endif

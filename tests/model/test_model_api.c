@@ -17,20 +17,10 @@ int main(void)
     gs_nn_blas_set_threads(1);
     char path[128];
     snprintf(path, sizeof path, "test_model_api_%d.safetensors", (int)getpid());
-    gs_model_spec spec;
-    gs_model_spec_default(&spec);
-    spec.preset = "tiny";
-    spec.train_identities = 2;
-    gs_model *m = NULL;
     gs_error err = {0, ""};
-    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
-    gs_train_options to;
-    gs_train_options_default(&to);
-    to.out_path = path;
-    to.steps = 6;
-    to.checkpoint_every = 0;
     gs_train_report rep;
-    CHECK_MSG(gs_train(m, &to, NULL, &rep, &err) == GS_OK, "%s", err.msg);
+    gs_model *m = trained_tiny(path, 6, &rep, &err);
+    CHECK_MSG(m != NULL, "%s", err.msg);
     CHECK(rep.steps == 6 && isfinite(rep.final_loss));
     gs_model_destroy(m);
     m = NULL;
@@ -43,14 +33,8 @@ int main(void)
     CHECK(c != NULL);
 
     /* A synthetic normalized face to fit. */
-    gs_synth_gen_config g;
-    gs_synth_gen_config_default(&g);
-    g.split = GS_SYNTH_TEST;
-    g.size = S;
-    g.rig = GS_SYNTH_RIG_NORMALIZED;
     gs_synth_sample smp;
-    CHECK(gs_synth_sample_alloc(&smp, S, S, &err) == GS_OK);
-    CHECK(gs_synth_gen_sample(&g, 3, NULL, &smp, &err) == GS_OK);
+    CHECK(held_out_face(S, 3, &smp, &err) == GS_OK);
     gs_fit_options fo;
     gs_fit_options_default(&fo);
     fo.max_iters = 8;

@@ -42,31 +42,17 @@ int main(void)
     gs_nn_blas_set_threads(1);
     char path[128];
     snprintf(path, sizeof path, "test_model_finetune_%d.safetensors", (int)getpid());
-    gs_model_spec spec;
-    gs_model_spec_default(&spec);
-    spec.preset = "tiny";
-    spec.train_identities = 2;
-    gs_model *m = NULL;
     gs_error err = {0, ""};
-    CHECK(gs_model_new(&spec, 5, &m, &err) == GS_OK);
-    gs_train_options to;
-    gs_train_options_default(&to);
-    to.out_path = path;
-    to.steps = 4;
-    to.checkpoint_every = 0;
-    CHECK_MSG(gs_train(m, &to, NULL, NULL, &err) == GS_OK, "%s", err.msg);
+    gs_model *m = trained_tiny(path, 4, NULL, &err);
+    CHECK_MSG(m != NULL, "%s", err.msg);
+    if (!m)
+        return 1;
     int S = m->cfg.image_size;
     size_t isz = 3 * (size_t)S * S;
 
     /* A held-out face, fitted with its true head pose. */
-    gs_synth_gen_config g;
-    gs_synth_gen_config_default(&g);
-    g.split = GS_SYNTH_TEST;
-    g.size = S;
-    g.rig = GS_SYNTH_RIG_NORMALIZED;
     gs_synth_sample smp;
-    CHECK(gs_synth_sample_alloc(&smp, S, S, &err) == GS_OK);
-    CHECK(gs_synth_gen_sample(&g, 7, NULL, &smp, &err) == GS_OK);
+    CHECK(held_out_face(S, 7, &smp, &err) == GS_OK);
     gs_fit_options fo;
     gs_fit_options_default(&fo);
     fo.max_iters = 6;
