@@ -436,6 +436,21 @@ static void fit_init(const gs_model_ctx *c, const gs_fit_options *o,
         s->lr[V_CODE + k] = 0.03;
 }
 
+/* PSNR over the weighted pixels of the composite in b->pred. */
+static float weighted_psnr(const fit_bufs *b, int S)
+{
+    size_t plane = (size_t)S * S;
+    double se = 0, wsum = 0;
+    for (int k = 0; k < 3; k++)
+        for (size_t i = 0; i < plane; i++) {
+            double e = b->pred[k * plane + i] - b->target[k * plane + i];
+            se += e * e;
+            wsum += b->w[i];
+        }
+    double mse = wsum > 0 ? se / wsum : 0;
+    return (float)(mse > 1e-12 ? -10.0 * log10(mse) : 120.0);
+}
+
 int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                  size_t stride, const gs_fit_options *opt, gs_subject *out,
                  gs_fit_report *report, gs_error *err)
@@ -545,17 +560,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             /* Composites the best render into b.pred for the figures. */
             double dg[3], db[3];
             image_loss(c, &b, best, dg, db);
-            /* Quality on the weighted region. */
             int S = c->S;
-            size_t plane = (size_t)S * S;
-            double se = 0, wsum = 0;
-            for (int k = 0; k < 3; k++)
-                for (size_t i = 0; i < plane; i++) {
-                    double w = b.w[i];
-                    double e = b.pred[k * plane + i] - b.target[k * plane + i];
-                    se += e * e;
-                    wsum += w;
-                }
             float ls = 0;
             gs_nn_ssim_loss_forward(&ls, b.pred, b.target, 3, S, S,
                                     GS_NN_SSIM_ZERO, b.ssim_scratch,
@@ -573,8 +578,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                 r.colour_gain[k] = (float)best->x[V_GAIN + k];
                 r.colour_bias[k] = (float)best->x[V_BIAS + k];
             }
-            double mse = wsum > 0 ? se / wsum : 0;
-            r.fit_psnr = (float)(mse > 1e-12 ? -10.0 * log10(mse) : 120.0);
+            r.fit_psnr = weighted_psnr(&b, S);
             r.fit_ssim = 1.0f - ls;
             *out = r;
         }
@@ -699,21 +703,6 @@ static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
     ft_pack(r, r->orig, 0);
     memcpy(r->best, r->orig, r->tuned * sizeof(float));
     return GS_OK;
-}
-
-/* PSNR over the weighted pixels of the composite in b->pred. */
-static float weighted_psnr(const fit_bufs *b, int S)
-{
-    size_t plane = (size_t)S * S;
-    double se = 0, wsum = 0;
-    for (int k = 0; k < 3; k++)
-        for (size_t i = 0; i < plane; i++) {
-            double e = b->pred[k * plane + i] - b->target[k * plane + i];
-            se += e * e;
-            wsum += b->w[i];
-        }
-    double mse = wsum > 0 ? se / wsum : 0;
-    return (float)(mse > 1e-12 ? -10.0 * log10(mse) : 120.0);
 }
 
 int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
