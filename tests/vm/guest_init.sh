@@ -111,8 +111,22 @@ else
     [ "${udev:-0}" = 1 ] && fail "libusb hotplug did not fire"
 fi
 
+# SIGTERM must end it promptly; a hang here would otherwise hang the guest.
 kill -TERM $live
+i=0
+while kill -0 $live 2>/dev/null && [ $i -lt 150 ]; do sleep 0.1; i=$((i + 1)); done
+if kill -0 $live 2>/dev/null; then
+    fail "gazesplat live still running 15 s after SIGTERM"
+    for t in /proc/$live/task/*; do
+        say "live thread ${t##*/} $(cat $t/comm) in $(cat $t/wchan 2>/dev/null)"
+        sed 's/^/GS-VM:   /' $t/stack 2>/dev/null
+    done
+    kill -KILL $live
+fi
 wait $live
+rc=$?
+[ $rc = 0 ] || fail "gazesplat live exited with status $rc after SIGTERM"
+say "live stopped $(now) s"
 sed 's/^/GS-VM: live| /' /tmp/live.log
 [ -s /tmp/udevd.log ] && sed 's/^/GS-VM: udevd| /' /tmp/udevd.log
 [ $ok = 1 ] && say "RESULT PASS" || say "RESULT FAIL"

@@ -5,15 +5,17 @@ and the vivid/v4l2loopback module chain; guest_init.sh runs the checks and
 this script hot-plugs a USB device through the qemu monitor when the guest
 asks. Needs no root. Exit 0 when the guest reports RESULT PASS.
 
-usage: vm_live.py --cli PATH --cache DIR --work DIR [--timeout S]
+usage: vm_live.py --cli PATH --cache DIR --work DIR [--timeout S] [--stall S]
 """
 import argparse
 import os
+import queue
 import shutil
 import socket
 import stat
 import subprocess
 import sys
+import threading
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -132,12 +134,23 @@ def monitor(sock_path, cmd):
     return reply
 
 
+def tail(path, n):
+    try:
+        with open(path, errors="replace") as f:
+            return f.read().splitlines()[-n:]
+    except OSError:
+        return []
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--cli", required=True)
     ap.add_argument("--cache", required=True)
     ap.add_argument("--work", required=True)
-    ap.add_argument("--timeout", type=float, default=240)
+    ap.add_argument("--timeout", type=float, default=600,
+                    help="whole run, boot included (s)")
+    ap.add_argument("--stall", type=float, default=240,
+                    help="longest wait for the next line on the serial console (s)")
     args = ap.parse_args()
     os.makedirs(args.work, exist_ok=True)
     prep = subprocess.run([os.path.join(ROOT, "scripts/vm/prepare.sh"), args.cache],
@@ -165,31 +178,68 @@ def main():
     t_start = time.time()
     qemu = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             stdin=subprocess.DEVNULL)
-    result = None
-    hot = {"added": None}
-    with open(log_path, "w") as log:
-        os.set_blocking(qemu.stdout.fileno(), True)
+    # The console is read by a thread so that the time limits hold even when
+    # the guest prints nothing (a hung boot, a hung guest step).
+    lines = queue.Queue()
+
+    def reader():
         for raw in qemu.stdout:
-            line = raw.decode(errors="replace").rstrip("\r\n")
+            lines.put(raw.decode(errors="replace").rstrip("\r\n"))
+        lines.put(None)
+
+    threading.Thread(target=reader, daemon=True).start()
+    result = None
+    t_result = 0.0
+    why = None
+    last_step = "(nothing yet: the kernel is booting)"
+    t_line = t_start
+    with open(log_path, "w") as log:
+        while True:
+            now = time.time()
+            wait = min(t_start + args.timeout, t_line + args.stall) - now
+            if result is not None:  # the verdict is in: only the power-off is left
+                wait = min(wait, t_result + 20 - now)
+                if wait <= 0:
+                    print("vm: qemu did not stop within 20 s of the result; killed",
+                          flush=True)
+                    break
+            if wait <= 0:
+                if now - t_start >= args.timeout:
+                    why = "the run passed its %.0f s limit" % args.timeout
+                else:
+                    why = "the console was silent for %.0f s" % args.stall
+                break
+            try:
+                line = lines.get(timeout=wait)
+            except queue.Empty:
+                continue
+            if line is None:
+                break
+            t_line = time.time()
             log.write(line + "\n")
             log.flush()
             if "GS-VM:" in line:
-                print("%6.1f s  %s" % (time.time() - t_start, line[line.index("GS-VM:"):]))
+                last_step = line[line.index("GS-VM:"):]
+                print("%6.1f s  %s" % (t_line - t_start, last_step), flush=True)
             if "GS-VM: HOTPLUG-READY" in line:
-                hot["added"] = monitor(mon, "device_add usb-kbd,id=hp0,bus=xhci.0")
-                print("vm: monitor device_add usb-kbd: %s" % hot["added"].strip()[-80:])
+                added = monitor(mon, "device_add usb-kbd,id=hp0,bus=xhci.0")
+                print("vm: monitor device_add usb-kbd: %s" % added.strip()[-80:], flush=True)
             if "GS-VM: RESULT" in line:
                 result = line.split("RESULT")[1].strip()
-            if time.time() - t_start > args.timeout:
-                print("vm: timed out after %.0f s" % args.timeout)
-                qemu.kill()
-                break
-    qemu.wait()
+                t_result = t_line
+    if why:
+        print("vm: %s; the last step the guest reported: %s" % (why, last_step), flush=True)
+    if qemu.poll() is None:
+        qemu.kill()
+    try:
+        qemu.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        qemu.kill()
+        qemu.wait()
     print("vm: qemu ran %.1f s; serial log in %s" % (time.time() - t_start, log_path))
     if result != "PASS":
-        with open(log_path) as f:
-            tail = f.read().splitlines()[-60:]
-        print("\n".join(tail))
+        print("vm: the console's last lines:")
+        print("\n".join(tail(log_path, 60)))
         return 1
     return 0
 
