@@ -607,9 +607,7 @@ void gs_finetune_options_default(gs_finetune_options *o)
     o->parts = GS_FT_DEFAULT;
 }
 
-/* The GS_FT_* part a tensor belongs to (0: never tuned: codes and fixed
- * tensors). */
-static unsigned tensor_part(const gs_ptensor *t)
+unsigned gs_model_tensor_part(const gs_ptensor *t)
 {
     const char *n = t->name;
     if (t->group == GS_PG_CODES || t->group == GS_PG_FIXED)
@@ -675,7 +673,7 @@ static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
     r->m = m;
     gs_nn_param_group groups[GS_MODEL_MAX_TENSORS];
     for (int i = 0; i < m->ntensors; i++)
-        if (tensor_part(&m->t[i]) & parts) {
+        if (gs_model_tensor_part(&m->t[i]) & parts) {
             r->idx[r->n++] = i;
             r->tuned += m->t[i].count;
         }
@@ -803,6 +801,8 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     }
     /* The best iterate, or on any error the parameters of before. */
     ft_pack(&r, rc ? r.orig : r.best, 1);
+    if (!rc)
+        m->tuned |= parts;
     if (report) {
         memset(report, 0, sizeof *report);
         report->iters = it;

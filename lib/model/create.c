@@ -203,6 +203,7 @@ int gs_model_create(const gs_model_config *cfg_in, uint64_t seed,
         for (size_t i = 0; i < (size_t)cfg.n_train_ids * cfg.id_dim; i++)
             p->codes[i] = (float)(0.01 * rng_normal(&r));
     gs_synth_template_free(&t);
+    m->id = gs_model_param_id(m);
     *out = m;
     return GS_OK;
 }
@@ -226,6 +227,8 @@ void gs_model_get_info(const gs_model *m, gs_model_info *info)
     info->focal = m->cfg.focal;
     info->distance_mm = m->cfg.d_n_mm;
     info->param_bytes = m->nparams * sizeof(float);
+    info->param_id = m->id;
+    info->tuned_parts = m->tuned;
 }
 
 void gs_model_spec_default(gs_model_spec *s)

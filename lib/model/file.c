@@ -151,6 +151,7 @@ static int load_from(gs_st_file *f, gs_model **out, gs_error *err)
         return rc;
     }
     gs_model_bind(m, m->params, &m->p);
+    m->id = gs_model_param_id(m);
     *out = m;
     return GS_OK;
 }

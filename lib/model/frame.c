@@ -1006,6 +1006,16 @@ int gs_model_ctx_set_render_options(gs_model_ctx *c,
     return GS_OK;
 }
 
+void gs_model_ctx_reset(gs_model_ctx *c)
+{
+    if (!c)
+        return;
+    sweep_drop(c);
+    c->face_valid = 0;
+    c->face_map_valid = 0;
+    c->rgb8_valid = 0;
+}
+
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st)
 {
     memset(st, 0, sizeof *st);

@@ -111,7 +111,15 @@ struct gs_model {
     size_t rend_offset;    /* the renderer's packed block */
     float *params;
     gs_model_params p;
+    uint64_t id;     /* gs_model_param_id of what it was loaded, created or
+                        pruned with; clones and copies carry it over */
+    unsigned tuned;  /* GS_FT_* parts fine-tuned since (gs_model_finetune) */
 };
+
+/* A 64-bit hash of m's tensor table and parameter values. */
+uint64_t gs_model_param_id(const gs_model *m);
+/* The GS_FT_* part a tensor belongs to (0: never tuned: codes, fixed). */
+unsigned gs_model_tensor_part(const gs_ptensor *t);
 
 /* Builds the tensor table of cfg and carves p out of base. */
 int gs_model_layout(const gs_model_config *cfg, gs_model *m, gs_error *err);

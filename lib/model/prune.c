@@ -174,6 +174,12 @@ int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
     o->rcfg = m->rcfg;
     copy_tensors(m, keep, o);
     gs_model_bind(o, o->params, &o->p);
+    if (k < n) {
+        o->id = gs_model_param_id(o);
+    } else { /* a clone: the same parameters, tuned or not */
+        o->id = m->id;
+        o->tuned = m->tuned;
+    }
     free(keep);
     *out = o;
     return GS_OK;
@@ -200,5 +206,7 @@ int gs_model_copy_params(gs_model *dst, const gs_model *src, gs_error *err)
         return gs_error_set(err, GS_ERR_ARG,
                             "copy params: the models' layouts differ");
     memcpy(dst->params, src->params, src->nparams * sizeof(float));
+    dst->id = src->id;
+    dst->tuned = src->tuned;
     return GS_OK;
 }

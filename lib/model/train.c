@@ -509,5 +509,6 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         rep->final_gaze_deg = gaze_mean * 180.0 / GS_MODEL_PI;
     }
     trainer_free(&t);
+    m->id = gs_model_param_id(m); /* the parameters it now holds */
     return rc;
 }

@@ -61,6 +61,10 @@ typedef struct gs_model_info {
     double focal;     /* normalized camera focal length, pixels */
     double distance_mm; /* normalized camera distance d_n */
     size_t param_bytes; /* memory held by the parameters */
+    uint64_t param_id;  /* names the parameters the model was loaded,
+                           created or pruned with (a hash of them and of
+                           the tensor table); clones keep it */
+    unsigned tuned_parts; /* GS_FT_* parts fine-tuned since (0: none) */
 } gs_model_info;
 void gs_model_get_info(const gs_model *m, gs_model_info *info);
 
@@ -122,6 +126,11 @@ typedef struct gs_model_ctx_stats {
     int sweep_kept;                /* renders kept for incremental reuse */
 } gs_model_ctx_stats;
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st);
+
+/* Forgets everything c kept from earlier renders (the face stream, kept
+ * sweep renders): needed after its model's parameters changed
+ * (gs_model_tuned_apply, gs_model_copy_params, gs_model_finetune). */
+void gs_model_ctx_reset(gs_model_ctx *c);
 
 /* ---- speed against quality at render time (docs/model.md) ---- */
 
@@ -239,6 +248,29 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
                       const uint8_t *rgb, size_t stride,
                       const gs_finetune_options *opt,
                       gs_finetune_report *report, gs_error *err);
+
+/* ---- serving fine-tuned subjects (docs/model.md) ---- */
+
+/* The tensors of every part m has fine-tuned (gs_model_finetune since m
+ * was cloned) as one self-contained block: the parts, the param_id of the
+ * model they were tuned from, the values and a checksum. *out is
+ * malloc'd (free it); a face-only block of the cpu model is about 1.5 MB.
+ * GS_ERR_ARG when m has not been fine-tuned. */
+int gs_model_tuned_encode(const gs_model *m, uint8_t **out, size_t *len,
+                          gs_error *err);
+
+/* Makes dst, a clone of base (gs_model_clone), render as the model the
+ * block was encoded from: base's parameters with the block's tensors in
+ * their place. buf NULL and len 0 puts base's parameters back. The block
+ * is checked whole before dst changes: bad magic, truncation, a wrong
+ * checksum or a non-finite value give GS_ERR_FORMAT, another version
+ * GS_ERR_UNSUPPORTED, a block tuned from another model (param_id) or a dst
+ * not of base's layout GS_ERR_ARG; dst is then untouched. Only the
+ * block's tensors and those dst had tuned otherwise are copied (a face
+ * block after another: about 1.5 MB). Reset dst's contexts afterwards
+ * (gs_model_ctx_reset). */
+int gs_model_tuned_apply(gs_model *dst, const gs_model *base,
+                         const uint8_t *buf, size_t len, gs_error *err);
 
 #ifdef __cplusplus
 }

@@ -1,0 +1,272 @@
+/* Fine-tuned parameters as a block of their own (docs/model.md, "Serving
+ * fine-tuned subjects"): what a subject's gs_model_finetune changed, kept
+ * beside its gs_subject and put back into a clone of the shared model
+ * when that subject is rendered.
+ *
+ * Block layout, little-endian:
+ *   u32 magic "GSFT", u32 version, u32 parts (GS_FT_*), u32 tensors,
+ *   u64 param id of the model it was tuned from,
+ *   per tensor: u32 index in the model's table, u32 floats, the floats,
+ *   u64 hash of every byte before it. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "model_internal.h"
+#include "frame.h"
+
+#define TUNED_MAGIC 0x54465347u /* "GSFT" */
+#define TUNED_VERSION 1u
+#define TUNED_HEAD 24
+#define TUNED_ALL_PARTS 0x1fu
+
+static inline uint64_t rotl(uint64_t x, int r)
+{
+    return x << r | x >> (64 - r);
+}
+
+/* Four independent lanes over 32-byte blocks (a single dependent chain
+ * would run at about a byte per cycle over a 30 MB model), folded at the
+ * end. Not cryptographic: it tells models and corrupt blocks apart. */
+typedef struct {
+    uint64_t v[4];
+    uint64_t n;
+} hash64;
+
+static void hash_init(hash64 *h, uint64_t seed)
+{
+    for (int k = 0; k < 4; k++)
+        h->v[k] = seed + 0x9e3779b97f4a7c15ULL * (uint64_t)(k + 1);
+    h->n = 0;
+}
+
+static inline uint64_t lane(uint64_t v, uint64_t w)
+{
+    return rotl(v ^ (w * 0xbf58476d1ce4e5b9ULL), 29) * 0x94d049bb133111ebULL;
+}
+
+/* Whole blocks of 32 bytes only, except for the last call's tail. */
+static void hash_bytes(hash64 *h, const void *p, size_t n)
+{
+    const uint8_t *b = p;
+    h->n += n;
+    for (; n >= 32; n -= 32, b += 32)
+        for (int k = 0; k < 4; k++) {
+            uint64_t w;
+            memcpy(&w, b + 8 * k, 8);
+            h->v[k] = lane(h->v[k], w);
+        }
+    for (int k = 0; n > 0; k++) {
+        uint64_t w = 0;
+        size_t c = n < 8 ? n : 8;
+        memcpy(&w, b, c);
+        h->v[k] = lane(h->v[k], w ^ 0xa5);
+        b += c, n -= c;
+    }
+}
+
+static uint64_t hash_final(const hash64 *h)
+{
+    uint64_t x = h->n;
+    for (int k = 0; k < 4; k++)
+        x = lane(x, h->v[k]);
+    x ^= x >> 31;
+    x *= 0xd6e8feb86659fd93ULL;
+    return x ^ (x >> 32);
+}
+
+uint64_t gs_model_param_id(const gs_model *m)
+{
+    hash64 h;
+    hash_init(&h, 0x67617a6573706c74ULL);
+    /* The table: names, offsets and counts, one 32-byte-aligned record
+     * each so that every call but the parameters' is whole blocks. */
+    for (int i = 0; i < m->ntensors; i++) {
+        uint8_t rec[96];
+        memset(rec, 0, sizeof rec);
+        memcpy(rec, m->t[i].name, sizeof m->t[i].name);
+        uint64_t oc[2] = {m->t[i].offset, m->t[i].count};
+        memcpy(rec + 64, oc, sizeof oc);
+        hash_bytes(&h, rec, sizeof rec);
+    }
+    hash_bytes(&h, m->params, m->nparams * sizeof(float));
+    return hash_final(&h);
+}
+
+static uint64_t block_hash(const uint8_t *p, size_t n)
+{
+    hash64 h;
+    hash_init(&h, 0x67736674756e6564ULL);
+    hash_bytes(&h, p, n);
+    return hash_final(&h);
+}
+
+static int same_layout(const gs_model *a, const gs_model *b)
+{
+    if (a->nparams != b->nparams || a->ntensors != b->ntensors)
+        return 0;
+    for (int i = 0; i < a->ntensors; i++)
+        if (a->t[i].offset != b->t[i].offset || a->t[i].count != b->t[i].count ||
+            strcmp(a->t[i].name, b->t[i].name))
+            return 0;
+    return 1;
+}
+
+static void put32(uint8_t *p, uint32_t v)
+{
+    memcpy(p, &v, 4);
+}
+
+static uint32_t get32(const uint8_t *p)
+{
+    uint32_t v;
+    memcpy(&v, p, 4);
+    return v;
+}
+
+int gs_model_tuned_encode(const gs_model *m, uint8_t **out, size_t *len, gs_error *err)
+{
+    if (!m || !out || !len)
+        return gs_error_set(err, GS_ERR_ARG, "tuned block: NULL argument");
+    if (!m->tuned)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "tuned block: the model has not been fine-tuned");
+    size_t n = TUNED_HEAD + 8;
+    uint32_t count = 0;
+    for (int i = 0; i < m->ntensors; i++)
+        if (gs_model_tensor_part(&m->t[i]) & m->tuned) {
+            n += 8 + m->t[i].count * sizeof(float);
+            count++;
+        }
+    uint8_t *b = malloc(n), *p = b;
+    if (!b)
+        return gs_error_set(err, GS_ERR_NOMEM, "tuned block: out of memory");
+    put32(p, TUNED_MAGIC);
+    put32(p + 4, TUNED_VERSION);
+    put32(p + 8, m->tuned);
+    put32(p + 12, count);
+    memcpy(p + 16, &m->id, 8);
+    p += TUNED_HEAD;
+    for (int i = 0; i < m->ntensors; i++) {
+        const gs_ptensor *t = &m->t[i];
+        if (!(gs_model_tensor_part(t) & m->tuned))
+            continue;
+        put32(p, (uint32_t)i);
+        put32(p + 4, (uint32_t)t->count);
+        memcpy(p + 8, m->params + t->offset, t->count * sizeof(float));
+        p += 8 + t->count * sizeof(float);
+    }
+    uint64_t h = block_hash(b, (size_t)(p - b));
+    memcpy(p, &h, 8);
+    *out = b;
+    *len = n;
+    return GS_OK;
+}
+
+/* Checks a whole block against base; *parts gets its parts. */
+static int check_block(const gs_model *base, const uint8_t *buf, size_t len, unsigned *parts,
+                       gs_error *err)
+{
+    if (len < TUNED_HEAD + 8)
+        return gs_error_set(err, GS_ERR_FORMAT, "tuned block: %zu bytes, too short", len);
+    if (get32(buf) != TUNED_MAGIC)
+        return gs_error_set(err, GS_ERR_FORMAT, "tuned block: bad magic");
+    if (get32(buf + 4) != TUNED_VERSION)
+        return gs_error_set(err, GS_ERR_UNSUPPORTED, "tuned block: version %u (this build reads %u)",
+                            get32(buf + 4), TUNED_VERSION);
+    uint64_t h;
+    memcpy(&h, buf + len - 8, 8);
+    if (block_hash(buf, len - 8) != h)
+        return gs_error_set(err, GS_ERR_FORMAT,
+                            "tuned block: checksum mismatch (truncated or corrupt)");
+    unsigned pt = get32(buf + 8);
+    uint32_t count = get32(buf + 12);
+    uint64_t id;
+    memcpy(&id, buf + 16, 8);
+    if (!pt || (pt & ~TUNED_ALL_PARTS))
+        return gs_error_set(err, GS_ERR_FORMAT, "tuned block: parts 0x%x", pt);
+    if (id != base->id)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "tuned block: tuned from another model (parameter id "
+                            "%016llx, this model's %016llx)",
+                            (unsigned long long)id, (unsigned long long)base->id);
+    /* Exactly the tensors of those parts, in table order. */
+    size_t off = TUNED_HEAD, body = len - 8;
+    uint32_t seen = 0;
+    for (int i = 0; i < base->ntensors; i++) {
+        const gs_ptensor *t = &base->t[i];
+        if (!(gs_model_tensor_part(t) & pt))
+            continue;
+        if (seen == count || body - off < 8)
+            return gs_error_set(err, GS_ERR_FORMAT, "tuned block: %s missing", t->name);
+        uint32_t idx = get32(buf + off), n = get32(buf + off + 4);
+        if (idx != (uint32_t)i || n != t->count)
+            return gs_error_set(err, GS_ERR_FORMAT,
+                                "tuned block: record %u is tensor %u with %u floats; "
+                                "expected %s (%d) with %zu",
+                                seen, idx, n, t->name, i, t->count);
+        off += 8;
+        if ((body - off) / sizeof(float) < n)
+            return gs_error_set(err, GS_ERR_FORMAT, "tuned block: %s truncated", t->name);
+        for (uint32_t k = 0; k < n; k++) {
+            float v;
+            memcpy(&v, buf + off + (size_t)k * 4, 4);
+            if (!isfinite(v))
+                return gs_error_set(err, GS_ERR_FORMAT,
+                                    "tuned block: %s[%u] is not finite", t->name, k);
+        }
+        off += (size_t)n * sizeof(float);
+        seen++;
+    }
+    if (seen != count || off != body)
+        return gs_error_set(err, GS_ERR_FORMAT,
+                            "tuned block: %u records and %zu bytes, expected %u and %zu",
+                            count, len, seen, off + 8);
+    *parts = pt;
+    return GS_OK;
+}
+
+int gs_model_tuned_apply(gs_model *dst, const gs_model *base, const uint8_t *buf, size_t len,
+                         gs_error *err)
+{
+    if (!dst || !base || (!buf && len))
+        return gs_error_set(err, GS_ERR_ARG, "tuned block: NULL argument");
+    if (dst == base)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "tuned block: apply to a clone (gs_model_clone), never the "
+                            "shared model");
+    if (base->tuned)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "tuned block: base is itself fine-tuned; pass the model "
+                            "the clones were made from");
+    if (!same_layout(dst, base))
+        return gs_error_set(err, GS_ERR_ARG, "tuned block: dst is not of base's layout");
+    unsigned pt = 0;
+    if (buf) {
+        int rc = check_block(base, buf, len, &pt, err);
+        if (rc)
+            return rc;
+    }
+    if (dst->id != base->id) {
+        /* Not a clone of base (or copied from elsewhere): start from base. */
+        memcpy(dst->params, base->params, base->nparams * sizeof(float));
+        dst->tuned = 0;
+    }
+    /* Tensors dst has tuned that this block does not hold go back to base;
+     * the block's own are written over whatever dst has. */
+    const uint8_t *p = buf ? buf + TUNED_HEAD : NULL;
+    for (int i = 0; i < base->ntensors; i++) {
+        const gs_ptensor *t = &base->t[i];
+        unsigned part = gs_model_tensor_part(t);
+        float *d = dst->params + t->offset;
+        if (part & pt) {
+            memcpy(d, p + 8, t->count * sizeof(float));
+            p += 8 + t->count * sizeof(float);
+        } else if (part & dst->tuned) {
+            memcpy(d, base->params + t->offset, t->count * sizeof(float));
+        }
+    }
+    dst->id = base->id;
+    dst->tuned = pt;
+    return GS_OK;
+}
