@@ -8,6 +8,7 @@
 #include <string.h>
 
 #include "cli.h"
+#include "gazesplat/model.h"
 
 static void vreport(const cli_command *cmd, const char *fmt, va_list ap)
 {
@@ -129,4 +130,69 @@ int cli_parse_size(const char *s, int max, int *w, int *h)
     *w = (int)vw;
     *h = (int)vh;
     return 0;
+}
+
+static const struct {
+    const char *name;
+    unsigned bit;
+} ft_names[] = {{"face", GS_FT_FACE}, {"eye", GS_FT_EYE}, {"renderer", GS_FT_RENDERER},
+                {"mlp", GS_FT_MLP}, {"geometry", GS_FT_GEOMETRY}};
+#define N_FT_NAMES (sizeof ft_names / sizeof ft_names[0])
+
+int cli_parse_ft_parts(const char *s, unsigned *parts)
+{
+    *parts = 0;
+    while (*s) {
+        size_t n = strcspn(s, ",");
+        int found = 0;
+        for (size_t k = 0; k < N_FT_NAMES; k++)
+            if (strlen(ft_names[k].name) == n && !strncmp(s, ft_names[k].name, n)) {
+                *parts |= ft_names[k].bit;
+                found = 1;
+            }
+        if (!found)
+            return -1;
+        s += n;
+        if (*s == ',' && *++s == '\0')
+            return -1;
+    }
+    return *parts ? 0 : -1;
+}
+
+const char *cli_ft_parts_name(unsigned parts, char *buf, size_t cap)
+{
+    size_t n = 0;
+    if (cap)
+        buf[0] = '\0';
+    for (size_t k = 0; k < N_FT_NAMES; k++)
+        if ((parts & ft_names[k].bit) && n < cap) {
+            int w = snprintf(buf + n, cap - n, "%s%s", n ? "," : "", ft_names[k].name);
+            n += w > 0 ? (size_t)w : 0;
+        }
+    return buf;
+}
+
+int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
+                       gs_finetune_options *fo)
+{
+    gs_finetune_options_default(fo);
+    fo->iters = 0;
+    if (n) {
+        long v;
+        if (cli_parse_long(n, 1, 100000, &v))
+            return cli_usage_error(cmd, "--finetune: want 1..100000 steps");
+        fo->iters = (int)v;
+    }
+    if (parts && cli_parse_ft_parts(parts, &fo->parts))
+        return cli_usage_error(cmd, "--finetune-parts: want a list of face, eye, renderer, "
+                               "mlp, geometry; got '%s'", parts);
+    if (lr) {
+        float x;
+        if (cli_parse_floats(lr, &x, 1) || !(x > 0 && x <= 1))
+            return cli_usage_error(cmd, "--finetune-lr: want a rate in (0, 1]");
+        fo->lr = x;
+    }
+    if ((parts || lr) && !n)
+        return cli_usage_error(cmd, "--finetune-parts and --finetune-lr go with --finetune N");
+    return CLI_OK;
 }

@@ -458,33 +458,6 @@ static int parse_prune(const char *s, evaluator *ev)
     return cli_parse_long(s, 1, 100000000L, &ev->prune_k);
 }
 
-/* --finetune-parts: GS_FT_* names */
-static int parse_parts(const char *s, unsigned *parts)
-{
-    static const struct {
-        const char *name;
-        unsigned bit;
-    } names[] = {{"face", GS_FT_FACE}, {"eye", GS_FT_EYE},
-                 {"renderer", GS_FT_RENDERER}, {"mlp", GS_FT_MLP},
-                 {"geometry", GS_FT_GEOMETRY}};
-    *parts = 0;
-    while (*s) {
-        size_t n = strcspn(s, ",");
-        int found = 0;
-        for (size_t k = 0; k < sizeof names / sizeof names[0]; k++)
-            if (strlen(names[k].name) == n && !strncmp(s, names[k].name, n)) {
-                *parts |= names[k].bit;
-                found = 1;
-            }
-        if (!found)
-            return -1;
-        s += n;
-        if (*s == ',' && *++s == '\0')
-            return -1;
-    }
-    return *parts ? 0 : -1;
-}
-
 static int parse_methods(const char *s, evaluator *ev)
 {
     ev->nmethods = 0;
@@ -768,24 +741,9 @@ static int run_eval(int argc, char **argv)
                                "(0, 1]; got '%s'", o[O_FSCALE].value);
     ev.ro.feature_scale = fscale;
     ev.ro.full = o[O_FULL].value != NULL;
-    gs_finetune_options_default(&ev.fo);
-    ev.fo.iters = 0;
-    if (o[O_FT].value) {
-        long n;
-        if (cli_parse_long(o[O_FT].value, 1, 100000, &n))
-            return cli_usage_error(cmd, "--finetune: want 1..100000 steps");
-        ev.fo.iters = (int)n;
-    }
-    if (o[O_FT_PARTS].value && parse_parts(o[O_FT_PARTS].value, &ev.fo.parts))
-        return cli_usage_error(cmd, "--finetune-parts: want a list of face, "
-                               "eye, renderer, mlp, geometry; got '%s'",
-                               o[O_FT_PARTS].value);
-    if (o[O_FT_LR].value) {
-        float lr;
-        if (cli_parse_floats(o[O_FT_LR].value, &lr, 1) || !(lr > 0 && lr <= 1))
-            return cli_usage_error(cmd, "--finetune-lr: want a rate in (0, 1]");
-        ev.fo.lr = lr;
-    }
+    if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value,
+                                 &ev.fo)))
+        return rc;
     ev.ft_eye_w = 1.0;
     if (o[O_FT_EYE].value) {
         float w;

@@ -22,6 +22,8 @@ const cli_command cli_fit_command = {
     "fit a subject (latent code, head pose, gaze, colour) to a face image",
     "usage: gazesplat fit --model M --image FACE.png --out SUBJECT.bin\n"
     "                     [--gaze-deg P,Y] [--iters N] [--time S]\n"
+    "                     [--finetune N [--finetune-parts LIST]\n"
+    "                      [--finetune-lr X]]\n"
     "\n"
     "  --model FILE     a model file (gazesplat train)\n"
     "  --image FILE     a normalized face image (PNG/JPEG) of the model's\n"
@@ -32,7 +34,16 @@ const cli_command cli_fit_command = {
     "  --gaze-deg P,Y   the image's gaze (head frame, degrees) if known;\n"
     "                   otherwise it is estimated with the fit\n"
     "  --iters N        iteration cap (200); --time S: time budget\n"
-    "  --out FILE       the fitted subject (binary, gs_subject_encode)\n"
+    "  --finetune N     then fine-tune a copy of the model on the image for N\n"
+    "                   Adam steps (gs_model_finetune; the paper's last step)\n"
+    "                   and store the tuned tensors with the subject\n"
+    "  --finetune-parts LIST  what is tuned, comma-separated: face (the\n"
+    "                   default: face Gaussians' colour and features), eye,\n"
+    "                   renderer, mlp, geometry\n"
+    "  --finetune-lr X  Adam's base rate (default 0.001)\n"
+    "  --out FILE       the fitted subject (binary, gs_subject_encode),\n"
+    "                   followed by the tuned block with --finetune\n"
+    "                   (gs_model_tuned_encode; about 1.5 MB for face)\n"
     "Prints the fit quality and the estimated labels.\n",
     run_fit,
 };
@@ -43,7 +54,8 @@ const cli_command cli_redirect_command = {
     "usage: gazesplat redirect --model M (--subject S.bin | --image IMG)\n"
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
     "                          [--head-deg P,Y] [--index I] [--out-norm]\n"
-    "                          [--iters N]\n"
+    "                          [--iters N] [--finetune N\n"
+    "                          [--finetune-parts LIST] [--finetune-lr X]]\n"
     "\n"
     "  --image IMG      a normalized face of the model's size, fitted first;\n"
     "                   or any photo: its face (--index I, largest first) is\n"
@@ -52,7 +64,11 @@ const cli_command cli_redirect_command = {
     "                   --out-norm also writes the normalized crops)\n"
     "  --gaze-deg LIST  targets, head frame, degrees (pitch > 0 looks up,\n"
     "                   yaw > 0 toward image-left), separated by ';'\n"
+    "  --subject S.bin  a subject from gazesplat fit; one written with\n"
+    "                   --finetune renders with its tuned tensors\n"
     "  --iters N        fit iteration cap (200)\n"
+    "  --finetune N     (with --image) fine-tune a copy of the model on the\n"
+    "                   face after the fit, as gazesplat fit does\n"
     "  --head-deg P,Y   render with this head pose instead of the subject's\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
@@ -69,10 +85,42 @@ static int load_model(const cli_command *cmd, const char *path, gs_model **m)
     return CLI_OK;
 }
 
+/* After a fit: a copy of m fine-tuned on the fitted image (ft->iters
+ * steps), reported on stderr. */
+static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
+                         const gs_subject *sub, const uint8_t *rgb, size_t stride,
+                         const uint8_t *mask, const gs_finetune_options *ft,
+                         gs_model **tuned)
+{
+    gs_error err = {0, ""};
+    gs_finetune_options fo = *ft;
+    fo.mask = mask;
+    gs_finetune_report r;
+    char parts[64];
+    if (gs_model_clone(m, tuned, &err))
+        return cli_fail(cmd, "finetune: %s", err.msg);
+    if (gs_model_finetune(*tuned, pool, sub, rgb, stride, &fo, &r, &err)) {
+        gs_model_destroy(*tuned);
+        *tuned = NULL;
+        return cli_fail(cmd, "finetune: %s", err.msg);
+    }
+    fprintf(stderr,
+            "gazesplat %s: fine-tuned %s (%zu floats) for %d steps in %.2f s: "
+            "PSNR %.2f -> %.2f dB\n",
+            cmd->name, cli_ft_parts_name(fo.parts ? fo.parts : GS_FT_DEFAULT, parts,
+                                         sizeof parts),
+            r.params_tuned, r.iters, r.seconds, r.psnr_first, r.psnr_best);
+    return CLI_OK;
+}
+
+/* Fits the image; with ft->iters > 0 also fine-tunes a copy of m on it
+ * (*tuned, NULL otherwise). */
 static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
                      const char *image, const char *mask, const char *gaze,
-                     long iters, double budget, gs_subject *sub)
+                     long iters, double budget, const gs_finetune_options *ft,
+                     gs_subject *sub, gs_model **tuned)
 {
+    *tuned = NULL;
     gs_model_info info;
     gs_model_get_info(m, &info);
     gs_io_image img = {0}, mk = {0};
@@ -129,6 +177,8 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
                     sub->gaze_yaw / DEG);
         gs_model_ctx_destroy(c);
     }
+    if (!rc && ft->iters > 0)
+        rc = finetune_copy(cmd, m, pool, sub, img.data, img.stride, w, ft, tuned);
     free(w);
     gs_io_image_free(&img);
     gs_io_image_free(&mk);
@@ -138,11 +188,12 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
 static int run_fit(int argc, char **argv)
 {
     const cli_command *cmd = &cli_fit_command;
-    cli_opt o[7] = {{"--model", 1, NULL}, {"--image", 1, NULL},
-                    {"--mask", 1, NULL},  {"--gaze-deg", 1, NULL},
-                    {"--iters", 1, NULL}, {"--time", 1, NULL},
-                    {"--out", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 7);
+    cli_opt o[10] = {{"--model", 1, NULL},    {"--image", 1, NULL},
+                     {"--mask", 1, NULL},     {"--gaze-deg", 1, NULL},
+                     {"--iters", 1, NULL},    {"--time", 1, NULL},
+                     {"--out", 1, NULL},      {"--finetune", 1, NULL},
+                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 10);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -158,22 +209,40 @@ static int run_fit(int argc, char **argv)
     if (o[5].value && (cli_parse_floats(o[5].value, &budget, 1) ||
                        !(budget > 0 && budget < 1e5)))
         return cli_usage_error(cmd, "--time: want seconds > 0");
+    gs_finetune_options ft;
+    if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, &ft)))
+        return rc;
     gs_model *m = NULL;
     if ((rc = load_model(cmd, o[0].value, &m)))
         return rc;
     gs_pool *pool = gs_pool_create(2);
     gs_subject sub;
+    gs_model *tuned = NULL;
     rc = fit_image(cmd, m, pool, o[1].value, o[2].value, o[3].value, iters,
-                   budget, &sub);
+                   budget, &ft, &sub, &tuned);
+    uint8_t *blk = NULL;
+    size_t blen = 0;
+    gs_error err = {0, ""};
+    if (!rc && tuned && gs_model_tuned_encode(tuned, &blk, &blen, &err))
+        rc = cli_fail(cmd, "finetune: %s", err.msg);
     if (!rc) {
+        /* The subject, then the tuned block when there is one; written to
+         * a temporary name and renamed, so a failure leaves no half file. */
         uint8_t buf[GS_SUBJECT_ENCODED_MAX];
         size_t n = gs_subject_encode(&sub, buf, sizeof buf);
-        FILE *f = fopen(o[6].value, "wb");
-        if (!f || fwrite(buf, 1, n, f) != n)
-            rc = cli_fail(cmd, "cannot write %s", o[6].value);
+        char tmp[4096];
+        snprintf(tmp, sizeof tmp, "%s.tmp", o[6].value);
+        FILE *f = fopen(tmp, "wb");
+        int bad = !f || fwrite(buf, 1, n, f) != n || (blk && fwrite(blk, 1, blen, f) != blen);
         if (f && fclose(f))
+            bad = 1;
+        if (bad || rename(tmp, o[6].value)) {
+            remove(tmp);
             rc = cli_fail(cmd, "cannot write %s", o[6].value);
+        }
     }
+    free(blk);
+    gs_model_destroy(tuned);
     gs_pool_destroy(pool);
     gs_model_destroy(m);
     return rc;
@@ -187,28 +256,78 @@ static int make_dir(const char *path)
            (stat(path, &st) == 0 && S_ISDIR(st.st_mode));
 }
 
-static int read_subject(const cli_command *cmd, const char *path,
-                        gs_subject *s)
+/* A subject file: the encoded subject, then (gazesplat fit --finetune)
+ * a tuned block, which *tuned gets: a clone of m with it applied. */
+#define MAX_SUBJECT_FILE ((size_t)1 << 30)
+static int read_subject(const cli_command *cmd, const char *path, gs_model *m,
+                        gs_subject *s, gs_model **tuned)
 {
-    uint8_t buf[GS_SUBJECT_ENCODED_MAX + 1];
+    *tuned = NULL;
     FILE *f = fopen(path, "rb");
     if (!f)
         return cli_fail(cmd, "cannot open %s", path);
-    size_t n = fread(buf, 1, sizeof buf, f);
+    size_t cap = 1 << 16, n = 0;
+    uint8_t *buf = malloc(cap);
+    while (buf) {
+        n += fread(buf + n, 1, cap - n, f);
+        if (n < cap || cap >= MAX_SUBJECT_FILE)
+            break;
+        uint8_t *nb = realloc(buf, cap * 2);
+        if (!nb) {
+            free(buf);
+            buf = NULL;
+            break;
+        }
+        buf = nb, cap *= 2;
+    }
+    int rd = ferror(f);
     fclose(f);
+    if (!buf)
+        return cli_fail(cmd, "%s: out of memory", path);
+    if (rd || n == cap) {
+        free(buf);
+        return cli_fail(cmd, "%s: %s", path, rd ? "read error" : "too large");
+    }
+    /* The subject's length follows from its code length (offset 8). */
+    gs_subject probe;
+    memset(&probe, 0, sizeof probe);
+    uint32_t dim = 0;
+    if (n >= 12)
+        memcpy(&dim, buf + 8, 4);
+    probe.code_dim = dim >= 1 && dim <= GS_MODEL_MAX_CODE ? (int)dim : 1;
+    size_t slen = gs_subject_encode(&probe, NULL, 0);
+    if (slen > n)
+        slen = n;
     gs_error err = {0, ""};
-    if (gs_subject_decode(buf, n, s, &err))
-        return cli_fail(cmd, "%s: %s", path, err.msg);
-    return CLI_OK;
+    int rc = CLI_OK;
+    if (gs_subject_decode(buf, slen, s, &err))
+        rc = cli_fail(cmd, "%s: %s", path, err.msg);
+    else if (n > slen) {
+        if (gs_model_clone(m, tuned, &err) ||
+            gs_model_tuned_apply(*tuned, m, buf + slen, n - slen, &err)) {
+            rc = cli_fail(cmd, "%s: %s", path, err.msg);
+            gs_model_destroy(*tuned);
+            *tuned = NULL;
+        } else {
+            gs_model_info ti;
+            char parts[64];
+            gs_model_get_info(*tuned, &ti);
+            fprintf(stderr, "gazesplat %s: %s: fine-tuned %s\n", cmd->name, path,
+                    cli_ft_parts_name(ti.tuned_parts, parts, sizeof parts));
+        }
+    }
+    free(buf);
+    return rc;
 }
 
 /* The photo path: detect -> landmarks -> pose -> normalize -> fit ->
  * render each target -> paste the eye regions back into the photo. */
 static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
                           const char *path, int index, int iters,
-                          double tg[][2],
+                          const gs_finetune_options *ft, double tg[][2],
                           int nt, const char *dir, int out_norm)
 {
+    gs_model *tuned = NULL;
     gs_model_info info;
     gs_model_get_info(m, &info);
     int S = info.image_size;
@@ -267,6 +386,16 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
             "fit %d iterations, PSNR %.2f dB; gaze %.1f,%.1f deg\n",
             index, res.n_faces, res.head_pitch_n / DEG, res.head_yaw_n / DEG,
             r.iters, sub.fit_psnr, sub.gaze_pitch / DEG, sub.gaze_yaw / DEG);
+    if (ft->iters > 0) { /* render with the tuned copy from here on */
+        if ((rc = finetune_copy(cmd, m, pool, &sub, norm.data, norm.stride, mask_n, ft,
+                                &tuned)))
+            goto done;
+        gs_model_ctx_destroy(c);
+        if (!(c = gs_model_ctx_create(tuned))) {
+            rc = cli_fail(cmd, "out of memory");
+            goto done;
+        }
+    }
     for (int k = 0; k < nt && !rc; k++) {
         gs_view v = {0};
         v.gaze_pitch = tg[k][0];
@@ -299,6 +428,7 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
         printf("gazesplat redirect: %d images -> %s\n", nt, dir);
 done:
     gs_model_ctx_destroy(c);
+    gs_model_destroy(tuned);
     free(face.data);
     free(mask_n);
     free(mask_p);
@@ -312,12 +442,13 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[9] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
-                    {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
-                    {"--out", 1, NULL},      {"--head-deg", 1, NULL},
-                    {"--index", 1, NULL},    {"--out-norm", 0, NULL},
-                    {"--iters", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 9);
+    cli_opt o[12] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+                     {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
+                     {"--out", 1, NULL},      {"--head-deg", 1, NULL},
+                     {"--index", 1, NULL},    {"--out-norm", 0, NULL},
+                     {"--iters", 1, NULL},    {"--finetune", 1, NULL},
+                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 12);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -354,6 +485,12 @@ static int run_redirect(int argc, char **argv)
     float head[2] = {0, 0};
     if (o[5].value && cli_parse_floats(o[5].value, head, 2))
         return cli_usage_error(cmd, "--head-deg: want P,Y");
+    gs_finetune_options ft;
+    if ((rc = cli_parse_finetune(cmd, o[9].value, o[10].value, o[11].value, &ft)))
+        return rc;
+    if (ft.iters > 0 && o[1].value)
+        return cli_usage_error(cmd, "--finetune goes with --image (a subject file "
+                                    "carries its own fine-tuning)");
     gs_model *m = NULL;
     if ((rc = load_model(cmd, o[0].value, &m)))
         return rc;
@@ -382,7 +519,7 @@ static int run_redirect(int argc, char **argv)
                 rc = cli_fail(cmd, "cannot create %s", o[4].value);
             else
                 rc = redirect_photo(cmd, m, pool, o[2].value, (int)index,
-                                    (int)iters, tg, nt, o[4].value,
+                                    (int)iters, &ft, tg, nt, o[4].value,
                                     o[7].value != NULL);
             gs_pool_destroy(pool);
             gs_model_destroy(m);
@@ -390,14 +527,15 @@ static int run_redirect(int argc, char **argv)
         }
     }
     gs_subject sub;
-    rc = o[1].value ? read_subject(cmd, o[1].value, &sub)
+    gs_model *tuned = NULL;
+    rc = o[1].value ? read_subject(cmd, o[1].value, m, &sub, &tuned)
                     : fit_image(cmd, m, pool, o[2].value, NULL, NULL, iters, 0,
-                                &sub);
+                                &ft, &sub, &tuned);
     if (!rc && !make_dir(o[4].value))
         rc = cli_fail(cmd, "cannot create %s", o[4].value);
     gs_model_info info;
     gs_model_get_info(m, &info);
-    gs_model_ctx *c = rc ? NULL : gs_model_ctx_create(m);
+    gs_model_ctx *c = rc ? NULL : gs_model_ctx_create(tuned ? tuned : m);
     gs_io_image img = {info.image_size, info.image_size,
                        3 * (size_t)info.image_size, NULL};
     img.data = malloc(img.stride * (size_t)img.height);
@@ -423,6 +561,7 @@ static int run_redirect(int argc, char **argv)
         printf("gazesplat redirect: %d images -> %s\n", nt, o[4].value);
     free(img.data);
     gs_model_ctx_destroy(c);
+    gs_model_destroy(tuned);
     gs_pool_destroy(pool);
     gs_model_destroy(m);
     return rc;

@@ -1,0 +1,82 @@
+#!/usr/bin/env bash
+# gazesplat fit / redirect with fine-tuned subjects, end to end on a tiny
+# model trained for a few steps and held-out synthetic faces: the subject
+# file carries the tuned block, redirect renders with it (the same bytes
+# as fitting and fine-tuning inline), a damaged file or one tuned from
+# another model is refused with a clear message and nothing written, and
+# bad options are usage errors (exit 2).
+set -euo pipefail
+G=$1
+T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
+cd "$T"
+"$G" train --preset tiny --identities 2 --steps 3 --checkpoint 100 --out m.safetensors >/dev/null 2>&1
+"$G" train --preset tiny --identities 2 --steps 4 --checkpoint 100 --out other.safetensors >/dev/null 2>&1
+"$G" synth --out ds --count 2 --seed-split test --identities 2 --size 128 --threads 2 >/dev/null 2>&1
+IMG=ds/images/00000000.png
+size() { stat -c %s "$1"; }
+fail() { echo "FAIL: $*"; exit 1; }
+
+# Plain fit: the subject alone.
+"$G" fit --model m.safetensors --image $IMG --iters 4 --out plain.bin 2>/dev/null
+[ "$(size plain.bin)" -lt 2048 ] || fail "plain subject is $(size plain.bin) bytes"
+
+# Fine-tuned: the subject and the tuned block.
+"$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 5 --out face.bin 2>fit.err
+grep -q "fine-tuned face (.* floats) for 5 steps" fit.err || { cat fit.err; fail "no fine-tune report"; }
+[ "$(size face.bin)" -gt 100000 ] || fail "tuned subject is $(size face.bin) bytes"
+cmp -n "$(size plain.bin)" plain.bin face.bin || fail "the subject part differs from the plain fit"
+"$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 2 --finetune-parts face,eye \
+  --finetune-lr 0.002 --out both.bin 2>/dev/null
+[ "$(size both.bin)" -gt "$(size face.bin)" ] || fail "face,eye block not larger than face"
+
+# Redirect with it: differs from the plain subject, equals fit+tune inline.
+"$G" redirect --model m.safetensors --subject plain.bin --gaze-deg "0,0;10,-15" --out o_plain >/dev/null 2>&1
+"$G" redirect --model m.safetensors --subject face.bin --gaze-deg "0,0;10,-15" --out o_face >/dev/null 2>r.err
+grep -q "face.bin: fine-tuned face" r.err || { cat r.err; fail "redirect did not report the block"; }
+"$G" redirect --model m.safetensors --image $IMG --iters 4 --finetune 5 --gaze-deg "0,0;10,-15" \
+  --out o_inline >/dev/null 2>&1
+for k in 000 001; do
+  [ -s o_face/$k.png ] || fail "missing o_face/$k.png"
+  ! cmp -s o_face/$k.png o_plain/$k.png || fail "tuned render $k equals the plain one"
+  cmp o_face/$k.png o_inline/$k.png || fail "inline fine-tune render $k differs"
+done
+"$G" redirect --model m.safetensors --subject both.bin --gaze-deg "5,5" --out o_both >/dev/null 2>&1
+[ -s o_both/000.png ] || fail "face,eye subject did not render"
+
+# Refused, with a message and no output: a truncated file, a flipped
+# byte, a block tuned from another model.
+refuse() { # name file want-message
+  if "$G" redirect --model m.safetensors --subject "$2" --gaze-deg "0,0" --out "o_$1" 2>"$1.err"; then
+    fail "$1 accepted"; fi
+  grep -q "$3" "$1.err" || { cat "$1.err"; fail "$1: message"; }
+  [ ! -e "o_$1" ] || fail "$1: output written"
+  echo "refused ($1): $(tail -1 "$1.err")"
+}
+head -c $(( $(size face.bin) - 1 )) face.bin > short.bin
+refuse short short.bin "checksum mismatch"
+cp face.bin flip.bin
+printf '\x55' | dd of=flip.bin bs=1 seek=$(( $(size face.bin) / 2 )) conv=notrunc status=none
+refuse flip flip.bin "checksum mismatch"
+"$G" fit --model other.safetensors --image $IMG --iters 2 --finetune 1 --out foreign.bin 2>/dev/null
+refuse foreign foreign.bin "tuned from another model"
+head -c 100 face.bin > stub.bin
+refuse stub stub.bin "subject"
+
+# Usage errors: exit 2.
+usage() { # description, then the command's arguments
+  local what=$1; shift
+  set +e; "$G" "$@" >/dev/null 2>u.err; local rc=$?; set -e
+  [ $rc = 2 ] || { cat u.err; fail "$what: exit $rc, want 2"; }
+}
+usage "parts without N" fit --model m.safetensors --image $IMG --finetune-parts face --out x.bin
+usage "zero steps" fit --model m.safetensors --image $IMG --finetune 0 --out x.bin
+usage "unknown part" fit --model m.safetensors --image $IMG --finetune 2 --finetune-parts nose --out x.bin
+usage "rate out of range" fit --model m.safetensors --image $IMG --finetune 2 --finetune-lr 3 --out x.bin
+usage "finetune with a subject" redirect --model m.safetensors --subject face.bin --finetune 2 \
+  --gaze-deg "0,0" --out x
+[ ! -e x.bin ] || fail "a refused fit wrote its output"
+# A failed write leaves nothing behind.
+if "$G" fit --model m.safetensors --image $IMG --iters 2 --finetune 1 --out nodir/s.bin 2>w.err; then
+  fail "write into a missing directory succeeded"; fi
+grep -q "cannot write" w.err || { cat w.err; fail "write error message"; }
+echo "fit_cli: ok"
