@@ -132,46 +132,6 @@ int cli_parse_size(const char *s, int max, int *w, int *h)
     return 0;
 }
 
-static const struct {
-    const char *name;
-    unsigned bit;
-} ft_names[] = {{"face", GS_FT_FACE}, {"eye", GS_FT_EYE}, {"renderer", GS_FT_RENDERER},
-                {"mlp", GS_FT_MLP}, {"geometry", GS_FT_GEOMETRY}};
-#define N_FT_NAMES (sizeof ft_names / sizeof ft_names[0])
-
-int cli_parse_ft_parts(const char *s, unsigned *parts)
-{
-    *parts = 0;
-    while (*s) {
-        size_t n = strcspn(s, ",");
-        int found = 0;
-        for (size_t k = 0; k < N_FT_NAMES; k++)
-            if (strlen(ft_names[k].name) == n && !strncmp(s, ft_names[k].name, n)) {
-                *parts |= ft_names[k].bit;
-                found = 1;
-            }
-        if (!found)
-            return -1;
-        s += n;
-        if (*s == ',' && *++s == '\0')
-            return -1;
-    }
-    return *parts ? 0 : -1;
-}
-
-const char *cli_ft_parts_name(unsigned parts, char *buf, size_t cap)
-{
-    size_t n = 0;
-    if (cap)
-        buf[0] = '\0';
-    for (size_t k = 0; k < N_FT_NAMES; k++)
-        if ((parts & ft_names[k].bit) && n < cap) {
-            int w = snprintf(buf + n, cap - n, "%s%s", n ? "," : "", ft_names[k].name);
-            n += w > 0 ? (size_t)w : 0;
-        }
-    return buf;
-}
-
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
                        gs_finetune_options *fo)
 {
@@ -183,7 +143,7 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
             return cli_usage_error(cmd, "--finetune: want 1..100000 steps");
         fo->iters = (int)v;
     }
-    if (parts && cli_parse_ft_parts(parts, &fo->parts))
+    if (parts && gs_finetune_parts_parse(parts, &fo->parts, NULL))
         return cli_usage_error(cmd, "--finetune-parts: want a list of face, eye, renderer, "
                                "mlp, geometry; got '%s'", parts);
     if (lr) {

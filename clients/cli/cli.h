@@ -65,12 +65,6 @@ int cli_parse_long(const char *s, long lo, long hi, long *out);
 /* "WxH", each in [1, max]. Returns 0 or -1. */
 int cli_parse_size(const char *s, int max, int *w, int *h);
 
-/* --finetune-parts: comma-separated face, eye, renderer, mlp, geometry
- * into GS_FT_* bits. Returns 0 or -1 (unknown or empty). */
-int cli_parse_ft_parts(const char *s, unsigned *parts);
-/* The names of GS_FT_* bits, comma-separated ("face,eye"). */
-const char *cli_ft_parts_name(unsigned parts, char *buf, size_t cap);
-
 /* --finetune N, --finetune-parts LIST, --finetune-lr X (any may be NULL)
  * into fo: fo->iters 0 when N is absent. Parts and rate without N are a
  * usage error. Returns CLI_OK or CLI_USAGE (reported). */

@@ -107,7 +107,7 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
     fprintf(stderr,
             "gazesplat %s: fine-tuned %s (%zu floats) for %d steps in %.2f s: "
             "PSNR %.2f -> %.2f dB\n",
-            cmd->name, cli_ft_parts_name(fo.parts ? fo.parts : GS_FT_DEFAULT, parts,
+            cmd->name, gs_finetune_parts_name(fo.parts ? fo.parts : GS_FT_DEFAULT, parts,
                                          sizeof parts),
             r.params_tuned, r.iters, r.seconds, r.psnr_first, r.psnr_best);
     return CLI_OK;
@@ -313,7 +313,7 @@ static int read_subject(const cli_command *cmd, const char *path, gs_model *m,
             char parts[64];
             gs_model_get_info(*tuned, &ti);
             fprintf(stderr, "gazesplat %s: %s: fine-tuned %s\n", cmd->name, path,
-                    cli_ft_parts_name(ti.tuned_parts, parts, sizeof parts));
+                    gs_finetune_parts_name(ti.tuned_parts, parts, sizeof parts));
         }
     }
     free(buf);

@@ -2,6 +2,7 @@
 #define _POSIX_C_SOURCE 200809L
 #include <float.h>
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
@@ -607,6 +608,51 @@ void gs_finetune_options_default(gs_finetune_options *o)
     o->parts = GS_FT_DEFAULT;
 }
 
+static const struct {
+    const char *name;
+    unsigned bit;
+} ft_names[] = {{"face", GS_FT_FACE}, {"eye", GS_FT_EYE}, {"renderer", GS_FT_RENDERER},
+                {"mlp", GS_FT_MLP}, {"geometry", GS_FT_GEOMETRY}};
+#define N_FT_NAMES (sizeof ft_names / sizeof ft_names[0])
+
+int gs_finetune_parts_parse(const char *s, unsigned *parts, gs_error *err)
+{
+    if (!s || !parts)
+        return gs_error_set(err, GS_ERR_ARG, "finetune parts: NULL argument");
+    unsigned bits = 0;
+    const char *p = s;
+    for (;;) {
+        size_t n = strcspn(p, ",");
+        size_t k = 0;
+        while (k < N_FT_NAMES && !(strlen(ft_names[k].name) == n && !strncmp(p, ft_names[k].name, n)))
+            k++;
+        if (k == N_FT_NAMES)
+            return gs_error_set(err, GS_ERR_ARG,
+                                "finetune parts: '%.*s' in '%.64s' is none of face, eye, renderer, "
+                                "mlp, geometry", (int)(n < 32 ? n : 32), p, s);
+        bits |= ft_names[k].bit;
+        p += n;
+        if (*p == '\0')
+            break;
+        p++; /* a comma: another name must follow */
+    }
+    *parts = bits;
+    return GS_OK;
+}
+
+const char *gs_finetune_parts_name(unsigned parts, char *buf, size_t cap)
+{
+    size_t n = 0;
+    if (cap)
+        buf[0] = '\0';
+    for (size_t k = 0; k < N_FT_NAMES; k++)
+        if ((parts & ft_names[k].bit) && n < cap) {
+            int w = snprintf(buf + n, cap - n, "%s%s", n ? "," : "", ft_names[k].name);
+            n += w > 0 ? (size_t)w : 0;
+        }
+    return buf;
+}
+
 unsigned gs_model_tensor_part(const gs_ptensor *t)
 {
     const char *n = t->name;
@@ -754,7 +800,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     frame_of(s, NULL, &fr);
     double t0 = now_s(), best = INFINITY, first = NAN;
     float psnr_first = NAN, psnr_best = NAN;
-    int it = 0;
+    int it = 0, stopped_on_time = 0;
     for (; it <= iters; it++) {
         rc = gs_frame_forward(r.c, pool, &fr, GS_STREAM_BOTH, 1, err);
         if (rc)
@@ -779,6 +825,10 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         }
         if (it == iters)
             break; /* the last step's result is measured, not stepped from */
+        if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s) {
+            stopped_on_time = 1;
+            break;
+        }
         gs_nn_adam_zero_grad(r.adam);
         gs_frame_grad fg;
         memset(&fg, 0, sizeof fg);
@@ -812,6 +862,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         report->psnr_first = psnr_first;
         report->psnr_best = psnr_best;
         report->params_tuned = r.tuned;
+        report->stopped_on_time = stopped_on_time;
     }
     ft_free(&r);
     free(fs);

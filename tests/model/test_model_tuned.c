@@ -208,7 +208,32 @@ int main(void)
     CHECK(gs_model_finetune(fresh, NULL, &bs, smp[0].rgb, smp[0].stride, &o, NULL, &err) ==
           GS_ERR_NONFINITE);
     CHECK(fresh->tuned == 0);
+    /* A time budget ends it early, keeping the best iterate (here the
+     * start: no step fits in a nanosecond). */
+    CHECK(gs_model_clone(m, &fresh, &err) == GS_OK);
+    gs_finetune_report fr;
+    o.iters = 50;
+    o.time_budget_s = 1e-9;
+    CHECK(gs_model_finetune(fresh, NULL, &sub[0], smp[0].rgb, smp[0].stride, &o, &fr, &err) ==
+          GS_OK);
+    CHECK(fr.stopped_on_time == 1 && fr.iters == 0);
+    CHECK(same_params(fresh, m));
     gs_model_destroy(fresh);
+
+    /* Part names. */
+    unsigned bits = 0;
+    char names[64];
+    CHECK(gs_finetune_parts_parse("face,eye", &bits, &err) == GS_OK && bits == 3u);
+    CHECK(gs_finetune_parts_parse("geometry,renderer,mlp", &bits, &err) == GS_OK && bits == 28u);
+    CHECK(!strcmp(gs_finetune_parts_name(0x1f, names, sizeof names),
+                  "face,eye,renderer,mlp,geometry"));
+    CHECK(!strcmp(gs_finetune_parts_name(0, names, sizeof names), ""));
+    const char *badp[] = {"", "face,", ",face", "nose", "face,,eye", "Face"};
+    for (size_t i = 0; i < sizeof badp / sizeof badp[0]; i++) {
+        bits = 99;
+        CHECK_MSG(gs_finetune_parts_parse(badp[i], &bits, &err) == GS_ERR_ARG && bits == 99,
+                  "'%s' accepted", badp[i]);
+    }
 
     free(bad);
     free(want);

@@ -226,8 +226,16 @@ typedef struct gs_finetune_options {
                              as in training (features x5, positions x10) */
     unsigned parts;       /* GS_FT_* bits; 0: GS_FT_DEFAULT */
     const uint8_t *mask;  /* as gs_fit_options.mask */
+    double time_budget_s; /* > 0: stop after the step that passes it,
+                             keeping the best iterate; <= 0: none */
 } gs_finetune_options;
 void gs_finetune_options_default(gs_finetune_options *o);
+
+/* GS_FT_* bits from names, comma-separated: face, eye, renderer, mlp,
+ * geometry ("face,eye"). GS_ERR_ARG for an unknown or empty name. */
+int gs_finetune_parts_parse(const char *s, unsigned *parts, gs_error *err);
+/* The names of GS_FT_* bits, comma-separated, into buf; returns buf. */
+const char *gs_finetune_parts_name(unsigned parts, char *buf, size_t cap);
 
 typedef struct gs_finetune_report {
     int iters;            /* steps taken */
@@ -235,6 +243,7 @@ typedef struct gs_finetune_report {
     double loss_first, loss_best;
     float psnr_first, psnr_best; /* on the weighted region, dB */
     size_t params_tuned;  /* floats adjusted */
+    int stopped_on_time;  /* the time budget ended it before iters */
 } gs_finetune_report;
 
 /* Fine-tunes the chosen parts of m (a clone: gs_model_clone) so that it
