@@ -24,7 +24,7 @@ struct gsd_cache {
     entry **buckets;
     size_t nbuckets; /* power of two */
     entry *head, *tail;
-    size_t budget;
+    size_t budget, max_blob;
     gsd_cache_stats st;
 };
 
@@ -44,6 +44,11 @@ static size_t bucket_of(const gsd_cache *c, const uint8_t *key)
 
 gsd_cache *gsd_cache_create(size_t budget_bytes)
 {
+    return gsd_cache_create_sized(budget_bytes, GSD_CACHE_MAX_BLOB);
+}
+
+gsd_cache *gsd_cache_create_sized(size_t budget_bytes, size_t max_blob)
+{
     gsd_cache *c = calloc(1, sizeof *c);
     if (!c)
         return NULL;
@@ -55,6 +60,7 @@ gsd_cache *gsd_cache_create(size_t budget_bytes)
     }
     pthread_mutex_init(&c->mu, NULL);
     c->budget = budget_bytes;
+    c->max_blob = max_blob;
     c->st.budget = budget_bytes;
     return c;
 }
@@ -154,7 +160,7 @@ static void evict(gsd_cache *c)
 
 static int put_locked(gsd_cache *c, const uint8_t *key, const void *blob, size_t len)
 {
-    if (len > GSD_CACHE_MAX_BLOB)
+    if (len > c->max_blob)
         return -1;
     entry *old = lookup(c, key, NULL);
     if (old)
@@ -199,6 +205,33 @@ long gsd_cache_get(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], void *out, si
     } else {
         c->st.misses++;
     }
+    pthread_mutex_unlock(&c->mu);
+    return r;
+}
+
+long gsd_cache_get_alloc(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], uint8_t **out)
+{
+    *out = NULL;
+    pthread_mutex_lock(&c->mu);
+    entry *e = lookup(c, key, NULL);
+    long r = -1;
+    if (e && (*out = malloc(e->len ? e->len : 1)) != NULL) {
+        memcpy(*out, e->blob, e->len);
+        lru_unlink(c, e);
+        lru_push_front(c, e);
+        r = (long)e->len;
+        c->st.hits++;
+    } else {
+        c->st.misses++;
+    }
+    pthread_mutex_unlock(&c->mu);
+    return r;
+}
+
+int gsd_cache_contains(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY])
+{
+    pthread_mutex_lock(&c->mu);
+    int r = lookup(c, key, NULL) != NULL;
     pthread_mutex_unlock(&c->mu);
     return r;
 }
@@ -396,7 +429,7 @@ static int parse_file(gsd_cache *c, const uint8_t *b, size_t n, const char *tag,
         if (gsd_cache_put(c, b + o, b + o + GSD_CACHE_KEY + 4, len) != 0) {
             snprintf(msg, cap, "entry %u: %zu bytes", i, len);
             gsd_cache_clear(c);
-            return len > GSD_CACHE_MAX_BLOB ? 1 : -1;
+            return len > c->max_blob ? 1 : -1;
         }
         o += GSD_CACHE_KEY + 4 + len;
     }

@@ -24,15 +24,22 @@ typedef struct gsd_cache_stats {
 } gsd_cache_stats;
 
 gsd_cache *gsd_cache_create(size_t budget_bytes);
+/* The same with blobs up to max_blob bytes (fine-tuned parameter blocks). */
+gsd_cache *gsd_cache_create_sized(size_t budget_bytes, size_t max_blob);
 void gsd_cache_destroy(gsd_cache *c);
 
-/* Inserts or replaces; may evict others. -1 when len is over
- * GSD_CACHE_MAX_BLOB or out of memory. */
+/* Inserts or replaces; may evict others. -1 when len is over the cache's
+ * largest blob (GSD_CACHE_MAX_BLOB unless created sized) or out of memory. */
 int gsd_cache_put(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], const void *blob, size_t len);
 
 /* Copies the blob out (cap bytes available) and marks it recently used.
  * Returns its length, or -1 when missing (or cap too small). */
 long gsd_cache_get(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], void *out, size_t cap);
+/* The same into a malloc'd copy (*out; free it). -1 when missing or out
+ * of memory (*out NULL). */
+long gsd_cache_get_alloc(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], uint8_t **out);
+/* 1 when key is present (its recency unchanged), else 0. */
+int gsd_cache_contains(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY]);
 
 /* Drops every entry (e.g. a different model was loaded). */
 void gsd_cache_clear(gsd_cache *c);

@@ -5,6 +5,8 @@
  * pipeline (gazesplat/face.h: photo -> normalized face, paste-back) is
  * here. */
 #define _GNU_SOURCE
+#include <ctype.h>
+#include <dirent.h>
 #include <errno.h>
 #include <fcntl.h>
 #include <math.h>
@@ -51,8 +53,16 @@ struct gsd_worker {
     gs_model_ctx *ctx;
     /* the subject of the last FIT, rendered once its reply is out so that
      * the context keeps its render for incremental REDIRECTs */
-    int prime;
+    int prime, prime_tuned;
     gs_subject prime_subj;
+    /* Fine-tuned subjects render with a clone of the model holding their
+     * tuned tensors (gs_model_tuned_apply): one clone and context per
+     * worker, holding the last tuned subject it served. */
+    gs_model *tuned;
+    gs_model_ctx *tctx;
+    int tuned_has;
+    uint8_t tuned_key[GS_FRAME_KEY_SIZE];
+    uint64_t tuned_sum;
 #endif
     /* keys of the subjects rendered lately (a ring, newest at recent_n - 1
      * modulo GSD_RECENT_MAX): the queue prefers giving their REDIRECTs to
@@ -60,6 +70,12 @@ struct gsd_worker {
     uint8_t recent[GSD_RECENT_MAX][GS_FRAME_KEY_SIZE];
     int recent_n, recent_cap;
 };
+
+#ifdef GSD_HAVE_MODEL
+/* Fine-tuned parameter blocks on disk (below). */
+static void tuned_sweep_locked(gsd_server *s);
+static void tuned_restore(gsd_server *s);
+#endif
 
 /* ---- hashing: FNV-1a, 128-bit, for model ids and content keys ---------- */
 
@@ -267,7 +283,15 @@ void gsd_model_finish_load(gsd_server *s)
     } else if (strcmp(old->id, m->id) != 0) {
         LOG_I("model changed (%s -> %s): subjects dropped", old->id, m->id);
         gsd_cache_clear(s->cache);
+        gsd_cache_clear(s->tuned);
         gsd_cache_persist(s);
+#ifdef GSD_HAVE_MODEL
+        if (s->state_dir[0]) {
+            pthread_mutex_lock(&s->persist_mu);
+            tuned_sweep_locked(s); /* every block file goes */
+            pthread_mutex_unlock(&s->persist_mu);
+        }
+#endif
     }
     model_unref(old);
     snprintf(detail, sizeof detail, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
@@ -302,6 +326,9 @@ void gsd_cache_restore(gsd_server *s)
         LOG_I("subject cache %s: %s", s->state_dir, msg);
     else
         LOG_W("subject cache %s: %s", s->state_dir, msg);
+#ifdef GSD_HAVE_MODEL
+    tuned_restore(s);
+#endif
 }
 
 int gsd_cache_persist(gsd_server *s)
@@ -346,6 +373,11 @@ static void worker_drop_model(gsd_worker *w)
 #ifdef GSD_HAVE_MODEL
     gs_model_ctx_destroy(w->ctx);
     w->ctx = NULL;
+    gs_model_ctx_destroy(w->tctx);
+    w->tctx = NULL;
+    gs_model_destroy(w->tuned);
+    w->tuned = NULL;
+    w->tuned_has = 0;
 #endif
     model_unref(w->model);
     w->model = NULL;
@@ -565,9 +597,24 @@ static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, co
     return e;
 }
 
+/* What a FIT (or an inline REDIRECT) asks to fine-tune. */
+typedef struct gsd_finetune {
+    uint32_t steps; /* 0: none */
+    unsigned parts; /* GS_FT_* */
+} gsd_finetune;
+
+static gsd_finetune finetune_of(uint32_t steps, const char *parts)
+{
+    gsd_finetune f = {steps, GS_FT_DEFAULT};
+    if (steps && parts && parts[0] && gs_finetune_parts_parse(parts, &f.parts, NULL) != GS_OK)
+        f.parts = GS_FT_DEFAULT; /* validated on the loop thread already */
+    return f;
+}
+
 /* The key a FIT without one gets: a hash of the pixels and the labels, so
  * the same input maps to the same subject. */
-static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, uint8_t key[16])
+static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, const gsd_finetune *ft,
+                        uint8_t key[16])
 {
     hash128 h;
     hash_init(&h);
@@ -577,15 +624,265 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
                         r && r->head ? r->head->pitch_deg : NAN, r && r->head ? r->head->yaw_deg : NAN,
                         r ? (double)r->max_iters : 0};
     hash_bytes(&h, labels, sizeof labels);
+    if (ft->steps) { /* a fine-tuned subject is another subject (plain keys unchanged) */
+        uint32_t v[2] = {ft->steps, ft->parts};
+        hash_bytes(&h, v, sizeof v);
+    }
     hash_out(&h, key);
 }
 
 
-static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj)
+/* ---- fine-tuned subjects ------------------------------------------------------
+ * The subject cache holds each subject's gs_subject; a fine-tuned one has
+ * "GSTR" and the checksum of its tuned block (gs_model_tuned_encode's last
+ * 8 bytes) after it. The blocks live in s->tuned (budget tuned_cache_mb)
+ * and, with a state directory, one file each (tuned-<key hex>.gsft, written
+ * atomically), kept while the block is in s->tuned. */
+
+#define TUNED_REF_MAGIC 0x52545347u /* "GSTR" */
+#define TUNED_FILE_PREFIX "tuned-"
+#define TUNED_FILE_SUFFIX ".gsft"
+
+/* The subject's cache blob; sum non-NULL: a fine-tuned subject. */
+static size_t subject_blob(const gs_subject *subj, const uint64_t *sum, uint8_t *blob, size_t cap)
 {
-    uint8_t blob[GS_SUBJECT_ENCODED_MAX];
+    size_t n = gs_subject_encode(subj, blob, cap);
+    if (!sum || n == 0 || n + 12 > cap)
+        return sum ? 0 : n;
+    uint32_t magic = TUNED_REF_MAGIC;
+    memcpy(blob + n, &magic, 4);
+    memcpy(blob + n + 4, sum, 8);
+    return n + 12;
+}
+
+static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj, int *tuned, uint64_t *sum)
+{
+    uint8_t blob[GS_SUBJECT_ENCODED_MAX + 12];
     long n = gsd_cache_get(s->cache, key, blob, sizeof blob);
-    return n > 0 && gs_subject_decode(blob, (size_t)n, subj, NULL) == GS_OK ? 0 : -1;
+    *tuned = 0;
+    if (n < 12)
+        return -1;
+    gs_subject probe;
+    memset(&probe, 0, sizeof probe);
+    uint32_t dim, magic;
+    memcpy(&dim, blob + 8, 4);
+    probe.code_dim = dim >= 1 && dim <= GS_MODEL_MAX_CODE ? (int)dim : 1;
+    size_t slen = gs_subject_encode(&probe, NULL, 0);
+    if ((size_t)n == slen + 12) {
+        memcpy(&magic, blob + slen, 4);
+        if (magic != TUNED_REF_MAGIC)
+            return -1;
+        memcpy(sum, blob + slen + 4, 8);
+        *tuned = 1;
+    } else if ((size_t)n != slen) {
+        return -1;
+    }
+    return gs_subject_decode(blob, slen, subj, NULL) == GS_OK ? 0 : -1;
+}
+
+static void tuned_path(const gsd_server *s, const uint8_t key[16], char *out, size_t cap)
+{
+    char hex[33];
+    gs_frame_key_hex(key, hex);
+    snprintf(out, cap, "%s/" TUNED_FILE_PREFIX "%s" TUNED_FILE_SUFFIX, s->state_dir, hex);
+}
+
+/* The key of a block file's name, or -1 for other names. */
+static int tuned_file_key(const char *name, uint8_t key[16])
+{
+    size_t pl = strlen(TUNED_FILE_PREFIX);
+    if (strncmp(name, TUNED_FILE_PREFIX, pl) || strlen(name) != pl + 32 + strlen(TUNED_FILE_SUFFIX) ||
+        strcmp(name + pl + 32, TUNED_FILE_SUFFIX))
+        return -1;
+    for (int i = 0; i < 16; i++) {
+        unsigned v;
+        char b[3] = {name[pl + 2 * i], name[pl + 2 * i + 1], 0};
+        if (!isxdigit((unsigned char)b[0]) || !isxdigit((unsigned char)b[1]) || sscanf(b, "%x", &v) != 1)
+            return -1;
+        key[i] = (uint8_t)v;
+    }
+    return 0;
+}
+
+/* Removes block files whose block is no longer in s->tuned (evicted, or
+ * the model changed). Under persist_mu. */
+static void tuned_sweep_locked(gsd_server *s)
+{
+    DIR *d = opendir(s->state_dir);
+    if (!d)
+        return;
+    struct dirent *e;
+    while ((e = readdir(d)) != NULL) {
+        uint8_t key[16];
+        if (tuned_file_key(e->d_name, key) == 0 && !gsd_cache_contains(s->tuned, key)) {
+            char path[GSD_STR_MAX + 64];
+            tuned_path(s, key, path, sizeof path);
+            if (unlink(path) != 0 && errno != ENOENT)
+                LOG_W("tuned block %s: unlink: %s", path, strerror(errno));
+        }
+    }
+    closedir(d);
+}
+
+static int write_file_atomic(const gsd_server *s, const char *path, const uint8_t *p, size_t n)
+{
+    char tmp[GSD_STR_MAX + 80];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
+    if (fd < 0)
+        return -1;
+    int bad = 0;
+    for (size_t o = 0; o < n && !bad;) {
+        ssize_t w = write(fd, p + o, n - o);
+        if (w < 0 && errno == EINTR)
+            continue;
+        bad = w <= 0;
+        o += w > 0 ? (size_t)w : 0;
+    }
+    bad |= fsync(fd) != 0;
+    bad |= close(fd) != 0;
+    if (bad || rename(tmp, path) != 0) {
+        unlink(tmp);
+        return -1;
+    }
+    int dfd = open(s->state_dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    if (dfd >= 0) {
+        fsync(dfd);
+        close(dfd);
+    }
+    return 0;
+}
+
+/* Keeps a subject's block: in s->tuned, and on disk with a state
+ * directory (a failure there is logged and counted: the block still
+ * serves until evicted or a restart). */
+static int tuned_store(gsd_server *s, const uint8_t key[16], const uint8_t *blk, size_t len, char *msg,
+                       size_t cap)
+{
+    if (gsd_cache_put(s->tuned, key, blk, len) != 0) {
+        snprintf(msg, cap, "fine-tuned parameters (%zu bytes) over tuned_cache_mb (%d MiB)", len,
+                 s->cfg.tuned_cache_mb);
+        return E(ERR_INTERNAL);
+    }
+    if (!s->state_dir[0])
+        return 0;
+    char path[GSD_STR_MAX + 64];
+    tuned_path(s, key, path, sizeof path);
+    pthread_mutex_lock(&s->persist_mu);
+    int r = write_file_atomic(s, path, blk, len);
+    tuned_sweep_locked(s);
+    pthread_mutex_unlock(&s->persist_mu);
+    atomic_fetch_add(r == 0 ? &s->ctr.tuned_saves : &s->ctr.tuned_save_failures, 1);
+    if (r != 0)
+        LOG_E("tuned block %s: %s", path, strerror(errno));
+    return 0;
+}
+
+static uint8_t *read_small_file(const char *path, size_t max, size_t *n)
+{
+    int fd = open(path, O_RDONLY | O_CLOEXEC);
+    struct stat st;
+    if (fd < 0)
+        return NULL;
+    uint8_t *b = NULL;
+    if (fstat(fd, &st) == 0 && st.st_size > 0 && (size_t)st.st_size <= max &&
+        (b = malloc((size_t)st.st_size)) != NULL) {
+        size_t o = 0;
+        while (o < (size_t)st.st_size) {
+            ssize_t r = read(fd, b + o, (size_t)st.st_size - o);
+            if (r < 0 && errno == EINTR)
+                continue;
+            if (r <= 0)
+                break;
+            o += (size_t)r;
+        }
+        if (o != (size_t)st.st_size) {
+            free(b);
+            b = NULL;
+        }
+        *n = o;
+    }
+    close(fd);
+    return b;
+}
+
+/* A subject's block (malloc'd) from s->tuned, or its file after a miss. */
+static long tuned_fetch(gsd_server *s, const uint8_t key[16], uint8_t **blk)
+{
+    long n = gsd_cache_get_alloc(s->tuned, key, blk);
+    if (n >= 0 || !s->state_dir[0])
+        return n;
+    char path[GSD_STR_MAX + 64];
+    tuned_path(s, key, path, sizeof path);
+    size_t len = 0;
+    *blk = read_small_file(path, (size_t)s->cfg.tuned_cache_mb << 20, &len);
+    if (!*blk)
+        return -1;
+    gsd_cache_put(s->tuned, key, *blk, len);
+    return (long)len;
+}
+
+typedef struct tuned_file {
+    uint8_t key[16];
+    struct timespec mtime;
+} tuned_file;
+
+static int by_mtime(const void *a, const void *b)
+{
+    const struct timespec *x = &((const tuned_file *)a)->mtime, *y = &((const tuned_file *)b)->mtime;
+    return x->tv_sec != y->tv_sec ? (x->tv_sec < y->tv_sec ? -1 : 1)
+                                  : (x->tv_nsec < y->tv_nsec ? -1 : x->tv_nsec > y->tv_nsec);
+}
+
+/* At start: the blocks of cached subjects back into s->tuned, oldest
+ * first (so the budget keeps the newest); every other block file goes. */
+static void tuned_restore(gsd_server *s)
+{
+    DIR *d = opendir(s->state_dir);
+    if (!d)
+        return;
+    tuned_file *f = NULL;
+    size_t n = 0, cap = 0;
+    struct dirent *e;
+    while ((e = readdir(d)) != NULL) {
+        uint8_t key[16];
+        struct stat st;
+        char path[GSD_STR_MAX + 64];
+        if (tuned_file_key(e->d_name, key) != 0 || !gsd_cache_contains(s->cache, key))
+            continue;
+        tuned_path(s, key, path, sizeof path);
+        if (stat(path, &st) != 0)
+            continue;
+        if (n == cap) {
+            tuned_file *g = realloc(f, (cap = cap ? 2 * cap : 64) * sizeof *f);
+            if (!g)
+                break;
+            f = g;
+        }
+        memcpy(f[n].key, key, 16);
+        f[n++].mtime = st.st_mtim;
+    }
+    closedir(d);
+    if (n)
+        qsort(f, n, sizeof *f, by_mtime);
+    size_t kept = 0;
+    for (size_t i = 0; i < n; i++) {
+        char path[GSD_STR_MAX + 64];
+        size_t len = 0;
+        tuned_path(s, f[i].key, path, sizeof path);
+        uint8_t *b = read_small_file(path, (size_t)s->cfg.tuned_cache_mb << 20, &len);
+        kept += b && gsd_cache_put(s->tuned, f[i].key, b, len) == 0;
+        free(b);
+    }
+    free(f);
+    pthread_mutex_lock(&s->persist_mu);
+    tuned_sweep_locked(s);
+    pthread_mutex_unlock(&s->persist_mu);
+    gsd_cache_stats st;
+    gsd_cache_stats_get(s->tuned, &st);
+    LOG_I("fine-tuned subjects: %llu blocks restored (%llu MiB)", (unsigned long long)st.entries,
+          (unsigned long long)(st.bytes >> 20));
+    (void)kept;
 }
 
 static void head_rotation(const Gazesplat__Angles *a, double R[9])
@@ -593,24 +890,140 @@ static void head_rotation(const Gazesplat__Angles *a, double R[9])
     gs_geom_rot_from_pitchyaw(a->pitch_deg * DEG, a->yaw_deg * DEG, 0.0, R);
 }
 
-/* Fits (or finds) the subject of `img`; fills key, subject and report,
- * and *p for a photo (the caller frees it). Returns 0 or an ErrorCode with
- * msg. *cached says no fit was run. */
-static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest *fr,
+/* The worker's clone for fine-tuned subjects and its context, made at
+ * the first need. */
+static int worker_tuned_ready(gsd_worker *w, char *msg, size_t cap)
+{
+    gs_error err;
+    gs_error_clear(&err);
+    if (!w->tuned && gs_model_clone(w->model->m, &w->tuned, &err) != GS_OK) {
+        snprintf(msg, cap, "fine-tuned subjects: %s", err.msg);
+        return E(ERR_INTERNAL);
+    }
+    if (!w->tctx) {
+        if (!(w->tctx = gs_model_ctx_create(w->tuned))) {
+            snprintf(msg, cap, "fine-tuned subjects: out of memory");
+            return E(ERR_INTERNAL);
+        }
+        /* It holds one subject at a time: a swap drops every kept render. */
+        gs_model_ctx_set_sweep_cache(w->tctx, 1, NULL);
+    }
+    return 0;
+}
+
+/* Puts subject key's tuned block (checksum sum) into the worker's clone
+ * unless it is there already. */
+static int worker_use_tuned(gsd_worker *w, const uint8_t key[16], uint64_t sum, char *msg, size_t cap)
+{
+    int e = worker_tuned_ready(w, msg, cap);
+    if (e)
+        return e;
+    if (w->tuned_has && !memcmp(w->tuned_key, key, 16) && w->tuned_sum == sum)
+        return 0;
+    uint8_t *blk = NULL;
+    long n = tuned_fetch(w->srv, key, &blk);
+    char hex[33];
+    gs_frame_key_hex(key, hex);
+    if (n < 8 || memcmp(blk + n - 8, &sum, 8) != 0) {
+        free(blk);
+        snprintf(msg, cap,
+                 "subject %s: its fine-tuned parameters are gone (evicted: tuned_cache_mb); fit it "
+                 "again", hex);
+        return E(ERR_UNKNOWN_SUBJECT);
+    }
+    gs_error err;
+    gs_error_clear(&err);
+    int r = gs_model_tuned_apply(w->tuned, w->model->m, blk, (size_t)n, &err);
+    free(blk);
+    if (r != GS_OK) {
+        snprintf(msg, cap, "subject %s: %s", hex, err.msg);
+        return E(ERR_INTERNAL);
+    }
+    gs_model_ctx_reset(w->tctx);
+    w->tuned_has = 1;
+    memcpy(w->tuned_key, key, 16);
+    w->tuned_sum = sum;
+    atomic_fetch_add(&w->srv->ctr.tuned_swaps, 1);
+    return 0;
+}
+
+/* Fine-tunes the worker's clone, from the shared model's parameters, on
+ * the fitted face and keeps the block (s->tuned, disk). *sum: its
+ * checksum. */
+static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, const gs_subject *subj,
+                            const gs_io_image *face, const uint8_t *mask, gs_finetune_report *rep,
+                            uint64_t *sum, char *msg, size_t cap)
+{
+    int e = worker_tuned_ready(w, msg, cap);
+    if (e)
+        return e;
+    gs_error err;
+    gs_error_clear(&err);
+    w->tuned_has = 0;
+    if (gs_model_tuned_apply(w->tuned, w->model->m, NULL, 0, &err) != GS_OK) {
+        snprintf(msg, cap, "finetune: %s", err.msg);
+        return E(ERR_INTERNAL);
+    }
+    gs_finetune_options fo;
+    gs_finetune_options_default(&fo);
+    fo.iters = (int)ft->steps;
+    fo.parts = ft->parts;
+    fo.mask = mask;
+    fo.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
+    if (fo.time_budget_s <= 0)
+        fo.time_budget_s = 0.001;
+    int r = gs_model_finetune(w->tuned, w->pool, subj, face->data, face->stride, &fo, rep, &err);
+    gs_model_ctx_reset(w->tctx);
+    if (r != GS_OK) {
+        snprintf(msg, cap, "finetune: %s", err.msg);
+        return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
+    }
+    uint8_t *blk = NULL;
+    size_t len = 0;
+    if (gs_model_tuned_encode(w->tuned, &blk, &len, &err) != GS_OK) {
+        snprintf(msg, cap, "finetune: %s", err.msg);
+        return E(ERR_INTERNAL);
+    }
+    memcpy(sum, blk + len - 8, 8);
+    e = tuned_store(w->srv, j->key, blk, len, msg, cap);
+    free(blk);
+    if (e)
+        return e;
+    w->tuned_has = 1;
+    memcpy(w->tuned_key, j->key, 16);
+    w->tuned_sum = *sum;
+    atomic_fetch_add(&w->srv->ctr.finetunes, 1);
+    return 0;
+}
+
+/* What obtain_subject found or made. */
+typedef struct subject_out {
+    gs_subject subj;
+    gs_fit_report fit;
+    gs_finetune_report ft; /* ft.iters > 0 or psnr: this request fine-tuned */
+    int cached, tuned, ft_ran;
+    uint64_t sum;          /* tuned: the block's checksum */
+} subject_out;
+
+/* Fits (or finds) the subject of `img`, fine-tuning it as ft asks; fills
+ * the key and *o, and *p for a photo (the caller frees it). Returns 0 or
+ * an ErrorCode with msg. */
+static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest *fr, const gsd_finetune *ft,
                           const Gazesplat__Image *img, const Gazesplat__Intrinsics *k, photo_input *p,
-                          gs_subject *subj, gs_fit_report *rep, int *cached, char *msg, size_t cap)
+                          subject_out *o, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
     const gs_model_info *info = &w->model->info;
+    gs_subject *subj = &o->subj;
+    memset(o, 0, sizeof *o);
     gs_io_image face;
     int e = input_face(w, j, img, k, p, &face, msg, cap);
     if (e)
         return e;
     if (key_zero(j->key))
-        content_key(&face, fr, j->key);
-    memset(rep, 0, sizeof *rep);
-    *cached = cache_lookup(s, j->key, subj) == 0;
-    if (*cached) {
+        content_key(&face, fr, ft, j->key);
+    o->cached = cache_lookup(s, j->key, subj, &o->tuned, &o->sum) == 0;
+    if (o->cached) {
         gs_io_image_free(&face);
         return 0;
     }
@@ -643,15 +1056,22 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest
         opt.time_budget_s = 0.001;
     gs_error err;
     gs_error_clear(&err);
-    int r = gs_model_fit(w->ctx, w->pool, face.data, face.stride, &opt, subj, rep, &err);
-    gs_io_image_free(&face);
+    int r = gs_model_fit(w->ctx, w->pool, face.data, face.stride, &opt, subj, &o->fit, &err);
     if (r != GS_OK) {
+        gs_io_image_free(&face);
         snprintf(msg, cap, "fit: %s", err.msg);
         return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
     }
     atomic_fetch_add(&s->ctr.fits, 1);
-    uint8_t blob[GS_SUBJECT_ENCODED_MAX];
-    size_t n = gs_subject_encode(subj, blob, sizeof blob);
+    if (ft->steps) {
+        e = finetune_subject(w, j, ft, subj, &face, p->mask_n, &o->ft, &o->sum, msg, cap);
+        o->tuned = o->ft_ran = e == 0;
+    }
+    gs_io_image_free(&face);
+    if (e)
+        return e;
+    uint8_t blob[GS_SUBJECT_ENCODED_MAX + 12];
+    size_t n = subject_blob(subj, o->tuned ? &o->sum : NULL, blob, sizeof blob);
     /* Durable before the reply: a FIT_OK means the subject survives a crash. */
     if (n == 0 || n > sizeof blob || gsd_cache_put(s->cache, j->key, blob, n) != 0) {
         snprintf(msg, cap, "subject cache refused %zu bytes", n);
@@ -675,23 +1095,27 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
 {
     gsd_server *s = w->srv;
     const Gazesplat__FitRequest *r = (const Gazesplat__FitRequest *)j->req;
-    gs_subject subj;
-    gs_fit_report rep;
-    int cached;
+    subject_out so;
     char msg[400];
     photo_input photo;
-    int e = obtain_subject(w, j, r, r->image, r->intrinsics, &photo, &subj, &rep, &cached, msg, sizeof msg);
+    gsd_finetune ft = finetune_of(r->finetune_steps, r->finetune_parts);
+    int e = obtain_subject(w, j, r, &ft, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
     photo_input_free(&photo);
     if (e)
         return gsd_error_frame(j, e, "%s", msg);
     int why = job_stop(j);
     if (why)
         return stop_frame(s, j, why);
-    if (cached)
+    if (so.cached)
         atomic_fetch_add(&s->ctr.fits_cached, 1);
-    w->prime = 1; /* after the reply: gsd_worker_run */
-    w->prime_subj = subj;
+    /* After the reply (gsd_worker_run) the subject is rendered once, so
+     * that its first REDIRECT here is incremental; a cached fine-tuned
+     * subject first needs its block in the clone. */
+    w->prime = !so.tuned || worker_use_tuned(w, j->key, so.sum, msg, sizeof msg) == 0;
+    w->prime_tuned = so.tuned;
+    w->prime_subj = so.subj;
     recent_add(w, j->key);
+    const gs_subject subj = so.subj;
     Gazesplat__Angles gaze = GAZESPLAT__ANGLES__INIT, head = GAZESPLAT__ANGLES__INIT;
     subject_angles(&subj, &gaze, &head);
     Gazesplat__FitResult m = GAZESPLAT__FIT_RESULT__INIT;
@@ -701,9 +1125,14 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     m.head = &head;
     m.psnr = subj.fit_psnr;
     m.ssim = subj.fit_ssim;
-    m.iters = (uint32_t)rep.iters;
+    m.iters = (uint32_t)so.fit.iters;
     m.seconds = (double)(now_ms() - t0) / 1000.0;
-    m.cached = cached;
+    m.cached = so.cached;
+    m.finetuned = so.tuned;
+    if (so.ft_ran) {
+        m.finetune_steps = (uint32_t)so.ft.iters;
+        m.finetune_psnr = so.ft.psnr_best;
+    }
     return gsd_frame_new(j, T(FIT_OK), &m.base);
 }
 
@@ -800,18 +1229,18 @@ static int paste_back(const photo_input *p, paste_state *ps, int whole_face, con
 }
 
 /* Adds the last render's path to the STATS counters. */
-static void count_render(gsd_worker *w)
+static void count_render(gsd_worker *w, gs_model_ctx *ctx)
 {
     gs_model_ctx_stats st;
-    gs_model_ctx_get_stats(w->ctx, &st);
+    gs_model_ctx_get_stats(ctx, &st);
     atomic_fetch_add(st.last_incremental ? &w->srv->ctr.renders_incremental : &w->srv->ctr.renders_full, 1);
 }
 
 /* Renders target i into rgb (the normalized face) and posts it, pasted
  * back into the photo when the request asks for it. */
-static int render_target(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
-                         const gs_subject *subj, const photo_input *p, paste_state *ps, uint8_t *rgb,
-                         char *msg, size_t cap)
+static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gazesplat__RedirectRequest *r,
+                         size_t i, const gs_subject *subj, const photo_input *p, paste_state *ps,
+                         uint8_t *rgb, char *msg, size_t cap)
 {
     const Gazesplat__Target *t = r->targets[i];
     int size = w->model->info.image_size;
@@ -826,11 +1255,11 @@ static int render_target(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReq
     }
     gs_error err;
     gs_error_clear(&err);
-    if (gs_model_render(w->ctx, w->pool, subj, &view, rgb, (size_t)size * 3, &err) != GS_OK) {
+    if (gs_model_render(ctx, w->pool, subj, &view, rgb, (size_t)size * 3, &err) != GS_OK) {
         snprintf(msg, cap, "render target %zu: %s", i, err.msg);
         return E(ERR_INTERNAL);
     }
-    count_render(w);
+    count_render(w, ctx);
     gs_io_image norm = {size, size, (size_t)size * 3, rgb};
     if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK)
         return post_image(w, j, r, i, &norm, msg, cap);
@@ -842,24 +1271,32 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
 {
     gsd_server *s = w->srv;
     const Gazesplat__RedirectRequest *r = (const Gazesplat__RedirectRequest *)j->req;
-    gs_subject subj;
+    subject_out so;
+    memset(&so, 0, sizeof so);
     char msg[400];
     photo_input photo;
     memset(&photo, 0, sizeof photo);
     if (r->image) {
-        gs_fit_report rep;
-        int cached;
-        int e = obtain_subject(w, j, NULL, r->image, r->intrinsics, &photo, &subj, &rep, &cached, msg,
-                               sizeof msg);
+        gsd_finetune ft = finetune_of(r->finetune_steps, r->finetune_parts);
+        int e = obtain_subject(w, j, NULL, &ft, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {
             photo_input_free(&photo);
             return gsd_error_frame(j, e, "%s", msg);
         }
-    } else if (cache_lookup(s, j->key, &subj) != 0) {
+    } else if (cache_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0) {
         char hex[33];
         gs_frame_key_hex(j->key, hex);
         return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
     }
+    if (so.tuned) {
+        int e = worker_use_tuned(w, j->key, so.sum, msg, sizeof msg);
+        if (e) {
+            photo_input_free(&photo);
+            return gsd_error_frame(j, e, "%s", msg);
+        }
+    }
+    gs_model_ctx *ctx = so.tuned ? w->tctx : w->ctx;
+    const gs_subject subj = so.subj;
     recent_add(w, j->key);
     int size = w->model->info.image_size;
     uint8_t *rgb = malloc((size_t)size * size * 3);
@@ -870,7 +1307,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         int why = job_stop(j);
         if (why)
             o = stop_frame(s, j, why);
-        else if ((why = render_target(w, j, r, i, &subj, &photo, &ps, rgb, msg, sizeof msg)) != 0)
+        else if ((why = render_target(w, ctx, j, r, i, &subj, &photo, &ps, rgb, msg, sizeof msg)) != 0)
             o = gsd_error_frame(j, why, "%s", msg);
     }
     free(rgb);
@@ -899,6 +1336,9 @@ static void worker_prime(gsd_worker *w)
     if (!w->prime || !w->ctx)
         return;
     w->prime = 0;
+    gs_model_ctx *ctx = w->prime_tuned ? w->tctx : w->ctx;
+    if (!ctx)
+        return;
     int size = w->model->info.image_size;
     uint8_t *rgb = malloc((size_t)size * size * 3);
     gs_view v;
@@ -907,8 +1347,8 @@ static void worker_prime(gsd_worker *w)
     v.gaze_yaw = w->prime_subj.gaze_yaw;
     gs_error err;
     gs_error_clear(&err);
-    if (rgb && gs_model_render(w->ctx, w->pool, &w->prime_subj, &v, rgb, (size_t)size * 3, &err) == GS_OK)
-        count_render(w);
+    if (rgb && gs_model_render(ctx, w->pool, &w->prime_subj, &v, rgb, (size_t)size * 3, &err) == GS_OK)
+        count_render(w, ctx);
     else
         LOG_W("worker %d: render after FIT: %s", w->index, rgb ? err.msg : "out of memory");
     free(rgb);

@@ -47,6 +47,8 @@ static const key_def keys[] = {
     {"max_deadline_ms", T_INT, OFF(max_deadline_ms), 10, 3600000, "600000"},
     {"drain_timeout_ms", T_INT, OFF(drain_timeout_ms), 0, 3600000, "30000"},
     {"cache_mb", T_INT, OFF(cache_mb), 1, 65536, "256"},
+    {"tuned_cache_mb", T_INT, OFF(tuned_cache_mb), 1, 65536, "256"},
+    {"max_finetune_steps", T_INT, OFF(max_finetune_steps), 0, 100000, "1000"},
     {"log_level", T_LEVEL, OFF(log_level), 0, 3, "info"},
     {"debug_requests", T_BOOL, OFF(debug_requests), 0, 1, "no"},
     {"photo_input", T_BOOL, OFF(photo_input), 0, 1, "yes"},

@@ -24,6 +24,8 @@ typedef struct gsd_config {
     int header_timeout_ms, idle_timeout_ms, request_timeout_ms, max_deadline_ms;
     int drain_timeout_ms;
     int cache_mb;
+    int tuned_cache_mb;      /* fine-tuned parameter blocks */
+    int max_finetune_steps;  /* per FIT; 0: fine-tuning refused */
     int log_level;
     int debug_requests;
     int photo_input;                  /* accept KIND_PHOTO (needs the two below) */

@@ -68,6 +68,7 @@ static const struct {
     CTR(fits), CTR(fits_cached), CTR(images_out), CTR(jobs_done), CTR(renders_full),
     CTR(renders_incremental), CTR(model_loads),
     CTR(model_load_failures), CTR(reloads), CTR(cache_saves), CTR(cache_save_failures),
+    CTR(finetunes), CTR(tuned_swaps), CTR(tuned_saves), CTR(tuned_save_failures),
 };
 #define NCOUNTERS (sizeof counter_names / sizeof counter_names[0])
 
@@ -444,7 +445,7 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
 {
     gsd_server *s = c->srv;
     bump(&s->ctr.req_stats, 1);
-    enum { EXTRA = 12 };
+    enum { EXTRA = 15 };
     Gazesplat__Counter cs[NCOUNTERS + EXTRA];
     Gazesplat__Counter *ptrs[NCOUNTERS + EXTRA];
     size_t n = 0;
@@ -455,8 +456,9 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
     }
     int qlen, running;
     gsd_work_lengths(s, &qlen, &running);
-    gsd_cache_stats cst;
+    gsd_cache_stats cst, tst;
     gsd_cache_stats_get(s->cache, &cst);
+    gsd_cache_stats_get(s->tuned, &tst);
     const struct {
         const char *name;
         uint64_t v;
@@ -465,6 +467,8 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
         {"jobs_running", (uint64_t)running}, {"cache_entries", cst.entries},
         {"cache_bytes", cst.bytes}, {"cache_budget", cst.budget}, {"cache_hits", cst.hits},
         {"cache_misses", cst.misses}, {"cache_evictions", cst.evictions},
+        {"tuned_entries", tst.entries}, {"tuned_bytes", tst.bytes},
+        {"tuned_evictions", tst.evictions},
         {"state", (uint64_t)atomic_load(&s->state)},
         {"uptime_ms", (uint64_t)(ev_now_ms() - s->started_ms)},
         {"job_ms_avg", (uint64_t)s->job_ms_avg},
@@ -934,6 +938,7 @@ void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
     gsd_log_set_level(s->cfg.log_level);
     gsd_work_set_depth(s, s->cfg.queue_depth);
     gsd_cache_set_budget(s->cache, (size_t)s->cfg.cache_mb << 20);
+    gsd_cache_set_budget(s->tuned, (size_t)s->cfg.tuned_cache_mb << 20);
     for (gsd_conn *c = s->conns; c; c = c->next)
         if (c->parser.state == 0 && c->parser.have == 0)
             set_limits(c);
@@ -1021,7 +1026,10 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
     snprintf(s->detail, sizeof s->detail, "starting");
     s->loop = ev_create(on_wake, s);
     s->cache = gsd_cache_create((size_t)cfg->cache_mb << 20);
-    if (!s->loop || !s->cache) {
+    /* A block can be as large as the budget (every part of a big model). */
+    s->tuned = gsd_cache_create_sized((size_t)cfg->tuned_cache_mb << 20,
+                                      (size_t)cfg->tuned_cache_mb << 20);
+    if (!s->loop || !s->cache || !s->tuned) {
         snprintf(msg, cap, "out of memory or epoll failure");
         return -1;
     }
@@ -1084,6 +1092,7 @@ void gsd_server_free(gsd_server *s)
     gsd_live_stop(s); /* holds a model reference and borrows the landmark model */
     gsd_model_release_all(s);
     gsd_cache_destroy(s->cache);
+    gsd_cache_destroy(s->tuned);
     if (s->sig_watch.fd > 0) {
         signal(SIGTERM, SIG_DFL);
         signal(SIGINT, SIG_DFL);

@@ -39,6 +39,7 @@ typedef struct gsd_counters {
     atomic_ullong fits, fits_cached, images_out, jobs_done;
     atomic_ullong renders_full, renders_incremental;
     atomic_ullong model_loads, model_load_failures, reloads, cache_saves, cache_save_failures;
+    atomic_ullong finetunes, tuned_swaps, tuned_saves, tuned_save_failures;
 } gsd_counters;
 
 /* A unit of compute work. */
@@ -124,6 +125,7 @@ struct gsd_server {
 
     gsd_work work;
     gsd_cache *cache;
+    gsd_cache *tuned;         /* fine-tuned parameter blocks by subject key */
     pthread_mutex_t persist_mu; /* one writer of the cache file at a time */
     char state_dir[GSD_STR_MAX];
 

@@ -6,6 +6,9 @@
 #include <string.h>
 
 #include "server.h"
+#ifdef GSD_HAVE_MODEL
+#include "gazesplat/model.h"
+#endif
 
 #define E(x) GAZESPLAT__ERROR_CODE__##x
 
@@ -147,6 +150,38 @@ static int check_intrinsics(const Gazesplat__Intrinsics *k, char *msg, size_t ca
     return 0;
 }
 
+/* finetune_steps / finetune_parts of FIT and REDIRECT. */
+static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts, char *msg,
+                          size_t cap)
+{
+    int has_parts = parts && parts[0];
+    if (has_parts && !steps) {
+        snprintf(msg, cap, "finetune_parts without finetune_steps");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (!steps)
+        return 0;
+    if (s->cfg.max_finetune_steps == 0) {
+        snprintf(msg, cap, "fine-tuning is off on this server (max_finetune_steps = 0)");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (steps > (uint32_t)s->cfg.max_finetune_steps) {
+        snprintf(msg, cap, "finetune_steps %u over max_finetune_steps %d", steps,
+                 s->cfg.max_finetune_steps);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+#ifdef GSD_HAVE_MODEL
+    unsigned bits;
+    gs_error err;
+    gs_error_clear(&err);
+    if (has_parts && gs_finetune_parts_parse(parts, &bits, &err) != GS_OK) {
+        snprintf(msg, cap, "%s", err.msg);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+#endif
+    return 0;
+}
+
 int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap)
 {
     int e;
@@ -164,6 +199,8 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
     }
+    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, msg, cap)) != 0)
+        return e;
     return gsd_check_deadline(s, r->deadline_ms, msg, cap);
 }
 
@@ -206,6 +243,13 @@ int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
     }
+    if (!r->image && (r->finetune_steps || (r->finetune_parts && r->finetune_parts[0]))) {
+        snprintf(msg, cap, "finetune_steps go with an inline image (a fitted subject keeps "
+                           "its own fine-tuning)");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, msg, cap)) != 0)
+        return e;
     if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
         return e;
     if (r->output_format > GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 || r->jpeg_quality > 100) {

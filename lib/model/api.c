@@ -626,6 +626,8 @@ int gs_finetune_parts_parse(const char *s, unsigned *parts, gs_error *err)
         size_t k = 0;
         while (k < N_FT_NAMES && !(strlen(ft_names[k].name) == n && !strncmp(p, ft_names[k].name, n)))
             k++;
+        if (n == 0)
+            return gs_error_set(err, GS_ERR_ARG, "finetune parts: an empty name in '%.64s'", s);
         if (k == N_FT_NAMES)
             return gs_error_set(err, GS_ERR_ARG,
                                 "finetune parts: '%.*s' in '%.64s' is none of face, eye, renderer, "

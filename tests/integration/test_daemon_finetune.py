@@ -1,0 +1,188 @@
+"""gazesplatd serving fine-tuned subjects, end to end with a tiny real
+model: FIT with finetune_steps (result fields, a key of its own, cache
+hits), REDIRECT switching between fine-tuned and plain subjects on one
+worker (same bytes every time), an inline REDIRECT that fine-tunes, bad
+requests, the blocks' files across restarts, eviction by tuned_cache_mb
+(a clear ERR_UNKNOWN_SUBJECT, the files pruned) and a model change
+dropping them all.
+usage: test_daemon_finetune.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
+from daemon_util import Checks, Daemon  # noqa: E402
+from model_fixture import faces, tiny_model  # noqa: E402
+import gazesplat_client as gc  # noqa: E402
+
+FAST = 3   # fit iterations
+STEPS = 4  # fine-tuning steps
+
+
+def wait_ready(t, addr, timeout=60):
+    end = time.time() + timeout
+    while time.time() < end:
+        with gc.Client(addr) as c:
+            h = c.health()
+        if h.state != gc.pb.Health.LOADING:
+            t.check(h.state == gc.pb.Health.READY, "health %s: %s" % (h.state, h.detail))
+            return h
+        time.sleep(0.05)
+    t.check(False, "model never loaded")
+    return None
+
+
+def expect_error(t, fn, code, what, text=None):
+    try:
+        r = fn()
+        if hasattr(r, "__next__"):
+            list(r)
+        t.check(False, "%s: no error" % what)
+    except gc.GazesplatError as e:
+        t.check(e.code == code, "%s: got %s (%s) want %s" % (what, e.name, e.message,
+                                                          gc.pb.ErrorCode.Name(code)))
+        if text:
+            t.check(text in e.message, "%s: message '%s' lacks '%s'" % (what, e.message, text))
+        print("refused (%s): %s" % (what, e.message))
+
+
+def raw(c, key, gaze=(10, -15)):
+    return list(c.redirect([gaze], subject=key, fmt="raw"))[0].image.data
+
+
+def tuned_files(state):
+    return sorted(f for f in os.listdir(state) if f.startswith("tuned-") and f.endswith(".gsft"))
+
+
+def serve(t, addr, imgs, state):
+    """FITs, REDIRECT switches and bad requests; returns the keys and the
+    tuned renders to compare after a restart."""
+    with gc.Client(addr) as c:
+        plain = c.fit(imgs[0], max_iters=FAST)
+        t.check(not plain.finetuned and plain.finetune_steps == 0, "plain fit: %s" % plain)
+        tuned0 = c.fit(imgs[0], max_iters=FAST, finetune_steps=STEPS)
+        t.check(tuned0.finetuned and tuned0.finetune_steps == STEPS and not tuned0.cached,
+                "fine-tuned fit: %s" % tuned0)
+        t.check(tuned0.subject_key != plain.subject_key, "a fine-tuned subject has a key of its own")
+        t.check(tuned0.finetune_psnr > tuned0.psnr, "fine-tuning improved the input's PSNR: %.2f -> %.2f"
+                % (tuned0.psnr, tuned0.finetune_psnr))
+        key1 = bytes(range(40, 56))
+        tuned1 = c.fit(imgs[1], key=key1, max_iters=FAST, finetune_steps=3, finetune_parts="face,eye")
+        t.check(tuned1.finetuned and tuned1.subject_key == key1, "face,eye fine-tune: %s" % tuned1)
+        again = c.fit(imgs[0], max_iters=FAST, finetune_steps=STEPS)
+        t.check(again.cached and again.finetuned and again.subject_key == tuned0.subject_key,
+                "the same fine-tuned FIT is a cache hit: %s" % again)
+        st = c.stats()
+        t.check(st["finetunes"] == 2 and st["tuned_entries"] == 2, "stats: finetunes %d, tuned_entries %d"
+                % (st["finetunes"], st["tuned_entries"]))
+        t.check(len(tuned_files(state)) == 2, "block files: %s" % tuned_files(state))
+
+        # One worker switches its clone between subjects: every render of
+        # a subject is the same bytes, whatever was rendered before.
+        k0, kp = tuned0.subject_key, plain.subject_key
+        first = {k: raw(c, k) for k in (k0, kp, key1)}
+        t.check(first[k0] != first[kp], "the fine-tuned render differs from the plain one")
+        swaps0 = c.stats()["tuned_swaps"]
+        for k in (k0, key1, kp, k0, kp, key1, k0):
+            t.check(raw(c, k) == first[k], "render of %s after switching" % k.hex()[:8])
+        t.check(c.stats()["tuned_swaps"] - swaps0 >= 4, "tuned swaps counted: %d"
+                % (c.stats()["tuned_swaps"] - swaps0))
+        sweep = list(c.redirect([(0, 0), (15, -20), (-10, 30)], subject=k0, fmt="raw"))
+        t.check(len({r.image.data for r in sweep}) == 3, "a fine-tuned sweep: three different images")
+
+        # Inline: fit, fine-tune and render in one request; the subject is
+        # kept under the key a FIT of the same image and settings gets.
+        inline = list(c.redirect([(0, 10)], image=imgs[2], finetune_steps=2, fmt="raw"))
+        t.check(len(inline) == 1, "inline fine-tuned REDIRECT")
+        r = c.fit(imgs[2], finetune_steps=2)
+        t.check(r.cached and r.finetuned, "inline subject cached as fine-tuned: %s" % r)
+        t.check(raw(c, r.subject_key, (0, 10)) == inline[0].image.data, "inline render == render by key")
+
+        # Bad requests: answered with a reason, the server unharmed.
+        expect_error(t, lambda: c.fit(imgs[0], finetune_steps=51), gc.pb.ERR_INVALID_ARGUMENT,
+                     "steps over max_finetune_steps", "max_finetune_steps")
+        expect_error(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_parts="nose"),
+                     gc.pb.ERR_INVALID_ARGUMENT, "unknown part", "nose")
+        expect_error(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_parts="face,"),
+                     gc.pb.ERR_INVALID_ARGUMENT, "empty part")
+        expect_error(t, lambda: c.fit(imgs[0], finetune_parts="face"), gc.pb.ERR_INVALID_ARGUMENT,
+                     "parts without steps")
+        expect_error(t, lambda: c.redirect([(0, 0)], subject=k0, finetune_steps=2),
+                     gc.pb.ERR_INVALID_ARGUMENT, "fine-tuning a subject by key")
+        t.check(c.health().state == gc.pb.Health.READY, "still READY")
+        return k0, kp, key1, r.subject_key, first
+
+
+def main():
+    daemon, cli, work = (os.path.abspath(a) for a in sys.argv[1:4])
+    os.makedirs(work, exist_ok=True)
+    t = Checks()
+    model = tiny_model(cli, work, seed=1)
+    other = tiny_model(cli, work, seed=2)
+    imgs = faces(cli, work, 128, 3)
+    state = os.path.join(work, "state_finetune_test")
+    os.makedirs(state, exist_ok=True)
+    for f in os.listdir(state):
+        os.unlink(os.path.join(state, f))
+    base = ["--model", model, "--state-dir", state, "--set", "photo_input=no",
+            "--set", "max_finetune_steps=50", "--set", "workers=1"]
+    d = Daemon(daemon, base).start()
+    rc = None
+    try:
+        addr = "unix:" + d.sock
+        wait_ready(t, addr)
+        k0, kp, k1, k2, first = serve(t, addr, imgs, state)
+        t.check(len(tuned_files(state)) == 3, "three block files: %s" % tuned_files(state))
+        t.check(d.stop() == 0, "clean exit")
+
+        # Restart: the blocks come back from their files, same renders.
+        d = Daemon(daemon, base).start()
+        addr = "unix:" + d.sock
+        wait_ready(t, addr)
+        with gc.Client(addr) as c:
+            t.check(c.stats()["tuned_entries"] == 3, "blocks restored: %d" % c.stats()["tuned_entries"])
+            for k in (k0, kp, k1):
+                t.check(raw(c, k) == first[k], "render of %s after a restart" % k.hex()[:8])
+        t.check(d.stop() == 0, "clean exit")
+
+        # A budget for one block (the tiny model's face block is 0.54 MB):
+        # the newest file is kept, the others go, and their subjects say
+        # so; plain subjects are unaffected.
+        d = Daemon(daemon, base + ["--set", "tuned_cache_mb=1"]).start()
+        addr = "unix:" + d.sock
+        wait_ready(t, addr)
+        with gc.Client(addr) as c:
+            t.check(c.stats()["tuned_entries"] == 1, "one block within 1 MiB: %d"
+                    % c.stats()["tuned_entries"])
+            t.check(len(tuned_files(state)) == 1, "files pruned to the kept block: %s" % tuned_files(state))
+            t.check(raw(c, k2, (0, 10)) is not None, "the newest fine-tuned subject renders")
+            expect_error(t, lambda: raw(c, k0), gc.pb.ERR_UNKNOWN_SUBJECT, "evicted block", "fit it again")
+            t.check(raw(c, kp) == first[kp], "plain subject unaffected")
+            # A new fine-tune evicts the kept one in turn.
+            r = c.fit(imgs[1], max_iters=FAST, finetune_steps=2)
+            t.check(r.finetuned, "fine-tune within the budget")
+            expect_error(t, lambda: raw(c, k2, (0, 10)), gc.pb.ERR_UNKNOWN_SUBJECT, "evicted by a new block")
+            t.check(len(tuned_files(state)) == 1, "one block file: %s" % tuned_files(state))
+            t.check(c.stats()["tuned_evictions"] >= 1, "evictions counted")
+        t.check(d.stop() == 0, "clean exit")
+
+        # Another model: no block applies; the files go.
+        d = Daemon(daemon, ["--model", other, "--state-dir", state, "--set", "photo_input=no"]).start()
+        addr = "unix:" + d.sock
+        wait_ready(t, addr)
+        with gc.Client(addr) as c:
+            expect_error(t, lambda: raw(c, k1), gc.pb.ERR_UNKNOWN_SUBJECT, "fine-tuned subject of another model")
+            t.check(c.stats()["tuned_entries"] == 0, "no blocks for another model")
+        t.check(tuned_files(state) == [], "block files removed for another model: %s" % tuned_files(state))
+    finally:
+        rc = d.stop()
+        if t.failures:
+            print(d.log())
+    t.check(rc in (0, None), "exit %s" % rc)
+    return t.status()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
