@@ -40,6 +40,11 @@ const cli_command cli_client_command = {
     "  --head P,Y           fit: known head pose, degrees\n"
     "  --key HEX            fit: the subject key to use (32 hex digits)\n"
     "  --max-iters N        fit (and redirect of an --image): iteration limit\n"
+    "  --finetune N         fit (and redirect of an --image): then fine-tune a copy\n"
+    "                       of the model on the image for N steps; the subject\n"
+    "                       renders with it (the server's max_finetune_steps)\n"
+    "  --finetune-parts L   with --finetune: face (default), eye, renderer, mlp,\n"
+    "                       geometry, comma-separated\n"
     "  --subject HEX        redirect: a fitted subject key\n"
     "  --gaze-deg LIST      redirect: targets 'P,Y;P,Y;...', degrees\n"
     "  --head-deg LIST      redirect: head poses, one per target\n"
@@ -54,8 +59,21 @@ const cli_command cli_client_command = {
 
 enum {
     O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
-    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_N
+    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_FT, O_FT_PARTS, O_N
 };
+
+/* --finetune N [--finetune-parts L]: 0 or CLI_USAGE (reported). */
+static int finetune_opts(const cli_command *cmd, const cli_opt *o, uint32_t *steps, char **parts)
+{
+    long n = 0;
+    if (o[O_FT].value && cli_parse_long(o[O_FT].value, 1, 100000, &n) != 0)
+        return cli_usage_error(cmd, "--finetune wants 1..100000 steps");
+    if (o[O_FT_PARTS].value && !o[O_FT].value)
+        return cli_usage_error(cmd, "--finetune-parts goes with --finetune N");
+    *steps = (uint32_t)n;
+    *parts = o[O_FT_PARTS].value ? (char *)o[O_FT_PARTS].value : (char *)"";
+    return CLI_OK;
+}
 
 #define MAX_SETS 32
 
@@ -313,7 +331,10 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         return cli_usage_error(cmd, "--max-iters wants 1..100000");
     if (o[O_DEADLINE].value && cli_parse_long(o[O_DEADLINE].value, 1, 3600000, &deadline) != 0)
         return cli_usage_error(cmd, "--deadline-ms wants 1..3600000");
-    int rc = load_image(cmd, o, &img, &data);
+    int rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts);
+    if (rc != CLI_OK)
+        return rc;
+    rc = load_image(cmd, o, &img, &data);
     if (rc != CLI_OK)
         return rc;
     req.image = &img;
@@ -332,10 +353,12 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         char hex[33];
         gs_frame_key_hex(f.header.key, hex);
         printf("subject %s\ngaze_deg %.3f,%.3f\nhead_deg %.3f,%.3f\npsnr %.2f\nssim %.4f\niters %u\n"
-               "seconds %.3f\ncached %s\n", hex, m->gaze ? m->gaze->pitch_deg : 0.0,
+               "seconds %.3f\ncached %s\nfinetuned %s\n", hex, m->gaze ? m->gaze->pitch_deg : 0.0,
                m->gaze ? m->gaze->yaw_deg : 0.0, m->head ? m->head->pitch_deg : 0.0,
                m->head ? m->head->yaw_deg : 0.0, m->psnr, m->ssim, m->iters, m->seconds,
-               m->cached ? "yes" : "no");
+               m->cached ? "yes" : "no", m->finetuned ? "yes" : "no");
+        if (m->finetune_steps)
+            printf("finetune_steps %u\nfinetune_psnr %.2f\n", m->finetune_steps, m->finetune_psnr);
         rc = CLI_OK;
     } else {
         rc = f.header.type == T(BUSY) ? print_busy(&f) : f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
@@ -435,7 +458,9 @@ static int do_redirect(gs_client *c, const cli_opt *o, int timeout)
         if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &iters) == 0)
             req.max_iters = (uint32_t)iters;
         gs_error err;
-        if (gs_client_send(c, T(REDIRECT), key, 1, &req.base, &err) != GS_OK)
+        if ((rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts)) != CLI_OK)
+            ; /* reported */
+        else if (gs_client_send(c, T(REDIRECT), key, 1, &req.base, &err) != GS_OK)
             rc = cli_fail(cmd, "%s", err.msg);
         else
             rc = receive_images(c, o[O_OUT].value, timeout);
@@ -461,7 +486,8 @@ static int run_client(int argc, char **argv)
         {"--photo", 0, NULL}, {"--gaze", 1, NULL}, {"--head", 1, NULL}, {"--key", 1, NULL},
         {"--max-iters", 1, NULL}, {"--subject", 1, NULL}, {"--gaze-deg", 1, NULL},
         {"--head-deg", 1, NULL}, {"--format", 1, NULL}, {"--out", 1, NULL}, {"--deadline-ms", 1, NULL},
-        {"--paste-back", 0, NULL}, {"--refit", 0, NULL},
+        {"--paste-back", 0, NULL}, {"--refit", 0, NULL}, {"--finetune", 1, NULL},
+        {"--finetune-parts", 1, NULL},
     };
     /* --set may repeat: take every one out before the common parser. */
     const char *sets[MAX_SETS];

@@ -64,10 +64,26 @@ def main():
         t.check(r.returncode == 1 and "ERR_UNKNOWN_SUBJECT" in r.stderr, "unknown subject: %s" % r.stderr)
         r = run(cli, "client", "redirect", addr, "--subject", "xyz", "--gaze-deg", "0,0", "--out", out)
         t.check(r.returncode == 2, "bad key is a usage error: %d" % r.returncode)
+        # Fine-tuned: the subject says so; a redirect by its key renders.
+        r = run(cli, "client", "fit", addr, "--image", face, "--max-iters", "3", "--finetune", "2",
+                "--finetune-parts", "face")
+        tkey = [ln.split()[1] for ln in r.stdout.splitlines() if ln.startswith("subject ")]
+        t.check(r.returncode == 0 and "finetuned yes" in r.stdout and "finetune_steps 2" in r.stdout,
+                "fit --finetune: %d %s %s" % (r.returncode, r.stdout, r.stderr))
+        tout = os.path.join(work, "cli_out_tuned")
+        r = run(cli, "client", "redirect", addr, "--subject", tkey[0] if tkey else "0" * 32,
+                "--gaze-deg", "0,0", "--out", tout)
+        t.check(r.returncode == 0 and os.path.exists(os.path.join(tout, "target_000.png")),
+                "redirect of a fine-tuned subject: %d %s" % (r.returncode, r.stderr))
+        r = run(cli, "client", "fit", addr, "--image", face, "--finetune-parts", "face")
+        t.check(r.returncode == 2, "--finetune-parts alone is a usage error: %d" % r.returncode)
+        r = run(cli, "client", "fit", addr, "--image", face, "--finetune", "2", "--finetune-parts", "nose")
+        t.check(r.returncode == 1 and "ERR_INVALID_ARGUMENT" in r.stderr, "unknown part: %s" % r.stderr)
         r = run(cli, "client", "fit", addr, "--image", face, "--photo")
         t.check(r.returncode == 1 and "ERR_PHOTO_UNSUPPORTED" in r.stderr, "photo: %s" % r.stderr)
         r = run(cli, "client", "stats", addr)
-        t.check(r.returncode == 0 and "images_out 2" in r.stdout, "stats: %s" % r.stdout[-300:])
+        t.check(r.returncode == 0 and "images_out 3" in r.stdout and "finetunes 1" in r.stdout,
+                "stats: %s" % r.stdout[-300:])
         r = run(cli, "client", "frobnicate", addr)
         t.check(r.returncode == 2, "unknown action: %d" % r.returncode)
         r = run(cli, "client", "health", "--addr=" + os.path.join(work, "nope.sock"))
