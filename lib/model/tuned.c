@@ -79,17 +79,24 @@ uint64_t gs_model_param_id(const gs_model *m)
 {
     hash64 h;
     hash_init(&h, 0x67617a6573706c74ULL);
-    /* The table: names, offsets and counts, one 32-byte-aligned record
-     * each so that every call but the parameters' is whole blocks. */
+    /* Per tensor a 128-byte record (whole blocks): its name (zero-padded),
+     * offset, count and the hash of its values. The alignment padding
+     * between tensors is not part of the model and not hashed. */
     for (int i = 0; i < m->ntensors; i++) {
-        uint8_t rec[96];
+        const gs_ptensor *t = &m->t[i];
+        uint8_t rec[128];
         memset(rec, 0, sizeof rec);
-        memcpy(rec, m->t[i].name, sizeof m->t[i].name);
-        uint64_t oc[2] = {m->t[i].offset, m->t[i].count};
-        memcpy(rec + 64, oc, sizeof oc);
+        size_t nl = 0;
+        while (nl < sizeof t->name - 1 && t->name[nl])
+            nl++;
+        memcpy(rec, t->name, nl);
+        hash64 v;
+        hash_init(&v, 0x76616c756573ULL);
+        hash_bytes(&v, m->params + t->offset, t->count * sizeof(float));
+        uint64_t f[3] = {t->offset, t->count, hash_final(&v)};
+        memcpy(rec + 64, f, sizeof f);
         hash_bytes(&h, rec, sizeof rec);
     }
-    hash_bytes(&h, m->params, m->nparams * sizeof(float));
     return hash_final(&h);
 }
 
