@@ -94,7 +94,8 @@ def serve(t, addr, imgs, state):
 
         # Inline: fit, fine-tune and render in one request; the subject is
         # kept under the key a FIT of the same image and settings gets.
-        inline = list(c.redirect([(0, 10)], image=imgs[2], finetune_steps=2, fmt="raw"))
+        inline = list(c.redirect([(0, 10)], image=imgs[2], max_iters=FAST, finetune_steps=2,
+                                 fmt="raw"))
         t.check(len(inline) == 1, "inline fine-tuned REDIRECT")
         r = c.fit(imgs[2], finetune_steps=2)
         t.check(r.cached and r.finetuned, "inline subject cached as fine-tuned: %s" % r)

@@ -208,6 +208,7 @@ int main(void)
     CHECK(gs_model_finetune(fresh, NULL, &bs, smp[0].rgb, smp[0].stride, &o, NULL, &err) ==
           GS_ERR_NONFINITE);
     CHECK(fresh->tuned == 0);
+    gs_model_destroy(fresh);
     /* A time budget ends it early, keeping the best iterate (here the
      * start: no step fits in a nanosecond). */
     CHECK(gs_model_clone(m, &fresh, &err) == GS_OK);
