@@ -53,16 +53,22 @@ struct gsd_worker {
     gs_model_ctx *ctx;
     /* the subject of the last FIT, rendered once its reply is out so that
      * the context keeps its render for incremental REDIRECTs */
-    int prime, prime_tuned;
+    int prime, prime_slot; /* prime_slot: a tuned slot, or -1 */
     gs_subject prime_subj;
-    /* Fine-tuned subjects render with a clone of the model holding their
-     * tuned tensors (gs_model_tuned_apply): one clone and context per
-     * worker, holding the last tuned subject it served. */
-    gs_model *tuned;
-    gs_model_ctx *tctx;
-    int tuned_has;
-    uint8_t tuned_key[GS_FRAME_KEY_SIZE];
-    uint64_t tuned_sum;
+    /* Fine-tuned subjects render with clones of the model holding their
+     * tuned tensors (gs_model_tuned_apply): tuned_subjects slots per
+     * worker, each a clone and its context, made at the first need, the
+     * least recently used one switched to a subject no slot holds. */
+    struct tuned_slot {
+        gs_model *m;
+        gs_model_ctx *ctx;
+        int has;
+        uint8_t key[GS_FRAME_KEY_SIZE];
+        uint64_t sum;
+        uint64_t used;
+    } slots[GSD_TUNED_SLOTS_MAX];
+    int nslots;
+    uint64_t tick;
 #endif
     /* keys of the subjects rendered lately (a ring, newest at recent_n - 1
      * modulo GSD_RECENT_MAX): the queue prefers giving their REDIRECTs to
@@ -365,6 +371,11 @@ gsd_worker *gsd_worker_create(gsd_server *s, int index)
     w->recent_cap = s->cfg.sweep_subjects < 1 ? 1
                     : s->cfg.sweep_subjects > GSD_RECENT_MAX ? GSD_RECENT_MAX
                     : s->cfg.sweep_subjects;
+#ifdef GSD_HAVE_MODEL
+    w->nslots = s->cfg.tuned_subjects < 1 ? 1
+                : s->cfg.tuned_subjects > GSD_TUNED_SLOTS_MAX ? GSD_TUNED_SLOTS_MAX
+                : s->cfg.tuned_subjects;
+#endif
     return w;
 }
 
@@ -373,11 +384,11 @@ static void worker_drop_model(gsd_worker *w)
 #ifdef GSD_HAVE_MODEL
     gs_model_ctx_destroy(w->ctx);
     w->ctx = NULL;
-    gs_model_ctx_destroy(w->tctx);
-    w->tctx = NULL;
-    gs_model_destroy(w->tuned);
-    w->tuned = NULL;
-    w->tuned_has = 0;
+    for (int i = 0; i < GSD_TUNED_SLOTS_MAX; i++) {
+        gs_model_ctx_destroy(w->slots[i].ctx);
+        gs_model_destroy(w->slots[i].m);
+        memset(&w->slots[i], 0, sizeof w->slots[i]);
+    }
 #endif
     model_unref(w->model);
     w->model = NULL;
@@ -890,36 +901,59 @@ static void head_rotation(const Gazesplat__Angles *a, double R[9])
     gs_geom_rot_from_pitchyaw(a->pitch_deg * DEG, a->yaw_deg * DEG, 0.0, R);
 }
 
-/* The worker's clone for fine-tuned subjects and its context, made at
- * the first need. */
-static int worker_tuned_ready(gsd_worker *w, char *msg, size_t cap)
+/* The slot holding subject key with block checksum sum, or -1. */
+static int slot_find(const gsd_worker *w, const uint8_t key[16], uint64_t sum)
 {
-    gs_error err;
-    gs_error_clear(&err);
-    if (!w->tuned && gs_model_clone(w->model->m, &w->tuned, &err) != GS_OK) {
-        snprintf(msg, cap, "fine-tuned subjects: %s", err.msg);
-        return E(ERR_INTERNAL);
-    }
-    if (!w->tctx) {
-        if (!(w->tctx = gs_model_ctx_create(w->tuned))) {
-            snprintf(msg, cap, "fine-tuned subjects: out of memory");
-            return E(ERR_INTERNAL);
-        }
-        /* It holds one subject at a time: a swap drops every kept render. */
-        gs_model_ctx_set_sweep_cache(w->tctx, 1, NULL);
-    }
-    return 0;
+    for (int i = 0; i < w->nslots; i++)
+        if (w->slots[i].has && !memcmp(w->slots[i].key, key, 16) && w->slots[i].sum == sum)
+            return i;
+    return -1;
 }
 
-/* Puts subject key's tuned block (checksum sum) into the worker's clone
- * unless it is there already. */
-static int worker_use_tuned(gsd_worker *w, const uint8_t key[16], uint64_t sum, char *msg, size_t cap)
+/* The slot to give another subject: one not made yet, else the least
+ * recently used; made ready (clone and context) here. Returns the slot or
+ * -1 with msg. */
+static int slot_take(gsd_worker *w, char *msg, size_t cap)
 {
-    int e = worker_tuned_ready(w, msg, cap);
-    if (e)
-        return e;
-    if (w->tuned_has && !memcmp(w->tuned_key, key, 16) && w->tuned_sum == sum)
+    int v = 0;
+    for (int i = 1; i < w->nslots; i++)
+        if ((w->slots[v].m && !w->slots[i].m) || (w->slots[i].m && w->slots[i].used < w->slots[v].used))
+            v = i;
+    struct tuned_slot *sl = &w->slots[v];
+    gs_error err;
+    gs_error_clear(&err);
+    if (!sl->m && gs_model_clone(w->model->m, &sl->m, &err) != GS_OK) {
+        snprintf(msg, cap, "fine-tuned subjects: %s", err.msg);
+        return -1;
+    }
+    if (!sl->ctx) {
+        if (!(sl->ctx = gs_model_ctx_create(sl->m))) {
+            snprintf(msg, cap, "fine-tuned subjects: out of memory");
+            return -1;
+        }
+        /* One subject per slot: a switch drops every kept render anyway. */
+        gs_model_ctx_set_sweep_cache(sl->ctx, 1, NULL);
+    }
+    sl->has = 0;
+    sl->used = ++w->tick;
+    return v;
+}
+
+/* The slot holding subject key's tuned block (checksum sum), switching
+ * the least recently used one to it when none does. */
+static int worker_use_tuned(gsd_worker *w, const uint8_t key[16], uint64_t sum, int *slot, char *msg,
+                            size_t cap)
+{
+    int i = slot_find(w, key, sum);
+    /* A slot still holding a subject whose block left the cache gives it
+     * up too: every worker answers the same for it. */
+    if (i >= 0 && gsd_cache_contains(w->srv->tuned, key)) {
+        w->slots[i].used = ++w->tick;
+        *slot = i;
         return 0;
+    }
+    if (i >= 0)
+        w->slots[i].has = 0;
     uint8_t *blk = NULL;
     long n = tuned_fetch(w->srv, key, &blk);
     char hex[33];
@@ -931,36 +965,42 @@ static int worker_use_tuned(gsd_worker *w, const uint8_t key[16], uint64_t sum, 
                  "again", hex);
         return E(ERR_UNKNOWN_SUBJECT);
     }
+    if ((i = slot_take(w, msg, cap)) < 0) {
+        free(blk);
+        return E(ERR_INTERNAL);
+    }
+    struct tuned_slot *sl = &w->slots[i];
     gs_error err;
     gs_error_clear(&err);
-    int r = gs_model_tuned_apply(w->tuned, w->model->m, blk, (size_t)n, &err);
+    int r = gs_model_tuned_apply(sl->m, w->model->m, blk, (size_t)n, &err);
     free(blk);
+    gs_model_ctx_reset(sl->ctx);
     if (r != GS_OK) {
         snprintf(msg, cap, "subject %s: %s", hex, err.msg);
         return E(ERR_INTERNAL);
     }
-    gs_model_ctx_reset(w->tctx);
-    w->tuned_has = 1;
-    memcpy(w->tuned_key, key, 16);
-    w->tuned_sum = sum;
+    sl->has = 1;
+    memcpy(sl->key, key, 16);
+    sl->sum = sum;
     atomic_fetch_add(&w->srv->ctr.tuned_swaps, 1);
+    *slot = i;
     return 0;
 }
 
-/* Fine-tunes the worker's clone, from the shared model's parameters, on
- * the fitted face and keeps the block (s->tuned, disk). *sum: its
- * checksum. */
+/* Fine-tunes a slot's clone, from the shared model's parameters, on the
+ * fitted face and keeps the block (s->tuned, disk); the slot then holds
+ * the subject. *sum: the block's checksum. */
 static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, const gs_subject *subj,
                             const gs_io_image *face, const uint8_t *mask, gs_finetune_report *rep,
                             uint64_t *sum, char *msg, size_t cap)
 {
-    int e = worker_tuned_ready(w, msg, cap);
-    if (e)
-        return e;
+    int i = slot_take(w, msg, cap);
+    if (i < 0)
+        return E(ERR_INTERNAL);
+    struct tuned_slot *sl = &w->slots[i];
     gs_error err;
     gs_error_clear(&err);
-    w->tuned_has = 0;
-    if (gs_model_tuned_apply(w->tuned, w->model->m, NULL, 0, &err) != GS_OK) {
+    if (gs_model_tuned_apply(sl->m, w->model->m, NULL, 0, &err) != GS_OK) {
         snprintf(msg, cap, "finetune: %s", err.msg);
         return E(ERR_INTERNAL);
     }
@@ -972,26 +1012,26 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
     fo.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
     if (fo.time_budget_s <= 0)
         fo.time_budget_s = 0.001;
-    int r = gs_model_finetune(w->tuned, w->pool, subj, face->data, face->stride, &fo, rep, &err);
-    gs_model_ctx_reset(w->tctx);
+    int r = gs_model_finetune(sl->m, w->pool, subj, face->data, face->stride, &fo, rep, &err);
+    gs_model_ctx_reset(sl->ctx);
     if (r != GS_OK) {
         snprintf(msg, cap, "finetune: %s", err.msg);
         return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
     }
     uint8_t *blk = NULL;
     size_t len = 0;
-    if (gs_model_tuned_encode(w->tuned, &blk, &len, &err) != GS_OK) {
+    if (gs_model_tuned_encode(sl->m, &blk, &len, &err) != GS_OK) {
         snprintf(msg, cap, "finetune: %s", err.msg);
         return E(ERR_INTERNAL);
     }
     memcpy(sum, blk + len - 8, 8);
-    e = tuned_store(w->srv, j->key, blk, len, msg, cap);
+    int e = tuned_store(w->srv, j->key, blk, len, msg, cap);
     free(blk);
     if (e)
         return e;
-    w->tuned_has = 1;
-    memcpy(w->tuned_key, j->key, 16);
-    w->tuned_sum = *sum;
+    sl->has = 1;
+    memcpy(sl->key, j->key, 16);
+    sl->sum = *sum;
     atomic_fetch_add(&w->srv->ctr.finetunes, 1);
     return 0;
 }
@@ -1111,8 +1151,8 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     /* After the reply (gsd_worker_run) the subject is rendered once, so
      * that its first REDIRECT here is incremental; a cached fine-tuned
      * subject first needs its block in the clone. */
-    w->prime = !so.tuned || worker_use_tuned(w, j->key, so.sum, msg, sizeof msg) == 0;
-    w->prime_tuned = so.tuned;
+    w->prime_slot = -1;
+    w->prime = !so.tuned || worker_use_tuned(w, j->key, so.sum, &w->prime_slot, msg, sizeof msg) == 0;
     w->prime_subj = so.subj;
     recent_add(w, j->key);
     const gs_subject subj = so.subj;
@@ -1288,14 +1328,15 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         gs_frame_key_hex(j->key, hex);
         return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
     }
+    int slot = -1;
     if (so.tuned) {
-        int e = worker_use_tuned(w, j->key, so.sum, msg, sizeof msg);
+        int e = worker_use_tuned(w, j->key, so.sum, &slot, msg, sizeof msg);
         if (e) {
             photo_input_free(&photo);
             return gsd_error_frame(j, e, "%s", msg);
         }
     }
-    gs_model_ctx *ctx = so.tuned ? w->tctx : w->ctx;
+    gs_model_ctx *ctx = slot >= 0 ? w->slots[slot].ctx : w->ctx;
     const gs_subject subj = so.subj;
     recent_add(w, j->key);
     int size = w->model->info.image_size;
@@ -1336,7 +1377,7 @@ static void worker_prime(gsd_worker *w)
     if (!w->prime || !w->ctx)
         return;
     w->prime = 0;
-    gs_model_ctx *ctx = w->prime_tuned ? w->tctx : w->ctx;
+    gs_model_ctx *ctx = w->prime_slot >= 0 ? w->slots[w->prime_slot].ctx : w->ctx;
     if (!ctx)
         return;
     int size = w->model->info.image_size;

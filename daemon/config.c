@@ -49,6 +49,7 @@ static const key_def keys[] = {
     {"cache_mb", T_INT, OFF(cache_mb), 1, 65536, "256"},
     {"tuned_cache_mb", T_INT, OFF(tuned_cache_mb), 1, 65536, "256"},
     {"max_finetune_steps", T_INT, OFF(max_finetune_steps), 0, 100000, "1000"},
+    {"tuned_subjects", T_INT, OFF(tuned_subjects), 1, GSD_TUNED_SLOTS_MAX, "2"},
     {"log_level", T_LEVEL, OFF(log_level), 0, 3, "info"},
     {"debug_requests", T_BOOL, OFF(debug_requests), 0, 1, "no"},
     {"photo_input", T_BOOL, OFF(photo_input), 0, 1, "yes"},

@@ -8,6 +8,9 @@
 
 #define GSD_STR_MAX 512
 
+/* Most fine-tuned subjects a worker holds (a model clone each). */
+#define GSD_TUNED_SLOTS_MAX 16
+
 typedef struct gsd_config {
     char socket[GSD_STR_MAX];     /* Unix socket path; "" = default */
     int socket_mode;              /* octal, default 0660 */
@@ -26,6 +29,7 @@ typedef struct gsd_config {
     int cache_mb;
     int tuned_cache_mb;      /* fine-tuned parameter blocks */
     int max_finetune_steps;  /* per FIT; 0: fine-tuning refused */
+    int tuned_subjects;      /* fine-tuned subjects each worker holds ready */
     int log_level;
     int debug_requests;
     int photo_input;                  /* accept KIND_PHOTO (needs the two below) */

@@ -928,9 +928,12 @@ void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
     s->cfg.socket_mode = old.socket_mode;
     s->cfg.workers = old.workers;
     s->cfg.threads = old.threads;
+    s->cfg.tuned_subjects = old.tuned_subjects;
     if (strcmp(old.socket, cfg->socket) || strcmp(old.tcp, cfg->tcp) || old.workers != cfg->workers ||
-        old.threads != cfg->threads || strcmp(old.state_dir, cfg->state_dir))
-        LOG_W("reload: socket, tcp, workers, threads and state_dir need a restart; kept");
+        old.threads != cfg->threads || strcmp(old.state_dir, cfg->state_dir) ||
+        old.tuned_subjects != cfg->tuned_subjects)
+        LOG_W("reload: socket, tcp, workers, threads, state_dir and tuned_subjects need a restart; "
+              "kept");
     if (strcmp(old.live_device, cfg->live_device) || strcmp(old.live_output, cfg->live_output) ||
         old.live_width != cfg->live_width || old.live_height != cfg->live_height ||
         old.live_fps != cfg->live_fps || old.live_fit_budget_s != cfg->live_fit_budget_s)

@@ -1,7 +1,8 @@
 """gazesplatd serving fine-tuned subjects, end to end with a tiny real
 model: FIT with finetune_steps (result fields, a key of its own, cache
-hits), REDIRECT switching between fine-tuned and plain subjects on one
-worker (same bytes every time), an inline REDIRECT that fine-tunes, bad
+hits), REDIRECT alternating between fine-tuned and plain subjects on one
+worker (same bytes every time; two subjects held without switching,
+incrementally; a third switches the least recently used), an inline REDIRECT that fine-tunes, bad
 requests, the blocks' files across restarts, eviction by tuned_cache_mb
 (a clear ERR_UNKNOWN_SUBJECT, the files pruned) and a model change
 dropping them all.
@@ -79,16 +80,24 @@ def serve(t, addr, imgs, state):
                 % (st["finetunes"], st["tuned_entries"]))
         t.check(len(tuned_files(state)) == 2, "block files: %s" % tuned_files(state))
 
-        # One worker switches its clone between subjects: every render of
-        # a subject is the same bytes, whatever was rendered before.
+        # The worker holds both fine-tuned subjects (tuned_subjects = 2):
+        # alternating between them switches nothing and renders
+        # incrementally; every render of a subject is the same bytes,
+        # whatever was rendered before.
         k0, kp = tuned0.subject_key, plain.subject_key
         first = {k: raw(c, k) for k in (k0, kp, key1)}
         t.check(first[k0] != first[kp], "the fine-tuned render differs from the plain one")
-        swaps0 = c.stats()["tuned_swaps"]
+        st0 = c.stats()
         for k in (k0, key1, kp, k0, kp, key1, k0):
             t.check(raw(c, k) == first[k], "render of %s after switching" % k.hex()[:8])
-        t.check(c.stats()["tuned_swaps"] - swaps0 >= 4, "tuned swaps counted: %d"
-                % (c.stats()["tuned_swaps"] - swaps0))
+        st1 = c.stats()
+        t.check(st1["tuned_swaps"] == st0["tuned_swaps"], "two slots, two subjects: %d switches"
+                % (st1["tuned_swaps"] - st0["tuned_swaps"]))
+        t.check(st1["renders_full"] == st0["renders_full"] and
+                st1["renders_incremental"] - st0["renders_incremental"] == 7,
+                "alternating subjects render incrementally: %d full, %d incremental"
+                % (st1["renders_full"] - st0["renders_full"],
+                   st1["renders_incremental"] - st0["renders_incremental"]))
         sweep = list(c.redirect([(0, 0), (15, -20), (-10, 30)], subject=k0, fmt="raw"))
         t.check(len({r.image.data for r in sweep}) == 3, "a fine-tuned sweep: three different images")
 
@@ -100,6 +109,16 @@ def serve(t, addr, imgs, state):
         r = c.fit(imgs[2], finetune_steps=2)
         t.check(r.cached and r.finetuned, "inline subject cached as fine-tuned: %s" % r)
         t.check(raw(c, r.subject_key, (0, 10)) == inline[0].image.data, "inline render == render by key")
+        # Three fine-tuned subjects, two slots: the least recently used slot
+        # switches, and the renders stay the same bytes.
+        st0 = c.stats()
+        for k in (k0, key1, r.subject_key, k0, key1):
+            if k in first:
+                t.check(raw(c, k) == first[k], "render of %s with three subjects" % k.hex()[:8])
+            else:
+                raw(c, k)
+        t.check(c.stats()["tuned_swaps"] - st0["tuned_swaps"] >= 3, "switches counted: %d"
+                % (c.stats()["tuned_swaps"] - st0["tuned_swaps"]))
 
         # Bad requests: answered with a reason, the server unharmed.
         expect_error(t, lambda: c.fit(imgs[0], finetune_steps=51), gc.pb.ERR_INVALID_ARGUMENT,
@@ -128,7 +147,7 @@ def main():
     for f in os.listdir(state):
         os.unlink(os.path.join(state, f))
     base = ["--model", model, "--state-dir", state, "--set", "photo_input=no",
-            "--set", "max_finetune_steps=50", "--set", "workers=1"]
+            "--set", "max_finetune_steps=50", "--set", "workers=1", "--set", "tuned_subjects=2"]
     d = Daemon(daemon, base).start()
     rc = None
     try:
