@@ -191,20 +191,30 @@ int gsd_cache_put(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], const void *bl
     return r;
 }
 
+/* Copies key's blob out (into out, up to cap bytes, or into a malloc'd
+ * copy when out is NULL: *copy) and marks it recently used. */
+static long get_locked(gsd_cache *c, const uint8_t *key, void *out, size_t cap, uint8_t **copy)
+{
+    entry *e = lookup(c, key, NULL);
+    if (e && !out && (*copy = malloc(e->len ? e->len : 1)) != NULL) {
+        out = *copy;
+        cap = e->len;
+    }
+    if (!e || !out || e->len > cap) {
+        c->st.misses++;
+        return -1;
+    }
+    memcpy(out, e->blob, e->len);
+    lru_unlink(c, e);
+    lru_push_front(c, e);
+    c->st.hits++;
+    return (long)e->len;
+}
+
 long gsd_cache_get(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], void *out, size_t cap)
 {
     pthread_mutex_lock(&c->mu);
-    entry *e = lookup(c, key, NULL);
-    long r = -1;
-    if (e && e->len <= cap) {
-        memcpy(out, e->blob, e->len);
-        lru_unlink(c, e);
-        lru_push_front(c, e);
-        r = (long)e->len;
-        c->st.hits++;
-    } else {
-        c->st.misses++;
-    }
+    long r = out ? get_locked(c, key, out, cap, NULL) : -1;
     pthread_mutex_unlock(&c->mu);
     return r;
 }
@@ -213,17 +223,7 @@ long gsd_cache_get_alloc(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], uint8_t
 {
     *out = NULL;
     pthread_mutex_lock(&c->mu);
-    entry *e = lookup(c, key, NULL);
-    long r = -1;
-    if (e && (*out = malloc(e->len ? e->len : 1)) != NULL) {
-        memcpy(*out, e->blob, e->len);
-        lru_unlink(c, e);
-        lru_push_front(c, e);
-        r = (long)e->len;
-        c->st.hits++;
-    } else {
-        c->st.misses++;
-    }
+    long r = get_locked(c, key, NULL, 0, out);
     pthread_mutex_unlock(&c->mu);
     return r;
 }

@@ -55,6 +55,41 @@ static void test_lru(void)
     gsd_cache_destroy(c);
 }
 
+/* A sized cache (fine-tuned blocks): blobs over 64 KiB, copies made by
+ * get_alloc, contains leaving the LRU order alone. */
+static void test_sized(void)
+{
+    size_t big = 3u << 20;
+    gsd_cache *c = gsd_cache_create_sized(8u << 20, 4u << 20);
+    uint8_t *blob = malloc(big), *copy = NULL, k[16];
+    for (size_t i = 0; i < big; i++)
+        blob[i] = (uint8_t)(i * 7);
+    key_of(1, k);
+    CHECK(gsd_cache_put(c, k, blob, big) == 0);
+    CHECK(gsd_cache_contains(c, k) == 1);
+    CHECK(gsd_cache_get_alloc(c, k, &copy) == (long)big && copy && !memcmp(copy, blob, big));
+    free(copy);
+    key_of(2, k);
+    CHECK(gsd_cache_contains(c, k) == 0);
+    CHECK(gsd_cache_get_alloc(c, k, &copy) == -1 && copy == NULL);
+    CHECK(gsd_cache_put(c, k, blob, big) == 0);
+    /* contains() on key 1 must not make it recent: a third blob evicts it. */
+    key_of(1, k);
+    CHECK(gsd_cache_contains(c, k) == 1);
+    key_of(3, k);
+    CHECK(gsd_cache_put(c, k, blob, big) == 0);
+    key_of(1, k);
+    CHECK(gsd_cache_contains(c, k) == 0);
+    key_of(2, k);
+    CHECK(gsd_cache_contains(c, k) == 1);
+    /* Over the sized limit: refused. */
+    uint8_t *huge = calloc(1, (4u << 20) + 1);
+    CHECK(gsd_cache_put(c, k, huge, (4u << 20) + 1) == -1);
+    free(huge);
+    free(blob);
+    gsd_cache_destroy(c);
+}
+
 static void test_many(void)
 {
     gsd_cache *c = gsd_cache_create(64u << 20);
@@ -147,6 +182,7 @@ static void test_persist(void)
 int main(void)
 {
     test_lru();
+    test_sized();
     test_many();
     test_persist();
     GS_TEST_END();

@@ -9,43 +9,22 @@ dropping them all.
 usage: test_daemon_finetune.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import os
 import sys
-import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
 from daemon_util import Checks, Daemon  # noqa: E402
 from model_fixture import faces, tiny_model  # noqa: E402
+from client_checks import expect_error, wait_ready  # noqa: E402
 import gazesplat_client as gc  # noqa: E402
 
 FAST = 3   # fit iterations
 STEPS = 4  # fine-tuning steps
 
 
-def wait_ready(t, addr, timeout=60):
-    end = time.time() + timeout
-    while time.time() < end:
-        with gc.Client(addr) as c:
-            h = c.health()
-        if h.state != gc.pb.Health.LOADING:
-            t.check(h.state == gc.pb.Health.READY, "health %s: %s" % (h.state, h.detail))
-            return h
-        time.sleep(0.05)
-    t.check(False, "model never loaded")
-    return None
-
-
-def expect_error(t, fn, code, what, text=None):
-    try:
-        r = fn()
-        if hasattr(r, "__next__"):
-            list(r)
-        t.check(False, "%s: no error" % what)
-    except gc.GazesplatError as e:
-        t.check(e.code == code, "%s: got %s (%s) want %s" % (what, e.name, e.message,
-                                                          gc.pb.ErrorCode.Name(code)))
-        if text:
-            t.check(text in e.message, "%s: message '%s' lacks '%s'" % (what, e.message, text))
+def refused(t, fn, code, what, text=None):
+    e = expect_error(t, fn, code, what, text)
+    if e:
         print("refused (%s): %s" % (what, e.message))
 
 
@@ -121,15 +100,15 @@ def serve(t, addr, imgs, state):
                 % (c.stats()["tuned_swaps"] - st0["tuned_swaps"]))
 
         # Bad requests: answered with a reason, the server unharmed.
-        expect_error(t, lambda: c.fit(imgs[0], finetune_steps=51), gc.pb.ERR_INVALID_ARGUMENT,
+        refused(t, lambda: c.fit(imgs[0], finetune_steps=51), gc.pb.ERR_INVALID_ARGUMENT,
                      "steps over max_finetune_steps", "max_finetune_steps")
-        expect_error(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_parts="nose"),
+        refused(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_parts="nose"),
                      gc.pb.ERR_INVALID_ARGUMENT, "unknown part", "nose")
-        expect_error(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_parts="face,"),
+        refused(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_parts="face,"),
                      gc.pb.ERR_INVALID_ARGUMENT, "empty part")
-        expect_error(t, lambda: c.fit(imgs[0], finetune_parts="face"), gc.pb.ERR_INVALID_ARGUMENT,
+        refused(t, lambda: c.fit(imgs[0], finetune_parts="face"), gc.pb.ERR_INVALID_ARGUMENT,
                      "parts without steps")
-        expect_error(t, lambda: c.redirect([(0, 0)], subject=k0, finetune_steps=2),
+        refused(t, lambda: c.redirect([(0, 0)], subject=k0, finetune_steps=2),
                      gc.pb.ERR_INVALID_ARGUMENT, "fine-tuning a subject by key")
         t.check(c.health().state == gc.pb.Health.READY, "still READY")
         return k0, kp, key1, r.subject_key, first
@@ -178,12 +157,12 @@ def main():
                     % c.stats()["tuned_entries"])
             t.check(len(tuned_files(state)) == 1, "files pruned to the kept block: %s" % tuned_files(state))
             t.check(raw(c, k2, (0, 10)) is not None, "the newest fine-tuned subject renders")
-            expect_error(t, lambda: raw(c, k0), gc.pb.ERR_UNKNOWN_SUBJECT, "evicted block", "fit it again")
+            refused(t, lambda: raw(c, k0), gc.pb.ERR_UNKNOWN_SUBJECT, "evicted block", "fit it again")
             t.check(raw(c, kp) == first[kp], "plain subject unaffected")
             # A new fine-tune evicts the kept one in turn.
             r = c.fit(imgs[1], max_iters=FAST, finetune_steps=2)
             t.check(r.finetuned, "fine-tune within the budget")
-            expect_error(t, lambda: raw(c, k2, (0, 10)), gc.pb.ERR_UNKNOWN_SUBJECT, "evicted by a new block")
+            refused(t, lambda: raw(c, k2, (0, 10)), gc.pb.ERR_UNKNOWN_SUBJECT, "evicted by a new block")
             t.check(len(tuned_files(state)) == 1, "one block file: %s" % tuned_files(state))
             t.check(c.stats()["tuned_evictions"] >= 1, "evictions counted")
         t.check(d.stop() == 0, "clean exit")
@@ -193,7 +172,7 @@ def main():
         addr = "unix:" + d.sock
         wait_ready(t, addr)
         with gc.Client(addr) as c:
-            expect_error(t, lambda: raw(c, k1), gc.pb.ERR_UNKNOWN_SUBJECT, "fine-tuned subject of another model")
+            refused(t, lambda: raw(c, k1), gc.pb.ERR_UNKNOWN_SUBJECT, "fine-tuned subject of another model")
             t.check(c.stats()["tuned_entries"] == 0, "no blocks for another model")
         t.check(tuned_files(state) == [], "block files removed for another model: %s" % tuned_files(state))
     finally:

@@ -16,6 +16,7 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
 from daemon_util import Checks, Daemon  # noqa: E402
 from model_fixture import faces, tiny_model  # noqa: E402
+from client_checks import expect_error, wait_ready  # noqa: E402
 import gazesplat_client as gc  # noqa: E402
 
 FAST = 3  # fit iterations: enough to exercise the path, fast on 2 cores
@@ -30,30 +31,6 @@ def bomb_png(w, h):
     ihdr = struct.pack(">IIBBBBB", w, h, 8, 2, 0, 0, 0)
     return (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr) +
             png_chunk(b"IDAT", zlib.compress(b"\0" * 64)) + png_chunk(b"IEND", b""))
-
-
-def wait_ready(t, addr, timeout=30):
-    end = time.time() + timeout
-    while time.time() < end:
-        with gc.Client(addr) as c:
-            h = c.health()
-        if h.state != gc.pb.Health.LOADING:
-            t.check(h.state == gc.pb.Health.READY, "health %s: %s" % (h.state, h.detail))
-            return h
-        time.sleep(0.05)
-    t.check(False, "model never loaded")
-    return None
-
-
-def expect_error(t, fn, code, what):
-    try:
-        r = fn()
-        if hasattr(r, "__next__"):
-            list(r)
-        t.check(False, "%s: no error" % what)
-    except gc.GazesplatError as e:
-        t.check(e.code == code, "%s: got %s (%s) want %s" % (what, e.name, e.message,
-                                                          gc.pb.ErrorCode.Name(code)))
 
 
 def test_fit_and_redirect(t, addr, imgs, size):

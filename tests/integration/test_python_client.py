@@ -17,14 +17,7 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
 from daemon_util import Checks, Daemon  # noqa: E402
 import gazesplat_client as gc  # noqa: E402
-
-
-def expect_error(t, fn, code, what):
-    try:
-        fn()
-        t.check(False, "%s: no error" % what)
-    except gc.GazesplatError as e:
-        t.check(e.code == code, "%s: got %s want %s" % (what, e.name, gc.pb.ErrorCode.Name(code)))
+from client_checks import expect_error  # noqa: E402
 
 
 def feed_fifo(path, data):

@@ -85,4 +85,21 @@ static inline int held_out_face(int S, uint64_t index, gs_synth_sample *smp,
     int rc = gs_synth_sample_alloc(smp, S, S, err);
     return rc ? rc : gs_synth_gen_sample(&g, index, NULL, smp, err);
 }
+
+/* held_out_face, then a fit of it (iters iterations, its true head pose)
+ * through c into *sub. */
+static inline int fit_held_out(gs_model_ctx *c, int S, uint64_t index, int iters,
+                               gs_synth_sample *smp, gs_subject *sub, gs_error *err)
+{
+    int rc = held_out_face(S, index, smp, err);
+    if (rc)
+        return rc;
+    gs_fit_options fo;
+    gs_fit_options_default(&fo);
+    fo.max_iters = iters;
+    fo.known_head = 1;
+    memcpy(fo.head_R, smp->labels.head_R, sizeof fo.head_R);
+    memcpy(fo.head_t, smp->labels.head_t, sizeof fo.head_t);
+    return gs_model_fit(c, NULL, smp->rgb, smp->stride, &fo, sub, NULL, err);
+}
 #endif

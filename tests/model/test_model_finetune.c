@@ -52,17 +52,9 @@ int main(void)
 
     /* A held-out face, fitted with its true head pose. */
     gs_synth_sample smp;
-    CHECK(held_out_face(S, 7, &smp, &err) == GS_OK);
-    gs_fit_options fo;
-    gs_fit_options_default(&fo);
-    fo.max_iters = 6;
-    fo.known_head = 1;
-    memcpy(fo.head_R, smp.labels.head_R, sizeof fo.head_R);
-    memcpy(fo.head_t, smp.labels.head_t, sizeof fo.head_t);
     gs_model_ctx *c = gs_model_ctx_create(m);
     gs_subject sub;
-    CHECK_MSG(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &sub, NULL, &err) == GS_OK,
-              "%s", err.msg);
+    CHECK_MSG(fit_held_out(c, S, 7, 6, &smp, &sub, &err) == GS_OK, "%s", err.msg);
 
     /* A clone holds the same bytes and renders the same image. */
     gs_model *ft = NULL;

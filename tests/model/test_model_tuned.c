@@ -79,15 +79,8 @@ int main(void)
     gs_view view[2];
     gs_model_ctx *c = gs_model_ctx_create(m);
     for (int k = 0; k < 2; k++) {
-        CHECK(held_out_face(S, 7 + 4 * (uint64_t)k, &smp[k], &err) == GS_OK);
-        gs_fit_options fo;
-        gs_fit_options_default(&fo);
-        fo.max_iters = 5;
-        fo.known_head = 1;
-        memcpy(fo.head_R, smp[k].labels.head_R, sizeof fo.head_R);
-        memcpy(fo.head_t, smp[k].labels.head_t, sizeof fo.head_t);
-        CHECK_MSG(gs_model_fit(c, NULL, smp[k].rgb, smp[k].stride, &fo, &sub[k], NULL, &err) ==
-                      GS_OK, "%s", err.msg);
+        CHECK_MSG(fit_held_out(c, S, 7 + 4 * (uint64_t)k, 5, &smp[k], &sub[k], &err) == GS_OK, "%s",
+                  err.msg);
         memset(&view[k], 0, sizeof view[k]);
         view[k].gaze_pitch = sub[k].gaze_pitch + 0.1;
         view[k].gaze_yaw = sub[k].gaze_yaw - 0.2;
