@@ -133,7 +133,7 @@ int cli_parse_size(const char *s, int max, int *w, int *h)
 }
 
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
-                       gs_finetune_options *fo)
+                       const char *plateau, gs_finetune_options *fo)
 {
     gs_finetune_options_default(fo);
     fo->iters = 0;
@@ -152,7 +152,14 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
             return cli_usage_error(cmd, "--finetune-lr: want a rate in (0, 1]");
         fo->lr = x;
     }
-    if ((parts || lr) && !n)
-        return cli_usage_error(cmd, "--finetune-parts and --finetune-lr go with --finetune N");
+    if (plateau) {
+        float x;
+        if (cli_parse_floats(plateau, &x, 1) || !(x > 0 && x < 1))
+            return cli_usage_error(cmd, "--finetune-plateau: want a fraction in (0, 1)");
+        fo->plateau_rel = x;
+    }
+    if ((parts || lr || plateau) && !n)
+        return cli_usage_error(cmd, "--finetune-parts, --finetune-lr and --finetune-plateau go "
+                               "with --finetune N");
     return CLI_OK;
 }

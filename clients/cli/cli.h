@@ -65,12 +65,12 @@ int cli_parse_long(const char *s, long lo, long hi, long *out);
 /* "WxH", each in [1, max]. Returns 0 or -1. */
 int cli_parse_size(const char *s, int max, int *w, int *h);
 
-/* --finetune N, --finetune-parts LIST, --finetune-lr X (any may be NULL)
- * into fo: fo->iters 0 when N is absent. Parts and rate without N are a
- * usage error. Returns CLI_OK or CLI_USAGE (reported). */
+/* --finetune N, --finetune-parts LIST, --finetune-lr X, --finetune-plateau
+ * R (any may be NULL) into fo: fo->iters 0 when N is absent. The others
+ * without N are a usage error. Returns CLI_OK or CLI_USAGE (reported). */
 struct gs_finetune_options;
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
-                       struct gs_finetune_options *fo);
+                       const char *plateau, struct gs_finetune_options *fo);
 
 /* Demo scene (demo_head.c): a stylised head, see cmd_scene.c. */
 struct gs_ply_scene;

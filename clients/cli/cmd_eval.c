@@ -741,7 +741,7 @@ static int run_eval(int argc, char **argv)
                                "(0, 1]; got '%s'", o[O_FSCALE].value);
     ev.ro.feature_scale = fscale;
     ev.ro.full = o[O_FULL].value != NULL;
-    if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value,
+    if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
                                  &ev.fo)))
         return rc;
     ev.ft_eye_w = 1.0;

@@ -1,11 +1,13 @@
 /* gazesplat fit / redirect: fit a subject to a normalized face image and
  * render it at other gazes. (Photos go through face detection and
  * normalization first; see docs/face.md.) */
+#define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 
 #include "cli.h"
 #include "gazesplat/face.h"
@@ -23,7 +25,7 @@ const cli_command cli_fit_command = {
     "usage: gazesplat fit --model M --image FACE.png --out SUBJECT.bin\n"
     "                     [--gaze-deg P,Y] [--iters N] [--time S]\n"
     "                     [--finetune N [--finetune-parts LIST]\n"
-    "                      [--finetune-lr X]]\n"
+    "                      [--finetune-lr X] [--finetune-plateau R]]\n"
     "\n"
     "  --model FILE     a model file (gazesplat train)\n"
     "  --image FILE     a normalized face image (PNG/JPEG) of the model's\n"
@@ -41,6 +43,9 @@ const cli_command cli_fit_command = {
     "                   default: face Gaussians' colour and features), eye,\n"
     "                   renderer, mlp, geometry\n"
     "  --finetune-lr X  Adam's base rate (default 0.001)\n"
+    "  --finetune-plateau R  stop fine-tuning when the loss improved by less\n"
+    "                   than the fraction R over 20 steps (default: never)\n"
+    "                   (--time S bounds the fit and the fine-tuning together)\n"
     "  --out FILE       the fitted subject (binary, gs_subject_encode),\n"
     "                   followed by the tuned block with --finetune\n"
     "                   (gs_model_tuned_encode; 2.9 MB for face at cpu)\n"
@@ -55,7 +60,8 @@ const cli_command cli_redirect_command = {
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
     "                          [--head-deg P,Y] [--index I] [--out-norm]\n"
     "                          [--iters N] [--finetune N\n"
-    "                          [--finetune-parts LIST] [--finetune-lr X]]\n"
+    "                          [--finetune-parts LIST] [--finetune-lr X]\n"
+    "                          [--finetune-plateau R]]\n"
     "\n"
     "  --image IMG      a normalized face of the model's size, fitted first;\n"
     "                   or any photo: its face (--index I, largest first) is\n"
@@ -85,6 +91,13 @@ static int load_model(const cli_command *cmd, const char *path, gs_model **m)
     return CLI_OK;
 }
 
+static double now_seconds(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
 /* After a fit: a copy of m fine-tuned on the fitted image (ft->iters
  * steps), reported on stderr. */
 static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
@@ -105,11 +118,13 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
         return cli_fail(cmd, "finetune: %s", err.msg);
     }
     fprintf(stderr,
-            "gazesplat %s: fine-tuned %s (%zu floats) for %d steps in %.2f s: "
+            "gazesplat %s: fine-tuned %s (%zu floats) for %d steps in %.2f s%s: "
             "PSNR %.2f -> %.2f dB\n",
             cmd->name, gs_finetune_parts_name(fo.parts ? fo.parts : GS_FT_DEFAULT, parts,
                                          sizeof parts),
-            r.params_tuned, r.iters, r.seconds, r.psnr_first, r.psnr_best);
+            r.params_tuned, r.iters, r.seconds,
+            r.stopped_on_plateau ? " (plateau)" : r.stopped_on_time ? " (time)" : "",
+            r.psnr_first, r.psnr_best);
     return CLI_OK;
 }
 
@@ -120,6 +135,7 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
                      long iters, double budget, const gs_finetune_options *ft,
                      gs_subject *sub, gs_model **tuned)
 {
+    double t_start = now_seconds();
     *tuned = NULL;
     gs_model_info info;
     gs_model_get_info(m, &info);
@@ -177,8 +193,15 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
                     sub->gaze_yaw / DEG);
         gs_model_ctx_destroy(c);
     }
-    if (!rc && ft->iters > 0)
-        rc = finetune_copy(cmd, m, pool, sub, img.data, img.stride, w, ft, tuned);
+    if (!rc && ft->iters > 0) {
+        /* --time bounds the fit and the fine-tuning together. */
+        gs_finetune_options f2 = *ft;
+        if (budget > 0) {
+            f2.time_budget_s = budget - (now_seconds() - t_start);
+            f2.time_budget_s = f2.time_budget_s > 1e-3 ? f2.time_budget_s : 1e-3;
+        }
+        rc = finetune_copy(cmd, m, pool, sub, img.data, img.stride, w, &f2, tuned);
+    }
     free(w);
     gs_io_image_free(&img);
     gs_io_image_free(&mk);
@@ -188,12 +211,13 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
 static int run_fit(int argc, char **argv)
 {
     const cli_command *cmd = &cli_fit_command;
-    cli_opt o[10] = {{"--model", 1, NULL},    {"--image", 1, NULL},
+    cli_opt o[11] = {{"--model", 1, NULL},    {"--image", 1, NULL},
                      {"--mask", 1, NULL},     {"--gaze-deg", 1, NULL},
                      {"--iters", 1, NULL},    {"--time", 1, NULL},
                      {"--out", 1, NULL},      {"--finetune", 1, NULL},
-                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 10);
+                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
+                     {"--finetune-plateau", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 11);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -210,7 +234,7 @@ static int run_fit(int argc, char **argv)
                        !(budget > 0 && budget < 1e5)))
         return cli_usage_error(cmd, "--time: want seconds > 0");
     gs_finetune_options ft;
-    if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, &ft)))
+    if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, o[10].value, &ft)))
         return rc;
     gs_model *m = NULL;
     if ((rc = load_model(cmd, o[0].value, &m)))
@@ -442,13 +466,14 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[12] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[13] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
                      {"--iters", 1, NULL},    {"--finetune", 1, NULL},
-                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 12);
+                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
+                     {"--finetune-plateau", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 13);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -486,7 +511,7 @@ static int run_redirect(int argc, char **argv)
     if (o[5].value && cli_parse_floats(o[5].value, head, 2))
         return cli_usage_error(cmd, "--head-deg: want P,Y");
     gs_finetune_options ft;
-    if ((rc = cli_parse_finetune(cmd, o[9].value, o[10].value, o[11].value, &ft)))
+    if ((rc = cli_parse_finetune(cmd, o[9].value, o[10].value, o[11].value, o[12].value, &ft)))
         return rc;
     if (ft.iters > 0 && o[1].value)
         return cli_usage_error(cmd, "--finetune goes with --image (a subject file "

@@ -766,7 +766,8 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     int iters = o.iters > 0 ? o.iters : 50;
     double lr = o.lr > 0 ? o.lr : 1e-3;
     unsigned parts = o.parts ? o.parts : GS_FT_DEFAULT;
-    if (!isfinite(o.lr) || o.lr > 1.0 || iters > 100000 ||
+    if (!isfinite(o.lr) || o.lr > 1.0 || iters > 100000 || !isfinite(o.plateau_rel) ||
+        isnan(o.time_budget_s) ||
         (parts & ~0x1fu))
         return gs_error_set(err, GS_ERR_ARG,
                             "finetune: lr %g (want <= 1), iterations %d "
@@ -802,7 +803,8 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     frame_of(s, NULL, &fr);
     double t0 = now_s(), best = INFINITY, first = NAN;
     float psnr_first = NAN, psnr_best = NAN;
-    int it = 0, stopped_on_time = 0;
+    double hist[20];
+    int it = 0, stopped_on_time = 0, plateaued = 0;
     for (; it <= iters; it++) {
         rc = gs_frame_forward(r.c, pool, &fr, GS_STREAM_BOTH, 1, err);
         if (rc)
@@ -827,6 +829,11 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         }
         if (it == iters)
             break; /* the last step's result is measured, not stepped from */
+        hist[it % 20] = loss;
+        if (o.plateau_rel > 0 && it >= 20 && hist[(it + 1) % 20] - loss < o.plateau_rel * loss) {
+            plateaued = 1;
+            break;
+        }
         if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s) {
             stopped_on_time = 1;
             break;
@@ -865,6 +872,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         report->psnr_best = psnr_best;
         report->params_tuned = r.tuned;
         report->stopped_on_time = stopped_on_time;
+        report->stopped_on_plateau = plateaued;
     }
     ft_free(&r);
     free(fs);

@@ -29,6 +29,15 @@ cmp -n "$(size plain.bin)" plain.bin face.bin || fail "the subject part differs 
   --finetune-lr 0.002 --out both.bin 2>/dev/null
 [ "$(size both.bin)" -gt "$(size face.bin)" ] || fail "face,eye block not larger than face"
 
+# Stopping early: on a plateau rule (20 steps), on the shared --time budget.
+"$G" fit --model m.safetensors --image $IMG --iters 2 --finetune 60 --finetune-plateau 0.9 \
+  --out plat.bin 2>plat.err
+grep -q "for 20 steps in .* s (plateau)" plat.err || { cat plat.err; fail "no plateau stop"; }
+"$G" fit --model m.safetensors --image $IMG --iters 2 --time 0.2 --finetune 100000 \
+  --out time.bin 2>time.err
+grep -q "s (time): PSNR" time.err || { cat time.err; fail "no time stop"; }
+[ "$(size time.bin)" -gt 100000 ] || fail "time-bounded fine-tune wrote no block"
+
 # Redirect with it: differs from the plain subject, equals fit+tune inline.
 "$G" redirect --model m.safetensors --subject plain.bin --gaze-deg "0,0;10,-15" --out o_plain >/dev/null 2>&1
 "$G" redirect --model m.safetensors --subject face.bin --gaze-deg "0,0;10,-15" --out o_face >/dev/null 2>r.err
@@ -71,6 +80,8 @@ usage() { # description, then the command's arguments
 usage "parts without N" fit --model m.safetensors --image $IMG --finetune-parts face --out x.bin
 usage "zero steps" fit --model m.safetensors --image $IMG --finetune 0 --out x.bin
 usage "unknown part" fit --model m.safetensors --image $IMG --finetune 2 --finetune-parts nose --out x.bin
+usage "plateau out of range" fit --model m.safetensors --image $IMG --finetune 2 --finetune-plateau 2 --out x.bin
+usage "plateau without N" fit --model m.safetensors --image $IMG --finetune-plateau 0.1 --out x.bin
 usage "rate out of range" fit --model m.safetensors --image $IMG --finetune 2 --finetune-lr 3 --out x.bin
 usage "finetune with a subject" redirect --model m.safetensors --subject face.bin --finetune 2 \
   --gaze-deg "0,0" --out x

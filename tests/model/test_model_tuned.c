@@ -212,6 +212,18 @@ int main(void)
           GS_OK);
     CHECK(fr.stopped_on_time == 1 && fr.iters == 0);
     CHECK(same_params(fresh, m));
+    /* A plateau rule that no 20 steps can pass (a 100 % gain) stops at 20. */
+    o.time_budget_s = 0;
+    o.iters = 30;
+    o.plateau_rel = 1.0;
+    CHECK(gs_model_finetune(fresh, NULL, &sub[0], smp[0].rgb, smp[0].stride, &o, &fr, &err) ==
+          GS_OK);
+    CHECK_MSG(fr.stopped_on_plateau == 1 && fr.iters == 20 && !fr.stopped_on_time,
+              "plateau: %d steps, flag %d", fr.iters, fr.stopped_on_plateau);
+    o.plateau_rel = NAN;
+    CHECK(gs_model_finetune(fresh, NULL, &sub[0], smp[0].rgb, smp[0].stride, &o, &fr, &err) ==
+          GS_ERR_ARG);
+    o.plateau_rel = 0;
     gs_model_destroy(fresh);
 
     /* Part names. */

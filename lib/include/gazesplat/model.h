@@ -228,6 +228,9 @@ typedef struct gs_finetune_options {
     const uint8_t *mask;  /* as gs_fit_options.mask */
     double time_budget_s; /* > 0: stop after the step that passes it,
                              keeping the best iterate; <= 0: none */
+    double plateau_rel;   /* > 0: stop when the loss improved by less than
+                             this fraction over 20 steps (the fit's rule);
+                             <= 0: run every step (the default) */
 } gs_finetune_options;
 void gs_finetune_options_default(gs_finetune_options *o);
 
@@ -244,6 +247,7 @@ typedef struct gs_finetune_report {
     float psnr_first, psnr_best; /* on the weighted region, dB */
     size_t params_tuned;  /* floats adjusted */
     int stopped_on_time;  /* the time budget ended it before iters */
+    int stopped_on_plateau; /* plateau_rel ended it before iters */
 } gs_finetune_report;
 
 /* Fine-tunes the chosen parts of m (a clone: gs_model_clone) so that it
