@@ -191,20 +191,10 @@ int gsd_cache_put(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], const void *bl
     return r;
 }
 
-/* Copies key's blob out (into out, up to cap bytes, or into a malloc'd
- * copy when out is NULL: *copy) and marks it recently used. */
-static long get_locked(gsd_cache *c, const uint8_t *key, void *out, size_t cap, uint8_t **copy)
+/* Copies e's blob to dst and marks it recently used (a hit). */
+static long take_locked(gsd_cache *c, entry *e, void *dst)
 {
-    entry *e = lookup(c, key, NULL);
-    if (e && !out && (*copy = malloc(e->len ? e->len : 1)) != NULL) {
-        out = *copy;
-        cap = e->len;
-    }
-    if (!e || !out || e->len > cap) {
-        c->st.misses++;
-        return -1;
-    }
-    memcpy(out, e->blob, e->len);
+    memcpy(dst, e->blob, e->len);
     lru_unlink(c, e);
     lru_push_front(c, e);
     c->st.hits++;
@@ -214,7 +204,12 @@ static long get_locked(gsd_cache *c, const uint8_t *key, void *out, size_t cap, 
 long gsd_cache_get(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], void *out, size_t cap)
 {
     pthread_mutex_lock(&c->mu);
-    long r = out ? get_locked(c, key, out, cap, NULL) : -1;
+    entry *e = lookup(c, key, NULL);
+    long r = -1;
+    if (e && out && e->len <= cap)
+        r = take_locked(c, e, out);
+    else
+        c->st.misses++;
     pthread_mutex_unlock(&c->mu);
     return r;
 }
@@ -223,7 +218,12 @@ long gsd_cache_get_alloc(gsd_cache *c, const uint8_t key[GSD_CACHE_KEY], uint8_t
 {
     *out = NULL;
     pthread_mutex_lock(&c->mu);
-    long r = get_locked(c, key, NULL, 0, out);
+    entry *e = lookup(c, key, NULL);
+    long r = -1;
+    if (e && (*out = malloc(e->len ? e->len : 1)) != NULL)
+        r = take_locked(c, e, *out);
+    else
+        c->st.misses++;
     pthread_mutex_unlock(&c->mu);
     return r;
 }
