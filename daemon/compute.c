@@ -1063,6 +1063,11 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest
     if (key_zero(j->key))
         content_key(&face, fr, ft, j->key);
     o->cached = cache_lookup(s, j->key, subj, &o->tuned, &o->sum) == 0;
+    if (o->cached && o->tuned && !gsd_cache_contains(s->tuned, j->key)) {
+        /* Its tuned tensors were evicted: the subject cannot render, so
+         * this FIT runs again (the error REDIRECT gives says so). */
+        o->cached = o->tuned = 0;
+    }
     if (o->cached) {
         gs_io_image_free(&face);
         return 0;

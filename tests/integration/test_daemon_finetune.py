@@ -165,6 +165,12 @@ def main():
             refused(t, lambda: raw(c, k2, (0, 10)), gc.pb.ERR_UNKNOWN_SUBJECT, "evicted by a new block")
             t.check(len(tuned_files(state)) == 1, "one block file: %s" % tuned_files(state))
             t.check(c.stats()["tuned_evictions"] >= 1, "evictions counted")
+            # Fitting an evicted subject again runs the fit and the
+            # fine-tune anew (not a cache hit) and gives the same renders.
+            r = c.fit(imgs[0], max_iters=FAST, finetune_steps=STEPS)
+            t.check(r.subject_key == k0 and not r.cached and r.finetuned and r.finetune_steps == STEPS,
+                    "an evicted subject is fitted again: %s" % r)
+            t.check(raw(c, k0) == first[k0], "the refitted subject renders the same bytes")
         t.check(d.stop() == 0, "clean exit")
 
         # Another model: no block applies; the files go.
