@@ -332,25 +332,19 @@ static int write_all(int fd, const uint8_t *p, size_t n)
     return 0;
 }
 
-int gsd_cache_save(gsd_cache *c, const char *dir, const char *tag, char *msg, size_t cap)
+int gsd_file_write_atomic(const char *dir, const char *name, const uint8_t *data, size_t n,
+                          char *msg, size_t cap)
 {
-    size_t n;
-    uint8_t *buf = serialize(c, tag, &n);
-    if (!buf) {
-        snprintf(msg, cap, "out of memory serializing %zu bytes", n);
-        return -1;
-    }
     char path[4096], tmp[4200];
-    snprintf(path, sizeof path, "%s/%s", dir, GSD_CACHE_FILE);
+    snprintf(path, sizeof path, "%s/%s", dir, name);
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-    int rc = fd < 0 || write_all(fd, buf, n) != 0 || fsync(fd) != 0 ? -1 : 0;
+    int rc = fd < 0 || write_all(fd, data, n) != 0 || fsync(fd) != 0 ? -1 : 0;
     int e = errno;
     if (fd >= 0 && close(fd) != 0 && rc == 0) {
         rc = -1;
         e = errno;
     }
-    free(buf);
     if (rc == 0 && rename(tmp, path) != 0) {
         rc = -1;
         e = errno;
@@ -369,7 +363,20 @@ int gsd_cache_save(gsd_cache *c, const char *dir, const char *tag, char *msg, si
     return 0;
 }
 
-static uint8_t *read_file(const char *path, size_t max, size_t *len, int *missing)
+int gsd_cache_save(gsd_cache *c, const char *dir, const char *tag, char *msg, size_t cap)
+{
+    size_t n;
+    uint8_t *buf = serialize(c, tag, &n);
+    if (!buf) {
+        snprintf(msg, cap, "out of memory serializing %zu bytes", n);
+        return -1;
+    }
+    int rc = gsd_file_write_atomic(dir, GSD_CACHE_FILE, buf, n, msg, cap);
+    free(buf);
+    return rc;
+}
+
+uint8_t *gsd_file_read(const char *path, size_t max, size_t *len, int *missing)
 {
     *missing = 0;
     int fd = open(path, O_RDONLY | O_CLOEXEC);
@@ -449,7 +456,7 @@ int gsd_cache_load(gsd_cache *c, const char *dir, const char *tag, char *msg, si
     size_t n = 0;
     int missing;
     /* A file can hold at most what the budget allows, plus slack. */
-    uint8_t *b = read_file(path, c->budget * 2 + 4096, &n, &missing);
+    uint8_t *b = gsd_file_read(path, c->budget * 2 + 4096, &n, &missing);
     if (!b) {
         snprintf(msg, cap, missing ? "no cache file" : "cannot read %s (or over the budget)", path);
         return missing ? 0 : 1;

@@ -55,6 +55,14 @@ int gsd_cache_save(gsd_cache *c, const char *dir, const char *tag, char *msg, si
  * message (returns 1). Returns -1 only when out of memory. */
 int gsd_cache_load(gsd_cache *c, const char *dir, const char *tag, char *msg, size_t cap);
 
+/* State-directory files. Writes dir/name atomically: a temporary file,
+ * fsync, rename, fsync of the directory; 0, or -1 with a message. */
+int gsd_file_write_atomic(const char *dir, const char *name, const uint8_t *data, size_t n,
+                          char *msg, size_t cap);
+/* Reads a file whole (malloc'd; *len its size) when it is at most max
+ * bytes; NULL otherwise, *missing telling a file that does not exist. */
+uint8_t *gsd_file_read(const char *path, size_t max, size_t *len, int *missing);
+
 /* Changes the budget (evicting if needed). */
 void gsd_cache_set_budget(gsd_cache *c, size_t budget_bytes);
 

@@ -648,7 +648,8 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
  * "GSTR" and the checksum of its tuned block (gs_model_tuned_encode's last
  * 8 bytes) after it. The blocks live in s->tuned (budget tuned_cache_mb)
  * and, with a state directory, one file each (tuned-<key hex>.gsft, written
- * atomically), kept while the block is in s->tuned. */
+ * atomically), kept while the block is in s->tuned: the files only bring
+ * the blocks back at start (tuned_restore). */
 
 #define TUNED_REF_MAGIC 0x52545347u /* "GSTR" */
 #define TUNED_FILE_PREFIX "tuned-"
@@ -691,11 +692,19 @@ static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj, 
     return gs_subject_decode(blob, slen, subj, NULL) == GS_OK ? 0 : -1;
 }
 
-static void tuned_path(const gsd_server *s, const uint8_t key[16], char *out, size_t cap)
+/* The block file's name in the state directory, and its path. */
+static void tuned_name(const uint8_t key[16], char out[64])
 {
     char hex[33];
     gs_frame_key_hex(key, hex);
-    snprintf(out, cap, "%s/" TUNED_FILE_PREFIX "%s" TUNED_FILE_SUFFIX, s->state_dir, hex);
+    snprintf(out, 64, TUNED_FILE_PREFIX "%s" TUNED_FILE_SUFFIX, hex);
+}
+
+static void tuned_path(const gsd_server *s, const uint8_t key[16], char *out, size_t cap)
+{
+    char name[64];
+    tuned_name(key, name);
+    snprintf(out, cap, "%s/%s", s->state_dir, name);
 }
 
 /* The key of a block file's name, or -1 for other names. */
@@ -735,35 +744,6 @@ static void tuned_sweep_locked(gsd_server *s)
     closedir(d);
 }
 
-static int write_file_atomic(const gsd_server *s, const char *path, const uint8_t *p, size_t n)
-{
-    char tmp[GSD_STR_MAX + 80];
-    snprintf(tmp, sizeof tmp, "%s.tmp", path);
-    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
-    if (fd < 0)
-        return -1;
-    int bad = 0;
-    for (size_t o = 0; o < n && !bad;) {
-        ssize_t w = write(fd, p + o, n - o);
-        if (w < 0 && errno == EINTR)
-            continue;
-        bad = w <= 0;
-        o += w > 0 ? (size_t)w : 0;
-    }
-    bad |= fsync(fd) != 0;
-    bad |= close(fd) != 0;
-    if (bad || rename(tmp, path) != 0) {
-        unlink(tmp);
-        return -1;
-    }
-    int dfd = open(s->state_dir, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-    if (dfd >= 0) {
-        fsync(dfd);
-        close(dfd);
-    }
-    return 0;
-}
-
 /* Keeps a subject's block: in s->tuned, and on disk with a state
  * directory (a failure there is logged and counted: the block still
  * serves until evicted or a restart). */
@@ -777,60 +757,16 @@ static int tuned_store(gsd_server *s, const uint8_t key[16], const uint8_t *blk,
     }
     if (!s->state_dir[0])
         return 0;
-    char path[GSD_STR_MAX + 64];
-    tuned_path(s, key, path, sizeof path);
+    char name[64], err[400];
+    tuned_name(key, name);
     pthread_mutex_lock(&s->persist_mu);
-    int r = write_file_atomic(s, path, blk, len);
+    int r = gsd_file_write_atomic(s->state_dir, name, blk, len, err, sizeof err);
     tuned_sweep_locked(s);
     pthread_mutex_unlock(&s->persist_mu);
     atomic_fetch_add(r == 0 ? &s->ctr.tuned_saves : &s->ctr.tuned_save_failures, 1);
     if (r != 0)
-        LOG_E("tuned block %s: %s", path, strerror(errno));
+        LOG_E("tuned block: %s", err);
     return 0;
-}
-
-static uint8_t *read_small_file(const char *path, size_t max, size_t *n)
-{
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
-    struct stat st;
-    if (fd < 0)
-        return NULL;
-    uint8_t *b = NULL;
-    if (fstat(fd, &st) == 0 && st.st_size > 0 && (size_t)st.st_size <= max &&
-        (b = malloc((size_t)st.st_size)) != NULL) {
-        size_t o = 0;
-        while (o < (size_t)st.st_size) {
-            ssize_t r = read(fd, b + o, (size_t)st.st_size - o);
-            if (r < 0 && errno == EINTR)
-                continue;
-            if (r <= 0)
-                break;
-            o += (size_t)r;
-        }
-        if (o != (size_t)st.st_size) {
-            free(b);
-            b = NULL;
-        }
-        *n = o;
-    }
-    close(fd);
-    return b;
-}
-
-/* A subject's block (malloc'd) from s->tuned, or its file after a miss. */
-static long tuned_fetch(gsd_server *s, const uint8_t key[16], uint8_t **blk)
-{
-    long n = gsd_cache_get_alloc(s->tuned, key, blk);
-    if (n >= 0 || !s->state_dir[0])
-        return n;
-    char path[GSD_STR_MAX + 64];
-    tuned_path(s, key, path, sizeof path);
-    size_t len = 0;
-    *blk = read_small_file(path, (size_t)s->cfg.tuned_cache_mb << 20, &len);
-    if (!*blk)
-        return -1;
-    gsd_cache_put(s->tuned, key, *blk, len);
-    return (long)len;
 }
 
 typedef struct tuned_file {
@@ -876,13 +812,14 @@ static void tuned_restore(gsd_server *s)
     closedir(d);
     if (n)
         qsort(f, n, sizeof *f, by_mtime);
-    size_t kept = 0;
     for (size_t i = 0; i < n; i++) {
         char path[GSD_STR_MAX + 64];
         size_t len = 0;
+        int missing;
         tuned_path(s, f[i].key, path, sizeof path);
-        uint8_t *b = read_small_file(path, (size_t)s->cfg.tuned_cache_mb << 20, &len);
-        kept += b && gsd_cache_put(s->tuned, f[i].key, b, len) == 0;
+        uint8_t *b = gsd_file_read(path, (size_t)s->cfg.tuned_cache_mb << 20, &len, &missing);
+        if (b) /* a block over the budget is refused here and its file swept below */
+            gsd_cache_put(s->tuned, f[i].key, b, len);
         free(b);
     }
     free(f);
@@ -893,7 +830,6 @@ static void tuned_restore(gsd_server *s)
     gsd_cache_stats_get(s->tuned, &st);
     LOG_I("fine-tuned subjects: %llu blocks restored (%llu MiB)", (unsigned long long)st.entries,
           (unsigned long long)(st.bytes >> 20));
-    (void)kept;
 }
 
 static void head_rotation(const Gazesplat__Angles *a, double R[9])
@@ -955,7 +891,7 @@ static int worker_use_tuned(gsd_worker *w, const uint8_t key[16], uint64_t sum, 
     if (i >= 0)
         w->slots[i].has = 0;
     uint8_t *blk = NULL;
-    long n = tuned_fetch(w->srv, key, &blk);
+    long n = gsd_cache_get_alloc(w->srv->tuned, key, &blk);
     char hex[33];
     gs_frame_key_hex(key, hex);
     if (n < 8 || memcmp(blk + n - 8, &sum, 8) != 0) {
