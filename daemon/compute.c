@@ -674,13 +674,9 @@ static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj, 
     *tuned = 0;
     if (n < 12)
         return -1;
-    gs_subject probe;
-    memset(&probe, 0, sizeof probe);
-    uint32_t dim, magic;
-    memcpy(&dim, blob + 8, 4);
-    probe.code_dim = dim >= 1 && dim <= GS_MODEL_MAX_CODE ? (int)dim : 1;
-    size_t slen = gs_subject_encode(&probe, NULL, 0);
-    if ((size_t)n == slen + 12) {
+    uint32_t magic;
+    size_t slen = gs_subject_encoded_len(blob, (size_t)n);
+    if (slen && (size_t)n == slen + 12) {
         memcpy(&magic, blob + slen, 4);
         if (magic != TUNED_REF_MAGIC)
             return -1;

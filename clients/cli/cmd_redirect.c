@@ -312,15 +312,9 @@ static int read_subject(const cli_command *cmd, const char *path, gs_model *m,
         free(buf);
         return cli_fail(cmd, "%s: %s", path, rd ? "read error" : "too large");
     }
-    /* The subject's length follows from its code length (offset 8). */
-    gs_subject probe;
-    memset(&probe, 0, sizeof probe);
-    uint32_t dim = 0;
-    if (n >= 12)
-        memcpy(&dim, buf + 8, 4);
-    probe.code_dim = dim >= 1 && dim <= GS_MODEL_MAX_CODE ? (int)dim : 1;
-    size_t slen = gs_subject_encode(&probe, NULL, 0);
-    if (slen > n)
+    /* A subject, then maybe a tuned block; decode explains a bad header. */
+    size_t slen = gs_subject_encoded_len(buf, n);
+    if (slen == 0 || slen > n)
         slen = n;
     gs_error err = {0, ""};
     int rc = CLI_OK;

@@ -66,6 +66,20 @@ static int all_finite_f(const float *v, int n)
     return 1;
 }
 
+size_t gs_subject_encoded_len(const uint8_t *buf, size_t len)
+{
+    uint32_t dim;
+    if (!buf || len < 12)
+        return 0;
+    memcpy(&dim, buf + 8, 4);
+    if (dim < 1 || dim > GS_MODEL_MAX_CODE)
+        return 0;
+    gs_subject s;
+    memset(&s, 0, sizeof s);
+    s.code_dim = (int)dim;
+    return gs_subject_encode(&s, NULL, 0);
+}
+
 int gs_subject_decode(const uint8_t *buf, size_t len, gs_subject *out,
                       gs_error *err)
 {

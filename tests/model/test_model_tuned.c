@@ -86,6 +86,18 @@ int main(void)
         view[k].gaze_yaw = sub[k].gaze_yaw - 0.2;
     }
 
+    /* A subject file is the subject, then maybe a block: its length comes
+     * from its header whatever follows. */
+    uint8_t enc[GS_SUBJECT_ENCODED_MAX + 16];
+    size_t elen = gs_subject_encode(&sub[0], enc, sizeof enc);
+    memset(enc + elen, 0xab, 16);
+    CHECK(elen > 12 && gs_subject_encoded_len(enc, elen) == elen);
+    CHECK(gs_subject_encoded_len(enc, elen + 16) == elen);
+    CHECK(gs_subject_encoded_len(enc, 11) == 0 && gs_subject_encoded_len(NULL, 100) == 0);
+    uint32_t bad_dim = GS_MODEL_MAX_CODE + 1;
+    memcpy(enc + 8, &bad_dim, 4);
+    CHECK(gs_subject_encoded_len(enc, elen) == 0);
+
     /* Subject 0: the face; subject 1: the face and the eyes. */
     gs_model *ft[2] = {NULL, NULL};
     uint8_t *blk[2] = {NULL, NULL};

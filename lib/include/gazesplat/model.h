@@ -86,6 +86,10 @@ typedef struct gs_subject {
 size_t gs_subject_encode(const gs_subject *s, uint8_t *buf, size_t cap);
 int gs_subject_decode(const uint8_t *buf, size_t len, gs_subject *s,
                       gs_error *err);
+/* The length of the encoded subject that buf starts with (whatever
+ * follows it, such as a tuned block), from its header; 0 when buf is too
+ * short or its code length is out of range (decode then says why). */
+size_t gs_subject_encoded_len(const uint8_t *buf, size_t len);
 
 /* A view to render: gaze in the head frame and head pose in the camera. */
 typedef struct gs_view {
