@@ -1,4 +1,6 @@
-/* Option parsing and strict number parsing for the subcommands. */
+/* Option parsing and strict number parsing for the subcommands, and the
+ * small helpers several of them share. */
+#define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #include <errno.h>
 #include <float.h>
 #include <math.h>
@@ -6,6 +8,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
+#include <time.h>
 
 #include "cli.h"
 #include "gazesplat/model.h"
@@ -162,4 +166,32 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
         return cli_usage_error(cmd, "--finetune-parts, --finetune-lr and --finetune-plateau go "
                                "with --finetune N");
     return CLI_OK;
+}
+
+double cli_now_s(void)
+{
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len)
+{
+    *out = NULL;
+    FILE *f = fopen(path, "rb");
+    struct stat st;
+    if (!f || fstat(fileno(f), &st) != 0 || st.st_size <= 0 || (uint64_t)st.st_size > max) {
+        if (f)
+            fclose(f);
+        return -1;
+    }
+    *len = (size_t)st.st_size;
+    *out = malloc(*len);
+    int ok = *out && fread(*out, 1, *len, f) == *len;
+    fclose(f);
+    if (!ok) {
+        free(*out);
+        *out = NULL;
+    }
+    return ok ? 0 : -1;
 }

@@ -6,6 +6,7 @@
 #define GS_CLI_H
 
 #include <stddef.h>
+#include <stdint.h>
 
 enum { CLI_OK = 0, CLI_FAIL = 1, CLI_USAGE = 2 };
 
@@ -71,6 +72,13 @@ int cli_parse_size(const char *s, int max, int *w, int *h);
 struct gs_finetune_options;
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
                        const char *plateau, struct gs_finetune_options *fo);
+
+/* CLOCK_MONOTONIC in seconds. */
+double cli_now_s(void);
+
+/* Reads a regular file of 1..max bytes whole into *out (malloc'd).
+ * Returns 0, or -1 (missing, empty, too large, unreadable; *out NULL). */
+int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len);
 
 /* Demo scene (demo_head.c): a stylised head, see cmd_scene.c. */
 struct gs_ply_scene;

@@ -94,25 +94,6 @@ static int print_busy(const gs_client_frame *f)
     return CLI_FAIL;
 }
 
-/* Reads a file whole (images). */
-static int slurp(const char *path, uint8_t **out, size_t *len)
-{
-    FILE *f = fopen(path, "rb");
-    struct stat st;
-    if (!f || fstat(fileno(f), &st) != 0 || st.st_size <= 0 || st.st_size > (256 << 20)) {
-        if (f)
-            fclose(f);
-        return -1;
-    }
-    *len = (size_t)st.st_size;
-    *out = malloc(*len);
-    int ok = *out && fread(*out, 1, *len, f) == *len;
-    fclose(f);
-    if (!ok)
-        free(*out);
-    return ok ? 0 : -1;
-}
-
 static int parse_pair(const char *s, Gazesplat__Angles *a)
 {
     float v[2];
@@ -297,7 +278,7 @@ static int do_live_status(gs_client *c, int timeout)
 static int load_image(const cli_command *cmd, const cli_opt *o, Gazesplat__Image *img, uint8_t **data)
 {
     size_t len;
-    if (slurp(o[O_IMAGE].value, data, &len) != 0)
+    if (cli_read_file(o[O_IMAGE].value, (size_t)256 << 20, data, &len) != 0)
         return cli_fail(cmd, "cannot read %s", o[O_IMAGE].value);
     int fmt = gs_io_format_sniff(*data, len);
     if (!fmt) {

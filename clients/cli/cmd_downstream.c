@@ -67,13 +67,6 @@ typedef struct ds_cli {
     char line[2048];          /* the command as run */
 } ds_cli;
 
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static int make_dir(const char *path)
 {
     struct stat st;
@@ -236,7 +229,7 @@ static int run_all(const ds_cli *d, const gs_model *m, const gs_gaze_net *est,
 {
     const cli_command *cmd = &cli_eval_downstream_command;
     int failed = 0;
-    double t0 = now_s();
+    double t0 = cli_now_s();
     for (int i = 0; i < d->identities; i++) {
         char fit[4300];
         snprintf(fit, sizeof fit, "%s/fits/seed%llu_%05d.bin", d->out,
@@ -261,7 +254,7 @@ static int run_all(const ds_cli *d, const gs_model *m, const gs_gaze_net *est,
                 d->identities, d->o.max_k, res[i].err[d->o.max_k][0],
                 res[i].err[d->o.max_k][1], res[i].err[d->o.max_k][2],
                 res[i].err[0][0], res[i].fit_s, res[i].finetune_s,
-                now_s() - t0);
+                cli_now_s() - t0);
     }
     return failed ? cli_fail(cmd, "%d of %d identities failed", failed,
                              d->identities)

@@ -80,13 +80,6 @@ enum {
     O_TARGETS, O_SEED, O_N
 };
 
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 static int make_pairs(const cli_opt *o)
 {
     const cli_command *cmd = &cli_eval_command;
@@ -240,7 +233,7 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
                    const gs_synth_scene *tscene, double *ms, gs_error *err)
 {
     size_t st = 3 * (size_t)ev->S;
-    double t0 = now_s();
+    double t0 = cli_now_s();
     int rc = GS_OK;
     if (method == EVAL_MODEL) {
         gs_view v = {0};
@@ -257,7 +250,7 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
         for (int y = 0; y < ev->S; y++)
             memcpy(ev->out + y * st, in->rgb + (size_t)y * in->stride, st);
     }
-    *ms = 1000.0 * (now_s() - t0);
+    *ms = 1000.0 * (cli_now_s() - t0);
     return rc;
 }
 
@@ -529,7 +522,7 @@ static int evaluate(evaluator *ev, const cli_opt *o, const gs_eval_pairs *ps,
     int rc = CLI_OK;
     if (!ev->rows || !ev->out || !ev->eye || !ev->face)
         rc = cli_fail(cmd, "out of memory");
-    double t0 = now_s();
+    double t0 = cli_now_s();
     for (int i = 0, done = 0; !rc && i < npairs; done++) {
         int j = i;
         while (j < npairs && ps->p[j].input == ps->p[i].input)
@@ -537,7 +530,7 @@ static int evaluate(evaluator *ev, const cli_opt *o, const gs_eval_pairs *ps,
         eval_input(ev, ps, i, j, csv);
         i = j;
         fprintf(stderr, "\rgazesplat eval: input %d/%d, %.0f s", done + 1,
-                info->inputs, now_s() - t0);
+                info->inputs, cli_now_s() - t0);
     }
     fputc('\n', stderr);
     if (fclose(csv) && !rc)

@@ -1,13 +1,11 @@
 /* gazesplat fit / redirect: fit a subject to a normalized face image and
  * render it at other gazes. (Photos go through face detection and
  * normalization first; see docs/face.md.) */
-#define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/stat.h>
-#include <time.h>
 
 #include "cli.h"
 #include "gazesplat/face.h"
@@ -91,13 +89,6 @@ static int load_model(const cli_command *cmd, const char *path, gs_model **m)
     return CLI_OK;
 }
 
-static double now_seconds(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
-
 /* After a fit: a copy of m fine-tuned on the fitted image (ft->iters
  * steps), reported on stderr. */
 static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
@@ -135,7 +126,7 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
                      long iters, double budget, const gs_finetune_options *ft,
                      gs_subject *sub, gs_model **tuned)
 {
-    double t_start = now_seconds();
+    double t_start = cli_now_s();
     *tuned = NULL;
     gs_model_info info;
     gs_model_get_info(m, &info);
@@ -197,7 +188,7 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
         /* --time bounds the fit and the fine-tuning together. */
         gs_finetune_options f2 = *ft;
         if (budget > 0) {
-            f2.time_budget_s = budget - (now_seconds() - t_start);
+            f2.time_budget_s = budget - (cli_now_s() - t_start);
             f2.time_budget_s = f2.time_budget_s > 1e-3 ? f2.time_budget_s : 1e-3;
         }
         rc = finetune_copy(cmd, m, pool, sub, img.data, img.stride, w, &f2, tuned);
@@ -287,31 +278,10 @@ static int read_subject(const cli_command *cmd, const char *path, gs_model *m,
                         gs_subject *s, gs_model **tuned)
 {
     *tuned = NULL;
-    FILE *f = fopen(path, "rb");
-    if (!f)
-        return cli_fail(cmd, "cannot open %s", path);
-    size_t cap = 1 << 16, n = 0;
-    uint8_t *buf = malloc(cap);
-    while (buf) {
-        n += fread(buf + n, 1, cap - n, f);
-        if (n < cap || cap >= MAX_SUBJECT_FILE)
-            break;
-        uint8_t *nb = realloc(buf, cap * 2);
-        if (!nb) {
-            free(buf);
-            buf = NULL;
-            break;
-        }
-        buf = nb, cap *= 2;
-    }
-    int rd = ferror(f);
-    fclose(f);
-    if (!buf)
-        return cli_fail(cmd, "%s: out of memory", path);
-    if (rd || n == cap) {
-        free(buf);
-        return cli_fail(cmd, "%s: %s", path, rd ? "read error" : "too large");
-    }
+    uint8_t *buf = NULL;
+    size_t n = 0;
+    if (cli_read_file(path, MAX_SUBJECT_FILE, &buf, &n))
+        return cli_fail(cmd, "cannot read %s (missing, empty or over 1 GiB)", path);
     /* A subject, then maybe a tuned block; decode explains a bad header. */
     size_t slen = gs_subject_encoded_len(buf, n);
     if (slen == 0 || slen > n)
