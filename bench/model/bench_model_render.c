@@ -27,6 +27,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../bench_util.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/model.h"
 #include "gazesplat/nn.h"
@@ -36,34 +37,6 @@
 #define BENCH_PI 3.14159265358979323846
 
 enum { GRID = 5, NVIEW = GRID * GRID, MAX_REPS = 64 };
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-/* CPU time of the whole process (every thread of the pool): what the
- * render costs, whatever else the machine runs. */
-static double cpu_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 static void die(const char *what, const gs_error *err)
 {

@@ -20,6 +20,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../bench_util.h"
 #include "gazesplat/nn.h"
 #include "gazesplat/pool.h"
 #include "renderer.h"
@@ -35,25 +36,6 @@ typedef struct {
     gs_renderer_params p, dp;
     double fwd[MAX_REPS], both[MAX_REPS], cpu_fwd[MAX_REPS], cpu_both[MAX_REPS];
 } bench_case;
-
-static double clock_ms(clockid_t id)
-{
-    struct timespec ts;
-    clock_gettime(id, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static double now_ms(void)
-{
-    return clock_ms(CLOCK_MONOTONIC);
-}
-
-/* CPU time of the process (all its threads): on a shared machine, wall
- * time also counts the time other jobs held the cores. */
-static double cpu_ms(void)
-{
-    return clock_ms(CLOCK_PROCESS_CPUTIME_ID);
-}
 
 static float *alloc_fill(size_t n, uint32_t seed)
 {
@@ -114,18 +96,6 @@ static void run_once(bench_case *b, int rep)
     b->both[rep] = t2 - t0;
     b->cpu_fwd[rep] = c1 - c0;
     b->cpu_both[rep] = c2 - c0;
-}
-
-static int cmp(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *x, int n)
-{
-    qsort(x, (size_t)n, sizeof *x, cmp);
-    return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
 }
 
 int main(int argc, char **argv)

@@ -24,6 +24,7 @@
 #include <time.h>
 
 #include "../../lib/model/model_internal.h" /* gs_model_param_id */
+#include "../bench_util.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/model.h"
 #include "gazesplat/nn.h"
@@ -31,25 +32,6 @@
 
 #define PI 3.14159265358979323846
 enum { MAX_REPS = 200, ROWS = 4 };
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
-}
-
-static double median(double *v, int n)
-{
-    qsort(v, (size_t)n, sizeof *v, cmp_double);
-    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
-}
 
 static void die(const char *what, const gs_error *e)
 {

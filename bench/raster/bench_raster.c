@@ -18,6 +18,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "../bench_util.h"
 #include "gazesplat/raster.h"
 
 typedef struct {
@@ -87,19 +88,6 @@ static void make_scene(scene *s, int n, int C, double spacing_scale)
         for (int c = 0; c < C; c++)
             s->feat[(size_t)i * C + c] = (float)urand();
     }
-}
-
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec * 1e3 + ts.tv_nsec * 1e-6;
-}
-
-static int cmp_double(const void *a, const void *b)
-{
-    double x = *(const double *)a, y = *(const double *)b;
-    return (x > y) - (x < y);
 }
 
 /* One configuration under test: a path and a thread count with its own
@@ -200,12 +188,6 @@ static void config_free(config *c)
     free(c->F), free(c->A), free(c->grad), free(c->tf), free(c->tb);
     for (int q = 0; q < 4; q++)
         free(c->ph[q]);
-}
-
-static double median(double *x, int n)
-{
-    qsort(x, (size_t)n, sizeof *x, cmp_double);
-    return n % 2 ? x[n / 2] : 0.5 * (x[n / 2 - 1] + x[n / 2]);
 }
 
 #define MAX_ISA 3
