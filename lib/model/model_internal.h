@@ -116,6 +116,8 @@ struct gs_model {
     unsigned tuned;  /* GS_FT_* parts fine-tuned since (gs_model_finetune) */
 };
 
+/* 1 when a and b have the same tensor table (names, offsets, counts). */
+int gs_model_same_layout(const gs_model *a, const gs_model *b);
 /* A 64-bit hash of m's tensor table and parameter values. */
 uint64_t gs_model_param_id(const gs_model *m);
 /* The GS_FT_* part a tensor belongs to (0: never tuned: codes, fixed). */

@@ -185,6 +185,17 @@ int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
     return GS_OK;
 }
 
+int gs_model_same_layout(const gs_model *a, const gs_model *b)
+{
+    if (a->nparams != b->nparams || a->ntensors != b->ntensors)
+        return 0;
+    for (int i = 0; i < a->ntensors; i++)
+        if (a->t[i].offset != b->t[i].offset || a->t[i].count != b->t[i].count ||
+            strcmp(a->t[i].name, b->t[i].name))
+            return 0;
+    return 1;
+}
+
 int gs_model_clone(const gs_model *m, gs_model **out, gs_error *err)
 {
     if (!m || !out)
@@ -197,12 +208,7 @@ int gs_model_copy_params(gs_model *dst, const gs_model *src, gs_error *err)
 {
     if (!dst || !src)
         return gs_error_set(err, GS_ERR_ARG, "copy params: NULL argument");
-    int same = dst->nparams == src->nparams && dst->ntensors == src->ntensors;
-    for (int i = 0; same && i < src->ntensors; i++)
-        same = dst->t[i].offset == src->t[i].offset &&
-               dst->t[i].count == src->t[i].count &&
-               !strcmp(dst->t[i].name, src->t[i].name);
-    if (!same)
+    if (!gs_model_same_layout(dst, src))
         return gs_error_set(err, GS_ERR_ARG,
                             "copy params: the models' layouts differ");
     memcpy(dst->params, src->params, src->nparams * sizeof(float));

@@ -108,17 +108,6 @@ static uint64_t block_hash(const uint8_t *p, size_t n)
     return hash_final(&h);
 }
 
-static int same_layout(const gs_model *a, const gs_model *b)
-{
-    if (a->nparams != b->nparams || a->ntensors != b->ntensors)
-        return 0;
-    for (int i = 0; i < a->ntensors; i++)
-        if (a->t[i].offset != b->t[i].offset || a->t[i].count != b->t[i].count ||
-            strcmp(a->t[i].name, b->t[i].name))
-            return 0;
-    return 1;
-}
-
 static void put32(uint8_t *p, uint32_t v)
 {
     memcpy(p, &v, 4);
@@ -246,7 +235,7 @@ int gs_model_tuned_apply(gs_model *dst, const gs_model *base, const uint8_t *buf
         return gs_error_set(err, GS_ERR_ARG,
                             "tuned block: base is itself fine-tuned; pass the model "
                             "the clones were made from");
-    if (!same_layout(dst, base))
+    if (!gs_model_same_layout(dst, base))
         return gs_error_set(err, GS_ERR_ARG, "tuned block: dst is not of base's layout");
     unsigned pt = 0;
     if (buf) {
