@@ -38,8 +38,9 @@ const cli_command cli_eval_command = {
     "                    and DIR/summary.md (created if needed)\n"
     "  --estimator FILE  gaze/head estimator for the angular errors; without\n"
     "                    it only the image metrics are measured\n"
-    "  --method LIST     comma-separated: model, warp (2D eye warping),\n"
-    "                    identity (output = input); default model\n"
+    "  --method LIST     comma-separated: model, transfer (the model with\n"
+    "                    detail transfer from the input), warp (2D eye\n"
+    "                    warping), identity (output = input); default model\n"
     "  --limit-inputs N  only the first N inputs of the file\n"
     "  --iters N         fit iteration cap (default 200)\n"
     "  --threads N       worker threads (default 2); results are the same\n"
@@ -243,6 +244,15 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
         memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
         memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
         rc = gs_model_render(ev->rctx, ev->pool, sub, &v, ev->out, st, err);
+    } else if (method == EVAL_TRANSFER) {
+        gs_view v = {0};
+        v.gaze_pitch = tscene->gaze_pitch;
+        v.gaze_yaw = tscene->gaze_yaw;
+        v.use_head = 1;
+        memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
+        memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
+        rc = gs_model_render_transfer(ev->rctx, ev->pool, sub, in->rgb,
+                                      in->stride, &v, ev->out, st, err);
     } else if (method == EVAL_WARP) {
         rc = gs_eval_warp_redirect(in, tscene->gaze_pitch, tscene->gaze_yaw,
                                    ev->out, st, err);
@@ -358,17 +368,19 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
     memset(&sub, 0, sizeof sub);
     int fit_status = EVAL_ROW_OK;
     double fit_s = NAN;
+    int fits = 0;
     for (int k = 0; k < ev->nmethods; k++)
-        if (ev->methods[k] == EVAL_MODEL) {
-            rc = cached_fit(ev, ps->p[first].input, &in, &sub, &fit_s,
-                            &err);
-            if (rc) {
-                fit_status = rc == GS_ERR_NONFINITE ? EVAL_ROW_DIVERGED
-                                                    : EVAL_ROW_ERROR;
-                fprintf(stderr, "gazesplat eval: input %d: fit: %s\n",
-                        ps->p[first].input, err.msg);
-            }
+        fits |= eval_method_fits(ev->methods[k]);
+    if (fits) {
+        rc = cached_fit(ev, ps->p[first].input, &in, &sub, &fit_s,
+                        &err);
+        if (rc) {
+            fit_status = rc == GS_ERR_NONFINITE ? EVAL_ROW_DIVERGED
+                                                : EVAL_ROW_ERROR;
+            fprintf(stderr, "gazesplat eval: input %d: fit: %s\n",
+                    ps->p[first].input, err.msg);
         }
+    }
     float fit_psnr = sub.fit_psnr;
     if (fit_status == EVAL_ROW_OK && ev->fo.iters > 0 && ev->nmethods > 0) {
         double ft_s = 0;
@@ -399,7 +411,7 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
         for (int k = 0; k < ev->nmethods; k++) {
             int mth = ev->methods[k];
             eval_row *r = new_row(ev, mth, i);
-            if (mth == EVAL_MODEL) {
+            if (eval_method_fits(mth)) {
                 r->fit_s = fit_s;
                 r->fit_row = i == first;
                 r->fit_psnr = fit_status == EVAL_ROW_OK ? fit_psnr : NAN;
@@ -707,8 +719,8 @@ static int run_eval(int argc, char **argv)
     ev.nmethods = 1;
     long limit = 0, threads = 2, iters = 200;
     if (o[O_METHOD].value && parse_methods(o[O_METHOD].value, &ev))
-        return cli_usage_error(cmd, "--method: want a list of model, warp, "
-                               "identity; got '%s'", o[O_METHOD].value);
+        return cli_usage_error(cmd, "--method: want a list of model, transfer, "
+                               "warp, identity; got '%s'", o[O_METHOD].value);
     if (o[O_LIMIT].value && cli_parse_long(o[O_LIMIT].value, 1, 100000000L,
                                            &limit))
         return cli_usage_error(cmd, "--limit-inputs: want 1 or more");

@@ -5,8 +5,8 @@
 
 #include "eval_report.h"
 
-const char *const eval_method_names[EVAL_METHODS] = {"model", "warp",
-                                                     "identity"};
+const char *const eval_method_names[EVAL_METHODS] = {
+    "model", "warp", "identity", "transfer"};
 const char *const eval_metric_names[M_COUNT] = {
     "gaze_err_deg", "gaze_err_label_deg", "head_err_deg",
     "head_err_label_deg", "est_gt_gaze_err_deg", "est_gt_head_err_deg",

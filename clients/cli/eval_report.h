@@ -6,7 +6,18 @@
 
 #include "gazesplat/eval.h"
 
-enum { EVAL_MODEL = 0, EVAL_WARP = 1, EVAL_IDENTITY = 2, EVAL_METHODS = 3 };
+enum {
+    EVAL_MODEL = 0,
+    EVAL_WARP = 1,
+    EVAL_IDENTITY = 2,
+    EVAL_TRANSFER = 3, /* the model with detail transfer */
+    EVAL_METHODS = 4
+};
+/* Methods that fit the model to the input. */
+static inline int eval_method_fits(int m)
+{
+    return m == EVAL_MODEL || m == EVAL_TRANSFER;
+}
 extern const char *const eval_method_names[EVAL_METHODS];
 
 enum { EVAL_ROW_OK = 0, EVAL_ROW_DIVERGED = 1, EVAL_ROW_ERROR = 2 };

@@ -41,6 +41,11 @@ typedef struct gs_sweep_slot {
     int rgb_dirty[4];
 } gs_sweep_slot;
 
+/* Detail transfer's state (transfer.c). */
+typedef struct gs_xfer gs_xfer;
+void gs_xfer_free(gs_xfer *x);
+void gs_xfer_invalidate(gs_xfer *x);
+
 struct gs_model_ctx {
     const gs_model *m;
     int nf, ne, n;         /* face, eye, total Gaussians */
@@ -125,6 +130,7 @@ struct gs_model_ctx {
     int face_valid;                   /* fe/fp outputs match fr */
     gs_frame face_key;                /* the frame the face cache is for */
     uint8_t *rgb8;                    /* [S, S, 3] */
+    gs_xfer *xfer;                    /* gs_model_render_transfer, lazily */
 };
 
 int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m);

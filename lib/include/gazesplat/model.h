@@ -112,6 +112,21 @@ int gs_model_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
                     const gs_view *view, uint8_t *rgb, size_t stride,
                     gs_error *err);
 
+/* Detail transfer (docs/model.md "Detail transfer"): renders `view` like
+ * gs_model_render, then adds back what the fit could not reproduce: the
+ * residual of `input` (the normalized image s was fitted to, image_size^2
+ * 8-bit RGB) against the subject's own view, carried to the target through
+ * the model's depth and head poses, everywhere except on the eyeballs
+ * (which come from the model alone) and where the input does not see the
+ * target's surface. With the input's head pose the residual is taken
+ * in place. The subject's own view is rendered once and kept while the
+ * subject and the render options are the same. Needs the eye stream
+ * (GS_ERR_ARG for single-stream models). */
+int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
+                             const gs_subject *s, const uint8_t *input,
+                             size_t in_stride, const gs_view *view,
+                             uint8_t *rgb, size_t stride, gs_error *err);
+
 /* Gaze sweeps over several subjects: a context keeps the renders of the
  * last n (subject, head pose) pairs it rendered (n = 1: the last only), so
  * that returning to any of them renders incrementally. Each costs about

@@ -1,0 +1,420 @@
+/* Detail transfer (docs/model.md, "Detail transfer"): a redirected image
+ * that keeps what the fit could not reproduce. The model renders the
+ * subject's own view (the input's gaze and head pose) and the target view;
+ * the residual R = input - own view is carried to the target through the
+ * model's geometry and added to the target render.
+ *
+ * Each target pixel p has the model's depth z_t(p), coverage a_t(p) and
+ * eyeball-ness b(p) (eye-stream coverage x GS_XFER_EYE_GAIN, at most 1).
+ * It takes the residual from two places of the input, weighted 1 - b and b:
+ *   skin (moves with the head): X_t = z_t K_t^-1 (p, 1) in the target
+ *     camera, X_s = R_s R_t^T (X_t - t_t) + t_s in the input's, p_s its
+ *     projection; with the input's head pose p_s = p;
+ *   eyeball (also turns with the gaze): the point, in the head frame,
+ *     turned about its eyeball's centre by R_e,s R_e,t^T (the eye
+ *     stream's rotations at the two gazes) before the same projection.
+ * A place counts when the input sees it: on the head there, at X_s's depth
+ * within GS_XFER_DEPTH_TOL, and of the same kind (a skin point must not
+ * take the input's eyeball, nor an eyeball point its eyelid): the weight
+ * is min(1, b_s / b) for the eyeball and min(1, (1 - b_s) / (1 - b)) for
+ * the skin, b_s the input's eyeball-ness at p_s. Off the head in both views
+ * the residual is taken in place. The subject's own view thus gives the
+ * input back, and a zero residual gives the plain render. */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "frame.h"
+
+/* Depth agreement (mm) for a head point to count as seen by the input. */
+#define GS_XFER_DEPTH_TOL 6.0
+/* Coverage above which a pixel is on the head. */
+#define GS_XFER_ON_HEAD 0.5f
+/* Eyeball-ness of a pixel: its eye-stream coverage times this, at most 1. */
+#define GS_XFER_EYE_GAIN 4.0f
+
+struct gs_xfer {
+    int S, n;
+    /* the subject's own view, kept while subject and settings are the same */
+    int valid;
+    gs_subject key;
+    int key_fs, key_full;
+    uint8_t *src8;                 /* [S, S, 3] */
+    float *src_z, *src_a, *src_e;  /* [S*S] depth mm, coverage, eye */
+    double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
+    double tgt_eR[2][9], tgt_ec[2][3]; /* the target's */
+    /* scratch */
+    gs_raster *raster;
+    float *feat;                   /* [n, 2]: face 1 0, eye 0 1 */
+    float *af, *aa, *ad;           /* [2, S, S], [S*S], [S*S] */
+    float *tgt_z, *tgt_a, *tgt_e;  /* [S*S] */
+    float *res;                    /* [3, S*S] residual, input's view */
+    float *warped;                 /* [3, S*S] residual, target's view */
+    uint8_t *tgt8;                 /* [S, S, 3] */
+};
+
+void gs_xfer_free(gs_xfer *x)
+{
+    if (!x)
+        return;
+    float *bufs[] = {x->src_z, x->src_a, x->src_e, x->feat, x->af, x->aa,
+                     x->ad, x->tgt_z, x->tgt_a, x->tgt_e, x->res,
+                     x->warped};
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
+        free(bufs[i]);
+    free(x->src8);
+    free(x->tgt8);
+    gs_raster_destroy(x->raster);
+    free(x);
+}
+
+void gs_xfer_invalidate(gs_xfer *x)
+{
+    if (x)
+        x->valid = 0;
+}
+
+static gs_xfer *xfer_get(gs_model_ctx *c)
+{
+    if (c->xfer)
+        return c->xfer;
+    gs_xfer *x = calloc(1, sizeof *x);
+    if (!x)
+        return NULL;
+    int S = c->S;
+    size_t px = (size_t)S * S;
+    x->S = S;
+    x->n = c->n;
+    x->raster = gs_raster_create();
+    x->feat = calloc((size_t)c->n * 2, sizeof(float));
+    x->af = malloc(2 * px * sizeof(float));
+    x->res = malloc(3 * px * sizeof(float));
+    x->warped = malloc(3 * px * sizeof(float));
+    float **one[] = {&x->src_z, &x->src_a, &x->src_e, &x->aa, &x->ad,
+                     &x->tgt_z, &x->tgt_a, &x->tgt_e};
+    int fail = !x->raster || !x->feat || !x->af || !x->res || !x->warped;
+    for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
+        fail |= !(*one[i] = malloc(px * sizeof(float)));
+    x->src8 = malloc(3 * px);
+    x->tgt8 = malloc(3 * px);
+    if (fail || !x->src8 || !x->tgt8) {
+        gs_xfer_free(x);
+        return NULL;
+    }
+    for (int i = 0; i < c->n; i++)
+        x->feat[2 * (size_t)i + (i < c->nf ? 0 : 1)] = 1.0f;
+    c->xfer = x;
+    return x;
+}
+
+/* The camera of an S x S image of a head at head_t. */
+static void image_camera(const gs_model_ctx *c, const double head_t[3],
+                         gs_camera *cam)
+{
+    gs_frame_camera(c->m, head_t, cam);
+    float s = (float)c->S / (float)c->fs;
+    cam->fx *= s, cam->fy *= s;
+    cam->cx = cam->cy = 0.5f * (float)c->S;
+    cam->width = cam->height = c->S;
+}
+
+/* Depth, coverage and eye coverage of the Gaussians the last render left
+ * in c->g_* (its frame), at image resolution. */
+static int aux_maps(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                    const double head_t[3], float *z, float *a, float *e,
+                    gs_error *err)
+{
+    gs_camera cam;
+    image_camera(c, head_t, &cam);
+    gs_gaussians g = {.n = c->n, .channels = 2, .means = c->g_mean,
+                      .log_scales = c->g_scale, .quats = c->g_quat,
+                      .opacity_logits = c->g_opac, .features = x->feat};
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    gs_raster_set_records(x->raster, 0);
+    int rc = gs_raster_forward(x->raster, pool, &cam, &g, NULL, &ro, x->af,
+                               x->aa, x->ad, err);
+    if (rc)
+        return rc;
+    size_t px = (size_t)x->S * x->S;
+    for (size_t i = 0; i < px; i++) {
+        float al = x->aa[i];
+        a[i] = al;
+        z[i] = al > 1e-3f ? x->ad[i] / al : 0.0f;
+        e[i] = x->af[px + i];
+    }
+    return GS_OK;
+}
+
+static int same_subject(const gs_subject *a, const gs_subject *b)
+{
+    if (a->code_dim != b->code_dim ||
+        memcmp(a->code, b->code, sizeof(float) * (size_t)a->code_dim) ||
+        memcmp(a->head_R, b->head_R, sizeof a->head_R) ||
+        memcmp(a->head_t, b->head_t, sizeof a->head_t) ||
+        memcmp(a->colour_gain, b->colour_gain, sizeof a->colour_gain) ||
+        memcmp(a->colour_bias, b->colour_bias, sizeof a->colour_bias))
+        return 0;
+    return a->gaze_pitch == b->gaze_pitch && a->gaze_yaw == b->gaze_yaw;
+}
+
+/* Bilinear sample of plane p (S x S) at continuous pixel coordinates
+ * (u, v), pixel centres at +0.5, clamped to the image. */
+static float bilinear(const float *p, int S, double u, double v)
+{
+    double x = u - 0.5, y = v - 0.5;
+    x = x < 0 ? 0 : x > S - 1 ? S - 1 : x;
+    y = y < 0 ? 0 : y > S - 1 ? S - 1 : y;
+    int x0 = (int)x, y0 = (int)y;
+    int x1 = x0 + 1 < S ? x0 + 1 : x0, y1 = y0 + 1 < S ? y0 + 1 : y0;
+    float fx = (float)(x - x0), fy = (float)(y - y0);
+    const float *r0 = p + (size_t)y0 * S, *r1 = p + (size_t)y1 * S;
+    return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) +
+           fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
+}
+
+/* The two views' geometry for the per-pixel warps. */
+typedef struct {
+    gs_camera ct, cs;     /* target and input cameras at image size */
+    double M[9];          /* R_s R_t^T: target camera -> input camera */
+    double Rt[9], tt[3], Rs[9], ts[3];
+    double eM[2][9];      /* per eye: R_e,s R_e,t^T (head frame) */
+    int same_pose;
+} xfer_geom;
+
+static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
+                      const double Rs[9], const double ts[3],
+                      const double Rt[9], const double tt[3])
+{
+    image_camera(c, tt, &g->ct);
+    image_camera(c, ts, &g->cs);
+    memcpy(g->Rt, Rt, sizeof g->Rt);
+    memcpy(g->tt, tt, sizeof g->tt);
+    memcpy(g->Rs, Rs, sizeof g->Rs);
+    memcpy(g->ts, ts, sizeof g->ts);
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++) {
+            g->M[3 * i + j] = 0;
+            for (int k = 0; k < 3; k++)
+                g->M[3 * i + j] += Rs[3 * i + k] * Rt[3 * j + k];
+            for (int e = 0; e < 2; e++) {
+                g->eM[e][3 * i + j] = 0;
+                for (int k = 0; k < 3; k++)
+                    g->eM[e][3 * i + j] +=
+                        x->src_eR[e][3 * i + k] * x->tgt_eR[e][3 * j + k];
+            }
+        }
+    g->same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
+                   !memcmp(ts, tt, 3 * sizeof(double));
+}
+
+/* Target pixel (px, py)'s surface point in the target camera. */
+static void target_point(const gs_xfer *x, const xfer_geom *g, int px, int py,
+                         double X[3])
+{
+    double z = x->tgt_z[(size_t)py * x->S + px];
+    X[0] = (px + 0.5 - g->ct.cx) / g->ct.fx * z;
+    X[1] = (py + 0.5 - g->ct.cy) / g->ct.fy * z;
+    X[2] = z;
+}
+
+/* min(1, num / den), den > 0: the share of a pixel's kind that its source
+ * place has. */
+static float kind_ratio(float num, float den)
+{
+    return num >= den ? 1.0f : num / den;
+}
+
+static float eyeballness(const float *e, int S, double u, double v)
+{
+    float b = GS_XFER_EYE_GAIN * bilinear(e, S, u, v);
+    return b > 1.0f ? 1.0f : b;
+}
+
+/* Projects X (input camera) to (u, v) and returns the weight of the place
+ * for a target pixel of eyeball-ness b taking it as skin (eye = 0) or
+ * eyeball (eye = 1): 0 unless the input sees X (in the image, on the head
+ * and at X's depth there). */
+static float seen_by_input(const gs_xfer *x, const xfer_geom *g,
+                           const double X[3], int eye, float b, double *u,
+                           double *v)
+{
+    int S = x->S;
+    if (!(X[2] > 1.0))
+        return 0.0f;
+    *u = g->cs.fx * X[0] / X[2] + g->cs.cx;
+    *v = g->cs.fy * X[1] / X[2] + g->cs.cy;
+    if (!(*u >= 0 && *v >= 0 && *u <= S && *v <= S))
+        return 0.0f;
+    if (bilinear(x->src_a, S, *u, *v) <= GS_XFER_ON_HEAD ||
+        fabs(bilinear(x->src_z, S, *u, *v) - X[2]) > GS_XFER_DEPTH_TOL)
+        return 0.0f;
+    float bs = eyeballness(x->src_e, S, *u, *v);
+    return eye ? kind_ratio(bs, b) : kind_ratio(1.0f - bs, 1.0f - b);
+}
+
+/* Where the input shows target pixel (px, py) of the head (skin, hair,
+ * eyelids: moving with the head) and how much to trust it. */
+static float head_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
+                         float b, double *u, double *v)
+{
+    size_t i = (size_t)py * x->S + px;
+    if (g->same_pose) { /* in place */
+        *u = px + 0.5, *v = py + 0.5;
+        return kind_ratio(1.0f - eyeballness(x->src_e, x->S, *u, *v),
+                          1.0f - b);
+    }
+    if (x->tgt_a[i] <= GS_XFER_ON_HEAD) /* off the head: in place */
+        return x->src_a[i] <= GS_XFER_ON_HEAD
+                   ? (*u = px + 0.5, *v = py + 0.5, 1.0f)
+                   : 0.0f;
+    double Xt[3], Xs[3], d[3];
+    target_point(x, g, px, py, Xt);
+    for (int k = 0; k < 3; k++)
+        d[k] = Xt[k] - g->tt[k];
+    for (int r = 0; r < 3; r++)
+        Xs[r] = g->M[3 * r] * d[0] + g->M[3 * r + 1] * d[1] +
+                g->M[3 * r + 2] * d[2] + g->ts[r];
+    return seen_by_input(x, g, Xs, 0, b, u, v);
+}
+
+/* The same for a point of an eyeball, which also turns with the gaze
+ * about its centre: the nearest eyeball's rotation from the target's gaze
+ * back to the input's. */
+static float eye_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
+                        float b, double *u, double *v)
+{
+    double Xt[3], h[3], d[3], hs[3], Xs[3];
+    target_point(x, g, px, py, Xt);
+    for (int k = 0; k < 3; k++)
+        d[k] = Xt[k] - g->tt[k];
+    for (int k = 0; k < 3; k++) /* head frame: R_t^T d */
+        h[k] = g->Rt[k] * d[0] + g->Rt[3 + k] * d[1] + g->Rt[6 + k] * d[2];
+    int e = 0;
+    double best = INFINITY;
+    for (int k = 0; k < 2; k++) {
+        double dd = 0;
+        for (int j = 0; j < 3; j++)
+            dd += (h[j] - x->tgt_ec[k][j]) * (h[j] - x->tgt_ec[k][j]);
+        if (dd < best)
+            best = dd, e = k;
+    }
+    double r[3];
+    for (int k = 0; k < 3; k++)
+        r[k] = h[k] - x->tgt_ec[e][k];
+    for (int k = 0; k < 3; k++)
+        hs[k] = x->src_ec[e][k] + g->eM[e][3 * k] * r[0] +
+                g->eM[e][3 * k + 1] * r[1] + g->eM[e][3 * k + 2] * r[2];
+    for (int k = 0; k < 3; k++)
+        Xs[k] = g->Rs[3 * k] * hs[0] + g->Rs[3 * k + 1] * hs[1] +
+                g->Rs[3 * k + 2] * hs[2] + g->ts[k];
+    return seen_by_input(x, g, Xs, 1, b, u, v);
+}
+
+static int check_image(const uint8_t *p, size_t stride, int S, const char *what,
+                       gs_error *err)
+{
+    if (!p)
+        return gs_error_set(err, GS_ERR_ARG, "transfer: %s is NULL", what);
+    if (stride < 3 * (size_t)S)
+        return gs_error_set(err, GS_ERR_ARG, "transfer: %s stride %zu < %d",
+                            what, stride, 3 * S);
+    return GS_OK;
+}
+
+int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
+                             const gs_subject *s, const uint8_t *input,
+                             size_t in_stride, const gs_view *view,
+                             uint8_t *rgb, size_t stride, gs_error *err)
+{
+    if (!c || !s || !view)
+        return gs_error_set(err, GS_ERR_ARG, "transfer: NULL argument");
+    int S = c->S, rc;
+    if ((rc = check_image(input, in_stride, S, "input", err)) ||
+        (rc = check_image(rgb, stride, S, "output", err)))
+        return rc;
+    if (c->ne == 0)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "transfer: the model has no eye stream (the "
+                            "eyeball mask comes from it)");
+    gs_xfer *x = xfer_get(c);
+    if (!x)
+        return gs_error_set(err, GS_ERR_NOMEM, "transfer: out of memory");
+    size_t px = (size_t)S * S;
+    const double *Rs = s->head_R, *ts = s->head_t;
+    const double *Rt = view->use_head ? view->head_R : s->head_R;
+    const double *tt = view->use_head ? view->head_t : s->head_t;
+
+    /* The subject's own view: rendered once per subject and settings. */
+    if (!x->valid || !same_subject(&x->key, s) || x->key_fs != c->render_fs ||
+        x->key_full != c->render_full) {
+        x->valid = 0;
+        gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}};
+        rc = gs_model_render(c, pool, s, &own, x->src8, 3 * (size_t)S, err);
+        if (!rc)
+            rc = aux_maps(c, x, pool, ts, x->src_z, x->src_a, x->src_e, err);
+        if (rc)
+            return rc;
+        memcpy(x->src_eR, c->eye_R, sizeof x->src_eR);
+        memcpy(x->src_ec, c->eye_c, sizeof x->src_ec);
+        x->key = *s;
+        x->key_fs = c->render_fs;
+        x->key_full = c->render_full;
+        x->valid = 1;
+    }
+    rc = gs_model_render(c, pool, s, view, x->tgt8, 3 * (size_t)S, err);
+    if (!rc)
+        rc = aux_maps(c, x, pool, tt, x->tgt_z, x->tgt_a, x->tgt_e, err);
+    if (rc)
+        return rc;
+
+    memcpy(x->tgt_eR, c->eye_R, sizeof x->tgt_eR);
+    memcpy(x->tgt_ec, c->eye_c, sizeof x->tgt_ec);
+
+    /* Residual of the input against its own view, planar, 8-bit units. */
+    for (int k = 0; k < 3; k++)
+        for (int y = 0; y < S; y++) {
+            const uint8_t *in = input + (size_t)y * in_stride;
+            const uint8_t *sr = x->src8 + (size_t)y * 3 * S;
+            float *o = x->res + k * px + (size_t)y * S;
+            for (int xx = 0; xx < S; xx++)
+                o[xx] = (float)in[3 * xx + k] - (float)sr[3 * xx + k];
+        }
+
+    xfer_geom g;
+    geom_init(c, x, &g, Rs, ts, Rt, tt);
+    for (int y = 0; y < S; y++)
+        for (int xx = 0; xx < S; xx++) {
+            size_t i = (size_t)y * S + xx;
+            float b = GS_XFER_EYE_GAIN * x->tgt_e[i];
+            b = b > 1.0f ? 1.0f : b;
+            double uh = 0, vh = 0, ue = 0, ve = 0;
+            float wh = 0.0f, we = 0.0f;
+            if (b < 1.0f)
+                wh = (1.0f - b) * head_source(x, &g, xx, y, b, &uh, &vh);
+            if (b > 0.0f)
+                we = b * eye_source(x, &g, xx, y, b, &ue, &ve);
+            for (int k = 0; k < 3; k++) {
+                const float *rk = x->res + k * px;
+                float v = 0.0f;
+                if (wh > 0.0f)
+                    v += wh * bilinear(rk, S, uh, vh);
+                if (we > 0.0f)
+                    v += we * bilinear(rk, S, ue, ve);
+                x->warped[k * px + i] = v;
+            }
+        }
+
+    for (int y = 0; y < S; y++) {
+        uint8_t *o = rgb + (size_t)y * stride;
+        const uint8_t *t = x->tgt8 + (size_t)y * 3 * S;
+        for (int xx = 0; xx < S; xx++) {
+            size_t i = (size_t)y * S + xx;
+            for (int k = 0; k < 3; k++) {
+                float v = (float)t[3 * xx + k] + x->warped[k * px + i];
+                v = v < 0 ? 0 : v > 255 ? 255 : v;
+                o[3 * xx + k] = (uint8_t)lrintf(v);
+            }
+        }
+    }
+    return GS_OK;
+}
