@@ -57,7 +57,7 @@ const cli_command cli_redirect_command = {
     "usage: gazesplat redirect --model M (--subject S.bin | --image IMG)\n"
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
     "                          [--head-deg P,Y] [--index I] [--out-norm]\n"
-    "                          [--iters N] [--finetune N\n"
+    "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
     "                          [--finetune-plateau R]]\n"
     "\n"
@@ -73,6 +73,12 @@ const cli_command cli_redirect_command = {
     "  --iters N        fit iteration cap (200)\n"
     "  --finetune N     (with --image) fine-tune a copy of the model on the\n"
     "                   face after the fit, as gazesplat fit does\n"
+    "  --transfer       detail transfer: add back what the fit could not\n"
+    "                   reproduce (the input's residual against the model,\n"
+    "                   carried through the model's geometry; the eyeballs\n"
+    "                   turn with the gaze). Needs the input: --image, or\n"
+    "                   --subject with --image naming the face it was\n"
+    "                   fitted to\n"
     "  --head-deg P,Y   render with this head pose instead of the subject's\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
@@ -263,6 +269,17 @@ static int run_fit(int argc, char **argv)
     return rc;
 }
 
+/* One target: the plain render, or with input (image_size^2 RGB, stride
+ * in_stride) the detail transfer from it. */
+static int render_target(gs_model_ctx *c, gs_pool *pool, const gs_subject *sub,
+                         const uint8_t *input, size_t in_stride, const gs_view *v,
+                         uint8_t *out, size_t stride, gs_error *err)
+{
+    if (input)
+        return gs_model_render_transfer(c, pool, sub, input, in_stride, v, out, stride, err);
+    return gs_model_render(c, pool, sub, v, out, stride, err);
+}
+
 /* mkdir -p of one level: an existing directory is fine. */
 static int make_dir(const char *path)
 {
@@ -313,7 +330,7 @@ static int read_subject(const cli_command *cmd, const char *path, gs_model *m,
 static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
                           const char *path, int index, int iters,
                           const gs_finetune_options *ft, double tg[][2],
-                          int nt, const char *dir, int out_norm)
+                          int nt, const char *dir, int out_norm, int transfer)
 {
     gs_model *tuned = NULL;
     gs_model_info info;
@@ -390,7 +407,8 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
         v.gaze_yaw = tg[k][1];
         char out[4096];
         gs_io_image full = {0};
-        if (gs_model_render(c, pool, &sub, &v, face.data, face.stride, &err)) {
+        if (render_target(c, pool, &sub, transfer ? norm.data : NULL, norm.stride, &v,
+                          face.data, face.stride, &err)) {
             rc = cli_fail(cmd, "target %d: %s", k, err.msg);
             break;
         }
@@ -430,24 +448,28 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[13] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[14] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
                      {"--iters", 1, NULL},    {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
-                     {"--finetune-plateau", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 13);
+                     {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 14);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
     }
     if (rc != CLI_PARSED)
         return rc;
-    if (!o[0].value || !o[3].value || !o[4].value ||
-        !o[1].value == !o[2].value)
+    int transfer = o[13].value != NULL;
+    if (!o[0].value || !o[3].value || !o[4].value || (!o[1].value && !o[2].value) ||
+        (o[1].value && o[2].value && !transfer))
         return cli_usage_error(cmd, "--model, --gaze-deg, --out and one of "
-                                    "--subject / --image are needed");
+                                    "--subject / --image are needed (both only "
+                                    "with --transfer)");
+    if (transfer && !o[2].value)
+        return cli_usage_error(cmd, "--transfer needs the input face: --image");
     /* Parse every target before any work. */
     enum { MAXT = 256 };
     double tg[MAXT][2];
@@ -491,7 +513,7 @@ static int run_redirect(int argc, char **argv)
         gs_model_destroy(m);
         return cli_usage_error(cmd, "--index: want 0..1000; --iters: 1..1e5");
     }
-    if (o[2].value) {
+    if (o[2].value && !o[1].value) {
         /* A photo unless it is already a normalized face of the model's
          * size. */
         gs_io_image probe = {0};
@@ -509,7 +531,7 @@ static int run_redirect(int argc, char **argv)
             else
                 rc = redirect_photo(cmd, m, pool, o[2].value, (int)index,
                                     (int)iters, &ft, tg, nt, o[4].value,
-                                    o[7].value != NULL);
+                                    o[7].value != NULL, transfer);
             gs_pool_destroy(pool);
             gs_model_destroy(m);
             return rc;
@@ -528,6 +550,15 @@ static int run_redirect(int argc, char **argv)
     gs_io_image img = {info.image_size, info.image_size,
                        3 * (size_t)info.image_size, NULL};
     img.data = malloc(img.stride * (size_t)img.height);
+    gs_io_image input = {0}; /* --transfer: the face the subject was fitted to */
+    if (!rc && transfer) {
+        gs_error err = {0, ""};
+        if (gs_io_image_read(o[2].value, NULL, &input, &err))
+            rc = cli_fail(cmd, "%s: %s", o[2].value, err.msg);
+        else if (input.width != info.image_size || input.height != info.image_size)
+            rc = cli_fail(cmd, "%s: %dx%d, the subject's face is %dx%d", o[2].value,
+                          input.width, input.height, info.image_size, info.image_size);
+    }
     for (int k = 0; !rc && k < nt; k++) {
         gs_view v = {0};
         v.gaze_pitch = tg[k][0];
@@ -542,13 +573,15 @@ static int run_redirect(int argc, char **argv)
         gs_error err = {0, ""};
         char path[4096];
         snprintf(path, sizeof path, "%s/%03d.png", o[4].value, k);
-        if (gs_model_render(c, pool, &sub, &v, img.data, img.stride, &err) ||
+        if (render_target(c, pool, &sub, transfer ? input.data : NULL, input.stride, &v,
+                          img.data, img.stride, &err) ||
             gs_io_image_write(path, &img, GS_IO_PNG, 0, &err))
             rc = cli_fail(cmd, "target %d: %s", k, err.msg);
     }
     if (!rc)
         printf("gazesplat redirect: %d images -> %s\n", nt, o[4].value);
     free(img.data);
+    gs_io_image_free(&input);
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);
     gs_pool_destroy(pool);

@@ -52,6 +52,25 @@ done
 "$G" redirect --model m.safetensors --subject both.bin --gaze-deg "5,5" --out o_both >/dev/null 2>&1
 [ -s o_both/000.png ] || fail "face,eye subject did not render"
 
+# Detail transfer: by subject + its image equals inline, differs from the
+# plain render, and needs the input (the library test checks the pixels).
+"$G" redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0;10,-15" --head-deg 5,10 --out o_xs >/dev/null 2>&1
+"$G" redirect --model m.safetensors --image $IMG --iters 4 --transfer \
+  --gaze-deg "0,0;10,-15" --head-deg 5,10 --out o_xi >/dev/null 2>&1
+"$G" redirect --model m.safetensors --subject plain.bin \
+  --gaze-deg "0,0;10,-15" --head-deg 5,10 --out o_xp >/dev/null 2>&1
+for k in 000 001; do
+  [ -s o_xs/$k.png ] || fail "missing o_xs/$k.png"
+  cmp o_xs/$k.png o_xi/$k.png || fail "transfer by subject and inline differ ($k)"
+  ! cmp -s o_xs/$k.png o_xp/$k.png || fail "transfer render $k equals the plain one"
+done
+usage_x() { set +e; "$G" "$@" >/dev/null 2>ux.err; local rc=$?; set -e
+  [ $rc = 2 ] || { cat ux.err; fail "transfer usage: exit $rc, want 2"; }; }
+usage_x redirect --model m.safetensors --subject plain.bin --transfer --gaze-deg "0,0" --out x
+usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --gaze-deg "0,0" --out x
+grep -q "both only with --transfer" ux.err || { cat ux.err; fail "transfer usage message"; }
+
 # Refused, with a message and no output: a truncated file, a flipped
 # byte, a block tuned from another model.
 refuse() { # name file want-message
