@@ -236,21 +236,17 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
     size_t st = 3 * (size_t)ev->S;
     double t0 = cli_now_s();
     int rc = GS_OK;
+    /* The model's target: the target's gaze (head frame) and its
+     * normalized-camera head pose. */
+    gs_view v = {0};
+    v.gaze_pitch = tscene->gaze_pitch;
+    v.gaze_yaw = tscene->gaze_yaw;
+    v.use_head = 1;
+    memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
+    memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
     if (method == EVAL_MODEL) {
-        gs_view v = {0};
-        v.gaze_pitch = tscene->gaze_pitch;
-        v.gaze_yaw = tscene->gaze_yaw;
-        v.use_head = 1;
-        memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
-        memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
         rc = gs_model_render(ev->rctx, ev->pool, sub, &v, ev->out, st, err);
     } else if (method == EVAL_TRANSFER) {
-        gs_view v = {0};
-        v.gaze_pitch = tscene->gaze_pitch;
-        v.gaze_yaw = tscene->gaze_yaw;
-        v.use_head = 1;
-        memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
-        memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
         rc = gs_model_render_transfer(ev->rctx, ev->pool, sub, in->rgb,
                                       in->stride, &v, ev->out, st, err);
     } else if (method == EVAL_WARP) {
