@@ -245,6 +245,22 @@ int main(int argc, char **argv)
     snprintf(md, sizeof md, "%s/summary.md", out2);
     sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "2 fits reused"), "%s", sum ? sum : "");
+    /* Detail transfer on the same fits: its own rows, all finite. */
+    const char *evt[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,transfer",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", NULL};
+    CHECK_EQ_INT(run(evt), 0);
+    c = ev_slurp(csv);
+    CHECK_MSG(c && strstr(c, "\ntransfer,0,") && strstr(c, "\nmodel,0,"),
+              "transfer rows:\n%s", c ? c : "");
+    free(c);
+    free(sum);
+    sum = ev_slurp(md);
+    CHECK_MSG(sum && strstr(sum, "| transfer |") &&
+                  strstr(sum, "diverged fits 0, errors 0, non-finite outputs 0") &&
+                  !strstr(sum, "nan"),
+              "%s", sum ? sum : "");
     /* Render settings on run 2's fits: 100 % and scale 1 are the normal
      * path (same numbers); pruned, coarse and full renders stay finite. */
     const char *ev4[] = {"eval", "--model", model, "--pairs", pairs,
