@@ -28,6 +28,7 @@
 #include <time.h>
 
 #include "../bench_util.h"
+#include "bench_model.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/model.h"
 #include "gazesplat/nn.h"
@@ -110,16 +111,10 @@ int main(int argc, char **argv)
     gs_nn_blas_set_threads(1);
     gs_error err = {0, ""};
     gs_model *m = NULL;
-    if (path) {
-        if (gs_model_load(path, &m, &err))
-            die(path, &err);
+    if (bench_model_open(path, &m, &err))
+        die(path ? path : "model", &err);
+    if (path)
         gs_model_set_guide_source(m, 1, NULL);
-    } else {
-        gs_model_spec spec;
-        gs_model_spec_default(&spec);
-        if (gs_model_new(&spec, 3, &m, &err))
-            die("model", &err);
-    }
     if (prune > 0) {
         gs_model *pm = NULL;
         if (gs_model_prune(m, NULL, prune, &pm, &err))
@@ -131,12 +126,7 @@ int main(int argc, char **argv)
     gs_model_get_info(m, &info);
     int S = info.image_size;
     gs_subject s;
-    memset(&s, 0, sizeof s);
-    s.code_dim = info.code_dim;
-    gs_geom_rot_from_pitchyaw(0.1, -0.15, 0.0, s.head_R);
-    s.head_t[2] = info.distance_mm;
-    for (int k = 0; k < 3; k++)
-        s.colour_gain[k] = 1.0f;
+    bench_subject(&info, 0.1, -0.15, &s);
     nthreads = nthreads < 1 ? 1 : nthreads > 64 ? 64 : nthreads;
     gs_pool *pool2 = nthreads > 1 ? gs_pool_create(nthreads) : NULL;
     gs_model_ctx *c = gs_model_ctx_create(m);

@@ -20,10 +20,9 @@
 #include <time.h>
 
 #include "../bench_util.h"
+#include "bench_model.h"
 #include "gazesplat/geom.h"
-#include "gazesplat/model.h"
 #include "gazesplat/nn.h"
-#include "gazesplat/train.h"
 
 enum { MAX_REPS = 200, ROWS = 4 };
 
@@ -52,26 +51,15 @@ int main(int argc, char **argv)
     gs_nn_blas_set_threads(1);
     gs_error err = {0, ""};
     gs_model *m = NULL;
-    if (path ? gs_model_load(path, &m, &err) : 0)
-        die(path, &err);
-    if (!path) {
-        gs_model_spec spec;
-        gs_model_spec_default(&spec);
-        if (gs_model_new(&spec, 3, &m, &err))
-            die("model", &err);
-    }
+    if (bench_model_open(path, &m, &err))
+        die(path ? path : "model", &err);
     gs_model_info info;
     gs_model_get_info(m, &info);
     int S = info.image_size;
     size_t isz = 3 * (size_t)S * S, st = 3 * (size_t)S;
     uint8_t *in = malloc(isz), *out = malloc(isz);
     gs_subject sub;
-    memset(&sub, 0, sizeof sub);
-    sub.code_dim = info.code_dim;
-    gs_geom_rot_from_pitchyaw(0.05, -0.15, 0.0, sub.head_R);
-    sub.head_t[2] = info.distance_mm;
-    for (int k = 0; k < 3; k++)
-        sub.colour_gain[k] = 1.0f;
+    bench_subject(&info, 0.05, -0.15, &sub);
     gs_model_ctx *cp = gs_model_ctx_create(m), *cx = gs_model_ctx_create(m);
     if (!cp || !cx || !in || !out)
         die("context", NULL);

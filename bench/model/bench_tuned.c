@@ -25,6 +25,7 @@
 
 #include "../../lib/model/model_internal.h" /* gs_model_param_id */
 #include "../bench_util.h"
+#include "bench_model.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/model.h"
 #include "gazesplat/nn.h"
@@ -37,16 +38,6 @@ static void die(const char *what, const gs_error *e)
 {
     fprintf(stderr, "bench_tuned: %s: %s\n", what, e ? e->msg : "failed");
     exit(1);
-}
-
-static void subject(const gs_model_info *info, double yaw, gs_subject *s)
-{
-    memset(s, 0, sizeof *s);
-    s->code_dim = info->code_dim;
-    gs_geom_rot_from_pitchyaw(0.05, yaw, 0.0, s->head_R);
-    s->head_t[2] = info->distance_mm;
-    for (int k = 0; k < 3; k++)
-        s->colour_gain[k] = 1.0f;
 }
 
 int main(int argc, char **argv)
@@ -78,14 +69,8 @@ int main(int argc, char **argv)
         die("--parts", &err);
     gs_model *m = NULL;
     double t0 = now_ms();
-    if (path ? gs_model_load(path, &m, &err) : 0)
-        die(path, &err);
-    if (!path) {
-        gs_model_spec spec;
-        gs_model_spec_default(&spec);
-        if (gs_model_new(&spec, 3, &m, &err))
-            die("model", &err);
-    }
+    if (bench_model_open(path, &m, &err))
+        die(path ? path : "model", &err);
     double load_ms = now_ms() - t0;
     gs_model_info info;
     gs_model_get_info(m, &info);
@@ -93,8 +78,8 @@ int main(int argc, char **argv)
     size_t isz = 3 * (size_t)S * S;
     uint8_t *img = malloc(isz);
     gs_subject sub[2];
-    subject(&info, -0.15, &sub[0]);
-    subject(&info, 0.2, &sub[1]);
+    bench_subject(&info, 0.05, -0.15, &sub[0]);
+    bench_subject(&info, 0.05, 0.2, &sub[1]);
 
     /* Real blocks: each subject's clone fine-tuned on its own render. */
     uint8_t *blk[2];

@@ -25,6 +25,7 @@
 #include <string.h>
 
 #include "frame.h"
+#include "gazesplat/geom.h"
 
 /* Depth agreement (mm) for a head point to count as seen by the input. */
 #define GS_XFER_DEPTH_TOL 6.0
@@ -34,7 +35,7 @@
 #define GS_XFER_EYE_GAIN 4.0f
 
 struct gs_xfer {
-    int S, n;
+    int S;
     /* the subject's own view, kept while subject and settings are the same */
     int valid;
     gs_subject key;
@@ -84,7 +85,6 @@ static gs_xfer *xfer_get(gs_model_ctx *c)
     int S = c->S;
     size_t px = (size_t)S * S;
     x->S = S;
-    x->n = c->n;
     x->raster = gs_raster_create();
     x->feat = calloc((size_t)c->n * 2, sizeof(float));
     x->af = malloc(2 * px * sizeof(float));
@@ -175,8 +175,7 @@ static float bilinear(const float *p, int S, double u, double v)
 /* The two views' geometry for the per-pixel warps. */
 typedef struct {
     gs_camera ct, cs;     /* target and input cameras at image size */
-    double M[9];          /* R_s R_t^T: target camera -> input camera */
-    double Rt[9], tt[3], Rs[9], ts[3];
+    const double *Rt, *tt, *Rs, *ts; /* head poses: target, input */
     double eM[2][9];      /* per eye: R_e,s R_e,t^T (head frame) */
     int same_pose;
 } xfer_geom;
@@ -187,34 +186,33 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
 {
     image_camera(c, tt, &g->ct);
     image_camera(c, ts, &g->cs);
-    memcpy(g->Rt, Rt, sizeof g->Rt);
-    memcpy(g->tt, tt, sizeof g->tt);
-    memcpy(g->Rs, Rs, sizeof g->Rs);
-    memcpy(g->ts, ts, sizeof g->ts);
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) {
-            g->M[3 * i + j] = 0;
-            for (int k = 0; k < 3; k++)
-                g->M[3 * i + j] += Rs[3 * i + k] * Rt[3 * j + k];
-            for (int e = 0; e < 2; e++) {
-                g->eM[e][3 * i + j] = 0;
-                for (int k = 0; k < 3; k++)
-                    g->eM[e][3 * i + j] +=
-                        x->src_eR[e][3 * i + k] * x->tgt_eR[e][3 * j + k];
-            }
-        }
+    g->Rt = Rt, g->tt = tt, g->Rs = Rs, g->ts = ts;
+    for (int e = 0; e < 2; e++) {
+        double tT[9];
+        gs_geom_mat3_transpose(x->tgt_eR[e], tT);
+        gs_geom_mat3_mul(x->src_eR[e], tT, g->eM[e]);
+    }
     g->same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
                    !memcmp(ts, tt, 3 * sizeof(double));
 }
 
-/* Target pixel (px, py)'s surface point in the target camera. */
+/* Target pixel (px, py)'s surface point in the head frame. */
 static void target_point(const gs_xfer *x, const xfer_geom *g, int px, int py,
-                         double X[3])
+                         double h[3])
 {
     double z = x->tgt_z[(size_t)py * x->S + px];
-    X[0] = (px + 0.5 - g->ct.cx) / g->ct.fx * z;
-    X[1] = (py + 0.5 - g->ct.cy) / g->ct.fy * z;
-    X[2] = z;
+    double d[3] = {(px + 0.5 - g->ct.cx) / g->ct.fx * z - g->tt[0],
+                   (py + 0.5 - g->ct.cy) / g->ct.fy * z - g->tt[1],
+                   z - g->tt[2]};
+    gs_geom_mat3_tvec(g->Rt, d, h);
+}
+
+/* Head-frame point h in the input's camera. */
+static void input_point(const xfer_geom *g, const double h[3], double X[3])
+{
+    gs_geom_mat3_vec(g->Rs, h, X);
+    for (int k = 0; k < 3; k++)
+        X[k] += g->ts[k];
 }
 
 /* min(1, num / den), den > 0: the share of a pixel's kind that its source
@@ -253,9 +251,10 @@ static float seen_by_input(const gs_xfer *x, const xfer_geom *g,
 }
 
 /* Where the input shows target pixel (px, py) of the head (skin, hair,
- * eyelids: moving with the head) and how much to trust it. */
+ * eyelids: moving with the head), h its head-frame point, and how much to
+ * trust it. */
 static float head_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
-                         float b, double *u, double *v)
+                         const double h[3], float b, double *u, double *v)
 {
     size_t i = (size_t)py * x->S + px;
     if (g->same_pose) { /* in place */
@@ -267,28 +266,17 @@ static float head_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
         return x->src_a[i] <= GS_XFER_ON_HEAD
                    ? (*u = px + 0.5, *v = py + 0.5, 1.0f)
                    : 0.0f;
-    double Xt[3], Xs[3], d[3];
-    target_point(x, g, px, py, Xt);
-    for (int k = 0; k < 3; k++)
-        d[k] = Xt[k] - g->tt[k];
-    for (int r = 0; r < 3; r++)
-        Xs[r] = g->M[3 * r] * d[0] + g->M[3 * r + 1] * d[1] +
-                g->M[3 * r + 2] * d[2] + g->ts[r];
+    double Xs[3];
+    input_point(g, h, Xs);
     return seen_by_input(x, g, Xs, 0, b, u, v);
 }
 
-/* The same for a point of an eyeball, which also turns with the gaze
+/* The same for a point h of an eyeball, which also turns with the gaze
  * about its centre: the nearest eyeball's rotation from the target's gaze
  * back to the input's. */
-static float eye_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
-                        float b, double *u, double *v)
+static float eye_source(const gs_xfer *x, const xfer_geom *g,
+                        const double h[3], float b, double *u, double *v)
 {
-    double Xt[3], h[3], d[3], hs[3], Xs[3];
-    target_point(x, g, px, py, Xt);
-    for (int k = 0; k < 3; k++)
-        d[k] = Xt[k] - g->tt[k];
-    for (int k = 0; k < 3; k++) /* head frame: R_t^T d */
-        h[k] = g->Rt[k] * d[0] + g->Rt[3 + k] * d[1] + g->Rt[6 + k] * d[2];
     int e = 0;
     double best = INFINITY;
     for (int k = 0; k < 2; k++) {
@@ -298,15 +286,13 @@ static float eye_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
         if (dd < best)
             best = dd, e = k;
     }
-    double r[3];
+    double r[3], hs[3], Xs[3];
     for (int k = 0; k < 3; k++)
         r[k] = h[k] - x->tgt_ec[e][k];
+    gs_geom_mat3_vec(g->eM[e], r, hs);
     for (int k = 0; k < 3; k++)
-        hs[k] = x->src_ec[e][k] + g->eM[e][3 * k] * r[0] +
-                g->eM[e][3 * k + 1] * r[1] + g->eM[e][3 * k + 2] * r[2];
-    for (int k = 0; k < 3; k++)
-        Xs[k] = g->Rs[3 * k] * hs[0] + g->Rs[3 * k + 1] * hs[1] +
-                g->Rs[3 * k + 2] * hs[2] + g->ts[k];
+        hs[k] += x->src_ec[e][k];
+    input_point(g, hs, Xs);
     return seen_by_input(x, g, Xs, 1, b, u, v);
 }
 
@@ -387,12 +373,13 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
             size_t i = (size_t)y * S + xx;
             float b = GS_XFER_EYE_GAIN * x->tgt_e[i];
             b = b > 1.0f ? 1.0f : b;
-            double uh = 0, vh = 0, ue = 0, ve = 0;
+            double uh = 0, vh = 0, ue = 0, ve = 0, h[3];
             float wh = 0.0f, we = 0.0f;
+            target_point(x, &g, xx, y, h);
             if (b < 1.0f)
-                wh = (1.0f - b) * head_source(x, &g, xx, y, b, &uh, &vh);
+                wh = (1.0f - b) * head_source(x, &g, xx, y, h, b, &uh, &vh);
             if (b > 0.0f)
-                we = b * eye_source(x, &g, xx, y, b, &ue, &ve);
+                we = b * eye_source(x, &g, h, b, &ue, &ve);
             for (int k = 0; k < 3; k++) {
                 const float *rk = x->res + k * px;
                 float v = 0.0f;

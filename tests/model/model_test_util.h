@@ -2,6 +2,9 @@
 #ifndef GS_MODEL_TEST_UTIL_H
 #define GS_MODEL_TEST_UTIL_H
 
+#include <stdio.h>
+#include <unistd.h>
+
 #include "../../lib/model/frame.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/synth.h"
@@ -70,6 +73,22 @@ static inline gs_model *trained_tiny(const char *path, int steps,
         return NULL;
     }
     return m;
+}
+
+/* The checkpoint file a test trains its tiny model into: NAME_PID.safetensors
+ * in the working directory (path: 128 bytes). */
+static inline void tiny_path(char path[128], const char *name)
+{
+    snprintf(path, 128, "%s_%d.safetensors", name, (int)getpid());
+}
+
+/* Removes what trained_tiny wrote: path and path.opt. */
+static inline void tiny_remove(const char *path)
+{
+    char opt[160];
+    unlink(path);
+    snprintf(opt, sizeof opt, "%s.opt", path);
+    unlink(opt);
 }
 
 /* Sample `index` of the held-out identities: a normalized S x S face with

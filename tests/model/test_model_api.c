@@ -4,7 +4,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "gazesplat/nn.h"
 #include "gazesplat/synth.h"
@@ -16,7 +15,7 @@ int main(void)
 {
     gs_nn_blas_set_threads(1);
     char path[128];
-    snprintf(path, sizeof path, "test_model_api_%d.safetensors", (int)getpid());
+    tiny_path(path, "test_model_api");
     gs_error err = {0, ""};
     gs_train_report rep;
     gs_model *m = trained_tiny(path, 6, &rep, &err);
@@ -119,9 +118,6 @@ int main(void)
     gs_model_ctx_destroy(c);
     gs_synth_sample_free(&smp);
     gs_model_destroy(m);
-    unlink(path);
-    char opt[160];
-    snprintf(opt, sizeof opt, "%s.opt", path);
-    unlink(opt);
+    tiny_remove(path);
     GS_TEST_END();
 }

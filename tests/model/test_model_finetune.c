@@ -7,7 +7,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "gazesplat/nn.h"
 #include "gazesplat/synth.h"
@@ -41,7 +40,7 @@ int main(void)
 {
     gs_nn_blas_set_threads(1);
     char path[128];
-    snprintf(path, sizeof path, "test_model_finetune_%d.safetensors", (int)getpid());
+    tiny_path(path, "test_model_finetune");
     gs_error err = {0, ""};
     gs_model *m = trained_tiny(path, 4, NULL, &err);
     CHECK_MSG(m != NULL, "%s", err.msg);
@@ -198,9 +197,6 @@ int main(void)
     gs_model_destroy(ft);
     gs_synth_sample_free(&smp);
     gs_model_destroy(m);
-    unlink(path);
-    char opt[160];
-    snprintf(opt, sizeof opt, "%s.opt", path);
-    unlink(opt);
+    tiny_remove(path);
     GS_TEST_END();
 }

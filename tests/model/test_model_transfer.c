@@ -8,7 +8,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "gazesplat/nn.h"
 #include "gazesplat/pool.h"
@@ -61,13 +60,7 @@ static gs_view turned(const gs_subject *s, double yaw, double gp, double gy)
     v.use_head = 1;
     double Ry[9];
     gs_geom_rot_from_pitchyaw(0.0, yaw, 0.0, Ry);
-    for (int i = 0; i < 3; i++)
-        for (int j = 0; j < 3; j++) {
-            double a = 0;
-            for (int k = 0; k < 3; k++)
-                a += Ry[3 * i + k] * s->head_R[3 * k + j];
-            v.head_R[3 * i + j] = a;
-        }
+    gs_geom_mat3_mul(Ry, s->head_R, v.head_R);
     memcpy(v.head_t, s->head_t, sizeof v.head_t);
     return v;
 }
@@ -92,7 +85,7 @@ int main(void)
 {
     gs_nn_blas_set_threads(1);
     char path[128];
-    snprintf(path, sizeof path, "test_model_transfer_%d.safetensors", (int)getpid());
+    tiny_path(path, "test_model_transfer");
     gs_error err = {0, ""};
     gs_model *m = trained_tiny(path, 4, NULL, &err);
     CHECK_MSG(m != NULL, "%s", err.msg);
@@ -241,9 +234,6 @@ int main(void)
         gs_synth_sample_free(&smp[k]);
     free(in), free(out), free(ref), free(own), free(a), free(b), free(noise);
     gs_model_destroy(m);
-    unlink(path);
-    char opt[160];
-    snprintf(opt, sizeof opt, "%s.opt", path);
-    unlink(opt);
+    tiny_remove(path);
     GS_TEST_END();
 }
