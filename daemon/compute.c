@@ -78,9 +78,10 @@ struct gsd_worker {
 };
 
 #ifdef GSD_HAVE_MODEL
-/* Fine-tuned parameter blocks on disk (below). */
-static void tuned_sweep_locked(gsd_server *s);
-static void tuned_restore(gsd_server *s);
+/* Fine-tuned blocks and kept inputs on disk (below). */
+enum { STORE_TUNED, STORE_INPUT, STORE_KINDS };
+static void store_sweep_all_locked(gsd_server *s);
+static void store_restore(gsd_server *s, int kind);
 #endif
 
 /* ---- hashing: FNV-1a, 128-bit, for model ids and content keys ---------- */
@@ -290,11 +291,12 @@ void gsd_model_finish_load(gsd_server *s)
         LOG_I("model changed (%s -> %s): subjects dropped", old->id, m->id);
         gsd_cache_clear(s->cache);
         gsd_cache_clear(s->tuned);
+        gsd_cache_clear(s->inputs);
         gsd_cache_persist(s);
 #ifdef GSD_HAVE_MODEL
         if (s->state_dir[0]) {
             pthread_mutex_lock(&s->persist_mu);
-            tuned_sweep_locked(s); /* every block file goes */
+            store_sweep_all_locked(s); /* every block and input file goes */
             pthread_mutex_unlock(&s->persist_mu);
         }
 #endif
@@ -333,7 +335,8 @@ void gsd_cache_restore(gsd_server *s)
     else
         LOG_W("subject cache %s: %s", s->state_dir, msg);
 #ifdef GSD_HAVE_MODEL
-    tuned_restore(s);
+    store_restore(s, STORE_TUNED);
+    store_restore(s, STORE_INPUT);
 #endif
 }
 
@@ -622,10 +625,11 @@ static gsd_finetune finetune_of(uint32_t steps, const char *parts)
     return f;
 }
 
-/* The key a FIT without one gets: a hash of the pixels and the labels, so
- * the same input maps to the same subject. */
-static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, const gsd_finetune *ft,
-                        uint8_t key[16])
+/* The key a FIT (or inline REDIRECT) without one gets: a hash of the
+ * pixels and of what shapes the fit (labels, iterations, fine-tuning), so
+ * the same input asked the same way maps to the same subject. */
+static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, uint32_t max_iters,
+                        const gsd_finetune *ft, uint8_t key[16])
 {
     hash128 h;
     hash_init(&h);
@@ -633,7 +637,7 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
         hash_bytes(&h, img->data + (size_t)y * img->stride, (size_t)img->width * 3);
     double labels[5] = {r && r->gaze ? r->gaze->pitch_deg : NAN, r && r->gaze ? r->gaze->yaw_deg : NAN,
                         r && r->head ? r->head->pitch_deg : NAN, r && r->head ? r->head->yaw_deg : NAN,
-                        r ? (double)r->max_iters : 0};
+                        (double)max_iters};
     hash_bytes(&h, labels, sizeof labels);
     if (ft->steps) { /* a fine-tuned subject is another subject (plain keys unchanged) */
         uint32_t v[2] = {ft->steps, ft->parts};
@@ -643,17 +647,37 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
 }
 
 
-/* ---- fine-tuned subjects ------------------------------------------------------
- * The subject cache holds each subject's gs_subject; a fine-tuned one has
- * "GSTR" and the checksum of its tuned block (gs_model_tuned_encode's last
- * 8 bytes) after it. The blocks live in s->tuned (budget tuned_cache_mb)
- * and, with a state directory, one file each (tuned-<key hex>.gsft, written
- * atomically), kept while the block is in s->tuned: the files only bring
- * the blocks back at start (tuned_restore). */
+/* ---- kept blobs: fine-tuned blocks and inputs ----------------------------------
+ * Besides its gs_subject (the subject cache), a subject may have:
+ *   a tuned block (STORE_TUNED), its fine-tuned tensors
+ *     (gs_model_tuned_encode); the subject's cache blob then has "GSTR"
+ *     and the block's checksum (its last 8 bytes) after the gs_subject;
+ *   a kept input (STORE_INPUT), the normalized face a FIT kept
+ *     (keep_image) for REDIRECT transfer: "GSFI", u32 side, side x side RGB.
+ * Each kind lives in an LRU cache of its own (tuned_cache_mb,
+ * input_cache_mb) and, with a state directory, one file per subject
+ * (PREFIX<key hex>SUFFIX, written atomically), kept while the blob is in
+ * its cache: the files only bring the blobs back at start (store_restore). */
 
 #define TUNED_REF_MAGIC 0x52545347u /* "GSTR" */
-#define TUNED_FILE_PREFIX "tuned-"
-#define TUNED_FILE_SUFFIX ".gsft"
+#define INPUT_MAGIC 0x49465347u     /* "GSFI" */
+
+static const struct store_kind {
+    const char *prefix, *suffix, *what, *budget;
+} store_kinds[STORE_KINDS] = {
+    {"tuned-", ".gsft", "fine-tuned parameters", "tuned_cache_mb"},
+    {"input-", ".gsfi", "kept input", "input_cache_mb"},
+};
+
+static gsd_cache *store_cache(const gsd_server *s, int kind)
+{
+    return kind == STORE_TUNED ? s->tuned : s->inputs;
+}
+
+static int store_budget_mb(const gsd_server *s, int kind)
+{
+    return kind == STORE_TUNED ? s->cfg.tuned_cache_mb : s->cfg.input_cache_mb;
+}
 
 /* The subject's cache blob; sum non-NULL: a fine-tuned subject. */
 static size_t subject_blob(const gs_subject *subj, const uint64_t *sum, uint8_t *blob, size_t cap)
@@ -688,27 +712,27 @@ static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj, 
     return gs_subject_decode(blob, slen, subj, NULL) == GS_OK ? 0 : -1;
 }
 
-/* The block file's name in the state directory, and its path. */
-static void tuned_name(const uint8_t key[16], char out[64])
+/* A blob file's name in the state directory, and its path. */
+static void store_name(int kind, const uint8_t key[16], char out[64])
 {
     char hex[33];
     gs_frame_key_hex(key, hex);
-    snprintf(out, 64, TUNED_FILE_PREFIX "%s" TUNED_FILE_SUFFIX, hex);
+    snprintf(out, 64, "%s%s%s", store_kinds[kind].prefix, hex, store_kinds[kind].suffix);
 }
 
-static void tuned_path(const gsd_server *s, const uint8_t key[16], char *out, size_t cap)
+static void store_path(const gsd_server *s, int kind, const uint8_t key[16], char *out, size_t cap)
 {
     char name[64];
-    tuned_name(key, name);
+    store_name(kind, key, name);
     snprintf(out, cap, "%s/%s", s->state_dir, name);
 }
 
-/* The key of a block file's name, or -1 for other names. */
-static int tuned_file_key(const char *name, uint8_t key[16])
+/* The key of a blob file's name of this kind, or -1 for other names. */
+static int store_file_key(int kind, const char *name, uint8_t key[16])
 {
-    size_t pl = strlen(TUNED_FILE_PREFIX);
-    if (strncmp(name, TUNED_FILE_PREFIX, pl) || strlen(name) != pl + 32 + strlen(TUNED_FILE_SUFFIX) ||
-        strcmp(name + pl + 32, TUNED_FILE_SUFFIX))
+    const char *pre = store_kinds[kind].prefix, *suf = store_kinds[kind].suffix;
+    size_t pl = strlen(pre);
+    if (strncmp(name, pre, pl) || strlen(name) != pl + 32 + strlen(suf) || strcmp(name + pl + 32, suf))
         return -1;
     for (int i = 0; i < 16; i++) {
         unsigned v;
@@ -720,9 +744,9 @@ static int tuned_file_key(const char *name, uint8_t key[16])
     return 0;
 }
 
-/* Removes block files whose block is no longer in s->tuned (evicted, or
- * the model changed). Under persist_mu. */
-static void tuned_sweep_locked(gsd_server *s)
+/* Removes the kind's files whose blob is no longer in its cache (evicted,
+ * or the model changed). Under persist_mu. */
+static void store_sweep_locked(gsd_server *s, int kind)
 {
     DIR *d = opendir(s->state_dir);
     if (!d)
@@ -730,102 +754,161 @@ static void tuned_sweep_locked(gsd_server *s)
     struct dirent *e;
     while ((e = readdir(d)) != NULL) {
         uint8_t key[16];
-        if (tuned_file_key(e->d_name, key) == 0 && !gsd_cache_contains(s->tuned, key)) {
+        if (store_file_key(kind, e->d_name, key) == 0 && !gsd_cache_contains(store_cache(s, kind), key)) {
             char path[GSD_STR_MAX + 64];
-            tuned_path(s, key, path, sizeof path);
+            store_path(s, kind, key, path, sizeof path);
             if (unlink(path) != 0 && errno != ENOENT)
-                LOG_W("tuned block %s: unlink: %s", path, strerror(errno));
+                LOG_W("%s %s: unlink: %s", store_kinds[kind].what, path, strerror(errno));
         }
     }
     closedir(d);
 }
 
-/* Keeps a subject's block: in s->tuned, and on disk with a state
- * directory (a failure there is logged and counted: the block still
- * serves until evicted or a restart). */
-static int tuned_store(gsd_server *s, const uint8_t key[16], const uint8_t *blk, size_t len, char *msg,
-                       size_t cap)
+static void store_sweep_all_locked(gsd_server *s)
 {
-    if (gsd_cache_put(s->tuned, key, blk, len) != 0) {
-        snprintf(msg, cap, "fine-tuned parameters (%zu bytes) over tuned_cache_mb (%d MiB)", len,
-                 s->cfg.tuned_cache_mb);
+    for (int k = 0; k < STORE_KINDS; k++)
+        store_sweep_locked(s, k);
+}
+
+/* Keeps a subject's blob: in its cache, and on disk with a state
+ * directory (a failure there is logged and counted: the blob still
+ * serves until evicted or a restart). */
+static int store_put(gsd_server *s, int kind, const uint8_t key[16], const uint8_t *blob, size_t len,
+                     char *msg, size_t cap)
+{
+    if (gsd_cache_put(store_cache(s, kind), key, blob, len) != 0) {
+        snprintf(msg, cap, "%s (%zu bytes) over %s (%d MiB)", store_kinds[kind].what, len,
+                 store_kinds[kind].budget, store_budget_mb(s, kind));
         return E(ERR_INTERNAL);
     }
     if (!s->state_dir[0])
         return 0;
     char name[64], err[400];
-    tuned_name(key, name);
+    store_name(kind, key, name);
     pthread_mutex_lock(&s->persist_mu);
-    int r = gsd_file_write_atomic(s->state_dir, name, blk, len, err, sizeof err);
-    tuned_sweep_locked(s);
+    int r = gsd_file_write_atomic(s->state_dir, name, blob, len, err, sizeof err);
+    store_sweep_locked(s, kind);
     pthread_mutex_unlock(&s->persist_mu);
-    atomic_fetch_add(r == 0 ? &s->ctr.tuned_saves : &s->ctr.tuned_save_failures, 1);
+    if (kind == STORE_TUNED)
+        atomic_fetch_add(r == 0 ? &s->ctr.tuned_saves : &s->ctr.tuned_save_failures, 1);
+    else
+        atomic_fetch_add(r == 0 ? &s->ctr.input_saves : &s->ctr.input_save_failures, 1);
     if (r != 0)
-        LOG_E("tuned block: %s", err);
+        LOG_E("%s: %s", store_kinds[kind].what, err);
     return 0;
 }
 
-typedef struct tuned_file {
+typedef struct store_file {
     uint8_t key[16];
     struct timespec mtime;
-} tuned_file;
+} store_file;
 
 static int by_mtime(const void *a, const void *b)
 {
-    const struct timespec *x = &((const tuned_file *)a)->mtime, *y = &((const tuned_file *)b)->mtime;
+    const struct timespec *x = &((const store_file *)a)->mtime, *y = &((const store_file *)b)->mtime;
     return x->tv_sec != y->tv_sec ? (x->tv_sec < y->tv_sec ? -1 : 1)
                                   : (x->tv_nsec < y->tv_nsec ? -1 : x->tv_nsec > y->tv_nsec);
 }
 
-/* At start: the blocks of cached subjects back into s->tuned, oldest
- * first (so the budget keeps the newest); every other block file goes. */
-static void tuned_restore(gsd_server *s)
+/* The kind's files of cached subjects, oldest first (so that the budget
+ * keeps the newest); *n their count. NULL when none (or out of memory). */
+static store_file *store_list(gsd_server *s, int kind, size_t *n)
 {
     DIR *d = opendir(s->state_dir);
+    *n = 0;
     if (!d)
-        return;
-    tuned_file *f = NULL;
-    size_t n = 0, cap = 0;
+        return NULL;
+    store_file *f = NULL;
+    size_t cap = 0;
     struct dirent *e;
     while ((e = readdir(d)) != NULL) {
         uint8_t key[16];
         struct stat st;
         char path[GSD_STR_MAX + 64];
-        if (tuned_file_key(e->d_name, key) != 0 || !gsd_cache_contains(s->cache, key))
+        if (store_file_key(kind, e->d_name, key) != 0 || !gsd_cache_contains(s->cache, key))
             continue;
-        tuned_path(s, key, path, sizeof path);
+        store_path(s, kind, key, path, sizeof path);
         if (stat(path, &st) != 0)
             continue;
-        if (n == cap) {
-            tuned_file *g = realloc(f, (cap = cap ? 2 * cap : 64) * sizeof *f);
+        if (*n == cap) {
+            store_file *g = realloc(f, (cap = cap ? 2 * cap : 64) * sizeof *f);
             if (!g)
                 break;
             f = g;
         }
-        memcpy(f[n].key, key, 16);
-        f[n++].mtime = st.st_mtim;
+        memcpy(f[*n].key, key, 16);
+        f[(*n)++].mtime = st.st_mtim;
     }
     closedir(d);
-    if (n)
-        qsort(f, n, sizeof *f, by_mtime);
+    if (*n)
+        qsort(f, *n, sizeof *f, by_mtime);
+    return f;
+}
+
+/* At start: the blobs of cached subjects back into their caches; every
+ * other file of the kind goes. */
+static void store_restore(gsd_server *s, int kind)
+{
+    size_t n = 0;
+    store_file *f = store_list(s, kind, &n);
+    gsd_cache *c = store_cache(s, kind);
     for (size_t i = 0; i < n; i++) {
         char path[GSD_STR_MAX + 64];
         size_t len = 0;
         int missing;
-        tuned_path(s, f[i].key, path, sizeof path);
-        uint8_t *b = gsd_file_read(path, (size_t)s->cfg.tuned_cache_mb << 20, &len, &missing);
-        if (b) /* a block over the budget is refused here and its file swept below */
-            gsd_cache_put(s->tuned, f[i].key, b, len);
+        store_path(s, kind, f[i].key, path, sizeof path);
+        uint8_t *b = gsd_file_read(path, (size_t)store_budget_mb(s, kind) << 20, &len, &missing);
+        if (b) /* a blob over the budget is refused here and its file swept below */
+            gsd_cache_put(c, f[i].key, b, len);
         free(b);
     }
     free(f);
     pthread_mutex_lock(&s->persist_mu);
-    tuned_sweep_locked(s);
+    store_sweep_locked(s, kind);
     pthread_mutex_unlock(&s->persist_mu);
     gsd_cache_stats st;
-    gsd_cache_stats_get(s->tuned, &st);
-    LOG_I("fine-tuned subjects: %llu blocks restored (%llu MiB)", (unsigned long long)st.entries,
+    gsd_cache_stats_get(c, &st);
+    LOG_I("%s: %llu restored (%llu MiB)", store_kinds[kind].what, (unsigned long long)st.entries,
           (unsigned long long)(st.bytes >> 20));
+}
+
+/* ---- kept inputs -------------------------------------------------------------- */
+
+/* Keeps face (the model's size) as key's input. */
+static int input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face, char *msg, size_t cap)
+{
+    size_t row = (size_t)face->width * 3, len = 8 + row * (size_t)face->height;
+    uint8_t *b = malloc(len);
+    if (!b) {
+        snprintf(msg, cap, "out of memory");
+        return E(ERR_INTERNAL);
+    }
+    uint32_t hdr[2] = {INPUT_MAGIC, (uint32_t)face->width};
+    memcpy(b, hdr, 8);
+    for (int y = 0; y < face->height; y++)
+        memcpy(b + 8 + (size_t)y * row, face->data + (size_t)y * face->stride, row);
+    int e = store_put(s, STORE_INPUT, key, b, len, msg, cap);
+    free(b);
+    return e;
+}
+
+/* key's kept input as a size x size image (out->data malloc'd); -1 when
+ * none is kept, or it does not fit the model. */
+static int input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out)
+{
+    uint8_t *b = NULL;
+    long n = gsd_cache_get_alloc(s->inputs, key, &b);
+    uint32_t hdr[2] = {0, 0};
+    if (n >= 8)
+        memcpy(hdr, b, 8);
+    if (n < 8 || hdr[0] != INPUT_MAGIC || hdr[1] != (uint32_t)size ||
+        (size_t)n != 8 + 3 * (size_t)size * size) {
+        free(b);
+        return -1;
+    }
+    memmove(b, b + 8, (size_t)n - 8);
+    *out = (gs_io_image){size, size, 3 * (size_t)size, b};
+    return 0;
 }
 
 static void head_rotation(const Gazesplat__Angles *a, double R[9])
@@ -957,7 +1040,7 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
         return E(ERR_INTERNAL);
     }
     memcpy(sum, blk + len - 8, 8);
-    int e = tuned_store(w->srv, j->key, blk, len, msg, cap);
+    int e = store_put(w->srv, STORE_TUNED, j->key, blk, len, msg, cap);
     free(blk);
     if (e)
         return e;
@@ -973,37 +1056,28 @@ typedef struct subject_out {
     gs_subject subj;
     gs_fit_report fit;
     gs_finetune_report ft; /* ft.iters > 0 or psnr: this request fine-tuned */
-    int cached, tuned, ft_ran;
+    int cached, tuned, ft_ran, kept;
     uint64_t sum;          /* tuned: the block's checksum */
+    gs_io_image face;      /* the normalized input, when the caller asked for it */
 } subject_out;
 
-/* Fits (or finds) the subject of `img`, fine-tuning it as ft asks; fills
- * the key and *o, and *p for a photo (the caller frees it). Returns 0 or
- * an ErrorCode with msg. */
-static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest *fr, const gsd_finetune *ft,
-                          const Gazesplat__Image *img, const Gazesplat__Intrinsics *k, photo_input *p,
-                          subject_out *o, char *msg, size_t cap)
+/* How obtain_subject fits: the request's labels (FIT only), iterations,
+ * fine-tuning, and whether the input is kept (keep_image) or handed back
+ * in o->face (want_face: inline REDIRECT transfer). */
+typedef struct subject_ask {
+    const Gazesplat__FitRequest *fr;
+    uint32_t max_iters;
+    gsd_finetune ft;
+    int keep_image, want_face;
+} subject_ask;
+
+/* Runs the fit (and fine-tune) a new subject needs and caches it. */
+static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const photo_input *p,
+                       const gs_io_image *face, subject_out *o, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
-    const gs_model_info *info = &w->model->info;
+    const Gazesplat__FitRequest *fr = a->fr;
     gs_subject *subj = &o->subj;
-    memset(o, 0, sizeof *o);
-    gs_io_image face;
-    int e = input_face(w, j, img, k, p, &face, msg, cap);
-    if (e)
-        return e;
-    if (key_zero(j->key))
-        content_key(&face, fr, ft, j->key);
-    o->cached = cache_lookup(s, j->key, subj, &o->tuned, &o->sum) == 0;
-    if (o->cached && o->tuned && !gsd_cache_contains(s->tuned, j->key)) {
-        /* Its tuned tensors were evicted: the subject cannot render, so
-         * this FIT runs again (the error REDIRECT gives says so). */
-        o->cached = o->tuned = 0;
-    }
-    if (o->cached) {
-        gs_io_image_free(&face);
-        return 0;
-    }
     gs_fit_options opt;
     gs_fit_options_default(&opt);
     if (fr && fr->gaze) {
@@ -1021,32 +1095,28 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest
     }
     if (opt.known_head) {
         opt.head_t[0] = opt.head_t[1] = 0.0;
-        opt.head_t[2] = info->distance_mm; /* the face centre is on the axis */
+        opt.head_t[2] = w->model->info.distance_mm; /* the face centre is on the axis */
     }
     opt.mask = p->mask_n;
-    if (fr && fr->max_iters)
-        opt.max_iters = (int)fr->max_iters;
-    if (!fr && j->type == T(REDIRECT))
-        opt.max_iters = (int)((const Gazesplat__RedirectRequest *)j->req)->max_iters;
+    if (a->max_iters)
+        opt.max_iters = (int)a->max_iters;
     opt.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
     if (opt.time_budget_s <= 0)
         opt.time_budget_s = 0.001;
     gs_error err;
     gs_error_clear(&err);
-    int r = gs_model_fit(w->ctx, w->pool, face.data, face.stride, &opt, subj, &o->fit, &err);
+    int r = gs_model_fit(w->ctx, w->pool, face->data, face->stride, &opt, subj, &o->fit, &err);
     if (r != GS_OK) {
-        gs_io_image_free(&face);
         snprintf(msg, cap, "fit: %s", err.msg);
         return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
     }
     atomic_fetch_add(&s->ctr.fits, 1);
-    if (ft->steps) {
-        e = finetune_subject(w, j, ft, subj, &face, p->mask_n, &o->ft, &o->sum, msg, cap);
-        o->tuned = o->ft_ran = e == 0;
+    if (a->ft.steps) {
+        int e = finetune_subject(w, j, &a->ft, subj, face, p->mask_n, &o->ft, &o->sum, msg, cap);
+        if (e)
+            return e;
+        o->tuned = o->ft_ran = 1;
     }
-    gs_io_image_free(&face);
-    if (e)
-        return e;
     uint8_t blob[GS_SUBJECT_ENCODED_MAX + 12];
     size_t n = subject_blob(subj, o->tuned ? &o->sum : NULL, blob, sizeof blob);
     /* Durable before the reply: a FIT_OK means the subject survives a crash. */
@@ -1056,6 +1126,38 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const Gazesplat__FitRequest
     }
     gsd_cache_persist(s);
     return 0;
+}
+
+/* Fits (or finds) the subject of `img` as a asks; fills the key and *o,
+ * and *p for a photo (the caller frees it, and o->face when asked for).
+ * Returns 0 or an ErrorCode with msg. */
+static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const Gazesplat__Image *img,
+                          const Gazesplat__Intrinsics *k, photo_input *p, subject_out *o, char *msg,
+                          size_t cap)
+{
+    gsd_server *s = w->srv;
+    memset(o, 0, sizeof *o);
+    gs_io_image face;
+    int e = input_face(w, j, img, k, p, &face, msg, cap);
+    if (e)
+        return e;
+    if (key_zero(j->key))
+        content_key(&face, a->fr, a->max_iters, &a->ft, j->key);
+    o->cached = cache_lookup(s, j->key, &o->subj, &o->tuned, &o->sum) == 0;
+    if (o->cached && o->tuned && !gsd_cache_contains(s->tuned, j->key)) {
+        /* Its tuned tensors were evicted: the subject cannot render, so
+         * this FIT runs again (the error REDIRECT gives says so). */
+        o->cached = o->tuned = 0;
+    }
+    if (!o->cached)
+        e = fit_subject(w, j, a, p, &face, o, msg, cap);
+    if (!e && a->keep_image && (e = input_keep(s, j->key, &face, msg, cap)) == 0)
+        o->kept = 1;
+    if (!e && a->want_face)
+        o->face = face;
+    else
+        gs_io_image_free(&face);
+    return e;
 }
 
 static void subject_angles(const gs_subject *subj, Gazesplat__Angles *gaze, Gazesplat__Angles *head)
@@ -1075,8 +1177,8 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     subject_out so;
     char msg[400];
     photo_input photo;
-    gsd_finetune ft = finetune_of(r->finetune_steps, r->finetune_parts);
-    int e = obtain_subject(w, j, r, &ft, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
+    subject_ask a = {r, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts), r->keep_image, 0};
+    int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
     photo_input_free(&photo);
     if (e)
         return gsd_error_frame(j, e, "%s", msg);
@@ -1106,6 +1208,7 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     m.seconds = (double)(now_ms() - t0) / 1000.0;
     m.cached = so.cached;
     m.finetuned = so.tuned;
+    m.image_kept = gsd_cache_contains(s->inputs, j->key);
     if (so.ft_ran) {
         m.finetune_steps = (uint32_t)so.ft.iters;
         m.finetune_psnr = so.ft.psnr_best;
@@ -1213,11 +1316,12 @@ static void count_render(gsd_worker *w, gs_model_ctx *ctx)
     atomic_fetch_add(st.last_incremental ? &w->srv->ctr.renders_incremental : &w->srv->ctr.renders_full, 1);
 }
 
-/* Renders target i into rgb (the normalized face) and posts it, pasted
- * back into the photo when the request asks for it. */
+/* Renders target i into rgb (the normalized face; with input, by detail
+ * transfer from it) and posts it, pasted back into the photo when the
+ * request asks for it. */
 static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gazesplat__RedirectRequest *r,
-                         size_t i, const gs_subject *subj, const photo_input *p, paste_state *ps,
-                         uint8_t *rgb, char *msg, size_t cap)
+                         size_t i, const gs_subject *subj, const gs_io_image *input, const photo_input *p,
+                         paste_state *ps, uint8_t *rgb, char *msg, size_t cap)
 {
     const Gazesplat__Target *t = r->targets[i];
     int size = w->model->info.image_size;
@@ -1232,11 +1336,16 @@ static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gaz
     }
     gs_error err;
     gs_error_clear(&err);
-    if (gs_model_render(ctx, w->pool, subj, &view, rgb, (size_t)size * 3, &err) != GS_OK) {
-        snprintf(msg, cap, "render target %zu: %s", i, err.msg);
-        return E(ERR_INTERNAL);
+    int rc = input ? gs_model_render_transfer(ctx, w->pool, subj, input->data, input->stride, &view, rgb,
+                                              (size_t)size * 3, &err)
+                   : gs_model_render(ctx, w->pool, subj, &view, rgb, (size_t)size * 3, &err);
+    if (rc != GS_OK) {
+        snprintf(msg, cap, "render target %zu%s: %s", i, input ? " (transfer)" : "", err.msg);
+        return rc == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
     }
     count_render(w, ctx);
+    if (input)
+        atomic_fetch_add(&w->srv->ctr.renders_transfer, 1);
     gs_io_image norm = {size, size, (size_t)size * 3, rgb};
     if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK)
         return post_image(w, j, r, i, &norm, msg, cap);
@@ -1254,21 +1363,29 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     photo_input photo;
     memset(&photo, 0, sizeof photo);
     if (r->image) {
-        gsd_finetune ft = finetune_of(r->finetune_steps, r->finetune_parts);
-        int e = obtain_subject(w, j, NULL, &ft, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
+        subject_ask a = {NULL, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts), 0,
+                         r->transfer};
+        int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {
             photo_input_free(&photo);
             return gsd_error_frame(j, e, "%s", msg);
         }
-    } else if (cache_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0) {
+    } else {
         char hex[33];
         gs_frame_key_hex(j->key, hex);
-        return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
+        if (cache_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0)
+            return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
+        if (r->transfer && input_get(s, j->key, w->model->info.image_size, &so.face) != 0)
+            return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT),
+                                   "subject %s: no kept input for transfer (FIT it with keep_image, or it "
+                                   "was evicted: input_cache_mb); send the image inline or FIT again",
+                                   hex);
     }
     int slot = -1;
     if (so.tuned) {
         int e = worker_use_tuned(w, j->key, so.sum, &slot, msg, sizeof msg);
         if (e) {
+            gs_io_image_free(&so.face);
             photo_input_free(&photo);
             return gsd_error_frame(j, e, "%s", msg);
         }
@@ -1285,10 +1402,12 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         int why = job_stop(j);
         if (why)
             o = stop_frame(s, j, why);
-        else if ((why = render_target(w, ctx, j, r, i, &subj, &photo, &ps, rgb, msg, sizeof msg)) != 0)
+        else if ((why = render_target(w, ctx, j, r, i, &subj, so.face.data ? &so.face : NULL, &photo, &ps,
+                                      rgb, msg, sizeof msg)) != 0)
             o = gsd_error_frame(j, why, "%s", msg);
     }
     free(rgb);
+    gs_io_image_free(&so.face);
     paste_state_free(&ps);
     photo_input_free(&photo);
     if (o)

@@ -48,6 +48,7 @@ static const key_def keys[] = {
     {"drain_timeout_ms", T_INT, OFF(drain_timeout_ms), 0, 3600000, "30000"},
     {"cache_mb", T_INT, OFF(cache_mb), 1, 65536, "256"},
     {"tuned_cache_mb", T_INT, OFF(tuned_cache_mb), 1, 65536, "256"},
+    {"input_cache_mb", T_INT, OFF(input_cache_mb), 1, 65536, "64"},
     {"max_finetune_steps", T_INT, OFF(max_finetune_steps), 0, 100000, "1000"},
     {"tuned_subjects", T_INT, OFF(tuned_subjects), 1, GSD_TUNED_SLOTS_MAX, "2"},
     {"log_level", T_LEVEL, OFF(log_level), 0, 3, "info"},

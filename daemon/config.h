@@ -10,6 +10,9 @@
 
 /* Most fine-tuned subjects a worker holds (a model clone each). */
 #define GSD_TUNED_SLOTS_MAX 16
+/* A kept FIT input (keep_image): an 8-byte header and a square RGB image of
+ * the model's size, at most 1024 px. */
+#define GSD_INPUT_MAX_BLOB (8 + 3 * 1024 * 1024)
 
 typedef struct gsd_config {
     char socket[GSD_STR_MAX];     /* Unix socket path; "" = default */
@@ -28,6 +31,7 @@ typedef struct gsd_config {
     int drain_timeout_ms;
     int cache_mb;
     int tuned_cache_mb;      /* fine-tuned parameter blocks */
+    int input_cache_mb;      /* kept FIT inputs (keep_image) */
     int max_finetune_steps;  /* per FIT; 0: fine-tuning refused */
     int tuned_subjects;      /* fine-tuned subjects each worker holds ready */
     int log_level;

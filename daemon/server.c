@@ -69,6 +69,7 @@ static const struct {
     CTR(renders_incremental), CTR(model_loads),
     CTR(model_load_failures), CTR(reloads), CTR(cache_saves), CTR(cache_save_failures),
     CTR(finetunes), CTR(tuned_swaps), CTR(tuned_saves), CTR(tuned_save_failures),
+    CTR(renders_transfer), CTR(input_saves), CTR(input_save_failures),
 };
 #define NCOUNTERS (sizeof counter_names / sizeof counter_names[0])
 
@@ -445,7 +446,7 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
 {
     gsd_server *s = c->srv;
     bump(&s->ctr.req_stats, 1);
-    enum { EXTRA = 15 };
+    enum { EXTRA = 18 };
     Gazesplat__Counter cs[NCOUNTERS + EXTRA];
     Gazesplat__Counter *ptrs[NCOUNTERS + EXTRA];
     size_t n = 0;
@@ -456,9 +457,10 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
     }
     int qlen, running;
     gsd_work_lengths(s, &qlen, &running);
-    gsd_cache_stats cst, tst;
+    gsd_cache_stats cst, tst, ist;
     gsd_cache_stats_get(s->cache, &cst);
     gsd_cache_stats_get(s->tuned, &tst);
+    gsd_cache_stats_get(s->inputs, &ist);
     const struct {
         const char *name;
         uint64_t v;
@@ -468,7 +470,8 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
         {"cache_bytes", cst.bytes}, {"cache_budget", cst.budget}, {"cache_hits", cst.hits},
         {"cache_misses", cst.misses}, {"cache_evictions", cst.evictions},
         {"tuned_entries", tst.entries}, {"tuned_bytes", tst.bytes},
-        {"tuned_evictions", tst.evictions},
+        {"tuned_evictions", tst.evictions}, {"input_entries", ist.entries},
+        {"input_bytes", ist.bytes}, {"input_evictions", ist.evictions},
         {"state", (uint64_t)atomic_load(&s->state)},
         {"uptime_ms", (uint64_t)(ev_now_ms() - s->started_ms)},
         {"job_ms_avg", (uint64_t)s->job_ms_avg},
@@ -942,6 +945,7 @@ void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
     gsd_work_set_depth(s, s->cfg.queue_depth);
     gsd_cache_set_budget(s->cache, (size_t)s->cfg.cache_mb << 20);
     gsd_cache_set_budget(s->tuned, (size_t)s->cfg.tuned_cache_mb << 20);
+    gsd_cache_set_budget(s->inputs, (size_t)s->cfg.input_cache_mb << 20);
     for (gsd_conn *c = s->conns; c; c = c->next)
         if (c->parser.state == 0 && c->parser.have == 0)
             set_limits(c);
@@ -1032,7 +1036,8 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
     /* A block can be as large as the budget (every part of a big model). */
     s->tuned = gsd_cache_create_sized((size_t)cfg->tuned_cache_mb << 20,
                                       (size_t)cfg->tuned_cache_mb << 20);
-    if (!s->loop || !s->cache || !s->tuned) {
+    s->inputs = gsd_cache_create_sized((size_t)cfg->input_cache_mb << 20, GSD_INPUT_MAX_BLOB);
+    if (!s->loop || !s->cache || !s->tuned || !s->inputs) {
         snprintf(msg, cap, "out of memory or epoll failure");
         return -1;
     }
@@ -1096,6 +1101,7 @@ void gsd_server_free(gsd_server *s)
     gsd_model_release_all(s);
     gsd_cache_destroy(s->cache);
     gsd_cache_destroy(s->tuned);
+    gsd_cache_destroy(s->inputs);
     if (s->sig_watch.fd > 0) {
         signal(SIGTERM, SIG_DFL);
         signal(SIGINT, SIG_DFL);

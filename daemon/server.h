@@ -40,6 +40,7 @@ typedef struct gsd_counters {
     atomic_ullong renders_full, renders_incremental;
     atomic_ullong model_loads, model_load_failures, reloads, cache_saves, cache_save_failures;
     atomic_ullong finetunes, tuned_swaps, tuned_saves, tuned_save_failures;
+    atomic_ullong renders_transfer, input_saves, input_save_failures;
 } gsd_counters;
 
 /* A unit of compute work. */
@@ -126,6 +127,7 @@ struct gsd_server {
     gsd_work work;
     gsd_cache *cache;
     gsd_cache *tuned;         /* fine-tuned parameter blocks by subject key */
+    gsd_cache *inputs;        /* kept FIT inputs (keep_image) by subject key */
     pthread_mutex_t persist_mu; /* one writer of the cache file at a time */
     char state_dir[GSD_STR_MAX];
 

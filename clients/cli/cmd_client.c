@@ -45,6 +45,10 @@ const cli_command cli_client_command = {
     "                       renders with it (the server's max_finetune_steps)\n"
     "  --finetune-parts L   with --finetune: face (default), eye, renderer, mlp,\n"
     "                       geometry, comma-separated\n"
+    "  --keep-image         fit: the server keeps the input with the subject, for\n"
+    "                       redirect --transfer by key\n"
+    "  --transfer           redirect: detail transfer (keep the input's own detail;\n"
+    "                       by --subject it needs a fit with --keep-image)\n"
     "  --subject HEX        redirect: a fitted subject key\n"
     "  --gaze-deg LIST      redirect: targets 'P,Y;P,Y;...', degrees\n"
     "  --head-deg LIST      redirect: head poses, one per target\n"
@@ -59,7 +63,8 @@ const cli_command cli_client_command = {
 
 enum {
     O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
-    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_FT, O_FT_PARTS, O_N
+    O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_FT, O_FT_PARTS, O_KEEP,
+    O_TRANSFER, O_N
 };
 
 /* --finetune N [--finetune-parts L]: 0 or CLI_USAGE (reported). */
@@ -323,6 +328,7 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
     req.head = o[O_HEAD].value ? &head : NULL;
     req.max_iters = (uint32_t)iters;
     req.deadline_ms = (uint32_t)deadline;
+    req.keep_image = o[O_KEEP].value != NULL;
     gs_client_frame f;
     gs_error err;
     int r = gs_client_call(c, T(FIT), key, 1, &req.base, timeout, &f, &err);
@@ -334,10 +340,11 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         char hex[33];
         gs_frame_key_hex(f.header.key, hex);
         printf("subject %s\ngaze_deg %.3f,%.3f\nhead_deg %.3f,%.3f\npsnr %.2f\nssim %.4f\niters %u\n"
-               "seconds %.3f\ncached %s\nfinetuned %s\n", hex, m->gaze ? m->gaze->pitch_deg : 0.0,
-               m->gaze ? m->gaze->yaw_deg : 0.0, m->head ? m->head->pitch_deg : 0.0,
-               m->head ? m->head->yaw_deg : 0.0, m->psnr, m->ssim, m->iters, m->seconds,
-               m->cached ? "yes" : "no", m->finetuned ? "yes" : "no");
+               "seconds %.3f\ncached %s\nfinetuned %s\nimage_kept %s\n", hex,
+               m->gaze ? m->gaze->pitch_deg : 0.0, m->gaze ? m->gaze->yaw_deg : 0.0,
+               m->head ? m->head->pitch_deg : 0.0, m->head ? m->head->yaw_deg : 0.0, m->psnr, m->ssim,
+               m->iters, m->seconds, m->cached ? "yes" : "no", m->finetuned ? "yes" : "no",
+               m->image_kept ? "yes" : "no");
         if (m->finetune_steps)
             printf("finetune_steps %u\nfinetune_psnr %.2f\n", m->finetune_steps, m->finetune_psnr);
         rc = CLI_OK;
@@ -435,6 +442,7 @@ static int do_redirect(gs_client *c, const cli_opt *o, int timeout)
         req.output_format = (Gazesplat__ImageFormat)fmt;
         if (o[O_PASTE].value)
             req.output_mode = GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK;
+        req.transfer = o[O_TRANSFER].value != NULL;
         long iters = 0;
         if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &iters) == 0)
             req.max_iters = (uint32_t)iters;
@@ -468,7 +476,7 @@ static int run_client(int argc, char **argv)
         {"--max-iters", 1, NULL}, {"--subject", 1, NULL}, {"--gaze-deg", 1, NULL},
         {"--head-deg", 1, NULL}, {"--format", 1, NULL}, {"--out", 1, NULL}, {"--deadline-ms", 1, NULL},
         {"--paste-back", 0, NULL}, {"--refit", 0, NULL}, {"--finetune", 1, NULL},
-        {"--finetune-parts", 1, NULL},
+        {"--finetune-parts", 1, NULL}, {"--keep-image", 0, NULL}, {"--transfer", 0, NULL},
     };
     /* --set may repeat: take every one out before the common parser. */
     const char *sets[MAX_SETS];

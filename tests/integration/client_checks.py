@@ -35,3 +35,19 @@ def expect_error(t, fn, code, what, text=None):
             t.check(text in e.message, "%s: message '%s' lacks '%s'" % (what, e.message, text))
         return e
     return None
+
+
+def refused(t, fn, code, what, text=None):
+    """expect_error, printing the server's reason when it came."""
+    e = expect_error(t, fn, code, what, text)
+    if e:
+        print("refused (%s): %s" % (what, e.message))
+    return e
+
+
+def start_ready(t, daemon_cls, binary, args):
+    """Starts a daemon and waits for its model; returns it and its address."""
+    d = daemon_cls(binary, args).start()
+    addr = "unix:" + d.sock
+    wait_ready(t, addr)
+    return d, addr

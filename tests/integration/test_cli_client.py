@@ -75,6 +75,22 @@ def main():
                 "--gaze-deg", "0,0", "--out", tout)
         t.check(r.returncode == 0 and os.path.exists(os.path.join(tout, "target_000.png")),
                 "redirect of a fine-tuned subject: %d %s" % (r.returncode, r.stderr))
+        # Detail transfer by key: refused until the fit keeps its input.
+        xout = os.path.join(work, "cli_out_transfer")
+        r = run(cli, "client", "redirect", addr, "--subject", key[0] if key else "0" * 32,
+                "--gaze-deg", "10,-20", "--transfer", "--out", xout)
+        t.check(r.returncode == 1 and "ERR_UNKNOWN_SUBJECT" in r.stderr and "keep_image" in r.stderr,
+                "transfer without a kept input: %s" % r.stderr)
+        r = run(cli, "client", "fit", addr, "--image", face, "--max-iters", "3", "--gaze", "5,-5",
+                "--keep-image")
+        t.check(r.returncode == 0 and "cached yes" in r.stdout and "image_kept yes" in r.stdout,
+                "fit --keep-image: %s %s" % (r.stdout, r.stderr))
+        r = run(cli, "client", "redirect", addr, "--subject", key[0] if key else "0" * 32,
+                "--gaze-deg", "10,-20", "--transfer", "--out", xout)
+        xpng = os.path.join(xout, "target_000.png")
+        plain = open(os.path.join(out, "target_001.png"), "rb").read() if files else b""
+        t.check(r.returncode == 0 and os.path.exists(xpng) and open(xpng, "rb").read() != plain,
+                "redirect --transfer by key: %d %s" % (r.returncode, r.stderr))
         r = run(cli, "client", "fit", addr, "--image", face, "--finetune-parts", "face")
         t.check(r.returncode == 2, "--finetune-parts alone is a usage error: %d" % r.returncode)
         r = run(cli, "client", "fit", addr, "--image", face, "--finetune", "2", "--finetune-parts", "nose")
@@ -82,7 +98,7 @@ def main():
         r = run(cli, "client", "fit", addr, "--image", face, "--photo")
         t.check(r.returncode == 1 and "ERR_PHOTO_UNSUPPORTED" in r.stderr, "photo: %s" % r.stderr)
         r = run(cli, "client", "stats", addr)
-        t.check(r.returncode == 0 and "images_out 3" in r.stdout and "finetunes 1" in r.stdout,
+        t.check(r.returncode == 0 and "images_out 4" in r.stdout and "finetunes 1" in r.stdout,
                 "stats: %s" % r.stdout[-300:])
         r = run(cli, "client", "frobnicate", addr)
         t.check(r.returncode == 2, "unknown action: %d" % r.returncode)

@@ -15,17 +15,12 @@ sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
 from daemon_util import Checks, Daemon  # noqa: E402
 from model_fixture import faces, tiny_model  # noqa: E402
-from client_checks import expect_error, wait_ready  # noqa: E402
+from client_checks import refused, start_ready, wait_ready  # noqa: E402
 import gazesplat_client as gc  # noqa: E402
 
 FAST = 3   # fit iterations
 STEPS = 4  # fine-tuning steps
 
-
-def refused(t, fn, code, what, text=None):
-    e = expect_error(t, fn, code, what, text)
-    if e:
-        print("refused (%s): %s" % (what, e.message))
 
 
 def raw(c, key, gaze=(10, -15)):
@@ -85,7 +80,7 @@ def serve(t, addr, imgs, state):
         inline = list(c.redirect([(0, 10)], image=imgs[2], max_iters=FAST, finetune_steps=2,
                                  fmt="raw"))
         t.check(len(inline) == 1, "inline fine-tuned REDIRECT")
-        r = c.fit(imgs[2], finetune_steps=2)
+        r = c.fit(imgs[2], max_iters=FAST, finetune_steps=2)
         t.check(r.cached and r.finetuned, "inline subject cached as fine-tuned: %s" % r)
         t.check(raw(c, r.subject_key, (0, 10)) == inline[0].image.data, "inline render == render by key")
         # Three fine-tuned subjects, two slots: the least recently used slot
@@ -137,9 +132,7 @@ def main():
         t.check(d.stop() == 0, "clean exit")
 
         # Restart: the blocks come back from their files, same renders.
-        d = Daemon(daemon, base).start()
-        addr = "unix:" + d.sock
-        wait_ready(t, addr)
+        d, addr = start_ready(t, Daemon, daemon, base)
         with gc.Client(addr) as c:
             t.check(c.stats()["tuned_entries"] == 3, "blocks restored: %d" % c.stats()["tuned_entries"])
             for k in (k0, kp, k1):
@@ -149,9 +142,7 @@ def main():
         # A budget for one block (the tiny model's face block is 0.54 MB):
         # the newest file is kept, the others go, and their subjects say
         # so; plain subjects are unaffected.
-        d = Daemon(daemon, base + ["--set", "tuned_cache_mb=1"]).start()
-        addr = "unix:" + d.sock
-        wait_ready(t, addr)
+        d, addr = start_ready(t, Daemon, daemon, base + ["--set", "tuned_cache_mb=1"])
         with gc.Client(addr) as c:
             t.check(c.stats()["tuned_entries"] == 1, "one block within 1 MiB: %d"
                     % c.stats()["tuned_entries"])
@@ -174,9 +165,8 @@ def main():
         t.check(d.stop() == 0, "clean exit")
 
         # Another model: no block applies; the files go.
-        d = Daemon(daemon, ["--model", other, "--state-dir", state, "--set", "photo_input=no"]).start()
-        addr = "unix:" + d.sock
-        wait_ready(t, addr)
+        d, addr = start_ready(t, Daemon, daemon,
+                              ["--model", other, "--state-dir", state, "--set", "photo_input=no"])
         with gc.Client(addr) as c:
             refused(t, lambda: raw(c, k1), gc.pb.ERR_UNKNOWN_SUBJECT, "fine-tuned subject of another model")
             t.check(c.stats()["tuned_entries"] == 0, "no blocks for another model")
