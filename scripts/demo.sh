@@ -4,7 +4,8 @@
 # default model and sends the bundled sample photo (samples/astronaut.jpg)
 # through the Python client, which writes ONE image: a 3 x 3 grid of
 # redirected gazes (rows pitch +20/0/-20 deg, columns yaw +25/0/-25 deg),
-# each pasted back into the photo, at out/demo/gaze-grid.png.
+# each the photo's own face redirected by detail transfer and pasted back
+# into the photo, at out/demo/gaze-grid.png.
 # GS_DEMO_ITERS bounds the photo fit (default 100 iterations: a few
 # minutes on a loaded 2-core machine).
 set -euo pipefail

@@ -7,8 +7,10 @@ each cell the image the server returned for that (pitch, yaw).
         --image samples/astronaut.jpg --out grid.png
 
 The photo is sent inline in a single REDIRECT: the server finds the face,
-fits a subject (at most --max-iters iterations), renders every target and
-pastes each back into the photo. Needs Debian's python3-pil (and
+fits a subject (at most --max-iters iterations), renders every target by
+detail transfer (the photo's own face, its eyes turned; --no-transfer
+shows the model's plain render instead) and pastes each back into the
+photo. Needs Debian's python3-pil (and
 python3-protobuf for the client).
 """
 import argparse
@@ -77,13 +79,14 @@ def wait_ready(client, seconds):
 
 
 def redirect_grid(client, photo, pitches, yaws, is_photo=True, paste_back=True, max_iters=0,
-                  deadline_ms=0):
+                  deadline_ms=0, transfer=True):
     """Sends one REDIRECT with len(pitches) x len(yaws) targets (row-major);
     returns the decoded images as rows."""
     targets = [(p, y) for p in pitches for y in yaws]
     got = {}
     for res in client.redirect(targets, image=photo, photo=is_photo, paste_back=paste_back and is_photo,
-                               max_iters=max_iters, deadline_ms=deadline_ms, fmt="png"):
+                               max_iters=max_iters, deadline_ms=deadline_ms, fmt="png",
+                               transfer=transfer):
         got[res.index] = Image.open(io.BytesIO(res.image.data))
     if sorted(got) != list(range(len(targets))):
         raise RuntimeError("server sent images %s for %d targets" % (sorted(got), len(targets)))
@@ -107,6 +110,9 @@ def main(argv=None):
                     help="the image is already a normalized face of the model's size")
     ap.add_argument("--no-paste-back", action="store_true",
                     help="cells show the normalized face instead of the photo")
+    ap.add_argument("--no-transfer", action="store_true",
+                    help="cells show the model's plain render instead of the photo's own face "
+                         "redirected by detail transfer")
     ap.add_argument("--max-iters", type=int, default=100, help="fit iterations (default 100)")
     ap.add_argument("--deadline-ms", type=int, default=0, help="request deadline (0: the server's)")
     ap.add_argument("--cell", type=int, default=256, help="cell edge in pixels (default 256)")
@@ -123,7 +129,7 @@ def main(argv=None):
         wait_ready(c, a.wait_ready)
         images = redirect_grid(c, photo, a.pitch, a.yaw, is_photo=not a.normalized,
                                paste_back=not a.no_paste_back, max_iters=a.max_iters,
-                               deadline_ms=a.deadline_ms)
+                               deadline_ms=a.deadline_ms, transfer=not a.no_transfer)
     grid = compose(images, a.pitch, a.yaw, a.cell)
     grid.save(a.out, "PNG")
     print("wrote %s: %d x %d gazes, %d x %d px" % (a.out, len(a.pitch), len(a.yaw), *grid.size))
