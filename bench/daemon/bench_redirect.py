@@ -9,10 +9,14 @@ preset model, 256 px; speed does not depend on training).
 usage: bench_redirect.py [--build DIR] [--model FILE] [--clients 1,8,32]
                          [--seconds S] [--format raw|png|jpeg]
                          [--workers N] [--threads N] [--subjects N]
-                         [--fit-iters N] [--compare]
+                         [--fit-iters N] [--compare] [--transfer]
        bench_redirect.py --overhead    (round trips of HEALTH, answered by
                          the loop, and of a 0 ms SLEEP, which goes through
                          the queue and a worker: the daemon's own cost)
+
+--transfer measures, on the same daemon and in turn with the plain
+REDIRECTs, the same requests with detail transfer (the subjects fitted
+with keep_image), and prints the plain/transfer ratios.
 
 --compare runs a second daemon with sweep_subjects = 1 beside the first
 (each worker keeps one subject's render: with the clients cycling over the
@@ -37,7 +41,7 @@ def percentile(xs, p):
     return xs[min(len(xs) - 1, int(p / 100.0 * len(xs)))] if xs else float("nan")
 
 
-def run_clients(gc, addr, keys, n, seconds, fmt):
+def run_clients(gc, addr, keys, n, seconds, fmt, transfer):
     lat, errors = [], []
     lock = threading.Lock()
     stop = time.time() + seconds
@@ -49,7 +53,7 @@ def run_clients(gc, addr, keys, n, seconds, fmt):
                 while time.time() < stop:
                     t0 = time.perf_counter()
                     out = list(c.redirect([((i + k) % 20 - 10, k % 40 - 20)], subject=keys[(i + k) % len(keys)],
-                                          fmt=fmt))
+                                          fmt=fmt, transfer=transfer))
                     dt = time.perf_counter() - t0
                     assert len(out) == 1
                     with lock:
@@ -74,13 +78,13 @@ def cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def measure(gc, d, keys, n, a):
+def measure(gc, d, keys, n, a, transfer=False):
     """One point: clients, images/s, p50, p99, CPU ms/image, renders."""
     addr = "unix:" + d.sock
     with gc.Client(addr) as c:
         st0 = c.stats()
     cpu0 = cpu_seconds(d.proc.pid)
-    lat, wall, errors = run_clients(gc, addr, keys, n, a.seconds, a.format)
+    lat, wall, errors = run_clients(gc, addr, keys, n, a.seconds, a.format, transfer)
     cpu = cpu_seconds(d.proc.pid) - cpu0
     with gc.Client(addr) as c:
         st1 = c.stats()
@@ -134,6 +138,7 @@ def main():
     ap.add_argument("--compare", action="store_true")
     ap.add_argument("--fit-iters", type=int, default=4)  # distinct subjects need a few
     ap.add_argument("--overhead", action="store_true")
+    ap.add_argument("--transfer", action="store_true")
     a = ap.parse_args()
     os.environ.setdefault("GAZESPLAT_PB2_DIR", os.path.join(a.build, "python"))
     import gazesplat_client as gc
@@ -159,22 +164,27 @@ def main():
             imgs = faces(cli, work, size, a.subjects)
             with gc.Client("unix:" + d.sock) as c:
                 # the same images and labels: the same subject keys in both
-                keys = [c.fit(img, max_iters=a.fit_iters).subject_key for img in imgs]
+                keys = [c.fit(img, max_iters=a.fit_iters, keep_image=a.transfer).subject_key
+                        for img in imgs]
                 list(c.redirect([(0, 0)], subject=keys[0], fmt=a.format))  # warm-up
         print("model %s, %d px, %d worker(s) x %s thread(s), %s output, %d subjects, %d CPUs, %.0f s per point"
               % (os.path.basename(model), size, a.workers, a.threads or "auto", a.format, len(keys),
                  os.cpu_count(), a.seconds))
         print("%-18s %7s %9s %8s %8s %12s %6s %6s" % ("daemon", "clients", "images/s", "p50 ms", "p99 ms",
                                                  "CPU ms/img", "inc", "full"))
+        points = [(name, d, False) for name, d in daemons]
+        if a.transfer:
+            points.insert(1, ("kept, transfer", daemons[0][1], True))
         for n in (int(x) for x in a.clients.split(",")):
             res = []
-            for name, d in daemons:
-                r = measure(gc, d, keys, n, a)
+            for name, d, transfer in points:
+                r = measure(gc, d, keys, n, a, transfer)
                 res.append(r)
                 print("%-18s %7d %9.1f %8.1f %8.1f %12.1f %6d %6d" % ((name, n) + r))
-            if len(res) == 2:
-                print("%-18s %7d %8.2fx %7.2fx %7.2fx %11.2fx" % ("ratio", n, res[0][0] / res[1][0],
-                      res[1][1] / res[0][1], res[1][2] / res[0][2], res[1][3] / res[0][3]))
+            for i in range(1, len(res)):
+                print("%-18s %7d %8.2fx %7.2fx %7.2fx %11.2fx" % ("ratio 1/%d" % (i + 1), n,
+                      res[0][0] / res[i][0], res[i][1] / res[0][1], res[i][2] / res[0][2],
+                      res[i][3] / res[0][3]))
             sys.stdout.flush()
     finally:
         for _, d in daemons:
