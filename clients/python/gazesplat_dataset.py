@@ -17,6 +17,12 @@ was asked to render.
 
 Each DataLoader worker opens its own connection and takes every n-th
 source. BUSY replies are retried after the server's retry-after.
+
+transfer=True renders by detail transfer (the source's own skin, hair and
+iris, carried to each target through the model's geometry, instead of the
+model's smoother render): each source is fitted with keep_image, and a
+source whose kept input the server evicted (input_cache_mb) is fitted
+again, which keeps it anew (the fit itself is cached).
 """
 import math
 import random
@@ -47,7 +53,7 @@ class RedirectedGazeDataset(torch.utils.data.IterableDataset):
     callable rng -> (pitch, yaw)."""
 
     def __init__(self, sources, gaze_targets, head_targets=None, targets_per_source=8,
-                 addr=None, token=None, fit_iters=0, batch=8, seed=0, epochs=1):
+                 addr=None, token=None, fit_iters=0, batch=8, seed=0, epochs=1, transfer=False):
         super().__init__()
         self.sources = list(sources)
         self.gaze_targets = gaze_targets
@@ -56,6 +62,7 @@ class RedirectedGazeDataset(torch.utils.data.IterableDataset):
         self.addr, self.token = addr, token
         self.fit_iters, self.batch = fit_iters, batch
         self.seed, self.epochs = seed, epochs
+        self.transfer = transfer
 
     def _targets(self, rng):
         if callable(self.gaze_targets):
@@ -73,8 +80,9 @@ class RedirectedGazeDataset(torch.utils.data.IterableDataset):
     def _fit(self, client, src):
         if isinstance(src, dict):
             return client.fit(_read(src["image"]), gaze_deg=src.get("gaze_deg"),
-                              head_deg=src.get("head_deg"), max_iters=self.fit_iters)
-        return client.fit(_read(src), max_iters=self.fit_iters)
+                              head_deg=src.get("head_deg"), max_iters=self.fit_iters,
+                              keep_image=self.transfer)
+        return client.fit(_read(src), max_iters=self.fit_iters, keep_image=self.transfer)
 
     def __iter__(self):
         info = torch.utils.data.get_worker_info()
@@ -94,14 +102,20 @@ class RedirectedGazeDataset(torch.utils.data.IterableDataset):
                                                 heads[k:k + step] if heads else None)
 
     def _render(self, client, fit, idx, gazes, heads):
+        refit = self.transfer  # one new FIT when the kept input was evicted
         for _ in range(1000):
             try:
                 results = list(client.redirect(gazes, subject=fit.subject_key, head_deg=heads,
-                                               fmt="raw"))
+                                               fmt="raw", transfer=self.transfer))
                 break
             except gc.Busy as b:
                 import time
                 time.sleep(b.retry_after_ms / 1000.0)
+            except gc.GazesplatError as e:
+                if not (refit and e.code == gc.pb.ERR_UNKNOWN_SUBJECT):
+                    raise
+                refit = False
+                self._fit(client, self.sources[idx])
         else:
             raise RuntimeError("server stayed busy")
         for r in results:

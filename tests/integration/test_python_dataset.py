@@ -24,7 +24,7 @@ def main():
     faces(cli, work, 128, 3)
     paths = [os.path.join(work, "faces128", "images", n)
              for n in sorted(os.listdir(os.path.join(work, "faces128", "images")))]
-    d = Daemon(daemon, ["--model", model, "--set", "photo_input=no"]).start()
+    d = Daemon(daemon, ["--model", model, "--set", "photo_input=no", "--set", "input_cache_mb=1"]).start()
     try:
         import torch
         import gazesplat_client as gc
@@ -48,6 +48,38 @@ def main():
                 "gaze label %s" % s["gaze"])
         t.check(torch.allclose(s["head"], torch.tensor([0.0, 5 * math.pi / 180])), "head %s" % s["head"])
         t.check(sorted({x["source"] for x in samples}) == [0, 1], "sources")
+        # Detail transfer: the same labels, other pixels (the sources' own).
+        xs = list(RedirectedGazeDataset(paths[:2], gaze_targets=targets, head_targets=(0, 5), addr=addr,
+                                        fit_iters=3, batch=2, transfer=True))
+        t.check(len(xs) == 6 and all(torch.equal(a["gaze"], b["gaze"]) for a, b in zip(xs, samples)),
+                "transfer: same samples and labels")
+        diff = max(float((a["image"] - b["image"]).abs().mean()) for a, b in zip(xs, samples))
+        t.check(0.002 < diff and all(0 <= float(a["image"].min()) and float(a["image"].max()) <= 1
+                                     for a in xs), "transfer images differ from plain (%.4f), in range"
+                % diff)
+        # A kept input evicted between the dataset's FIT and its REDIRECT
+        # (a budget of 1 MiB holds 21 of these 128 px inputs; 24 other
+        # subjects evict it) is fitted again and renders the same.
+        xd = RedirectedGazeDataset(paths[:1], gaze_targets=targets, head_targets=(0, 5), addr=addr,
+                                   fit_iters=3, batch=2, transfer=True)
+        with gc.Client(addr) as c:
+            fit0 = xd._fit(c, paths[0])
+            for i in range(24):
+                c.fit(open(paths[2], "rb").read(), key=bytes([9, i]) + bytes(14), max_iters=1,
+                      keep_image=True)
+            evicted = c.stats()["input_evictions"]
+            try:
+                list(c.redirect([(0, 0)], subject=fit0.subject_key, transfer=True))
+                gone = None
+            except gc.GazesplatError as e:
+                gone = e.code
+            t.check(gone == gc.pb.ERR_UNKNOWN_SUBJECT, "the source's kept input is evicted: %s" % gone)
+            fits = c.stats()["fits"]
+            ys = list(xd._render(c, fit0, 0, targets, [(0, 5)] * 3))
+            t.check(c.stats()["fits"] == fits, "the refit was a cached FIT")
+        t.check(evicted >= 1 and len(ys) == 3 and all(torch.equal(a["image"], b["image"])
+                                                      for a, b in zip(ys, xs[:3])),
+                "after %d evictions the dataset refits and renders the same" % evicted)
         loader = torch.utils.data.DataLoader(ds, batch_size=3, num_workers=2)
         n = sum(b["image"].shape[0] for b in loader)
         t.check(n == 6, "two workers: %d samples" % n)
