@@ -650,13 +650,13 @@ static void splat_box(const gs_camera *cam, const float *x, const float *ls,
     }
 }
 
-/* Tile-aligned box (feature pixels, x0 y0 x1 y1, x1 y1 exclusive, clipped
- * to the map; empty when x0 >= x1) of every tile the eye stream's
+/* Tile-aligned box (pixels of cam, x0 y0 x1 y1, x1 y1 exclusive, clipped
+ * to its image; empty when x0 >= x1) of every tile the eye stream's
  * Gaussians can reach. The rasterizer bins a Gaussian to each tile its
  * 3-sigma box touches and composites it on any pixel of those tiles where
  * its alpha passes 1/255, so its reach is a set of whole tiles: those of
  * the union of splat_box. */
-static void eye_tiles(const gs_model_ctx *c, const gs_camera *cam, int r[4])
+void gs_frame_eye_tiles(const gs_model_ctx *c, const gs_camera *cam, int r[4])
 {
     int lo[2] = {INT_MAX, INT_MAX}, hi[2] = {INT_MIN, INT_MIN};
     for (int i = c->nf; i < c->n; i++) {
@@ -682,7 +682,7 @@ static void eye_tiles(const gs_model_ctx *c, const gs_camera *cam, int r[4])
     }
 }
 
-static void box_union(int a[4], const int b[4])
+void gs_frame_box_union(int a[4], const int b[4])
 {
     if (b[0] >= b[2] || b[1] >= b[3])
         return;
@@ -701,55 +701,78 @@ static void box_grow(const int b[4], int m, int n, int o[4])
     o[2] = b[2] + m < n ? b[2] + m : n, o[3] = b[3] + m < n ? b[3] + m : n;
 }
 
-/* The face Gaussians' boxes of the current pose, for gather_crop. */
-static void face_boxes(gs_model_ctx *c, const gs_camera *cam)
+void gs_frame_face_boxes(const gs_model_ctx *c, const gs_camera *cam,
+                         int16_t *fbox)
 {
     for (int i = 0; i < c->nf; i++) {
         int b[4];
         splat_box(cam, c->g_mean + 3 * (size_t)i, c->g_scale + 3 * (size_t)i, b);
         for (int k = 0; k < 4; k++) /* within [-1, edge + 1] */
-            c->fbox[4 * (size_t)i + k] = (int16_t)b[k];
+            fbox[4 * (size_t)i + k] = (int16_t)b[k];
     }
 }
 
-/* Copies into k_* the face Gaussians whose box meets the box d, then the
- * eye stream, and returns their count. The order is kept, and the
- * rasterizer sorts by (depth, index) and culls what misses the image, so
- * the crop renders exactly as with every Gaussian: only the projection of
- * the far ones (most of the face) is saved. */
-static void gather_one(gs_model_ctx *c, int i, int k)
+static void gather_one(const gs_gaussians *src, int i, const gs_frame_soa *dst,
+                       int k)
 {
-    int C = c->C;
-    memcpy(c->k_mean + 3 * (size_t)k, c->g_mean + 3 * (size_t)i,
+    size_t C = (size_t)src->channels;
+    memcpy(dst->mean + 3 * (size_t)k, src->means + 3 * (size_t)i,
            3 * sizeof(float));
-    memcpy(c->k_scale + 3 * (size_t)k, c->g_scale + 3 * (size_t)i,
+    memcpy(dst->scale + 3 * (size_t)k, src->log_scales + 3 * (size_t)i,
            3 * sizeof(float));
-    memcpy(c->k_quat + 4 * (size_t)k, c->g_quat + 4 * (size_t)i,
+    memcpy(dst->quat + 4 * (size_t)k, src->quats + 4 * (size_t)i,
            4 * sizeof(float));
-    c->k_opac[k] = c->g_opac[i];
-    memcpy(c->k_feat + (size_t)k * C, c->g_feat + (size_t)i * C,
-           (size_t)C * sizeof(float));
+    dst->opac[k] = src->opacity_logits[i];
+    memcpy(dst->feat + (size_t)k * C, src->features + (size_t)i * C,
+           C * sizeof(float));
 }
 
-static int gather_crop(gs_model_ctx *c, const int d[4])
+/* The order is kept, and the rasterizer sorts by (depth, index) and culls
+ * what misses the image, so the crop renders exactly as with every
+ * Gaussian: only the projection of the far ones (most of the face) is
+ * saved. */
+gs_gaussians gs_frame_gather(const gs_gaussians *src, int nf,
+                             const int16_t *fbox, const int d[4],
+                             const gs_frame_soa *dst)
 {
     int k = 0;
-    for (int i = 0; i < c->nf; i++) {
-        const int16_t *b = c->fbox + 4 * (size_t)i;
+    for (int i = 0; i < nf; i++) {
+        const int16_t *b = fbox + 4 * (size_t)i;
         if (b[0] < d[2] && b[2] > d[0] && b[1] < d[3] && b[3] > d[1])
-            gather_one(c, i, k++);
+            gather_one(src, i, dst, k++);
     }
-    for (int i = c->nf; i < c->n; i++)
-        gather_one(c, i, k++);
-    return k;
+    for (int i = nf; i < src->n; i++)
+        gather_one(src, i, dst, k++);
+    gs_gaussians g = {.n = k, .channels = src->channels, .means = dst->mean,
+                      .log_scales = dst->scale, .quats = dst->quat,
+                      .opacity_logits = dst->opac, .features = dst->feat};
+    return g;
 }
 
-/* A feature value moved by more than float rounding. The crop's camera
+int gs_frame_raster_crop(gs_raster *r, gs_pool *pool, const gs_camera *full,
+                         const int d[4], const gs_gaussians *g,
+                         const float *bg, float *out, float *alpha,
+                         float *depth, gs_error *err)
+{
+    gs_camera cam = *full;
+    cam.cx -= (float)d[0], cam.cy -= (float)d[1];
+    cam.width = d[2] - d[0], cam.height = d[3] - d[1];
+    /* the full image's frustum: the Jacobian's clamp as in the full render */
+    int rc = gs_raster_set_frustum(r, full, err);
+    if (rc)
+        return rc;
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    gs_raster_set_records(r, 0); /* renders only */
+    return gs_raster_forward(r, pool, &cam, g, bg, &ro, out, alpha, depth,
+                             err);
+}
+
+/* A value moved by more than float rounding. The crop's camera
  * has its centre shifted, which rounds the splats' pixel offsets
  * differently from the full render's: values then differ by a few ulps
  * all over the crop (about 1e-7 of 0.4), which are not changes: what
  * moves by less than 1e-6 (1 + |old|) keeps its value. */
-static int moved(float old, float now)
+int gs_frame_moved(float old, float now)
 {
     return fabsf(now - old) > 1e-6f * (1.0f + fabsf(old)) || isnan(now);
 }
@@ -764,25 +787,18 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
 {
     int w = d[2] - d[0], h = d[3] - d[1], fs = c->fs, C = c->C;
     size_t plane = (size_t)w * h;
-    gs_camera cam = *full;
-    cam.cx -= (float)d[0], cam.cy -= (float)d[1];
-    cam.width = w, cam.height = h;
     for (int k = 0; k < C; k++) /* the background is constant per channel */
         for (size_t i = 0; i < plane; i++)
             c->bg_crop[k * plane + i] = c->bg[(size_t)k * fs * fs];
-    /* the full map's frustum: the Jacobian's clamp as in the full render */
-    int rc = gs_raster_set_frustum(c->raster_crop, full, err);
-    if (rc)
-        return rc;
-    gs_gaussians g = {.n = gather_crop(c, d), .channels = C,
-                      .means = c->k_mean, .log_scales = c->k_scale,
-                      .quats = c->k_quat, .opacity_logits = c->k_opac,
-                      .features = c->k_feat};
-    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    gs_gaussians all = {.n = c->n, .channels = C, .means = c->g_mean,
+                        .log_scales = c->g_scale, .quats = c->g_quat,
+                        .opacity_logits = c->g_opac, .features = c->g_feat};
+    gs_frame_soa kept = {c->k_mean, c->k_scale, c->k_quat, c->k_opac,
+                         c->k_feat};
+    gs_gaussians g = gs_frame_gather(&all, c->nf, c->fbox, d, &kept);
     float *out = c->v_fmap, *alpha = c->v_fmap_face; /* scratch here */
-    gs_raster_set_records(c->raster_crop, 0); /* renders only */
-    rc = gs_raster_forward(c->raster_crop, pool, &cam, &g, c->bg_crop, &ro,
-                           out, alpha, NULL, err);
+    int rc = gs_frame_raster_crop(c->raster_crop, pool, full, d, &g,
+                                  c->bg_crop, out, alpha, NULL, err);
     if (rc)
         return rc;
     ch[0] = ch[1] = INT_MAX, ch[2] = ch[3] = INT_MIN;
@@ -791,7 +807,7 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
             float *dst = c->fmap + ((size_t)k * fs + d[1] + y) * fs + d[0];
             const float *src = out + k * plane + (size_t)y * w;
             for (int x = 0; x < w; x++)
-                if (moved(dst[x], src[x])) {
+                if (gs_frame_moved(dst[x], src[x])) {
                     int gx = d[0] + x, gy = d[1] + y;
                     ch[0] = gx < ch[0] ? gx : ch[0], ch[2] = gx >= ch[2] ? gx + 1 : ch[2];
                     ch[1] = gy < ch[1] ? gy : ch[1], ch[3] = gy >= ch[3] ? gy + 1 : ch[3];
@@ -829,7 +845,7 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
                    out + ((size_t)k * H4 + y - 4 * in[1]) * W4 + keep[0] -
                        4 * in[0],
                    (size_t)(keep[2] - keep[0]) * sizeof(float));
-    box_union(c->rgb_dirty, keep);
+    gs_frame_box_union(c->rgb_dirty, keep);
     return GS_OK;
 }
 
@@ -1059,8 +1075,8 @@ static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     }
     gs_camera cam;
     gs_frame_camera(c->m, fr->head_t, &cam);
-    eye_tiles(c, &cam, c->inc_rect);
-    face_boxes(c, &cam);
+    gs_frame_eye_tiles(c, &cam, c->inc_rect);
+    gs_frame_face_boxes(c, &cam, c->fbox);
     c->inc_key = *fr;
     c->inc_valid = 1;
     c->n_full++;
@@ -1075,9 +1091,9 @@ static int render_inc(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     eye_streams(c, fr);
     gs_frame_camera(c->m, fr->head_t, &cam);
     int now[4], dirty[4];
-    eye_tiles(c, &cam, now);
+    gs_frame_eye_tiles(c, &cam, now);
     memcpy(dirty, c->inc_rect, sizeof dirty);
-    box_union(dirty, now);
+    gs_frame_box_union(dirty, now);
     if (dirty[0] < dirty[2] && dirty[1] < dirty[3]) {
         int changed[4];
         int rc = raster_box(c, pool, &cam, dirty, changed, err);

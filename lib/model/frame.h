@@ -182,4 +182,48 @@ void gs_frame_clear_gaussian_grads(gs_model_ctx *c);
 void gs_frame_camera(const gs_model *m, const double head_t[3],
                      gs_camera *cam);
 
+/* ---- crops of a render (incremental renders, detail transfer) ---- */
+
+/* Writable arrays of Gaussians, n x 3, 3, 4, 1 and channels each. */
+typedef struct gs_frame_soa {
+    float *mean, *scale, *quat, *opac, *feat;
+} gs_frame_soa;
+
+/* The tile-aligned box (pixels of cam: x0 y0 x1 y1, exclusive, clipped to
+ * its image; empty when x0 >= x1) that the eye stream's Gaussians in c->g_*
+ * can reach: the rasterizer changes no pixel outside it when only they
+ * move. */
+void gs_frame_eye_tiles(const gs_model_ctx *c, const gs_camera *cam,
+                        int r[4]);
+
+/* Per face Gaussian of c->g_*, a pixel box (fbox [nf, 4], x0 y0 x1 y1) that
+ * holds its footprint through cam and through any crop of cam
+ * (gs_frame_raster_crop). */
+void gs_frame_face_boxes(const gs_model_ctx *c, const gs_camera *cam,
+                         int16_t *fbox);
+
+/* a = the bounding box of a and b (an empty one adds nothing) */
+void gs_frame_box_union(int a[4], const int b[4]);
+
+/* Copies into dst the first nf Gaussians of src (the face) whose fbox
+ * meets the box d, then all the others (the eye stream), and returns them
+ * as Gaussians in dst's arrays: what a crop at d needs. */
+gs_gaussians gs_frame_gather(const gs_gaussians *src, int nf,
+                             const int16_t *fbox, const int d[4],
+                             const gs_frame_soa *dst);
+
+/* Rasterizes g into the tile-aligned box d of the image seen by full:
+ * full's camera shifted by d's origin, at d's size, with full's frustum,
+ * so each pixel equals the whole image's to float rounding. out, alpha
+ * and depth are d-sized (depth may be NULL). Sets r's frustum: r serves
+ * crops of full only. */
+int gs_frame_raster_crop(gs_raster *r, gs_pool *pool, const gs_camera *full,
+                         const int d[4], const gs_gaussians *g,
+                         const float *bg, float *out, float *alpha,
+                         float *depth, gs_error *err);
+
+/* Whether a crop's value differs from the whole image's `old` by more than
+ * the float rounding of the crop's shifted camera (1e-6 (1 + |old|)). */
+int gs_frame_moved(float old, float now);
+
 #endif
