@@ -1042,6 +1042,9 @@ void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st)
     st->renders_full = c->n_full;
     st->renders_incremental = c->n_inc;
     st->last_incremental = c->last_inc;
+    st->transfers_full = c->n_xfer_full;
+    st->transfers_incremental = c->n_xfer_inc;
+    st->last_transfer_incremental = c->last_xfer_inc;
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         st->sweep_kept += c->slots[i].valid;
     st->sweep_kept += c->inc_valid;

@@ -45,6 +45,13 @@ typedef struct gs_sweep_slot {
 typedef struct gs_xfer gs_xfer;
 void gs_xfer_free(gs_xfer *x);
 void gs_xfer_invalidate(gs_xfer *x);
+/* Drops only the kept target: the next transfer takes the full path
+ * (benchmarks of that path). */
+void gs_xfer_forget_target(gs_xfer *x);
+/* The last target's depth (mm), coverage and eye coverage maps [S*S]
+ * (tests); NULL before the first transfer. */
+void gs_xfer_target_maps(const gs_xfer *x, const float **z, const float **a,
+                         const float **e);
 
 struct gs_model_ctx {
     const gs_model *m;
@@ -131,6 +138,9 @@ struct gs_model_ctx {
     gs_frame face_key;                /* the frame the face cache is for */
     uint8_t *rgb8;                    /* [S, S, 3] */
     gs_xfer *xfer;                    /* gs_model_render_transfer, lazily */
+    uint64_t n_xfer_full, n_xfer_inc; /* transfers by path of their maps */
+    int last_xfer_inc;
+    double xfer_px;                   /* image px redone by incremental ones */
 };
 
 int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m);

@@ -44,6 +44,19 @@ struct gs_xfer {
     float *src_z, *src_a, *src_e;  /* [S*S] depth mm, coverage, eye */
     double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
     double tgt_eR[2][9], tgt_ec[2][3]; /* the target's */
+    /* the residual res, kept with the input it came from while the own
+     * view is kept */
+    int res_valid;
+    uint8_t *in8;                  /* [S, S, 3] */
+    /* the last target's maps and warped residual, kept with the own view:
+     * a target that changes only the gaze redoes them only where the eye
+     * stream reaches (target_maps) */
+    int tgt_valid;
+    double tgt_R[9], tgt_t[3];     /* its head pose */
+    int tgt_rect[4];               /* its eye stream's tiles, image px */
+    int16_t *fbox;                 /* [nf, 4] its face Gaussians' boxes */
+    gs_raster *raster_crop;
+    gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
     /* scratch */
     gs_raster *raster;
     float *feat;                   /* [n, 2]: face 1 0, eye 0 1 */
@@ -60,19 +73,51 @@ void gs_xfer_free(gs_xfer *x)
         return;
     float *bufs[] = {x->src_z, x->src_a, x->src_e, x->feat, x->af, x->aa,
                      x->ad, x->tgt_z, x->tgt_a, x->tgt_e, x->res,
-                     x->warped};
+                     x->warped, x->k.mean, x->k.scale, x->k.quat,
+                     x->k.opac, x->k.feat};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(bufs[i]);
     free(x->src8);
     free(x->tgt8);
+    free(x->in8);
+    free(x->fbox);
     gs_raster_destroy(x->raster);
+    gs_raster_destroy(x->raster_crop);
     free(x);
 }
 
 void gs_xfer_invalidate(gs_xfer *x)
 {
     if (x)
-        x->valid = 0;
+        x->valid = x->res_valid = x->tgt_valid = 0;
+}
+
+void gs_xfer_forget_target(gs_xfer *x)
+{
+    if (x)
+        x->tgt_valid = 0;
+}
+
+void gs_xfer_target_maps(const gs_xfer *x, const float **z, const float **a,
+                         const float **e)
+{
+    *z = x ? x->tgt_z : NULL;
+    *a = x ? x->tgt_a : NULL;
+    *e = x ? x->tgt_e : NULL;
+}
+
+/* Buffers of n floats each, after the arrays of xfer_get. */
+static int crop_alloc(gs_xfer *x, size_t n)
+{
+    x->raster_crop = gs_raster_create();
+    x->fbox = malloc(n * 4 * sizeof(int16_t));
+    float **f[] = {&x->k.mean, &x->k.scale, &x->k.quat, &x->k.opac,
+                   &x->k.feat};
+    size_t per[] = {3, 3, 4, 1, 2};
+    int fail = !x->raster_crop || !x->fbox;
+    for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
+        fail |= !(*f[i] = malloc(n * per[i] * sizeof(float)));
+    return fail;
 }
 
 static gs_xfer *xfer_get(gs_model_ctx *c)
@@ -97,7 +142,9 @@ static gs_xfer *xfer_get(gs_model_ctx *c)
         fail |= !(*one[i] = malloc(px * sizeof(float)));
     x->src8 = malloc(3 * px);
     x->tgt8 = malloc(3 * px);
-    if (fail || !x->src8 || !x->tgt8) {
+    x->in8 = malloc(3 * px);
+    fail |= crop_alloc(x, (size_t)c->n);
+    if (fail || !x->src8 || !x->tgt8 || !x->in8) {
         gs_xfer_free(x);
         return NULL;
     }
@@ -118,31 +165,106 @@ static void image_camera(const gs_model_ctx *c, const double head_t[3],
     cam->width = cam->height = c->S;
 }
 
-/* Depth, coverage and eye coverage of the Gaussians the last render left
- * in c->g_* (its frame), at image resolution. */
-static int aux_maps(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
-                    const double head_t[3], float *z, float *a, float *e,
-                    gs_error *err)
+/* The Gaussians the last render left in c->g_* (its frame) with the
+ * features of the maps: face 1 0, eye 0 1. */
+static gs_gaussians map_gaussians(const gs_model_ctx *c, const gs_xfer *x)
 {
-    gs_camera cam;
-    image_camera(c, head_t, &cam);
     gs_gaussians g = {.n = c->n, .channels = 2, .means = c->g_mean,
                       .log_scales = c->g_scale, .quats = c->g_quat,
                       .opacity_logits = c->g_opac, .features = x->feat};
+    return g;
+}
+
+/* Depth (mm) of a pixel from its alpha and alpha-weighted depth sum. */
+static float depth_of(float alpha, float depth_sum)
+{
+    return alpha > 1e-3f ? depth_sum / alpha : 0.0f;
+}
+
+/* Depth, coverage and eye coverage of the Gaussians of the last render
+ * seen by cam (image resolution). */
+static int aux_maps(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                    const gs_camera *cam, float *z, float *a, float *e,
+                    gs_error *err)
+{
+    gs_gaussians g = map_gaussians(c, x);
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
     gs_raster_set_records(x->raster, 0);
-    int rc = gs_raster_forward(x->raster, pool, &cam, &g, NULL, &ro, x->af,
+    int rc = gs_raster_forward(x->raster, pool, cam, &g, NULL, &ro, x->af,
                                x->aa, x->ad, err);
     if (rc)
         return rc;
     size_t px = (size_t)x->S * x->S;
     for (size_t i = 0; i < px; i++) {
-        float al = x->aa[i];
-        a[i] = al;
-        z[i] = al > 1e-3f ? x->ad[i] / al : 0.0f;
+        a[i] = x->aa[i];
+        z[i] = depth_of(x->aa[i], x->ad[i]);
         e[i] = x->af[px + i];
     }
     return GS_OK;
+}
+
+/* Pixel i of the target's maps from a crop's alpha, depth sum and eye
+ * coverage. What moved by no more than the crop camera's rounding keeps
+ * its value; coverage and depth are judged by the rasterizer's outputs, as
+ * depth = sum / alpha would magnify the rounding where alpha is small. */
+static void merge_pixel(gs_xfer *x, size_t i, float al, float sum, float eye)
+{
+    if (gs_frame_moved(x->tgt_a[i], al) ||
+        gs_frame_moved(x->tgt_a[i] * x->tgt_z[i], sum)) {
+        x->tgt_a[i] = al;
+        x->tgt_z[i] = depth_of(al, sum);
+    }
+    if (gs_frame_moved(x->tgt_e[i], eye))
+        x->tgt_e[i] = eye;
+}
+
+/* The target's maps over the tile-aligned box d only, from the Gaussians
+ * that can reach it. */
+static int aux_crop(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                    const gs_camera *ct, const int d[4], gs_error *err)
+{
+    gs_gaussians all = map_gaussians(c, x);
+    gs_gaussians g = gs_frame_gather(&all, c->nf, x->fbox, d, &x->k);
+    int w = d[2] - d[0], h = d[3] - d[1], S = x->S;
+    int rc = gs_frame_raster_crop(x->raster_crop, pool, ct, d, &g, NULL,
+                                  x->af, x->aa, x->ad, err);
+    if (rc)
+        return rc;
+    const float *eye = x->af + (size_t)w * h;
+    for (int y = 0; y < h; y++)
+        for (int xx = 0; xx < w; xx++) {
+            size_t j = (size_t)y * w + xx;
+            merge_pixel(x, (size_t)(d[1] + y) * S + d[0] + xx, x->aa[j],
+                        x->ad[j], eye[j]);
+        }
+    return GS_OK;
+}
+
+/* The target's maps for the render c->g_* holds, seen by ct. With the
+ * same head pose as the kept target (keep), the face Gaussians are the
+ * same and only the eye stream moved: only its reach, at the kept gaze or
+ * this one, is redone. d: the box that changed (the whole image on the
+ * full path). */
+static int target_maps(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                       const gs_camera *ct, int keep, int d[4],
+                       gs_error *err)
+{
+    int now[4], rc = GS_OK;
+    gs_frame_eye_tiles(c, ct, now);
+    if (keep) {
+        memcpy(d, x->tgt_rect, sizeof now);
+        gs_frame_box_union(d, now);
+        if (d[0] < d[2] && d[1] < d[3])
+            rc = aux_crop(c, x, pool, ct, d, err);
+    } else {
+        rc = aux_maps(c, x, pool, ct, x->tgt_z, x->tgt_a, x->tgt_e, err);
+        gs_frame_face_boxes(c, ct, x->fbox);
+        d[0] = d[1] = 0, d[2] = d[3] = x->S;
+    }
+    memcpy(x->tgt_rect, now, sizeof now);
+    memcpy(x->tgt_eR, c->eye_R, sizeof x->tgt_eR);
+    memcpy(x->tgt_ec, c->eye_c, sizeof x->tgt_ec);
+    return rc;
 }
 
 static int same_subject(const gs_subject *a, const gs_subject *b)
@@ -307,6 +429,105 @@ static int check_image(const uint8_t *p, size_t stride, int S, const char *what,
     return GS_OK;
 }
 
+/* The subject's own view and its maps: rendered once per subject and
+ * settings; a new one drops what was kept against the old. */
+static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                    const gs_subject *s, gs_error *err)
+{
+    if (x->valid && same_subject(&x->key, s) && x->key_fs == c->render_fs &&
+        x->key_full == c->render_full)
+        return GS_OK;
+    gs_xfer_invalidate(x);
+    int S = x->S;
+    gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}};
+    gs_camera cs;
+    image_camera(c, s->head_t, &cs);
+    int rc = gs_model_render(c, pool, s, &own, x->src8, 3 * (size_t)S, err);
+    if (!rc)
+        rc = aux_maps(c, x, pool, &cs, x->src_z, x->src_a, x->src_e, err);
+    if (rc)
+        return rc;
+    memcpy(x->src_eR, c->eye_R, sizeof x->src_eR);
+    memcpy(x->src_ec, c->eye_c, sizeof x->src_ec);
+    x->key = *s;
+    x->key_fs = c->render_fs;
+    x->key_full = c->render_full;
+    x->valid = 1;
+    return GS_OK;
+}
+
+/* Residual of the input against its own view, planar, 8-bit units; kept
+ * while the input is the same bytes. Returns whether it was kept. */
+static int residual(gs_xfer *x, const uint8_t *input, size_t in_stride)
+{
+    int S = x->S, same = x->res_valid;
+    size_t px = (size_t)S * S, row = 3 * (size_t)S;
+    for (int y = 0; y < S && same; y++)
+        same = !memcmp(x->in8 + y * row, input + y * in_stride, row);
+    if (same)
+        return 1;
+    for (int y = 0; y < S; y++)
+        memcpy(x->in8 + y * row, input + y * in_stride, row);
+    for (int k = 0; k < 3; k++)
+        for (size_t i = 0; i < px; i++)
+            x->res[k * px + i] = (float)x->in8[3 * i + k] -
+                                 (float)x->src8[3 * i + k];
+    x->res_valid = 1;
+    return 0;
+}
+
+/* The residual carried to target pixel (px, py): from where the input
+ * shows its head point (weight 1 - b) and its eyeball point (weight b). */
+static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
+{
+    size_t n = (size_t)x->S * x->S, i = (size_t)py * x->S + px;
+    float b = GS_XFER_EYE_GAIN * x->tgt_e[i];
+    b = b > 1.0f ? 1.0f : b;
+    double uh = 0, vh = 0, ue = 0, ve = 0, h[3];
+    float wh = 0.0f, we = 0.0f;
+    target_point(x, g, px, py, h);
+    if (b < 1.0f)
+        wh = (1.0f - b) * head_source(x, g, px, py, h, b, &uh, &vh);
+    if (b > 0.0f)
+        we = b * eye_source(x, g, h, b, &ue, &ve);
+    for (int k = 0; k < 3; k++) {
+        const float *rk = x->res + k * n;
+        float v = 0.0f;
+        if (wh > 0.0f)
+            v += wh * bilinear(rk, x->S, uh, vh);
+        if (we > 0.0f)
+            v += we * bilinear(rk, x->S, ue, ve);
+        x->warped[k * n + i] = v;
+    }
+}
+
+/* lrintf(v) for v in [0, 255] in the default rounding mode (to nearest,
+ * ties to even) without a library call per value: v + 1.5 2^23 has no
+ * fraction bits left. */
+static uint8_t round_byte(float v)
+{
+    return (uint8_t)(int)((v + 0x1.8p23f) - 0x1.8p23f);
+}
+
+/* The target render plus the warped residual, rounded to 8 bits. */
+static void compose(const gs_xfer *x, uint8_t *rgb, size_t stride)
+{
+    int S = x->S;
+    size_t px = (size_t)S * S;
+    for (int y = 0; y < S; y++) {
+        uint8_t *o = rgb + (size_t)y * stride;
+        const uint8_t *t = x->tgt8 + (size_t)y * 3 * S;
+        for (int xx = 0; xx < S; xx++) {
+            size_t i = (size_t)y * S + xx;
+            for (int k = 0; k < 3; k++) {
+                float v = (float)t[3 * xx + k] + x->warped[k * px + i];
+                v = v < 0 ? 0 : v > 255 ? 255 : v;
+                o[3 * xx + k] = round_byte(v);
+            }
+        }
+    }
+}
+
 int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
                              const gs_subject *s, const uint8_t *input,
                              size_t in_stride, const gs_view *view,
@@ -325,83 +546,43 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
     gs_xfer *x = xfer_get(c);
     if (!x)
         return gs_error_set(err, GS_ERR_NOMEM, "transfer: out of memory");
-    size_t px = (size_t)S * S;
     const double *Rs = s->head_R, *ts = s->head_t;
     const double *Rt = view->use_head ? view->head_R : s->head_R;
     const double *tt = view->use_head ? view->head_t : s->head_t;
-
-    /* The subject's own view: rendered once per subject and settings. */
-    if (!x->valid || !same_subject(&x->key, s) || x->key_fs != c->render_fs ||
-        x->key_full != c->render_full) {
-        x->valid = 0;
-        gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}};
-        rc = gs_model_render(c, pool, s, &own, x->src8, 3 * (size_t)S, err);
-        if (!rc)
-            rc = aux_maps(c, x, pool, ts, x->src_z, x->src_a, x->src_e, err);
-        if (rc)
-            return rc;
-        memcpy(x->src_eR, c->eye_R, sizeof x->src_eR);
-        memcpy(x->src_ec, c->eye_c, sizeof x->src_ec);
-        x->key = *s;
-        x->key_fs = c->render_fs;
-        x->key_full = c->render_full;
-        x->valid = 1;
-    }
+    c->last_xfer_inc = 0;
+    if ((rc = own_view(c, x, pool, s, err)))
+        return rc;
+    /* only the gaze changed since the kept target: the face is the same */
+    int keep = x->tgt_valid && !memcmp(x->tgt_R, Rt, sizeof x->tgt_R) &&
+               !memcmp(x->tgt_t, tt, sizeof x->tgt_t);
+    x->tgt_valid = 0; /* until this target is complete */
+    gs_camera ct;
+    image_camera(c, tt, &ct);
+    int d[4];
     rc = gs_model_render(c, pool, s, view, x->tgt8, 3 * (size_t)S, err);
     if (!rc)
-        rc = aux_maps(c, x, pool, tt, x->tgt_z, x->tgt_a, x->tgt_e, err);
+        rc = target_maps(c, x, pool, &ct, keep, d, err);
     if (rc)
         return rc;
+    if (!residual(x, input, in_stride)) /* a new input: warp everything */
+        d[0] = d[1] = 0, d[2] = d[3] = S;
 
-    memcpy(x->tgt_eR, c->eye_R, sizeof x->tgt_eR);
-    memcpy(x->tgt_ec, c->eye_c, sizeof x->tgt_ec);
-
-    /* Residual of the input against its own view, planar, 8-bit units. */
-    for (int k = 0; k < 3; k++)
-        for (int y = 0; y < S; y++) {
-            const uint8_t *in = input + (size_t)y * in_stride;
-            const uint8_t *sr = x->src8 + (size_t)y * 3 * S;
-            float *o = x->res + k * px + (size_t)y * S;
-            for (int xx = 0; xx < S; xx++)
-                o[xx] = (float)in[3 * xx + k] - (float)sr[3 * xx + k];
-        }
-
+    /* Outside d the maps are the kept target's, with no eye coverage at
+     * either gaze (b = 0): head_source depends on the head poses and those
+     * maps only, so the kept warped residual stands there. */
     xfer_geom g;
     geom_init(c, x, &g, Rs, ts, Rt, tt);
-    for (int y = 0; y < S; y++)
-        for (int xx = 0; xx < S; xx++) {
-            size_t i = (size_t)y * S + xx;
-            float b = GS_XFER_EYE_GAIN * x->tgt_e[i];
-            b = b > 1.0f ? 1.0f : b;
-            double uh = 0, vh = 0, ue = 0, ve = 0, h[3];
-            float wh = 0.0f, we = 0.0f;
-            target_point(x, &g, xx, y, h);
-            if (b < 1.0f)
-                wh = (1.0f - b) * head_source(x, &g, xx, y, h, b, &uh, &vh);
-            if (b > 0.0f)
-                we = b * eye_source(x, &g, h, b, &ue, &ve);
-            for (int k = 0; k < 3; k++) {
-                const float *rk = x->res + k * px;
-                float v = 0.0f;
-                if (wh > 0.0f)
-                    v += wh * bilinear(rk, S, uh, vh);
-                if (we > 0.0f)
-                    v += we * bilinear(rk, S, ue, ve);
-                x->warped[k * px + i] = v;
-            }
-        }
+    for (int y = d[1]; y < d[3]; y++)
+        for (int xx = d[0]; xx < d[2]; xx++)
+            warp_pixel(x, &g, xx, y);
+    compose(x, rgb, stride);
 
-    for (int y = 0; y < S; y++) {
-        uint8_t *o = rgb + (size_t)y * stride;
-        const uint8_t *t = x->tgt8 + (size_t)y * 3 * S;
-        for (int xx = 0; xx < S; xx++) {
-            size_t i = (size_t)y * S + xx;
-            for (int k = 0; k < 3; k++) {
-                float v = (float)t[3 * xx + k] + x->warped[k * px + i];
-                v = v < 0 ? 0 : v > 255 ? 255 : v;
-                o[3 * xx + k] = (uint8_t)lrintf(v);
-            }
-        }
-    }
+    memcpy(x->tgt_R, Rt, sizeof x->tgt_R);
+    memcpy(x->tgt_t, tt, sizeof x->tgt_t);
+    x->tgt_valid = 1;
+    c->last_xfer_inc = keep;
+    c->n_xfer_inc += (uint64_t)keep;
+    c->n_xfer_full += (uint64_t)!keep;
+    c->xfer_px += keep ? (double)(d[2] - d[0]) * (d[3] - d[1]) : 0.0;
     return GS_OK;
 }

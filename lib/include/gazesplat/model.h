@@ -137,12 +137,18 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
 #define GS_MODEL_MAX_SWEEP_CACHE 64
 int gs_model_ctx_set_sweep_cache(gs_model_ctx *c, int n, gs_error *err);
 
-/* What a context's renders did (gs_model_render; counters since create). */
+/* What a context's renders did (gs_model_render and
+ * gs_model_render_transfer; counters since create). */
 typedef struct gs_model_ctx_stats {
     uint64_t renders_full;         /* everything rasterized and rendered */
     uint64_t renders_incremental;  /* only the eyes' reach */
     int last_incremental;          /* the last successful render's path */
     int sweep_kept;                /* renders kept for incremental reuse */
+    /* gs_model_render_transfer: full maps, or only the eyes' reach (the
+     * last target had the same subject, settings and head pose) */
+    uint64_t transfers_full;
+    uint64_t transfers_incremental;
+    int last_transfer_incremental;  /* the last successful transfer's path */
 } gs_model_ctx_stats;
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st);
 
