@@ -3,7 +3,8 @@
  * render for any view; a constant residual arrives whole away from the
  * eyes and never more than whole anywhere; the kept own view follows the
  * subject and the context's resets; 1 and 2 threads give the same bytes;
- * bad arguments are refused with the output untouched. */
+ * gaze sweeps redo only the eyes' reach and match a fresh context's full
+ * transfer; bad arguments are refused with the output untouched. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -79,6 +80,173 @@ static void refuse(gs_model_ctx *c, const gs_subject *s, const uint8_t *in, size
     CHECK_MSG(!memcmp(snap, out, n), "%s: output changed", what);
     printf("refused (%s): %s\n", what, err.msg);
     free(snap);
+}
+
+
+/* Incremental transfers against a fresh context's full one: maps within
+ * MAP_TOL relative, bytes within 1 level on at most BYTE_SHARE of them. */
+#define MAP_TOL 1e-5
+#define BYTE_SHARE 1e-3
+
+typedef struct {
+    double map[4];     /* worst relative map differences (maps_diff) */
+    int byte;          /* worst byte difference */
+    size_t nbyte;      /* most bytes differing in one image */
+} agreement;
+
+/* Worst |a - b| / (1 + |b|) of the last targets' maps: [0] depth where
+ * the coverage is at least ON_MAP (elsewhere depth is a ratio of two small
+ * sums, whose rounding grows as 1 / coverage: 7.5e-6 at coverage 0.01),
+ * [1] coverage, [2] eye coverage, [3] depth everywhere (reported only). */
+#define ON_MAP 0.1
+static void maps_diff(const gs_model_ctx *a, const gs_model_ctx *b, int S, double w[4])
+{
+    const float *pa[3], *pb[3];
+    gs_xfer_target_maps(a->xfer, &pa[0], &pa[1], &pa[2]);
+    gs_xfer_target_maps(b->xfer, &pb[0], &pb[1], &pb[2]);
+    w[0] = w[1] = w[2] = w[3] = 0.0;
+    for (int k = 0; k < 3; k++)
+        for (size_t i = 0; i < (size_t)S * S; i++) {
+            double d = fabs((double)pa[k][i] - pb[k][i]) / (1.0 + fabs(pb[k][i]));
+            if (k == 0)
+                w[3] = fmax(w[3], d);
+            if (k || pb[1][i] >= ON_MAP)
+                w[k] = fmax(w[k], d);
+        }
+}
+
+static int last_incremental(const gs_model_ctx *c)
+{
+    gs_model_ctx_stats st;
+    gs_model_ctx_get_stats(c, &st);
+    return st.last_transfer_incremental;
+}
+
+/* Transfers v in c (the path: want_inc) and in a fresh context and checks
+ * that they agree; the fresh one must take the full path. */
+static void agree(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uint8_t *in,
+                  const gs_view *v, int want_inc, uint8_t *out, int S, agreement *worst,
+                  const char *what)
+{
+    size_t isz = 3 * (size_t)S * S;
+    uint8_t *ref = malloc(isz);
+    transfer(c, pool, s, in, v, out, S);
+    CHECK_MSG(last_incremental(c) == want_inc, "%s: incremental %d, want %d", what,
+              last_incremental(c), want_inc);
+    gs_model_ctx *f = gs_model_ctx_create(c->m);
+    transfer(f, pool, s, in, v, ref, S);
+    CHECK_MSG(!last_incremental(f), "%s: a fresh context went incremental", what);
+    double dm[4];
+    maps_diff(c, f, S, dm);
+    size_t n = 0;
+    for (size_t i = 0; i < isz; i++)
+        n += out[i] != ref[i];
+    int db = max_diff(out, ref, isz);
+    CHECK_MSG(fmax(dm[0], fmax(dm[1], dm[2])) <= MAP_TOL,
+              "%s: maps differ by %.3g (depth), %.3g (coverage), %.3g (eye), relative; "
+              "tolerance %g",
+              what, dm[0], dm[1], dm[2], MAP_TOL);
+    CHECK_MSG(db <= 1 && (double)n <= BYTE_SHARE * (double)isz,
+              "%s: %zu of %zu bytes differ, by up to %d (allowed: 1 on %.1f %%)", what, n,
+              isz, db, 100 * BYTE_SHARE);
+    for (int k = 0; k < 4; k++)
+        worst->map[k] = fmax(worst->map[k], dm[k]);
+    worst->byte = db > worst->byte ? db : worst->byte;
+    worst->nbyte = n > worst->nbyte ? n : worst->nbyte;
+    gs_model_ctx_destroy(f);
+    free(ref);
+}
+
+/* gaze (pitch, yaw) in degrees: small steps, the range's corners, back */
+static const double sweep_gz[][2] = {{5, -10}, {7, -9}, {-5, 10}, {30, -40}, {-30, 40},
+                                     {-30, 39}, {40, 50}, {-40, -50}, {5, -10}};
+#define SWEEP_N ((int)(sizeof sweep_gz / sizeof sweep_gz[0]))
+
+/* A gaze sweep at view v's head pose in c, each target against a fresh
+ * context; outs (may be NULL) gets each step's bytes. The first target
+ * takes the full path unless c kept one at this pose (first_inc). */
+static void sweep(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uint8_t *in,
+                  gs_view v, int first_inc, uint8_t *outs, int S, agreement *worst,
+                  const char *name)
+{
+    size_t isz = 3 * (size_t)S * S;
+    uint8_t *out = malloc(isz);
+    for (int k = 0; k < SWEEP_N; k++) {
+        char what[96];
+        snprintf(what, sizeof what, "%s, gaze (%g, %g)", name, sweep_gz[k][0], sweep_gz[k][1]);
+        v.gaze_pitch = sweep_gz[k][0] * GS_MODEL_PI / 180;
+        v.gaze_yaw = sweep_gz[k][1] * GS_MODEL_PI / 180;
+        agree(c, pool, s, in, &v, k > 0 || first_inc, out, S, worst, what);
+        if (outs)
+            memcpy(outs + k * isz, out, isz);
+    }
+    free(out);
+}
+
+/* Gaze sweeps redo the maps and the warp over the eyes' reach only and
+ * agree with full transfers; a new head pose, subject, input, reset or a
+ * refused call in between is handled; 1 and 2 threads give the same
+ * bytes. */
+static void incremental(const gs_model *m, const gs_subject *sub, const uint8_t *in,
+                        const uint8_t *in2, gs_pool *pool, int S)
+{
+    size_t isz = 3 * (size_t)S * S;
+    uint8_t *outs = malloc(SWEEP_N * isz), *outs2 = malloc(SWEEP_N * isz),
+            *out = malloc(isz);
+    agreement w = {{0, 0, 0, 0}, 0, 0};
+    gs_model_ctx *c = gs_model_ctx_create(m), *c2 = gs_model_ctx_create(m);
+    gs_view v_own = own_view(&sub[0]);
+    gs_view v_turn = turned(&sub[0], 0.15, 0, 0), v_turn2 = turned(&sub[0], -0.1, 0, 0);
+
+    sweep(c, NULL, &sub[0], in, v_own, 0, NULL, S, &w, "input's head pose");
+    sweep(c, NULL, &sub[0], in, v_turn, 0, outs, S, &w, "head turned");
+    sweep(c2, pool, &sub[0], in, v_turn, 0, outs2, S, &w, "head turned, 2 threads");
+    CHECK_MSG(!memcmp(outs, outs2, SWEEP_N * isz), "sweep: 1 and 2 threads differ");
+    gs_model_ctx_stats st;
+    gs_model_ctx_get_stats(c, &st);
+    CHECK_MSG(st.transfers_incremental == 2 * (SWEEP_N - 1) && st.transfers_full == 2,
+              "sweeps: %llu incremental, %llu full transfers",
+              (unsigned long long)st.transfers_incremental,
+              (unsigned long long)st.transfers_full);
+    double share = c->xfer_px / ((double)S * S * (double)st.transfers_incremental);
+
+    /* a head change after the sweep: the full path, then a sweep there */
+    sweep(c, NULL, &sub[0], in, v_turn2, 0, NULL, S, &w, "head turned back");
+    /* another input: the maps stay incremental, the warp is redone */
+    v_turn2.gaze_pitch = 0.2;
+    agree(c, NULL, &sub[0], in2, &v_turn2, 1, out, S, &w, "new input");
+    /* another subject at the same head pose, then back: full paths */
+    gs_view v1 = v_turn2;
+    v1.gaze_yaw = 0.3;
+    agree(c, NULL, &sub[1], in, &v1, 0, out, S, &w, "subject switch");
+    agree(c, NULL, &sub[0], in, &v_turn2, 0, out, S, &w, "subject switch back");
+    /* a refused call drops the kept target; so do the context's resets */
+    gs_view v_bad = v_turn2;
+    v_bad.gaze_yaw = NAN;
+    gs_error err = {0, ""};
+    CHECK(gs_model_render_transfer(c, NULL, &sub[0], in, 3 * (size_t)S, &v_bad, out,
+                                   3 * (size_t)S, &err) == GS_ERR_NONFINITE);
+    v_turn2.gaze_yaw = -0.3;
+    agree(c, NULL, &sub[0], in, &v_turn2, 0, out, S, &w, "after a refusal");
+    gs_model_ctx_reset(c);
+    v_turn2.gaze_yaw = -0.2;
+    agree(c, NULL, &sub[0], in, &v_turn2, 0, out, S, &w, "after a reset");
+    gs_model_render_options ro;
+    gs_model_render_options_default(&ro);
+    CHECK(gs_model_ctx_set_render_options(c, &ro, &err) == GS_OK);
+    v_turn2.gaze_yaw = -0.1;
+    agree(c, NULL, &sub[0], in, &v_turn2, 0, out, S, &w, "after new render options");
+    v_turn2.gaze_yaw = 0.1;
+    agree(c, NULL, &sub[0], in, &v_turn2, 1, out, S, &w, "and a gaze change");
+
+    printf("incremental transfers: maps within %.2e (depth at coverage >= %g; %.2e "
+           "everywhere), %.2e (coverage), %.2e (eye), relative; bytes within %d on at most "
+           "%zu of %zu; %.0f%% of the image redone per gaze change\n",
+           w.map[0], ON_MAP, w.map[3], w.map[1], w.map[2], w.byte, w.nbyte, isz,
+           100 * share);
+    gs_model_ctx_destroy(c);
+    gs_model_ctx_destroy(c2);
+    free(outs), free(outs2), free(out);
 }
 
 int main(void)
@@ -191,6 +359,7 @@ int main(void)
     CHECK_MSG(!memcmp(out, a, isz), "1 and 2 threads differ");
     gs_model_ctx_destroy(c3);
     printf("kept own view, resets and thread counts: same bytes\n");
+    incremental(m, sub, in, noise, pool, S);
 
     /* Bad arguments. */
     memset(out, 0x5a, isz);
