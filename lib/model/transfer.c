@@ -26,6 +26,7 @@
 
 #include "frame.h"
 #include "gazesplat/geom.h"
+#include "gazesplat/pool.h"
 
 /* Depth agreement (mm) for a head point to count as seen by the input. */
 #define GS_XFER_DEPTH_TOL 6.0
@@ -509,22 +510,45 @@ static uint8_t round_byte(float v)
     return (uint8_t)(int)((v + 0x1.8p23f) - 0x1.8p23f);
 }
 
-/* The target render plus the warped residual, rounded to 8 bits. */
-static void compose(const gs_xfer *x, uint8_t *rgb, size_t stride)
+/* Row y of the output: the target render plus the warped residual,
+ * rounded to 8 bits. */
+static void compose_row(const gs_xfer *x, int y, uint8_t *o)
 {
     int S = x->S;
     size_t px = (size_t)S * S;
-    for (int y = 0; y < S; y++) {
-        uint8_t *o = rgb + (size_t)y * stride;
-        const uint8_t *t = x->tgt8 + (size_t)y * 3 * S;
-        for (int xx = 0; xx < S; xx++) {
-            size_t i = (size_t)y * S + xx;
-            for (int k = 0; k < 3; k++) {
-                float v = (float)t[3 * xx + k] + x->warped[k * px + i];
-                v = v < 0 ? 0 : v > 255 ? 255 : v;
-                o[3 * xx + k] = round_byte(v);
-            }
+    const uint8_t *t = x->tgt8 + (size_t)y * 3 * S;
+    for (int xx = 0; xx < S; xx++) {
+        size_t i = (size_t)y * S + xx;
+        for (int k = 0; k < 3; k++) {
+            float v = (float)t[3 * xx + k] + x->warped[k * px + i];
+            v = v < 0 ? 0 : v > 255 ? 255 : v;
+            o[3 * xx + k] = round_byte(v);
         }
+    }
+}
+
+/* The output in bands of rows, each warped over its part of the box d
+ * first; a pixel depends on nothing another band writes. */
+typedef struct {
+    gs_xfer *x;
+    const xfer_geom *g;
+    const int *d;
+    uint8_t *rgb;
+    size_t stride;
+} xfer_bands;
+
+enum { XFER_BAND_ROWS = 8 };
+
+static void band_task(void *ctx, int task, int worker)
+{
+    const xfer_bands *b = ctx;
+    int S = b->x->S, y1 = (task + 1) * XFER_BAND_ROWS;
+    (void)worker;
+    for (int y = task * XFER_BAND_ROWS; y < y1 && y < S; y++) {
+        if (y >= b->d[1] && y < b->d[3])
+            for (int xx = b->d[0]; xx < b->d[2]; xx++)
+                warp_pixel(b->x, b->g, xx, y);
+        compose_row(b->x, y, b->rgb + (size_t)y * b->stride);
     }
 }
 
@@ -572,10 +596,9 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
      * maps only, so the kept warped residual stands there. */
     xfer_geom g;
     geom_init(c, x, &g, Rs, ts, Rt, tt);
-    for (int y = d[1]; y < d[3]; y++)
-        for (int xx = d[0]; xx < d[2]; xx++)
-            warp_pixel(x, &g, xx, y);
-    compose(x, rgb, stride);
+    xfer_bands b = {x, &g, d, rgb, stride};
+    gs_pool_for(pool, (S + XFER_BAND_ROWS - 1) / XFER_BAND_ROWS, band_task,
+                &b);
 
     memcpy(x->tgt_R, Rt, sizeof x->tgt_R);
     memcpy(x->tgt_t, tt, sizeof x->tgt_t);
