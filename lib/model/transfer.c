@@ -19,7 +19,14 @@
  * is min(1, b_s / b) for the eyeball and min(1, (1 - b_s) / (1 - b)) for
  * the skin, b_s the input's eyeball-ness at p_s. Off the head in both views
  * the residual is taken in place. The subject's own view thus gives the
- * input back, and a zero residual gives the plain render. */
+ * input back, and a zero residual gives the plain render.
+ *
+ * Gaze sweeps: when the target has the last one's subject, settings and
+ * head pose, only the eye stream moved. The rasterizer changes no pixel
+ * outside the tiles the eye stream reaches at the old or the new gaze,
+ * and outside those b = 0 at both, so the skin's warp there (head poses
+ * and the face's maps only) stands: the maps and the warp are redone over
+ * that box alone, as the plain render redoes its features (frame.c). */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -49,22 +56,21 @@ struct gs_xfer {
      * view is kept */
     int res_valid;
     uint8_t *in8;                  /* [S, S, 3] */
-    /* the last target's maps and warped residual, kept with the own view:
-     * a target that changes only the gaze redoes them only where the eye
-     * stream reaches (target_maps) */
+    float *res;                    /* [3, S*S] residual, input's view */
+    /* the last target's maps and warped residual, kept with the own view
+     * (tgt_valid): a target that changes only the gaze redoes them only
+     * where the eye stream reaches (target_maps) */
     int tgt_valid;
     double tgt_R[9], tgt_t[3];     /* its head pose */
     int tgt_rect[4];               /* its eye stream's tiles, image px */
     int16_t *fbox;                 /* [nf, 4] its face Gaussians' boxes */
-    gs_raster *raster_crop;
-    gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
+    float *tgt_z, *tgt_a, *tgt_e;  /* [S*S] */
+    float *warped;                 /* [3, S*S] residual, target's view */
     /* scratch */
-    gs_raster *raster;
+    gs_raster *raster, *raster_crop; /* whole images; crops of the target */
+    gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
     float *feat;                   /* [n, 2]: face 1 0, eye 0 1 */
     float *af, *aa, *ad;           /* [2, S, S], [S*S], [S*S] */
-    float *tgt_z, *tgt_a, *tgt_e;  /* [S*S] */
-    float *res;                    /* [3, S*S] residual, input's view */
-    float *warped;                 /* [3, S*S] residual, target's view */
     uint8_t *tgt8;                 /* [S, S, 3] */
 };
 
@@ -107,7 +113,8 @@ void gs_xfer_target_maps(const gs_xfer *x, const float **z, const float **a,
     *e = x ? x->tgt_e : NULL;
 }
 
-/* Buffers of n floats each, after the arrays of xfer_get. */
+/* What the crops of n Gaussians need (raster_crop, fbox, k); nonzero when
+ * out of memory. */
 static int crop_alloc(gs_xfer *x, size_t n)
 {
     x->raster_crop = gs_raster_create();

@@ -84,7 +84,11 @@ static void refuse(gs_model_ctx *c, const gs_subject *s, const uint8_t *in, size
 
 
 /* Incremental transfers against a fresh context's full one: maps within
- * MAP_TOL relative, bytes within 1 level on at most BYTE_SHARE of them. */
+ * MAP_TOL relative, bytes within 1 level on at most BYTE_SHARE of them
+ * (the crop camera's shifted centre rounds differently; measured: maps
+ * within 2.4e-6, at most 2 of 49152 bytes off by 1). Full transfers give
+ * the same maps bit for bit (the bytes may still differ by 1 where the
+ * plain render was incremental). */
 #define MAP_TOL 1e-5
 #define BYTE_SHARE 1e-3
 
@@ -142,6 +146,9 @@ static void agree(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uin
     for (size_t i = 0; i < isz; i++)
         n += out[i] != ref[i];
     int db = max_diff(out, ref, isz);
+    CHECK_MSG(want_inc || fmax(dm[3], fmax(dm[1], dm[2])) == 0.0,
+              "%s: full path, maps differ by %.3g (depth), %.3g (coverage), %.3g (eye)",
+              what, dm[3], dm[1], dm[2]);
     CHECK_MSG(fmax(dm[0], fmax(dm[1], dm[2])) <= MAP_TOL,
               "%s: maps differ by %.3g (depth), %.3g (coverage), %.3g (eye), relative; "
               "tolerance %g",
@@ -162,12 +169,10 @@ static const double sweep_gz[][2] = {{5, -10}, {7, -9}, {-5, 10}, {30, -40}, {-3
                                      {-30, 39}, {40, 50}, {-40, -50}, {5, -10}};
 #define SWEEP_N ((int)(sizeof sweep_gz / sizeof sweep_gz[0]))
 
-/* A gaze sweep at view v's head pose in c, each target against a fresh
- * context; outs (may be NULL) gets each step's bytes. The first target
- * takes the full path unless c kept one at this pose (first_inc). */
+/* A gaze sweep at view v's head pose (a new one for c), each target
+ * against a fresh context; outs (may be NULL) gets each step's bytes. */
 static void sweep(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uint8_t *in,
-                  gs_view v, int first_inc, uint8_t *outs, int S, agreement *worst,
-                  const char *name)
+                  gs_view v, uint8_t *outs, int S, agreement *worst, const char *name)
 {
     size_t isz = 3 * (size_t)S * S;
     uint8_t *out = malloc(isz);
@@ -176,7 +181,7 @@ static void sweep(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uin
         snprintf(what, sizeof what, "%s, gaze (%g, %g)", name, sweep_gz[k][0], sweep_gz[k][1]);
         v.gaze_pitch = sweep_gz[k][0] * GS_MODEL_PI / 180;
         v.gaze_yaw = sweep_gz[k][1] * GS_MODEL_PI / 180;
-        agree(c, pool, s, in, &v, k > 0 || first_inc, out, S, worst, what);
+        agree(c, pool, s, in, &v, k > 0, out, S, worst, what);
         if (outs)
             memcpy(outs + k * isz, out, isz);
     }
@@ -198,9 +203,9 @@ static void incremental(const gs_model *m, const gs_subject *sub, const uint8_t 
     gs_view v_own = own_view(&sub[0]);
     gs_view v_turn = turned(&sub[0], 0.15, 0, 0), v_turn2 = turned(&sub[0], -0.1, 0, 0);
 
-    sweep(c, NULL, &sub[0], in, v_own, 0, NULL, S, &w, "input's head pose");
-    sweep(c, NULL, &sub[0], in, v_turn, 0, outs, S, &w, "head turned");
-    sweep(c2, pool, &sub[0], in, v_turn, 0, outs2, S, &w, "head turned, 2 threads");
+    sweep(c, NULL, &sub[0], in, v_own, NULL, S, &w, "input's head pose");
+    sweep(c, NULL, &sub[0], in, v_turn, outs, S, &w, "head turned");
+    sweep(c2, pool, &sub[0], in, v_turn, outs2, S, &w, "head turned, 2 threads");
     CHECK_MSG(!memcmp(outs, outs2, SWEEP_N * isz), "sweep: 1 and 2 threads differ");
     gs_model_ctx_stats st;
     gs_model_ctx_get_stats(c, &st);
@@ -211,10 +216,14 @@ static void incremental(const gs_model *m, const gs_subject *sub, const uint8_t 
     double share = c->xfer_px / ((double)S * S * (double)st.transfers_incremental);
 
     /* a head change after the sweep: the full path, then a sweep there */
-    sweep(c, NULL, &sub[0], in, v_turn2, 0, NULL, S, &w, "head turned back");
+    sweep(c, NULL, &sub[0], in, v_turn2, NULL, S, &w, "head turned back");
     /* another input: the maps stay incremental, the warp is redone */
     v_turn2.gaze_pitch = 0.2;
     agree(c, NULL, &sub[0], in2, &v_turn2, 1, out, S, &w, "new input");
+    /* a plain render of another subject in between changes nothing */
+    render(c, NULL, &sub[1], &v_own, out, S);
+    v_turn2.gaze_yaw = 0.25;
+    agree(c, NULL, &sub[0], in2, &v_turn2, 1, out, S, &w, "plain render in between");
     /* another subject at the same head pose, then back: full paths */
     gs_view v1 = v_turn2;
     v1.gaze_yaw = 0.3;
