@@ -15,7 +15,8 @@
  *   head change (a fresh head offset each rep): full renders, and transfer
  *     with its maps of every Gaussian.
  * Prints a Markdown table of medians with each row's ratio to the plain
- * render of its kind, and the full gaze change's to the incremental one.
+ * render of its kind, the full gaze change's to the incremental one and
+ * the share of the image the incremental one redid.
  * --threads N (default 1) gives every call a gs_pool of N threads. Without
  * --model, a cpu-preset model as initialised (the timing does not depend
  * on training). */
@@ -135,7 +136,9 @@ int main(int argc, char **argv)
         else
             printf(" %.2f× |\n", med[i] / med[base[i]]);
     }
-    printf("\ngaze change, transfer: full / incremental %.2f×\n", med[2] / med[1]);
+    printf("\ngaze change, transfer: full / incremental %.2f×; the eyes' box %.1f %% of "
+           "the image\n",
+           med[2] / med[1], 100.0 * ctx[1]->xfer_px / ((double)S * S * (double)reps));
     for (int k = 0; k < ROWS; k++)
         gs_model_ctx_destroy(ctx[k]);
     gs_pool_destroy(pool);
