@@ -4,7 +4,8 @@
  * eyes and never more than whole anywhere; the kept own view follows the
  * subject and the context's resets; 1 and 2 threads give the same bytes;
  * gaze sweeps redo only the eyes' reach and match a fresh context's full
- * transfer; bad arguments are refused with the output untouched. */
+ * transfer, also when that reach moves with the gaze; bad arguments are
+ * refused with the output untouched. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -193,7 +194,7 @@ static void sweep(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uin
  * refused call in between is handled; 1 and 2 threads give the same
  * bytes. */
 static void incremental(const gs_model *m, const gs_subject *sub, const uint8_t *in,
-                        const uint8_t *in2, gs_pool *pool, int S)
+                        const uint8_t *in2, gs_pool *pool, int S, const char *name)
 {
     size_t isz = 3 * (size_t)S * S;
     uint8_t *outs = malloc(SWEEP_N * isz), *outs2 = malloc(SWEEP_N * isz),
@@ -248,14 +249,42 @@ static void incremental(const gs_model *m, const gs_subject *sub, const uint8_t 
     v_turn2.gaze_yaw = 0.1;
     agree(c, NULL, &sub[0], in, &v_turn2, 1, out, S, &w, "and a gaze change");
 
-    printf("incremental transfers: maps within %.2e (depth at coverage >= %g; %.2e "
+    printf("incremental transfers, %s: maps within %.2e (depth at coverage >= %g; %.2e "
            "everywhere), %.2e (coverage), %.2e (eye), relative; bytes within %d on at most "
            "%zu of %zu; %.0f%% of the image redone per gaze change\n",
-           w.map[0], ON_MAP, w.map[3], w.map[1], w.map[2], w.byte, w.nbyte, isz,
+           name, w.map[0], ON_MAP, w.map[3], w.map[1], w.map[2], w.byte, w.nbyte, isz,
            100 * share);
     gs_model_ctx_destroy(c);
     gs_model_ctx_destroy(c2);
     free(outs), free(outs2), free(out);
+}
+
+/* Moves every eye Gaussian of m onto a small cap of its eyeball facing the
+ * camera of subject s. A whole eyeball's reach stays where it is whatever
+ * the gaze; a cap's moves with it, across tiles, so that a sweep's box
+ * must cover the reach at the old gaze as well as at the new one. */
+static void eyes_to_caps(gs_model *m, const gs_subject *s)
+{
+    const gs_model_params *p = &m->p;
+    int each = m->cfg.n_eye_each;
+    double cam[3], t[3] = {-s->head_t[0], -s->head_t[1], -s->head_t[2]};
+    gs_geom_mat3_tvec(s->head_R, t, cam); /* the camera in the head frame */
+    for (int i = 0; i < 2 * each; i++) {
+        const float *c = p->eye_centre + 3 * (i < each ? 0 : 1);
+        float *x = p->e_xyz + 3 * (size_t)i;
+        double f[3], r[3], d[3], nf = 0, nr = 0, rf = 0, nd = 0;
+        for (int k = 0; k < 3; k++)
+            f[k] = cam[k] - c[k], nf += f[k] * f[k];
+        for (int k = 0; k < 3; k++) {
+            f[k] /= sqrt(nf);
+            r[k] = x[k] - c[k], nr += r[k] * r[k], rf += r[k] * f[k];
+        }
+        nr = sqrt(nr);
+        for (int k = 0; k < 3; k++)
+            d[k] = f[k] + 0.3 * (r[k] - rf * f[k]) / nr, nd += d[k] * d[k];
+        for (int k = 0; k < 3; k++)
+            x[k] = (float)(c[k] + nr * d[k] / sqrt(nd));
+    }
 }
 
 int main(void)
@@ -368,7 +397,7 @@ int main(void)
     CHECK_MSG(!memcmp(out, a, isz), "1 and 2 threads differ");
     gs_model_ctx_destroy(c3);
     printf("kept own view, resets and thread counts: same bytes\n");
-    incremental(m, sub, in, noise, pool, S);
+    incremental(m, sub, in, noise, pool, S, "whole eyeballs");
 
     /* Bad arguments. */
     memset(out, 0x5a, isz);
@@ -404,6 +433,11 @@ int main(void)
     /* The context still works after the refusals. */
     transfer(c, NULL, &sub[0], in, &v_own, out, S);
     CHECK(max_diff(out, in, isz) <= 1);
+
+    /* Eye streams whose reach moves with the gaze (the model changes:
+     * fresh contexts only from here). */
+    eyes_to_caps(m, &sub[0]);
+    incremental(m, sub, in, noise, pool, S, "eyeball caps");
 
     gs_pool_destroy(pool);
     gs_model_ctx_destroy(c);
