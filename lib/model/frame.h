@@ -225,8 +225,8 @@ gs_gaussians gs_frame_gather(const gs_gaussians *src, int nf,
 /* Rasterizes g into the tile-aligned box d of the image seen by full:
  * full's camera shifted by d's origin, at d's size, with full's frustum,
  * so each pixel equals the whole image's to float rounding. out, alpha
- * and depth are d-sized (depth may be NULL). Sets r's frustum: r serves
- * crops of full only. */
+ * and depth are d-sized (depth may be NULL). r keeps full's frustum for
+ * later forwards: give it crops only. */
 int gs_frame_raster_crop(gs_raster *r, gs_pool *pool, const gs_camera *full,
                          const int d[4], const gs_gaussians *g,
                          const float *bg, float *out, float *alpha,
