@@ -42,16 +42,16 @@
 /* Eyeball-ness of a pixel: its eye-stream coverage times this, at most 1. */
 #define GS_XFER_EYE_GAIN 4.0f
 
-struct gs_xfer {
-    int S;
-    /* the subject's own view, kept while subject and settings are the same */
+/* What is kept per subject: its own view (while subject and settings are
+ * the same), the residual of its input, and its last target's maps and
+ * warped residual. */
+typedef struct xfer_subj {
     int valid;
     gs_subject key;
     int key_fs, key_full;
     uint8_t *src8;                 /* [S, S, 3] */
     float *src_z, *src_a, *src_e;  /* [S*S] depth mm, coverage, eye */
     double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
-    double tgt_eR[2][9], tgt_ec[2][3]; /* the target's */
     /* the residual res, kept with the input it came from while the own
      * view is kept */
     int res_valid;
@@ -66,6 +66,19 @@ struct gs_xfer {
     int16_t *fbox;                 /* [nf, 4] its face Gaussians' boxes */
     float *tgt_z, *tgt_a, *tgt_e;  /* [S*S] */
     float *warped;                 /* [3, S*S] residual, target's view */
+    uint64_t used;                 /* in a slot: when last live */
+} xfer_subj;
+
+struct gs_xfer {
+    int S, nf;
+    /* the live subject, and the others the context's sweep cache allows
+     * (c->sweep_n - 1 slots: own views kept for several subjects, so that
+     * requests alternating between them stay incremental) */
+    xfer_subj cur;
+    xfer_subj *slots;
+    int nslots;
+    uint64_t clock;
+    double tgt_eR[2][9], tgt_ec[2][3]; /* this call's target's eyeballs */
     /* scratch */
     gs_raster *raster, *raster_crop; /* whole images; crops of the target */
     gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
@@ -74,20 +87,62 @@ struct gs_xfer {
     uint8_t *tgt8;                 /* [S, S, 3] */
 };
 
+static void subj_invalidate(xfer_subj *u)
+{
+    u->valid = u->res_valid = u->tgt_valid = 0;
+}
+
+static void subj_free(xfer_subj *u)
+{
+    float *bufs[] = {u->src_z, u->src_a, u->src_e, u->res,
+                     u->tgt_z, u->tgt_a, u->tgt_e, u->warped};
+    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
+        free(bufs[i]);
+    free(u->src8);
+    free(u->in8);
+    free(u->fbox);
+    memset(u, 0, sizeof *u);
+}
+
+/* A subject's buffers for S x S images and nf face Gaussians; nonzero
+ * when out of memory (u then holds none). */
+static int subj_alloc(xfer_subj *u, int S, int nf)
+{
+    size_t px = (size_t)S * S;
+    float **one[] = {&u->src_z, &u->src_a, &u->src_e, &u->tgt_z, &u->tgt_a,
+                     &u->tgt_e};
+    int fail = 0;
+    for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
+        fail |= !(*one[i] = malloc(px * sizeof(float)));
+    fail |= !(u->res = malloc(3 * px * sizeof(float)));
+    fail |= !(u->warped = malloc(3 * px * sizeof(float)));
+    fail |= !(u->src8 = malloc(3 * px)) || !(u->in8 = malloc(3 * px));
+    fail |= !(u->fbox = malloc((size_t)(nf ? nf : 1) * 4 * sizeof(int16_t)));
+    if (fail)
+        subj_free(u);
+    return fail;
+}
+
+static void slots_free(gs_xfer *x)
+{
+    for (int i = 0; i < x->nslots; i++)
+        subj_free(&x->slots[i]);
+    free(x->slots);
+    x->slots = NULL;
+    x->nslots = 0;
+}
+
 void gs_xfer_free(gs_xfer *x)
 {
     if (!x)
         return;
-    float *bufs[] = {x->src_z, x->src_a, x->src_e, x->feat, x->af, x->aa,
-                     x->ad, x->tgt_z, x->tgt_a, x->tgt_e, x->res,
-                     x->warped, x->k.mean, x->k.scale, x->k.quat,
-                     x->k.opac, x->k.feat};
+    float *bufs[] = {x->feat, x->af, x->aa, x->ad, x->k.mean, x->k.scale,
+                     x->k.quat, x->k.opac, x->k.feat};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(bufs[i]);
-    free(x->src8);
+    subj_free(&x->cur);
+    slots_free(x);
     free(x->tgt8);
-    free(x->in8);
-    free(x->fbox);
     gs_raster_destroy(x->raster);
     gs_raster_destroy(x->raster_crop);
     free(x);
@@ -95,34 +150,44 @@ void gs_xfer_free(gs_xfer *x)
 
 void gs_xfer_invalidate(gs_xfer *x)
 {
-    if (x)
-        x->valid = x->res_valid = x->tgt_valid = 0;
+    if (!x)
+        return;
+    subj_invalidate(&x->cur);
+    for (int i = 0; i < x->nslots; i++)
+        subj_invalidate(&x->slots[i]);
 }
 
 void gs_xfer_forget_target(gs_xfer *x)
 {
     if (x)
-        x->tgt_valid = 0;
+        x->cur.tgt_valid = 0;
 }
 
 void gs_xfer_target_maps(const gs_xfer *x, const float **z, const float **a,
                          const float **e)
 {
-    *z = x ? x->tgt_z : NULL;
-    *a = x ? x->tgt_a : NULL;
-    *e = x ? x->tgt_e : NULL;
+    *z = x ? x->cur.tgt_z : NULL;
+    *a = x ? x->cur.tgt_a : NULL;
+    *e = x ? x->cur.tgt_e : NULL;
 }
 
-/* What the crops of n Gaussians need (raster_crop, fbox, k); nonzero when
- * out of memory. */
-static int crop_alloc(gs_xfer *x, size_t n)
+/* The scratch of the whole-image and crop passes for n Gaussians;
+ * nonzero when out of memory. */
+static int scratch_alloc(gs_xfer *x, int S, size_t n)
 {
+    size_t px = (size_t)S * S;
+    x->raster = gs_raster_create();
     x->raster_crop = gs_raster_create();
-    x->fbox = malloc(n * 4 * sizeof(int16_t));
+    x->feat = calloc(n * 2, sizeof(float));
+    x->af = malloc(2 * px * sizeof(float));
+    x->aa = malloc(px * sizeof(float));
+    x->ad = malloc(px * sizeof(float));
+    x->tgt8 = malloc(3 * px);
     float **f[] = {&x->k.mean, &x->k.scale, &x->k.quat, &x->k.opac,
                    &x->k.feat};
     size_t per[] = {3, 3, 4, 1, 2};
-    int fail = !x->raster_crop || !x->fbox;
+    int fail = !x->raster || !x->raster_crop || !x->feat || !x->af ||
+               !x->aa || !x->ad || !x->tgt8;
     for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
         fail |= !(*f[i] = malloc(n * per[i] * sizeof(float)));
     return fail;
@@ -135,24 +200,10 @@ static gs_xfer *xfer_get(gs_model_ctx *c)
     gs_xfer *x = calloc(1, sizeof *x);
     if (!x)
         return NULL;
-    int S = c->S;
-    size_t px = (size_t)S * S;
-    x->S = S;
-    x->raster = gs_raster_create();
-    x->feat = calloc((size_t)c->n * 2, sizeof(float));
-    x->af = malloc(2 * px * sizeof(float));
-    x->res = malloc(3 * px * sizeof(float));
-    x->warped = malloc(3 * px * sizeof(float));
-    float **one[] = {&x->src_z, &x->src_a, &x->src_e, &x->aa, &x->ad,
-                     &x->tgt_z, &x->tgt_a, &x->tgt_e};
-    int fail = !x->raster || !x->feat || !x->af || !x->res || !x->warped;
-    for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
-        fail |= !(*one[i] = malloc(px * sizeof(float)));
-    x->src8 = malloc(3 * px);
-    x->tgt8 = malloc(3 * px);
-    x->in8 = malloc(3 * px);
-    fail |= crop_alloc(x, (size_t)c->n);
-    if (fail || !x->src8 || !x->tgt8 || !x->in8) {
+    x->S = c->S;
+    x->nf = c->nf;
+    if (scratch_alloc(x, c->S, (size_t)c->n) ||
+        subj_alloc(&x->cur, c->S, c->nf)) {
         gs_xfer_free(x);
         return NULL;
     }
@@ -217,13 +268,13 @@ static int aux_maps(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
  * depth = sum / alpha would magnify the rounding where alpha is small. */
 static void merge_pixel(gs_xfer *x, size_t i, float al, float sum, float eye)
 {
-    if (gs_frame_moved(x->tgt_a[i], al) ||
-        gs_frame_moved(x->tgt_a[i] * x->tgt_z[i], sum)) {
-        x->tgt_a[i] = al;
-        x->tgt_z[i] = depth_of(al, sum);
+    if (gs_frame_moved(x->cur.tgt_a[i], al) ||
+        gs_frame_moved(x->cur.tgt_a[i] * x->cur.tgt_z[i], sum)) {
+        x->cur.tgt_a[i] = al;
+        x->cur.tgt_z[i] = depth_of(al, sum);
     }
-    if (gs_frame_moved(x->tgt_e[i], eye))
-        x->tgt_e[i] = eye;
+    if (gs_frame_moved(x->cur.tgt_e[i], eye))
+        x->cur.tgt_e[i] = eye;
 }
 
 /* The target's maps over the tile-aligned box d only, from the Gaussians
@@ -232,7 +283,7 @@ static int aux_crop(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
                     const gs_camera *ct, const int d[4], gs_error *err)
 {
     gs_gaussians all = map_gaussians(c, x);
-    gs_gaussians g = gs_frame_gather(&all, c->nf, x->fbox, d, &x->k);
+    gs_gaussians g = gs_frame_gather(&all, c->nf, x->cur.fbox, d, &x->k);
     int w = d[2] - d[0], h = d[3] - d[1], S = x->S;
     int rc = gs_frame_raster_crop(x->raster_crop, pool, ct, d, &g, NULL,
                                   x->af, x->aa, x->ad, err);
@@ -260,16 +311,16 @@ static int target_maps(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     int now[4], rc = GS_OK;
     gs_frame_eye_tiles(c, ct, now);
     if (keep) {
-        memcpy(d, x->tgt_rect, sizeof now);
+        memcpy(d, x->cur.tgt_rect, sizeof now);
         gs_frame_box_union(d, now);
         if (d[0] < d[2] && d[1] < d[3])
             rc = aux_crop(c, x, pool, ct, d, err);
     } else {
-        rc = aux_maps(c, x, pool, ct, x->tgt_z, x->tgt_a, x->tgt_e, err);
-        gs_frame_face_boxes(c, ct, x->fbox);
+        rc = aux_maps(c, x, pool, ct, x->cur.tgt_z, x->cur.tgt_a, x->cur.tgt_e, err);
+        gs_frame_face_boxes(c, ct, x->cur.fbox);
         d[0] = d[1] = 0, d[2] = d[3] = x->S;
     }
-    memcpy(x->tgt_rect, now, sizeof now);
+    memcpy(x->cur.tgt_rect, now, sizeof now);
     memcpy(x->tgt_eR, c->eye_R, sizeof x->tgt_eR);
     memcpy(x->tgt_ec, c->eye_c, sizeof x->tgt_ec);
     return rc;
@@ -320,7 +371,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
     for (int e = 0; e < 2; e++) {
         double tT[9];
         gs_geom_mat3_transpose(x->tgt_eR[e], tT);
-        gs_geom_mat3_mul(x->src_eR[e], tT, g->eM[e]);
+        gs_geom_mat3_mul(x->cur.src_eR[e], tT, g->eM[e]);
     }
     g->same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
                    !memcmp(ts, tt, 3 * sizeof(double));
@@ -330,7 +381,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
 static void target_point(const gs_xfer *x, const xfer_geom *g, int px, int py,
                          double h[3])
 {
-    double z = x->tgt_z[(size_t)py * x->S + px];
+    double z = x->cur.tgt_z[(size_t)py * x->S + px];
     double d[3] = {(px + 0.5 - g->ct.cx) / g->ct.fx * z - g->tt[0],
                    (py + 0.5 - g->ct.cy) / g->ct.fy * z - g->tt[1],
                    z - g->tt[2]};
@@ -373,10 +424,10 @@ static float seen_by_input(const gs_xfer *x, const xfer_geom *g,
     *v = g->cs.fy * X[1] / X[2] + g->cs.cy;
     if (!(*u >= 0 && *v >= 0 && *u <= S && *v <= S))
         return 0.0f;
-    if (bilinear(x->src_a, S, *u, *v) <= GS_XFER_ON_HEAD ||
-        fabs(bilinear(x->src_z, S, *u, *v) - X[2]) > GS_XFER_DEPTH_TOL)
+    if (bilinear(x->cur.src_a, S, *u, *v) <= GS_XFER_ON_HEAD ||
+        fabs(bilinear(x->cur.src_z, S, *u, *v) - X[2]) > GS_XFER_DEPTH_TOL)
         return 0.0f;
-    float bs = eyeballness(x->src_e, S, *u, *v);
+    float bs = eyeballness(x->cur.src_e, S, *u, *v);
     return eye ? kind_ratio(bs, b) : kind_ratio(1.0f - bs, 1.0f - b);
 }
 
@@ -389,11 +440,11 @@ static float head_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
     size_t i = (size_t)py * x->S + px;
     if (g->same_pose) { /* in place */
         *u = px + 0.5, *v = py + 0.5;
-        return kind_ratio(1.0f - eyeballness(x->src_e, x->S, *u, *v),
+        return kind_ratio(1.0f - eyeballness(x->cur.src_e, x->S, *u, *v),
                           1.0f - b);
     }
-    if (x->tgt_a[i] <= GS_XFER_ON_HEAD) /* off the head: in place */
-        return x->src_a[i] <= GS_XFER_ON_HEAD
+    if (x->cur.tgt_a[i] <= GS_XFER_ON_HEAD) /* off the head: in place */
+        return x->cur.src_a[i] <= GS_XFER_ON_HEAD
                    ? (*u = px + 0.5, *v = py + 0.5, 1.0f)
                    : 0.0f;
     double Xs[3];
@@ -421,7 +472,7 @@ static float eye_source(const gs_xfer *x, const xfer_geom *g,
         r[k] = h[k] - x->tgt_ec[e][k];
     gs_geom_mat3_vec(g->eM[e], r, hs);
     for (int k = 0; k < 3; k++)
-        hs[k] += x->src_ec[e][k];
+        hs[k] += x->cur.src_ec[e][k];
     input_point(g, hs, Xs);
     return seen_by_input(x, g, Xs, 1, b, u, v);
 }
@@ -439,28 +490,77 @@ static int check_image(const uint8_t *p, size_t stride, int S, const char *what,
 
 /* The subject's own view and its maps: rendered once per subject and
  * settings; a new one drops what was kept against the old. */
+static int subj_matches(const gs_model_ctx *c, const xfer_subj *u,
+                        const gs_subject *s)
+{
+    return u->valid && same_subject(&u->key, s) && u->key_fs == c->render_fs &&
+           u->key_full == c->render_full;
+}
+
+static void subj_swap(xfer_subj *a, xfer_subj *b)
+{
+    xfer_subj t = *a;
+    *a = *b, *b = t;
+}
+
+/* Makes s the live subject: its kept state when a slot has it; otherwise
+ * the live one goes to a free or the least recently used slot (as many as
+ * the context's sweep cache keeps other subjects' renders), and the live
+ * state is left invalid, with buffers. Returns nonzero when out of memory. */
+static int subj_select(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s)
+{
+    if (subj_matches(c, &x->cur, s))
+        return 0;
+    int want = c->sweep_n - 1;
+    if (want != x->nslots) { /* the cache was resized: start over */
+        slots_free(x);
+        if (want > 0 && !(x->slots = calloc((size_t)want, sizeof *x->slots)))
+            return 1;
+        x->nslots = want;
+    }
+    xfer_subj *v = NULL;
+    for (int i = 0; i < x->nslots; i++) {
+        xfer_subj *u = &x->slots[i];
+        if (subj_matches(c, u, s)) {
+            u->used = ++x->clock;
+            subj_swap(&x->cur, u);
+            return 0;
+        }
+        if (!v || (v->valid && (!u->valid || u->used < v->used)))
+            v = u;
+    }
+    if (v && x->cur.valid) {
+        x->cur.used = ++x->clock;
+        subj_swap(&x->cur, v); /* v's buffers, or none yet */
+    }
+    subj_invalidate(&x->cur);
+    return !x->cur.src8 && subj_alloc(&x->cur, x->S, x->nf);
+}
+
+/* The subject's own view and its maps: rendered once per subject and
+ * settings, kept for as many subjects as the sweep cache. */
 static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
                     const gs_subject *s, gs_error *err)
 {
-    if (x->valid && same_subject(&x->key, s) && x->key_fs == c->render_fs &&
-        x->key_full == c->render_full)
+    if (subj_select(c, x, s))
+        return gs_error_set(err, GS_ERR_NOMEM, "transfer: out of memory");
+    if (x->cur.valid)
         return GS_OK;
-    gs_xfer_invalidate(x);
     int S = x->S;
     gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}};
     gs_camera cs;
     image_camera(c, s->head_t, &cs);
-    int rc = gs_model_render(c, pool, s, &own, x->src8, 3 * (size_t)S, err);
+    int rc = gs_model_render(c, pool, s, &own, x->cur.src8, 3 * (size_t)S, err);
     if (!rc)
-        rc = aux_maps(c, x, pool, &cs, x->src_z, x->src_a, x->src_e, err);
+        rc = aux_maps(c, x, pool, &cs, x->cur.src_z, x->cur.src_a, x->cur.src_e, err);
     if (rc)
         return rc;
-    memcpy(x->src_eR, c->eye_R, sizeof x->src_eR);
-    memcpy(x->src_ec, c->eye_c, sizeof x->src_ec);
-    x->key = *s;
-    x->key_fs = c->render_fs;
-    x->key_full = c->render_full;
-    x->valid = 1;
+    memcpy(x->cur.src_eR, c->eye_R, sizeof x->cur.src_eR);
+    memcpy(x->cur.src_ec, c->eye_c, sizeof x->cur.src_ec);
+    x->cur.key = *s;
+    x->cur.key_fs = c->render_fs;
+    x->cur.key_full = c->render_full;
+    x->cur.valid = 1;
     return GS_OK;
 }
 
@@ -468,19 +568,19 @@ static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
  * while the input is the same bytes. Returns whether it was kept. */
 static int residual(gs_xfer *x, const uint8_t *input, size_t in_stride)
 {
-    int S = x->S, same = x->res_valid;
+    int S = x->S, same = x->cur.res_valid;
     size_t px = (size_t)S * S, row = 3 * (size_t)S;
     for (int y = 0; y < S && same; y++)
-        same = !memcmp(x->in8 + y * row, input + y * in_stride, row);
+        same = !memcmp(x->cur.in8 + y * row, input + y * in_stride, row);
     if (same)
         return 1;
     for (int y = 0; y < S; y++)
-        memcpy(x->in8 + y * row, input + y * in_stride, row);
+        memcpy(x->cur.in8 + y * row, input + y * in_stride, row);
     for (int k = 0; k < 3; k++)
         for (size_t i = 0; i < px; i++)
-            x->res[k * px + i] = (float)x->in8[3 * i + k] -
-                                 (float)x->src8[3 * i + k];
-    x->res_valid = 1;
+            x->cur.res[k * px + i] = (float)x->cur.in8[3 * i + k] -
+                                 (float)x->cur.src8[3 * i + k];
+    x->cur.res_valid = 1;
     return 0;
 }
 
@@ -489,7 +589,7 @@ static int residual(gs_xfer *x, const uint8_t *input, size_t in_stride)
 static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
 {
     size_t n = (size_t)x->S * x->S, i = (size_t)py * x->S + px;
-    float b = GS_XFER_EYE_GAIN * x->tgt_e[i];
+    float b = GS_XFER_EYE_GAIN * x->cur.tgt_e[i];
     b = b > 1.0f ? 1.0f : b;
     double uh = 0, vh = 0, ue = 0, ve = 0, h[3];
     float wh = 0.0f, we = 0.0f;
@@ -499,13 +599,13 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
     if (b > 0.0f)
         we = b * eye_source(x, g, h, b, &ue, &ve);
     for (int k = 0; k < 3; k++) {
-        const float *rk = x->res + k * n;
+        const float *rk = x->cur.res + k * n;
         float v = 0.0f;
         if (wh > 0.0f)
             v += wh * bilinear(rk, x->S, uh, vh);
         if (we > 0.0f)
             v += we * bilinear(rk, x->S, ue, ve);
-        x->warped[k * n + i] = v;
+        x->cur.warped[k * n + i] = v;
     }
 }
 
@@ -527,7 +627,7 @@ static void compose_row(const gs_xfer *x, int y, uint8_t *o)
     for (int xx = 0; xx < S; xx++) {
         size_t i = (size_t)y * S + xx;
         for (int k = 0; k < 3; k++) {
-            float v = (float)t[3 * xx + k] + x->warped[k * px + i];
+            float v = (float)t[3 * xx + k] + x->cur.warped[k * px + i];
             v = v < 0 ? 0 : v > 255 ? 255 : v;
             o[3 * xx + k] = round_byte(v);
         }
@@ -584,9 +684,9 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
     if ((rc = own_view(c, x, pool, s, err)))
         return rc;
     /* only the gaze changed since the kept target: the face is the same */
-    int keep = x->tgt_valid && !memcmp(x->tgt_R, Rt, sizeof x->tgt_R) &&
-               !memcmp(x->tgt_t, tt, sizeof x->tgt_t);
-    x->tgt_valid = 0; /* until this target is complete */
+    int keep = x->cur.tgt_valid && !memcmp(x->cur.tgt_R, Rt, sizeof x->cur.tgt_R) &&
+               !memcmp(x->cur.tgt_t, tt, sizeof x->cur.tgt_t);
+    x->cur.tgt_valid = 0; /* until this target is complete */
     gs_camera ct;
     image_camera(c, tt, &ct);
     int d[4];
@@ -607,9 +707,9 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
     gs_pool_for(pool, (S + XFER_BAND_ROWS - 1) / XFER_BAND_ROWS, band_task,
                 &b);
 
-    memcpy(x->tgt_R, Rt, sizeof x->tgt_R);
-    memcpy(x->tgt_t, tt, sizeof x->tgt_t);
-    x->tgt_valid = 1;
+    memcpy(x->cur.tgt_R, Rt, sizeof x->cur.tgt_R);
+    memcpy(x->cur.tgt_t, tt, sizeof x->cur.tgt_t);
+    x->cur.tgt_valid = 1;
     c->last_xfer_inc = keep;
     c->n_xfer_inc += (uint64_t)keep;
     c->n_xfer_full += (uint64_t)!keep;

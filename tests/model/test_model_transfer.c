@@ -225,11 +225,22 @@ static void incremental(const gs_model *m, const gs_subject *sub, const uint8_t 
     render(c, NULL, &sub[1], &v_own, out, S);
     v_turn2.gaze_yaw = 0.25;
     agree(c, NULL, &sub[0], in2, &v_turn2, 1, out, S, &w, "plain render in between");
-    /* another subject at the same head pose, then back: full paths */
+    /* another subject at the same head pose, then back: the first
+     * subject's state waits in a slot (the sweep cache keeps 4 subjects),
+     * so alternating subjects stay incremental once each was seen */
     gs_view v1 = v_turn2;
     v1.gaze_yaw = 0.3;
     agree(c, NULL, &sub[1], in, &v1, 0, out, S, &w, "subject switch");
-    agree(c, NULL, &sub[0], in, &v_turn2, 0, out, S, &w, "subject switch back");
+    v_turn2.gaze_yaw = 0.2;
+    agree(c, NULL, &sub[0], in2, &v_turn2, 1, out, S, &w, "subject switch back");
+    v1.gaze_yaw = 0.35;
+    agree(c, NULL, &sub[1], in, &v1, 1, out, S, &w, "and to the other again");
+    /* with no other subject kept (sweep cache 1) every switch is full */
+    gs_error e1 = {0, ""};
+    CHECK(gs_model_ctx_set_sweep_cache(c, 1, &e1) == GS_OK);
+    agree(c, NULL, &sub[0], in2, &v_turn2, 0, out, S, &w, "sweep cache 1: switch");
+    agree(c, NULL, &sub[1], in, &v1, 0, out, S, &w, "sweep cache 1: switch back");
+    CHECK(gs_model_ctx_set_sweep_cache(c, GS_MODEL_SWEEP_CACHE_DEFAULT, &e1) == GS_OK);
     /* a refused call drops the kept target; so do the context's resets */
     gs_view v_bad = v_turn2;
     v_bad.gaze_yaw = NAN;
