@@ -51,3 +51,13 @@ def start_ready(t, daemon_cls, binary, args):
     addr = "unix:" + d.sock
     wait_ready(t, addr)
     return d, addr
+
+
+def finish(t, d):
+    """Stops daemon d (if still running), prints its log when a check
+    failed, checks its exit status; returns the test's exit status."""
+    rc = d.stop()
+    if t.failures:
+        print(d.log())
+    t.check(rc in (0, None), "exit %s" % rc)
+    return t.status()

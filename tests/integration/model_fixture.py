@@ -21,3 +21,18 @@ def faces(cli, workdir, size=128, count=3):
                        check=True, capture_output=True)
     names = sorted(os.listdir(os.path.join(out, "images")))
     return [open(os.path.join(out, "images", n), "rb").read() for n in names]
+
+
+def daemon_fixture(argv, state_name, size=128, count=3):
+    """What the model-backed daemon tests start from, for argv
+    (GAZESPLATD GAZESPLAT_CLI WORKDIR): the binaries, two tiny models
+    (seeds 1 and 2), `count` faces and an emptied state directory."""
+    daemon, cli, work = (os.path.abspath(a) for a in argv[:3])
+    os.makedirs(work, exist_ok=True)
+    state = os.path.join(work, state_name)
+    os.makedirs(state, exist_ok=True)
+    for f in os.listdir(state):
+        os.unlink(os.path.join(state, f))
+    return {"daemon": daemon, "cli": cli, "work": work, "state": state,
+            "model": tiny_model(cli, work, seed=1), "other": tiny_model(cli, work, seed=2),
+            "faces": faces(cli, work, size, count)}

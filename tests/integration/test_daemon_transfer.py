@@ -16,8 +16,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
 from daemon_util import Checks, Daemon  # noqa: E402
-from model_fixture import faces, tiny_model  # noqa: E402
-from client_checks import refused, start_ready, wait_ready  # noqa: E402
+from model_fixture import daemon_fixture  # noqa: E402
+from client_checks import finish, refused, start_ready, wait_ready  # noqa: E402
 import gazesplat_client as gc  # noqa: E402
 
 FAST = 3  # fit iterations
@@ -107,21 +107,13 @@ def inline_and_keys(t, c, imgs, faces_rgb):
 
 
 def main():
-    daemon, cli, work = (os.path.abspath(a) for a in sys.argv[1:4])
-    os.makedirs(work, exist_ok=True)
     t = Checks()
-    model = tiny_model(cli, work, seed=1)
-    other = tiny_model(cli, work, seed=2)
-    imgs = faces(cli, work, 128, 3)
+    fx = daemon_fixture(sys.argv[1:4], "state_transfer_test")
+    daemon, state, model, other, imgs = fx["daemon"], fx["state"], fx["model"], fx["other"], fx["faces"]
     faces_rgb = [decode(p) for p in imgs]
-    state = os.path.join(work, "state_transfer_test")
-    os.makedirs(state, exist_ok=True)
-    for f in os.listdir(state):
-        os.unlink(os.path.join(state, f))
     base = ["--model", model, "--state-dir", state, "--set", "photo_input=no",
             "--set", "workers=1", "--set", "max_finetune_steps=10"]
     d = Daemon(daemon, base).start()
-    rc = None
     try:
         addr = "unix:" + d.sock
         wait_ready(t, addr)
@@ -167,11 +159,8 @@ def main():
             t.check(c.stats()["input_entries"] == 0, "no inputs for another model")
         t.check(input_files(state) == [], "input files removed for another model: %s" % input_files(state))
     finally:
-        rc = d.stop()
-        if t.failures:
-            print(d.log())
-    t.check(rc in (0, None), "exit %s" % rc)
-    return t.status()
+        status = finish(t, d)
+    return status
 
 
 if __name__ == "__main__":
