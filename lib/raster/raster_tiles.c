@@ -1090,17 +1090,25 @@ static int fast_backward(gs_raster *r, gs_pool *pool, int t0, int t1, size_t slo
 }
 
 /* 1 when every value is finite. x * 0 is 0 for finite x and NaN otherwise;
- * eight running sums keep the loop vectorizable. */
+ * four vectors of running sums keep the loop vectorized and the adds
+ * independent (one chain would wait on the add's latency every vector:
+ * this runs before every forward, over every parameter and feature). */
 static int all_finite(const float *x, size_t n)
 {
-    vf acc = splat(0.0f);
+    vf acc[4] = {splat(0.0f), splat(0.0f), splat(0.0f), splat(0.0f)};
     size_t i = 0;
+    for (; i + 4 * L <= n; i += 4 * L)
+        for (int k = 0; k < 4; k++) {
+            vf v;
+            memcpy(&v, x + i + (size_t)k * L, sizeof v);
+            acc[k] += v * splat(0.0f);
+        }
     for (; i + L <= n; i += L) {
         vf v;
         memcpy(&v, x + i, sizeof v);
-        acc += v * splat(0.0f);
+        acc[0] += v * splat(0.0f);
     }
-    float s = hsum(acc);
+    float s = hsum((acc[0] + acc[1]) + (acc[2] + acc[3]));
     for (; i < n; i++)
         s += x[i] * 0.0f;
     return s == 0.0f;

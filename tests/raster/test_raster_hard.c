@@ -598,10 +598,19 @@ static void nonfinite_inputs(void)
             }
         }
         rt_scene s;
-        rt_scene_copy(&s, &base);
-        s.background[100] = bad[v];
-        expect_refused("background", &s, &base, GS_ERR_NONFINITE);
-        rt_scene_free(&s);
+        /* every place of the finite check's loops (blocks of 4 vectors of
+         * 8 or 16 lanes, single vectors, the scalar tail) in a 768-value
+         * background */
+        const int at[] = {0, 1, 7, 8, 15, 16, 31, 32, 63, 64, 100, 127, 128, 700, 735, 736,
+                          751, 752, 760, 766, 767};
+        for (size_t k = 0; k < sizeof at / sizeof at[0]; k++) {
+            rt_scene_copy(&s, &base);
+            s.background[at[k]] = bad[v];
+            char what[64];
+            snprintf(what, sizeof what, "background[%d] = %g", at[k], (double)bad[v]);
+            expect_refused(what, &s, &base, GS_ERR_NONFINITE);
+            rt_scene_free(&s);
+        }
         for (int k = 0; k < 16; k++) { /* fx fy cx cy viewmat[12] */
             rt_scene_copy(&s, &base);
             gs_camera *c = &s.cam;
