@@ -430,11 +430,20 @@ static void project_chunk(void *vctx, int task, int worker)
 static void sort_by_depth(gs_raster *r, int m)
 {
     uint32_t *ord = r->order, *ot = r->order_tmp, *key = r->keys, *kt = r->keys_tmp;
+    /* The four bytes' histograms in one read of the keys: a pass only
+     * moves the keys, which keep their bytes. */
+    uint32_t hist[4][257];
+    memset(hist, 0, sizeof hist);
+    for (int i = 0; i < m; i++) {
+        uint32_t k = key[i];
+        hist[0][(k & 0xff) + 1]++;
+        hist[1][((k >> 8) & 0xff) + 1]++;
+        hist[2][((k >> 16) & 0xff) + 1]++;
+        hist[3][(k >> 24) + 1]++;
+    }
     for (int pass = 0; pass < 4; pass++) {
         int shift = pass * 8;
-        uint32_t count[257] = {0};
-        for (int i = 0; i < m; i++)
-            count[((key[i] >> shift) & 0xff) + 1]++;
+        uint32_t *count = hist[pass];
         if (count[((key[0] >> shift) & 0xff) + 1] == (uint32_t)m)
             continue; /* every key shares this byte */
         for (int b = 0; b < 256; b++)
