@@ -132,6 +132,27 @@ def main():
                     "fine-tuned transfer after a restart: same bytes")
         t.check(d.stop() == 0, "clean exit")
 
+        # A damaged file (truncated; then one of another size) is no kept
+        # input: that subject's transfer is refused with the reason, the
+        # other's still serves, and a FIT with keep_image keeps it anew.
+        path = os.path.join(state, "input-%s.gsfi" % kt.hex())
+        for damage in (lambda b: b[:len(b) // 2], lambda b: b[:8] + b[8:] + b"\0" * 300):
+            with open(path, "rb") as f:
+                blob = f.read()
+            with open(path, "wb") as f:
+                f.write(damage(blob))
+            d, addr = start_ready(t, Daemon, daemon, base)
+            with gc.Client(addr) as c:
+                refused(t, lambda: render(c, [(10, -15)], subject=kt, transfer=True),
+                        gc.pb.ERR_UNKNOWN_SUBJECT, "damaged input file", "no kept input")
+                t.check(np.array_equal(render(c, [(10, -15)], subject=k0, transfer=True)[0], x0),
+                        "the other subject's input still serves")
+                r = c.fit(imgs[2], max_iters=FAST, finetune_steps=2, keep_image=True)
+                t.check(r.cached and r.image_kept and r.subject_key == kt, "kept anew: %s" % r)
+                t.check(np.array_equal(render(c, [(10, -15)], subject=kt, transfer=True)[0], xt),
+                        "transfer after keeping it anew: same bytes")
+            t.check(d.stop() == 0, "clean exit")
+
         # A 1 MiB budget holds 21 inputs of 128 px (49,160 bytes each):
         # 24 more FITs evict the oldest, whose transfer is then refused
         # with the reason, and whose files are pruned.
