@@ -30,7 +30,7 @@ const cli_command cli_eval_command = {
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
-    "                      [--targets N] [--seed N]\n"
+    "                      [--targets N] [--seed N] [--split S]\n"
     "\n"
     "  --model FILE      the model to evaluate (its image size and camera)\n"
     "  --pairs FILE      the pairing (bench/eval/pairs.csv; --make-pairs)\n"
@@ -68,9 +68,11 @@ const cli_command cli_eval_command = {
     "  --finetune-eye-weight W  weight of the input's eye region in the\n"
     "                    fine-tuning loss, 0..1 (default 1; 0 leaves the\n"
     "                    eyes to the shared model)\n"
-    "  --make-pairs FILE write a pairing: --identities test identities\n"
+    "  --make-pairs FILE write a pairing: --identities held-out identities\n"
     "                    (15) x --inputs scenes each (10) x --targets (10),\n"
-    "                    --seed (1); deterministic\n",
+    "                    --seed (1); deterministic. --split test (default)\n"
+    "                    or validation: choose methods and settings on\n"
+    "                    validation pairs, report on test pairs\n",
     run_eval,
 };
 
@@ -78,7 +80,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_MAKE, O_IDS, O_INPUTS,
-    O_TARGETS, O_SEED, O_N
+    O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 static int make_pairs(const cli_opt *o)
@@ -106,6 +108,11 @@ static int make_pairs(const cli_opt *o)
         if (cli_parse_long(o[O_SEED].value, 0, 4294967295L, &v))
             return cli_usage_error(cmd, "--seed: want 0..4294967295");
         sp.seed = (uint64_t)v;
+    }
+    if (o[O_SPLIT].value) {
+        if (strcmp(o[O_SPLIT].value, "test") && strcmp(o[O_SPLIT].value, "validation"))
+            return cli_usage_error(cmd, "--split: want test or validation");
+        sp.split = strcmp(o[O_SPLIT].value, "test") ? GS_SYNTH_VAL : GS_SYNTH_TEST;
     }
     gs_eval_pairs ps;
     gs_error err = {0, ""};
@@ -687,7 +694,7 @@ static int run_eval(int argc, char **argv)
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
-        {"--targets", 1, NULL}, {"--seed", 1, NULL}};
+        {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -699,8 +706,8 @@ static int run_eval(int argc, char **argv)
         for (int k = 0; k < O_MAKE; k++)
             if (o[k].value)
                 return cli_usage_error(cmd, "--make-pairs takes only "
-                                       "--identities, --inputs, --targets "
-                                       "and --seed");
+                                       "--identities, --inputs, --targets, "
+                                       "--seed and --split");
         return make_pairs(o);
     }
     for (int k = O_IDS; k < O_N; k++)

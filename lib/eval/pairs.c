@@ -62,6 +62,7 @@ double gs_eval_angle_deg(double p0, double y0, double p1, double y1)
 
 void gs_eval_pairs_spec_default(gs_eval_pairs_spec *s)
 {
+    s->split = GS_SYNTH_TEST;
     s->identities = 15;
     s->inputs = 10;
     s->targets = 10;
@@ -154,7 +155,7 @@ static int pick_input(const gs_eval_pairs_spec *sp, int k, int i,
 {
     gs_synth_ranges r;
     gs_eval_ranges(&r);
-    uint64_t id = gs_synth_split_seed(GS_SYNTH_TEST, (uint64_t)k);
+    uint64_t id = gs_synth_split_seed(sp->split, (uint64_t)k);
     /* The class rotates with the identity so that the first two inputs of
      * every identity (a prefix of the file) already cover all classes. */
     int c = (i + 2 * k) % 10;
@@ -198,6 +199,9 @@ int gs_eval_pairs_make(const gs_eval_pairs_spec *sp, gs_eval_pairs *out,
 {
     out->n = 0;
     out->p = NULL;
+    if (sp->split != GS_SYNTH_TEST && sp->split != GS_SYNTH_VAL)
+        return gs_error_set(err, GS_ERR_ARG, "eval: pairs come from the test or "
+                            "validation identities, never the training ones");
     if (sp->identities < 1 || sp->identities > 100000 || sp->inputs < 1 ||
         sp->inputs > 1000 || sp->targets < 1 || sp->targets > 1000)
         return gs_error_set(err, GS_ERR_ARG, "eval: pairs spec out of range "
@@ -219,7 +223,7 @@ int gs_eval_pairs_make(const gs_eval_pairs_spec *sp, gs_eval_pairs *out,
                 gs_eval_pair *e = &p[q];
                 e->input = i * sp->identities + k;
                 e->identity = k;
-                e->identity_seed = gs_synth_split_seed(GS_SYNTH_TEST,
+                e->identity_seed = gs_synth_split_seed(sp->split,
                                                        (uint64_t)k);
                 e->input_scene = s;
                 e->head_change = j % 2;
@@ -241,9 +245,11 @@ static const char CSV_HEADER[] =
 
 int gs_eval_pairs_write(FILE *f, const gs_eval_pairs *ps, gs_error *err)
 {
-    fprintf(f, "# gazesplat eval pairs v1: test-split identities; scenes from "
+    int val = ps->n > 0 && gs_synth_seed_split(ps->p[0].identity_seed) == GS_SYNTH_VAL;
+    fprintf(f, "# gazesplat eval pairs v1: %s-split identities; scenes from "
                "gs_synth_scene_random(identity_seed, scene_seed, "
-               "gs_eval_ranges); docs/eval.md\n%s\n", CSV_HEADER);
+               "gs_eval_ranges); docs/eval.md\n%s\n", val ? "validation" : "test",
+            CSV_HEADER);
     for (int i = 0; i < ps->n; i++) {
         const gs_eval_pair *p = &ps->p[i];
         fprintf(f, "%d,%d,%d,%llu,%llu,%llu,%d,%.3f,%.3f,%.3f,%d,%d\n", i,
@@ -307,15 +313,17 @@ static int parse_line(char *line, int *index, gs_eval_pair *p)
 }
 
 /* The stated derived values must be the generator's (to the 3 decimals
- * written), and the identity a held-out one. */
+ * written), and the identity a held-out one (test or validation). */
 static int check_pair(const gs_eval_pair *got, int line, gs_error *err)
 {
     gs_eval_pair p = *got;
-    if (p.identity_seed != gs_synth_split_seed(GS_SYNTH_TEST,
+    int split = gs_synth_seed_split(p.identity_seed);
+    if ((split != GS_SYNTH_TEST && split != GS_SYNTH_VAL) ||
+        p.identity_seed != gs_synth_split_seed((gs_synth_split)split,
                                                (uint64_t)p.identity))
         return gs_error_set(err, GS_ERR_FORMAT, "eval pairs line %d: "
-                            "identity_seed is not test identity %d", line,
-                            p.identity);
+                            "identity_seed is not test or validation identity "
+                            "%d", line, p.identity);
     int rc = gs_eval_pair_derive(&p, err);
     if (rc)
         return rc;
@@ -379,6 +387,12 @@ int gs_eval_pairs_read(FILE *f, gs_eval_pairs *out, gs_error *err)
                       p.identity != out->p[out->n - 1].identity))
                 rc = gs_error_set(err, GS_ERR_FORMAT, "eval pairs line %d: "
                                   "one input, two scenes", lineno);
+            else if (out->n > 0 &&
+                     gs_synth_seed_split(p.identity_seed) !=
+                         gs_synth_seed_split(out->p[0].identity_seed))
+                rc = gs_error_set(err, GS_ERR_FORMAT, "eval pairs line %d: "
+                                  "test and validation identities mixed",
+                                  lineno);
             else if (!(rc = check_pair(&p, lineno, err)) &&
                      append(out, &cap, &p))
                 rc = gs_error_set(err, GS_ERR_NOMEM, "eval: out of memory");

@@ -122,6 +122,19 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK_EQ_INT(run(ids0), 2);
     const char *positional[] = {"eval", "extra", NULL};
     CHECK_EQ_INT(run(positional), 2);
+    /* --split: validation pairs are written and say so; training refused */
+    char vpairs[200];
+    snprintf(vpairs, sizeof vpairs, "%s/val_pairs.csv", dir);
+    const char *split_train[] = {"eval", "--make-pairs", vpairs, "--split", "train", NULL};
+    CHECK_EQ_INT(run(split_train), 2);
+    const char *split_val[] = {"eval", "--make-pairs", vpairs, "--split", "validation",
+                               "--identities", "1", "--inputs", "1", "--targets", "2", NULL};
+    CHECK_EQ_INT(run(split_val), 0);
+    FILE *vf = fopen(vpairs, "r");
+    char head[160] = "";
+    CHECK(vf && fgets(head, sizeof head, vf) && strstr(head, "validation-split"));
+    if (vf)
+        fclose(vf);
     /* Render settings: --prune K or P%, --feature-scale in (0, 1]. */
     const char *bad_render[][2] = {
         {"--prune", "0"},          {"--prune", "0%"},

@@ -146,6 +146,41 @@ int main(void)
     CHECK(a.p[1].head_change == 1);
     CHECK(memcmp(in.head_R, tg.head_R, sizeof in.head_R) != 0);
 
+    /* Validation identities: the same schedule on other identities; a
+     * file of them reads back; a file mixing the splits is refused, and
+     * the training identities cannot be drawn. */
+    gs_eval_pairs v;
+    sp.split = GS_SYNTH_VAL;
+    CHECK_MSG(gs_eval_pairs_make(&sp, &v, &err) == GS_OK, "%s", err.msg);
+    int val = v.n == a.n, disjoint = 1;
+    for (int i = 0; val && i < v.n; i++) {
+        val = gs_synth_seed_split(v.p[i].identity_seed) == GS_SYNTH_VAL;
+        disjoint &= v.p[i].identity_seed != a.p[i].identity_seed;
+    }
+    CHECK_MSG(val && disjoint, "validation pairs: %d, disjoint from test: %d", val, disjoint);
+    f = fopen(path, "w");
+    CHECK(f && gs_eval_pairs_write(f, &v, &err) == GS_OK);
+    fclose(f);
+    f = fopen(path, "r");
+    CHECK_MSG(gs_eval_pairs_read(f, &r, &err) == GS_OK && r.n == v.n, "%s", err.msg);
+    fclose(f);
+    gs_eval_pairs_free(&r);
+    gs_eval_pair keep_v = v.p[v.n - 1];
+    v.p[v.n - 1] = a.p[a.n - 1]; /* a test pair last */
+    f = fopen(path, "w");
+    gs_eval_pairs_write(f, &v, &err);
+    fclose(f);
+    f = fopen(path, "r");
+    CHECK(gs_eval_pairs_read(f, &r, &err) == GS_ERR_FORMAT);
+    CHECK_MSG(strstr(err.msg, "mixed") != NULL, "%s", err.msg);
+    fclose(f);
+    remove(path);
+    v.p[v.n - 1] = keep_v;
+    gs_eval_pairs_free(&v);
+    sp.split = GS_SYNTH_TRAIN;
+    CHECK(gs_eval_pairs_make(&sp, &r, &err) == GS_ERR_ARG);
+    sp.split = GS_SYNTH_TEST;
+
     sp.targets = 0;
     CHECK(gs_eval_pairs_make(&sp, &r, &err) == GS_ERR_ARG);
     gs_eval_pairs_free(&a);

@@ -67,12 +67,15 @@ typedef struct gs_eval_pairs {
 } gs_eval_pairs;
 
 typedef struct gs_eval_pairs_spec {
-    int identities;            /* test identities 0..identities-1 */
+    gs_synth_split split;      /* GS_SYNTH_TEST (default) or GS_SYNTH_VAL:
+                                * held-out identities either way; choose
+                                * methods on VAL, report on TEST */
+    int identities;            /* identities 0..identities-1 of the split */
     int inputs;                /* input scenes per identity */
     int targets;               /* targets per input */
     uint64_t seed;             /* pairing stream */
 } gs_eval_pairs_spec;
-/* 15 identities x 10 inputs x 10 targets, seed 1. */
+/* Test split, 15 identities x 10 inputs x 10 targets, seed 1. */
 void gs_eval_pairs_spec_default(gs_eval_pairs_spec *s);
 
 /* Draws the pairing (deterministic). Input i of identity k has class
