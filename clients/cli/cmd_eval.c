@@ -63,7 +63,7 @@ const cli_command cli_eval_command = {
     "                    that input's targets with it; fit time includes it\n"
     "  --finetune-parts LIST  what is tuned, comma-separated: face (face\n"
     "                    Gaussians' colours and features), eye, renderer,\n"
-    "                    mlp, geometry; default face\n"
+    "                    mlp, geometry; default face,geometry\n"
     "  --finetune-lr X   Adam's base rate (default 0.001)\n"
     "  --finetune-eye-weight W  weight of the input's eye region in the\n"
     "                    fine-tuning loss, 0..1 (default 1; 0 leaves the\n"

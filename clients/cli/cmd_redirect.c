@@ -37,16 +37,16 @@ const cli_command cli_fit_command = {
     "  --finetune N     then fine-tune a copy of the model on the image for N\n"
     "                   Adam steps (gs_model_finetune; the paper's last step)\n"
     "                   and store the tuned tensors with the subject\n"
-    "  --finetune-parts LIST  what is tuned, comma-separated: face (the\n"
-    "                   default: face Gaussians' colour and features), eye,\n"
-    "                   renderer, mlp, geometry\n"
+    "  --finetune-parts LIST  what is tuned, comma-separated: face (face\n"
+    "                   Gaussians' colour and features), eye, renderer, mlp,\n"
+    "                   geometry; default face,geometry\n"
     "  --finetune-lr X  Adam's base rate (default 0.001)\n"
     "  --finetune-plateau R  stop fine-tuning when the loss improved by less\n"
     "                   than the fraction R over 20 steps (default: never)\n"
     "                   (--time S bounds the fit and the fine-tuning together)\n"
     "  --out FILE       the fitted subject (binary, gs_subject_encode),\n"
     "                   followed by the tuned block with --finetune\n"
-    "                   (gs_model_tuned_encode; 2.9 MB for face at cpu)\n"
+    "                   (gs_model_tuned_encode; 3.4 MB for the default parts at cpu)\n"
     "Prints the fit quality and the estimated labels.\n",
     run_fit,
 };

@@ -237,7 +237,7 @@ class Client:
         """Fits a subject to a normalized face (PNG/JPEG bytes or HxWx3
         uint8 array); returns the FitResult (subject_key, labels, quality).
         finetune_steps > 0: the server then fine-tunes a copy of the model
-        on the image (finetune_parts: "face" by default) and the subject
+        on the image (finetune_parts: "face,geometry" by default) and the subject
         renders with it. keep_image: the server keeps the (normalized)
         input with the subject, so that redirect(subject=..., transfer=True)
         works by key."""

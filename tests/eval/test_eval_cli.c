@@ -320,7 +320,7 @@ int main(int argc, char **argv)
     double p0 = NAN, p1 = NAN;
     const char *ft = sum ? strstr(sum, "input PSNR ") : NULL;
     CHECK_MSG(sum && strstr(sum, "fine-tuned per input (--finetune 6, parts "
-                                 "face, rate 0.001, eye weight 0)") &&
+                                 "face,geometry, rate 0.001, eye weight 0)") &&
                   strstr(sum, "non-finite outputs 0") && ft &&
                   sscanf(ft, "input PSNR %lf -> %lf", &p0, &p1) == 2,
               "%s", sum ? sum : "");

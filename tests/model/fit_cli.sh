@@ -22,12 +22,12 @@ fail() { echo "FAIL: $*"; exit 1; }
 
 # Fine-tuned: the subject and the tuned block.
 "$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 5 --out face.bin 2>fit.err
-grep -q "fine-tuned face (.* floats) for 5 steps" fit.err || { cat fit.err; fail "no fine-tune report"; }
+grep -q "fine-tuned face,geometry (.* floats) for 5 steps" fit.err || { cat fit.err; fail "no fine-tune report"; }
 [ "$(size face.bin)" -gt 100000 ] || fail "tuned subject is $(size face.bin) bytes"
 cmp -n "$(size plain.bin)" plain.bin face.bin || fail "the subject part differs from the plain fit"
-"$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 2 --finetune-parts face,eye \
+"$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 2 --finetune-parts face,eye,geometry \
   --finetune-lr 0.002 --out both.bin 2>/dev/null
-[ "$(size both.bin)" -gt "$(size face.bin)" ] || fail "face,eye block not larger than face"
+[ "$(size both.bin)" -gt "$(size face.bin)" ] || fail "face,eye,geometry block not larger than the default (face,geometry)"
 
 # Stopping early: on a plateau rule (20 steps), on the shared --time budget.
 "$G" fit --model m.safetensors --image $IMG --iters 2 --finetune 60 --finetune-plateau 0.9 \
