@@ -1056,7 +1056,7 @@ typedef struct subject_out {
     gs_subject subj;
     gs_fit_report fit;
     gs_finetune_report ft; /* ft.iters > 0 or psnr: this request fine-tuned */
-    int cached, tuned, ft_ran, kept;
+    int cached, tuned, ft_ran;
     uint64_t sum;          /* tuned: the block's checksum */
     gs_io_image face;      /* the normalized input, when the caller asked for it */
 } subject_out;
@@ -1151,8 +1151,8 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const
     }
     if (!o->cached)
         e = fit_subject(w, j, a, p, &face, o, msg, cap);
-    if (!e && a->keep_image && (e = input_keep(s, j->key, &face, msg, cap)) == 0)
-        o->kept = 1;
+    if (!e && a->keep_image)
+        e = input_keep(s, j->key, &face, msg, cap);
     if (!e && a->want_face)
         o->face = face;
     else
