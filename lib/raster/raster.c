@@ -203,8 +203,35 @@ static int finite_array(const float *x, size_t n)
     return best_kernels()->all_finite(x, n); /* the same answer with every set */
 }
 
+/* The finiteness check of the inputs in blocks over the pool: for 20k
+ * Gaussians of 32 channels it reads 3.4 MB, serial time worth sharing. The
+ * answer (which array first holds a non-finite value) does not depend on
+ * the split. */
+#define FINITE_BLOCK ((size_t)1 << 16)
+#define FINITE_ARRAYS 6
+#define FINITE_TASKS 256
+
+typedef struct {
+    const float *p[FINITE_ARRAYS];
+    size_t len[FINITE_ARRAYS];
+    int task0[FINITE_ARRAYS + 1]; /* first task of each array */
+    unsigned char bad[FINITE_TASKS];
+} finite_ctx;
+
+static void finite_task(void *vctx, int task, int worker)
+{
+    (void)worker;
+    finite_ctx *c = vctx;
+    int a = 0;
+    while (task >= c->task0[a + 1])
+        a++;
+    size_t b = (size_t)(task - c->task0[a]), blk = c->len[a] / (size_t)(c->task0[a + 1] - c->task0[a]) + 1;
+    size_t lo = b * blk, hi = lo + blk < c->len[a] ? lo + blk : c->len[a];
+    c->bad[task] = lo < hi && !finite_array(c->p[a] + lo, hi - lo);
+}
+
 static int check_inputs(const gs_camera *cam, const gs_gaussians *g,
-                        const float *bg, gs_error *err)
+                        const float *bg, gs_pool *pool, gs_error *err)
 {
     if (!cam || !g)
         return gs_error_set(err, GS_ERR_ARG, "raster: camera and Gaussians are required");
@@ -236,10 +263,21 @@ static int check_inputs(const gs_camera *cam, const gs_gaussians *g,
         {g->features, n * C, "features"},
         {bg, bg ? C * (size_t)cam->width * (size_t)cam->height : 0, "background"},
     };
-    for (size_t i = 0; i < sizeof arrays / sizeof arrays[0]; i++)
-        if (arrays[i].len && !finite_array(arrays[i].p, arrays[i].len))
-            return gs_error_set(err, GS_ERR_NONFINITE, "raster: non-finite value in %s",
-                                arrays[i].name);
+    _Static_assert(sizeof arrays / sizeof arrays[0] == FINITE_ARRAYS, "one task range per array");
+    finite_ctx fc;
+    int tasks = 0;
+    for (int a = 0; a < FINITE_ARRAYS; a++) {
+        fc.p[a] = arrays[a].p, fc.len[a] = arrays[a].len, fc.task0[a] = tasks;
+        size_t nb = (arrays[a].len + FINITE_BLOCK - 1) / FINITE_BLOCK;
+        tasks += (int)(nb < FINITE_TASKS / FINITE_ARRAYS ? nb : FINITE_TASKS / FINITE_ARRAYS);
+    }
+    fc.task0[FINITE_ARRAYS] = tasks;
+    gs_pool_for(pool, tasks, finite_task, &fc);
+    for (int a = 0; a < FINITE_ARRAYS; a++)
+        for (int t = fc.task0[a]; t < fc.task0[a + 1]; t++)
+            if (fc.bad[t])
+                return gs_error_set(err, GS_ERR_NONFINITE, "raster: non-finite value in %s",
+                                    arrays[a].name);
     return GS_OK;
 }
 
@@ -660,7 +698,8 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
                             "raster: GS_RASTER_ISA=%s is unknown or not supported by this CPU "
                             "(avx512, avx2, generic, auto)",
                             r->isa_error);
-    int rc = check_inputs(cam, g, background, err);
+    int rc = check_inputs(cam, g, background,
+                          opt && opt->path == GS_RASTER_SCALAR ? NULL : pool, err);
     if (rc)
         return rc;
     static const gs_raster_options defaults = {0, GS_RASTER_FAST};

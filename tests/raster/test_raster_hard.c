@@ -625,6 +625,45 @@ static void nonfinite_inputs(void)
     rt_scene_free(&base);
 }
 
+/* The finite check runs in blocks of 65,536 values over the pool: a bad
+ * value on either side of a block boundary, in the last block and in its
+ * last value is found, and with two bad arrays the error names the first
+ * (features before background) whatever block finishes first. */
+static void nonfinite_blocks(void)
+{
+    rt_scene base;
+    rt_random_scene(&base, 708, 4100, 64, 16, 16); /* 262,400 feature values */
+    fill_background(&base, 10);
+    size_t nf = (size_t)4100 * 64;
+    const size_t at[] = {0, 65535, 65536, 131071, 131072, 200000, nf - 1};
+    for (size_t k = 0; k < sizeof at / sizeof at[0]; k++) {
+        rt_scene s;
+        rt_scene_copy(&s, &base);
+        s.features[at[k]] = NAN;
+        char what[64];
+        snprintf(what, sizeof what, "features[%zu] = nan of %zu", at[k], nf);
+        expect_refused(what, &s, &base, GS_ERR_NONFINITE);
+        rt_scene_free(&s);
+    }
+    rt_scene s;
+    rt_scene_copy(&s, &base);
+    s.features[nf - 1] = INFINITY;
+    s.background[0] = NAN;
+    gs_raster *r = gs_raster_create();
+    gs_raster_options opt = {s.antialiased, g_path};
+    size_t np = 16 * 16;
+    float *f = rt_alloc(np * 64, sizeof(float)), *a = rt_alloc(np, sizeof(float));
+    gs_error err = {0, {0}};
+    int st = gs_raster_forward(r, g_pool, &s.cam, &s.g, s.background, &opt, f, a, NULL, &err);
+    CHECK_MSG(st == GS_ERR_NONFINITE && strstr(err.msg, "features"),
+              "two bad arrays: status %d, \"%s\" (want features named)", st, err.msg);
+    gs_raster_destroy(r);
+    free(f);
+    free(a);
+    rt_scene_free(&s);
+    rt_scene_free(&base);
+}
+
 /* Finite but overflowing values: either refused with an error code or
  * rendered with finite outputs and gradients; never NaN with GS_OK. */
 static void extreme_finite(void)
@@ -886,6 +925,7 @@ int main(void)
         many_on_one_pixel();
         equal_depths();
         nonfinite_inputs();
+        nonfinite_blocks();
         extreme_finite();
         sizes_and_channels();
         bad_arguments();
