@@ -25,6 +25,13 @@ const cli_command cli_train_command = {
     "  --seed N            model initialisation and sample stream (1)\n"
     "  --threads N         worker threads (2)\n"
     "  --resume            continue a run from FILE and FILE.opt\n"
+    "  --fresh-optimizer STEP\n"
+    "                      with --resume, for a FILE without FILE.opt (a\n"
+    "                      shipped model): continue its weights from step\n"
+    "                      STEP with a new optimizer, the learning rate\n"
+    "                      ramping up over the first 200 steps\n"
+    "  --cosine            learning rate from --lr down to --lr/20 at --steps\n"
+    "                      along a half cosine (default: constant)\n"
     "  --checkpoint N      save every N steps (500)\n"
     "  --log-every N       progress line every N steps (50)\n"
     "  --guidance MODE     none | additive | paper (renderer guidance)\n"
@@ -53,7 +60,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
-       O_N };
+       O_FRESH, O_COS, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -64,7 +71,8 @@ static int run_train(int argc, char **argv)
         {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
         {"--guidance", 1, NULL}, {"--single-stream", 0, NULL},
         {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL},
-        {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL}};
+        {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL},
+        {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -144,6 +152,17 @@ static int run_train(int argc, char **argv)
     if (o[O_NOEYE].value)
         spec.eye_rotation = 0;
     t.resume = o[O_RESUME].value != NULL;
+    if (o[O_FRESH].value) {
+        if (!t.resume)
+            return cli_usage_error(cmd, "--fresh-optimizer needs --resume");
+        if (cli_parse_long(o[O_FRESH].value, 0, 100000000L, &v))
+            return cli_usage_error(cmd, "--fresh-optimizer: want a step 0..1e8");
+        if (v >= t.steps)
+            return cli_usage_error(cmd, "--fresh-optimizer: step %ld is not below --steps %ld",
+                                   v, t.steps);
+        t.fresh_from_step = v;
+    }
+    t.cosine = o[O_COS].value != NULL;
     t.log = log_line;
 
     gs_nn_blas_set_threads(1);

@@ -30,6 +30,8 @@ void gs_train_options_default(gs_train_options *o)
     o->checkpoint_every = 500;
     o->log_every = 50;
     o->gaze_weight = 0.1;
+    o->fresh_from_step = -1;
+    o->warmup = 200;
 }
 
 /* The 12 light values of a scene in its head frame: sum over lights of
@@ -74,6 +76,7 @@ typedef struct trainer {
     size_t ssim_len;
     double light_sum[GS_MODEL_LIGHT_DIM];
     long light_n;
+    long sched_first;          /* the learning-rate curve's first step */
 } trainer;
 
 static double group_lr(int group)
@@ -350,6 +353,8 @@ static int save_checkpoint(trainer *t, const char *path, long step,
     gs_st_writer_meta(w, "step", val);
     snprintf(val, sizeof val, "%ld", gs_nn_adam_steps(t->adam));
     gs_st_writer_meta(w, "adam_steps", val);
+    snprintf(val, sizeof val, "%ld", t->sched_first);
+    gs_st_writer_meta(w, "schedule_first", val);
     int gi = 0;
     for (int i = 0; i < m->ntensors && !rc; i++) {
         if (group_lr(m->t[i].group) <= 0)
@@ -371,15 +376,33 @@ static int save_checkpoint(trainer *t, const char *path, long step,
     return rc;
 }
 
+double gs_train_lr(const gs_train_options *o, long first, long step, long done)
+{
+    double lr = o->lr;
+    if (o->cosine && o->steps > first) {
+        double u = (double)(step - first) / (double)(o->steps - first);
+        u = u < 0 ? 0 : u > 1 ? 1 : u;
+        lr *= 0.05 + 0.95 * 0.5 * (1.0 + cos(3.14159265358979323846 * u));
+    }
+    if (done >= 0 && o->warmup > 0 && done < o->warmup)
+        lr *= (double)(done + 1) / (double)o->warmup;
+    return lr;
+}
+
 static int load_optimizer(trainer *t, const char *path, long *step,
                           gs_error *err)
 {
     char opath[4096];
     snprintf(opath, sizeof opath, "%s.opt", path);
     gs_st_file *f = NULL;
-    int rc = gs_st_open(opath, NULL, &f, err);
+    gs_error e2 = {0, ""};
+    int rc = gs_st_open(opath, NULL, &f, &e2);
     if (rc)
-        return rc;
+        return gs_error_set(err, rc,
+                            "train: cannot resume without the optimizer state: %s (a model "
+                            "without it continues with a new optimizer: fresh_from_step, "
+                            "--fresh-optimizer STEP)",
+                            e2.msg);
     const char *s = gs_st_meta(f, "step"), *a = gs_st_meta(f, "adam_steps");
     if (!s || !a) {
         gs_st_close(f);
@@ -388,6 +411,8 @@ static int load_optimizer(trainer *t, const char *path, long *step,
     }
     *step = atol(s);
     gs_nn_adam_set_steps(t->adam, atol(a));
+    const char *sf = gs_st_meta(f, "schedule_first"); /* absent before the cosine: 0 */
+    t->sched_first = sf ? atol(sf) : 0;
     int gi = 0;
     const gs_model *m = t->m;
     for (int i = 0; i < m->ntensors && !rc; i++) {
@@ -426,10 +451,16 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     trainer t;
     int rc = trainer_init(&t, m, o, err);
     long step = 0;
-    if (!rc && o->resume)
+    t.sched_first = 0;
+    if (!rc && o->resume && o->fresh_from_step >= 0)
+        step = t.sched_first = o->fresh_from_step;
+    else if (!rc && o->resume)
         rc = load_optimizer(&t, o->out_path, &step, err);
+    int ramp = o->resume && o->fresh_from_step >= 0 && o->warmup > 0;
+    long first = t.sched_first; /* the cosine runs from here to o->steps */
     double t0 = now_s(), run_mean = 0, last_log = t0;
     long skipped = 0, done = 0;
+    double lr = o->lr; /* this step's learning rate */
     double psnr_acc = 0, loss_acc = 0, gaze_acc = 0, gaze_mean = 0;
     int acc_n = 0;
     for (; !rc && step < o->steps; step++) {
@@ -458,7 +489,8 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
             for (int j = 0; j < m->cfg.id_dim; j++)
                 dc[j] += fg.code[j];
             double gn;
-            int arc = gs_nn_adam_step(t.adam, o->lr, &gn);
+            lr = gs_train_lr(o, first, step, ramp ? done : -1);
+            int arc = gs_nn_adam_step(t.adam, lr, &gn);
             if (arc == GS_ERR_NONFINITE)
                 skip = 1;
             else if (arc) {
@@ -487,9 +519,9 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
                 snprintf(gz, sizeof gz, "  gaze %.2f deg",
                          gaze_acc / acc_n * 180.0 / GS_MODEL_PI);
             o->log(o->log_ctx,
-                   "step %ld/%ld loss %.4f psnr %.2f dB%s  %.0f ms/step  "
+                   "step %ld/%ld loss %.4f psnr %.2f dB%s  lr %.2e  %.0f ms/step  "
                    "eta %.0f s  skipped %ld",
-                   step + 1, o->steps, loss_acc / acc_n, psnr_acc / acc_n, gz,
+                   step + 1, o->steps, loss_acc / acc_n, psnr_acc / acc_n, gz, lr,
                    1000.0 * (now_s() - last_log) / acc_n,
                    (o->steps - step - 1) / (rate > 0 ? rate : 1), skipped);
             last_log = now_s();

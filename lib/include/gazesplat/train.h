@@ -48,6 +48,19 @@ typedef struct gs_train_options {
     double lr;              /* base Adam learning rate */
     uint64_t seed;          /* sample stream */
     int resume;             /* 1: continue from out_path(.opt) */
+    /* With resume: >= 0 continues out_path's weights from this step with a
+     * new optimizer instead of out_path.opt (for a model shipped without
+     * its optimizer state); the learning rate then ramps up linearly over
+     * the first `warmup` steps, so that the first steps of zeroed moments
+     * do not jolt trained weights. -1 (default): load out_path.opt. */
+    long fresh_from_step;
+    long warmup;            /* steps of the ramp (200) */
+    /* 1: the learning rate follows a half cosine from lr at the run's
+     * first step (0, or fresh_from_step) down to lr / 20 at `steps`, the
+     * end of the run (its last step, steps - 1, is just above); a
+     * resumed run continues the same curve (out_path.opt keeps its first
+     * step). 0 (default): constant. */
+    int cosine;
     long checkpoint_every;
     long log_every;
     gs_train_log_fn log;
@@ -66,6 +79,12 @@ typedef struct gs_train_report {
     double seconds, final_loss;
     double final_gaze_deg;  /* running mean gaze loss angle (with a net) */
 } gs_train_report;
+
+/* The learning rate of `step` for a run whose curve starts at `first`
+ * (0, or fresh_from_step), `done` steps into a run that ramps up (-1: no
+ * ramp): lr, times the cosine's factor when o->cosine, times
+ * (done + 1) / warmup during the ramp. */
+double gs_train_lr(const gs_train_options *o, long first, long step, long done);
 
 /* Trains m in place. */
 int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,

@@ -1,0 +1,200 @@
+/* The training's learning-rate schedule and its fresh-optimizer resume
+ * (gs_train_options.cosine, fresh_from_step, warmup), on a tiny model.
+ * Checked: the curve's values (lr at its first step, lr / 20 at the last,
+ * the half-way point, clamped outside, the ramp's (done + 1) / warmup);
+ * a resume without FILE.opt is refused with a message naming the way out;
+ * a fresh-optimizer resume trains from the given step, writes the step and
+ * the curve's first step into FILE.opt, moves the weights, and gives the
+ * same bytes twice; a plain resume of that run continues the same curve
+ * (FILE.opt's first step is kept); a huge ramp moves the weights far less
+ * than no ramp. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "gazesplat/nn.h"
+#include "gazesplat/safetensors.h"
+#include "gazesplat/train.h"
+#include "gs_test.h"
+#include "model_test_util.h"
+
+static char g_path[128], g_opt[160];
+
+static gs_model *tiny(void)
+{
+    gs_model_spec spec;
+    gs_model_spec_default(&spec);
+    spec.preset = "tiny";
+    spec.train_identities = 2;
+    gs_model *m = NULL;
+    gs_error err = {0, ""};
+    if (gs_model_new(&spec, 7, &m, &err) != GS_OK)
+        fprintf(stderr, "%s\n", err.msg);
+    return m;
+}
+
+static long opt_meta(const char *key)
+{
+    gs_st_file *f = NULL;
+    gs_error err = {0, ""};
+    if (gs_st_open(g_opt, NULL, &f, &err) != GS_OK)
+        return -2;
+    const char *v = gs_st_meta(f, key);
+    long r = v ? atol(v) : -1;
+    gs_st_close(f);
+    return r;
+}
+
+/* Largest |a - b| over the model's parameters. */
+static double max_change(const float *a, const gs_model *m)
+{
+    double d = 0;
+    for (size_t i = 0; i < m->nparams; i++)
+        d = fmax(d, fabs((double)a[i] - (double)m->params[i]));
+    return d;
+}
+
+/* Parameters that moved by more than 1e-6 (the saved light statistics
+ * change whatever the learning rate: a handful). */
+static size_t moved(const float *a, const gs_model *m)
+{
+    size_t k = 0;
+    for (size_t i = 0; i < m->nparams; i++)
+        k += fabs((double)a[i] - (double)m->params[i]) > 1e-6;
+    return k;
+}
+
+static void curve(void)
+{
+    gs_train_options o;
+    gs_train_options_default(&o);
+    CHECK(o.fresh_from_step == -1 && o.cosine == 0 && o.warmup == 200);
+    o.lr = 1e-3;
+    o.steps = 1100;
+    CHECK_CLOSE(gs_train_lr(&o, 100, 600, -1), 1e-3, 0, 0); /* constant */
+    o.cosine = 1;
+    CHECK_CLOSE(gs_train_lr(&o, 100, 100, -1), 1e-3, 1e-15, 0);
+    CHECK_CLOSE(gs_train_lr(&o, 100, 1100, -1), 5e-5, 1e-15, 0);
+    CHECK_CLOSE(gs_train_lr(&o, 100, 600, -1), 1e-3 * (0.05 + 0.95 * 0.5), 1e-15, 0);
+    CHECK_CLOSE(gs_train_lr(&o, 100, 50, -1), 1e-3, 1e-15, 0);    /* before: clamped */
+    CHECK_CLOSE(gs_train_lr(&o, 100, 5000, -1), 5e-5, 1e-15, 0);  /* after: clamped */
+    double prev = 1;
+    int falls = 1;
+    for (long s = 100; s <= 1100; s += 50) {
+        double lr = gs_train_lr(&o, 100, s, -1);
+        falls &= lr < prev;
+        prev = lr;
+    }
+    CHECK_MSG(falls, "the cosine does not fall step after step");
+    o.cosine = 0;
+    CHECK_CLOSE(gs_train_lr(&o, 0, 7, 0), 1e-3 / 200, 1e-18, 0);
+    CHECK_CLOSE(gs_train_lr(&o, 0, 7, 99), 1e-3 * 100 / 200, 1e-15, 0);
+    CHECK_CLOSE(gs_train_lr(&o, 0, 7, 200), 1e-3, 0, 0);
+}
+
+/* Trains m (loaded from g_path) with o; returns the status. */
+static int train_file(gs_train_options *o, gs_model **out, gs_train_report *rep,
+                      gs_error *err)
+{
+    gs_model *m = NULL;
+    int rc = gs_model_load(g_path, &m, err);
+    if (rc == GS_OK)
+        rc = gs_train(m, o, NULL, rep, err);
+    *out = m;
+    return rc;
+}
+
+static void fresh_resume(void)
+{
+    gs_model *m0 = tiny();
+    CHECK(m0 != NULL);
+    if (!m0)
+        return;
+    gs_error err = {0, ""};
+    CHECK(gs_model_write(m0, g_path, &err) == GS_OK);
+    remove(g_opt);
+
+    gs_train_options o;
+    gs_train_options_default(&o);
+    o.out_path = g_path;
+    o.checkpoint_every = 0;
+    o.resume = 1;
+    o.steps = 13;
+    gs_train_report rep;
+    gs_model *m = NULL;
+    int rc = train_file(&o, &m, &rep, &err);
+    CHECK_MSG(rc != GS_OK && strstr(err.msg, "optimizer state") && strstr(err.msg, "fresh"),
+              "resume without FILE.opt: %d \"%s\"", rc, err.msg);
+    gs_model_destroy(m);
+
+    /* fresh from step 10 to 13, twice from the same file: same bytes */
+    o.fresh_from_step = 10;
+    o.cosine = 1;
+    o.warmup = 2;
+    float *a = NULL;
+    size_t n = m0->nparams;
+    for (int run = 0; run < 2; run++) {
+        CHECK(gs_model_write(m0, g_path, &err) == GS_OK);
+        remove(g_opt);
+        CHECK_EQ_INT(train_file(&o, &m, &rep, &err), GS_OK);
+        CHECK_EQ_INT((int)rep.steps, 13);
+        CHECK_EQ_INT((int)opt_meta("step"), 13);
+        CHECK_EQ_INT((int)opt_meta("schedule_first"), 10);
+        CHECK_EQ_INT((int)opt_meta("adam_steps"), 3);
+        if (m && run == 0) {
+            CHECK_MSG(max_change(m0->params, m) > 0, "three steps moved nothing");
+            a = malloc(n * sizeof(float));
+            memcpy(a, m->params, n * sizeof(float));
+        } else if (m && a) {
+            CHECK_MSG(memcmp(a, m->params, n * sizeof(float)) == 0,
+                      "two fresh resumes differ");
+        }
+        gs_model_destroy(m);
+        m = NULL;
+    }
+
+    /* a plain resume of it continues the curve that starts at 10 */
+    o.fresh_from_step = -1;
+    o.steps = 15;
+    CHECK_EQ_INT(train_file(&o, &m, &rep, &err), GS_OK);
+    CHECK_EQ_INT((int)opt_meta("step"), 15);
+    CHECK_EQ_INT((int)opt_meta("schedule_first"), 10);
+    CHECK_EQ_INT((int)opt_meta("adam_steps"), 5);
+    gs_model_destroy(m);
+
+    /* one step with a ramp of a million steps against one without */
+    o.fresh_from_step = 0;
+    o.cosine = 0;
+    o.steps = 1;
+    size_t d_ramp = 0, d_none = 0;
+    for (int k = 0; k < 2; k++) {
+        o.warmup = k == 0 ? 1000000 : 0;
+        CHECK(gs_model_write(m0, g_path, &err) == GS_OK);
+        remove(g_opt);
+        CHECK_EQ_INT(train_file(&o, &m, &rep, &err), GS_OK);
+        if (m)
+            *(k == 0 ? &d_ramp : &d_none) = moved(m0->params, m);
+        gs_model_destroy(m);
+        m = NULL;
+    }
+    printf("one step: %zu of %zu parameters moved by > 1e-6 with no ramp, %zu with a ramp "
+           "of 1e6 steps\n", d_none, n, d_ramp);
+    CHECK_MSG(d_none > n / 4 && d_ramp * 100 < d_none,
+              "ramp: %zu moved against %zu without", d_ramp, d_none);
+    free(a);
+    gs_model_destroy(m0);
+}
+
+int main(void)
+{
+    gs_nn_blas_set_threads(1);
+    snprintf(g_path, sizeof g_path, "test_model_train_schedule_%d.safetensors", (int)getpid());
+    snprintf(g_opt, sizeof g_opt, "%s.opt", g_path);
+    curve();
+    fresh_resume();
+    remove(g_path);
+    remove(g_opt);
+    GS_TEST_END();
+}

@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# gazesplat train --resume without FILE.opt, --fresh-optimizer and --cosine
+# through the CLI on a tiny model: the refused resume names the way out and
+# writes nothing, bad combinations are usage errors (exit 2), a fresh
+# resume continues from its step with the learning rate ramping up, and a
+# cosine run's rate falls to lr / 20 at its last step.
+set -euo pipefail
+G=$1
+T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
+cd "$T"
+fail() { echo "FAIL: $*"; exit 1; }
+"$G" train --preset tiny --identities 2 --steps 2 --checkpoint 100 --out m.safetensors >/dev/null 2>&1
+rm m.safetensors.opt
+cp m.safetensors orig.safetensors
+
+set +e
+"$G" train --resume --steps 5 --out m.safetensors >/dev/null 2>err.txt; rc=$?
+set -e
+[ $rc -eq 1 ] || fail "resume without .opt: exit $rc"
+grep -q "optimizer state.*--fresh-optimizer STEP" err.txt || { cat err.txt; fail "no hint"; }
+cmp m.safetensors orig.safetensors || fail "a refused resume changed the model"
+[ ! -e m.safetensors.opt ] || fail "a refused resume wrote FILE.opt"
+
+for bad in "--fresh-optimizer 2 --steps 5" "--resume --fresh-optimizer 5 --steps 5" \
+           "--resume --fresh-optimizer -1 --steps 5" "--resume --fresh-optimizer x --steps 5"; do
+  set +e
+  # shellcheck disable=SC2086
+  "$G" train $bad --out m.safetensors >/dev/null 2>err.txt; rc=$?
+  set -e
+  [ $rc -eq 2 ] || fail "'$bad': exit $rc, want 2"
+  grep -q "fresh-optimizer" err.txt || { cat err.txt; fail "'$bad': message does not name the option"; }
+done
+
+"$G" train --resume --fresh-optimizer 2 --steps 8 --cosine --log-every 1 --checkpoint 100 \
+  --out m.safetensors 2>log.txt >/dev/null
+grep -q "step 3/8 " log.txt || { cat log.txt; fail "did not start at step 2"; }
+! grep -q "step 2/8 " log.txt || fail "retrained step 2"
+[ -s m.safetensors.opt ] || fail "no FILE.opt after the fresh resume"
+! cmp -s m.safetensors orig.safetensors || fail "the weights did not change"
+# the ramp (200 steps) starts at 1/200 of the curve's lr (1e-3 at its start)
+grep -q "step 3/8 .* lr 5.00e-06 " log.txt || { cat log.txt; fail "the ramp's first step is not lr/200"; }
+
+# a cosine run from scratch: lr at step 0, then falling towards lr / 20 at
+# step 6, the end (step 5, the last run, has 0.05 + 0.475 (1 + cos(5 pi / 6)))
+"$G" train --preset tiny --identities 2 --steps 6 --cosine --log-every 1 --checkpoint 100 \
+  --out c.safetensors 2>log.txt >/dev/null
+grep -q "step 1/6 .* lr 1.00e-03 " log.txt || { cat log.txt; fail "cosine does not start at lr"; }
+grep -q "step 6/6 .* lr 1.14e-04 " log.txt || { cat log.txt; fail "cosine's last step"; }
+echo "ok"
