@@ -22,19 +22,6 @@
 
 static char g_path[128], g_opt[160];
 
-static gs_model *tiny(void)
-{
-    gs_model_spec spec;
-    gs_model_spec_default(&spec);
-    spec.preset = "tiny";
-    spec.train_identities = 2;
-    gs_model *m = NULL;
-    gs_error err = {0, ""};
-    if (gs_model_new(&spec, 7, &m, &err) != GS_OK)
-        fprintf(stderr, "%s\n", err.msg);
-    return m;
-}
-
 static long opt_meta(const char *key)
 {
     gs_st_file *f = NULL;
@@ -108,11 +95,12 @@ static int train_file(gs_train_options *o, gs_model **out, gs_train_report *rep,
 
 static void fresh_resume(void)
 {
-    gs_model *m0 = tiny();
-    CHECK(m0 != NULL);
+    gs_error err = {0, ""};
+    gs_train_report rep;
+    gs_model *m0 = trained_tiny(g_path, 1, &rep, &err); /* the starting point */
+    CHECK_MSG(m0 != NULL, "tiny model: %s", err.msg);
     if (!m0)
         return;
-    gs_error err = {0, ""};
     CHECK(gs_model_write(m0, g_path, &err) == GS_OK);
     remove(g_opt);
 
@@ -122,7 +110,6 @@ static void fresh_resume(void)
     o.checkpoint_every = 0;
     o.resume = 1;
     o.steps = 13;
-    gs_train_report rep;
     gs_model *m = NULL;
     int rc = train_file(&o, &m, &rep, &err);
     CHECK_MSG(rc != GS_OK && strstr(err.msg, "optimizer state") && strstr(err.msg, "fresh"),
@@ -190,11 +177,10 @@ static void fresh_resume(void)
 int main(void)
 {
     gs_nn_blas_set_threads(1);
-    snprintf(g_path, sizeof g_path, "test_model_train_schedule_%d.safetensors", (int)getpid());
+    tiny_path(g_path, "test_model_train_schedule");
     snprintf(g_opt, sizeof g_opt, "%s.opt", g_path);
     curve();
     fresh_resume();
-    remove(g_path);
-    remove(g_opt);
+    tiny_remove(g_path);
     GS_TEST_END();
 }
