@@ -128,6 +128,7 @@ static void problem_init(problem *pb, const scene *s, int size)
 }
 
 static int spin_us = -1; /* --spin: the pools' spin time; -1 keeps the default */
+static int no_records;    /* --no-records: forwards keep no records (renders) */
 
 static int config_init(config *c, const problem *pb, gs_raster_path path, const char *isa,
                        int threads, int reps)
@@ -141,6 +142,8 @@ static int config_init(config *c, const problem *pb, gs_raster_path path, const 
         fprintf(stderr, "bench_raster: %s\n", err.msg);
         return 1;
     }
+    if (no_records)
+        gs_raster_set_records(c->r, 0); /* the backward evaluates again */
     c->pool = path == GS_RASTER_FAST ? gs_pool_create(threads) : NULL;
     if (c->pool && spin_us >= 0)
         gs_pool_set_spin_us(c->pool, spin_us);
@@ -207,14 +210,18 @@ int main(int argc, char **argv)
             only_size = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--reps") && i + 1 < argc)
             reps = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--no-records"))
+            no_records = 1;
         else if (!strcmp(argv[i], "--spin") && i + 1 < argc)
             spin_us = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--isa") && i + 1 < argc && strlen(argv[i + 1]) < sizeof isa_list)
             strcpy(isa_list, argv[++i]);
         else {
             fprintf(stderr, "usage: bench_raster [--quick] [--reps N] [--fast-only] [--size 128|512]\n"
-                            "                    [--isa avx512,avx2,generic] [--spin US]\n"
+                            "                    [--isa avx512,avx2,generic] [--spin US] [--no-records]\n"
                             "  --isa: the fast path's instruction sets to compare, interleaved\n"
+                            "  --no-records: the forward keeps no records for the backward (as\n"
+                            "         renders do); the backward then evaluates the Gaussians again\n"
                             "         (default: avx512 and avx2, those this CPU runs)\n"
                             "  --spin: microseconds the pools spin between jobs (default %d)\n",
                     GS_POOL_DEFAULT_SPIN_US);
