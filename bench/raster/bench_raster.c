@@ -220,10 +220,10 @@ int main(int argc, char **argv)
             fprintf(stderr, "usage: bench_raster [--quick] [--reps N] [--fast-only] [--size 128|512]\n"
                             "                    [--isa avx512,avx2,generic] [--spin US] [--no-records]\n"
                             "  --isa: the fast path's instruction sets to compare, interleaved\n"
-                            "  --no-records: the forward keeps no records for the backward (as\n"
-                            "         renders do); the backward then evaluates the Gaussians again\n"
                             "         (default: avx512 and avx2, those this CPU runs)\n"
-                            "  --spin: microseconds the pools spin between jobs (default %d)\n",
+                            "  --spin: microseconds the pools spin between jobs (default %d)\n"
+                            "  --no-records: the forward keeps no records for the backward (as\n"
+                            "         renders do); the backward then evaluates the Gaussians again\n",
                     GS_POOL_DEFAULT_SPIN_US);
             return 2;
         }

@@ -382,7 +382,7 @@ double gs_train_lr(const gs_train_options *o, long first, long step, long done)
     if (o->cosine && o->steps > first) {
         double u = (double)(step - first) / (double)(o->steps - first);
         u = u < 0 ? 0 : u > 1 ? 1 : u;
-        lr *= 0.05 + 0.95 * 0.5 * (1.0 + cos(3.14159265358979323846 * u));
+        lr *= 0.05 + 0.95 * 0.5 * (1.0 + cos(GS_MODEL_PI * u));
     }
     if (done >= 0 && o->warmup > 0 && done < o->warmup)
         lr *= (double)(done + 1) / (double)o->warmup;
@@ -457,7 +457,6 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     else if (!rc && o->resume)
         rc = load_optimizer(&t, o->out_path, &step, err);
     int ramp = o->resume && o->fresh_from_step >= 0 && o->warmup > 0;
-    long first = t.sched_first; /* the cosine runs from here to o->steps */
     double t0 = now_s(), run_mean = 0, last_log = t0;
     long skipped = 0, done = 0;
     double lr = o->lr; /* this step's learning rate */
@@ -489,7 +488,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
             for (int j = 0; j < m->cfg.id_dim; j++)
                 dc[j] += fg.code[j];
             double gn;
-            lr = gs_train_lr(o, first, step, ramp ? done : -1);
+            lr = gs_train_lr(o, t.sched_first, step, ramp ? done : -1);
             int arc = gs_nn_adam_step(t.adam, lr, &gn);
             if (arc == GS_ERR_NONFINITE)
                 skip = 1;

@@ -225,7 +225,8 @@ static void finite_task(void *vctx, int task, int worker)
     int a = 0;
     while (task >= c->task0[a + 1])
         a++;
-    size_t b = (size_t)(task - c->task0[a]), blk = c->len[a] / (size_t)(c->task0[a + 1] - c->task0[a]) + 1;
+    size_t nb = (size_t)(c->task0[a + 1] - c->task0[a]), b = (size_t)(task - c->task0[a]);
+    size_t blk = (c->len[a] + nb - 1) / nb;
     size_t lo = b * blk, hi = lo + blk < c->len[a] ? lo + blk : c->len[a];
     c->bad[task] = lo < hi && !finite_array(c->p[a] + lo, hi - lo);
 }
@@ -266,13 +267,16 @@ static int check_inputs(const gs_camera *cam, const gs_gaussians *g,
     _Static_assert(sizeof arrays / sizeof arrays[0] == FINITE_ARRAYS, "one task range per array");
     finite_ctx fc;
     int tasks = 0;
+    size_t total = 0;
     for (int a = 0; a < FINITE_ARRAYS; a++) {
         fc.p[a] = arrays[a].p, fc.len[a] = arrays[a].len, fc.task0[a] = tasks;
         size_t nb = (arrays[a].len + FINITE_BLOCK - 1) / FINITE_BLOCK;
         tasks += (int)(nb < FINITE_TASKS / FINITE_ARRAYS ? nb : FINITE_TASKS / FINITE_ARRAYS);
+        total += arrays[a].len;
     }
     fc.task0[FINITE_ARRAYS] = tasks;
-    gs_pool_for(pool, tasks, finite_task, &fc);
+    /* A small scene's few blocks cost less than waking the pool. */
+    gs_pool_for(total > 2 * FINITE_BLOCK ? pool : NULL, tasks, finite_task, &fc);
     for (int a = 0; a < FINITE_ARRAYS; a++)
         for (int t = fc.task0[a]; t < fc.task0[a + 1]; t++)
             if (fc.bad[t])
