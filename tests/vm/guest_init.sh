@@ -17,7 +17,10 @@ fail() { say "FAIL $*"; ok=0; }
 now() { cut -d' ' -f1 /proc/uptime; }
 # Milliseconds between two uptime values.
 ms() { awk -v a="$1" -v b="$2" 'BEGIN { printf "%d", (b - a) * 1000 }'; }
-count() { grep -c "$1" /tmp/live.log 2>/dev/null || true; }
+# Lines of the live log matching $1; 0 before the log exists (the background
+# job's redirect may not have created it yet: an empty count would make
+# every numeric test below fail as "bad number" and end the waits at once).
+count() { n=$(grep -c "$1" /tmp/live.log 2>/dev/null); echo "${n:-0}"; }
 
 say "boot $(now) s"
 while read -r m args; do
