@@ -1,8 +1,9 @@
 /* Fast compositing: tiles in parallel, each tile walked Gaussian by Gaussian
- * (front to back, or back to front in the backward pass) over the rows and
- * 8-pixel groups that the Gaussian's alpha >= 1/255 ellipse can reach, with
- * 8 pixels per vector. Built once per instruction set (GS_KERNELS names the
- * table): GCC vector extensions map to AVX2 or SSE2.
+ * (front to back, or back to front in the backward pass) over the groups of
+ * pixels (4 x 2 or 4 x 4 blocks, one pixel per vector lane) that the
+ * Gaussian's alpha >= 1/255 ellipse can reach. Built once per instruction
+ * set (GS_KERNELS names the table): GCC vector extensions map to AVX-512,
+ * AVX2 or SSE2.
  *
  * The per-pixel arithmetic is the same as the scalar path's except for the
  * exponential, a polynomial accurate to a few ulp; the fast backward replays
@@ -29,7 +30,21 @@
 #endif
 #define TS GS_RASTER_TILE
 #define TPIX (TS * TS)
-#define GROUPS (TS / L)  /* groups per tile row */
+/* A group is GW x GH pixels of a tile, one per lane, row-major in the
+ * vector: 4 x 4 with 16 lanes, 4 x 2 with 8. Splats of a few pixels'
+ * radius cover compact blocks in fewer groups, with more of each group's
+ * lanes contributing, than runs of a row (16 x 1: about 3 of 16 lanes;
+ * bench/README.md has the figures). */
+#ifndef GS_GROUP_W
+#define GS_GROUP_W 4
+#endif
+#define GW GS_GROUP_W
+#define GH (L / GW)
+#if GW * GH != L || TS % GW || TS % GH
+#error "GS_GROUP_W must divide the lanes and the tile"
+#endif
+#define GX (TS / GW)      /* groups per row of groups */
+#define GY (TS / GH)      /* rows of groups per tile */
 #define NGROUPS (TPIX / L) /* groups per tile */
 #define GROUP_BITS (L == 8 ? 5 : 4) /* log2(NGROUPS) */
 /* Records (raster_internal.h): header pair << GROUP_BITS | group; exp(-sigma)
@@ -153,12 +168,28 @@ static inline vf vexp_neg(vf x)
     return vsel(tiny, splat(0.0f), p * scale);
 }
 
-/* Lane offsets 0.5, 1.5, ...: pixel centres of a group. */
-static const vf lane_centre = {0.5f,  1.5f,  2.5f,  3.5f,  4.5f,  5.5f,  6.5f,  7.5f,
-#if L == 16
-                               8.5f,  9.5f,  10.5f, 11.5f, 12.5f, 13.5f, 14.5f, 15.5f
+/* Pixel centres of a group's lanes relative to its corner: lane j is
+ * column j % GW, row j / GW. */
+#define LX(j) ((float)((j) % GW) + 0.5f)
+#define LY(j) ((float)((j) / GW) + 0.5f)
+#if L == 8
+#define LANES8(F) F(0), F(1), F(2), F(3), F(4), F(5), F(6), F(7)
+#define LANES(F) LANES8(F)
+#else
+#define LANES(F)                                                                             \
+    F(0), F(1), F(2), F(3), F(4), F(5), F(6), F(7), F(8), F(9), F(10), F(11), F(12), F(13),  \
+        F(14), F(15)
 #endif
-};
+static const vf lane_cx = {LANES(LX)};
+static const vf lane_cy = {LANES(LY)};
+
+/* Per-lane dy of group row by for a splat at tile-relative my: the lane's
+ * pixel row plus 0.5 is exact, so this is one rounding, as in the scalar
+ * path. */
+static inline vf group_dy(float my, int by)
+{
+    return splat(my) - (splat((float)(by * GH)) + lane_cy);
+}
 
 typedef struct {
     int x0, y0, w, h;      /* tile origin and size inside the image */
@@ -178,8 +209,8 @@ static tile_info get_tile(const gs_raster *r, int t)
     return ti;
 }
 
-/* Rows [*r0, *r1] and groups [*g0, *g1] of the tile that splat sp's
- * ellipse can reach; returns 0 when none. */
+/* Rows of groups [*r0, *r1] and columns of groups [*g0, *g1] of the tile
+ * that splat sp's ellipse can reach; returns 0 when none. */
 static int splat_window(const gs_splat *sp, const tile_info *ti, int *r0, int *r1, int *g0,
                         int *g1)
 {
@@ -194,12 +225,13 @@ static int splat_window(const gs_splat *sp, const tile_info *ti, int *r0, int *r
     y0 = y0 > 0 ? y0 : 0, x0 = x0 > 0 ? x0 : 0;
     y1 = y1 < hy ? y1 : hy, x1 = x1 < hx ? x1 : hx;
     int iy0 = (int)y0, ix0 = (int)x0;
-    *r0 = iy0 + ((float)iy0 < y0);
-    *r1 = (int)y1;
+    int p0 = iy0 + ((float)iy0 < y0), p1 = (int)y1;
     int c0 = ix0 + ((float)ix0 < x0), c1 = (int)x1;
-    *g0 = c0 / L;
-    *g1 = c1 / L;
-    return *r0 <= *r1 && c0 <= c1;
+    *r0 = p0 / GH;
+    *r1 = p1 / GH;
+    *g0 = c0 / GW;
+    *g1 = c1 / GW;
+    return p0 <= p1 && c0 <= c1;
 }
 
 /* Pairs ahead of the one being composited whose data is fetched early: the
@@ -235,12 +267,12 @@ typedef struct {
 /* sigma first: a group where no lane has sigma <= thr (the splat's widened
  * ln(255 opacity)) cannot pass the alpha test, so the exponential is
  * skipped there without changing any decision. */
-static inline int group_sigma(group_eval *g, float mx, float dy, float a, float b, float c,
+static inline int group_sigma(group_eval *g, float mx, vf dy, float a, float b, float c,
                               float thr, float gx, vi alive)
 {
-    g->dx = splat(mx - gx) - lane_centre;
-    g->sigma = splat(0.5f) * (splat(a) * g->dx * g->dx + splat(c * dy * dy)) +
-               splat(b * dy) * g->dx;
+    g->dx = splat(mx - gx) - lane_cx;
+    g->sigma = splat(0.5f) * (splat(a) * g->dx * g->dx + splat(c) * dy * dy) +
+               splat(b) * dy * g->dx;
     return any(alive & (g->sigma <= splat(thr)));
 }
 
@@ -328,6 +360,68 @@ static inline void store_n(float *p, vf v, int n)
     else
         for (int j = 0; j < n; j++)
             p[j] = v[j];
+}
+
+/* A group of an image plane with row stride W, its corner at p: nw <= GW
+ * columns of nh <= GH rows (fewer at the image's edges), zeros elsewhere. */
+static inline vf load_grp(const float *p, size_t W, int nw, int nh)
+{
+#if GH == 1
+    (void)W, (void)nh;
+    return load_n(p, nw);
+#else
+    lanes u = {splat(0.0f)};
+    for (int y = 0; y < nh; y++)
+        if (nw == GW)
+            memcpy(u.f + y * GW, p + (size_t)y * W, GW * sizeof(float));
+        else
+            for (int x = 0; x < nw; x++)
+                u.f[y * GW + x] = p[(size_t)y * W + (size_t)x];
+    return u.v;
+#endif
+}
+
+static inline void store_grp(float *p, size_t W, vf v, int nw, int nh)
+{
+#if GH == 1
+    (void)W, (void)nh;
+    store_n(p, v, nw);
+#else
+    lanes u = {v};
+    for (int y = 0; y < nh; y++)
+        if (nw == GW)
+            memcpy(p + (size_t)y * W, u.f + y * GW, GW * sizeof(float));
+        else
+            for (int x = 0; x < nw; x++)
+                p[(size_t)y * W + (size_t)x] = u.f[y * GW + x];
+#endif
+}
+
+/* The same for the per-pixel contributor counts. */
+static inline vi load_grp_i(const uint32_t *p, size_t W, int nw, int nh)
+{
+#if GH == 1
+    (void)W, (void)nh;
+    return load_ni(p, nw);
+#else
+    vi v = {0};
+    for (int y = 0; y < nh; y++)
+        for (int x = 0; x < nw; x++)
+            v[y * GW + x] = (int32_t)p[(size_t)y * W + (size_t)x];
+    return v;
+#endif
+}
+
+static inline void store_grp_i(uint32_t *p, size_t W, vi v, int nw, int nh)
+{
+#if GH == 1
+    (void)W, (void)nh;
+    store_ni(p, v, nw);
+#else
+    for (int y = 0; y < nh; y++)
+        for (int x = 0; x < nw; x++)
+            p[(size_t)y * W + (size_t)x] = (uint32_t)v[y * GW + x];
+#endif
 }
 
 /* Features of one Gaussian as nv vectors, zero past channel C. */
@@ -465,10 +559,12 @@ write_tile(fwd_ctx *ctx, const tile_info *ti, const vf *acc, const fwd_state *st
     gs_raster *r = ctx->r;
     const int C = r->g.channels, W = r->cam.width;
     const size_t HW = (size_t)W * (size_t)r->cam.height;
-    for (int row = 0; row < ti->h; row++)
-        for (int gi = 0; gi * L < ti->w; gi++) {
-            int v = row * GROUPS + gi, n = ti->w - gi * L < L ? ti->w - gi * L : L;
-            size_t pix0 = (size_t)(ti->y0 + row) * W + (size_t)(ti->x0 + gi * L);
+    for (int by = 0; by * GH < ti->h; by++)
+        for (int gi = 0; gi * GW < ti->w; gi++) {
+            int v = by * GX + gi;
+            int nw = ti->w - gi * GW < GW ? ti->w - gi * GW : GW;
+            int nh = ti->h - by * GH < GH ? ti->h - by * GH : GH;
+            size_t pix0 = (size_t)(ti->y0 + by * GH) * W + (size_t)(ti->x0 + gi * GW);
             vf T = st->T[v];
             for (int cb = 0; cb < nv; cb++) {
                 vf m[L];
@@ -480,16 +576,16 @@ write_tile(fwd_ctx *ctx, const tile_info *ti, const vf *acc, const fwd_state *st
                     size_t off = (size_t)(cb * L + k) * HW + pix0;
                     vf o = m[k];
                     if (ctx->bg)
-                        o += T * load_n(ctx->bg + off, n);
-                    store_n(ctx->out_f + off, o, n);
+                        o += T * load_grp(ctx->bg + off, (size_t)W, nw, nh);
+                    store_grp(ctx->out_f + off, (size_t)W, o, nw, nh);
                 }
             }
             vf alpha = splat(1.0f) - T;
-            store_n(ctx->out_alpha + pix0, alpha, n);
-            store_n(r->t_final + pix0, T, n);
-            store_ni(r->last + pix0, st->last[v], n);
+            store_grp(ctx->out_alpha + pix0, (size_t)W, alpha, nw, nh);
+            store_grp(r->t_final + pix0, (size_t)W, T, nw, nh);
+            store_grp_i(r->last + pix0, (size_t)W, st->last[v], nw, nh);
             if (ctx->out_depth)
-                store_n(ctx->out_depth + pix0, st->dep[v], n);
+                store_grp(ctx->out_depth + pix0, (size_t)W, st->dep[v], nw, nh);
         }
 }
 
@@ -516,21 +612,24 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
     st.dep = st.T + TPIX / L;
     st.last = (void *)(st.dep + TPIX / L);
     st.alive = st.last + TPIX / L;
-    int row_alive[TS];
+    int row_alive[GY]; /* pixels still compositing per row of groups */
     int tile_alive = 0;
     size_t contributions = 0;
     memset(acc, 0, (size_t)nv * TPIX * sizeof(vf));
-    for (int row = 0; row < TS; row++) {
-        row_alive[row] = row < ti.h ? ti.w : 0;
-        tile_alive += row_alive[row];
-        for (int gi = 0; gi < GROUPS; gi++) {
-            int v = row * GROUPS + gi;
+    for (int by = 0; by < GY; by++) {
+        row_alive[by] = 0;
+        for (int gi = 0; gi < GX; gi++) {
+            int v = by * GX + gi;
             st.T[v] = splat(1.0f);
             st.dep[v] = splat(0.0f);
             st.last[v] = (vi){0};
-            for (int j = 0; j < L; j++)
-                st.alive[v][j] = (row < ti.h && gi * L + j < ti.w) ? -1 : 0;
+            for (int j = 0; j < L; j++) {
+                int in = gi * GW + j % GW < ti.w && by * GH + j / GW < ti.h;
+                st.alive[v][j] = in ? -1 : 0;
+                row_alive[by] += in;
+            }
         }
+        tile_alive += row_alive[by];
     }
 
     for (uint32_t k = ti.s; k < ti.s + PREFETCH_AHEAD; k++)
@@ -548,17 +647,17 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
         vf fv[MAX_NV];
         load_features(r->g.features + (size_t)i * C, C, nv, fv);
         vi pos = (vi){0} + (int32_t)(k - ti.s + 1);
-        for (int row = r0; row <= r1; row++) {
-            if (!row_alive[row])
+        for (int by = r0; by <= r1; by++) {
+            if (!row_alive[by])
                 continue;
-            float dy = my - ((float)row + 0.5f);
+            vf dy = group_dy(my, by);
             for (int gi = g0; gi <= g1; gi++) {
-                int v = row * GROUPS + gi;
+                int v = by * GX + gi;
                 vi alive = st.alive[v];
                 if (!any(alive))
                     continue; /* every pixel here has stopped */
                 group_eval ge;
-                if (!group_sigma(&ge, mx, dy, q[0], q[1], q[2], thr, (float)(gi * L), alive))
+                if (!group_sigma(&ge, mx, dy, q[0], q[1], q[2], thr, (float)(gi * GW), alive))
                     continue;
                 group_alpha(&ge, op);
                 vi valid = ge.ok & alive;
@@ -571,7 +670,7 @@ tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
                     st.alive[v] &= ~stop;
                     valid &= ~stop;
                     int n = __builtin_popcount((unsigned)mask_bits(stop));
-                    row_alive[row] -= n;
+                    row_alive[by] -= n;
                     tile_alive -= n;
                 }
                 unsigned bits = (unsigned)mask_bits(valid);
@@ -765,14 +864,17 @@ load_tile(bwd_ctx *ctx, const tile_info *ti, vf *vpix, const bwd_state *st, cons
     const int C = r->g.channels, W = r->cam.width;
     const size_t HW = (size_t)W * (size_t)r->cam.height;
     const float *bg = r->background;
-    for (int row = 0; row < ti->h; row++)
-        for (int gi = 0; gi * L < ti->w; gi++) {
-            int v = row * GROUPS + gi, n = ti->w - gi * L < L ? ti->w - gi * L : L;
-            size_t pix0 = (size_t)(ti->y0 + row) * W + (size_t)(ti->x0 + gi * L);
-            vf T = load_n(r->t_final + pix0, n);
+    for (int by = 0; by * GH < ti->h; by++)
+        for (int gi = 0; gi * GW < ti->w; gi++) {
+            int v = by * GX + gi;
+            int nw = ti->w - gi * GW < GW ? ti->w - gi * GW : GW;
+            int nh = ti->h - by * GH < GH ? ti->h - by * GH : GH;
+            size_t pix0 = (size_t)(ti->y0 + by * GH) * W + (size_t)(ti->x0 + gi * GW);
+            vf T = load_grp(r->t_final + pix0, (size_t)W, nw, nh);
             st->T[v] = st->tfin[v] = T;
-            st->vdep[v] = ctx->v_depth ? load_n(ctx->v_depth + pix0, n) : splat(0.0f);
-            st->last[v] = load_ni(r->last + pix0, n);
+            st->vdep[v] =
+                ctx->v_depth ? load_grp(ctx->v_depth + pix0, (size_t)W, nw, nh) : splat(0.0f);
+            st->last[v] = load_grp_i(r->last + pix0, (size_t)W, nw, nh);
             vf bg_dot = splat(0.0f);
             for (int cb = 0; cb < nv; cb++) {
                 vf m[L];
@@ -782,11 +884,12 @@ load_tile(bwd_ctx *ctx, const tile_info *ti, vf *vpix, const bwd_state *st, cons
                     if (ch >= C)
                         continue;
                     size_t off = (size_t)ch * HW + pix0;
-                    m[k] = load_n(ctx->v_f + off, n);
+                    m[k] = load_grp(ctx->v_f + off, (size_t)W, nw, nh);
                     if (bg)
-                        bg_dot += load_n(bg + off, n) * m[k];
+                        bg_dot += load_grp(bg + off, (size_t)W, nw, nh) * m[k];
                     if (ctx->v_bg) {
-                        store_n(ctx->v_bg + off, load_n(ctx->v_bg + off, n) + T * m[k], n);
+                        vf vb = load_grp(ctx->v_bg + off, (size_t)W, nw, nh);
+                        store_grp(ctx->v_bg + off, (size_t)W, vb + T * m[k], nw, nh);
                     }
                 }
                 transpose(m);
@@ -794,7 +897,7 @@ load_tile(bwd_ctx *ctx, const tile_info *ti, vf *vpix, const bwd_state *st, cons
                 for (int j = 0; j < L; j++)
                     vpix[(size_t)(v * L + j) * nv + cb] = m[j];
             }
-            vf va = ctx->v_alpha ? load_n(ctx->v_alpha + pix0, n) : splat(0.0f);
+            vf va = ctx->v_alpha ? load_grp(ctx->v_alpha + pix0, (size_t)W, nw, nh) : splat(0.0f);
             st->vres[v] = va - bg_dot;
         }
 }
@@ -832,11 +935,11 @@ pair_end(const bwd_pair *bp, float *slot, int C, const int nv)
         store_n(slot + GS_SLOT_HEAD + c * L, bp->pf[c], C - c * L < L ? C - c * L : L);
 }
 
-/* Gradients of one group v (row dy) whose pixels in valid took part, with
+/* Gradients of one group v (lanes' dy) whose pixels in valid took part, with
  * ge's dx, vis and alpha: undoes the group's step of the forward in the
  * pixel state, adds into the pair's sums. */
 static inline __attribute__((always_inline)) void
-group_grad(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, int v, float dy,
+group_grad(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, int v, vf dy,
            const group_eval *ge, vi valid, const int nv)
 {
     const float *q = bp->q;
@@ -877,9 +980,9 @@ group_grad(bwd_pair *bp, const bwd_state *st, vf *buf, const vf *vpix, int v, fl
     vi grad_ok = valid & (splat(bp->op) * ge->vis <= splat(GS_RASTER_MAX_ALPHA));
     va = vsel(grad_ok, va, splat(0.0f));
     vf vsig = -ge->alpha * va;
-    vf dx = ge->dx, vdy = splat(dy);
-    part[0] += vsig * (splat(q[0]) * dx + splat(q[1] * dy));
-    part[1] += vsig * (splat(q[1]) * dx + splat(q[2] * dy));
+    vf dx = ge->dx, vdy = dy;
+    part[0] += vsig * (splat(q[0]) * dx + splat(q[1]) * vdy);
+    part[1] += vsig * (splat(q[1]) * dx + splat(q[2]) * vdy);
     part[2] += splat(0.5f) * vsig * dx * dx;
     part[3] += vsig * dx * vdy;
     part[4] += splat(0.5f) * vsig * vdy * vdy;
@@ -901,11 +1004,11 @@ pair_grad_nv(const gs_splat *sp, const float *f, int C, float x0, float y0,
     pair_begin(&p, sp, f, C, x0, y0, nv);
     for (size_t e = 0; e < nrec; e++) {
         int v = (int)(hdr[e] & (NGROUPS - 1));
-        float dy = p.my - ((float)(v / GROUPS) + 0.5f);
+        vf dy = group_dy(p.my, v / GX);
         vf ex;
         memcpy(&ex, vis + e * L, sizeof ex);
         /* sigma and ok are not needed here (the lanes are known) */
-        group_eval ge = {.dx = splat(p.mx - (float)(v % GROUPS * L)) - lane_centre,
+        group_eval ge = {.dx = splat(p.mx - (float)(v % GX * GW)) - lane_cx,
                          .sigma = splat(0.0f),
                          .vis = ex,
                          .alpha = vmin(splat(GS_RASTER_MAX_ALPHA), splat(p.op) * ex),
@@ -997,15 +1100,15 @@ evaluate_pairs(bwd_ctx *ctx, const tile_info *ti, const bwd_state *st, vf *buf, 
         float mx = sp->mx - (float)ti->x0, my = sp->my - (float)ti->y0;
         vi pos = (vi){0} + (int32_t)(k - ti->s);
         size_t nrec = 0;
-        for (int row = r0; row <= r1; row++) {
-            float dy = my - ((float)row + 0.5f);
+        for (int by = r0; by <= r1; by++) {
+            vf dy = group_dy(my, by);
             for (int gi = g0; gi <= g1; gi++) {
-                int v = row * GROUPS + gi;
+                int v = by * GX + gi;
                 vi before_last = pos < st->last[v];
                 if (!any(before_last))
                     continue; /* behind every pixel's last contributor */
                 group_eval ge;
-                if (!group_sigma(&ge, mx, dy, sp->a, sp->b, sp->c, sp->thr, (float)(gi * L),
+                if (!group_sigma(&ge, mx, dy, sp->a, sp->b, sp->c, sp->thr, (float)(gi * GW),
                                  before_last))
                     continue;
                 group_alpha(&ge, sp->op);

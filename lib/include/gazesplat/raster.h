@@ -141,9 +141,9 @@ int gs_raster_set_frustum(gs_raster *r, const gs_camera *frustum,
  * same gradients, evaluating every tile again. */
 void gs_raster_set_records(gs_raster *r, int on);
 
-/* The fast path's instruction set for later forwards: "avx512" (16-pixel
- * groups, AVX-512 F/VL/DQ/BW with FMA), "avx2" (8-pixel groups, AVX2 with
- * FMA), "generic" (8-pixel groups, the compiler's baseline vectors) or
+/* The fast path's instruction set for later forwards: "avx512" (4 x 4
+ * pixel groups, AVX-512 F/VL/DQ/BW with FMA), "avx2" (4 x 2 pixel groups,
+ * AVX2 with FMA), "generic" (4 x 2, the compiler's baseline vectors) or
  * "auto" (the best this CPU runs; the default). A new workspace takes the
  * environment variable GS_RASTER_ISA when it is set; if that names a set
  * that is unknown or that this CPU cannot run, its forwards fail with an
