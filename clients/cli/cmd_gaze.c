@@ -36,6 +36,13 @@ const cli_command cli_train_estimator_command = {
     "  --hidden N          fully connected hidden units (96)\n"
     "  --cache N           rendered samples kept and re-drawn (2048)\n"
     "  --fresh N           new samples rendered per step (4)\n"
+    "  --render-size N     render samples at N px, one sample per pixel, as\n"
+    "                      the evaluation does (input..512; default: the\n"
+    "                      input size with 2x2 supersampling)\n"
+    "  --white P           share of samples made white outside the head, as\n"
+    "                      the evaluation's targets are (0..1, default 0)\n"
+    "  --shift N           random shift of each batch image, up to N px (0)\n"
+    "  --blur P            share of batch images blurred by [1,2,1]/4 (0)\n"
     "  --identities N      training identities drawn from (20000)\n"
     "  --threads N         worker threads (2)\n"
     "  --checkpoint N      save every N steps (500)\n"
@@ -66,6 +73,8 @@ const cli_command cli_eval_estimator_command = {
     "  --seed N            scene stream (7)\n"
     "  --threads N         render threads (2)\n"
     "  --csv FILE          per model and image: labels, predictions, errors\n"
+    "  --white             white outside the head mask, as the evaluation's\n"
+    "                      targets are (default: the rendered background)\n"
     "\n"
     "Prints mean, median and 90th percentile of the angular gaze and head\n"
     "errors in degrees (angle between the 3D directions).\n",
@@ -84,7 +93,8 @@ static void log_line(void *ctx, const char *fmt, ...)
 }
 
 enum { T_ARCH, T_OUT, T_SEED, T_STEPS, T_BATCH, T_LR, T_INPUT, T_CACHE, T_FRESH, T_IDS,
-       T_THREADS, T_CKPT, T_LOG, T_RESUME, T_WIDTHS, T_HIDDEN, T_N };
+       T_THREADS, T_CKPT, T_LOG, T_RESUME, T_WIDTHS, T_HIDDEN, T_RSIZE, T_WHITE, T_SHIFT,
+       T_BLUR, T_N };
 
 /* Reads an optional integer option into *v; nonzero (usage printed) when bad. */
 static int opt_long(const cli_command *cmd, const cli_opt *o, long lo, long hi, long *v)
@@ -103,7 +113,9 @@ static int run_train_est(int argc, char **argv)
                       {"--input", 1, NULL},   {"--cache", 1, NULL},   {"--fresh", 1, NULL},
                       {"--identities", 1, NULL}, {"--threads", 1, NULL},
                       {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
-                      {"--resume", 0, NULL}, {"--widths", 1, NULL}, {"--hidden", 1, NULL}};
+                      {"--resume", 0, NULL}, {"--widths", 1, NULL}, {"--hidden", 1, NULL},
+                      {"--render-size", 1, NULL}, {"--white", 1, NULL}, {"--shift", 1, NULL},
+                      {"--blur", 1, NULL}};
     const cli_command *cmd = &cli_train_estimator_command;
     int rc = cli_parse(cmd, argc, argv, o, T_N);
     if (rc == CLI_HELP)
@@ -119,7 +131,7 @@ static int run_train_est(int argc, char **argv)
     gs_gaze_train_options_default(&t);
     long seed = 1, steps = t.steps, batch = t.batch, input = 64, cache = t.cache,
          fresh = t.fresh, ids = (long)t.identities, threads = 2, ckpt = t.checkpoint_every,
-         logev = t.log_every, hidden = 96;
+         logev = t.log_every, hidden = 96, rsize = 0, shift = 0;
     if (opt_long(cmd, &o[T_SEED], 0, 4294967295L, &seed) ||
         opt_long(cmd, &o[T_STEPS], 1, 100000000L, &steps) ||
         opt_long(cmd, &o[T_BATCH], 1, 4096, &batch) ||
@@ -130,8 +142,23 @@ static int run_train_est(int argc, char **argv)
         opt_long(cmd, &o[T_THREADS], 1, 256, &threads) ||
         opt_long(cmd, &o[T_CKPT], 0, 100000000L, &ckpt) ||
         opt_long(cmd, &o[T_LOG], 0, 100000000L, &logev) ||
-        opt_long(cmd, &o[T_HIDDEN], 1, 4096, &hidden))
+        opt_long(cmd, &o[T_HIDDEN], 1, 4096, &hidden) ||
+        opt_long(cmd, &o[T_RSIZE], 32, 512, &rsize) || opt_long(cmd, &o[T_SHIFT], 0, 16, &shift))
         return CLI_USAGE;
+    if (o[T_RSIZE].value && rsize < input)
+        return cli_usage_error(cmd, "--render-size: want >= --input (%ld)", input);
+    const int share_opt[2] = {T_WHITE, T_BLUR};
+    double share[2] = {0, 0};
+    for (int k = 0; k < 2; k++) {
+        float v;
+        const cli_opt *so = &o[share_opt[k]];
+        if (!so->value)
+            continue;
+        if (cli_parse_floats(so->value, &v, 1) || !(v >= 0 && v <= 1))
+            return cli_usage_error(cmd, "%s: want a share in 0..1; got '%s'", so->name,
+                                   so->value);
+        share[k] = v;
+    }
     float wf[GS_GAZE_STAGES];
     if (o[T_WIDTHS].value && cli_parse_floats(o[T_WIDTHS].value, wf, GS_GAZE_STAGES))
         return cli_usage_error(cmd, "--widths: want 4 comma-separated integers");
@@ -152,6 +179,7 @@ static int run_train_est(int argc, char **argv)
     t.fresh = (int)fresh, t.identities = (uint64_t)ids, t.checkpoint_every = ckpt;
     t.log_every = logev, t.out_path = o[T_OUT].value, t.resume = o[T_RESUME].value != NULL;
     t.log = log_line;
+    t.render_size = (int)rsize, t.white = share[0], t.shift = (int)shift, t.blur = share[1];
 
     gs_nn_blas_set_threads(1);
     gs_error err = {0, ""};
@@ -241,7 +269,7 @@ static double angle_between(double p1, double y1, double p2, double y2)
     return gs_geom_vec3_angle(a, b);
 }
 
-enum { E_MODEL, E_SPLIT, E_COUNT, E_SIZE, E_SEED, E_THREADS, E_CSV, E_N };
+enum { E_MODEL, E_SPLIT, E_COUNT, E_SIZE, E_SEED, E_THREADS, E_CSV, E_WHITE, E_N };
 enum { MAX_MODELS = 4 };
 
 typedef struct eval_set {
@@ -249,6 +277,7 @@ typedef struct eval_set {
     char path[MAX_MODELS][1024];
     gs_gaze_net *net[MAX_MODELS];
     double *eg[MAX_MODELS], *eh[MAX_MODELS]; /* [count] angular errors */
+    int white; /* --white */
 } eval_set;
 
 /* One image: every model's prediction and errors, and its CSV rows. */
@@ -279,6 +308,13 @@ static int eval_loop(eval_set *es, const gs_synth_gen_config *gc, long count, gs
     int rc = gs_synth_sample_alloc(&s, gc->size, gc->size, err);
     for (long i = 0; !rc && i < count; i++) {
         rc = gs_synth_gen_sample(gc, (uint64_t)i, pool, &s, err);
+        if (!rc && es->white) {
+            const uint8_t *head = gs_synth_sample_mask(&s, GS_SYNTH_MASK_HEAD);
+            for (int y = 0; y < s.height; y++)
+                for (int x = 0; x < s.width; x++)
+                    if (!head[(size_t)y * (size_t)s.width + (size_t)x])
+                        memset(s.rgb + (size_t)y * s.stride + 3 * (size_t)x, 255, 3);
+        }
         if (!rc)
             rc = eval_image(es, &s, i, csv, err);
         if (!rc && (i + 1) % 50 == 0)
@@ -355,7 +391,7 @@ static int run_eval_est(int argc, char **argv)
 {
     cli_opt o[E_N] = {{"--model", 1, NULL}, {"--split", 1, NULL}, {"--count", 1, NULL},
                       {"--size", 1, NULL},  {"--seed", 1, NULL},  {"--threads", 1, NULL},
-                      {"--csv", 1, NULL}};
+                      {"--csv", 1, NULL},   {"--white", 0, NULL}};
     const cli_command *cmd = &cli_eval_estimator_command;
     int rc = cli_parse(cmd, argc, argv, o, E_N);
     if (rc == CLI_HELP)
@@ -389,6 +425,7 @@ static int run_eval_est(int argc, char **argv)
     gc.rig = GS_SYNTH_RIG_NORMALIZED;
     gc.supersample = 1;
     gs_nn_blas_set_threads(1);
+    es.white = o[E_WHITE].value != NULL;
     rc = eval_run(cmd, &es, &gc, count, threads, o[E_CSV].value, sp);
     eval_free(&es);
     return rc;

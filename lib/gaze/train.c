@@ -45,6 +45,7 @@ typedef struct trainer {
     gs_synth_sample *smp; /* [threads] render targets */
     gz_ctx *ctx;          /* [threads] */
     float *img;           /* [threads][3*S*S] */
+    float *tmp;           /* [threads][3*S*S]: the blur's first pass */
     float *sgrad;         /* [batch][np] */
     float *sloss, *serr;  /* [batch] L1 and gaze angle */
     int *task_rc;         /* [max(batch, cache)] */
@@ -90,6 +91,16 @@ static void render_task(void *ctx, int task, int worker)
     t->task_rc[task] = gs_synth_gen_sample(&t->gen, g, NULL, s, NULL);
     if (t->task_rc[task])
         return;
+    /* White outside the head for a `white` share of the samples, chosen by
+     * the sample's index (so a resumed run makes the same choice). */
+    if (t->o->white > 0 &&
+        (double)(mix(t->o->seed ^ 0x57484954ull, g) >> 11) * 0x1.0p-53 < t->o->white) {
+        const uint8_t *head = gs_synth_sample_mask(s, GS_SYNTH_MASK_HEAD);
+        for (int y = 0; y < t->S; y++)
+            for (int x = 0; x < t->S; x++)
+                if (!head[(size_t)y * (size_t)t->S + (size_t)x])
+                    memset(s->rgb + (size_t)y * s->stride + 3 * (size_t)x, 255, 3);
+    }
     size_t slot = (size_t)(g % (uint64_t)t->o->cache), plane = (size_t)t->S * t->S;
     uint8_t *dst = t->ring + slot * t->img_len;
     for (int y = 0; y < t->S; y++)
@@ -127,6 +138,32 @@ static size_t pick(const trainer *t, int b, int *flip)
     return (size_t)((h & 0xFFFFFFFFull) % filled);
 }
 
+static int clampi(int v, int lo, int hi)
+{
+    return v < lo ? lo : v > hi ? hi : v;
+}
+
+/* [1,2,1]/4 along rows then columns, edges repeated: src -> tmp -> src. */
+static void blur121(float *img, float *tmp, int S)
+{
+    size_t plane = (size_t)S * (size_t)S;
+    for (int k = 0; k < 3; k++) {
+        float *p = img + k * plane, *q = tmp + k * plane;
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++) {
+                const float *r = p + (size_t)y * (size_t)S;
+                q[(size_t)y * (size_t)S + (size_t)x] =
+                    0.25f * (r[clampi(x - 1, 0, S - 1)] + 2.0f * r[x] + r[clampi(x + 1, 0, S - 1)]);
+            }
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++)
+                p[(size_t)y * (size_t)S + (size_t)x] =
+                    0.25f * (q[(size_t)clampi(y - 1, 0, S - 1) * (size_t)S + (size_t)x] +
+                             2.0f * q[(size_t)y * (size_t)S + (size_t)x] +
+                             q[(size_t)clampi(y + 1, 0, S - 1) * (size_t)S + (size_t)x]);
+    }
+}
+
 /* One batch element: forward, L1 loss, backward into its gradient slot. */
 static void batch_task(void *ctx, int b, int worker)
 {
@@ -135,11 +172,22 @@ static void batch_task(void *ctx, int b, int worker)
     size_t slot = pick(t, b, &flip), plane = (size_t)S * S;
     const uint8_t *src = t->ring + slot * t->img_len;
     float *img = t->img + (size_t)worker * t->img_len, lab[4], out[4], d[4];
+    /* The shift and blur of this element: fixed by (seed, step, b). */
+    uint64_t h = mix(mix(mix(t->o->seed, (uint64_t)t->step), (uint64_t)b), 0x5348494654ull);
+    int span = 2 * t->o->shift + 1;
+    int sx = (int)(h % (uint64_t)span) - t->o->shift;
+    int sy = (int)((h >> 16) % (uint64_t)span) - t->o->shift;
+    int blur = t->o->blur > 0 && (double)(h >> 32) * 0x1.0p-32 < t->o->blur;
     for (int k = 0; k < 3; k++)
-        for (int y = 0; y < S; y++)
-            for (int x = 0; x < S; x++)
-                img[k * plane + (size_t)y * S + x] =
-                    src[k * plane + (size_t)y * S + (flip ? S - 1 - x : x)] / 255.0f;
+        for (int y = 0; y < S; y++) {
+            int ys = clampi(y - sy, 0, S - 1);
+            for (int x = 0; x < S; x++) {
+                int xs = clampi((flip ? S - 1 - x : x) - sx, 0, S - 1);
+                img[k * plane + (size_t)y * S + x] = src[k * plane + (size_t)ys * S + xs] / 255.0f;
+            }
+        }
+    if (blur)
+        blur121(img, t->tmp + (size_t)worker * t->img_len, S);
     memcpy(lab, t->ring_lab + 4 * slot, sizeof lab);
     if (flip) /* a mirror image looks the other way: yaws change sign */
         lab[1] = -lab[1], lab[3] = -lab[3];
@@ -159,7 +207,7 @@ static int trainer_init(trainer *t, gs_gaze_net *n, const gs_gaze_train_options 
     memset(t, 0, sizeof *t);
     t->n = n, t->o = o, t->pool = pool;
     t->threads = gs_pool_threads(pool);
-    t->S = n->spec.input_size;
+    t->S = o->render_size > 0 ? o->render_size : n->spec.input_size;
     t->img_len = 3 * (size_t)t->S * t->S;
     t->np = n->g.nparams;
     gs_synth_gen_config_default(&t->gen);
@@ -168,19 +216,20 @@ static int trainer_init(trainer *t, gs_gaze_net *n, const gs_gaze_train_options 
     t->gen.seed = o->seed;
     t->gen.size = t->S;
     t->gen.rig = GS_SYNTH_RIG_NORMALIZED;
-    t->gen.supersample = 2;
+    t->gen.supersample = o->render_size > 0 ? 1 : 2;
     size_t ntask = (size_t)(o->batch > o->cache ? o->batch : o->cache);
     t->ring = malloc((size_t)o->cache * t->img_len);
     t->ring_lab = malloc((size_t)o->cache * 4 * sizeof(float));
     t->smp = calloc((size_t)t->threads, sizeof *t->smp);
     t->ctx = calloc((size_t)t->threads, sizeof *t->ctx);
     t->img = malloc((size_t)t->threads * t->img_len * sizeof(float));
+    t->tmp = malloc((size_t)t->threads * t->img_len * sizeof(float));
     t->sgrad = malloc((size_t)o->batch * t->np * sizeof(float));
     t->sloss = malloc((size_t)o->batch * sizeof(float));
     t->serr = malloc((size_t)o->batch * sizeof(float));
     t->task_rc = calloc(ntask, sizeof(int));
     t->grad = calloc(t->np, sizeof(float));
-    if (!t->ring || !t->ring_lab || !t->smp || !t->ctx || !t->img || !t->sgrad ||
+    if (!t->ring || !t->ring_lab || !t->smp || !t->ctx || !t->img || !t->tmp || !t->sgrad ||
         !t->sloss || !t->serr || !t->task_rc || !t->grad)
         return gs_error_set(err, GS_ERR_NOMEM, "train-estimator: out of memory");
     for (int i = 0; i < t->threads; i++) {
@@ -207,6 +256,7 @@ static void trainer_free(trainer *t)
     free(t->smp);
     free(t->ctx);
     free(t->img);
+    free(t->tmp);
     free(t->sgrad);
     free(t->sloss);
     free(t->serr);
@@ -217,9 +267,17 @@ static void trainer_free(trainer *t)
 
 /* ---- checkpoints: the net file plus PATH.opt (Adam moments, step) ------ */
 
+/* What fixes the sample stream, which a resumed run must share. */
+static void stream_id(const gs_gaze_train_options *o, char *v, size_t n)
+{
+    snprintf(v, n, "%llu/%d/%d/%d/%llu/%d/%g/%d/%g", (unsigned long long)o->seed, o->batch,
+             o->cache, o->fresh, (unsigned long long)o->identities, o->render_size, o->white,
+             o->shift, o->blur);
+}
+
 static int save_opt(trainer *t, const char *path, long step, gs_error *err)
 {
-    char name[4096], v[64];
+    char name[4096], v[160];
     if (snprintf(name, sizeof name, "%s.opt", path) >= (int)sizeof name)
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: path too long");
     float *m, *vv;
@@ -233,8 +291,7 @@ static int save_opt(trainer *t, const char *path, long step, gs_error *err)
     rc = rc ? rc : gs_st_writer_meta(w, "step", v);
     snprintf(v, sizeof v, "%ld", gs_nn_adam_steps(t->adam));
     rc = rc ? rc : gs_st_writer_meta(w, "adam_steps", v);
-    snprintf(v, sizeof v, "%llu/%d/%d/%d/%llu", (unsigned long long)t->o->seed, t->o->batch,
-             t->o->cache, t->o->fresh, (unsigned long long)t->o->identities);
+    stream_id(t->o, v, sizeof v);
     rc = rc ? rc : gs_st_writer_meta(w, "stream", v);
     rc = rc ? rc : gs_st_writer_add(w, "adam.m", GS_ST_F32, 1, shape, m);
     rc = rc ? rc : gs_st_writer_add(w, "adam.v", GS_ST_F32, 1, shape, vv);
@@ -250,7 +307,7 @@ static int save_opt(trainer *t, const char *path, long step, gs_error *err)
 
 static int load_opt(trainer *t, const char *path, long *step, gs_error *err)
 {
-    char name[4096], v[64];
+    char name[4096], v[160];
     if (snprintf(name, sizeof name, "%s.opt", path) >= (int)sizeof name)
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: path too long");
     gs_st_file *f = NULL;
@@ -261,8 +318,7 @@ static int load_opt(trainer *t, const char *path, long *step, gs_error *err)
     int64_t shape[1] = {(int64_t)t->np};
     const char *s = gs_st_meta(f, "step"), *a = gs_st_meta(f, "adam_steps"),
                *stream = gs_st_meta(f, "stream");
-    snprintf(v, sizeof v, "%llu/%d/%d/%d/%llu", (unsigned long long)t->o->seed, t->o->batch,
-             t->o->cache, t->o->fresh, (unsigned long long)t->o->identities);
+    stream_id(t->o, v, sizeof v);
     rc = gs_st_get_f32(f, "adam.m", 1, shape, &m, err);
     rc = rc ? rc : gs_st_get_f32(f, "adam.v", 1, shape, &vv, err);
     char *e1 = NULL, *e2 = NULL;
@@ -272,7 +328,8 @@ static int load_opt(trainer *t, const char *path, long *step, gs_error *err)
     if (!rc && (!stream || strcmp(stream, v) != 0))
         rc = gs_error_set(err, GS_ERR_ARG,
                           "train-estimator: %s was made with seed/batch/cache/fresh/"
-                          "identities %s, not %s", name, stream ? stream : "?", v);
+                          "identities/render-size/white/shift/blur %s, not %s",
+                          name, stream ? stream : "?", v);
     if (!rc) {
         float *dm, *dv;
         gs_nn_adam_moments(t->adam, 0, &dm, &dv);
@@ -337,7 +394,9 @@ static int options_check(const gs_gaze_train_options *o, gs_error *err)
     if (o->steps < 1 || o->batch < 1 || o->batch > 4096 || !(o->lr > 0) ||
         o->identities < 1 || o->identities > GS_SYNTH_SEED_SPLIT_COUNT || o->cache < 1 ||
         o->cache > 1000000 || o->fresh < 1 || o->fresh > o->cache ||
-        o->checkpoint_every < 0 || o->log_every < 0 || o->stop_after < 0)
+        o->checkpoint_every < 0 || o->log_every < 0 || o->stop_after < 0 ||
+        o->render_size < 0 || o->render_size > 512 || !(o->white >= 0 && o->white <= 1) ||
+        o->shift < 0 || o->shift > 16 || !(o->blur >= 0 && o->blur <= 1))
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: option out of range");
     if ((o->checkpoint_every || o->resume) && !o->out_path)
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: checkpoints need out_path");
@@ -352,6 +411,10 @@ int gs_gaze_train(gs_gaze_net *n, const gs_gaze_train_options *o, gs_pool *pool,
     int rc = options_check(o, err);
     if (rc)
         return rc;
+    if (o->render_size && o->render_size < n->spec.input_size)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train-estimator: render size %d below the net's input %d",
+                            o->render_size, n->spec.input_size);
     trainer t;
     long start = 0;
     rc = trainer_init(&t, n, o, pool, err);

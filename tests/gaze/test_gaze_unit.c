@@ -268,6 +268,79 @@ static void test_determinism_and_resume(void)
     gs_gaze_net_destroy(r);
 }
 
+/* The evaluation-style samples and the gaze-neutral augmentations: range
+ * checks; each option changes what is learnt; deterministic across thread
+ * counts; a resumed run matches a straight one and a run resumed with
+ * other augmentations is refused. */
+static void test_augmentations(void)
+{
+    gs_pool *pool = gs_pool_create(3);
+    gs_error err = {0, ""};
+    gs_gaze_train_options o;
+    struct {
+        int rs, shift;
+        double white, blur;
+    } bad[] = {{-1, 0, 0, 0}, {513, 0, 0, 0}, {16, 0, 0, 0}, {0, -1, 0, 0}, {0, 17, 0, 0},
+               {0, 0, -0.1, 0}, {0, 0, 1.5, 0}, {0, 0, 0, 2.0}, {0, 0, NAN, 0}, {0, 0, 0, NAN}};
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        gs_gaze_net *n = tiny(GS_GAZE_RESNET, 5);
+        train_opts(&o, 1, NULL, 0);
+        o.render_size = bad[k].rs, o.shift = bad[k].shift;
+        o.white = bad[k].white, o.blur = bad[k].blur;
+        float before = n->params[0];
+        CHECK_MSG(gs_gaze_train(n, &o, NULL, NULL, &err) == GS_ERR_ARG,
+                  "case %zu accepted (render %d shift %d white %g blur %g)", k, bad[k].rs,
+                  bad[k].shift, bad[k].white, bad[k].blur);
+        CHECK(n->params[0] == before);
+        gs_gaze_net_destroy(n);
+    }
+
+    /* base, then one option at a time, then all together */
+    enum { V = 6 };
+    gs_gaze_net *run[V], *run3 = tiny(GS_GAZE_RESNET, 5);
+    for (int v = 0; v < V; v++) {
+        run[v] = tiny(GS_GAZE_RESNET, 5);
+        train_opts(&o, 3, NULL, 0);
+        o.render_size = v == 1 || v == 5 ? 48 : 0;
+        o.white = v == 2 || v == 5 ? 0.5 : 0;
+        o.shift = v == 3 || v == 5 ? 2 : 0;
+        o.blur = v == 4 || v == 5 ? 0.5 : 0;
+        CHECK_MSG(gs_gaze_train(run[v], &o, NULL, NULL, &err) == GS_OK, "%s", err.msg);
+        if (v == V - 1)
+            CHECK_MSG(gs_gaze_train(run3, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    }
+    size_t bytes = run[0]->g.nparams * sizeof(float);
+    for (int v = 1; v < V; v++)
+        CHECK_MSG(memcmp(run[0]->params, run[v]->params, bytes), "variant %d changed nothing", v);
+    CHECK_MSG(!memcmp(run[V - 1]->params, run3->params, bytes),
+              "augmented training differs between 1 and 3 threads");
+
+    char path[256], opt[300];
+    snprintf(path, sizeof path, "%s/aug.safetensors", dir);
+    snprintf(opt, sizeof opt, "%s.opt", path);
+    gs_gaze_net *c = tiny(GS_GAZE_RESNET, 5), *r = NULL;
+    train_opts(&o, 3, path, 0);
+    o.render_size = 48, o.white = 0.5, o.shift = 2, o.blur = 0.5;
+    o.stop_after = 1;
+    CHECK_MSG(gs_gaze_train(c, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    CHECK_MSG(gs_gaze_net_load(path, &r, &err) == GS_OK, "%s", err.msg);
+    o.stop_after = 0, o.resume = 1, o.blur = 0.25;
+    CHECK(r && gs_gaze_train(r, &o, pool, NULL, &err) == GS_ERR_ARG);
+    CHECK_MSG(strstr(err.msg, "blur") != NULL, "refusal does not name the options: %s", err.msg);
+    o.blur = 0.5;
+    CHECK_MSG(r && gs_gaze_train(r, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    CHECK_MSG(r && !memcmp(run[V - 1]->params, r->params, bytes),
+              "resumed augmented run differs from a straight one");
+    unlink(path);
+    unlink(opt);
+    for (int v = 0; v < V; v++)
+        gs_gaze_net_destroy(run[v]);
+    gs_gaze_net_destroy(run3);
+    gs_gaze_net_destroy(c);
+    gs_gaze_net_destroy(r);
+    gs_pool_destroy(pool);
+}
+
 /* Mean L1 (radians) of the 4 outputs on 12 held-out TRAIN-split samples. */
 static double heldout_l1(gs_gaze_net *n)
 {
@@ -332,6 +405,7 @@ int main(int argc, char **argv)
         test_l1_loss();
         test_loader();
         test_determinism_and_resume();
+        test_augmentations();
     }
     rmdir(dir);
     GS_TEST_END();

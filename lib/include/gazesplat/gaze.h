@@ -130,6 +130,15 @@ typedef struct gs_gaze_train_options {
     uint64_t identities;   /* TRAIN identities drawn from (20000) */
     int cache;             /* samples kept in memory and re-drawn (2048) */
     int fresh;             /* new samples rendered per step (4) */
+    int render_size;       /* 0: samples rendered at the net's input size with
+                              2x2 supersampling; else at this size (input..512)
+                              with one sample per pixel, as the evaluation
+                              renders its targets, and resized by the net */
+    double white;          /* probability that a sample is white outside the
+                              head mask, as the evaluation's targets are (0) */
+    int shift;             /* largest random shift of a batch image, px at the
+                              sample size, edges repeated (0) */
+    double blur;           /* probability of a [1,2,1]/4 blur both ways (0) */
     long checkpoint_every; /* steps (500); 0 = only at the end */
     long log_every;        /* steps (50) */
     const char *out_path;  /* checkpoints: out_path + out_path.opt */
@@ -147,8 +156,10 @@ typedef struct gs_gaze_train_report {
 } gs_gaze_train_report;
 
 /* Trains n in place (L1 on the 4 angles, Adam). Samples: normalized
- * images rendered at the net's input size with 2x2 supersampling, random
- * horizontal flips (yaw signs flipped). rep may be NULL. */
+ * images (see render_size and white), random horizontal flips (yaw signs
+ * flipped), shifts and blur (shift, blur): changes that leave the gaze
+ * alone, so that the estimate learns not to move with them. rep may be
+ * NULL. */
 int gs_gaze_train(gs_gaze_net *n, const gs_gaze_train_options *o,
                   gs_pool *pool, gs_gaze_train_report *rep, gs_error *err);
 
