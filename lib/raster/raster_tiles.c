@@ -331,7 +331,8 @@ static inline vf load_n(const float *p, int n)
     return v;
 }
 
-/* The same for the per-pixel contributor counts. */
+#if GH == 1
+/* The same for the per-pixel contributor counts (row-run groups only). */
 static inline vi load_ni(const uint32_t *p, int n)
 {
     vi v = {0};
@@ -351,6 +352,7 @@ static inline void store_ni(uint32_t *p, vi v, int n)
         for (int j = 0; j < n; j++)
             p[j] = (uint32_t)v[j];
 }
+#endif
 
 /* Stores the first n <= 8 lanes of v at p. */
 static inline void store_n(float *p, vf v, int n)
