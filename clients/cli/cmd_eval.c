@@ -27,6 +27,7 @@ const cli_command cli_eval_command = {
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
+    "                      [--transfer-head-weight W]\n"
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
@@ -58,6 +59,9 @@ const cli_command cli_eval_command = {
     "                    (0, 1] (default 1), resampled for the renderer\n"
     "  --full-render     every render from scratch (no incremental sweeps,\n"
     "                    no cached face stream)\n"
+    "  --transfer-head-weight W  the transfer method at another head pose:\n"
+    "                    weight of the smoothed skin residual, 0..1\n"
+    "                    (default 0.5; 0 = the model's render there)\n"
     "  --finetune N      after each fit, fine-tune a copy of the model on the\n"
     "                    input for N Adam steps (gs_model_finetune) and render\n"
     "                    that input's targets with it; fit time includes it\n"
@@ -79,7 +83,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -624,6 +628,7 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     info->n_face = mi.n_face;
     info->feature_scale = ev->ro.feature_scale;
     info->full_render = ev->ro.full;
+    info->transfer_head_weight = ev->ro.transfer_head_weight;
     return CLI_OK;
 }
 
@@ -692,7 +697,7 @@ static int run_eval(int argc, char **argv)
         {"--feature-scale", 1, NULL}, {"--full-render", 0, NULL},
         {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
-        {"--make-pairs", 1, NULL},
+        {"--transfer-head-weight", 1, NULL}, {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -749,6 +754,12 @@ static int run_eval(int argc, char **argv)
                                "(0, 1]; got '%s'", o[O_FSCALE].value);
     ev.ro.feature_scale = fscale;
     ev.ro.full = o[O_FULL].value != NULL;
+    float xhw = (float)GS_XFER_HEAD_WEIGHT_DEFAULT;
+    if (o[O_XHW].value && (cli_parse_floats(o[O_XHW].value, &xhw, 1) ||
+                           !(xhw >= 0.0f && xhw <= 1.0f)))
+        return cli_usage_error(cmd, "--transfer-head-weight: want a number "
+                               "in [0, 1]; got '%s'", o[O_XHW].value);
+    ev.ro.transfer_head_weight = xhw;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
                                  &ev.fo)))
         return rc;

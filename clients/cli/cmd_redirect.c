@@ -56,7 +56,8 @@ const cli_command cli_redirect_command = {
     "render a fitted subject (or a face image, fitted first) at new gazes",
     "usage: gazesplat redirect --model M (--subject S.bin | --image IMG)\n"
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
-    "                          [--head-deg P,Y] [--index I] [--out-norm]\n"
+    "                          [--head-deg P,Y [--light-on-head]] [--index I]\n"
+    "                          [--out-norm]\n"
     "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
     "                          [--finetune-plateau R]]\n"
@@ -79,7 +80,11 @@ const cli_command cli_redirect_command = {
     "                   turn with the gaze). Needs the input: --image, or\n"
     "                   --subject with --image naming the face it was\n"
     "                   fitted to\n"
-    "  --head-deg P,Y   render with this head pose instead of the subject's\n"
+    "  --head-deg P,Y   render with this head pose instead of the subject's;\n"
+    "                   the lights stay where they are in the camera, so\n"
+    "                   the shading changes as the head turns\n"
+    "  --light-on-head  (with --head-deg) keep the fitted light on the head\n"
+    "                   instead: the shading turns with it\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
 };
@@ -448,14 +453,15 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[14] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[15] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
                      {"--iters", 1, NULL},    {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
-                     {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 14);
+                     {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
+                     {"--light-on-head", 0, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 15);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -470,6 +476,8 @@ static int run_redirect(int argc, char **argv)
                                     "with --transfer)");
     if (transfer && !o[2].value)
         return cli_usage_error(cmd, "--transfer needs the input face: --image");
+    if (o[14].value && !o[5].value)
+        return cli_usage_error(cmd, "--light-on-head goes with --head-deg");
     /* Parse every target before any work. */
     enum { MAXT = 256 };
     double tg[MAXT][2];
@@ -565,6 +573,7 @@ static int run_redirect(int argc, char **argv)
         v.gaze_yaw = tg[k][1];
         if (o[5].value) {
             v.use_head = 1;
+            v.light_on_head = o[14].value != NULL;
             /* Head angles as geom.h defines them (z-axis of R). */
             gs_geom_rot_from_pitchyaw(head[0] * DEG, head[1] * DEG, 0,
                                       v.head_R);

@@ -204,6 +204,13 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                 info->full_render ? "every render from scratch "
                                     "(--full-render)"
                                   : "incremental where possible");
+    int has_transfer = 0;
+    for (int k = 0; k < nmethods; k++)
+        has_transfer |= methods[k] == EVAL_TRANSFER;
+    if (info->n_face > 0 && has_transfer)
+        fprintf(f, "- transfer at another head pose: smoothed skin residual "
+                   "x %.3g (--transfer-head-weight)\n",
+                info->transfer_head_weight);
     if (info->ft_iters > 0) {
         static const char *pn[] = {"face", "eye", "renderer", "mlp", "geometry"};
         char parts[64] = "";

@@ -48,6 +48,7 @@ typedef struct eval_run_info {
     int face_kept, n_face;
     double feature_scale;
     int full_render;
+    double transfer_head_weight; /* render option, transfer method */
     /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
     int ft_iters;
     unsigned ft_parts;

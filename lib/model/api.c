@@ -254,12 +254,33 @@ static int write_image(gs_model_ctx *c, const gs_subject *s, uint8_t *rgb,
     return GS_OK;
 }
 
+/* The light part of a code is in the head frame (training labels: the
+ * scene's lights turned into the head). The lights stay where they are in
+ * the camera when the head turns, so a view at another head pose sees them
+ * turned the other way: each colour's direction vector goes from the
+ * subject's head frame (R_s) to the view's (R_v), dh' = R_v^T R_s dh; the
+ * ambient colour is the same in any frame. */
+void gs_model_light_to_view(float *code, int code_dim, const double R_s[9],
+                            const double R_v[9])
+{
+    float *l = code + code_dim - GS_MODEL_LIGHT_DIM;
+    for (int c = 0; c < 3; c++) {
+        double dh[3] = {l[3 * c], l[3 * c + 1], l[3 * c + 2]}, d[3], o[3];
+        gs_geom_mat3_vec(R_s, dh, d);
+        gs_geom_mat3_tvec(R_v, d, o);
+        for (int k = 0; k < 3; k++)
+            l[3 * c + k] = (float)o[k];
+    }
+}
+
 static void frame_of(const gs_subject *s, const gs_view *v, gs_frame *fr)
 {
     memset(fr, 0, sizeof *fr);
     memcpy(fr->code, s->code, sizeof(float) * (size_t)s->code_dim);
     const double *R = v && v->use_head ? v->head_R : s->head_R;
     const double *t = v && v->use_head ? v->head_t : s->head_t;
+    if (v && !v->light_on_head && memcmp(R, s->head_R, sizeof fr->head_R))
+        gs_model_light_to_view(fr->code, s->code_dim, s->head_R, R);
     memcpy(fr->head_R, R, sizeof fr->head_R);
     memcpy(fr->head_t, t, sizeof fr->head_t);
     fr->gaze[0] = v ? v->gaze_pitch : s->gaze_pitch;

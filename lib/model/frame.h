@@ -121,6 +121,7 @@ struct gs_model_ctx {
      * (fs: the normal path) and whether every render starts from scratch */
     int render_fs;
     int render_full;
+    float xfer_head_w; /* transfer_head_weight (render options) */
     int face_map_fs;                  /* the size fmap_face was made at */
     int last_inc;
     float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */

@@ -137,6 +137,10 @@ void gs_model_config_default(gs_model_config *c);
 /* The light part of tau for a synthetic scene (head frame). */
 struct gs_synth_scene;
 void gs_model_light_code(const struct gs_synth_scene *s, float out[12]);
+/* Turns a code's light from head pose R_s to R_v (lights fixed in the
+ * camera). */
+void gs_model_light_to_view(float *code, int code_dim, const double R_s[9],
+                            const double R_v[9]);
 
 /* ---- MLP kernels ---- */
 /* Activation floats an MLP needs for a batch of n (pre-activations of the

@@ -21,6 +21,13 @@
  * the residual is taken in place. The subject's own view thus gives the
  * input back, and a zero residual gives the plain render.
  *
+ * At another head pose the model's geometry places the input's detail a
+ * pixel or two off, and the input's shading was lit at the old pose: a
+ * head change carries only the skin residual's smooth part (Gaussian,
+ * sigma GS_XFER_HEAD_SIGMA px) times the context's transfer_head_weight;
+ * the eyeballs take none (the eye stream draws them at the new pose) and
+ * off the head nothing is taken (the input's outline moved with the head).
+ *
  * Gaze sweeps: when the target has the last one's subject, settings and
  * head pose, only the eye stream moved. The rasterizer changes no pixel
  * outside the tiles the eye stream reaches at the old or the new gaze,
@@ -41,6 +48,9 @@
 #define GS_XFER_ON_HEAD 0.5f
 /* Eyeball-ness of a pixel: its eye-stream coverage times this, at most 1. */
 #define GS_XFER_EYE_GAIN 4.0f
+/* Smoothing of the residual carried to another head pose, px at 256 px
+ * (scaled with the image size). */
+#define GS_XFER_HEAD_SIGMA 2.0
 
 /* What is kept per subject: its own view (while subject and settings are
  * the same), the residual of its input, and its last target's maps and
@@ -49,6 +59,7 @@ typedef struct xfer_subj {
     int valid;
     gs_subject key;
     int key_fs, key_full;
+    float key_head_w;
     uint8_t *src8;                 /* [S, S, 3] */
     float *src_z, *src_a, *src_e;  /* [S*S] depth mm, coverage, eye */
     double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
@@ -57,6 +68,8 @@ typedef struct xfer_subj {
     int res_valid;
     uint8_t *in8;                  /* [S, S, 3] */
     float *res;                    /* [3, S*S] residual, input's view */
+    int smooth_valid;              /* res_smooth is res's */
+    float *res_smooth;             /* [3, S*S] res smoothed (head changes) */
     /* the last target's maps and warped residual, kept with the own view
      * (tgt_valid): a target that changes only the gaze redoes them only
      * where the eye stream reaches (target_maps) */
@@ -94,7 +107,7 @@ static void subj_invalidate(xfer_subj *u)
 
 static void subj_free(xfer_subj *u)
 {
-    float *bufs[] = {u->src_z, u->src_a, u->src_e, u->res,
+    float *bufs[] = {u->src_z, u->src_a, u->src_e, u->res, u->res_smooth,
                      u->tgt_z, u->tgt_a, u->tgt_e, u->warped};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(bufs[i]);
@@ -115,6 +128,7 @@ static int subj_alloc(xfer_subj *u, int S, int nf)
     for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
         fail |= !(*one[i] = malloc(px * sizeof(float)));
     fail |= !(u->res = malloc(3 * px * sizeof(float)));
+    fail |= !(u->res_smooth = malloc(3 * px * sizeof(float)));
     fail |= !(u->warped = malloc(3 * px * sizeof(float)));
     fail |= !(u->src8 = malloc(3 * px)) || !(u->in8 = malloc(3 * px));
     fail |= !(u->fbox = malloc((size_t)(nf ? nf : 1) * 4 * sizeof(int16_t)));
@@ -359,6 +373,7 @@ typedef struct {
     const double *Rt, *tt, *Rs, *ts; /* head poses: target, input */
     double eM[2][9];      /* per eye: R_e,s R_e,t^T (head frame) */
     int same_pose;
+    float head_w;         /* weight of the smoothed residual (head change) */
 } xfer_geom;
 
 static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
@@ -443,10 +458,8 @@ static float head_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
         return kind_ratio(1.0f - eyeballness(x->cur.src_e, x->S, *u, *v),
                           1.0f - b);
     }
-    if (x->cur.tgt_a[i] <= GS_XFER_ON_HEAD) /* off the head: in place */
-        return x->cur.src_a[i] <= GS_XFER_ON_HEAD
-                   ? (*u = px + 0.5, *v = py + 0.5, 1.0f)
-                   : 0.0f;
+    if (x->cur.tgt_a[i] <= GS_XFER_ON_HEAD) /* off the head: nothing */
+        return 0.0f;
     double Xs[3];
     input_point(g, h, Xs);
     return seen_by_input(x, g, Xs, 0, b, u, v);
@@ -494,7 +507,7 @@ static int subj_matches(const gs_model_ctx *c, const xfer_subj *u,
                         const gs_subject *s)
 {
     return u->valid && same_subject(&u->key, s) && u->key_fs == c->render_fs &&
-           u->key_full == c->render_full;
+           u->key_full == c->render_full && u->key_head_w == c->xfer_head_w;
 }
 
 static void subj_swap(xfer_subj *a, xfer_subj *b)
@@ -547,7 +560,7 @@ static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     if (x->cur.valid)
         return GS_OK;
     int S = x->S;
-    gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}};
+    gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}, 0};
     gs_camera cs;
     image_camera(c, s->head_t, &cs);
     int rc = gs_model_render(c, pool, s, &own, x->cur.src8, 3 * (size_t)S, err);
@@ -560,6 +573,7 @@ static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     x->cur.key = *s;
     x->cur.key_fs = c->render_fs;
     x->cur.key_full = c->render_full;
+    x->cur.key_head_w = c->xfer_head_w;
     x->cur.valid = 1;
     return GS_OK;
 }
@@ -581,11 +595,63 @@ static int residual(gs_xfer *x, const uint8_t *input, size_t in_stride)
             x->cur.res[k * px + i] = (float)x->cur.in8[3 * i + k] -
                                  (float)x->cur.src8[3 * i + k];
     x->cur.res_valid = 1;
+    x->cur.smooth_valid = 0;
     return 0;
 }
 
+/* res smoothed by a Gaussian of sigma GS_XFER_HEAD_SIGMA (scaled to the
+ * image size), separable, edges clamped; once per input. */
+static int smooth_residual(gs_xfer *x)
+{
+    if (x->cur.smooth_valid)
+        return GS_OK;
+    int S = x->S;
+    size_t px = (size_t)S * S;
+    double sg = GS_XFER_HEAD_SIGMA * S / 256.0;
+    int r = (int)ceil(3.0 * sg);
+    float *w = malloc((size_t)(2 * r + 1) * sizeof(float));
+    float *tmp = malloc(px * sizeof(float));
+    if (!w || !tmp) {
+        free(w);
+        free(tmp);
+        return GS_ERR_NOMEM;
+    }
+    double sum = 0;
+    for (int j = -r; j <= r; j++)
+        sum += w[j + r] = (float)exp(-0.5 * j * j / (sg * sg));
+    for (int j = 0; j <= 2 * r; j++)
+        w[j] = (float)(w[j] / sum);
+    for (int k = 0; k < 3; k++) {
+        const float *a = x->cur.res + k * px;
+        float *o = x->cur.res_smooth + k * px;
+        for (int y = 0; y < S; y++)
+            for (int c = 0; c < S; c++) {
+                float v = 0.0f;
+                for (int j = -r; j <= r; j++) {
+                    int q = c + j < 0 ? 0 : c + j >= S ? S - 1 : c + j;
+                    v += w[j + r] * a[(size_t)y * S + q];
+                }
+                tmp[(size_t)y * S + c] = v;
+            }
+        for (int y = 0; y < S; y++)
+            for (int c = 0; c < S; c++) {
+                float v = 0.0f;
+                for (int j = -r; j <= r; j++) {
+                    int q = y + j < 0 ? 0 : y + j >= S ? S - 1 : y + j;
+                    v += w[j + r] * tmp[(size_t)q * S + c];
+                }
+                o[(size_t)y * S + c] = v;
+            }
+    }
+    free(w);
+    free(tmp);
+    x->cur.smooth_valid = 1;
+    return GS_OK;
+}
+
 /* The residual carried to target pixel (px, py): from where the input
- * shows its head point (weight 1 - b) and its eyeball point (weight b). */
+ * shows its head point (weight 1 - b) and its eyeball point (weight b);
+ * at another head pose the smoothed skin residual alone, times head_w. */
 static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
 {
     size_t n = (size_t)x->S * x->S, i = (size_t)py * x->S + px;
@@ -593,13 +659,18 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
     b = b > 1.0f ? 1.0f : b;
     double uh = 0, vh = 0, ue = 0, ve = 0, h[3];
     float wh = 0.0f, we = 0.0f;
-    target_point(x, g, px, py, h);
-    if (b < 1.0f)
-        wh = (1.0f - b) * head_source(x, g, px, py, h, b, &uh, &vh);
-    if (b > 0.0f)
-        we = b * eye_source(x, g, h, b, &ue, &ve);
+    const float *res = g->same_pose ? x->cur.res : x->cur.res_smooth;
+    if (g->same_pose || g->head_w > 0.0f) {
+        target_point(x, g, px, py, h);
+        if (b < 1.0f)
+            wh = (1.0f - b) * head_source(x, g, px, py, h, b, &uh, &vh);
+        if (b > 0.0f && g->same_pose)
+            we = b * eye_source(x, g, h, b, &ue, &ve);
+        if (!g->same_pose)
+            wh *= g->head_w;
+    }
     for (int k = 0; k < 3; k++) {
-        const float *rk = x->cur.res + k * n;
+        const float *rk = res + k * n;
         float v = 0.0f;
         if (wh > 0.0f)
             v += wh * bilinear(rk, x->S, uh, vh);
@@ -703,6 +774,9 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
      * maps only, so the kept warped residual stands there. */
     xfer_geom g;
     geom_init(c, x, &g, Rs, ts, Rt, tt);
+    g.head_w = c->xfer_head_w;
+    if (!g.same_pose && g.head_w > 0.0f && smooth_residual(x))
+        return gs_error_set(err, GS_ERR_NOMEM, "transfer: out of memory");
     xfer_bands b = {x, &g, d, rgb, stride};
     gs_pool_for(pool, (S + XFER_BAND_ROWS - 1) / XFER_BAND_ROWS, band_task,
                 &b);

@@ -359,28 +359,51 @@ int main(void)
     }
 
     /* A constant residual of +20 (own view + 20): every output pixel is the
-     * plain render plus at most 20, and most of the face gets all of it. */
+     * plain render plus at most 20 w, and most of the face gets all of it;
+     * w = 1 for a gaze change, the context's transfer head weight (the
+     * default 0.5, then 1 and 0) at another head pose. */
     for (size_t i = 0; i < isz; i++)
         a[i] = (uint8_t)(own[i] > 235 ? 255 : own[i] + 20);
-    for (int k = 0; k < 3; k++) {
-        render(c2, NULL, &sub[0], views[k], ref, S);
-        transfer(c, NULL, &sub[0], a, views[k], out, S);
-        size_t whole = 0, counted = 0;
-        int bad = 0;
-        for (size_t i = 0; i < isz; i++) {
-            int dd = (int)out[i] - (int)ref[i];
-            if (ref[i] <= 235 && own[i] <= 235) {
-                counted++;
-                whole += dd == 20;
-                bad |= dd < 0 || dd > 20;
+    const double head_w[3] = {GS_XFER_HEAD_WEIGHT_DEFAULT, 1.0, 0.0};
+    for (int k = 0; k < 3; k++)
+        for (int t = 0; t < (k ? 3 : 1); t++) {
+            gs_model_render_options hro;
+            gs_model_render_options_default(&hro);
+            hro.transfer_head_weight = head_w[t];
+            CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_OK);
+            int want = k ? (int)lround(20 * head_w[t]) : 20;
+            render(c2, NULL, &sub[0], views[k], ref, S);
+            transfer(c, NULL, &sub[0], a, views[k], out, S);
+            size_t whole = 0, counted = 0;
+            int bad = 0;
+            for (size_t i = 0; i < isz; i++) {
+                int dd = (int)out[i] - (int)ref[i];
+                if (ref[i] <= 235 && own[i] <= 235) {
+                    counted++;
+                    whole += dd == want;
+                    bad |= dd < 0 || dd > want;
+                }
             }
+            double share = (double)whole / (double)counted;
+            printf("%s (head weight %.1f): constant residual arrives whole (%d) on %.1f %% "
+                   "of the samples\n", names[k], k ? head_w[t] : 1.0, want, 100.0 * share);
+            CHECK_MSG(!bad, "%s: residual outside [0, %d]", names[k], want);
+            /* at a head change nothing is carried off the model's head;
+             * this barely trained model's renderer leaves much of its
+             * background below 236, and those pixels (about 40 % of the
+             * counted ones: 90 % arrive whole when they take the residual
+             * in place, as gaze changes do) count here and get 0 */
+            CHECK_MSG(share > (k == 0 ? 0.95 : want == 0 ? 0.999 : 0.45),
+                      "%s: whole on %.3f only", names[k], share);
         }
-        double share = (double)whole / (double)counted;
-        printf("%s: constant residual arrives whole on %.1f %% of the samples\n", names[k],
-               100.0 * share);
-        CHECK_MSG(!bad, "%s: residual outside [0, 20]", names[k]);
-        CHECK_MSG(share > (k == 0 ? 0.95 : 0.6), "%s: whole on %.3f only", names[k], share);
-    }
+    gs_model_render_options hro;
+    gs_model_render_options_default(&hro);
+    CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_OK);
+    hro.transfer_head_weight = 1.5;
+    CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_ERR_ARG);
+    hro.transfer_head_weight = NAN;
+    CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_ERR_ARG);
+    gs_model_render_options_default(&hro);
 
     /* The kept own view follows the subject, the context's resets and
      * other renders in between; a fresh context agrees; 2 threads too. */

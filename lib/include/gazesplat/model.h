@@ -91,11 +91,17 @@ int gs_subject_decode(const uint8_t *buf, size_t len, gs_subject *s,
  * short or its code length is out of range (decode then says why). */
 size_t gs_subject_encoded_len(const uint8_t *buf, size_t len);
 
-/* A view to render: gaze in the head frame and head pose in the camera. */
+/* A view to render: gaze in the head frame and head pose in the camera.
+ * At another head pose the lights stay where they are in the camera, as a
+ * room's do when a person turns: the subject's light (fitted in its head
+ * frame) is turned into the view's head frame (docs/model.md, "Lights at
+ * another head pose"). light_on_head = 1 keeps the fitted light on the head
+ * instead, so the shading turns with it. */
 typedef struct gs_view {
     double gaze_pitch, gaze_yaw;
     int use_head;        /* 0: the subject's own head pose */
     double head_R[9], head_t[3];
+    int light_on_head;   /* 0 (default): lights fixed in the camera */
 } gs_view;
 
 gs_model_ctx *gs_model_ctx_create(const gs_model *m);
@@ -171,7 +177,14 @@ typedef struct gs_model_render_options {
     /* 1: every render from scratch: no incremental sweep, no cached face
      * stream (what a render costs with nothing to reuse). */
     int full;
+    /* gs_model_render_transfer at another head pose than the input's: the
+     * weight of the residual it carries there, [0, 1] (default
+     * GS_XFER_HEAD_WEIGHT_DEFAULT). At a head change only the skin's
+     * smoothed residual is carried (docs/model.md, "Detail transfer");
+     * 0 gives the plain render there. A gaze change always carries all. */
+    double transfer_head_weight;
 } gs_model_render_options;
+#define GS_XFER_HEAD_WEIGHT_DEFAULT 0.5
 void gs_model_render_options_default(gs_model_render_options *o);
 /* Takes effect from the next render; drops the context's kept renders.
  * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */
