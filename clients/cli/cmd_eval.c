@@ -27,7 +27,7 @@ const cli_command cli_eval_command = {
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
-    "                      [--transfer-head-weight W]\n"
+    "                      [--transfer-head-weight W] [--light-on-head]\n"
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
@@ -62,6 +62,9 @@ const cli_command cli_eval_command = {
     "  --transfer-head-weight W  the transfer method at another head pose:\n"
     "                    weight of the smoothed skin residual, 0..1\n"
     "                    (default 0.5; 0 = the model's render there)\n"
+    "  --light-on-head   model and transfer methods: at a head change keep\n"
+    "                    the fitted light on the head (default: the lights\n"
+    "                    stay in the camera, as in the ground truth)\n"
     "  --finetune N      after each fit, fine-tune a copy of the model on the\n"
     "                    input for N Adam steps (gs_model_finetune) and render\n"
     "                    that input's targets with it; fit time includes it\n"
@@ -83,7 +86,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_LOH, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -143,6 +146,7 @@ typedef struct evaluator {
     double prune_pct;           /* --prune P%: P; else 0 */
     long prune_k;               /* --prune K: K; else 0 */
     gs_model_render_options ro;
+    int light_on_head;    /* --light-on-head */
     eval_estimator *est;
     gs_pool *pool;
     int S, iters;
@@ -253,6 +257,7 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
     v.gaze_pitch = tscene->gaze_pitch;
     v.gaze_yaw = tscene->gaze_yaw;
     v.use_head = 1;
+    v.light_on_head = ev->light_on_head;
     memcpy(v.head_R, gt->labels.head_R, sizeof v.head_R);
     memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
     if (method == EVAL_MODEL) {
@@ -629,6 +634,7 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     info->feature_scale = ev->ro.feature_scale;
     info->full_render = ev->ro.full;
     info->transfer_head_weight = ev->ro.transfer_head_weight;
+    info->light_on_head = ev->light_on_head;
     return CLI_OK;
 }
 
@@ -697,7 +703,8 @@ static int run_eval(int argc, char **argv)
         {"--feature-scale", 1, NULL}, {"--full-render", 0, NULL},
         {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
-        {"--transfer-head-weight", 1, NULL}, {"--make-pairs", 1, NULL},
+        {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
+        {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -760,6 +767,7 @@ static int run_eval(int argc, char **argv)
         return cli_usage_error(cmd, "--transfer-head-weight: want a number "
                                "in [0, 1]; got '%s'", o[O_XHW].value);
     ev.ro.transfer_head_weight = xhw;
+    ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
                                  &ev.fo)))
         return rc;

@@ -204,6 +204,10 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                 info->full_render ? "every render from scratch "
                                     "(--full-render)"
                                   : "incremental where possible");
+    if (info->n_face > 0)
+        fprintf(f, "- lights at another head pose: %s\n",
+                info->light_on_head ? "kept on the head (--light-on-head)"
+                                    : "kept in the camera, as in the ground truth");
     int has_transfer = 0;
     for (int k = 0; k < nmethods; k++)
         has_transfer |= methods[k] == EVAL_TRANSFER;
