@@ -71,6 +71,17 @@ usage_x redirect --model m.safetensors --subject plain.bin --transfer --gaze-deg
 usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --gaze-deg "0,0" --out x
 grep -q "both only with --transfer" ux.err || { cat ux.err; fail "transfer usage message"; }
 
+# Lights at another head pose: --light-on-head changes the turned render
+# (the library test checks what), and goes with --head-deg only.
+"$G" redirect --model m.safetensors --subject plain.bin \
+  --gaze-deg "0,0;10,-15" --head-deg 5,10 --light-on-head --out o_xl >/dev/null 2>&1
+for k in 000 001; do
+  [ -s o_xl/$k.png ] || fail "missing o_xl/$k.png"
+  ! cmp -s o_xl/$k.png o_xp/$k.png || fail "--light-on-head render $k equals the default one"
+done
+usage_x redirect --model m.safetensors --subject plain.bin --light-on-head --gaze-deg "0,0" --out x
+grep -q "light-on-head goes with --head-deg" ux.err || { cat ux.err; fail "light usage message"; }
+
 # Refused, with a message and no output: a truncated file, a flipped
 # byte, a block tuned from another model.
 refuse() { # name file want-message
