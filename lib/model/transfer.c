@@ -599,6 +599,25 @@ static int residual(gs_xfer *x, const uint8_t *input, size_t in_stride)
     return 0;
 }
 
+/* One pass of a 1D filter w[0..2r] over an S x S plane, edges clamped:
+ * along rows (step 1) or columns (step S). */
+static void filter_pass(const float *in, float *out, int S, const float *w,
+                        int r, int step)
+{
+    int col = step == 1;
+    for (int y = 0; y < S; y++)
+        for (int c = 0; c < S; c++) {
+            int at = col ? c : y;
+            const float *base = in + (col ? (size_t)y * S : (size_t)c);
+            float v = 0.0f;
+            for (int j = -r; j <= r; j++) {
+                int q = at + j < 0 ? 0 : at + j >= S ? S - 1 : at + j;
+                v += w[j + r] * base[(size_t)q * step];
+            }
+            out[(size_t)y * S + c] = v;
+        }
+}
+
 /* res smoothed by a Gaussian of sigma GS_XFER_HEAD_SIGMA (scaled to the
  * image size), separable, edges clamped; once per input. */
 static int smooth_residual(gs_xfer *x)
@@ -622,26 +641,8 @@ static int smooth_residual(gs_xfer *x)
     for (int j = 0; j <= 2 * r; j++)
         w[j] = (float)(w[j] / sum);
     for (int k = 0; k < 3; k++) {
-        const float *a = x->cur.res + k * px;
-        float *o = x->cur.res_smooth + k * px;
-        for (int y = 0; y < S; y++)
-            for (int c = 0; c < S; c++) {
-                float v = 0.0f;
-                for (int j = -r; j <= r; j++) {
-                    int q = c + j < 0 ? 0 : c + j >= S ? S - 1 : c + j;
-                    v += w[j + r] * a[(size_t)y * S + q];
-                }
-                tmp[(size_t)y * S + c] = v;
-            }
-        for (int y = 0; y < S; y++)
-            for (int c = 0; c < S; c++) {
-                float v = 0.0f;
-                for (int j = -r; j <= r; j++) {
-                    int q = y + j < 0 ? 0 : y + j >= S ? S - 1 : y + j;
-                    v += w[j + r] * tmp[(size_t)q * S + c];
-                }
-                o[(size_t)y * S + c] = v;
-            }
+        filter_pass(x->cur.res + k * px, tmp, S, w, r, 1);
+        filter_pass(tmp, x->cur.res_smooth + k * px, S, w, r, S);
     }
     free(w);
     free(tmp);
