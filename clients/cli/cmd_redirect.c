@@ -57,7 +57,7 @@ const cli_command cli_redirect_command = {
     "usage: gazesplat redirect --model M (--subject S.bin | --image IMG)\n"
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
     "                          [--head-deg P,Y [--light-on-head]] [--index I]\n"
-    "                          [--out-norm]\n"
+    "                          [--out-norm] [--transfer-head-weight W]\n"
     "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
     "                          [--finetune-plateau R]]\n"
@@ -85,6 +85,9 @@ const cli_command cli_redirect_command = {
     "                   the shading changes as the head turns\n"
     "  --light-on-head  (with --head-deg) keep the fitted light on the head\n"
     "                   instead: the shading turns with it\n"
+    "  --transfer-head-weight W  (with --transfer and --head-deg) weight of\n"
+    "                   the smoothed skin residual carried to the new head\n"
+    "                   pose, 0..1 (0.5; 0 = the model's render there)\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
 };
@@ -453,15 +456,15 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[15] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[16] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
                      {"--iters", 1, NULL},    {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
                      {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
-                     {"--light-on-head", 0, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 15);
+                     {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 16);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -478,6 +481,14 @@ static int run_redirect(int argc, char **argv)
         return cli_usage_error(cmd, "--transfer needs the input face: --image");
     if (o[14].value && !o[5].value)
         return cli_usage_error(cmd, "--light-on-head goes with --head-deg");
+    float head_w = (float)GS_XFER_HEAD_WEIGHT_DEFAULT;
+    if (o[15].value && (!transfer || !o[5].value))
+        return cli_usage_error(cmd, "--transfer-head-weight goes with --transfer "
+                                    "and --head-deg");
+    if (o[15].value && (cli_parse_floats(o[15].value, &head_w, 1) ||
+                        !(head_w >= 0.0f && head_w <= 1.0f)))
+        return cli_usage_error(cmd, "--transfer-head-weight: want a number in "
+                                    "[0, 1]; got '%s'", o[15].value);
     /* Parse every target before any work. */
     enum { MAXT = 256 };
     double tg[MAXT][2];
@@ -533,6 +544,13 @@ static int run_redirect(int argc, char **argv)
             photo = probe.width != mi.image_size ||
                     probe.height != mi.image_size || o[6].value;
         gs_io_image_free(&probe);
+        if (photo && o[5].value) {
+            gs_pool_destroy(pool);
+            gs_model_destroy(m);
+            return cli_usage_error(cmd, "--head-deg needs a normalized face of "
+                                        "the model's size; a photo keeps its "
+                                        "head pose (only the gaze changes)");
+        }
         if (photo) {
             if (!make_dir(o[4].value))
                 rc = cli_fail(cmd, "cannot create %s", o[4].value);
@@ -555,6 +573,16 @@ static int run_redirect(int argc, char **argv)
     gs_model_info info;
     gs_model_get_info(m, &info);
     gs_model_ctx *c = rc ? NULL : gs_model_ctx_create(tuned ? tuned : m);
+    if (!rc && !c)
+        rc = cli_fail(cmd, "out of memory");
+    if (!rc && o[15].value) {
+        gs_model_render_options ro;
+        gs_model_render_options_default(&ro);
+        ro.transfer_head_weight = head_w;
+        gs_error err = {0, ""};
+        if (gs_model_ctx_set_render_options(c, &ro, &err))
+            rc = cli_fail(cmd, "--transfer-head-weight: %s", err.msg);
+    }
     gs_io_image img = {info.image_size, info.image_size,
                        3 * (size_t)info.image_size, NULL};
     img.data = malloc(img.stride * (size_t)img.height);

@@ -82,6 +82,26 @@ done
 usage_x redirect --model m.safetensors --subject plain.bin --light-on-head --gaze-deg "0,0" --out x
 grep -q "light-on-head goes with --head-deg" ux.err || { cat ux.err; fail "light usage message"; }
 
+# The transfer's head weight: 0 gives the plain render at the new head pose,
+# byte for byte; it needs --transfer and --head-deg, and a number in [0, 1].
+"$G" redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0;10,-15" --head-deg 5,10 --transfer-head-weight 0 --out o_xw0 >/dev/null 2>&1
+"$G" redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0;10,-15" --head-deg 5,10 --transfer-head-weight 1 --out o_xw1 >/dev/null 2>&1
+for k in 000 001; do
+  cmp o_xw0/$k.png o_xp/$k.png || fail "head weight 0: render $k is not the plain one"
+  ! cmp -s o_xw1/$k.png o_xs/$k.png || fail "head weight 1: render $k equals weight 0.5"
+done
+usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0" --transfer-head-weight 0.5 --out x
+grep -q "goes with --transfer and --head-deg" ux.err || { cat ux.err; fail "head weight usage"; }
+usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0" --head-deg 5,10 --transfer-head-weight 2 --out x
+"$G" synth --out ds2 --count 1 --seed-split test --identities 1 --size 160 --threads 2 >/dev/null 2>&1
+usage_x redirect --model m.safetensors --image ds2/images/00000000.png --gaze-deg "0,0" \
+  --head-deg 5,10 --out x
+grep -q "head-deg needs a normalized face" ux.err || { cat ux.err; fail "photo head usage"; }
+
 # Refused, with a message and no output: a truncated file, a flipped
 # byte, a block tuned from another model.
 refuse() { # name file want-message
