@@ -59,7 +59,6 @@ typedef struct xfer_subj {
     int valid;
     gs_subject key;
     int key_fs, key_full;
-    float key_head_w;
     uint8_t *src8;                 /* [S, S, 3] */
     float *src_z, *src_a, *src_e;  /* [S*S] depth mm, coverage, eye */
     double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
@@ -507,7 +506,7 @@ static int subj_matches(const gs_model_ctx *c, const xfer_subj *u,
                         const gs_subject *s)
 {
     return u->valid && same_subject(&u->key, s) && u->key_fs == c->render_fs &&
-           u->key_full == c->render_full && u->key_head_w == c->xfer_head_w;
+           u->key_full == c->render_full;
 }
 
 static void subj_swap(xfer_subj *a, xfer_subj *b)
@@ -573,7 +572,6 @@ static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     x->cur.key = *s;
     x->cur.key_fs = c->render_fs;
     x->cur.key_full = c->render_full;
-    x->cur.key_head_w = c->xfer_head_w;
     x->cur.valid = 1;
     return GS_OK;
 }
@@ -604,11 +602,11 @@ static int residual(gs_xfer *x, const uint8_t *input, size_t in_stride)
 static void filter_pass(const float *in, float *out, int S, const float *w,
                         int r, int step)
 {
-    int col = step == 1;
+    int along_rows = step == 1;
     for (int y = 0; y < S; y++)
         for (int c = 0; c < S; c++) {
-            int at = col ? c : y;
-            const float *base = in + (col ? (size_t)y * S : (size_t)c);
+            int at = along_rows ? c : y;
+            const float *base = in + (along_rows ? (size_t)y * S : (size_t)c);
             float v = 0.0f;
             for (int j = -r; j <= r; j++) {
                 int q = at + j < 0 ? 0 : at + j >= S ? S - 1 : at + j;
