@@ -28,6 +28,7 @@ const cli_command cli_eval_command = {
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
+    "                      [--transfer-eye-weight W]\n"
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
@@ -62,6 +63,10 @@ const cli_command cli_eval_command = {
     "  --transfer-head-weight W  the transfer method at another head pose:\n"
     "                    weight of the smoothed skin residual, 0..1\n"
     "                    (default 0.5; 0 = the model's render there)\n"
+    "  --transfer-eye-weight W  the transfer method at another gaze: weight\n"
+    "                    of the eyeball residual once the eye has turned a\n"
+    "                    few degrees, 0..1 (default 0.5; all of it at the\n"
+    "                    input's own gaze)\n"
     "  --light-on-head   model and transfer methods: at a head change keep\n"
     "                    the fitted light on the head (default: the lights\n"
     "                    stay in the camera, as in the ground truth)\n"
@@ -86,7 +91,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_LOH, O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_LOH, O_XEW, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -634,6 +639,7 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     info->feature_scale = ev->ro.feature_scale;
     info->full_render = ev->ro.full;
     info->transfer_head_weight = ev->ro.transfer_head_weight;
+    info->transfer_eye_weight = ev->ro.transfer_eye_weight;
     info->light_on_head = ev->light_on_head;
     return CLI_OK;
 }
@@ -704,7 +710,7 @@ static int run_eval(int argc, char **argv)
         {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
         {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
-        {"--make-pairs", 1, NULL},
+        {"--transfer-eye-weight", 1, NULL}, {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -767,6 +773,12 @@ static int run_eval(int argc, char **argv)
         return cli_usage_error(cmd, "--transfer-head-weight: want a number "
                                "in [0, 1]; got '%s'", o[O_XHW].value);
     ev.ro.transfer_head_weight = xhw;
+    float xew = (float)GS_XFER_EYE_WEIGHT_DEFAULT;
+    if (o[O_XEW].value && (cli_parse_floats(o[O_XEW].value, &xew, 1) ||
+                           !(xew >= 0.0f && xew <= 1.0f)))
+        return cli_usage_error(cmd, "--transfer-eye-weight: want a number "
+                               "in [0, 1]; got '%s'", o[O_XEW].value);
+    ev.ro.transfer_eye_weight = xew;
     ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
                                  &ev.fo)))

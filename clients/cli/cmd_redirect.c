@@ -58,6 +58,7 @@ const cli_command cli_redirect_command = {
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
     "                          [--head-deg P,Y [--light-on-head]] [--index I]\n"
     "                          [--out-norm] [--transfer-head-weight W]\n"
+    "                          [--transfer-eye-weight W]\n"
     "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
     "                          [--finetune-plateau R]]\n"
@@ -88,6 +89,10 @@ const cli_command cli_redirect_command = {
     "  --transfer-head-weight W  (with --transfer and --head-deg) weight of\n"
     "                   the smoothed skin residual carried to the new head\n"
     "                   pose, 0..1 (0.5; 0 = the model's render there)\n"
+    "  --transfer-eye-weight W  (with --transfer) weight of the eyeball\n"
+    "                   residual once the eye has turned a few degrees from\n"
+    "                   the input's gaze, 0..1 (0.5; all of it at the\n"
+    "                   input's own gaze, reached smoothly)\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
 };
@@ -456,15 +461,16 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[16] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[17] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
                      {"--iters", 1, NULL},    {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
                      {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
-                     {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 16);
+                     {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
+                     {"--transfer-eye-weight", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 17);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -489,6 +495,13 @@ static int run_redirect(int argc, char **argv)
                         !(head_w >= 0.0f && head_w <= 1.0f)))
         return cli_usage_error(cmd, "--transfer-head-weight: want a number in "
                                     "[0, 1]; got '%s'", o[15].value);
+    float eye_w = (float)GS_XFER_EYE_WEIGHT_DEFAULT;
+    if (o[16].value && !transfer)
+        return cli_usage_error(cmd, "--transfer-eye-weight goes with --transfer");
+    if (o[16].value && (cli_parse_floats(o[16].value, &eye_w, 1) ||
+                        !(eye_w >= 0.0f && eye_w <= 1.0f)))
+        return cli_usage_error(cmd, "--transfer-eye-weight: want a number in "
+                                    "[0, 1]; got '%s'", o[16].value);
     /* Parse every target before any work. */
     enum { MAXT = 256 };
     double tg[MAXT][2];
@@ -575,13 +588,14 @@ static int run_redirect(int argc, char **argv)
     gs_model_ctx *c = rc ? NULL : gs_model_ctx_create(tuned ? tuned : m);
     if (!rc && !c)
         rc = cli_fail(cmd, "out of memory");
-    if (!rc && o[15].value) {
+    if (!rc && (o[15].value || o[16].value)) {
         gs_model_render_options ro;
         gs_model_render_options_default(&ro);
         ro.transfer_head_weight = head_w;
+        ro.transfer_eye_weight = eye_w;
         gs_error err = {0, ""};
         if (gs_model_ctx_set_render_options(c, &ro, &err))
-            rc = cli_fail(cmd, "--transfer-head-weight: %s", err.msg);
+            rc = cli_fail(cmd, "transfer weights: %s", err.msg);
     }
     gs_io_image img = {info.image_size, info.image_size,
                        3 * (size_t)info.image_size, NULL};

@@ -215,6 +215,10 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
         fprintf(f, "- transfer at another head pose: smoothed skin residual "
                    "x %.3g (--transfer-head-weight)\n",
                 info->transfer_head_weight);
+    if (has_transfer)
+        fprintf(f, "- transfer at another gaze: eyeball residual x %.3g once "
+                   "the eye has turned a few degrees (--transfer-eye-weight)\n",
+                info->transfer_eye_weight);
     if (info->ft_iters > 0) {
         static const char *pn[] = {"face", "eye", "renderer", "mlp", "geometry"};
         char parts[64] = "";

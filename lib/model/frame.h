@@ -122,6 +122,7 @@ struct gs_model_ctx {
     int render_fs;
     int render_full;
     float xfer_head_w; /* transfer_head_weight (render options) */
+    float xfer_eye_w;  /* transfer_eye_weight (render options) */
     int face_map_fs;                  /* the size fmap_face was made at */
     int last_inc;
     float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */

@@ -21,6 +21,14 @@
  * the residual is taken in place. The subject's own view thus gives the
  * input back, and a zero residual gives the plain render.
  *
+ * The model's eyeball is not the input's (its iris is drawn a little off
+ * in place, size and colour), so the more the eye turns, the less of the
+ * input's eyeball residual lands where the target's iris is: an eyeball
+ * whose rotation from the input's gaze is theta degrees carries it times
+ * W + (1 - W) exp(-(theta / GS_XFER_EYE_FALLOFF_DEG)^2), W the context's
+ * transfer_eye_weight: all of it at the input's gaze (the input comes
+ * back), W once the eye has turned a few degrees, and no jump between.
+ *
  * At another head pose the model's geometry places the input's detail a
  * pixel or two off, and the input's shading was lit at the old pose: a
  * head change carries only the skin residual's smooth part (Gaussian,
@@ -48,6 +56,9 @@
 #define GS_XFER_ON_HEAD 0.5f
 /* Eyeball-ness of a pixel: its eye-stream coverage times this, at most 1. */
 #define GS_XFER_EYE_GAIN 4.0f
+/* Gaze turn (degrees) over which an eyeball's residual weight falls from
+ * 1 to the context's transfer_eye_weight. */
+#define GS_XFER_EYE_FALLOFF_DEG 5.0
 /* Smoothing of the residual carried to another head pose, px at 256 px
  * (scaled with the image size). */
 #define GS_XFER_HEAD_SIGMA 2.0
@@ -372,8 +383,18 @@ typedef struct {
     const double *Rt, *tt, *Rs, *ts; /* head poses: target, input */
     double eM[2][9];      /* per eye: R_e,s R_e,t^T (head frame) */
     int same_pose;
+    float eye_w[2];       /* weight of each eyeball's residual */
     float head_w;         /* weight of the smoothed residual (head change) */
 } xfer_geom;
+
+/* The weight of an eyeball's residual after a turn by M (the header). */
+static float eye_weight(const double M[9], double floor_w)
+{
+    double ct = 0.5 * (M[0] + M[4] + M[8] - 1.0);
+    double deg = acos(ct > 1 ? 1 : ct < -1 ? -1 : ct) * (180.0 / 3.14159265358979323846);
+    double r = deg / GS_XFER_EYE_FALLOFF_DEG;
+    return (float)(floor_w + (1.0 - floor_w) * exp(-r * r));
+}
 
 static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
                       const double Rs[9], const double ts[3],
@@ -386,6 +407,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
         double tT[9];
         gs_geom_mat3_transpose(x->tgt_eR[e], tT);
         gs_geom_mat3_mul(x->cur.src_eR[e], tT, g->eM[e]);
+        g->eye_w[e] = eye_weight(g->eM[e], c->xfer_eye_w);
     }
     g->same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
                    !memcmp(ts, tt, 3 * sizeof(double));
@@ -486,7 +508,7 @@ static float eye_source(const gs_xfer *x, const xfer_geom *g,
     for (int k = 0; k < 3; k++)
         hs[k] += x->cur.src_ec[e][k];
     input_point(g, hs, Xs);
-    return seen_by_input(x, g, Xs, 1, b, u, v);
+    return g->eye_w[e] * seen_by_input(x, g, Xs, 1, b, u, v);
 }
 
 static int check_image(const uint8_t *p, size_t stride, int S, const char *what,

@@ -144,6 +144,8 @@ static void usage_errors(const char *model, const char *pairs)
         {"--feature-scale", "nan"},
         {"--transfer-head-weight", "1.5"}, {"--transfer-head-weight", "-0.1"},
         {"--transfer-head-weight", "nan"},
+        {"--transfer-eye-weight", "1.5"}, {"--transfer-eye-weight", "-0.1"},
+        {"--transfer-eye-weight", "nan"},
         {"--feature-scale", "0.1"}, /* 3 of the tiny model's 32 px */
         {"--finetune", "0"},        {"--finetune", "-3"},
         {"--finetune-parts", "face"}, /* without --finetune N */
@@ -275,7 +277,8 @@ int main(int argc, char **argv)
     CHECK_MSG(sum && strstr(sum, "| transfer |") &&
                   strstr(sum, "diverged fits 0, errors 0, non-finite outputs 0") &&
                   strstr(sum, "lights at another head pose: kept in the camera") &&
-                  strstr(sum, "smoothed skin residual x 0.5") && !strstr(sum, "nan"),
+                  strstr(sum, "smoothed skin residual x 0.5") &&
+                  strstr(sum, "eyeball residual x 0.5 once") && !strstr(sum, "nan"),
               "%s", sum ? sum : "");
     /* Render settings on run 2's fits: 100 % and scale 1 are the normal
      * path (same numbers); pruned, coarse and full renders stay finite. */

@@ -97,6 +97,19 @@ usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transf
 grep -q "goes with --transfer and --head-deg" ux.err || { cat ux.err; fail "head weight usage"; }
 usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
   --gaze-deg "0,0" --head-deg 5,10 --transfer-head-weight 2 --out x
+# The transfer's eye weight: at the input's own gaze the input comes back
+# at any weight; after a turn, weight 1 differs from the default 0.5; it
+# needs --transfer and a number in [0, 1] (the library test checks what).
+"$G" redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0;10,-15" --transfer-eye-weight 1 --out o_xe1 >/dev/null 2>&1
+"$G" redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0;10,-15" --out o_xe >/dev/null 2>&1
+! cmp -s o_xe1/001.png o_xe/001.png || fail "eye weight 1: the turned render equals weight 0.5"
+usage_x redirect --model m.safetensors --image $IMG \
+  --gaze-deg "0,0" --transfer-eye-weight 0.5 --out x
+grep -q "transfer-eye-weight goes with --transfer" ux.err || { cat ux.err; fail "eye weight usage"; }
+usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0" --transfer-eye-weight -1 --out x
 "$G" synth --out ds2 --count 1 --seed-split test --identities 1 --size 160 --threads 2 >/dev/null 2>&1
 usage_x redirect --model m.safetensors --image ds2/images/00000000.png --gaze-deg "0,0" \
   --head-deg 5,10 --out x

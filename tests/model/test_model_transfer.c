@@ -360,7 +360,7 @@ int main(void)
 
     /* A constant residual of +20 (own view + 20): every output pixel is the
      * plain render plus at most 20 w, and most of the face gets all of it;
-     * w = 1 for a gaze change, the context's transfer head weight (the
+     * w = 1 for a gaze change (transfer eye weight 1), the context's transfer head weight (the
      * default 0.5, then 1 and 0) at another head pose. */
     for (size_t i = 0; i < isz; i++)
         a[i] = (uint8_t)(own[i] > 235 ? 255 : own[i] + 20);
@@ -370,6 +370,7 @@ int main(void)
             gs_model_render_options hro;
             gs_model_render_options_default(&hro);
             hro.transfer_head_weight = head_w[t];
+            hro.transfer_eye_weight = 1.0; /* the eyeballs' weight: below */
             CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_OK);
             int want = k ? (int)lround(20 * head_w[t]) : 20;
             render(c2, NULL, &sub[0], views[k], ref, S);
@@ -396,12 +397,72 @@ int main(void)
             CHECK_MSG(share > (k == 0 ? 0.95 : want == 0 ? 0.999 : 0.45),
                       "%s: whole on %.3f only", names[k], share);
         }
+    /* The eyeball residual after a gaze turn of about 20 degrees: all of
+     * it at transfer eye weight 1, none at 0, half at 0.5 (the default);
+     * the skin's is the same at every weight. Linear in the weight, so each
+     * sample at 0.5 is the mean of the other two, to rounding. */
+    {
+        const double ew[3] = {1.0, GS_XFER_EYE_WEIGHT_DEFAULT, 0.0};
+        uint8_t *o3[3] = {out, b, ref};
+        uint8_t *pl = malloc(isz);
+        render(c2, NULL, &sub[0], &v_gaze, pl, S);
+        for (int t = 0; t < 3; t++) {
+            gs_model_render_options ero;
+            gs_model_render_options_default(&ero);
+            ero.transfer_eye_weight = ew[t];
+            CHECK(gs_model_ctx_set_render_options(c, &ero, &err) == GS_OK);
+            transfer(c, NULL, &sub[0], a, &v_gaze, o3[t], S);
+        }
+        size_t eye_px = 0, skin_px = 0;
+        int bad_mid = 0, bad_skin = 0;
+        for (size_t i = 0; i < isz; i++) {
+            if (pl[i] > 235 || own[i] > 235)
+                continue;
+            int d1 = out[i] - pl[i], dh = b[i] - pl[i], d0 = ref[i] - pl[i];
+            bad_mid |= abs(2 * dh - d1 - d0) > 2;
+            if (d1 == 20 && d0 == 0)
+                eye_px++;
+            if (d1 == d0) {
+                skin_px++;
+                bad_skin |= dh != d1;
+            }
+        }
+        printf("gaze turn: eyeball residual whole at eye weight 1 and none at 0 on %zu "
+               "samples; half at %.1f; skin unchanged on %zu\n",
+               eye_px, GS_XFER_EYE_WEIGHT_DEFAULT, skin_px);
+        CHECK_MSG(!bad_mid, "eye weight 0.5 is not the mean of 1 and 0");
+        CHECK_MSG(!bad_skin, "eye weight changed the skin's residual");
+        CHECK_MSG(eye_px >= 30, "only %zu eyeball samples", eye_px);
+        /* the input's own gaze gives the input back at any weight, and a
+         * turn of 0.2 degrees is within rounding of weight 1: no jump */
+        transfer(c, NULL, &sub[0], noise, &v_own, out, S);
+        d = max_diff(out, noise, isz);
+        CHECK_MSG(d <= 1, "eye weight 0, own view of noise: input back within 1, got %d", d);
+        gs_view v_tiny = v_own;
+        v_tiny.gaze_yaw += 0.2 * 3.14159265358979323846 / 180.0;
+        transfer(c, NULL, &sub[0], a, &v_tiny, out, S);
+        gs_model_render_options one;
+        gs_model_render_options_default(&one);
+        one.transfer_eye_weight = 1.0;
+        CHECK(gs_model_ctx_set_render_options(c, &one, &err) == GS_OK);
+        transfer(c, NULL, &sub[0], a, &v_tiny, b, S);
+        d = max_diff(out, b, isz);
+        CHECK_MSG(d <= 1, "0.2 degree turn: eye weights 0 and 1 differ by %d", d);
+        printf("eye weight 0: own view gives the input back; 0.2 degree turn within %d "
+               "of weight 1\n", d);
+        free(pl);
+    }
     gs_model_render_options hro;
     gs_model_render_options_default(&hro);
     CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_OK);
     hro.transfer_head_weight = 1.5;
     CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_ERR_ARG);
     hro.transfer_head_weight = NAN;
+    CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_ERR_ARG);
+    gs_model_render_options_default(&hro);
+    hro.transfer_eye_weight = -0.5;
+    CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_ERR_ARG);
+    hro.transfer_eye_weight = NAN;
     CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_ERR_ARG);
     gs_model_render_options_default(&hro);
 

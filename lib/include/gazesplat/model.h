@@ -181,10 +181,17 @@ typedef struct gs_model_render_options {
      * weight of the residual it carries there, [0, 1] (default
      * GS_XFER_HEAD_WEIGHT_DEFAULT). At a head change only the skin's
      * smoothed residual is carried (docs/model.md, "Detail transfer");
-     * 0 gives the plain render there. A gaze change always carries all. */
+     * 0 gives the plain render there. */
     double transfer_head_weight;
+    /* gs_model_render_transfer at another gaze: the weight, [0, 1]
+     * (default GS_XFER_EYE_WEIGHT_DEFAULT), of the eyeball residual that
+     * turns with the eye, reached smoothly from 1 at the input's own gaze
+     * (docs/model.md, "Detail transfer"). The skin always carries all of
+     * its residual at the input's head pose. */
+    double transfer_eye_weight;
 } gs_model_render_options;
 #define GS_XFER_HEAD_WEIGHT_DEFAULT 0.5
+#define GS_XFER_EYE_WEIGHT_DEFAULT 0.5
 void gs_model_render_options_default(gs_model_render_options *o);
 /* Takes effect from the next render; drops the context's kept renders.
  * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */
