@@ -137,7 +137,7 @@ int cli_parse_size(const char *s, int max, int *w, int *h)
 }
 
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
-                       const char *plateau, gs_finetune_options *fo)
+                       const char *plateau, const char *outline, gs_finetune_options *fo)
 {
     gs_finetune_options_default(fo);
     fo->iters = 0;
@@ -162,9 +162,15 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
             return cli_usage_error(cmd, "--finetune-plateau: want a fraction in (0, 1)");
         fo->plateau_rel = x;
     }
-    if ((parts || lr || plateau) && !n)
-        return cli_usage_error(cmd, "--finetune-parts, --finetune-lr and --finetune-plateau go "
-                               "with --finetune N");
+    if (outline) {
+        long v;
+        if (cli_parse_long(outline, 0, 8, &v))
+            return cli_usage_error(cmd, "--finetune-outline: want 0..8 feature pixels");
+        fo->outline_px = (int)v;
+    }
+    if ((parts || lr || plateau || outline) && !n)
+        return cli_usage_error(cmd, "--finetune-parts, --finetune-lr, --finetune-plateau and "
+                               "--finetune-outline go with --finetune N");
     return CLI_OK;
 }
 

@@ -67,11 +67,13 @@ int cli_parse_long(const char *s, long lo, long hi, long *out);
 int cli_parse_size(const char *s, int max, int *w, int *h);
 
 /* --finetune N, --finetune-parts LIST, --finetune-lr X, --finetune-plateau
- * R (any may be NULL) into fo: fo->iters 0 when N is absent. The others
- * without N are a usage error. Returns CLI_OK or CLI_USAGE (reported). */
+ * R, --finetune-outline PX (any may be NULL) into fo: fo->iters 0 when N
+ * is absent. The others without N are a usage error. Returns CLI_OK or
+ * CLI_USAGE (reported). */
 struct gs_finetune_options;
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
-                       const char *plateau, struct gs_finetune_options *fo);
+                       const char *plateau, const char *outline,
+                       struct gs_finetune_options *fo);
 
 /* CLOCK_MONOTONIC in seconds. */
 double cli_now_s(void);

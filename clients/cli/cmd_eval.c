@@ -31,6 +31,7 @@ const cli_command cli_eval_command = {
     "                      [--transfer-eye-weight W]\n"
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
+    "                      [--finetune-outline PX]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N] [--split S]\n"
     "\n"
@@ -80,6 +81,9 @@ const cli_command cli_eval_command = {
     "  --finetune-eye-weight W  weight of the input's eye region in the\n"
     "                    fine-tuning loss, 0..1 (default 1; 0 leaves the\n"
     "                    eyes to the shared model)\n"
+    "  --finetune-outline PX  colours learn nothing within PX feature pixels\n"
+    "                    of the model's outline, only the geometry (0..8,\n"
+    "                    default 0)\n"
     "  --make-pairs FILE write a pairing: --identities held-out identities\n"
     "                    (15) x --inputs scenes each (10) x --targets (10),\n"
     "                    --seed (1); deterministic. --split test (default)\n"
@@ -91,7 +95,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_LOH, O_XEW, O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_LOH, O_XEW, O_FT_OUTLINE, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -710,7 +714,8 @@ static int run_eval(int argc, char **argv)
         {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
         {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
-        {"--transfer-eye-weight", 1, NULL}, {"--make-pairs", 1, NULL},
+        {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
+        {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -781,6 +786,7 @@ static int run_eval(int argc, char **argv)
     ev.ro.transfer_eye_weight = xew;
     ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
+                                 o[O_FT_OUTLINE].value,
                                  &ev.fo)))
         return rc;
     ev.ft_eye_w = 1.0;
@@ -812,5 +818,6 @@ static int run_eval(int argc, char **argv)
     info.ft_parts = ev.fo.parts;
     info.ft_lr = ev.fo.lr;
     info.ft_eye_w = ev.ft_eye_w;
+    info.ft_outline = ev.fo.outline_px;
     return run_checked(o, &ev, limit, threads, &info);
 }

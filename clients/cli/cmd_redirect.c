@@ -23,7 +23,8 @@ const cli_command cli_fit_command = {
     "usage: gazesplat fit --model M --image FACE.png --out SUBJECT.bin\n"
     "                     [--gaze-deg P,Y] [--iters N] [--time S]\n"
     "                     [--finetune N [--finetune-parts LIST]\n"
-    "                      [--finetune-lr X] [--finetune-plateau R]]\n"
+    "                      [--finetune-lr X] [--finetune-plateau R]\n"
+    "                      [--finetune-outline PX]]\n"
     "\n"
     "  --model FILE     a model file (gazesplat train)\n"
     "  --image FILE     a normalized face image (PNG/JPEG) of the model's\n"
@@ -44,6 +45,10 @@ const cli_command cli_fit_command = {
     "  --finetune-plateau R  stop fine-tuning when the loss improved by less\n"
     "                   than the fraction R over 20 steps (default: never)\n"
     "                   (--time S bounds the fit and the fine-tuning together)\n"
+    "  --finetune-outline PX  colours learn nothing within PX feature pixels\n"
+    "                   (0..8, default 0) of the model's outline, only the\n"
+    "                   geometry: fewer background-coloured patches at other\n"
+    "                   head poses (2 for head-pose changes; docs/model.md)\n"
     "  --out FILE       the fitted subject (binary, gs_subject_encode),\n"
     "                   followed by the tuned block with --finetune\n"
     "                   (gs_model_tuned_encode; 3.4 MB for the default parts at cpu)\n"
@@ -61,7 +66,7 @@ const cli_command cli_redirect_command = {
     "                          [--transfer-eye-weight W]\n"
     "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
-    "                          [--finetune-plateau R]]\n"
+    "                          [--finetune-plateau R] [--finetune-outline PX]]\n"
     "\n"
     "  --image IMG      a normalized face of the model's size, fitted first;\n"
     "                   or any photo: its face (--index I, largest first) is\n"
@@ -221,13 +226,13 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
 static int run_fit(int argc, char **argv)
 {
     const cli_command *cmd = &cli_fit_command;
-    cli_opt o[11] = {{"--model", 1, NULL},    {"--image", 1, NULL},
+    cli_opt o[12] = {{"--model", 1, NULL},    {"--image", 1, NULL},
                      {"--mask", 1, NULL},     {"--gaze-deg", 1, NULL},
                      {"--iters", 1, NULL},    {"--time", 1, NULL},
                      {"--out", 1, NULL},      {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
-                     {"--finetune-plateau", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 11);
+                     {"--finetune-plateau", 1, NULL}, {"--finetune-outline", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 12);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -244,7 +249,8 @@ static int run_fit(int argc, char **argv)
                        !(budget > 0 && budget < 1e5)))
         return cli_usage_error(cmd, "--time: want seconds > 0");
     gs_finetune_options ft;
-    if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, o[10].value, &ft)))
+    if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, o[10].value,
+                                 o[11].value, &ft)))
         return rc;
     gs_model *m = NULL;
     if ((rc = load_model(cmd, o[0].value, &m)))
@@ -461,7 +467,7 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[17] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[18] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
@@ -469,8 +475,8 @@ static int run_redirect(int argc, char **argv)
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
                      {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
                      {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
-                     {"--transfer-eye-weight", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 17);
+                     {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 18);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -529,7 +535,8 @@ static int run_redirect(int argc, char **argv)
     if (o[5].value && cli_parse_floats(o[5].value, head, 2))
         return cli_usage_error(cmd, "--head-deg: want P,Y");
     gs_finetune_options ft;
-    if ((rc = cli_parse_finetune(cmd, o[9].value, o[10].value, o[11].value, o[12].value, &ft)))
+    if ((rc = cli_parse_finetune(cmd, o[9].value, o[10].value, o[11].value, o[12].value,
+                                 o[17].value, &ft)))
         return rc;
     if (ft.iters > 0 && o[1].value)
         return cli_usage_error(cmd, "--finetune goes with --image (a subject file "

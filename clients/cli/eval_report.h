@@ -55,6 +55,7 @@ typedef struct eval_run_info {
     int ft_iters;
     unsigned ft_parts;
     double ft_lr, ft_eye_w;
+    int ft_outline;             /* --finetune-outline PX */
     int ft_n;
     double ft_s, ft_psnr_first, ft_psnr_best;
 } eval_run_info;

@@ -786,6 +786,27 @@ static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
     return GS_OK;
 }
 
+/* Feature pixels within r of the outline of a coverage map [fs, fs]
+ * (coverage under 0.5 there) get 0, the rest 1 (gs_finetune_options.
+ * outline_px): the colours learn inside the model's own outline only. On
+ * the outline, the input's background may fall on Gaussians seen edge-on,
+ * which would take its colour over a surface that faces the camera at
+ * another head pose (docs/model.md, "Per-image fine-tuning"). */
+static void outline_mask(const float *alpha, int fs, int r, float *inner)
+{
+    for (int y = 0; y < fs; y++)
+        for (int x = 0; x < fs; x++) {
+            int in = 1;
+            for (int dy = -r; dy <= r && in; dy++)
+                for (int dx = -r; dx <= r && in; dx++) {
+                    int yy = y + dy, xx = x + dx;
+                    in = yy >= 0 && xx >= 0 && yy < fs && xx < fs &&
+                         alpha[yy * fs + xx] >= 0.5f;
+                }
+            inner[y * fs + x] = (float)in;
+        }
+}
+
 int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
                       const uint8_t *rgb, size_t stride,
                       const gs_finetune_options *opt,
@@ -808,6 +829,9 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
                             "finetune: lr %g (want <= 1), iterations %d "
                             "(<= 100000) or parts 0x%x out of range",
                             o.lr, o.iters, parts);
+    if (o.outline_px < 0 || o.outline_px > 8)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "finetune: outline %d px: want 0..8", o.outline_px);
     int rc = check_subject(m, s, err);
     if (rc)
         return rc;
@@ -840,8 +864,16 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     float psnr_first = NAN, psnr_best = NAN;
     double hist[20];
     int it = 0, stopped_on_time = 0, plateaued = 0;
-    for (; it <= iters; it++) {
+    float *inner = malloc((size_t)r.c->fs * r.c->fs * sizeof(float));
+    if (!inner)
+        rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
+    for (; !rc && it <= iters; it++) {
         rc = gs_frame_forward(r.c, pool, &fr, GS_STREAM_BOTH, 1, err);
+        if (!rc && it == 0 && o.outline_px > 0 &&
+            (parts & (GS_FT_FACE | GS_FT_EYE | GS_FT_MLP))) {
+            outline_mask(r.c->alpha, r.c->fs, o.outline_px, inner);
+            rc = gs_frame_set_feature_mask(r.c, inner, err);
+        }
         if (rc)
             break;
         double dg[3], db[3];
@@ -910,6 +942,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         report->stopped_on_plateau = plateaued;
     }
     ft_free(&r);
+    free(inner);
     free(fs);
     fit_bufs_free(&b);
     return rc;

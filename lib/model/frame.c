@@ -225,7 +225,8 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
                       &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,
                       &c->k_scale, &c->k_quat, &c->k_opac, &c->k_feat,
-                      &c->eye_w0, &c->eye_base, &c->eye_v};
+                      &c->eye_w0, &c->eye_base, &c->eye_v,
+                      &c->v_fmap_m, &c->v_fmap_face_m, &c->v_feat_keep};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(*bufs[i]);
     free(c->rgb8);
@@ -1430,12 +1431,44 @@ void gs_frame_clear_gaussian_grads(gs_model_ctx *c)
     memset(c->v_feat, 0, n * (size_t)c->C * sizeof(float));
 }
 
+int gs_frame_set_feature_mask(gs_model_ctx *c, const float *mask,
+                              gs_error *err)
+{
+    c->feat_mask = NULL;
+    if (!mask)
+        return GS_OK;
+    size_t fsz = (size_t)c->fs * c->fs * c->C;
+    int fail = 0;
+    if (!c->v_fmap_m)
+        c->v_fmap_m = falloc(fsz, &fail);
+    if (!c->v_fmap_face_m)
+        c->v_fmap_face_m = falloc(fsz, &fail);
+    if (!c->v_feat_keep)
+        c->v_feat_keep = falloc((size_t)c->n * c->C, &fail);
+    if (fail)
+        return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
+    c->feat_mask = mask;
+    return GS_OK;
+}
+
+/* dst = src with every channel's pixels outside the mask zeroed. */
+static void mask_map(const float *src, const float *mask, int C, size_t plane,
+                     float *dst)
+{
+    for (int k = 0; k < C; k++)
+        for (size_t i = 0; i < plane; i++)
+            dst[k * plane + i] = src[k * plane + i] * mask[i];
+}
+
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap, const float *d_fmap_face,
                       const float *d_fmap_eye, const gs_model_params *grads,
                       gs_frame_grad *fg, gs_error *err)
 {
     size_t fsz = (size_t)c->fs * c->fs * c->C;
+    if (c->feat_mask && d_fmap_eye)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "model: a feature mask with the eye-only map");
     if (grads) /* parameter gradients: training, the parameters change */
         sweep_drop(c);
     if (d_fmap)
@@ -1458,14 +1491,34 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         if (rc)
             return gs_error_set(err, rc, "model: renderer backward failed");
     }
-    gs_frame_clear_gaussian_grads(c);
     int first = c->stream == GS_STREAM_EYE ? c->nf : 0;
     gs_gaussian_grads gg = {c->v_mean + 3 * (size_t)first,
                             c->v_scale + 3 * (size_t)first,
                             c->v_quat + 4 * (size_t)first, c->v_opac + first,
                             c->v_feat + (size_t)first * c->C};
-    int rc = gs_raster_backward(c->raster, pool, c->v_fmap, NULL, NULL, &gg,
+    int rc;
+    if (c->feat_mask) { /* the features' gradient from the masked maps */
+        size_t plane = (size_t)c->fs * c->fs;
+        gs_frame_clear_gaussian_grads(c);
+        mask_map(c->v_fmap, c->feat_mask, c->C, plane, c->v_fmap_m);
+        rc = gs_raster_backward(c->raster, pool, c->v_fmap_m, NULL, NULL, &gg,
                                 NULL, err);
+        if (!rc && c->used_face_map) {
+            gs_gaussian_grads gf = {c->v_mean, c->v_scale, c->v_quat,
+                                    c->v_opac, c->v_feat};
+            mask_map(c->v_fmap_face, c->feat_mask, c->C, plane,
+                     c->v_fmap_face_m);
+            rc = gs_raster_backward(c->raster_face, pool, c->v_fmap_face_m,
+                                    NULL, NULL, &gf, NULL, err);
+        }
+        if (rc)
+            return rc;
+        memcpy(c->v_feat_keep, c->v_feat,
+               (size_t)c->n * c->C * sizeof(float));
+    }
+    gs_frame_clear_gaussian_grads(c);
+    rc = gs_raster_backward(c->raster, pool, c->v_fmap, NULL, NULL, &gg,
+                            NULL, err);
     if (rc)
         return rc;
     if (c->used_face_map) { /* the face-only map adds to the face stream */
@@ -1486,6 +1539,8 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         if (rc)
             return rc;
     }
+    if (c->feat_mask)
+        memcpy(c->v_feat, c->v_feat_keep, (size_t)c->n * c->C * sizeof(float));
     gs_frame_backward_streams(c, grads, fg);
     return GS_OK;
 }

@@ -72,6 +72,10 @@ struct gs_model_ctx {
     float *x_head;                    /* [n, 3] head-frame positions */
     float *q_head;                    /* [nf, 4] head-frame quaternions */
     float *v_mean, *v_scale, *v_quat, *v_opac, *v_feat;   /* their grads */
+    /* gs_frame_set_feature_mask: where the Gaussians' features (colours)
+     * take gradient, [fs, fs] 0/1 (NULL: everywhere), and its scratch */
+    const float *feat_mask;
+    float *v_fmap_m, *v_fmap_face_m, *v_feat_keep;
     /* raster + renderer */
     gs_raster *raster;
     /* SOURCE guidance (renderer.h): the face stream's own map is the
@@ -170,6 +174,14 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap, const float *d_fmap_face,
                       const float *d_fmap_eye, const gs_model_params *grads,
                       gs_frame_grad *fg, gs_error *err);
+
+/* Until called again with NULL, gs_frame_backward gives the Gaussians'
+ * features (colours: feat[k]) only the gradient of the feature-map pixels
+ * where mask [fs, fs] (kept by the caller) is 1; their positions, scales,
+ * rotations and opacities still take the whole map's. Costs one more
+ * rasterizer backward. GS_ERR_NOMEM when its scratch cannot be had. */
+int gs_frame_set_feature_mask(gs_model_ctx *c, const float *mask,
+                              gs_error *err);
 
 /* Renders a frame into c->rgb for display (no backward). When the model
  * allows it (SOURCE or no guidance, two streams) and the last render had

@@ -146,6 +146,7 @@ static void usage_errors(const char *model, const char *pairs)
         {"--transfer-head-weight", "nan"},
         {"--transfer-eye-weight", "1.5"}, {"--transfer-eye-weight", "-0.1"},
         {"--transfer-eye-weight", "nan"},
+        {"--finetune-outline", "1"}, /* without --finetune N */
         {"--feature-scale", "0.1"}, /* 3 of the tiny model's 32 px */
         {"--finetune", "0"},        {"--finetune", "-3"},
         {"--finetune-parts", "face"}, /* without --finetune N */
@@ -167,6 +168,8 @@ static void usage_errors(const char *model, const char *pairs)
                                {"--finetune-lr", "nan"},
                                {"--finetune-eye-weight", "1.5"},
                                {"--finetune-eye-weight", "-1"},
+                               {"--finetune-outline", "9"},
+                               {"--finetune-outline", "-1"},
                                {"--prune", "50%"}};
     for (size_t k = 0; k < sizeof bad_ft / sizeof bad_ft[0]; k++) {
         const char *args[] = {"eval", "--model", model, "--pairs", pairs,
@@ -326,11 +329,29 @@ int main(int argc, char **argv)
     double p0 = NAN, p1 = NAN;
     const char *ft = sum ? strstr(sum, "input PSNR ") : NULL;
     CHECK_MSG(sum && strstr(sum, "fine-tuned per input (--finetune 6, parts "
-                                 "face,geometry, rate 0.001, eye weight 0)") &&
+                                 "face,geometry, rate 0.001, eye weight 0, outline 0 px)") &&
                   strstr(sum, "non-finite outputs 0") && ft &&
                   sscanf(ft, "input PSNR %lf -> %lf", &p0, &p1) == 2,
               "%s", sum ? sum : "");
     CHECK_MSG(p1 > p0, "input PSNR %.2f -> %.2f", p0, p1);
+    /* --finetune-outline: other numbers, named in the summary */
+    const char *ev7[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", "--finetune", "6",
+                         "--finetune-eye-weight", "0", "--finetune-outline", "2", NULL};
+    CHECK_EQ_INT(run(ev7), 0);
+    char *e7 = check_csv(csv);
+    char *d7 = NULL;
+    CHECK_EQ_INT(run(ev6), 0);
+    d7 = check_csv(csv);
+    CHECK_MSG(e7 && d7 && strcmp(e7, d7) != 0, "--finetune-outline 2 changed nothing");
+    free(e7);
+    free(d7);
+    free(sum);
+    CHECK_EQ_INT(run(ev7), 0);
+    sum = ev_slurp(md);
+    CHECK_MSG(sum && strstr(sum, "eye weight 0, outline 2 px)"), "%s", sum ? sum : "");
     free(a);
     free(b);
     free(sum);

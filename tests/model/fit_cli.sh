@@ -110,6 +110,17 @@ usage_x redirect --model m.safetensors --image $IMG \
 grep -q "transfer-eye-weight goes with --transfer" ux.err || { cat ux.err; fail "eye weight usage"; }
 usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
   --gaze-deg "0,0" --transfer-eye-weight -1 --out x
+# --finetune-outline: another tuned block than without it (the library
+# test checks what it changes); 0..8 and with --finetune N only.
+"$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 5 --finetune-outline 2 \
+  --out face_ol.bin >/dev/null 2>&1
+[ -s face_ol.bin ] || fail "fit --finetune-outline wrote nothing"
+! cmp -s face_ol.bin face.bin || fail "--finetune-outline 2 gave the same subject"
+usage_x fit --model m.safetensors --image $IMG --finetune-outline 1 --out x.bin
+grep -q "go with --finetune N" ux.err || { cat ux.err; fail "outline usage message"; }
+usage_x fit --model m.safetensors --image $IMG --finetune 2 --finetune-outline 9 --out x.bin
+usage_x redirect --model m.safetensors --image $IMG --finetune 2 --finetune-outline -1 \
+  --gaze-deg "0,0" --out x
 "$G" synth --out ds2 --count 1 --seed-split test --identities 1 --size 160 --threads 2 >/dev/null 2>&1
 usage_x redirect --model m.safetensors --image ds2/images/00000000.png --gaze-deg "0,0" \
   --head-deg 5,10 --out x

@@ -45,6 +45,72 @@ static int is_tuned_default(const char *name)
     return 0;
 }
 
+/* Runs the last forward's backward from the maps D (merged) and D2 (face
+ * only) and copies the Gaussians' feature and position gradients out. */
+static void backward_from(gs_model_ctx *c, const float *d, const float *d2,
+                          float *v_feat, float *v_mean)
+{
+    gs_error err = {0, ""};
+    CHECK_MSG(gs_frame_backward(c, NULL, NULL, d, d2, NULL, NULL, NULL, &err) == GS_OK,
+              "%s", err.msg);
+    memcpy(v_feat, c->v_feat, (size_t)c->n * c->C * sizeof(float));
+    memcpy(v_mean, c->v_mean, (size_t)c->n * 3 * sizeof(float));
+}
+
+/* Fine-tuning's colours learn inside the model's outline only
+ * (gs_frame_set_feature_mask): with a mask M, the features' gradient is
+ * exactly the one of the maps times M, and everything else is the one of
+ * the whole maps. */
+static void feature_mask_checks(const gs_model *m)
+{
+    gs_error err = {0, ""};
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    gs_frame fr;
+    frame_default(m, &fr);
+    CHECK_MSG(gs_frame_forward(c, NULL, &fr, GS_STREAM_BOTH, 1, &err) == GS_OK, "%s",
+              err.msg);
+    size_t plane = (size_t)c->fs * c->fs, fsz = plane * c->C;
+    size_t nf = (size_t)c->n * c->C, nm = (size_t)c->n * 3;
+    float *d = malloc(fsz * sizeof(float)), *d2 = malloc(fsz * sizeof(float));
+    float *dm = malloc(fsz * sizeof(float)), *dm2 = malloc(fsz * sizeof(float));
+    float *mask = malloc(plane * sizeof(float));
+    float *fa = malloc(nf * sizeof(float)), *fb = malloc(nf * sizeof(float));
+    float *fc = malloc(nf * sizeof(float));
+    float *ma = malloc(nm * sizeof(float)), *mb = malloc(nm * sizeof(float));
+    float *mc = malloc(nm * sizeof(float));
+    uint64_t st = 99;
+    for (size_t i = 0; i < fsz; i++) {
+        st = st * 6364136223846793005ULL + 1442695040888963407ULL;
+        d[i] = (float)((int)(st >> 40) % 2001 - 1000) * 1e-3f;
+        d2[i] = 0.5f * d[(i * 7) % fsz];
+    }
+    for (size_t i = 0; i < plane; i++) /* a disc and a stripe */
+        mask[i] = (float)((i % (size_t)c->fs) * 3 < (size_t)c->fs || i % 5 == 0);
+    for (size_t i = 0; i < fsz; i++) {
+        dm[i] = d[i] * mask[i % plane];
+        dm2[i] = d2[i] * mask[i % plane];
+    }
+    CHECK(gs_frame_set_feature_mask(c, mask, &err) == GS_OK);
+    backward_from(c, d, d2, fa, ma);
+    CHECK(gs_frame_set_feature_mask(c, NULL, &err) == GS_OK);
+    backward_from(c, dm, dm2, fb, mb);
+    backward_from(c, d, d2, fc, mc);
+    int feat_masked = !memcmp(fa, fb, nf * sizeof(float));
+    int pos_whole = !memcmp(ma, mc, nm * sizeof(float));
+    int differs = memcmp(fa, fc, nf * sizeof(float)) && memcmp(mb, mc, nm * sizeof(float));
+    printf("feature mask: features' gradient = the masked maps' (%s), positions' = the "
+           "whole maps' (%s), and both differ from the other (%s)\n",
+           feat_masked ? "same bytes" : "DIFFERS", pos_whole ? "same bytes" : "DIFFERS",
+           differs ? "yes" : "NO");
+    CHECK(feat_masked && pos_whole && differs);
+    /* the eye-only map is training's, never masked */
+    CHECK(gs_frame_set_feature_mask(c, mask, &err) == GS_OK);
+    CHECK(gs_frame_backward(c, NULL, NULL, d, NULL, d, NULL, NULL, &err) == GS_ERR_ARG);
+    free(d), free(d2), free(dm), free(dm2), free(mask);
+    free(fa), free(fb), free(fc), free(ma), free(mb), free(mc);
+    gs_model_ctx_destroy(c);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -194,6 +260,41 @@ int main(void)
     CHECK(gs_model_prune(m, NULL, m->cfg.n_face / 2, &pruned, &err) == GS_OK);
     CHECK(gs_model_copy_params(pruned, m, &err) == GS_ERR_ARG);
     CHECK(gs_model_clone(NULL, &pruned, &err) == GS_ERR_ARG);
+
+    feature_mask_checks(m);
+    /* --finetune-outline: the same steps with colours kept off the outline
+     * tune other values, still render the input better, and the geometry
+     * still moves; 9 px is refused. */
+    {
+        gs_model *fo = NULL;
+        CHECK(gs_model_clone(m, &fo, &err) == GS_OK);
+        gs_finetune_options oo;
+        gs_finetune_options_default(&oo);
+        oo.iters = 12;
+        oo.lr = 5e-3; /* as the default-parts run above (tuned2) */
+        oo.outline_px = 9;
+        CHECK(gs_model_finetune(fo, NULL, &sub, smp.rgb, smp.stride, &oo, NULL, &err) ==
+              GS_ERR_ARG);
+        CHECK(!memcmp(fo->params, m->params, m->nparams * sizeof(float)));
+        oo.outline_px = 2;
+        gs_finetune_report ro;
+        CHECK_MSG(gs_model_finetune(fo, NULL, &sub, smp.rgb, smp.stride, &oo, &ro, &err) ==
+                      GS_OK, "%s", err.msg);
+        int col_diff = 0, xyz_moved = 0;
+        for (int i = 0; i < m->ntensors; i++) {
+            const gs_ptensor *t = &m->t[i];
+            if (!strcmp(t->name, "face.colour"))
+                col_diff = memcmp(fo->params + t->offset, tuned2 + t->offset,
+                                  t->count * sizeof(float)) != 0;
+            if (!strcmp(t->name, "face.xyz"))
+                xyz_moved = !tensor_same(m, fo, i);
+        }
+        printf("outline 2 px: PSNR %.2f -> %.2f dB; colours differ from outline 0: %s; "
+               "geometry moved: %s\n", ro.psnr_first, ro.psnr_best, col_diff ? "yes" : "NO",
+               xyz_moved ? "yes" : "NO");
+        CHECK(col_diff && xyz_moved && ro.psnr_best > ro.psnr_first + 1.0f);
+        gs_model_destroy(fo);
+    }
 
     gs_model_destroy(pruned);
     free(poisoned);

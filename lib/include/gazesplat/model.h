@@ -280,6 +280,13 @@ typedef struct gs_finetune_options {
     double plateau_rel;   /* > 0: stop when the loss improved by less than
                              this fraction over 20 steps (the fit's rule);
                              <= 0: run every step (the default) */
+    int outline_px;       /* 0..8: feature pixels within this many of the
+                             model's outline at the input's view (coverage
+                             under 0.5) teach the Gaussians' features and
+                             colours nothing, only their geometry; 0 (the
+                             default): off. Removes background-coloured
+                             patches at other head poses, at a cost at the
+                             input's own pose (docs/model.md) */
 } gs_finetune_options;
 void gs_finetune_options_default(gs_finetune_options *o);
 
