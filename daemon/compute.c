@@ -615,11 +615,12 @@ static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, co
 typedef struct gsd_finetune {
     uint32_t steps; /* 0: none */
     unsigned parts; /* GS_FT_* */
+    uint32_t outline; /* gs_finetune_options.outline_px */
 } gsd_finetune;
 
-static gsd_finetune finetune_of(uint32_t steps, const char *parts)
+static gsd_finetune finetune_of(uint32_t steps, const char *parts, uint32_t outline)
 {
-    gsd_finetune f = {steps, GS_FT_DEFAULT};
+    gsd_finetune f = {steps, GS_FT_DEFAULT, steps ? outline : 0};
     if (steps && parts && parts[0] && gs_finetune_parts_parse(parts, &f.parts, NULL) != GS_OK)
         f.parts = GS_FT_DEFAULT; /* validated on the loop thread already */
     return f;
@@ -642,6 +643,8 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
     if (ft->steps) { /* a fine-tuned subject is another subject (plain keys unchanged) */
         uint32_t v[2] = {ft->steps, ft->parts};
         hash_bytes(&h, v, sizeof v);
+        if (ft->outline) /* keys without it unchanged */
+            hash_bytes(&h, &ft->outline, sizeof ft->outline);
     }
     hash_out(&h, key);
 }
@@ -1023,6 +1026,7 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
     gs_finetune_options_default(&fo);
     fo.iters = (int)ft->steps;
     fo.parts = ft->parts;
+    fo.outline_px = (int)ft->outline;
     fo.mask = mask;
     fo.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
     if (fo.time_budget_s <= 0)
@@ -1177,7 +1181,7 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     subject_out so;
     char msg[400];
     photo_input photo;
-    subject_ask a = {r, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts), r->keep_image, 0};
+    subject_ask a = {r, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px), r->keep_image, 0};
     int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
     photo_input_free(&photo);
     if (e)
@@ -1363,7 +1367,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     photo_input photo;
     memset(&photo, 0, sizeof photo);
     if (r->image) {
-        subject_ask a = {NULL, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts), 0,
+        subject_ask a = {NULL, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px), 0,
                          r->transfer};
         int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {

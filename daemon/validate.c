@@ -150,13 +150,19 @@ static int check_intrinsics(const Gazesplat__Intrinsics *k, char *msg, size_t ca
     return 0;
 }
 
-/* finetune_steps / finetune_parts of FIT and REDIRECT. */
-static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts, char *msg,
-                          size_t cap)
+/* finetune_steps / finetune_parts / finetune_outline_px of FIT and
+ * REDIRECT. */
+static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts,
+                          uint32_t outline, char *msg, size_t cap)
 {
     int has_parts = parts && parts[0];
-    if (has_parts && !steps) {
-        snprintf(msg, cap, "finetune_parts without finetune_steps");
+    if ((has_parts || outline) && !steps) {
+        snprintf(msg, cap, "%s without finetune_steps",
+                 has_parts ? "finetune_parts" : "finetune_outline_px");
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (outline > 8) {
+        snprintf(msg, cap, "finetune_outline_px %u over 8", outline);
         return E(ERR_INVALID_ARGUMENT);
     }
     if (!steps)
@@ -199,7 +205,8 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
     }
-    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, msg, cap)) != 0)
+    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px, msg,
+                              cap)) != 0)
         return e;
     return gsd_check_deadline(s, r->deadline_ms, msg, cap);
 }
@@ -243,12 +250,14 @@ int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
     }
-    if (!r->image && (r->finetune_steps || (r->finetune_parts && r->finetune_parts[0]))) {
+    if (!r->image && (r->finetune_steps || r->finetune_outline_px ||
+                      (r->finetune_parts && r->finetune_parts[0]))) {
         snprintf(msg, cap, "finetune_steps go with an inline image (a fitted subject keeps "
                            "its own fine-tuning)");
         return E(ERR_INVALID_ARGUMENT);
     }
-    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, msg, cap)) != 0)
+    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px, msg,
+                              cap)) != 0)
         return e;
     if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
         return e;

@@ -171,6 +171,25 @@ def main():
             refused(t, lambda: raw(c, k1), gc.pb.ERR_UNKNOWN_SUBJECT, "fine-tuned subject of another model")
             t.check(c.stats()["tuned_entries"] == 0, "no blocks for another model")
         t.check(tuned_files(state) == [], "block files removed for another model: %s" % tuned_files(state))
+        t.check(d.stop() == 0, "clean exit")
+
+        # finetune_outline_px: a subject of its own (the library test checks
+        # what it changes); 0..8, with finetune_steps only.
+        d, addr = start_ready(t, Daemon, daemon, ["--model", other, "--set", "photo_input=no"])
+        with gc.Client(addr) as c:
+            a = c.fit(imgs[0], max_iters=FAST, finetune_steps=2)
+            b = c.fit(imgs[0], max_iters=FAST, finetune_steps=2, finetune_outline_px=2)
+            t.check(a.finetuned and b.finetuned and not b.cached and a.subject_key != b.subject_key,
+                    "outline 2: fine-tuned, a key of its own: %s / %s" % (a, b))
+            t.check(raw(c, a.subject_key, (0, 10)) != raw(c, b.subject_key, (0, 10)),
+                    "outline 2 renders other bytes")
+            refused(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_outline_px=9),
+                    gc.pb.ERR_INVALID_ARGUMENT, "outline over 8", "over 8")
+            refused(t, lambda: c.fit(imgs[0], finetune_outline_px=1), gc.pb.ERR_INVALID_ARGUMENT,
+                    "outline without steps", "finetune_outline_px without finetune_steps")
+            refused(t, lambda: c.redirect([(0, 0)], subject=a.subject_key, finetune_outline_px=1),
+                    gc.pb.ERR_INVALID_ARGUMENT, "outline for a subject by key")
+            t.check(c.health().state == gc.pb.Health.READY, "still READY")
     finally:
         rc = d.stop()
         if t.failures:
