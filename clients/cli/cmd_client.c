@@ -45,6 +45,9 @@ const cli_command cli_client_command = {
     "                       renders with it (the server's max_finetune_steps)\n"
     "  --finetune-parts L   with --finetune: face, eye, renderer, mlp, geometry,\n"
     "                       comma-separated (default face,geometry)\n"
+    "  --finetune-outline PX  with --finetune, 0..8: the colours learn nothing within\n"
+    "                       PX feature pixels of the model's outline (2 for\n"
+    "                       head-pose changes: fewer background-coloured patches)\n"
     "  --keep-image         fit: the server keeps the input with the subject, for\n"
     "                       redirect --transfer by key\n"
     "  --transfer           redirect: detail transfer (keep the input's own detail;\n"
@@ -64,17 +67,22 @@ const cli_command cli_client_command = {
 enum {
     O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
     O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_FT, O_FT_PARTS, O_KEEP,
-    O_TRANSFER, O_N
+    O_TRANSFER, O_FT_OUTLINE, O_N
 };
 
-/* --finetune N [--finetune-parts L]: 0 or CLI_USAGE (reported). */
-static int finetune_opts(const cli_command *cmd, const cli_opt *o, uint32_t *steps, char **parts)
+/* --finetune N [--finetune-parts L] [--finetune-outline PX]: 0 or
+ * CLI_USAGE (reported). */
+static int finetune_opts(const cli_command *cmd, const cli_opt *o, uint32_t *steps, char **parts,
+                         uint32_t *outline)
 {
-    long n = 0;
+    long n = 0, px = 0;
     if (o[O_FT].value && cli_parse_long(o[O_FT].value, 1, 100000, &n) != 0)
         return cli_usage_error(cmd, "--finetune wants 1..100000 steps");
-    if (o[O_FT_PARTS].value && !o[O_FT].value)
-        return cli_usage_error(cmd, "--finetune-parts goes with --finetune N");
+    if ((o[O_FT_PARTS].value || o[O_FT_OUTLINE].value) && !o[O_FT].value)
+        return cli_usage_error(cmd, "--finetune-parts and --finetune-outline go with --finetune N");
+    if (o[O_FT_OUTLINE].value && cli_parse_long(o[O_FT_OUTLINE].value, 0, 8, &px) != 0)
+        return cli_usage_error(cmd, "--finetune-outline wants 0..8 feature pixels");
+    *outline = (uint32_t)px;
     *steps = (uint32_t)n;
     *parts = o[O_FT_PARTS].value ? (char *)o[O_FT_PARTS].value : (char *)"";
     return CLI_OK;
@@ -317,7 +325,8 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         return cli_usage_error(cmd, "--max-iters wants 1..100000");
     if (o[O_DEADLINE].value && cli_parse_long(o[O_DEADLINE].value, 1, 3600000, &deadline) != 0)
         return cli_usage_error(cmd, "--deadline-ms wants 1..3600000");
-    int rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts);
+    int rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts,
+                           &req.finetune_outline_px);
     if (rc != CLI_OK)
         return rc;
     rc = load_image(cmd, o, &img, &data);
@@ -447,7 +456,8 @@ static int do_redirect(gs_client *c, const cli_opt *o, int timeout)
         if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &iters) == 0)
             req.max_iters = (uint32_t)iters;
         gs_error err;
-        if ((rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts)) != CLI_OK)
+        if ((rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts,
+                                &req.finetune_outline_px)) != CLI_OK)
             ; /* reported */
         else if (gs_client_send(c, T(REDIRECT), key, 1, &req.base, &err) != GS_OK)
             rc = cli_fail(cmd, "%s", err.msg);
@@ -477,6 +487,7 @@ static int run_client(int argc, char **argv)
         {"--head-deg", 1, NULL}, {"--format", 1, NULL}, {"--out", 1, NULL}, {"--deadline-ms", 1, NULL},
         {"--paste-back", 0, NULL}, {"--refit", 0, NULL}, {"--finetune", 1, NULL},
         {"--finetune-parts", 1, NULL}, {"--keep-image", 0, NULL}, {"--transfer", 0, NULL},
+        {"--finetune-outline", 1, NULL},
     };
     /* --set may repeat: take every one out before the common parser. */
     const char *sets[MAX_SETS];

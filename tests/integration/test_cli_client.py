@@ -100,6 +100,16 @@ def main():
         r = run(cli, "client", "stats", addr)
         t.check(r.returncode == 0 and "images_out 4" in r.stdout and "finetunes 1" in r.stdout,
                 "stats: %s" % r.stdout[-300:])
+        # --finetune-outline: another subject than without it; 0..8, with --finetune only.
+        r = run(cli, "client", "fit", addr, "--image", face, "--max-iters", "3", "--finetune", "2",
+                "--finetune-parts", "face", "--finetune-outline", "2")
+        okey = [ln.split()[1] for ln in r.stdout.splitlines() if ln.startswith("subject ")]
+        t.check(r.returncode == 0 and "finetuned yes" in r.stdout and okey and okey != tkey,
+                "fit --finetune-outline 2: %d %s %s" % (r.returncode, r.stdout, r.stderr))
+        r = run(cli, "client", "fit", addr, "--image", face, "--finetune-outline", "2")
+        t.check(r.returncode == 2, "--finetune-outline alone is a usage error: %d" % r.returncode)
+        r = run(cli, "client", "fit", addr, "--image", face, "--finetune", "2", "--finetune-outline", "9")
+        t.check(r.returncode == 2, "--finetune-outline 9 is a usage error: %d" % r.returncode)
         r = run(cli, "client", "frobnicate", addr)
         t.check(r.returncode == 2, "unknown action: %d" % r.returncode)
         r = run(cli, "client", "health", "--addr=" + os.path.join(work, "nope.sock"))
