@@ -616,11 +616,13 @@ typedef struct gsd_finetune {
     uint32_t steps; /* 0: none */
     unsigned parts; /* GS_FT_* */
     uint32_t outline; /* gs_finetune_options.outline_px */
+    uint32_t no_mirror; /* !gs_finetune_options.mirror */
 } gsd_finetune;
 
-static gsd_finetune finetune_of(uint32_t steps, const char *parts, uint32_t outline)
+static gsd_finetune finetune_of(uint32_t steps, const char *parts, uint32_t outline,
+                                int no_mirror)
 {
-    gsd_finetune f = {steps, GS_FT_DEFAULT, steps ? outline : 0};
+    gsd_finetune f = {steps, GS_FT_DEFAULT, steps ? outline : 0, steps && no_mirror};
     if (steps && parts && parts[0] && gs_finetune_parts_parse(parts, &f.parts, NULL) != GS_OK)
         f.parts = GS_FT_DEFAULT; /* validated on the loop thread already */
     return f;
@@ -645,6 +647,10 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
         hash_bytes(&h, v, sizeof v);
         if (ft->outline) /* keys without it unchanged */
             hash_bytes(&h, &ft->outline, sizeof ft->outline);
+        if (ft->no_mirror) {
+            static const char tag[] = "no-mirror";
+            hash_bytes(&h, tag, sizeof tag);
+        }
     }
     hash_out(&h, key);
 }
@@ -1027,6 +1033,7 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
     fo.iters = (int)ft->steps;
     fo.parts = ft->parts;
     fo.outline_px = (int)ft->outline;
+    fo.mirror = !ft->no_mirror;
     fo.mask = mask;
     fo.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
     if (fo.time_budget_s <= 0)
@@ -1181,7 +1188,8 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     subject_out so;
     char msg[400];
     photo_input photo;
-    subject_ask a = {r, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px), r->keep_image, 0};
+    subject_ask a = {r, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
+                                   r->finetune_no_mirror), r->keep_image, 0};
     int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
     photo_input_free(&photo);
     if (e)
@@ -1367,7 +1375,8 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     photo_input photo;
     memset(&photo, 0, sizeof photo);
     if (r->image) {
-        subject_ask a = {NULL, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px), 0,
+        subject_ask a = {NULL, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
+                                   r->finetune_no_mirror), 0,
                          r->transfer};
         int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {

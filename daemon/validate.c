@@ -153,12 +153,13 @@ static int check_intrinsics(const Gazesplat__Intrinsics *k, char *msg, size_t ca
 /* finetune_steps / finetune_parts / finetune_outline_px of FIT and
  * REDIRECT. */
 static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts,
-                          uint32_t outline, char *msg, size_t cap)
+                          uint32_t outline, int no_mirror, char *msg, size_t cap)
 {
     int has_parts = parts && parts[0];
-    if ((has_parts || outline) && !steps) {
+    if ((has_parts || outline || no_mirror) && !steps) {
         snprintf(msg, cap, "%s without finetune_steps",
-                 has_parts ? "finetune_parts" : "finetune_outline_px");
+                 has_parts ? "finetune_parts"
+                 : outline ? "finetune_outline_px" : "finetune_no_mirror");
         return E(ERR_INVALID_ARGUMENT);
     }
     if (outline > 8) {
@@ -205,8 +206,8 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
     }
-    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px, msg,
-                              cap)) != 0)
+    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
+                              r->finetune_no_mirror, msg, cap)) != 0)
         return e;
     return gsd_check_deadline(s, r->deadline_ms, msg, cap);
 }
@@ -250,14 +251,14 @@ int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);
         return E(ERR_INVALID_ARGUMENT);
     }
-    if (!r->image && (r->finetune_steps || r->finetune_outline_px ||
+    if (!r->image && (r->finetune_steps || r->finetune_outline_px || r->finetune_no_mirror ||
                       (r->finetune_parts && r->finetune_parts[0]))) {
         snprintf(msg, cap, "finetune_steps go with an inline image (a fitted subject keeps "
                            "its own fine-tuning)");
         return E(ERR_INVALID_ARGUMENT);
     }
-    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px, msg,
-                              cap)) != 0)
+    if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
+                              r->finetune_no_mirror, msg, cap)) != 0)
         return e;
     if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
         return e;

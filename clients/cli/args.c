@@ -137,7 +137,8 @@ int cli_parse_size(const char *s, int max, int *w, int *h)
 }
 
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
-                       const char *plateau, const char *outline, gs_finetune_options *fo)
+                       const char *plateau, const char *outline, const char *mirror,
+                       gs_finetune_options *fo)
 {
     gs_finetune_options_default(fo);
     fo->iters = 0;
@@ -168,9 +169,15 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
             return cli_usage_error(cmd, "--finetune-outline: want 0..8 feature pixels");
         fo->outline_px = (int)v;
     }
-    if ((parts || lr || plateau || outline) && !n)
-        return cli_usage_error(cmd, "--finetune-parts, --finetune-lr, --finetune-plateau and "
-                               "--finetune-outline go with --finetune N");
+    if (mirror) {
+        long v;
+        if (cli_parse_long(mirror, 0, 1, &v))
+            return cli_usage_error(cmd, "--finetune-mirror: want 0 or 1");
+        fo->mirror = (int)v;
+    }
+    if ((parts || lr || plateau || outline || mirror) && !n)
+        return cli_usage_error(cmd, "--finetune-parts, --finetune-lr, --finetune-plateau, "
+                               "--finetune-outline and --finetune-mirror go with --finetune N");
     return CLI_OK;
 }
 

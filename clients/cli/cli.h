@@ -67,12 +67,13 @@ int cli_parse_long(const char *s, long lo, long hi, long *out);
 int cli_parse_size(const char *s, int max, int *w, int *h);
 
 /* --finetune N, --finetune-parts LIST, --finetune-lr X, --finetune-plateau
- * R, --finetune-outline PX (any may be NULL) into fo: fo->iters 0 when N
+ * R, --finetune-outline PX, --finetune-mirror 0|1 (any may be NULL) into
+ * fo: fo->iters 0 when N
  * is absent. The others without N are a usage error. Returns CLI_OK or
  * CLI_USAGE (reported). */
 struct gs_finetune_options;
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
-                       const char *plateau, const char *outline,
+                       const char *plateau, const char *outline, const char *mirror,
                        struct gs_finetune_options *fo);
 
 /* CLOCK_MONOTONIC in seconds. */

@@ -31,7 +31,7 @@ const cli_command cli_eval_command = {
     "                      [--transfer-eye-weight W]\n"
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
-    "                      [--finetune-outline PX]\n"
+    "                      [--finetune-outline PX] [--finetune-mirror 0|1]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N] [--split S]\n"
     "\n"
@@ -84,6 +84,8 @@ const cli_command cli_eval_command = {
     "  --finetune-outline PX  colours learn nothing within PX feature pixels\n"
     "                    of the model's outline, only the geometry (0..8,\n"
     "                    default 0)\n"
+    "  --finetune-mirror 0|1  also fit the input mirrored left to right from\n"
+    "                    the mirrored pose (default 1); 0: the input alone\n"
     "  --make-pairs FILE write a pairing: --identities held-out identities\n"
     "                    (15) x --inputs scenes each (10) x --targets (10),\n"
     "                    --seed (1); deterministic. --split test (default)\n"
@@ -95,7 +97,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_LOH, O_XEW, O_FT_OUTLINE, O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_LOH, O_XEW, O_FT_OUTLINE, O_FT_MIRROR, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -715,6 +717,7 @@ static int run_eval(int argc, char **argv)
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
         {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
         {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
+        {"--finetune-mirror", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
@@ -786,7 +789,7 @@ static int run_eval(int argc, char **argv)
     ev.ro.transfer_eye_weight = xew;
     ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
-                                 o[O_FT_OUTLINE].value,
+                                 o[O_FT_OUTLINE].value, o[O_FT_MIRROR].value,
                                  &ev.fo)))
         return rc;
     ev.ft_eye_w = 1.0;
@@ -819,5 +822,6 @@ static int run_eval(int argc, char **argv)
     info.ft_lr = ev.fo.lr;
     info.ft_eye_w = ev.ft_eye_w;
     info.ft_outline = ev.fo.outline_px;
+    info.ft_mirror = ev.fo.mirror;
     return run_checked(o, &ev, limit, threads, &info);
 }

@@ -24,7 +24,7 @@ const cli_command cli_fit_command = {
     "                     [--gaze-deg P,Y] [--iters N] [--time S]\n"
     "                     [--finetune N [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-plateau R]\n"
-    "                      [--finetune-outline PX]]\n"
+    "                      [--finetune-outline PX] [--finetune-mirror 0|1]]\n"
     "\n"
     "  --model FILE     a model file (gazesplat train)\n"
     "  --image FILE     a normalized face image (PNG/JPEG) of the model's\n"
@@ -49,6 +49,9 @@ const cli_command cli_fit_command = {
     "                   (0..8, default 0) of the model's outline, only the\n"
     "                   geometry: fewer background-coloured patches at other\n"
     "                   head poses (2 for head-pose changes; docs/model.md)\n"
+    "  --finetune-mirror 0|1  also fit the input mirrored left to right, from\n"
+    "                   the mirrored pose (1, the default: the side the input\n"
+    "                   hides takes the other side's look); 0: the input alone\n"
     "  --out FILE       the fitted subject (binary, gs_subject_encode),\n"
     "                   followed by the tuned block with --finetune\n"
     "                   (gs_model_tuned_encode; 3.4 MB for the default parts at cpu)\n"
@@ -66,7 +69,8 @@ const cli_command cli_redirect_command = {
     "                          [--transfer-eye-weight W]\n"
     "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
-    "                          [--finetune-plateau R] [--finetune-outline PX]]\n"
+    "                          [--finetune-plateau R] [--finetune-outline PX]\n"
+    "                          [--finetune-mirror 0|1]]\n"
     "\n"
     "  --image IMG      a normalized face of the model's size, fitted first;\n"
     "                   or any photo: its face (--index I, largest first) is\n"
@@ -226,13 +230,14 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
 static int run_fit(int argc, char **argv)
 {
     const cli_command *cmd = &cli_fit_command;
-    cli_opt o[12] = {{"--model", 1, NULL},    {"--image", 1, NULL},
+    cli_opt o[13] = {{"--model", 1, NULL},    {"--image", 1, NULL},
                      {"--mask", 1, NULL},     {"--gaze-deg", 1, NULL},
                      {"--iters", 1, NULL},    {"--time", 1, NULL},
                      {"--out", 1, NULL},      {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
-                     {"--finetune-plateau", 1, NULL}, {"--finetune-outline", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 12);
+                     {"--finetune-plateau", 1, NULL}, {"--finetune-outline", 1, NULL},
+                     {"--finetune-mirror", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 13);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -250,7 +255,7 @@ static int run_fit(int argc, char **argv)
         return cli_usage_error(cmd, "--time: want seconds > 0");
     gs_finetune_options ft;
     if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, o[10].value,
-                                 o[11].value, &ft)))
+                                 o[11].value, o[12].value, &ft)))
         return rc;
     gs_model *m = NULL;
     if ((rc = load_model(cmd, o[0].value, &m)))
@@ -467,7 +472,7 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[18] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[19] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
@@ -475,8 +480,9 @@ static int run_redirect(int argc, char **argv)
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
                      {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
                      {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
-                     {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 18);
+                     {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
+                     {"--finetune-mirror", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 19);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -536,7 +542,7 @@ static int run_redirect(int argc, char **argv)
         return cli_usage_error(cmd, "--head-deg: want P,Y");
     gs_finetune_options ft;
     if ((rc = cli_parse_finetune(cmd, o[9].value, o[10].value, o[11].value, o[12].value,
-                                 o[17].value, &ft)))
+                                 o[17].value, o[18].value, &ft)))
         return rc;
     if (ft.iters > 0 && o[1].value)
         return cli_usage_error(cmd, "--finetune goes with --image (a subject file "

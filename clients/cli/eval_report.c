@@ -229,10 +229,11 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                 strcat(parts, pn[k]);
             }
         fprintf(f, "- fine-tuned per input (--finetune %d, parts %s, rate %g, "
-                   "eye weight %g, outline %d px): %d inputs, mean %.2f s each "
-                   "(in the fit times), input PSNR %.2f -> %.2f dB on average "
-                   "(weighted pixels)\n", info->ft_iters, parts, info->ft_lr,
-                info->ft_eye_w, info->ft_outline, info->ft_n, info->ft_s,
+                   "eye weight %g, outline %d px, mirror %s): %d inputs, mean "
+                   "%.2f s each (in the fit times), input PSNR %.2f -> %.2f dB "
+                   "on average (weighted pixels)\n", info->ft_iters, parts,
+                info->ft_lr, info->ft_eye_w, info->ft_outline,
+                info->ft_mirror ? "on" : "off", info->ft_n, info->ft_s,
                 info->ft_psnr_first, info->ft_psnr_best);
     }
     if (info->fits_reused)

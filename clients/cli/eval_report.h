@@ -56,6 +56,7 @@ typedef struct eval_run_info {
     unsigned ft_parts;
     double ft_lr, ft_eye_w;
     int ft_outline;             /* --finetune-outline PX */
+    int ft_mirror;              /* --finetune-mirror */
     int ft_n;
     double ft_s, ft_psnr_first, ft_psnr_best;
 } eval_run_info;

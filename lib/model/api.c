@@ -641,6 +641,7 @@ void gs_finetune_options_default(gs_finetune_options *o)
     o->iters = 50;
     o->lr = 1e-3;
     o->parts = GS_FT_DEFAULT;
+    o->mirror = 1;
 }
 
 static const struct {
@@ -786,6 +787,27 @@ static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
     return GS_OK;
 }
 
+/* The image flipped left to right, packed (S x S x 3); NULL when out of
+ * memory. */
+static uint8_t *mirror_image(const uint8_t *rgb, size_t stride, int S)
+{
+    uint8_t *f = malloc(3 * (size_t)S * S);
+    if (f)
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++)
+                memcpy(f + 3 * ((size_t)y * S + x),
+                       rgb + (size_t)y * stride + 3 * (size_t)(S - 1 - x), 3);
+    return f;
+}
+
+/* Pixel weights of the mirrored image from the input's mask. */
+static void mirror_weights(const uint8_t *mask, int S, float *w)
+{
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++)
+            w[(size_t)y * S + x] = mask[(size_t)y * S + (S - 1 - x)] / 255.0f;
+}
+
 /* Feature pixels within r of the outline of a coverage map [fs, fs]
  * (coverage under 0.5 there) get 0, the rest 1 (gs_finetune_options.
  * outline_px): the colours learn inside the model's own outline only. On
@@ -829,6 +851,9 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
                             "finetune: lr %g (want <= 1), iterations %d "
                             "(<= 100000) or parts 0x%x out of range",
                             o.lr, o.iters, parts);
+    if (o.mirror != 0 && o.mirror != 1)
+        return gs_error_set(err, GS_ERR_ARG, "finetune: mirror %d: want 0 or 1",
+                            o.mirror);
     if (o.outline_px < 0 || o.outline_px > 8)
         return gs_error_set(err, GS_ERR_ARG,
                             "finetune: outline %d px: want 0..8", o.outline_px);
@@ -858,19 +883,29 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         fs->x[V_GAIN + k] = s->colour_gain[k];
         fs->x[V_BIAS + k] = s->colour_bias[k];
     }
-    gs_frame fr;
+    gs_frame fr, frm;
     frame_of(s, NULL, &fr);
+    gs_frame_mirror(&fr, s->code_dim, &frm);
+    /* The mirrored input and weights (o.mirror; docs/model.md). */
+    fit_bufs bm;
+    memset(&bm, 0, sizeof bm);
+    uint8_t *flip = o.mirror ? mirror_image(rgb, stride, r.c->S) : NULL;
+    if (o.mirror && (!flip || fit_bufs_init(&bm, r.c, flip, 3 * (size_t)r.c->S, NULL)))
+        rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
+    if (!rc && o.mirror && o.mask)
+        mirror_weights(o.mask, r.c->S, bm.w);
     double t0 = now_s(), best = INFINITY, first = NAN;
     float psnr_first = NAN, psnr_best = NAN;
     double hist[20];
     int it = 0, stopped_on_time = 0, plateaued = 0;
+    int masked = o.outline_px > 0 && (parts & (GS_FT_FACE | GS_FT_EYE | GS_FT_MLP));
     float *inner = malloc((size_t)r.c->fs * r.c->fs * sizeof(float));
-    if (!inner)
+    float *inner_m = malloc((size_t)r.c->fs * r.c->fs * sizeof(float));
+    if (!inner || !inner_m)
         rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
     for (; !rc && it <= iters; it++) {
         rc = gs_frame_forward(r.c, pool, &fr, GS_STREAM_BOTH, 1, err);
-        if (!rc && it == 0 && o.outline_px > 0 &&
-            (parts & (GS_FT_FACE | GS_FT_EYE | GS_FT_MLP))) {
+        if (!rc && it == 0 && masked) {
             outline_mask(r.c->alpha, r.c->fs, o.outline_px, inner);
             rc = gs_frame_set_feature_mask(r.c, inner, err);
         }
@@ -910,6 +945,24 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         memset(&fg, 0, sizeof fg);
         rc = gs_frame_backward(r.c, pool, b.dpred, NULL, NULL, NULL, &r.g,
                                &fg, err);
+        if (!rc && o.mirror) { /* the mirrored view adds its gradient */
+            double dgm[3], dbm[3];
+            rc = gs_frame_forward(r.c, pool, &frm, GS_STREAM_BOTH, 1, err);
+            if (!rc && !isfinite(image_loss(r.c, &bm, fs, dgm, dbm)))
+                rc = gs_error_set(err, GS_ERR_NONFINITE,
+                                  "finetune: mirrored view diverged at step %d", it);
+            if (!rc && masked) { /* its own outline, from its first view */
+                if (it == 0)
+                    outline_mask(r.c->alpha, r.c->fs, o.outline_px, inner_m);
+                rc = gs_frame_set_feature_mask(r.c, inner_m, err);
+            }
+            memset(&fg, 0, sizeof fg);
+            if (!rc)
+                rc = gs_frame_backward(r.c, pool, bm.dpred, NULL, NULL, NULL,
+                                       &r.g, &fg, err);
+            if (!rc && masked)
+                rc = gs_frame_set_feature_mask(r.c, inner, err);
+        }
         if (rc)
             break;
         double gn = 0;
@@ -943,6 +996,9 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     }
     ft_free(&r);
     free(inner);
+    free(inner_m);
+    free(flip);
+    fit_bufs_free(&bm);
     free(fs);
     fit_bufs_free(&b);
     return rc;

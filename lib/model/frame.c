@@ -1431,6 +1431,21 @@ void gs_frame_clear_gaussian_grads(gs_model_ctx *c)
     memset(c->v_feat, 0, n * (size_t)c->C * sizeof(float));
 }
 
+void gs_frame_mirror(const gs_frame *fr, int code_dim, gs_frame *out)
+{
+    static const double sg[3] = {-1, 1, 1};
+    gs_frame m = *fr;
+    for (int i = 0; i < 3; i++)
+        for (int j = 0; j < 3; j++)
+            m.head_R[3 * i + j] = sg[i] * fr->head_R[3 * i + j] * sg[j];
+    m.head_t[0] = -fr->head_t[0];
+    m.gaze[1] = -fr->gaze[1];
+    float *l = m.code + code_dim - GS_MODEL_LIGHT_DIM;
+    for (int k = 0; k < 3; k++) /* the three light directions' x */
+        l[3 * k] = -l[3 * k];
+    *out = m;
+}
+
 int gs_frame_set_feature_mask(gs_model_ctx *c, const float *mask,
                               gs_error *err)
 {

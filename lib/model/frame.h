@@ -175,6 +175,12 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap_eye, const gs_model_params *grads,
                       gs_frame_grad *fg, gs_error *err);
 
+/* fr seen in a mirror: the image flipped left to right is the same head
+ * (if symmetric about its x = 0 plane) at head rotation S R S and
+ * translation S t, S = diag(-1, 1, 1), with the gaze's yaw and the light
+ * directions' head-frame x negated. Its own inverse. */
+void gs_frame_mirror(const gs_frame *fr, int code_dim, gs_frame *out);
+
 /* Until called again with NULL, gs_frame_backward gives the Gaussians'
  * features (colours: feat[k]) only the gradient of the feature-map pixels
  * where mask [fs, fs] (kept by the caller) is 1; their positions, scales,

@@ -147,6 +147,7 @@ static void usage_errors(const char *model, const char *pairs)
         {"--transfer-eye-weight", "1.5"}, {"--transfer-eye-weight", "-0.1"},
         {"--transfer-eye-weight", "nan"},
         {"--finetune-outline", "1"}, /* without --finetune N */
+        {"--finetune-mirror", "0"},
         {"--feature-scale", "0.1"}, /* 3 of the tiny model's 32 px */
         {"--finetune", "0"},        {"--finetune", "-3"},
         {"--finetune-parts", "face"}, /* without --finetune N */
@@ -169,6 +170,7 @@ static void usage_errors(const char *model, const char *pairs)
                                {"--finetune-eye-weight", "1.5"},
                                {"--finetune-eye-weight", "-1"},
                                {"--finetune-outline", "9"},
+                               {"--finetune-mirror", "2"},
                                {"--finetune-outline", "-1"},
                                {"--prune", "50%"}};
     for (size_t k = 0; k < sizeof bad_ft / sizeof bad_ft[0]; k++) {
@@ -329,7 +331,7 @@ int main(int argc, char **argv)
     double p0 = NAN, p1 = NAN;
     const char *ft = sum ? strstr(sum, "input PSNR ") : NULL;
     CHECK_MSG(sum && strstr(sum, "fine-tuned per input (--finetune 6, parts "
-                                 "face,geometry, rate 0.001, eye weight 0, outline 0 px)") &&
+                                 "face,geometry, rate 0.001, eye weight 0, outline 0 px, mirror on)") &&
                   strstr(sum, "non-finite outputs 0") && ft &&
                   sscanf(ft, "input PSNR %lf -> %lf", &p0, &p1) == 2,
               "%s", sum ? sum : "");
@@ -351,7 +353,7 @@ int main(int argc, char **argv)
     free(sum);
     CHECK_EQ_INT(run(ev7), 0);
     sum = ev_slurp(md);
-    CHECK_MSG(sum && strstr(sum, "eye weight 0, outline 2 px)"), "%s", sum ? sum : "");
+    CHECK_MSG(sum && strstr(sum, "eye weight 0, outline 2 px, mirror on)"), "%s", sum ? sum : "");
     free(a);
     free(b);
     free(sum);

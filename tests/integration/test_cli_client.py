@@ -110,6 +110,8 @@ def main():
         t.check(r.returncode == 2, "--finetune-outline alone is a usage error: %d" % r.returncode)
         r = run(cli, "client", "fit", addr, "--image", face, "--finetune", "2", "--finetune-outline", "9")
         t.check(r.returncode == 2, "--finetune-outline 9 is a usage error: %d" % r.returncode)
+        r = run(cli, "client", "fit", addr, "--image", face, "--finetune", "2", "--finetune-mirror", "2")
+        t.check(r.returncode == 2, "--finetune-mirror 2 is a usage error: %d" % r.returncode)
         r = run(cli, "client", "frobnicate", addr)
         t.check(r.returncode == 2, "unknown action: %d" % r.returncode)
         r = run(cli, "client", "health", "--addr=" + os.path.join(work, "nope.sock"))

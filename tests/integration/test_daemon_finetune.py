@@ -189,6 +189,14 @@ def main():
                     "outline without steps", "finetune_outline_px without finetune_steps")
             refused(t, lambda: c.redirect([(0, 0)], subject=a.subject_key, finetune_outline_px=1),
                     gc.pb.ERR_INVALID_ARGUMENT, "outline for a subject by key")
+            # finetune_mirror=False (finetune_no_mirror): the input alone, a key of its own.
+            n = c.fit(imgs[0], max_iters=FAST, finetune_steps=2, finetune_mirror=False)
+            t.check(n.finetuned and n.subject_key not in (a.subject_key, b.subject_key),
+                    "no mirror: a key of its own: %s" % n)
+            t.check(raw(c, n.subject_key, (0, 10)) != raw(c, a.subject_key, (0, 10)),
+                    "no mirror renders other bytes")
+            refused(t, lambda: c.fit(imgs[0], finetune_mirror=False), gc.pb.ERR_INVALID_ARGUMENT,
+                    "no mirror without steps", "finetune_no_mirror without finetune_steps")
             t.check(c.health().state == gc.pb.Health.READY, "still READY")
     finally:
         rc = d.stop()

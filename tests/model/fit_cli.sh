@@ -119,6 +119,14 @@ usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transf
 usage_x fit --model m.safetensors --image $IMG --finetune-outline 1 --out x.bin
 grep -q "go with --finetune N" ux.err || { cat ux.err; fail "outline usage message"; }
 usage_x fit --model m.safetensors --image $IMG --finetune 2 --finetune-outline 9 --out x.bin
+# --finetune-mirror 0: the input alone, another block than the default's
+# mirrored view (the library test checks the mirror itself); 0 or 1 only.
+"$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 5 --finetune-mirror 0 \
+  --out face_m0.bin >/dev/null 2>&1
+[ -s face_m0.bin ] || fail "fit --finetune-mirror 0 wrote nothing"
+! cmp -s face_m0.bin face.bin || fail "--finetune-mirror 0 gave the default's subject"
+usage_x fit --model m.safetensors --image $IMG --finetune 2 --finetune-mirror 2 --out x.bin
+usage_x fit --model m.safetensors --image $IMG --finetune-mirror 0 --out x.bin
 usage_x redirect --model m.safetensors --image $IMG --finetune 2 --finetune-outline -1 \
   --gaze-deg "0,0" --out x
 "$G" synth --out ds2 --count 1 --seed-split test --identities 1 --size 160 --threads 2 >/dev/null 2>&1

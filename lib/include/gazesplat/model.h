@@ -287,6 +287,12 @@ typedef struct gs_finetune_options {
                              default): off. Removes background-coloured
                              patches at other head poses, at a cost at the
                              input's own pose (docs/model.md) */
+    int mirror;           /* 1 (the default): each step also fits the input
+                             mirrored left to right, seen from the mirrored
+                             head pose with the mirrored gaze and lights (a
+                             face is close to symmetric: the side the input
+                             hides gets the other side's look); 0: the input
+                             alone. Doubles the cost of a step */
 } gs_finetune_options;
 void gs_finetune_options_default(gs_finetune_options *o);
 
