@@ -48,7 +48,7 @@ const cli_command cli_fit_command = {
     "  --finetune-outline PX  colours learn nothing within PX feature pixels\n"
     "                   (0..8, default 0) of the model's outline, only the\n"
     "                   geometry: fewer background-coloured patches at other\n"
-    "                   head poses (2 for head-pose changes; docs/model.md)\n"
+    "                   head poses (2 with --finetune-mirror 0; docs/model.md)\n"
     "  --finetune-mirror 0|1  also fit the input mirrored left to right, from\n"
     "                   the mirrored pose (1, the default: the side the input\n"
     "                   hides takes the other side's look); 0: the input alone\n"
