@@ -136,6 +136,17 @@ int cli_parse_size(const char *s, int max, int *w, int *h)
     return 0;
 }
 
+int cli_parse_unit(const cli_command *cmd, const char *flag, const char *value, double *out)
+{
+    float x;
+    if (!value)
+        return CLI_OK;
+    if (cli_parse_floats(value, &x, 1) || !(x >= 0.0f && x <= 1.0f))
+        return cli_usage_error(cmd, "%s: want a number in [0, 1]; got '%s'", flag, value);
+    *out = x;
+    return CLI_OK;
+}
+
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
                        const char *plateau, const char *outline, const char *mirror,
                        gs_finetune_options *fo)

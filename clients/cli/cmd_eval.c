@@ -775,18 +775,11 @@ static int run_eval(int argc, char **argv)
                                "(0, 1]; got '%s'", o[O_FSCALE].value);
     ev.ro.feature_scale = fscale;
     ev.ro.full = o[O_FULL].value != NULL;
-    float xhw = (float)GS_XFER_HEAD_WEIGHT_DEFAULT;
-    if (o[O_XHW].value && (cli_parse_floats(o[O_XHW].value, &xhw, 1) ||
-                           !(xhw >= 0.0f && xhw <= 1.0f)))
-        return cli_usage_error(cmd, "--transfer-head-weight: want a number "
-                               "in [0, 1]; got '%s'", o[O_XHW].value);
-    ev.ro.transfer_head_weight = xhw;
-    float xew = (float)GS_XFER_EYE_WEIGHT_DEFAULT;
-    if (o[O_XEW].value && (cli_parse_floats(o[O_XEW].value, &xew, 1) ||
-                           !(xew >= 0.0f && xew <= 1.0f)))
-        return cli_usage_error(cmd, "--transfer-eye-weight: want a number "
-                               "in [0, 1]; got '%s'", o[O_XEW].value);
-    ev.ro.transfer_eye_weight = xew;
+    if ((rc = cli_parse_unit(cmd, "--transfer-head-weight", o[O_XHW].value,
+                             &ev.ro.transfer_head_weight)) ||
+        (rc = cli_parse_unit(cmd, "--transfer-eye-weight", o[O_XEW].value,
+                             &ev.ro.transfer_eye_weight)))
+        return rc;
     ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
                                  o[O_FT_OUTLINE].value, o[O_FT_MIRROR].value,

@@ -499,21 +499,15 @@ static int run_redirect(int argc, char **argv)
         return cli_usage_error(cmd, "--transfer needs the input face: --image");
     if (o[14].value && !o[5].value)
         return cli_usage_error(cmd, "--light-on-head goes with --head-deg");
-    float head_w = (float)GS_XFER_HEAD_WEIGHT_DEFAULT;
+    double head_w = GS_XFER_HEAD_WEIGHT_DEFAULT, eye_w = GS_XFER_EYE_WEIGHT_DEFAULT;
     if (o[15].value && (!transfer || !o[5].value))
         return cli_usage_error(cmd, "--transfer-head-weight goes with --transfer "
                                     "and --head-deg");
-    if (o[15].value && (cli_parse_floats(o[15].value, &head_w, 1) ||
-                        !(head_w >= 0.0f && head_w <= 1.0f)))
-        return cli_usage_error(cmd, "--transfer-head-weight: want a number in "
-                                    "[0, 1]; got '%s'", o[15].value);
-    float eye_w = (float)GS_XFER_EYE_WEIGHT_DEFAULT;
     if (o[16].value && !transfer)
         return cli_usage_error(cmd, "--transfer-eye-weight goes with --transfer");
-    if (o[16].value && (cli_parse_floats(o[16].value, &eye_w, 1) ||
-                        !(eye_w >= 0.0f && eye_w <= 1.0f)))
-        return cli_usage_error(cmd, "--transfer-eye-weight: want a number in "
-                                    "[0, 1]; got '%s'", o[16].value);
+    if ((rc = cli_parse_unit(cmd, "--transfer-head-weight", o[15].value, &head_w)) ||
+        (rc = cli_parse_unit(cmd, "--transfer-eye-weight", o[16].value, &eye_w)))
+        return rc;
     /* Parse every target before any work. */
     enum { MAXT = 256 };
     double tg[MAXT][2];

@@ -892,6 +892,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     uint8_t *flip = o.mirror ? mirror_image(rgb, stride, r.c->S) : NULL;
     if (o.mirror && (!flip || fit_bufs_init(&bm, r.c, flip, 3 * (size_t)r.c->S, NULL)))
         rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
+    free(flip); /* bm holds it as floats */
     if (!rc && o.mirror && o.mask)
         mirror_weights(o.mask, r.c->S, bm.w);
     double t0 = now_s(), best = INFINITY, first = NAN;
@@ -997,7 +998,6 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     ft_free(&r);
     free(inner);
     free(inner_m);
-    free(flip);
     fit_bufs_free(&bm);
     free(fs);
     fit_bufs_free(&b);
