@@ -13,7 +13,12 @@
  *   gaze change, transfer, full: the same target with the kept one dropped
  *     first (the path before incremental transfers);
  *   head change (a fresh head offset each rep): full renders, and transfer
- *     with its maps of every Gaussian.
+ *     with its maps of every Gaussian;
+ *   gaze change, transfer, incremental, with the eyeball warp off
+ *     (transfer_eye_warp_deg 0): what the warp costs a sweep's image;
+ *   a subject's first gaze change (the context reset first), with the
+ *     warp and without: the own view, and with the warp its eye opening's
+ *     probe renders, once per subject.
  * Prints a Markdown table of medians with each row's ratio to the plain
  * render of its kind, the full gaze change's to the incremental one and
  * the share of the image the incremental one redid.
@@ -34,7 +39,7 @@
 #include "gazesplat/nn.h"
 #include "gazesplat/pool.h"
 
-enum { MAX_REPS = 200, ROWS = 5 };
+enum { MAX_REPS = 200, ROWS = 8 };
 
 static void die(const char *what, const gs_error *e)
 {
@@ -82,6 +87,12 @@ int main(int argc, char **argv)
         fail |= !(ctx[k] = gs_model_ctx_create(m));
     if (fail)
         die("context", NULL);
+    gs_model_render_options nowarp;
+    gs_model_render_options_default(&nowarp);
+    nowarp.transfer_eye_warp_deg = 0.0;
+    if (gs_model_ctx_set_render_options(ctx[5], &nowarp, &err) ||
+        gs_model_ctx_set_render_options(ctx[7], &nowarp, &err))
+        die("render options", &err);
     gs_view own = {0};
     if (gs_model_render(ctx[0], pool, &sub, &own, in, st, &err))
         die("render", &err);
@@ -95,8 +106,13 @@ int main(int argc, char **argv)
     const char *names[ROWS] = {"gaze change: plain (incremental)",
                                "gaze change: transfer, incremental",
                                "gaze change: transfer, full maps",
-                               "head change: plain (full)", "head change: transfer"};
-    const int plain[ROWS] = {1, 0, 0, 1, 0}, base[ROWS] = {0, 0, 0, 3, 3};
+                               "head change: plain (full)", "head change: transfer",
+                               "gaze change: transfer, incremental, warp off",
+                               "first gaze change of a subject: transfer",
+                               "first gaze change of a subject: transfer, warp off"};
+    const int plain[ROWS] = {1, 0, 0, 1, 0, 0, 0, 0};
+    const int base[ROWS] = {0, 0, 0, 3, 3, 0, 7, 7};
+    const int head[ROWS] = {0, 0, 0, 1, 1, 0, 0, 0};
     for (int r = -1; r < reps; r++) { /* rep -1 warms up, untimed */
         gs_view v = {0};
         v.gaze_pitch = 0.1 * ((r + 3) % 3) - 0.1;
@@ -106,8 +122,10 @@ int main(int argc, char **argv)
         gs_geom_rot_from_pitchyaw(0.05, -0.15 + 0.01 * (r + 2), 0.0, h.head_R);
         memcpy(h.head_t, sub.head_t, sizeof h.head_t);
         gs_xfer_forget_target(ctx[2]->xfer);
+        gs_model_ctx_reset(ctx[6]);
+        gs_model_ctx_reset(ctx[7]);
         for (int k = 0; k < ROWS; k++) {
-            const gs_view *vk = k < 3 ? &v : &h;
+            const gs_view *vk = head[k] ? &h : &v;
             double t0 = now_ms();
             int rc = plain[k] ? gs_model_render(ctx[k], pool, &sub, vk, out, st, &err)
                               : gs_model_render_transfer(ctx[k], pool, &sub, in, st, vk,
@@ -133,9 +151,14 @@ int main(int argc, char **argv)
         printf("| %s | %.2f | %.1f |", names[i], med[i], 1000.0 / med[i]);
         if (plain[i])
             printf(" |\n");
+        else if (base[i] == i)
+            printf(" |\n");
         else
             printf(" %.2f× |\n", med[i] / med[base[i]]);
     }
+    printf("\nthe eyeball warp: %.2f× a sweep's incremental transfer without it; its eye "
+           "opening %.1f ms once per subject\n",
+           med[1] / med[5], med[6] - med[7]);
     printf("\ngaze change, transfer: full / incremental %.2f×; the eyes' box %.1f %% of "
            "the image\n",
            med[2] / med[1], 100.0 * ctx[1]->xfer_px / ((double)S * S * (double)reps));

@@ -147,6 +147,18 @@ int cli_parse_unit(const cli_command *cmd, const char *flag, const char *value, 
     return CLI_OK;
 }
 
+int cli_parse_warp(const cli_command *cmd, const char *value, double *out)
+{
+    float x;
+    if (!value)
+        return CLI_OK;
+    if (cli_parse_floats(value, &x, 1) || !(x >= 0.0f && x <= 90.0f))
+        return cli_usage_error(cmd, "--transfer-eye-warp: want degrees in [0, 90] "
+                               "(0: off); got '%s'", value);
+    *out = x;
+    return CLI_OK;
+}
+
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,
                        const char *plateau, const char *outline, const char *mirror,
                        gs_finetune_options *fo)

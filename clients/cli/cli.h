@@ -69,6 +69,8 @@ int cli_parse_size(const char *s, int max, int *w, int *h);
 /* A number in [0, 1] from flag's value into *out (unchanged when value is
  * NULL). Returns CLI_OK or CLI_USAGE (reported). */
 int cli_parse_unit(const cli_command *cmd, const char *flag, const char *value, double *out);
+/* --transfer-eye-warp DEG: [0, 90] into *out; NULL value: *out untouched. */
+int cli_parse_warp(const cli_command *cmd, const char *value, double *out);
 
 /* --finetune N, --finetune-parts LIST, --finetune-lr X, --finetune-plateau
  * R, --finetune-outline PX, --finetune-mirror 0|1 (any may be NULL) into

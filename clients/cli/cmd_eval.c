@@ -28,7 +28,7 @@ const cli_command cli_eval_command = {
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
-    "                      [--transfer-eye-weight W]\n"
+    "                      [--transfer-eye-weight W] [--transfer-eye-warp DEG]\n"
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "                      [--finetune-outline PX] [--finetune-mirror 0|1]\n"
@@ -68,6 +68,10 @@ const cli_command cli_eval_command = {
     "                    of the eyeball residual once the eye has turned a\n"
     "                    few degrees, 0..1 (default 0.5; all of it at the\n"
     "                    input's own gaze)\n"
+    "  --transfer-eye-warp DEG  the transfer method at another gaze, same\n"
+    "                    head pose: the input's eyeball pixels, turned with\n"
+    "                    the eye inside its opening, weighted\n"
+    "                    exp(-(turn / DEG)^2); 0..90 (default 14; 0 = off)\n"
     "  --light-on-head   model and transfer methods: at a head change keep\n"
     "                    the fitted light on the head (default: the lights\n"
     "                    stay in the camera, as in the ground truth)\n"
@@ -97,7 +101,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_LOH, O_XEW, O_FT_OUTLINE, O_FT_MIRROR, O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -646,6 +650,7 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     info->full_render = ev->ro.full;
     info->transfer_head_weight = ev->ro.transfer_head_weight;
     info->transfer_eye_weight = ev->ro.transfer_eye_weight;
+    info->transfer_eye_warp_deg = ev->ro.transfer_eye_warp_deg;
     info->light_on_head = ev->light_on_head;
     return CLI_OK;
 }
@@ -716,8 +721,8 @@ static int run_eval(int argc, char **argv)
         {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
         {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
-        {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
-        {"--finetune-mirror", 1, NULL},
+        {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
+        {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
@@ -778,7 +783,8 @@ static int run_eval(int argc, char **argv)
     if ((rc = cli_parse_unit(cmd, "--transfer-head-weight", o[O_XHW].value,
                              &ev.ro.transfer_head_weight)) ||
         (rc = cli_parse_unit(cmd, "--transfer-eye-weight", o[O_XEW].value,
-                             &ev.ro.transfer_eye_weight)))
+                             &ev.ro.transfer_eye_weight)) ||
+        (rc = cli_parse_warp(cmd, o[O_XWARP].value, &ev.ro.transfer_eye_warp_deg)))
         return rc;
     ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,

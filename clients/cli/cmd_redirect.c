@@ -67,6 +67,7 @@ const cli_command cli_redirect_command = {
     "                          [--head-deg P,Y [--light-on-head]] [--index I]\n"
     "                          [--out-norm] [--transfer-head-weight W]\n"
     "                          [--transfer-eye-weight W]\n"
+    "                          [--transfer-eye-warp DEG]\n"
     "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
     "                          [--finetune-plateau R] [--finetune-outline PX]\n"
@@ -102,6 +103,10 @@ const cli_command cli_redirect_command = {
     "                   residual once the eye has turned a few degrees from\n"
     "                   the input's gaze, 0..1 (0.5; all of it at the\n"
     "                   input's own gaze, reached smoothly)\n"
+    "  --transfer-eye-warp DEG  (with --transfer) at the input's head pose\n"
+    "                   the input's eyeball pixels, turned with the eye\n"
+    "                   inside its opening, weighted exp(-(turn / DEG)^2);\n"
+    "                   0..90 (14; 0 = off)\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
 };
@@ -472,7 +477,7 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[19] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[20] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
@@ -481,8 +486,8 @@ static int run_redirect(int argc, char **argv)
                      {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
                      {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
                      {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
-                     {"--finetune-mirror", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 19);
+                     {"--finetune-mirror", 1, NULL}, {"--transfer-eye-warp", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 20);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -503,10 +508,14 @@ static int run_redirect(int argc, char **argv)
     if (o[15].value && (!transfer || !o[5].value))
         return cli_usage_error(cmd, "--transfer-head-weight goes with --transfer "
                                     "and --head-deg");
+    double warp_deg = GS_XFER_EYE_WARP_DEG_DEFAULT;
     if (o[16].value && !transfer)
         return cli_usage_error(cmd, "--transfer-eye-weight goes with --transfer");
+    if (o[19].value && !transfer)
+        return cli_usage_error(cmd, "--transfer-eye-warp goes with --transfer");
     if ((rc = cli_parse_unit(cmd, "--transfer-head-weight", o[15].value, &head_w)) ||
-        (rc = cli_parse_unit(cmd, "--transfer-eye-weight", o[16].value, &eye_w)))
+        (rc = cli_parse_unit(cmd, "--transfer-eye-weight", o[16].value, &eye_w)) ||
+        (rc = cli_parse_warp(cmd, o[19].value, &warp_deg)))
         return rc;
     /* Parse every target before any work. */
     enum { MAXT = 256 };
@@ -595,11 +604,12 @@ static int run_redirect(int argc, char **argv)
     gs_model_ctx *c = rc ? NULL : gs_model_ctx_create(tuned ? tuned : m);
     if (!rc && !c)
         rc = cli_fail(cmd, "out of memory");
-    if (!rc && (o[15].value || o[16].value)) {
+    if (!rc && (o[15].value || o[16].value || o[19].value)) {
         gs_model_render_options ro;
         gs_model_render_options_default(&ro);
         ro.transfer_head_weight = head_w;
         ro.transfer_eye_weight = eye_w;
+        ro.transfer_eye_warp_deg = warp_deg;
         gs_error err = {0, ""};
         if (gs_model_ctx_set_render_options(c, &ro, &err))
             rc = cli_fail(cmd, "transfer weights: %s", err.msg);

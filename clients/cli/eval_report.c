@@ -219,6 +219,13 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
         fprintf(f, "- transfer at another gaze: eyeball residual x %.3g once "
                    "the eye has turned a few degrees (--transfer-eye-weight)\n",
                 info->transfer_eye_weight);
+    if (has_transfer && info->transfer_eye_warp_deg > 0)
+        fprintf(f, "- transfer at another gaze, same head pose: the input's "
+                   "eyeball pixels turned inside the eye opening, x "
+                   "exp(-(turn / %.3g deg)^2) (--transfer-eye-warp)\n",
+                info->transfer_eye_warp_deg);
+    else if (has_transfer)
+        fprintf(f, "- transfer eyeball warp: off (--transfer-eye-warp 0)\n");
     if (info->ft_iters > 0) {
         static const char *pn[] = {"face", "eye", "renderer", "mlp", "geometry"};
         char parts[64] = "";

@@ -50,6 +50,7 @@ typedef struct eval_run_info {
     int full_render;
     double transfer_head_weight; /* render option, transfer method */
     double transfer_eye_weight;  /* render option, transfer method */
+    double transfer_eye_warp_deg; /* render option, transfer method */
     int light_on_head;    /* --light-on-head */
     /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
     int ft_iters;

@@ -29,6 +29,32 @@
  * transfer_eye_weight: all of it at the input's gaze (the input comes
  * back), W once the eye has turned a few degrees, and no jump between.
  *
+ * The eyeball warp (the context's transfer_eye_warp_deg, W_deg > 0; same
+ * head pose only). The model draws the eyeball from 64^2 features, far
+ * blurrier than the input shows it, so where the input sees it the input's
+ * own eyeball pixels, turned with the eye, make a better eyeball than the
+ * render plus a residual. Per subject (with its own view):
+ *   - a proxy eyeball per eye: the sphere about the eye stream's centre
+ *     whose radius is its Gaussians' mean distance from it, with the iris
+ *     on a plane inside the limbus (GS_XFER_IRIS_RATIO of the radius from
+ *     the optical axis, R_e (0, 0, -1)), as in an eye: the iris turns
+ *     about the centre at that plane's distance, not the sphere's;
+ *   - the eye opening ap(p) in [0, 1]: where the model's render changes
+ *     when only the gaze changes (GS_XFER_PROBES renders at the input's
+ *     gaze +- GS_XFER_PROBE_YAW / _PITCH), the largest change summed over
+ *     RGB from GS_XFER_AP_LO to GS_XFER_AP_HI (8-bit units) mapped to 0..1.
+ *     The face stream does not see the gaze, so the lids and the skin
+ *     never count; the renderer learned where an eyeball shows.
+ * Target pixel p inside the eye stream's tiles and the opening: its ray
+ * meets a proxy eyeball at h (the iris plane inside the limbus), turned
+ * back to the input's gaze h_s = c + R_e,s R_e,t^T (h - c) and projected to
+ * q. It takes input(q) - render(p) with weight
+ * w = ap(p) ap(q) exp(-(theta / W_deg)^2) when h_s faces the input's camera
+ * (0 otherwise), and the skin and eyeball residuals above with 1 - w. The
+ * falloff keeps it to the turns the proxy carries well: a large turn brings
+ * sclera from under the input's lids, which the input never showed. At the
+ * input's own gaze q = p and the input comes back.
+ *
  * At another head pose the model's geometry places the input's detail a
  * pixel or two off, and the input's shading was lit at the old pose: a
  * head change carries only the skin residual's smooth part (Gaussian,
@@ -62,6 +88,14 @@
 /* Smoothing of the residual carried to another head pose, px at 256 px
  * (scaled with the image size). */
 #define GS_XFER_HEAD_SIGMA 2.0
+/* The eyeball warp (the header): the proxy's iris (GS_XFER_IRIS_RATIO,
+ * GS_XFER_IRIS_INSET) in frame.h; the probe gazes' offsets (rad) and the change (summed over RGB, 8-bit
+ * units) over which a pixel becomes the eye opening */
+#define GS_XFER_PROBES 4
+#define GS_XFER_PROBE_YAW 0.4
+#define GS_XFER_PROBE_PITCH 0.3
+#define GS_XFER_AP_LO 20.0f
+#define GS_XFER_AP_HI 80.0f
 
 /* What is kept per subject: its own view (while subject and settings are
  * the same), the residual of its input, and its last target's maps and
@@ -73,6 +107,9 @@ typedef struct xfer_subj {
     uint8_t *src8;                 /* [S, S, 3] */
     float *src_z, *src_a, *src_e;  /* [S*S] depth mm, coverage, eye */
     double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
+    double src_er[2];              /* its proxy eyeballs' radii */
+    int ap_valid;                  /* src_ap is this own view's */
+    float *src_ap;                 /* [S*S] eye opening, 0..1 */
     /* the residual res, kept with the input it came from while the own
      * view is kept */
     int res_valid;
@@ -108,17 +145,18 @@ struct gs_xfer {
     float *feat;                   /* [n, 2]: face 1 0, eye 0 1 */
     float *af, *aa, *ad;           /* [2, S, S], [S*S], [S*S] */
     uint8_t *tgt8;                 /* [S, S, 3] */
+    uint8_t *probe8;               /* [S, S, 3] the opening's probe renders */
 };
 
 static void subj_invalidate(xfer_subj *u)
 {
-    u->valid = u->res_valid = u->tgt_valid = 0;
+    u->valid = u->res_valid = u->tgt_valid = u->ap_valid = 0;
 }
 
 static void subj_free(xfer_subj *u)
 {
     float *bufs[] = {u->src_z, u->src_a, u->src_e, u->res, u->res_smooth,
-                     u->tgt_z, u->tgt_a, u->tgt_e, u->warped};
+                     u->tgt_z, u->tgt_a, u->tgt_e, u->warped, u->src_ap};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(bufs[i]);
     free(u->src8);
@@ -133,7 +171,7 @@ static int subj_alloc(xfer_subj *u, int S, int nf)
 {
     size_t px = (size_t)S * S;
     float **one[] = {&u->src_z, &u->src_a, &u->src_e, &u->tgt_z, &u->tgt_a,
-                     &u->tgt_e};
+                     &u->tgt_e, &u->src_ap};
     int fail = 0;
     for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
         fail |= !(*one[i] = malloc(px * sizeof(float)));
@@ -167,6 +205,7 @@ void gs_xfer_free(gs_xfer *x)
     subj_free(&x->cur);
     slots_free(x);
     free(x->tgt8);
+    free(x->probe8);
     gs_raster_destroy(x->raster);
     gs_raster_destroy(x->raster_crop);
     free(x);
@@ -185,6 +224,11 @@ void gs_xfer_forget_target(gs_xfer *x)
 {
     if (x)
         x->cur.tgt_valid = 0;
+}
+
+float *gs_xfer_eye_opening(gs_xfer *x)
+{
+    return x && x->cur.ap_valid ? x->cur.src_ap : NULL;
 }
 
 void gs_xfer_target_maps(const gs_xfer *x, const float **z, const float **a,
@@ -207,11 +251,12 @@ static int scratch_alloc(gs_xfer *x, int S, size_t n)
     x->aa = malloc(px * sizeof(float));
     x->ad = malloc(px * sizeof(float));
     x->tgt8 = malloc(3 * px);
+    x->probe8 = malloc(3 * px);
     float **f[] = {&x->k.mean, &x->k.scale, &x->k.quat, &x->k.opac,
                    &x->k.feat};
     size_t per[] = {3, 3, 4, 1, 2};
     int fail = !x->raster || !x->raster_crop || !x->feat || !x->af ||
-               !x->aa || !x->ad || !x->tgt8;
+               !x->aa || !x->ad || !x->tgt8 || !x->probe8;
     for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
         fail |= !(*f[i] = malloc(n * per[i] * sizeof(float)));
     return fail;
@@ -362,9 +407,15 @@ static int same_subject(const gs_subject *a, const gs_subject *b)
     return a->gaze_pitch == b->gaze_pitch && a->gaze_yaw == b->gaze_yaw;
 }
 
-/* Bilinear sample of plane p (S x S) at continuous pixel coordinates
- * (u, v), pixel centres at +0.5, clamped to the image. */
-static float bilinear(const float *p, int S, double u, double v)
+/* The four pixels (y * S + x) and weights of a bilinear sample of an
+ * S x S image at continuous pixel coordinates (u, v), pixel centres at
+ * +0.5, clamped to the image. */
+typedef struct {
+    size_t at[4];
+    float w[4];
+} bilinear_taps;
+
+static bilinear_taps taps_at(int S, double u, double v)
 {
     double x = u - 0.5, y = v - 0.5;
     x = x < 0 ? 0 : x > S - 1 ? S - 1 : x;
@@ -372,9 +423,18 @@ static float bilinear(const float *p, int S, double u, double v)
     int x0 = (int)x, y0 = (int)y;
     int x1 = x0 + 1 < S ? x0 + 1 : x0, y1 = y0 + 1 < S ? y0 + 1 : y0;
     float fx = (float)(x - x0), fy = (float)(y - y0);
-    const float *r0 = p + (size_t)y0 * S, *r1 = p + (size_t)y1 * S;
-    return (1 - fy) * ((1 - fx) * r0[x0] + fx * r0[x1]) +
-           fy * ((1 - fx) * r1[x0] + fx * r1[x1]);
+    bilinear_taps t = {{(size_t)y0 * S + x0, (size_t)y0 * S + x1,
+                        (size_t)y1 * S + x0, (size_t)y1 * S + x1},
+                       {(1 - fy) * (1 - fx), (1 - fy) * fx, fy * (1 - fx), fy * fx}};
+    return t;
+}
+
+/* Bilinear sample of plane p (S x S) at (u, v) (taps_at). */
+static float bilinear(const float *p, int S, double u, double v)
+{
+    bilinear_taps t = taps_at(S, u, v);
+    return t.w[0] * p[t.at[0]] + t.w[1] * p[t.at[1]] + t.w[2] * p[t.at[2]] +
+           t.w[3] * p[t.at[3]];
 }
 
 /* The two views' geometry for the per-pixel warps. */
@@ -384,16 +444,31 @@ typedef struct {
     double eM[2][9];      /* per eye: R_e,s R_e,t^T (head frame) */
     int same_pose;
     float eye_w[2];       /* weight of each eyeball's residual */
+    float warp_w[2];      /* the eyeball warp's falloff per eye; 0: off */
+    double ray_o[3];      /* the target camera's centre, head frame */
     float head_w;         /* weight of the smoothed residual (head change) */
 } xfer_geom;
+
+/* The angle (degrees) of rotation M. */
+static double turn_deg(const double M[9])
+{
+    double ct = 0.5 * (M[0] + M[4] + M[8] - 1.0);
+    return acos(ct > 1 ? 1 : ct < -1 ? -1 : ct) * (180.0 / 3.14159265358979323846);
+}
 
 /* The weight of an eyeball's residual after a turn by M (the header). */
 static float eye_weight(const double M[9], double floor_w)
 {
-    double ct = 0.5 * (M[0] + M[4] + M[8] - 1.0);
-    double deg = acos(ct > 1 ? 1 : ct < -1 ? -1 : ct) * (180.0 / 3.14159265358979323846);
-    double r = deg / GS_XFER_EYE_FALLOFF_DEG;
+    double r = turn_deg(M) / GS_XFER_EYE_FALLOFF_DEG;
     return (float)(floor_w + (1.0 - floor_w) * exp(-r * r));
+}
+
+/* Whether the eyeball warp runs: asked for, at the input's head pose, and
+ * the model turns its eyes explicitly (without, R_e,s R_e,t^T = I would
+ * carry the input's gaze along). */
+static int warp_on(const gs_model_ctx *c, int same_pose)
+{
+    return c->xfer_warp_deg > 0 && same_pose && c->m->cfg.eye_rotation;
 }
 
 static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
@@ -411,6 +486,13 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
     }
     g->same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
                    !memcmp(ts, tt, 3 * sizeof(double));
+    int warp = warp_on(c, g->same_pose);
+    for (int e = 0; e < 2; e++) {
+        double r = turn_deg(g->eM[e]) / (warp ? c->xfer_warp_deg : 1.0);
+        g->warp_w[e] = warp ? (float)exp(-r * r) : 0.0f;
+    }
+    double mt[3] = {-tt[0], -tt[1], -tt[2]};
+    gs_geom_mat3_tvec(Rt, mt, g->ray_o);
 }
 
 /* Target pixel (px, py)'s surface point in the head frame. */
@@ -511,6 +593,103 @@ static float eye_source(const gs_xfer *x, const xfer_geom *g,
     return g->eye_w[e] * seen_by_input(x, g, Xs, 1, b, u, v);
 }
 
+/* The eye's optical axis (head frame) for its rotation R: R (0, 0, -1). */
+static void eye_axis(const double R[9], double a[3])
+{
+    a[0] = -R[2], a[1] = -R[5], a[2] = -R[8];
+}
+
+/* Target pixel (px, py)'s ray against the proxy eyeballs (the header):
+ * the eye it meets first (-1: none), h the head-frame point (on the iris
+ * plane inside the limbus), *iris whether it is there. */
+static int proxy_hit(const gs_xfer *x, const xfer_geom *g, int px, int py,
+                     double h[3], int *iris)
+{
+    double dc[3] = {(px + 0.5 - g->ct.cx) / g->ct.fx,
+                    (py + 0.5 - g->ct.cy) / g->ct.fy, 1.0};
+    double d[3];
+    const double *o = g->ray_o;
+    gs_geom_mat3_tvec(g->Rt, dc, d);
+    double best = INFINITY, A = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+    int e = -1;
+    for (int k = 0; k < 2; k++) {
+        double r = x->cur.src_er[k], oc[3], B = 0, C = -r * r;
+        for (int j = 0; j < 3; j++) {
+            oc[j] = o[j] - x->tgt_ec[k][j];
+            B += d[j] * oc[j];
+            C += oc[j] * oc[j];
+        }
+        double D = B * B - A * C;
+        double t = D >= 0 ? (-B - sqrt(D)) / A : -1.0;
+        if (t > 0 && t < best)
+            best = t, e = k;
+    }
+    if (e < 0)
+        return -1;
+    const double *c = x->tgt_ec[e];
+    double r = x->cur.src_er[e], ax[3], ca = 0;
+    eye_axis(x->tgt_eR[e], ax);
+    for (int k = 0; k < 3; k++) {
+        h[k] = o[k] + best * d[k];
+        ca += (h[k] - c[k]) * ax[k];
+    }
+    double limbus = sqrt(1.0 - GS_XFER_IRIS_RATIO * GS_XFER_IRIS_RATIO);
+    *iris = 0;
+    if (ca > limbus * r) { /* inside the limbus: on to the iris plane */
+        double dp = r * (limbus - GS_XFER_IRIS_INSET), num = 0, den = 0;
+        for (int k = 0; k < 3; k++) {
+            num += (c[k] + dp * ax[k] - o[k]) * ax[k];
+            den += d[k] * ax[k];
+        }
+        if (den < 0) { /* the ray goes into the eye */
+            for (int k = 0; k < 3; k++)
+                h[k] = o[k] + num / den * d[k];
+            *iris = 1;
+        }
+    }
+    return e;
+}
+
+/* Where the input shows target pixel (px, py)'s proxy eyeball point, at
+ * (u, v), and the warp's weight for it there without the target's
+ * opening (the header): 0 unless it faces the input's camera. */
+static float warp_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
+                         double *u, double *v)
+{
+    double h[3], r[3], hs[3], n[3], nc[3], Xs[3];
+    int iris, e = proxy_hit(x, g, px, py, h, &iris);
+    if (e < 0 || g->warp_w[e] <= 0.0f)
+        return 0.0f;
+    for (int k = 0; k < 3; k++)
+        r[k] = h[k] - x->tgt_ec[e][k];
+    gs_geom_mat3_vec(g->eM[e], r, hs);
+    if (iris)
+        eye_axis(x->cur.src_eR[e], n);
+    else
+        memcpy(n, hs, sizeof n);
+    for (int k = 0; k < 3; k++)
+        hs[k] += x->cur.src_ec[e][k];
+    input_point(g, hs, Xs);
+    gs_geom_mat3_vec(g->Rs, n, nc);
+    if (!(Xs[2] > 1.0) || nc[0] * Xs[0] + nc[1] * Xs[1] + nc[2] * Xs[2] >= 0)
+        return 0.0f;
+    int S = x->S;
+    *u = g->cs.fx * Xs[0] / Xs[2] + g->cs.cx;
+    *v = g->cs.fy * Xs[1] / Xs[2] + g->cs.cy;
+    if (!(*u >= 0 && *v >= 0 && *u <= S && *v <= S))
+        return 0.0f;
+    return g->warp_w[e] * bilinear(x->cur.src_ap, S, *u, *v);
+}
+
+/* An interleaved 8-bit S x S RGB image at (u, v), bilinear (taps_at). */
+static void bilinear_rgb8(const uint8_t *p, int S, double u, double v, float rgb[3])
+{
+    bilinear_taps t = taps_at(S, u, v);
+    for (int k = 0; k < 3; k++)
+        rgb[k] = t.w[0] * p[3 * t.at[0] + k] + t.w[1] * p[3 * t.at[1] + k] +
+                 t.w[2] * p[3 * t.at[2] + k] + t.w[3] * p[3 * t.at[3] + k];
+}
+
 static int check_image(const uint8_t *p, size_t stride, int S, const char *what,
                        gs_error *err)
 {
@@ -571,6 +750,65 @@ static int subj_select(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s)
     return !x->cur.src8 && subj_alloc(&x->cur, x->S, x->nf);
 }
 
+/* Each eye's proxy radius: its Gaussians' mean distance from its centre
+ * in the render c->x_head holds. */
+static void proxy_radii(const gs_model_ctx *c, double r[2])
+{
+    int each = c->ne / 2;
+    for (int e = 0; e < 2; e++) {
+        double sum = 0;
+        for (int i = 0; i < each; i++) {
+            const float *xh = c->x_head + 3 * (size_t)(c->nf + e * each + i);
+            double d2 = 0;
+            for (int k = 0; k < 3; k++)
+                d2 += (xh[k] - c->eye_c[e][k]) * (xh[k] - c->eye_c[e][k]);
+            sum += sqrt(d2);
+        }
+        r[e] = each ? sum / each : 0.0;
+    }
+}
+
+static double clamp_abs(double v, double lim)
+{
+    return v > lim ? lim : v < -lim ? -lim : v;
+}
+
+/* The live subject's eye opening (the header): the largest change of its
+ * render over the probe gazes, mapped to 0..1. Renders, so it runs before
+ * the target's render (whose Gaussians the target's maps read). */
+static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                       const gs_subject *s, gs_error *err)
+{
+    if (x->cur.ap_valid)
+        return GS_OK;
+    static const double probe[GS_XFER_PROBES][2] = {
+        {0, GS_XFER_PROBE_YAW}, {0, -GS_XFER_PROBE_YAW},
+        {GS_XFER_PROBE_PITCH, 0}, {-GS_XFER_PROBE_PITCH, 0}};
+    int S = x->S;
+    size_t px = (size_t)S * S;
+    float *ap = x->cur.src_ap;
+    memset(ap, 0, px * sizeof(float));
+    for (int k = 0; k < GS_XFER_PROBES; k++) {
+        gs_view v = {clamp_abs(s->gaze_pitch + probe[k][0], GS_MODEL_MAX_GAZE_PITCH),
+                     clamp_abs(s->gaze_yaw + probe[k][1], GS_MODEL_MAX_GAZE_YAW),
+                     0, {0}, {0}, 0};
+        int rc = gs_model_render(c, pool, s, &v, x->probe8, 3 * (size_t)S, err);
+        if (rc)
+            return rc;
+        for (size_t i = 0; i < px; i++) {
+            const uint8_t *a = x->probe8 + 3 * i, *b = x->cur.src8 + 3 * i;
+            float d = (float)(abs(a[0] - b[0]) + abs(a[1] - b[1]) + abs(a[2] - b[2]));
+            ap[i] = d > ap[i] ? d : ap[i];
+        }
+    }
+    for (size_t i = 0; i < px; i++) {
+        float w = (ap[i] - GS_XFER_AP_LO) / (GS_XFER_AP_HI - GS_XFER_AP_LO);
+        ap[i] = w < 0.0f ? 0.0f : w > 1.0f ? 1.0f : w;
+    }
+    x->cur.ap_valid = 1;
+    return GS_OK;
+}
+
 /* The subject's own view and its maps: rendered once per subject and
  * settings, kept for as many subjects as the sweep cache. */
 static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
@@ -591,6 +829,7 @@ static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
         return rc;
     memcpy(x->cur.src_eR, c->eye_R, sizeof x->cur.src_eR);
     memcpy(x->cur.src_ec, c->eye_c, sizeof x->cur.src_ec);
+    proxy_radii(c, x->cur.src_er);
     x->cur.key = *s;
     x->cur.key_fs = c->render_fs;
     x->cur.key_full = c->render_full;
@@ -690,6 +929,19 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
         if (!g->same_pose)
             wh *= g->head_w;
     }
+    /* the eyeball warp, inside the eye stream's tiles (redone with them in
+     * a sweep) and the opening */
+    const int *tr = x->cur.tgt_rect;
+    double uw = 0, vw = 0;
+    float ww = 0.0f, src[3] = {0, 0, 0};
+    if ((g->warp_w[0] > 0.0f || g->warp_w[1] > 0.0f) && x->cur.src_ap[i] > 0.0f &&
+        px >= tr[0] && px < tr[2] && py >= tr[1] && py < tr[3]) {
+        ww = x->cur.src_ap[i] * warp_source(x, g, px, py, &uw, &vw);
+        wh *= 1.0f - ww;
+        we *= 1.0f - ww;
+        if (ww > 0.0f)
+            bilinear_rgb8(x->cur.in8, x->S, uw, vw, src);
+    }
     for (int k = 0; k < 3; k++) {
         const float *rk = res + k * n;
         float v = 0.0f;
@@ -697,6 +949,8 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
             v += wh * bilinear(rk, x->S, uh, vh);
         if (we > 0.0f)
             v += we * bilinear(rk, x->S, ue, ve);
+        if (ww > 0.0f)
+            v += ww * (src[k] - (float)x->tgt8[3 * i + k]);
         x->cur.warped[k * n + i] = v;
     }
 }
@@ -774,6 +1028,10 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
     const double *tt = view->use_head ? view->head_t : s->head_t;
     c->last_xfer_inc = 0;
     if ((rc = own_view(c, x, pool, s, err)))
+        return rc;
+    int same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
+                    !memcmp(ts, tt, 3 * sizeof(double));
+    if (warp_on(c, same_pose) && (rc = eye_opening(c, x, pool, s, err)))
         return rc;
     /* only the gaze changed since the kept target: the face is the same */
     int keep = x->cur.tgt_valid && !memcmp(x->cur.tgt_R, Rt, sizeof x->cur.tgt_R) &&

@@ -146,6 +146,8 @@ static void usage_errors(const char *model, const char *pairs)
         {"--transfer-head-weight", "nan"},
         {"--transfer-eye-weight", "1.5"}, {"--transfer-eye-weight", "-0.1"},
         {"--transfer-eye-weight", "nan"},
+        {"--transfer-eye-warp", "-1"}, {"--transfer-eye-warp", "91"},
+        {"--transfer-eye-warp", "nan"}, {"--transfer-eye-warp", "wide"},
         {"--finetune-outline", "1"}, /* without --finetune N */
         {"--finetune-mirror", "0"},
         {"--feature-scale", "0.1"}, /* 3 of the tiny model's 32 px */
@@ -283,7 +285,9 @@ int main(int argc, char **argv)
                   strstr(sum, "diverged fits 0, errors 0, non-finite outputs 0") &&
                   strstr(sum, "lights at another head pose: kept in the camera") &&
                   strstr(sum, "smoothed skin residual x 0.5") &&
-                  strstr(sum, "eyeball residual x 0.5 once") && !strstr(sum, "nan"),
+                  strstr(sum, "eyeball residual x 0.5 once") &&
+                  strstr(sum, "exp(-(turn / 14 deg)^2) (--transfer-eye-warp)") &&
+                  !strstr(sum, "nan"),
               "%s", sum ? sum : "");
     /* Render settings on run 2's fits: 100 % and scale 1 are the normal
      * path (same numbers); pruned, coarse and full renders stay finite. */

@@ -110,6 +110,21 @@ usage_x redirect --model m.safetensors --image $IMG \
 grep -q "transfer-eye-weight goes with --transfer" ux.err || { cat ux.err; fail "eye weight usage"; }
 usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
   --gaze-deg "0,0" --transfer-eye-weight -1 --out x
+# --transfer-eye-warp: renders with the warp off and at its widest; it
+# needs --transfer and degrees in [0, 90] (the library test checks what
+# the warp does, with the eye opening pinned: this model's renders barely
+# change with the gaze, so its opening is empty).
+"$G" redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0;10,-15" --transfer-eye-warp 0 --out o_xwo >/dev/null 2>&1
+"$G" redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0;10,-15" --transfer-eye-warp 90 --out o_xw90 >/dev/null 2>&1
+[ -s o_xwo/001.png ] && [ -s o_xw90/001.png ] || fail "--transfer-eye-warp wrote nothing"
+usage_x redirect --model m.safetensors --image $IMG \
+  --gaze-deg "0,0" --transfer-eye-warp 5 --out x
+grep -q "transfer-eye-warp goes with --transfer" ux.err || { cat ux.err; fail "eye warp usage"; }
+usage_x redirect --model m.safetensors --subject plain.bin --image $IMG --transfer \
+  --gaze-deg "0,0" --transfer-eye-warp 91 --out x
+grep -q "want degrees in \[0, 90\]" ux.err || { cat ux.err; fail "eye warp range message"; }
 # --finetune-outline: another tuned block than without it (the library
 # test checks what it changes); 0..8 and with --finetune N only.
 "$G" fit --model m.safetensors --image $IMG --iters 4 --finetune 5 --finetune-outline 2 \

@@ -4,7 +4,9 @@
  * eyes and never more than whole anywhere; the kept own view follows the
  * subject and the context's resets; 1 and 2 threads give the same bytes;
  * gaze sweeps redo only the eyes' reach and match a fresh context's full
- * transfer, also when that reach moves with the gaze; bad arguments are
+ * transfer, also when that reach moves with the gaze; the eyeball warp
+ * changes only the eye opening, takes each pixel from where the proxy
+ * eyeball puts it and stays incremental in a sweep; bad arguments are
  * refused with the output untouched. */
 #include <math.h>
 #include <stdio.h>
@@ -169,6 +171,314 @@ static void agree(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uin
 static const double sweep_gz[][2] = {{5, -10}, {7, -9}, {-5, 10}, {30, -40}, {-30, 40},
                                      {-30, 39}, {40, 50}, {-40, -50}, {5, -10}};
 #define SWEEP_N ((int)(sizeof sweep_gz / sizeof sweep_gz[0]))
+
+/* ---- The eyeball warp ---- */
+
+static void set_warp(gs_model_ctx *c, double deg)
+{
+    gs_model_render_options o;
+    gs_model_render_options_default(&o);
+    o.transfer_eye_warp_deg = deg;
+    gs_error err = {0, ""};
+    CHECK_MSG(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK, "%s", err.msg);
+}
+
+/* What the warp should do, worked out here on its own terms: the ray of
+ * target pixel p is marched through the proxy eyeballs (sphere about the
+ * eye stream's centre, radius its Gaussians' mean distance; the iris plane
+ * inside the limbus), the point turned back to the input's gaze and
+ * projected into the input. */
+typedef struct {
+    gs_camera cam;
+    double R[9], t[3];       /* head pose (both views) */
+    double c[2][3], r[2];    /* eyeballs */
+    double Rs[2][9], Rt[2][9];
+} warp_ref;
+
+static void eye_state(const gs_model_ctx *c, double R[2][9], double ctr[2][3], double r[2])
+{
+    int each = c->ne / 2;
+    memcpy(R, c->eye_R, sizeof c->eye_R);
+    memcpy(ctr, c->eye_c, sizeof c->eye_c);
+    for (int e = 0; e < 2; e++) {
+        double sum = 0;
+        for (int i = 0; i < each; i++) {
+            const float *x = c->x_head + 3 * (size_t)(c->nf + e * each + i);
+            sum += sqrt(pow(x[0] - ctr[e][0], 2) + pow(x[1] - ctr[e][1], 2) +
+                        pow(x[2] - ctr[e][2], 2));
+        }
+        r[e] = sum / each;
+    }
+}
+
+/* Target pixel (px, py) -> input position q; returns the eye, -1 where
+ * the warp takes nothing (no eyeball, or its point faces away from the
+ * input's camera). */
+static int warp_expect(const warp_ref *w, int px, int py, double q[2])
+{
+    double dc[3] = {(px + 0.5 - w->cam.cx) / w->cam.fx, (py + 0.5 - w->cam.cy) / w->cam.fy, 1};
+    double o[3], d[3], mt[3] = {-w->t[0], -w->t[1], -w->t[2]};
+    gs_geom_mat3_tvec(w->R, mt, o);
+    gs_geom_mat3_tvec(w->R, dc, d);
+    double nd = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    for (int k = 0; k < 3; k++)
+        d[k] /= nd;
+    double best = INFINITY, h[3] = {0, 0, 0};
+    int eye = -1, iris = 0;
+    for (int e = 0; e < 2; e++) {
+        double along = 0, ax[3] = {-w->Rt[e][2], -w->Rt[e][5], -w->Rt[e][8]};
+        for (int k = 0; k < 3; k++)
+            along += (w->c[e][k] - o[k]) * d[k];
+        double lim = sqrt(1 - GS_XFER_IRIS_RATIO * GS_XFER_IRIS_RATIO);
+        double plane = w->r[e] * (lim - GS_XFER_IRIS_INSET);
+        /* march in 2 um steps from 2 radii before the centre */
+        int in_sphere = 0;
+        for (double t = along - 2 * w->r[e]; t < along + w->r[e] && t < best; t += 0.002) {
+            double X[3], rr = 0, a = 0;
+            for (int k = 0; k < 3; k++) {
+                X[k] = o[k] + t * d[k] - w->c[e][k];
+                rr += X[k] * X[k];
+                a += X[k] * ax[k];
+            }
+            if (!in_sphere && rr <= w->r[e] * w->r[e]) {
+                in_sphere = 1;
+                if (a <= lim * w->r[e]) { /* sclera */
+                    best = t, eye = e, iris = 0;
+                    break;
+                }
+            }
+            if (in_sphere && a <= plane) { /* through the cornea to the iris */
+                best = t, eye = e, iris = 1;
+                break;
+            }
+        }
+        if (eye == e)
+            for (int k = 0; k < 3; k++)
+                h[k] = o[k] + best * d[k];
+    }
+    if (eye < 0)
+        return -1;
+    double M[9], RtT[9], rel[3], hs[3], n[3], X[3], nc[3];
+    gs_geom_mat3_transpose(w->Rt[eye], RtT);
+    gs_geom_mat3_mul(w->Rs[eye], RtT, M);
+    for (int k = 0; k < 3; k++)
+        rel[k] = h[k] - w->c[eye][k];
+    gs_geom_mat3_vec(M, rel, hs);
+    if (iris)
+        n[0] = -w->Rs[eye][2], n[1] = -w->Rs[eye][5], n[2] = -w->Rs[eye][8];
+    else
+        memcpy(n, hs, sizeof n);
+    for (int k = 0; k < 3; k++)
+        hs[k] += w->c[eye][k];
+    gs_geom_mat3_vec(w->R, hs, X);
+    gs_geom_mat3_vec(w->R, n, nc);
+    for (int k = 0; k < 3; k++)
+        X[k] += w->t[k];
+    if (nc[0] * X[0] + nc[1] * X[1] + nc[2] * X[2] >= 0)
+        return -1;
+    q[0] = w->cam.fx * X[0] / X[2] + w->cam.cx;
+    q[1] = w->cam.fy * X[1] / X[2] + w->cam.cy;
+    return eye;
+}
+
+static double turn_deg_of(const double Rs[9], const double Rt[9])
+{
+    double RtT[9], M[9];
+    gs_geom_mat3_transpose(Rt, RtT);
+    gs_geom_mat3_mul(Rs, RtT, M);
+    double ct = 0.5 * (M[0] + M[4] + M[8] - 1.0);
+    return acos(ct > 1 ? 1 : ct < -1 ? -1 : ct) * 180.0 / GS_MODEL_PI;
+}
+
+/* The warp: the own view still gives the input back; it changes only the
+ * eye opening (the pixels whose render changes with the gaze); with the
+ * opening pinned to everything, an input that is a ramp of its own pixel
+ * coordinates reveals where each target pixel is taken from, and that is
+ * where the proxy eyeball puts it, to a pixel; the falloff and the
+ * option's range. */
+static void warp_checks(const gs_model *m, const gs_subject *s, const uint8_t *in, int S)
+{
+    size_t isz = 3 * (size_t)S * S, px = (size_t)S * S;
+    uint8_t *o0 = malloc(isz), *o1 = malloc(isz), *ramp = malloc(isz);
+    gs_model_ctx *cw = gs_model_ctx_create(m), *c0 = gs_model_ctx_create(m);
+    set_warp(c0, 0.0);
+    gs_view vo = own_view(s), vt = vo;
+    vt.gaze_pitch += 0.2;
+    vt.gaze_yaw -= 0.35;
+
+    /* the default warp: input back at its own gaze, then a turn changes
+     * only the opening */
+    transfer(cw, NULL, s, in, &vo, o1, S);
+    CHECK_MSG(max_diff(o1, in, isz) <= 1, "warp: own view not the input back (%d)",
+              max_diff(o1, in, isz));
+    transfer(cw, NULL, s, in, &vt, o1, S);
+    transfer(c0, NULL, s, in, &vt, o0, S);
+    float *ap = gs_xfer_eye_opening(cw->xfer);
+    CHECK_MSG(ap != NULL, "warp: no eye opening after a turn");
+    if (!ap)
+        goto done;
+    size_t open = 0, outside = 0, inside = 0;
+    int bad_ap = 0;
+    for (int pass = 0; pass < 2; pass++) {
+        /* pass 0: this model's opening (tiny: often none); pass 1: pinned
+         * to the image's left half */
+        if (pass) {
+            for (size_t i = 0; i < px; i++)
+                ap[i] = (int)(i % (size_t)S) < S / 2 ? 1.0f : 0.0f;
+            transfer(cw, NULL, s, in, &vt, o1, S);
+        }
+        for (size_t i = 0; i < px; i++) {
+            bad_ap |= !(ap[i] >= 0.0f && ap[i] <= 1.0f);
+            open += !pass && ap[i] > 0.0f;
+            for (int k = 0; k < 3; k++) {
+                int ch = o1[3 * i + k] != o0[3 * i + k];
+                outside += ap[i] == 0.0f && ch;
+                inside += pass && ap[i] > 0.0f && ch;
+            }
+        }
+    }
+    CHECK_MSG(!bad_ap, "warp: opening outside [0, 1]");
+    CHECK_MSG(outside == 0, "warp: %zu samples changed outside the opening", outside);
+    CHECK_MSG(open < px / 10, "warp: opening of %zu of %zu pixels", open, px);
+    CHECK_MSG(inside > 0, "warp: nothing changed inside a pinned opening");
+    printf("eyeball warp: own view gives the input back; a turn changes only the opening "
+           "(%zu px of this model's; pinned to the left half: %zu samples there, none "
+           "elsewhere)\n", open, inside);
+
+    /* pinned opening, ramp input: R = 2 x, G = 2 y, B = 128 */
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
+            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
+        }
+    set_warp(cw, 90.0);
+    transfer(cw, NULL, s, ramp, &vt, o1, S); /* makes the opening */
+    float *pin = gs_xfer_eye_opening(cw->xfer);
+    for (size_t i = 0; pin && i < px; i++)
+        pin[i] = 1.0f;
+    transfer(cw, NULL, s, ramp, &vt, o1, S);
+    transfer(c0, NULL, s, ramp, &vt, o0, S);
+    warp_ref w;
+    gs_model_ctx *cr = gs_model_ctx_create(m);
+    double c2[2][3], r2[2];
+    render(cr, NULL, s, &vo, ramp, S); /* cr->eye_*: the own gaze's */
+    eye_state(cr, w.Rs, w.c, w.r);
+    render(cr, NULL, s, &vt, ramp, S);
+    eye_state(cr, w.Rt, c2, r2);
+    gs_frame_camera(m, s->head_t, &w.cam);
+    float sc = (float)S / (float)cr->fs;
+    w.cam.fx *= sc, w.cam.fy *= sc;
+    w.cam.cx = w.cam.cy = 0.5f * (float)S;
+    gs_model_ctx_destroy(cr);
+    memcpy(w.R, s->head_R, sizeof w.R);
+    memcpy(w.t, s->head_t, sizeof w.t);
+    double wt[2];
+    for (int e = 0; e < 2; e++) {
+        double r = turn_deg_of(w.Rs[e], w.Rt[e]) / 90.0;
+        wt[e] = exp(-r * r);
+    }
+    /* the ramp again (the renders above wrote over it) */
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
+            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
+        }
+    size_t n = 0, near = 0, stray = 0;
+    double err_sum = 0, move_sum = 0;
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            size_t i = 3 * ((size_t)y * S + x);
+            double q[2];
+            int e = warp_expect(&w, x, y, q);
+            int same = o1[i] == o0[i] && o1[i + 1] == o0[i + 1];
+            if (e < 0) {
+                stray += !same;
+                continue;
+            }
+            if (same || o0[i] == 0 || o0[i] == 255 || o0[i + 1] == 0 || o0[i + 1] == 255)
+                continue; /* outside the eye stream's tiles, or clamped */
+            double u = 0.5 * (o0[i] + (o1[i] - o0[i]) / wt[e]) + 0.5;
+            double v = 0.5 * (o0[i + 1] + (o1[i + 1] - o0[i + 1]) / wt[e]) + 0.5;
+            double eu = fabs(u - q[0]), ev = fabs(v - q[1]);
+            n++;
+            near += eu <= 1.0 && ev <= 1.0;
+            err_sum += hypot(u - q[0], v - q[1]);
+            move_sum += hypot(q[0] - (x + 0.5), q[1] - (y + 0.5));
+        }
+    printf("eyeball warp, pinned opening, ramp input, a %.1f / %.1f degree turn: %zu pixels "
+           "taken from where the proxy eyeball puts them (mean error %.2f px, %.1f %% within "
+           "1 px; they move %.2f px on average); %zu pixels warped where it puts nothing\n",
+           turn_deg_of(w.Rs[0], w.Rt[0]), turn_deg_of(w.Rs[1], w.Rt[1]), n,
+           n ? err_sum / n : 0.0, n ? 100.0 * near / n : 0.0, n ? move_sum / n : 0.0, stray);
+    CHECK_MSG(n >= 40, "warp: only %zu pixels to check", n);
+    CHECK_MSG(n && move_sum / n >= 1.0, "warp: the turn moves pixels %.2f px only", move_sum / n);
+    CHECK_MSG(n && err_sum / n <= 0.5 && near >= 0.95 * n,
+              "warp: taken %.2f px from the proxy's place on average, %zu of %zu within 1 px",
+              n ? err_sum / n : 0.0, near, n);
+    CHECK_MSG(stray <= px / 200, "warp: %zu pixels warped where the proxy has no eyeball",
+              stray);
+
+    /* a gaze sweep with the opening pinned: the incremental transfers (the
+     * warp redone inside the eye stream's tiles only) agree with a fresh
+     * context's full ones, and the warp does change them */
+    set_warp(cw, 90.0);
+    transfer(cw, NULL, s, in, &vo, o1, S);
+    pin = gs_xfer_eye_opening(cw->xfer);
+    for (size_t i = 0; pin && i < px; i++)
+        pin[i] = 1.0f;
+    int worst = 0, incs = 0;
+    size_t nworst = 0, warped_px = 0;
+    for (int k = 0; k < SWEEP_N; k++) {
+        gs_view v = vo;
+        v.gaze_pitch = sweep_gz[k][0] * GS_MODEL_PI / 180;
+        v.gaze_yaw = sweep_gz[k][1] * GS_MODEL_PI / 180;
+        transfer(cw, NULL, s, in, &v, o1, S);
+        incs += last_incremental(cw);
+        gs_model_ctx *f = gs_model_ctx_create(m);
+        set_warp(f, 90.0);
+        transfer(f, NULL, s, in, &v, o0, S);
+        float *fp = gs_xfer_eye_opening(f->xfer);
+        for (size_t i = 0; fp && i < px; i++)
+            fp[i] = 1.0f;
+        gs_xfer_forget_target(f->xfer);
+        transfer(f, NULL, s, in, &v, o0, S);
+        CHECK_MSG(!last_incremental(f), "warp sweep: the fresh context went incremental");
+        size_t nd = 0;
+        for (size_t i = 0; i < isz; i++)
+            nd += o1[i] != o0[i];
+        int d = max_diff(o1, o0, isz);
+        worst = d > worst ? d : worst;
+        nworst = nd > nworst ? nd : nworst;
+        transfer(c0, NULL, s, in, &v, ramp, S); /* the same without the warp */
+        for (size_t i = 0; i < isz; i++)
+            warped_px += o1[i] != ramp[i];
+        gs_model_ctx_destroy(f);
+    }
+    printf("eyeball warp, pinned opening: a sweep of %d gazes, %d incremental, agrees with "
+           "fresh full transfers (bytes within %d on at most %zu of %zu); the warp changed "
+           "%zu samples\n", SWEEP_N, incs, worst, nworst, isz, warped_px);
+    CHECK_MSG(incs == SWEEP_N, "warp sweep: %d of %d incremental", incs, SWEEP_N);
+    CHECK_MSG(worst <= 1 && (double)nworst <= BYTE_SHARE * (double)isz,
+              "warp sweep: incremental and full differ by %d on %zu samples", worst, nworst);
+    CHECK_MSG(warped_px > 100, "warp sweep: the warp changed only %zu samples", warped_px);
+
+    /* the option's range */
+    gs_model_render_options o;
+    gs_model_render_options_default(&o);
+    CHECK(o.transfer_eye_warp_deg == GS_XFER_EYE_WARP_DEG_DEFAULT);
+    gs_error err = {0, ""};
+    const double bad[3] = {-1.0, 90.5, NAN};
+    for (int k = 0; k < 3; k++) {
+        o.transfer_eye_warp_deg = bad[k];
+        CHECK_MSG(gs_model_ctx_set_render_options(cw, &o, &err) == GS_ERR_ARG,
+                  "warp %g accepted", bad[k]);
+    }
+done:
+    gs_model_ctx_destroy(cw);
+    gs_model_ctx_destroy(c0);
+    free(o0), free(o1), free(ramp);
+}
+
 
 /* A gaze sweep at view v's head pose (a new one for c), each target
  * against a fresh context; outs (may be NULL) gets each step's bytes. */
@@ -345,7 +655,10 @@ int main(void)
     CHECK_MSG(d <= 1, "own view of noise: input back within 1, got %d", d);
     printf("own view: the input back (face and noise, max diff %d)\n", d);
 
-    /* A zero residual: the plain render, for every view. */
+    /* A zero residual: the plain render, for every view, with the eyeball
+     * warp off (it carries the input's eyeball pixels, not its residual:
+     * warp_checks). */
+    set_warp(c, 0.0);
     gs_model_ctx *c2 = gs_model_ctx_create(m);
     render(c2, NULL, &sub[0], &v_own, own, S);
     for (int k = 0; k < 3; k++) {
@@ -371,6 +684,7 @@ int main(void)
             gs_model_render_options_default(&hro);
             hro.transfer_head_weight = head_w[t];
             hro.transfer_eye_weight = 1.0; /* the eyeballs' weight: below */
+            hro.transfer_eye_warp_deg = 0.0;
             CHECK(gs_model_ctx_set_render_options(c, &hro, &err) == GS_OK);
             int want = k ? (int)lround(20 * head_w[t]) : 20;
             render(c2, NULL, &sub[0], views[k], ref, S);
@@ -397,8 +711,9 @@ int main(void)
             CHECK_MSG(share > (k == 0 ? 0.95 : want == 0 ? 0.999 : 0.45),
                       "%s: whole on %.3f only", names[k], share);
         }
-    /* The eyeball residual after a gaze turn of about 20 degrees: all of
-     * it at transfer eye weight 1, none at 0, half at 0.5 (the default);
+    /* The eyeball residual after a gaze turn of about 20 degrees (the warp
+     * off): all of it at transfer eye weight 1, none at 0, half at 0.5 (the
+     * default);
      * the skin's is the same at every weight. Linear in the weight, so each
      * sample at 0.5 is the mean of the other two, to rounding. */
     {
@@ -410,6 +725,7 @@ int main(void)
             gs_model_render_options ero;
             gs_model_render_options_default(&ero);
             ero.transfer_eye_weight = ew[t];
+            ero.transfer_eye_warp_deg = 0.0;
             CHECK(gs_model_ctx_set_render_options(c, &ero, &err) == GS_OK);
             transfer(c, NULL, &sub[0], a, &v_gaze, o3[t], S);
         }
@@ -444,6 +760,7 @@ int main(void)
         gs_model_render_options one;
         gs_model_render_options_default(&one);
         one.transfer_eye_weight = 1.0;
+        one.transfer_eye_warp_deg = 0.0;
         CHECK(gs_model_ctx_set_render_options(c, &one, &err) == GS_OK);
         transfer(c, NULL, &sub[0], a, &v_tiny, b, S);
         d = max_diff(out, b, isz);
@@ -493,6 +810,7 @@ int main(void)
     gs_model_ctx_destroy(c3);
     printf("kept own view, resets and thread counts: same bytes\n");
     incremental(m, sub, in, noise, pool, S, "whole eyeballs");
+    warp_checks(m, &sub[0], in, S);
 
     /* Bad arguments. */
     memset(out, 0x5a, isz);

@@ -189,9 +189,18 @@ typedef struct gs_model_render_options {
      * (docs/model.md, "Detail transfer"). The skin always carries all of
      * its residual at the input's head pose. */
     double transfer_eye_weight;
+    /* gs_model_render_transfer at another gaze, same head pose: the input's
+     * own eyeball pixels, turned with the eye about the model's eyeball and
+     * kept inside the eye opening, make the eyeball, with weight
+     * exp(-(theta / transfer_eye_warp_deg)^2) for a turn of theta degrees;
+     * the rest is the model's render plus the residual as above
+     * (docs/model.md, "The eyeball warp"). Degrees, [0, 90] (default
+     * GS_XFER_EYE_WARP_DEG_DEFAULT); 0 turns the warp off. */
+    double transfer_eye_warp_deg;
 } gs_model_render_options;
 #define GS_XFER_HEAD_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WEIGHT_DEFAULT 0.5
+#define GS_XFER_EYE_WARP_DEG_DEFAULT 14.0
 void gs_model_render_options_default(gs_model_render_options *o);
 /* Takes effect from the next render; drops the context's kept renders.
  * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */
