@@ -37,8 +37,9 @@
  *   - a proxy eyeball per eye: the sphere about the eye stream's centre
  *     whose radius is its Gaussians' mean distance from it, with the iris
  *     on a plane inside the limbus (GS_XFER_IRIS_RATIO of the radius from
- *     the optical axis, R_e (0, 0, -1)), as in an eye: the iris turns
- *     about the centre at that plane's distance, not the sphere's;
+ *     the optical axis, R_g (0, 0, -1), R_g the gaze's rotation), as in an
+ *     eye: the iris turns about the centre at that plane's distance, not
+ *     the sphere's;
  *   - the eye opening ap(p) in [0, 1]: where the model's render changes
  *     when only the gaze changes (GS_XFER_PROBES renders at the input's
  *     gaze +- GS_XFER_PROBE_YAW / _PITCH), the largest change summed over
@@ -47,9 +48,13 @@
  *     never count; the renderer learned where an eyeball shows.
  * Target pixel p inside the eye stream's tiles and the opening: its ray
  * meets a proxy eyeball at h (the iris plane inside the limbus), turned
- * back to the input's gaze h_s = c + R_e,s R_e,t^T (h - c) and projected to
- * q. It takes input(q) - render(p) with weight
- * w = ap(p) ap(q) exp(-(theta / W_deg)^2) when h_s faces the input's camera
+ * back to the input's gaze h_s = c + R_g,s R_g,t^T (h - c) and projected to
+ * q. The turn is the gaze's own, without the eye stream's learned residual
+ * rotation: the input's pixels are a real eye, which turns by the gaze
+ * change itself (the residual, for the model's drawn iris, read worse by
+ * the estimator). It takes input(q) - render(p) with weight
+ * w = ap(p) ap(q) exp(-(theta / W_deg)^2), theta that turn's angle, when
+ * h_s faces the input's camera
  * (0 otherwise), and the skin and eyeball residuals above with 1 - w. The
  * falloff keeps it to the turns the proxy carries well: a large turn brings
  * sclera from under the input's lids, which the input never showed. At the
@@ -107,6 +112,7 @@ typedef struct xfer_subj {
     uint8_t *src8;                 /* [S, S, 3] */
     float *src_z, *src_a, *src_e;  /* [S*S] depth mm, coverage, eye */
     double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
+    double src_Rg[9];              /* its gaze's rotation (the warp's) */
     double src_er[2];              /* its proxy eyeballs' radii */
     int ap_valid;                  /* src_ap is this own view's */
     float *src_ap;                 /* [S*S] eye opening, 0..1 */
@@ -139,6 +145,7 @@ struct gs_xfer {
     int nslots;
     uint64_t clock;
     double tgt_eR[2][9], tgt_ec[2][3]; /* this call's target's eyeballs */
+    double tgt_Rg[9];                  /* and its gaze's rotation */
     /* scratch */
     gs_raster *raster, *raster_crop; /* whole images; crops of the target */
     gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
@@ -391,6 +398,7 @@ static int target_maps(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     }
     memcpy(x->cur.tgt_rect, now, sizeof now);
     memcpy(x->tgt_eR, c->eye_R, sizeof x->tgt_eR);
+    memcpy(x->tgt_Rg, c->eye_Rg, sizeof x->tgt_Rg);
     memcpy(x->tgt_ec, c->eye_c, sizeof x->tgt_ec);
     return rc;
 }
@@ -444,7 +452,8 @@ typedef struct {
     double eM[2][9];      /* per eye: R_e,s R_e,t^T (head frame) */
     int same_pose;
     float eye_w[2];       /* weight of each eyeball's residual */
-    float warp_w[2];      /* the eyeball warp's falloff per eye; 0: off */
+    double gM[9];         /* the gaze's own turn R_g,s R_g,t^T (the warp) */
+    float warp_w;         /* the eyeball warp's falloff; 0: off */
     double ray_o[3];      /* the target camera's centre, head frame */
     float head_w;         /* weight of the smoothed residual (head change) */
 } xfer_geom;
@@ -464,8 +473,8 @@ static float eye_weight(const double M[9], double floor_w)
 }
 
 /* Whether the eyeball warp runs: asked for, at the input's head pose, and
- * the model turns its eyes explicitly (without, R_e,s R_e,t^T = I would
- * carry the input's gaze along). */
+ * the model turns its eyes explicitly (the ablation without is measured
+ * as the model it is). */
 static int warp_on(const gs_model_ctx *c, int same_pose)
 {
     return c->xfer_warp_deg > 0 && same_pose && c->m->cfg.eye_rotation;
@@ -486,11 +495,12 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
     }
     g->same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
                    !memcmp(ts, tt, 3 * sizeof(double));
+    double tT[9];
+    gs_geom_mat3_transpose(x->tgt_Rg, tT);
+    gs_geom_mat3_mul(x->cur.src_Rg, tT, g->gM);
     int warp = warp_on(c, g->same_pose);
-    for (int e = 0; e < 2; e++) {
-        double r = turn_deg(g->eM[e]) / (warp ? c->xfer_warp_deg : 1.0);
-        g->warp_w[e] = warp ? (float)exp(-r * r) : 0.0f;
-    }
+    double r = turn_deg(g->gM) / (warp ? c->xfer_warp_deg : 1.0);
+    g->warp_w = warp ? (float)exp(-r * r) : 0.0f;
     double mt[3] = {-tt[0], -tt[1], -tt[2]};
     gs_geom_mat3_tvec(Rt, mt, g->ray_o);
 }
@@ -628,7 +638,7 @@ static int proxy_hit(const gs_xfer *x, const xfer_geom *g, int px, int py,
         return -1;
     const double *c = x->tgt_ec[e];
     double r = x->cur.src_er[e], ax[3], ca = 0;
-    eye_axis(x->tgt_eR[e], ax);
+    eye_axis(x->tgt_Rg, ax);
     for (int k = 0; k < 3; k++) {
         h[k] = o[k] + best * d[k];
         ca += (h[k] - c[k]) * ax[k];
@@ -658,13 +668,13 @@ static float warp_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
 {
     double h[3], r[3], hs[3], n[3], nc[3], Xs[3];
     int iris, e = proxy_hit(x, g, px, py, h, &iris);
-    if (e < 0 || g->warp_w[e] <= 0.0f)
+    if (e < 0)
         return 0.0f;
     for (int k = 0; k < 3; k++)
         r[k] = h[k] - x->tgt_ec[e][k];
-    gs_geom_mat3_vec(g->eM[e], r, hs);
+    gs_geom_mat3_vec(g->gM, r, hs);
     if (iris)
-        eye_axis(x->cur.src_eR[e], n);
+        eye_axis(x->cur.src_Rg, n);
     else
         memcpy(n, hs, sizeof n);
     for (int k = 0; k < 3; k++)
@@ -678,7 +688,7 @@ static float warp_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
     *v = g->cs.fy * Xs[1] / Xs[2] + g->cs.cy;
     if (!(*u >= 0 && *v >= 0 && *u <= S && *v <= S))
         return 0.0f;
-    return g->warp_w[e] * bilinear(x->cur.src_ap, S, *u, *v);
+    return g->warp_w * bilinear(x->cur.src_ap, S, *u, *v);
 }
 
 /* An interleaved 8-bit S x S RGB image at (u, v), bilinear (taps_at). */
@@ -828,6 +838,7 @@ static int own_view(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     if (rc)
         return rc;
     memcpy(x->cur.src_eR, c->eye_R, sizeof x->cur.src_eR);
+    memcpy(x->cur.src_Rg, c->eye_Rg, sizeof x->cur.src_Rg);
     memcpy(x->cur.src_ec, c->eye_c, sizeof x->cur.src_ec);
     proxy_radii(c, x->cur.src_er);
     x->cur.key = *s;
@@ -934,7 +945,7 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
     const int *tr = x->cur.tgt_rect;
     double uw = 0, vw = 0;
     float ww = 0.0f, src[3] = {0, 0, 0};
-    if ((g->warp_w[0] > 0.0f || g->warp_w[1] > 0.0f) && x->cur.src_ap[i] > 0.0f &&
+    if (g->warp_w > 0.0f && x->cur.src_ap[i] > 0.0f &&
         px >= tr[0] && px < tr[2] && py >= tr[1] && py < tr[3]) {
         ww = x->cur.src_ap[i] * warp_source(x, g, px, py, &uw, &vw);
         wh *= 1.0f - ww;
