@@ -233,9 +233,13 @@ static int warp_expect(const warp_ref *w, int px, int py, double q[2])
     double best = INFINITY, h[3] = {0, 0, 0};
     int eye = -1, iris = 0;
     for (int e = 0; e < 2; e++) {
-        double along = 0, ax[3] = {-w->Rt[e][2], -w->Rt[e][5], -w->Rt[e][8]};
-        for (int k = 0; k < 3; k++)
+        double along = 0, dist2 = 0, ax[3] = {-w->Rt[e][2], -w->Rt[e][5], -w->Rt[e][8]};
+        for (int k = 0; k < 3; k++) {
             along += (w->c[e][k] - o[k]) * d[k];
+            dist2 += (w->c[e][k] - o[k]) * (w->c[e][k] - o[k]);
+        }
+        if (dist2 - along * along > w->r[e] * w->r[e])
+            continue; /* the ray passes the eyeball by */
         double lim = sqrt(1 - GS_XFER_IRIS_RATIO * GS_XFER_IRIS_RATIO);
         double plane = w->r[e] * (lim - GS_XFER_IRIS_INSET);
         /* march in 2 um steps from 2 radii before the centre */
