@@ -54,11 +54,11 @@
  * change itself (the residual, for the model's drawn iris, read worse by
  * the estimator). It takes input(q) - render(p) with weight
  * w = ap(p) ap(q) exp(-(theta / W_deg)^2), theta that turn's angle, when
- * h_s faces the input's camera
- * (0 otherwise), and the skin and eyeball residuals above with 1 - w. The
- * falloff keeps it to the turns the proxy carries well: a large turn brings
- * sclera from under the input's lids, which the input never showed. At the
- * input's own gaze q = p and the input comes back.
+ * h_s faces the input's camera (0 otherwise), and the skin and eyeball
+ * residuals above with 1 - w. The falloff keeps it to the turns the proxy
+ * carries well: a large turn brings sclera from under the input's lids,
+ * which the input never showed. At the input's own gaze q = p and the
+ * input comes back.
  *
  * At another head pose the model's geometry places the input's detail a
  * pixel or two off, and the input's shading was lit at the old pose: a
@@ -94,8 +94,9 @@
  * (scaled with the image size). */
 #define GS_XFER_HEAD_SIGMA 2.0
 /* The eyeball warp (the header): the proxy's iris (GS_XFER_IRIS_RATIO,
- * GS_XFER_IRIS_INSET) in frame.h; the probe gazes' offsets (rad) and the change (summed over RGB, 8-bit
- * units) over which a pixel becomes the eye opening */
+ * GS_XFER_IRIS_INSET) is in frame.h; here the probe gazes' offsets (rad)
+ * and the change (summed over RGB, 8-bit units) over which a pixel
+ * becomes the eye opening. */
 #define GS_XFER_PROBES 4
 #define GS_XFER_PROBE_YAW 0.4
 #define GS_XFER_PROBE_PITCH 0.3
@@ -145,7 +146,7 @@ struct gs_xfer {
     int nslots;
     uint64_t clock;
     double tgt_eR[2][9], tgt_ec[2][3]; /* this call's target's eyeballs */
-    double tgt_Rg[9];                  /* and its gaze's rotation */
+    double tgt_Rg[9];                  /* its gaze's rotation */
     /* scratch */
     gs_raster *raster, *raster_crop; /* whole images; crops of the target */
     gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
