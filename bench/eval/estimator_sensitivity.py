@@ -16,6 +16,7 @@ median and largest angle per change.
 Needs numpy and PIL (python3-numpy, python3-pil)."""
 import argparse
 import io
+import json
 import os
 import subprocess
 import sys
@@ -39,7 +40,25 @@ def direction(pitch_deg, yaw_deg):
 
 
 def angle(a, b):
-    return float(np.degrees(np.arccos(np.clip(direction(*a) @ direction(*b), -1.0, 1.0))))
+    """Degrees between two gaze vectors (any length)."""
+    c = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
+    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+
+
+def test_faces(gazesplat, tmp, count):
+    """count held-out (test-split) synthetic faces at 256 px, white outside
+    the head mask as the evaluation's targets are: (image, label) pairs,
+    the label as `gazesplat synth` writes it (labels.jsonl)."""
+    ds = os.path.join(tmp, "ds")
+    subprocess.run([gazesplat, "synth", "--out", ds, "--count", str(count),
+                    "--seed-split", "test", "--identities", "15", "--size", "256",
+                    "--threads", "2"], check=True, capture_output=True)
+    with open(os.path.join(ds, "labels.jsonl")) as f:
+        for line in f:
+            lab = json.loads(line)
+            img = np.array(Image.open(os.path.join(ds, lab["image"])).convert("RGB"))
+            head = np.array(Image.open(os.path.join(ds, lab["mask"])).convert("RGB"))
+            yield np.where(head[..., :1] > 127, img, 255).astype(np.uint8), lab
 
 
 def changes(img, seed):
@@ -63,19 +82,13 @@ def main():
     if a.count < 1:
         sys.exit("estimator_sensitivity: --count must be >= 1")
     with tempfile.TemporaryDirectory() as tmp:
-        ds = os.path.join(tmp, "ds")
-        subprocess.run([a.gazesplat, "synth", "--out", ds, "--count", str(a.count),
-                        "--seed-split", "test", "--identities", "15", "--size", "256",
-                        "--threads", "2"], check=True, capture_output=True)
         probe = os.path.join(tmp, "probe.png")
         res = {}
-        for i in range(a.count):
-            img = np.array(Image.open(os.path.join(ds, "images", f"{i:08d}.png")).convert("RGB"))
-            head = np.array(Image.open(os.path.join(ds, "masks", f"{i:08d}.png")).convert("RGB"))
-            img = np.where(head[..., :1] > 127, img, 255).astype(np.uint8)
-            base = estimate(a.gazesplat, a.estimator, img, probe)
+        for i, (img, _) in enumerate(test_faces(a.gazesplat, tmp, a.count)):
+            base = direction(*estimate(a.gazesplat, a.estimator, img, probe))
             for name, x in changes(img, i).items():
-                res.setdefault(name, []).append(angle(base, estimate(a.gazesplat, a.estimator, x, probe)))
+                res.setdefault(name, []).append(
+                    angle(base, direction(*estimate(a.gazesplat, a.estimator, x, probe))))
     print(f"| change ({a.count} test-split faces, 256 px) | mean° | median° | max° |")
     print("|---|---:|---:|---:|")
     for name, v in res.items():

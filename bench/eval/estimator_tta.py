@@ -17,32 +17,13 @@ image alone, averaged (as unit gaze vectors) over the 5 shifts of at most
 
 Needs numpy and PIL (python3-numpy, python3-pil)."""
 import argparse
-import json
 import os
-import subprocess
 import sys
 import tempfile
 
 import numpy as np
-from PIL import Image
 
-
-def estimate(gazesplat, model, img, path):
-    Image.fromarray(img).save(path)
-    out = subprocess.run([gazesplat, "estimate", "--model", model, "--image", path],
-                         capture_output=True, text=True, check=True).stdout.split()
-    d = dict(zip(out[0::2], map(float, out[1::2])))
-    return d["gaze_pitch_deg"], d["gaze_yaw_deg"]
-
-
-def direction(pitch_deg, yaw_deg):
-    p, y = np.radians(pitch_deg), np.radians(yaw_deg)
-    return np.array([-np.cos(p) * np.sin(y), -np.sin(p), -np.cos(p) * np.cos(y)])
-
-
-def angle(a, b):
-    c = a @ b / (np.linalg.norm(a) * np.linalg.norm(b))
-    return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+from estimator_sensitivity import angle, direction, estimate, test_faces
 
 
 def shifted(img, dx, dy):
@@ -66,21 +47,12 @@ def main():
     square = [(dx, dy) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
     err = {"alone": [], "5 shifts": [], "9 shifts": []}
     with tempfile.TemporaryDirectory() as tmp:
-        ds = os.path.join(tmp, "ds")
-        subprocess.run([a.gazesplat, "synth", "--out", ds, "--count", str(a.count),
-                        "--seed-split", "test", "--identities", "15", "--size", "256",
-                        "--threads", "2"], check=True, capture_output=True)
         probe = os.path.join(tmp, "probe.png")
-        with open(os.path.join(ds, "labels.jsonl")) as f:
-            labels = [json.loads(line) for line in f]
-        for i, lab in enumerate(labels):
+        for img, lab in test_faces(a.gazesplat, tmp, a.count):
             p = np.degrees(lab["gaze_norm_pitch_rad"])
             y = np.degrees(lab["gaze_norm_yaw_rad"])
             if abs(p) > 50 or abs(y) > 60:
                 continue
-            img = np.array(Image.open(os.path.join(ds, lab["image"])).convert("RGB"))
-            head = np.array(Image.open(os.path.join(ds, lab["mask"])).convert("RGB"))
-            img = np.where(head[..., :1] > 127, img, 255).astype(np.uint8)
             truth = direction(p, y)
             v = {s: direction(*estimate(a.gazesplat, a.estimator, shifted(img, *s), probe))
                  for s in square}

@@ -149,9 +149,7 @@ int main(int argc, char **argv)
     printf("| render | median ms | images/s | / plain |\n|---|---:|---:|---:|\n");
     for (int i = 0; i < ROWS; i++) {
         printf("| %s | %.2f | %.1f |", names[i], med[i], 1000.0 / med[i]);
-        if (plain[i])
-            printf(" |\n");
-        else if (base[i] == i)
+        if (plain[i] || base[i] == i) /* a row the others are measured by */
             printf(" |\n");
         else
             printf(" %.2f× |\n", med[i] / med[base[i]]);

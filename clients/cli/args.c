@@ -136,27 +136,21 @@ int cli_parse_size(const char *s, int max, int *w, int *h)
     return 0;
 }
 
-int cli_parse_unit(const cli_command *cmd, const char *flag, const char *value, double *out)
+int cli_parse_range(const cli_command *cmd, const char *flag, const char *value, double lo,
+                    double hi, const char *want, double *out)
 {
     float x;
     if (!value)
         return CLI_OK;
-    if (cli_parse_floats(value, &x, 1) || !(x >= 0.0f && x <= 1.0f))
-        return cli_usage_error(cmd, "%s: want a number in [0, 1]; got '%s'", flag, value);
+    if (cli_parse_floats(value, &x, 1) || !(x >= lo && x <= hi))
+        return cli_usage_error(cmd, "%s: want %s; got '%s'", flag, want, value);
     *out = x;
     return CLI_OK;
 }
 
-int cli_parse_warp(const cli_command *cmd, const char *value, double *out)
+int cli_parse_unit(const cli_command *cmd, const char *flag, const char *value, double *out)
 {
-    float x;
-    if (!value)
-        return CLI_OK;
-    if (cli_parse_floats(value, &x, 1) || !(x >= 0.0f && x <= 90.0f))
-        return cli_usage_error(cmd, "--transfer-eye-warp: want degrees in [0, 90] "
-                               "(0: off); got '%s'", value);
-    *out = x;
-    return CLI_OK;
+    return cli_parse_range(cmd, flag, value, 0.0, 1.0, "a number in [0, 1]", out);
 }
 
 int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts, const char *lr,

@@ -69,8 +69,13 @@ int cli_parse_size(const char *s, int max, int *w, int *h);
 /* A number in [0, 1] from flag's value into *out (unchanged when value is
  * NULL). Returns CLI_OK or CLI_USAGE (reported). */
 int cli_parse_unit(const cli_command *cmd, const char *flag, const char *value, double *out);
-/* --transfer-eye-warp DEG: [0, 90] into *out; NULL value: *out untouched. */
-int cli_parse_warp(const cli_command *cmd, const char *value, double *out);
+/* A number in [lo, hi] from flag's value into *out (unchanged when value
+ * is NULL); refused with "FLAG: want WANT; got 'VALUE'". Returns CLI_OK or
+ * CLI_USAGE (reported). */
+int cli_parse_range(const cli_command *cmd, const char *flag, const char *value, double lo,
+                    double hi, const char *want, double *out);
+/* --transfer-eye-warp's range, as cli_parse_range's WANT */
+#define CLI_WARP_WANT "degrees in [0, 90] (0: off)"
 
 /* --finetune N, --finetune-parts LIST, --finetune-lr X, --finetune-plateau
  * R, --finetune-outline PX, --finetune-mirror 0|1 (any may be NULL) into

@@ -784,7 +784,8 @@ static int run_eval(int argc, char **argv)
                              &ev.ro.transfer_head_weight)) ||
         (rc = cli_parse_unit(cmd, "--transfer-eye-weight", o[O_XEW].value,
                              &ev.ro.transfer_eye_weight)) ||
-        (rc = cli_parse_warp(cmd, o[O_XWARP].value, &ev.ro.transfer_eye_warp_deg)))
+        (rc = cli_parse_range(cmd, "--transfer-eye-warp", o[O_XWARP].value, 0.0, 90.0,
+                              CLI_WARP_WANT, &ev.ro.transfer_eye_warp_deg)))
         return rc;
     ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,

@@ -515,7 +515,8 @@ static int run_redirect(int argc, char **argv)
         return cli_usage_error(cmd, "--transfer-eye-warp goes with --transfer");
     if ((rc = cli_parse_unit(cmd, "--transfer-head-weight", o[15].value, &head_w)) ||
         (rc = cli_parse_unit(cmd, "--transfer-eye-weight", o[16].value, &eye_w)) ||
-        (rc = cli_parse_warp(cmd, o[19].value, &warp_deg)))
+        (rc = cli_parse_range(cmd, "--transfer-eye-warp", o[19].value, 0.0, 90.0,
+                              CLI_WARP_WANT, &warp_deg)))
         return rc;
     /* Parse every target before any work. */
     enum { MAXT = 256 };

@@ -483,7 +483,7 @@ static int warp_on(const gs_model_ctx *c, int same_pose)
 
 static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
                       const double Rs[9], const double ts[3],
-                      const double Rt[9], const double tt[3])
+                      const double Rt[9], const double tt[3], int same_pose)
 {
     image_camera(c, tt, &g->ct);
     image_camera(c, ts, &g->cs);
@@ -494,8 +494,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
         gs_geom_mat3_mul(x->cur.src_eR[e], tT, g->eM[e]);
         g->eye_w[e] = eye_weight(g->eM[e], c->xfer_eye_w);
     }
-    g->same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
-                   !memcmp(ts, tt, 3 * sizeof(double));
+    g->same_pose = same_pose;
     double tT[9];
     gs_geom_mat3_transpose(x->tgt_Rg, tT);
     gs_geom_mat3_mul(x->cur.src_Rg, tT, g->gM);
@@ -1064,7 +1063,7 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
      * either gaze (b = 0): head_source depends on the head poses and those
      * maps only, so the kept warped residual stands there. */
     xfer_geom g;
-    geom_init(c, x, &g, Rs, ts, Rt, tt);
+    geom_init(c, x, &g, Rs, ts, Rt, tt, same_pose);
     g.head_w = c->xfer_head_w;
     if (!g.same_pose && g.head_w > 0.0f && smooth_residual(x))
         return gs_error_set(err, GS_ERR_NOMEM, "transfer: out of memory");
