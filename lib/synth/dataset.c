@@ -257,7 +257,7 @@ int gs_synth_contact_sheet(gs_synth_split split, int rows, int tile,
     rg.head_roll = 5 * deg;
     rg.expression_prob = 0.0f;
     rg.blink_prob = 0.0f;
-    gs_synth_render_opts opts = {2, 0};
+    gs_synth_render_opts opts = {.supersample = 2};
     for (int r = 0; rc == GS_OK && r < rows; r++) {
         gs_synth_scene sc;
         gs_synth_scene_random(gs_synth_split_seed(split, (uint64_t)r), 101u + (uint64_t)r,

@@ -66,6 +66,6 @@ int gs_synth_gen_sample(const gs_synth_gen_config *c, uint64_t index,
     int rc = gs_synth_gen_scene(c, index, &scene, &cam, err);
     if (rc != GS_OK)
         return rc;
-    gs_synth_render_opts o = {c->supersample, 0};
+    gs_synth_render_opts o = {.supersample = c->supersample};
     return gs_synth_render(&scene, &cam, &o, pool, out, err);
 }

@@ -416,10 +416,11 @@ static void render_rows(void *vctx, int task, int worker)
     (void)worker;
     const render_ctx *r = vctx;
     const head_model *h = &r->head;
-    int y0 = task * TILE, y1 = y0 + TILE < r->height ? y0 + TILE : r->height;
+    int y0 = (r->ry0 / TILE + task) * TILE;
+    int y1 = y0 + TILE < r->height ? y0 + TILE : r->height;
     float t_near = maxf(0.0f, v3_len(v3_sub(r->o, h->bound_c)) - h->bound_r);
     enum { NSUB = (TILE / SUB) * (TILE / SUB) };
-    for (int x0 = 0; x0 < r->width; x0 += TILE) {
+    for (int x0 = r->rx0 / TILE * TILE; x0 < r->rx1; x0 += TILE) {
         int x1 = x0 + TILE < r->width ? x0 + TILE : r->width;
         cone tile;
         cone_init(r, &tile, x0, y0, x1, y1, t_near);
@@ -481,6 +482,9 @@ void gs_synth_render_setup(render_ctx *r, const gs_synth_scene *s,
     r->width = cam->width;
     r->height = cam->height;
     r->ss = ss;
+    r->rx0 = r->ry0 = 0;
+    r->rx1 = r->width;
+    r->ry1 = r->height;
     for (int i = 0; i < SRGB_LUT; i++) {
         float c = srgb_encode((float)i / (float)(SRGB_LUT - 1));
         r->lut[i] = (uint8_t)(c * 255.0f + 0.5f);
@@ -489,6 +493,6 @@ void gs_synth_render_setup(render_ctx *r, const gs_synth_scene *s,
 
 void gs_synth_render_pixels(render_ctx *r, gs_pool *pool)
 {
-    int ntasks = (r->height + ROWS_PER_TASK - 1) / ROWS_PER_TASK;
+    int ntasks = (r->ry1 + TILE - 1) / TILE - r->ry0 / TILE;
     gs_pool_for(pool, ntasks, render_rows, r);
 }

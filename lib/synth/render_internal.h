@@ -16,6 +16,7 @@ typedef struct render_ctx {
     v3 ambient, bg_top, bg_bottom;
     int specular;
     int width, height, ss;
+    int rx0, ry0, rx1, ry1; /* tiles meeting this box are rendered */
     uint8_t lut[SRGB_LUT]; /* linear [0, 1] -> sRGB 8 bit */
     gs_synth_sample *out;
 } render_ctx;

@@ -94,6 +94,17 @@ int gs_synth_render(const gs_synth_scene *scene, const gs_synth_camera *cam,
     if (opts && opts->supersample != 1 && opts->supersample != 2 &&
         opts->supersample != 0)
         return gs_error_set(err, GS_ERR_ARG, "synth: supersample must be 1 or 2");
+    if (opts && (opts->region[2] > opts->region[0] ||
+                 opts->region[3] > opts->region[1]) &&
+        (opts->region[0] < 0 || opts->region[1] < 0 ||
+         opts->region[2] <= opts->region[0] ||
+         opts->region[3] <= opts->region[1] ||
+         opts->region[2] > cam->width || opts->region[3] > cam->height))
+        return gs_error_set(err, GS_ERR_ARG, "synth: region [%d, %d) x "
+                            "[%d, %d) is empty or leaves the %dx%d image",
+                            opts->region[0], opts->region[2],
+                            opts->region[1], opts->region[3], cam->width,
+                            cam->height);
     if (!out->rgb || !out->mask || out->width != cam->width ||
         out->height != cam->height || out->stride < 3 * (size_t)cam->width)
         return gs_error_set(err, GS_ERR_ARG,
@@ -107,6 +118,12 @@ int gs_synth_render(const gs_synth_scene *scene, const gs_synth_camera *cam,
     if (opts && opts->open_lids)
         gs_synth_head_open_lids(&r->head);
     gs_synth_render_setup(r, scene, cam, ss);
+    if (opts && opts->region[2] > opts->region[0]) {
+        r->rx0 = opts->region[0];
+        r->ry0 = opts->region[1];
+        r->rx1 = opts->region[2];
+        r->ry1 = opts->region[3];
+    }
     r->out = out;
     gs_synth_render_pixels(r, pool);
     gs_synth_labels_from_head(scene, cam, &r->head, &out->labels);

@@ -205,7 +205,7 @@ static void test_errors(void)
     gs_synth_camera big = cam;
     big.width = 64;
     CHECK_EQ_INT(gs_synth_render(&s, &big, NULL, NULL, &smp, &err), GS_ERR_ARG);
-    gs_synth_render_opts o = {3, 0};
+    gs_synth_render_opts o = {.supersample = 3};
     CHECK_EQ_INT(gs_synth_render(&s, &cam, &o, NULL, &smp, &err), GS_ERR_ARG);
     cam.K[0] = -1;
     CHECK_EQ_INT(gs_synth_render(&s, &cam, NULL, NULL, &smp, &err), GS_ERR_ARG);

@@ -122,7 +122,7 @@ int main(void)
     gs_rng_seed(&rng, 77);
     gs_synth_sample s;
     CHECK(gs_synth_sample_alloc(&s, SIZE, SIZE, NULL) == GS_OK);
-    gs_synth_render_opts opts = {2, 1};
+    gs_synth_render_opts opts = {.supersample = 2, .open_lids = 1};
     int tested = 0, pitch_bins[BINS] = {0}, yaw_bins[BINS] = {0};
     double worst = 0.0, sum = 0.0, rsum = 0.0, yaw_lo = 0, yaw_hi = 0,
            pitch_lo = 0, pitch_hi = 0, hy_max = 0, hp_max = 0;

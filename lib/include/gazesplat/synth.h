@@ -256,6 +256,11 @@ typedef struct gs_synth_render_opts {
                           pupil). The eye landmarks (36-47) then lie on the
                           opened margins; the eye corners, the face centre
                           and every other label are unchanged. */
+    int region[4];     /* x0, y0, x1, y1: render only the 16 x 16 tiles
+                          that meet [x0, x1) x [y0, y1); other pixels and
+                          mask bytes are left as they were. The pixels
+                          rendered are exactly those of a whole render.
+                          All 0 (default): the whole image. */
 } gs_synth_render_opts;
 
 /* Renders `scene` through `cam` into `out` (allocated to the camera's
