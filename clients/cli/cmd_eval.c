@@ -32,6 +32,7 @@ const cli_command cli_eval_command = {
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "                      [--finetune-outline PX] [--finetune-mirror 0|1]\n"
+    "                      [--readout]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N] [--split S]\n"
     "\n"
@@ -41,6 +42,11 @@ const cli_command cli_eval_command = {
     "                    and DIR/summary.md (created if needed)\n"
     "  --estimator FILE  gaze/head estimator for the angular errors; without\n"
     "                    it only the image metrics are measured\n"
+    "  --readout         also read the gaze of every output (and of the GT\n"
+    "                    target: the floor) by synthesis: the target scene\n"
+    "                    rendered at candidate gazes over the eye regions,\n"
+    "                    the best match wins (gs_eval_gaze_readout); about\n"
+    "                    1 s per image on 2 threads\n"
     "  --method LIST     comma-separated: model, transfer (the model with\n"
     "                    detail transfer from the input), warp (2D eye\n"
     "                    warping), identity (output = input); default model\n"
@@ -101,7 +107,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -163,6 +169,7 @@ typedef struct evaluator {
     gs_model_render_options ro;
     int light_on_head;    /* --light-on-head */
     eval_estimator *est;
+    int readout;                /* --readout */
     gs_pool *pool;
     int S, iters;
     double focal, d_n;
@@ -202,9 +209,26 @@ static int predict(evaluator *ev, const uint8_t *rgb, float out[4])
                                   3 * (size_t)ev->S, out, &err) != GS_OK;
 }
 
+/* The synthesis readout's error (degrees) on an image of the target scene
+ * against its true gaze; NaN, and a message, if it fails. */
+static double read_err(evaluator *ev, const gs_synth_scene *ts,
+                       const uint8_t *rgb, size_t stride, int pair)
+{
+    gs_eval_readout rd;
+    gs_error err = {0, ""};
+    if (gs_eval_gaze_readout(ts, ev->S, ev->d_n, ev->focal, rgb, stride,
+                             NULL, ev->pool, &rd, &err)) {
+        fprintf(stderr, "gazesplat eval: pair %d: readout: %s\n", pair,
+                err.msg);
+        return NAN;
+    }
+    return gs_eval_angle_deg(rd.pitch, rd.yaw, ts->gaze_pitch, ts->gaze_yaw);
+}
+
 /* Image and angle metrics of ev->out against the GT target. */
 static void measure(evaluator *ev, const gs_synth_sample *gt,
-                    const float gt_est[4], eval_row *r)
+                    const gs_synth_scene *ts, const float gt_est[4],
+                    double read_floor, eval_row *r)
 {
     int S = ev->S;
     size_t st = 3 * (size_t)S;
@@ -235,11 +259,18 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
                              l->gaze_norm_yaw);
     r->m[M_FLOOR_HEAD] = ang(gt_est[2], gt_est[3], l->head_norm_pitch,
                              l->head_norm_yaw);
+    /* The readout reads eyes: none when the target's are closed. */
+    if (ev->readout && !r->no_eye) {
+        r->m[M_READ] = read_err(ev, ts, ev->out, st, r->pair);
+        r->m[M_READ_FLOOR] = read_floor;
+    }
     /* Every metric that should exist must be finite. */
     for (int k = 0; k < M_COUNT; k++) {
         int eye_metric = k == M_EYE_PSNR || k == M_EYE_SSIM;
         int angle = k <= M_FLOOR_HEAD;
-        if ((eye_metric && r->no_eye) || (angle && !ev->est))
+        int read = k == M_READ || k == M_READ_FLOOR;
+        if ((eye_metric && r->no_eye) || (angle && !ev->est) ||
+            (read && (!ev->readout || r->no_eye)))
             continue;
         r->nonfinite += !isfinite(r->m[k]);
     }
@@ -428,6 +459,9 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
         int bad_gt = rc ? 0 : predict(ev, gt.rgb, gt_est);
         if (!rc)
             rc = gs_eval_regions(&gt, ev->eye, ev->face);
+        double read_floor = NAN;
+        if (!rc && ev->readout && gs_eval_mask_count(ev->eye, ev->S, ev->S))
+            read_floor = read_err(ev, &tscene, gt.rgb, gt.stride, i);
         if (!rc && i < ev->save_images) {
             save_png(ev, i, "input", in.rgb, in.stride);
             save_png(ev, i, "target", gt.rgb, gt.stride);
@@ -457,7 +491,7 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
                     if (i < ev->save_images)
                         save_png(ev, i, eval_method_names[mth], ev->out,
                                  3 * (size_t)ev->S);
-                    measure(ev, &gt, gt_est, r);
+                    measure(ev, &gt, &tscene, gt_est, read_floor, r);
                     r->nonfinite += bad_gt;
                 }
             }
@@ -723,7 +757,7 @@ static int run_eval(int argc, char **argv)
         {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
         {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
-        {"--make-pairs", 1, NULL},
+        {"--readout", 0, NULL}, {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -806,12 +840,14 @@ static int run_eval(int argc, char **argv)
     ev.iters = (int)iters;
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
+    ev.readout = o[O_READ].value != NULL;
     char line[2048];
     command_line(argc, argv, line, sizeof line);
     eval_run_info info;
     memset(&info, 0, sizeof info);
     info.model = o[O_MODEL].value;
     info.estimator = o[O_EST].value;
+    info.readout = ev.readout;
     info.pairs = o[O_PAIRS].value;
     info.command = line;
     info.threads = (int)threads;

@@ -10,7 +10,8 @@ const char *const eval_method_names[EVAL_METHODS] = {
 const char *const eval_metric_names[M_COUNT] = {
     "gaze_err_deg", "gaze_err_label_deg", "head_err_deg",
     "head_err_label_deg", "est_gt_gaze_err_deg", "est_gt_head_err_deg",
-    "psnr", "ssim", "eye_psnr", "eye_ssim", "id_psnr", "id_ssim"};
+    "psnr", "ssim", "eye_psnr", "eye_ssim", "id_psnr", "id_ssim",
+    "read_gaze_err_deg", "read_floor_gaze_deg"};
 
 void eval_csv_header(FILE *f)
 {
@@ -102,26 +103,30 @@ static void put_mean(FILE *f, const stats *s, int k, int prec)
         fputs(" – |", f);
 }
 
+/* The table's columns; the last two only with --readout. */
 static const int table_metrics[] = {M_GAZE, M_GAZE_LABEL, M_FLOOR_GAZE,
                                     M_HEAD, M_HEAD_LABEL, M_FLOOR_HEAD,
                                     M_PSNR, M_SSIM, M_EYE_PSNR, M_EYE_SSIM,
-                                    M_ID_PSNR, M_ID_SSIM};
+                                    M_ID_PSNR, M_ID_SSIM, M_READ,
+                                    M_READ_FLOOR};
 #define NTABLE (int)(sizeof table_metrics / sizeof table_metrics[0])
+#define NTABLE_PLAIN (NTABLE - 2)
 
-static void table_header(FILE *f, const char *first)
+static void table_header(FILE *f, const char *first, int readout)
 {
     fprintf(f, "| %s | n | gaze° | gaze° vs label | floor gaze° | head° | "
                "head° vs label | floor head° | PSNR | SSIM | eye PSNR | "
-               "eye SSIM | id PSNR | id SSIM |\n|---|---:|", first);
-    for (int k = 0; k < NTABLE; k++)
+               "eye SSIM | id PSNR | id SSIM |%s\n|---|---:|", first,
+            readout ? " read gaze° | read floor° |" : "");
+    for (int k = 0; k < (readout ? NTABLE : NTABLE_PLAIN); k++)
         fputs("---:|", f);
     fputc('\n', f);
 }
 
-static void table_row(FILE *f, const char *name, const stats *s)
+static void table_row(FILE *f, const char *name, const stats *s, int readout)
 {
     fprintf(f, "| %s | %d |", name, s->n);
-    for (int k = 0; k < NTABLE; k++) {
+    for (int k = 0; k < (readout ? NTABLE : NTABLE_PLAIN); k++) {
         int m = table_metrics[k];
         put_mean(f, s, m, m == M_SSIM || m == M_EYE_SSIM || m == M_ID_SSIM
                               ? 4 : 2);
@@ -252,28 +257,34 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
     else
         fputs("- no estimator given: gaze and head errors are not "
               "measured\n", f);
+    if (info->readout)
+        fputs("- readout: read gaze° = the gaze the output shows, read by "
+              "synthesis (the target scene rendered at candidate gazes over "
+              "the eye regions, the best match wins), against the target's "
+              "true gaze; read floor° = the same on the GT target itself; "
+              "closed eyes are not read\n", f);
     fputs("- degrees: mean angular error; gaze°/head° = estimator(output) vs "
           "estimator(GT target); PSNR dB and SSIM against the GT target "
           "(white outside the head); eye = eye region; id = face without "
           "the eyes (identity consistency). docs/eval.md explains each.\n\n",
           f);
     fputs("## All methods, all pairs\n\n", f);
-    table_header(f, "method");
+    table_header(f, "method", info->readout);
     for (int k = 0; k < nmethods; k++) {
         stats s;
         gather(rows, n, ps, methods[k], G_ALL, &s);
-        table_row(f, eval_method_names[methods[k]], &s);
+        table_row(f, eval_method_names[methods[k]], &s, info->readout);
     }
     for (int k = 0; k < nmethods; k++) {
         fprintf(f, "\n## %s\n\n", eval_method_names[methods[k]]);
         method_counts(f, rows, n, ps, methods[k]);
         fputc('\n', f);
-        table_header(f, "pairs");
+        table_header(f, "pairs", info->readout);
         for (int g = 0; g < G_COUNT; g++) {
             stats s;
             gather(rows, n, ps, methods[k], g, &s);
             if (s.n || g == G_ALL)
-                table_row(f, group_names[g], &s);
+                table_row(f, group_names[g], &s, info->readout);
         }
     }
 }

@@ -26,6 +26,8 @@ enum { EVAL_ROW_OK = 0, EVAL_ROW_DIVERGED = 1, EVAL_ROW_ERROR = 2 };
 enum {
     M_GAZE, M_GAZE_LABEL, M_HEAD, M_HEAD_LABEL, M_FLOOR_GAZE, M_FLOOR_HEAD,
     M_PSNR, M_SSIM, M_EYE_PSNR, M_EYE_SSIM, M_ID_PSNR, M_ID_SSIM,
+    M_READ, M_READ_FLOOR, /* --readout: the synthesis readout's gaze error
+                             on the output, and on the GT target */
     M_COUNT
 };
 extern const char *const eval_metric_names[M_COUNT];
@@ -41,6 +43,7 @@ typedef struct eval_row {
 
 typedef struct eval_run_info {
     const char *model, *estimator, *pairs, *command;
+    int readout;          /* --readout */
     int threads, iters, inputs, image_size;
     int fits_reused;      /* fits taken from an earlier run's DIR/fits */
     /* render settings of the model method (--prune, --feature-scale,

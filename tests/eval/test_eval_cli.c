@@ -21,6 +21,9 @@
 #include "eval_fixture.h"
 
 static const char *exe;
+/* check_csv: the readout columns (26, 27) are to be filled (--readout),
+ * else empty. */
+static int expect_read;
 static char dir[] = "eval_test_XXXXXX";
 
 /* Runs gazesplat with args (NULL-terminated), output to dir/log.txt;
@@ -63,7 +66,7 @@ static char *check_csv(const char *path)
         }
         if (rows++ == 0) {
             CHECK_MSG(strncmp(line, "method,pair,", 12) == 0, "%s", line);
-            CHECK_EQ_INT(nc, 26);
+            CHECK_EQ_INT(nc, 28);
         } else {
             methods[0] += strcmp(cols[0], "model") == 0;
             methods[1] += strcmp(cols[0], "warp") == 0;
@@ -71,9 +74,14 @@ static char *check_csv(const char *path)
             bad += strcmp(cols[10], "ok") != 0;
             /* Angles (cols 14-19), PSNR, SSIM, id PSNR, id SSIM (20, 21,
              * 24, 25) always; eye metrics unless the eyes are closed. */
-            for (int k = 14; k < 26 && nc == 26; k++)
+            for (int k = 14; k < 26 && nc == 28; k++)
                 bad += (*cols[k] == 0 || !isfinite(strtod(cols[k], NULL))) &&
                        k != 22 && k != 23;
+            for (int k = 26; k < 28 && nc == 28; k++)
+                bad += expect_read ? *cols[k] == 0 ||
+                                         !(strtod(cols[k], NULL) >= 0 &&
+                                           strtod(cols[k], NULL) <= 180)
+                                   : *cols[k] != 0;
             if (strcmp(cols[0], "model") == 0)
                 bad += !(strtod(cols[11], NULL) > 0) ||
                        !isfinite(strtod(cols[12], NULL));
@@ -358,6 +366,29 @@ int main(int argc, char **argv)
     CHECK_EQ_INT(run(ev7), 0);
     sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "eye weight 0, outline 2 px, mirror on)"), "%s", sum ? sum : "");
+    /* --readout: every output's gaze and the floor read by synthesis,
+     * the same for 1 and 2 threads, in the summary's tables. */
+    expect_read = 1;
+    const char *ev8[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "model,warp,identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", "--readout", NULL};
+    CHECK_EQ_INT(run(ev8), 0);
+    c = check_csv(csv);
+    ev8[12] = "1";
+    CHECK_EQ_INT(run(ev8), 0);
+    d = check_csv(csv);
+    CHECK_MSG(c && d && strcmp(c, d) == 0, "readout: 1 and 2 threads "
+              "differ:\n%s\n---\n%s", c, d);
+    free(c);
+    free(d);
+    free(sum);
+    sum = ev_slurp(md);
+    CHECK_MSG(sum && strstr(sum, "read gaze° | read floor° |") &&
+                  strstr(sum, "- readout: read gaze°") &&
+                  strstr(sum, "non-finite outputs 0"),
+              "%s", sum ? sum : "");
+    expect_read = 0;
     free(a);
     free(b);
     free(sum);

@@ -138,6 +138,56 @@ int gs_eval_regions(const gs_synth_sample *gt, uint8_t *eye, uint8_t *face);
 /* Angle in degrees between two (pitch, yaw) directions, radians. */
 double gs_eval_angle_deg(double p0, double y0, double p1, double y1);
 
+/* ---- the synthesis readout: the gaze an image shows ---- */
+
+/* Reads the gaze (head frame) an image of `scene` shows, by analysis by
+ * synthesis: the scene (identity, expression, lights, head pose: all but
+ * the gaze) is rendered through the normalized camera of
+ * gs_eval_render_scene (size, d_n_mm, f_n), over two eye boxes only (+-1.7
+ * x +-1.2 projected eyeball radii about each eyeball centre).
+ *  1. Alignment: the image's 2D shift (up to max_shift_px) that best
+ *     matches the scene at its own gaze on the boxes' still pixels, those
+ *     no gaze changes (probe renders at pitch +-30 and yaw +-45 degrees
+ *     mark the eyeballs and the lids, which follow the pitch).
+ *  2. Gaze: on the pixels where the scene at its own gaze shows eyeball,
+ *     the candidate gaze whose render best matches the shifted image
+ *     (least mean square, 8-bit levels) wins: a grid of grid_deg over
+ *     +-pitch_range_deg x +-yaw_range_deg, then a pattern search (8
+ *     neighbours, step halved down to tol_deg) from its 2 best local
+ *     minima.
+ * Image and renders are blurred alike (Gaussian, blur_px) before they are
+ * compared. On the scene's own render it reads the scene's gaze (within
+ * 0.1 degree at 256 px). Deterministic for any thread count. Meant for
+ * eval-sized images (256 px): smaller eyes give coarser readings. */
+typedef struct gs_eval_readout_options {
+    double max_shift_px;       /* 4; [0, 8] (0: no alignment) */
+    double grid_deg;           /* 10; [1, 45] */
+    double tol_deg;            /* 0.05; [0.01, grid_deg / 2] */
+    double pitch_range_deg;    /* 40; [0, 80] */
+    double yaw_range_deg;      /* 50; [0, 80] */
+    double blur_px;            /* 1; [0, 3]: Gaussian sigma applied to the
+                                  image and to every candidate before they
+                                  are compared (0: none) */
+} gs_eval_readout_options;
+void gs_eval_readout_options_default(gs_eval_readout_options *o);
+
+typedef struct gs_eval_readout {
+    double pitch, yaw;         /* the gaze read, head frame, radians */
+    double shift[2];           /* the image's shift found (px) */
+    double rms;                /* residual RMS on the eyeball pixels at the
+                                  gaze read (8-bit levels, blurred) */
+    int renders;               /* renders, probes and reference included */
+    int pixels;                /* eyeball pixels compared */
+} gs_eval_readout;
+
+/* opts NULL: the defaults. GS_ERR_ARG for bad sizes, options out of
+ * range, no eye inside the image or no eyeball visible (closed eyes); out
+ * is written only on success. */
+int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
+                         double f_n, const uint8_t *rgb, size_t stride,
+                         const gs_eval_readout_options *opts, gs_pool *pool,
+                         gs_eval_readout *out, gs_error *err);
+
 /* ---- the 2D warping baseline ---- */
 
 /* Moves the content of one eye opening by disp (pixels): inside the mask a

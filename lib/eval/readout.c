@@ -1,0 +1,568 @@
+/* The synthesis readout: which way does the eyeball in an image point? On
+ * synthetic heads everything of the target scene but the gaze is known,
+ * so the gaze an image shows can be read by rendering that scene at
+ * candidate gazes and keeping the one whose eyeballs match the image best
+ * (analysis by synthesis).
+ *
+ * Two stages, both over the eye boxes only (a box per eye about its
+ * eyeball centre's projection):
+ *  1. Alignment. The scene at its own gaze (the reference) is rendered
+ *     once; the image's 2D shift t is the one that best matches it on the
+ *     boxes' still pixels: those no gaze changes (probe renders at the
+ *     corners of the gaze range mark the eyeballs and the lids, which
+ *     follow the pitch): corners, skin, brow edge. A face placed a pixel
+ *     off is then not read as a gaze change, and neither moves the lids.
+ *  2. Gaze. Candidates are rendered with the lids pulled back
+ *     (gs_synth_render_opts.open_lids), so that only the eyeball's turn
+ *     changes them, and compared with the shifted image on the pixels
+ *     where the reference shows eyeball: the gaze is read from the iris
+ *     and sclera inside the true eye opening, not from where the lids sit
+ *     (the synthetic lids follow the gaze's pitch; a redirected image's
+ *     lids may not).
+ * Image and candidates are blurred alike first (blur_px), which makes the
+ * match less sensitive to a slightly soft image.
+ *
+ * Cost: each candidate renders only the boxes' tiles; the candidates of a
+ * search step are rendered in parallel, one per pool task, and reduced in
+ * candidate order (deterministic for any thread count). */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "eval_internal.h"
+#include "gazesplat/eval.h"
+
+#define RD_PI 3.14159265358979323846
+#define RD_DEG (RD_PI / 180.0)
+/* Eye box of one eye: the eyeball centre's projection +- these many
+ * projected eyeball radii (both corners and the lids). */
+#define RD_HALF_W 1.7
+#define RD_HALF_H 1.2
+/* Coarse shift grid step (px); a parabola through it refines. */
+#define RD_SHIFT_STEP 0.25
+/* Starts of the gaze pattern search taken from the coarse grid. */
+#define RD_STARTS 2
+#define RD_MAX_CAND 128
+/* Largest blur radius: 3 sigma for sigma up to 3 px. */
+#define RD_MAX_R 9
+/* Candidates stay within +-80 degrees of pitch and yaw. */
+#define RD_LIMIT (80 * RD_DEG)
+/* A pixel no probe gaze changes by more than this (summed RGB levels,
+ * blurred) is still: the alignment uses those. */
+#define RD_STILL 3.0f
+
+void gs_eval_readout_options_default(gs_eval_readout_options *o)
+{
+    o->max_shift_px = 4.0;
+    o->blur_px = 1.0;
+    o->grid_deg = 10.0;
+    o->tol_deg = 0.05;
+    o->pitch_range_deg = 40.0;
+    o->yaw_range_deg = 50.0;
+}
+
+typedef struct rd_ctx {
+    gs_synth_scene scene;       /* the target; its gaze is overwritten */
+    gs_synth_camera cam;        /* the scene's normalized camera */
+    int size;
+    int R;                      /* blur radius (px), 0: none */
+    float ker[2 * RD_MAX_R + 1];
+    int x0, y0, w, h;           /* bounding box of the eye boxes */
+    uint8_t *inbox;             /* w * h: inside an eye box */
+    int ex, ey, ew, eh;         /* box rendered: the bounding box + R */
+    float *bimg;                /* the image, blurred, over box b* */
+    int bx, by, bw, bh;
+    int n;                      /* eyeball pixels of the reference */
+    int *idx;                   /* their indices in the bounding box */
+    float *img;                 /* the image there, shifted by t, n * 3 */
+    double t[2];
+    int workers;
+    gs_synth_sample *smp;       /* per worker */
+    float *ebuf;                /* per worker, 2 * ew * eh * 3 (the second
+                                   half: the blur's scratch) */
+    /* the batch being evaluated */
+    int nc;
+    double g[RD_MAX_CAND][2];   /* pitch, yaw (radians) */
+    double e[RD_MAX_CAND];      /* energy (mean square, 8-bit levels) */
+    int rc[RD_MAX_CAND];
+    gs_error err[RD_MAX_CAND];
+    int renders;
+} rd_ctx;
+
+/* The blurred image at (u, v) = pixel (x, y) + shift, bilinear. */
+static void sample_at(const rd_ctx *c, int x, int y, double tx, double ty,
+                      float out[3])
+{
+    double u = x + tx, v = y + ty;
+    int xi = (int)floor(u), yi = (int)floor(v);
+    double ax = u - xi, ay = v - yi;
+    const float *p = c->bimg + 3 * ((size_t)(yi - c->by) * c->bw + (xi - c->bx));
+    const float *q = p + 3 * (size_t)c->bw;
+    for (int ch = 0; ch < 3; ch++)
+        out[ch] = (float)((1 - ay) * ((1 - ax) * p[ch] + ax * p[3 + ch]) +
+                          ay * ((1 - ax) * q[ch] + ax * q[3 + ch]));
+}
+
+/* Separable blur of a w x h RGB float image in place (tmp: its size),
+ * edges clamped. */
+static void blur_rgb(const rd_ctx *c, float *img, float *tmp, int w, int h)
+{
+    int R = c->R;
+    if (!R)
+        return;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            for (int ch = 0; ch < 3; ch++) {
+                float a = 0;
+                for (int d = -R; d <= R; d++) {
+                    int xx = x + d < 0 ? 0 : x + d >= w ? w - 1 : x + d;
+                    a += c->ker[d + R] * img[3 * ((size_t)y * w + xx) + ch];
+                }
+                tmp[3 * ((size_t)y * w + x) + ch] = a;
+            }
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++)
+            for (int ch = 0; ch < 3; ch++) {
+                float a = 0;
+                for (int d = -R; d <= R; d++) {
+                    int yy = y + d < 0 ? 0 : y + d >= h ? h - 1 : y + d;
+                    a += c->ker[d + R] * tmp[3 * ((size_t)yy * w + x) + ch];
+                }
+                img[3 * ((size_t)y * w + x) + ch] = a;
+            }
+}
+
+/* Renders `sc` over the rendered box into sample s and its blurred RGB
+ * (white outside the head, as the targets are) into eb (2 * ew * eh * 3
+ * floats, the second half scratch). */
+static int render_box(const rd_ctx *c, const gs_synth_scene *sc,
+                      int open_lids, gs_synth_sample *s, float *eb,
+                      gs_error *err)
+{
+    gs_synth_render_opts o = {.supersample = 1, .open_lids = open_lids,
+                              .region = {c->ex, c->ey, c->ex + c->ew,
+                                         c->ey + c->eh}};
+    int rc = gs_synth_render(sc, &c->cam, &o, NULL, s, err);
+    if (rc)
+        return rc;
+    const uint8_t *head = gs_synth_sample_mask(s, GS_SYNTH_MASK_HEAD);
+    for (int y = 0; y < c->eh; y++)
+        for (int x = 0; x < c->ew; x++) {
+            size_t i = (size_t)(c->ey + y) * c->size + (c->ex + x);
+            const uint8_t *p = s->rgb + (size_t)(c->ey + y) * s->stride +
+                               3 * (size_t)(c->ex + x);
+            for (int ch = 0; ch < 3; ch++)
+                eb[3 * ((size_t)y * c->ew + x) + ch] = head[i] ? p[ch] : 255.0f;
+        }
+    blur_rgb(c, eb, eb + 3 * (size_t)c->ew * c->eh, c->ew, c->eh);
+    return GS_OK;
+}
+
+/* Pixel k of the eyeball set in a rendered-box buffer. */
+static const float *box_px(const rd_ctx *c, const float *eb, int k)
+{
+    int x = c->x0 + c->idx[k] % c->w - c->ex;
+    int y = c->y0 + c->idx[k] / c->w - c->ey;
+    return eb + 3 * ((size_t)y * c->ew + x);
+}
+
+/* One candidate gaze: render with the lids open, compare the eyeball
+ * pixels with the shifted image. */
+static void eval_candidate(void *vctx, int task, int worker)
+{
+    rd_ctx *c = vctx;
+    gs_synth_scene sc = c->scene;
+    sc.gaze_pitch = c->g[task][0];
+    sc.gaze_yaw = c->g[task][1];
+    float *eb = c->ebuf + (size_t)worker * 6 * c->ew * c->eh;
+    c->e[task] = INFINITY;
+    c->rc[task] = render_box(c, &sc, 0, &c->smp[worker], eb, &c->err[task]);
+    if (c->rc[task])
+        return;
+    double s = 0;
+    for (int k = 0; k < c->n; k++) {
+        const float *r = box_px(c, eb, k);
+        for (int ch = 0; ch < 3; ch++) {
+            double d = (double)c->img[3 * k + ch] - r[ch];
+            s += d * d;
+        }
+    }
+    c->e[task] = s / (3.0 * c->n);
+}
+
+/* Evaluates the batch c->g[0..nc); returns the first render error. */
+static int run_batch(rd_ctx *c, gs_pool *pool, gs_error *err)
+{
+    gs_pool_for(pool, c->nc, eval_candidate, c);
+    c->renders += c->nc;
+    for (int i = 0; i < c->nc; i++)
+        if (c->rc[i]) {
+            if (err)
+                *err = c->err[i];
+            return c->rc[i];
+        }
+    return GS_OK;
+}
+
+/* The eye boxes, inside the image by the shift range plus one pixel (for
+ * the bilinear taps), and their bounding box. */
+static int make_boxes(rd_ctx *c, const gs_synth_labels *l, double smax,
+                      gs_error *err)
+{
+    double lo = smax + 1, hi = c->size - smax - 2;
+    double box[2][4];
+    int nbox = 0;
+    double bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+    for (int e = 0; e < 2; e++) {
+        double z = l->eye_centre[e][2];
+        if (!(z > 0))
+            continue;
+        double r = l->K[0] * l->eyeball_radius_mm / z;
+        double x0 = fmax(lo, l->eye_centre_uv[e][0] - RD_HALF_W * r);
+        double x1 = fmin(hi, l->eye_centre_uv[e][0] + RD_HALF_W * r);
+        double y0 = fmax(lo, l->eye_centre_uv[e][1] - RD_HALF_H * r);
+        double y1 = fmin(hi, l->eye_centre_uv[e][1] + RD_HALF_H * r);
+        if (!(x1 - x0 >= 2 && y1 - y0 >= 2))
+            continue;
+        double *b = box[nbox++];
+        b[0] = x0;
+        b[1] = y0;
+        b[2] = x1;
+        b[3] = y1;
+        bx0 = fmin(bx0, x0);
+        by0 = fmin(by0, y0);
+        bx1 = fmax(bx1, x1);
+        by1 = fmax(by1, y1);
+    }
+    if (!nbox)
+        return gs_error_set(err, GS_ERR_ARG, "gaze readout: no eye inside "
+                            "the image");
+    c->x0 = (int)floor(bx0);
+    c->y0 = (int)floor(by0);
+    c->w = (int)ceil(bx1) - c->x0;
+    c->h = (int)ceil(by1) - c->y0;
+    c->inbox = calloc((size_t)c->w * c->h, 1);
+    c->idx = malloc(sizeof *c->idx * (size_t)c->w * c->h);
+    if (!c->inbox || !c->idx)
+        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    /* Pixel (x, y) covers [x, x + 1): those whose centre is inside. */
+    for (int y = 0; y < c->h; y++)
+        for (int x = 0; x < c->w; x++) {
+            double u = c->x0 + x + 0.5, v = c->y0 + y + 0.5;
+            for (int b = 0; b < nbox; b++)
+                c->inbox[y * c->w + x] |= u >= box[b][0] && u <= box[b][2] &&
+                                          v >= box[b][1] && v <= box[b][3];
+        }
+    return GS_OK;
+}
+
+/* Stage 1: the shift of the image that best matches the reference (eb,
+ * the rendered box) on the boxes' still pixels (eye[] 0: neither eyeball
+ * nor changed by a probe gaze, with a pixel's margin): a grid of
+ * RD_SHIFT_STEP, then a parabola per axis through the best's neighbours. */
+static void align(rd_ctx *c, const float *eb, const uint8_t *eye,
+                  double smax)
+{
+    int ns = 1 + 2 * (int)lround(smax / RD_SHIFT_STEP);
+    int nsk = 0;
+    int *sk = malloc(sizeof *sk * (size_t)c->w * c->h);
+    double *eg = malloc(sizeof *eg * (size_t)ns * ns);
+    c->t[0] = c->t[1] = 0;
+    if (!sk || !eg || ns == 1)
+        goto done;
+    for (int y = 0; y < c->h; y++)
+        for (int x = 0; x < c->w; x++) {
+            int near_eye = 0;
+            for (int dy = -1; dy <= 1; dy++)
+                for (int dx = -1; dx <= 1; dx++) {
+                    int xx = c->x0 + x + dx, yy = c->y0 + y + dy;
+                    near_eye |= eye[(size_t)yy * c->size + xx] != 0;
+                }
+            if (c->inbox[y * c->w + x] && !near_eye)
+                sk[nsk++] = y * c->w + x;
+        }
+    int bi = 0;
+    for (int i = 0; i < ns * ns; i++) {
+        double tx = (i % ns) * RD_SHIFT_STEP - smax;
+        double ty = (i / ns) * RD_SHIFT_STEP - smax;
+        double s = 0;
+        for (int k = 0; k < nsk; k++) {
+            int x = c->x0 + sk[k] % c->w, y = c->y0 + sk[k] / c->w;
+            float v[3];
+            sample_at(c, x, y, tx, ty, v);
+            const float *r = eb + 3 * ((size_t)(y - c->ey) * c->ew + (x - c->ex));
+            for (int ch = 0; ch < 3; ch++)
+                s += ((double)v[ch] - r[ch]) * ((double)v[ch] - r[ch]);
+        }
+        eg[i] = s;
+        if (eg[i] < eg[bi])
+            bi = i;
+    }
+    int bx = bi % ns, by = bi / ns;
+    double d[2] = {0, 0};
+    if (bx > 0 && bx < ns - 1) {
+        double den = eg[bi - 1] - 2 * eg[bi] + eg[bi + 1];
+        if (den > 0)
+            d[0] = 0.5 * (eg[bi - 1] - eg[bi + 1]) / den;
+    }
+    if (by > 0 && by < ns - 1) {
+        double den = eg[bi - ns] - 2 * eg[bi] + eg[bi + ns];
+        if (den > 0)
+            d[1] = 0.5 * (eg[bi - ns] - eg[bi + ns]) / den;
+    }
+    c->t[0] = (bx + d[0]) * RD_SHIFT_STEP - smax;
+    c->t[1] = (by + d[1]) * RD_SHIFT_STEP - smax;
+done:
+    free(sk);
+    free(eg);
+}
+
+static void rd_free(rd_ctx *c)
+{
+    if (c->smp)
+        for (int i = 0; i < c->workers; i++)
+            gs_synth_sample_free(&c->smp[i]);
+    free(c->smp);
+    free(c->ebuf);
+    free(c->bimg);
+    free(c->img);
+    free(c->idx);
+    free(c->inbox);
+}
+
+/* Boxes, blur, buffers, the reference, the alignment and the eyeball
+ * pixels of the shifted image. */
+static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
+                 double d_n_mm, double f_n, const uint8_t *rgb, size_t stride,
+                 const gs_eval_readout_options *o, gs_pool *pool,
+                 gs_error *err)
+{
+    c->scene = *scene;
+    c->size = size;
+    double smax = floor(o->max_shift_px / RD_SHIFT_STEP) * RD_SHIFT_STEP;
+    gs_synth_labels lab;
+    int rc = gs_eval_scene_camera(scene, size, d_n_mm, f_n, &c->cam, err);
+    if (!rc)
+        rc = gs_synth_labels_compute(scene, &c->cam, &lab, err);
+    if (!rc)
+        rc = make_boxes(c, &lab, smax, err);
+    if (rc)
+        return rc;
+    c->R = o->blur_px > 0 ? (int)ceil(3 * o->blur_px) : 0;
+    double ks = 0;
+    for (int d = -c->R; d <= c->R; d++)
+        ks += c->ker[d + c->R] =
+            (float)exp(-0.5 * d * d / (o->blur_px * o->blur_px + 1e-30));
+    for (int d = 0; d <= 2 * c->R; d++)
+        c->ker[d] = (float)(c->ker[d] / ks);
+    /* Rendered: the bounding box + R (+ 1 for the eyeball's dilation);
+     * the image's: + the shift range + 1 more. */
+    int m = c->R + 1;
+    c->ex = c->x0 - m < 0 ? 0 : c->x0 - m;
+    c->ey = c->y0 - m < 0 ? 0 : c->y0 - m;
+    c->ew = (c->x0 + c->w + m > size ? size : c->x0 + c->w + m) - c->ex;
+    c->eh = (c->y0 + c->h + m > size ? size : c->y0 + c->h + m) - c->ey;
+    m = c->R + (int)ceil(smax) + 1;
+    c->bx = c->x0 - m < 0 ? 0 : c->x0 - m;
+    c->by = c->y0 - m < 0 ? 0 : c->y0 - m;
+    c->bw = (c->x0 + c->w + m > size ? size : c->x0 + c->w + m) - c->bx;
+    c->bh = (c->y0 + c->h + m > size ? size : c->y0 + c->h + m) - c->by;
+    c->workers = gs_pool_threads(pool);
+    size_t nb = 3 * (size_t)c->bw * c->bh;
+    c->bimg = malloc(sizeof *c->bimg * 2 * nb);
+    c->ebuf = malloc(sizeof *c->ebuf * 6 * (size_t)c->ew * c->eh * c->workers);
+    c->smp = calloc((size_t)c->workers, sizeof *c->smp);
+    c->img = malloc(sizeof *c->img * 3 * (size_t)c->w * c->h);
+    if (!c->bimg || !c->ebuf || !c->smp || !c->img)
+        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    for (int i = 0; i < c->workers; i++)
+        if ((rc = gs_synth_sample_alloc(&c->smp[i], size, size, err)))
+            return rc;
+    for (int y = 0; y < c->bh; y++)
+        for (int x = 0; x < c->bw; x++)
+            for (int ch = 0; ch < 3; ch++)
+                c->bimg[3 * ((size_t)y * c->bw + x) + ch] =
+                    rgb[(size_t)(c->by + y) * stride + 3 * (size_t)(c->bx + x) + ch];
+    blur_rgb(c, c->bimg, c->bimg + nb, c->bw, c->bh);
+    /* The reference: the scene at its own gaze, lids as they are. */
+    gs_synth_sample *s = &c->smp[0];
+    if ((rc = render_box(c, scene, 0, s, c->ebuf, err)))
+        return rc;
+    uint8_t *eye = calloc((size_t)size * size, 1);
+    if (!eye)
+        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    const uint8_t *ml = gs_synth_sample_mask(s, GS_SYNTH_MASK_LEFT_EYE);
+    const uint8_t *mr = gs_synth_sample_mask(s, GS_SYNTH_MASK_RIGHT_EYE);
+    for (int y = c->ey; y < c->ey + c->eh; y++)
+        for (int x = c->ex; x < c->ex + c->ew; x++) {
+            size_t i = (size_t)y * size + x;
+            eye[i] = ml[i] || mr[i];
+        }
+    /* Pixels any gaze changes (the eyeballs and the lids, which follow
+     * the pitch) are no help for the alignment: probe renders at the
+     * corners of the gaze range mark them (2 in eye[]). */
+    size_t ne = 3 * (size_t)c->ew * c->eh;
+    float *ref = malloc(sizeof *ref * 3 * ne), *pb = ref + ne;
+    if (!ref) {
+        free(eye);
+        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    }
+    memcpy(ref, c->ebuf, sizeof *ref * ne);
+    static const double probe[4][2] = {{-30, 0}, {30, 0}, {0, -45}, {0, 45}};
+    for (int k = 0; !rc && k < 4; k++) {
+        gs_synth_scene ps = *scene;
+        ps.gaze_pitch = probe[k][0] * RD_DEG;
+        ps.gaze_yaw = probe[k][1] * RD_DEG;
+        if ((rc = render_box(c, &ps, 0, s, pb, err)))
+            break;
+        for (int y = 0; y < c->eh; y++)
+            for (int x = 0; x < c->ew; x++) {
+                size_t i = (size_t)y * c->ew + x;
+                float d = fabsf(pb[3 * i] - ref[3 * i]) +
+                          fabsf(pb[3 * i + 1] - ref[3 * i + 1]) +
+                          fabsf(pb[3 * i + 2] - ref[3 * i + 2]);
+                uint8_t *mk = &eye[(size_t)(c->ey + y) * size + c->ex + x];
+                if (d > RD_STILL && !*mk)
+                    *mk = 2;
+            }
+    }
+    if (!rc)
+        align(c, ref, eye, smax);
+    free(ref);
+    if (rc) {
+        free(eye);
+        return rc;
+    }
+    c->n = 0;
+    for (int y = 0; y < c->h; y++)
+        for (int x = 0; x < c->w; x++)
+            if (c->inbox[y * c->w + x] &&
+                eye[(size_t)(c->y0 + y) * size + c->x0 + x] == 1) {
+                sample_at(c, c->x0 + x, c->y0 + y, c->t[0], c->t[1],
+                          c->img + 3 * (size_t)c->n);
+                c->idx[c->n++] = y * c->w + x;
+            }
+    free(eye);
+    if (!c->n)
+        return gs_error_set(err, GS_ERR_ARG, "gaze readout: no eyeball "
+                            "visible in the scene (closed eyes)");
+    return GS_OK;
+}
+
+int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
+                         double f_n, const uint8_t *rgb, size_t stride,
+                         const gs_eval_readout_options *opts, gs_pool *pool,
+                         gs_eval_readout *out, gs_error *err)
+{
+    gs_eval_readout_options o;
+    if (opts)
+        o = *opts;
+    else
+        gs_eval_readout_options_default(&o);
+    if (!scene || !rgb || !out || size < 16 || size > 8192 ||
+        stride < 3 * (size_t)size)
+        return gs_error_set(err, GS_ERR_ARG, "gaze readout: bad arguments");
+    if (!(o.max_shift_px >= 0 && o.max_shift_px <= 8) ||
+        !(o.grid_deg >= 1 && o.grid_deg <= 45) ||
+        !(o.blur_px >= 0 && o.blur_px <= RD_MAX_R / 3.0) ||
+        !(o.tol_deg >= 0.01 && o.tol_deg <= o.grid_deg / 2) ||
+        !(o.pitch_range_deg >= 0 && o.pitch_range_deg <= 80) ||
+        !(o.yaw_range_deg >= 0 && o.yaw_range_deg <= 80))
+        return gs_error_set(err, GS_ERR_ARG, "gaze readout: options out of "
+                            "range");
+    rd_ctx *c = calloc(1, sizeof *c);
+    if (!c)
+        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    int rc = setup(c, scene, size, d_n_mm, f_n, rgb, stride, &o, pool, err);
+    /* Coarse grid over the ranges, centred on 0, in batches. */
+    int np = (int)floor(o.pitch_range_deg / o.grid_deg + 1e-9);
+    int ny = (int)floor(o.yaw_range_deg / o.grid_deg + 1e-9);
+    int row = 2 * ny + 1, ng = (2 * np + 1) * row;
+    double(*grid)[4] = rc ? NULL : malloc(sizeof *grid * (size_t)ng);
+    if (!rc && !grid)
+        rc = gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    for (int k0 = 0; !rc && k0 < ng; k0 += RD_MAX_CAND) {
+        c->nc = ng - k0 < RD_MAX_CAND ? ng - k0 : RD_MAX_CAND;
+        for (int k = 0; k < c->nc; k++) {
+            c->g[k][0] = ((k0 + k) / row - np) * o.grid_deg * RD_DEG;
+            c->g[k][1] = ((k0 + k) % row - ny) * o.grid_deg * RD_DEG;
+        }
+        rc = run_batch(c, pool, err);
+        for (int k = 0; !rc && k < c->nc; k++) {
+            grid[k0 + k][0] = c->g[k][0];
+            grid[k0 + k][1] = c->g[k][1];
+            grid[k0 + k][2] = c->e[k];
+        }
+    }
+    /* Starts: the best few local minima of the grid (no lower neighbour
+     * among its 8). */
+    for (int k = 0; !rc && k < ng; k++) {
+        int i = k / row, j = k % row, local = 1;
+        for (int d = 0; d < 9 && local; d++) {
+            int ii = i + d / 3 - 1, jj = j + d % 3 - 1;
+            if (d != 4 && ii >= 0 && ii <= 2 * np && jj >= 0 && jj < row &&
+                grid[ii * row + jj][2] < grid[k][2])
+                local = 0;
+        }
+        grid[k][3] = local;
+    }
+    /* Pattern search (8 neighbours, the step halved when none is lower)
+     * from each start; the lowest energy reached wins. */
+    double best_e = INFINITY, best_g[2] = {0, 0};
+    for (int s = 0; !rc && s < RD_STARTS; s++) {
+        int bi = -1;
+        for (int k = 0; k < ng; k++)
+            if (grid[k][3] != 0 && (bi < 0 || grid[k][2] < grid[bi][2]))
+                bi = k;
+        if (bi < 0)
+            break;
+        grid[bi][3] = 0;
+        double g[2] = {grid[bi][0], grid[bi][1]}, e = grid[bi][2];
+        for (double st = o.grid_deg / 2 * RD_DEG;
+             !rc && st >= o.tol_deg * RD_DEG * (1 - 1e-9); st /= 2) {
+            for (int moves = 0; !rc && moves < 64; moves++) {
+                c->nc = 0;
+                for (int d = 0; d < 9; d++) {
+                    double p = g[0] + (d / 3 - 1) * st;
+                    double y = g[1] + (d % 3 - 1) * st;
+                    if (d == 4 || fabs(p) > RD_LIMIT || fabs(y) > RD_LIMIT)
+                        continue;
+                    c->g[c->nc][0] = p;
+                    c->g[c->nc][1] = y;
+                    c->nc++;
+                }
+                rc = run_batch(c, pool, err);
+                int bk = -1;
+                for (int k = 0; !rc && k < c->nc; k++)
+                    if (c->e[k] < e && (bk < 0 || c->e[k] < c->e[bk]))
+                        bk = k;
+                if (bk < 0)
+                    break;
+                e = c->e[bk];
+                g[0] = c->g[bk][0];
+                g[1] = c->g[bk][1];
+            }
+        }
+        if (e < best_e) {
+            best_e = e;
+            best_g[0] = g[0];
+            best_g[1] = g[1];
+        }
+    }
+    free(grid);
+    if (!rc && !isfinite(best_e))
+        rc = gs_error_set(err, GS_ERR_NONFINITE, "gaze readout: no finite "
+                          "match");
+    if (!rc) {
+        out->pitch = best_g[0];
+        out->yaw = best_g[1];
+        out->shift[0] = c->t[0];
+        out->shift[1] = c->t[1];
+        out->rms = sqrt(best_e);
+        out->renders = c->renders + 5; /* + the reference and 4 probes */
+        out->pixels = c->n;
+    }
+    rd_free(c);
+    free(c);
+    return rc;
+}
