@@ -46,7 +46,7 @@ const cli_command cli_eval_command = {
     "                    target: the floor) by synthesis: the target scene\n"
     "                    rendered at candidate gazes over the eye regions,\n"
     "                    the best match wins (gs_eval_gaze_readout); about\n"
-    "                    1 s per image on 2 threads\n"
+    "                    1.4 s per image on 2 threads\n"
     "  --method LIST     comma-separated: model, transfer (the model with\n"
     "                    detail transfer from the input), warp (2D eye\n"
     "                    warping), identity (output = input); default model\n"
@@ -210,9 +210,11 @@ static int predict(evaluator *ev, const uint8_t *rgb, float out[4])
 }
 
 /* The synthesis readout's error (degrees) on an image of the target scene
- * against its true gaze; NaN, and a message, if it fails. */
+ * against its true gaze, and the gaze read (head frame, degrees) into
+ * read[2] when not NULL; NaN, and a message, if it fails. */
 static double read_err(evaluator *ev, const gs_synth_scene *ts,
-                       const uint8_t *rgb, size_t stride, int pair)
+                       const uint8_t *rgb, size_t stride, int pair,
+                       double *read)
 {
     gs_eval_readout rd;
     gs_error err = {0, ""};
@@ -221,6 +223,10 @@ static double read_err(evaluator *ev, const gs_synth_scene *ts,
         fprintf(stderr, "gazesplat eval: pair %d: readout: %s\n", pair,
                 err.msg);
         return NAN;
+    }
+    if (read) {
+        read[0] = rd.pitch * (180.0 / 3.14159265358979323846);
+        read[1] = rd.yaw * (180.0 / 3.14159265358979323846);
     }
     return gs_eval_angle_deg(rd.pitch, rd.yaw, ts->gaze_pitch, ts->gaze_yaw);
 }
@@ -261,14 +267,18 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
                              l->head_norm_yaw);
     /* The readout reads eyes: none when the target's are closed. */
     if (ev->readout && !r->no_eye) {
-        r->m[M_READ] = read_err(ev, ts, ev->out, st, r->pair);
+        double rd[2] = {NAN, NAN};
+        r->m[M_READ] = read_err(ev, ts, ev->out, st, r->pair, rd);
+        r->m[M_READ_PITCH] = rd[0];
+        r->m[M_READ_YAW] = rd[1];
         r->m[M_READ_FLOOR] = read_floor;
     }
     /* Every metric that should exist must be finite. */
     for (int k = 0; k < M_COUNT; k++) {
         int eye_metric = k == M_EYE_PSNR || k == M_EYE_SSIM;
         int angle = k <= M_FLOOR_HEAD;
-        int read = k == M_READ || k == M_READ_FLOOR;
+        int read = k == M_READ || k == M_READ_FLOOR || k == M_READ_PITCH ||
+                   k == M_READ_YAW;
         if ((eye_metric && r->no_eye) || (angle && !ev->est) ||
             (read && (!ev->readout || r->no_eye)))
             continue;
@@ -461,7 +471,7 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
             rc = gs_eval_regions(&gt, ev->eye, ev->face);
         double read_floor = NAN;
         if (!rc && ev->readout && gs_eval_mask_count(ev->eye, ev->S, ev->S))
-            read_floor = read_err(ev, &tscene, gt.rgb, gt.stride, i);
+            read_floor = read_err(ev, &tscene, gt.rgb, gt.stride, i, NULL);
         if (!rc && i < ev->save_images) {
             save_png(ev, i, "input", in.rgb, in.stride);
             save_png(ev, i, "target", gt.rgb, gt.stride);

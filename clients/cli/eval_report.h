@@ -28,6 +28,8 @@ enum {
     M_PSNR, M_SSIM, M_EYE_PSNR, M_EYE_SSIM, M_ID_PSNR, M_ID_SSIM,
     M_READ, M_READ_FLOOR, /* --readout: the synthesis readout's gaze error
                              on the output, and on the GT target */
+    M_READ_PITCH, M_READ_YAW, /* --readout: the gaze read on the output
+                                 (head frame, degrees) */
     M_COUNT
 };
 extern const char *const eval_metric_names[M_COUNT];

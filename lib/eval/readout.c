@@ -50,6 +50,8 @@
 /* A pixel no probe gaze changes by more than this (summed RGB levels,
  * blurred) is still: the alignment uses those. */
 #define RD_STILL 3.0f
+/* Fewer still pixels than this: no alignment (the shift stays 0). */
+#define RD_MIN_STILL 16
 
 void gs_eval_readout_options_default(gs_eval_readout_options *o)
 {
@@ -260,15 +262,19 @@ static int make_boxes(rd_ctx *c, const gs_synth_labels *l, double smax,
  * the rendered box) on the boxes' still pixels (eye[] 0: neither eyeball
  * nor changed by a probe gaze, with a pixel's margin): a grid of
  * RD_SHIFT_STEP, then a parabola per axis through the best's neighbours. */
-static void align(rd_ctx *c, const float *eb, const uint8_t *eye,
-                  double smax)
+static int align(rd_ctx *c, const float *eb, const uint8_t *eye,
+                 double smax, gs_error *err)
 {
     int ns = 1 + 2 * (int)lround(smax / RD_SHIFT_STEP);
-    int nsk = 0;
+    int nsk = 0, rc = GS_OK;
     int *sk = malloc(sizeof *sk * (size_t)c->w * c->h);
     double *eg = malloc(sizeof *eg * (size_t)ns * ns);
     c->t[0] = c->t[1] = 0;
-    if (!sk || !eg || ns == 1)
+    if (!sk || !eg) {
+        rc = gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+        goto done;
+    }
+    if (ns == 1)
         goto done;
     for (int y = 0; y < c->h; y++)
         for (int x = 0; x < c->w; x++) {
@@ -281,6 +287,8 @@ static void align(rd_ctx *c, const float *eb, const uint8_t *eye,
             if (c->inbox[y * c->w + x] && !near_eye)
                 sk[nsk++] = y * c->w + x;
         }
+    if (nsk < RD_MIN_STILL)
+        goto done; /* nothing to align on: no shift */
     int bi = 0;
     for (int i = 0; i < ns * ns; i++) {
         double tx = (i % ns) * RD_SHIFT_STEP - smax;
@@ -315,6 +323,7 @@ static void align(rd_ctx *c, const float *eb, const uint8_t *eye,
 done:
     free(sk);
     free(eg);
+    return rc;
 }
 
 static void rd_free(rd_ctx *c)
@@ -427,7 +436,7 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
             }
     }
     if (!rc)
-        align(c, ref, eye, smax);
+        rc = align(c, ref, eye, smax, err);
     free(ref);
     if (rc) {
         free(eye);

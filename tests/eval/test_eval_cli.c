@@ -21,7 +21,7 @@
 #include "eval_fixture.h"
 
 static const char *exe;
-/* check_csv: the readout columns (26, 27) are to be filled (--readout),
+/* check_csv: the readout columns (26-29) are to be filled (--readout),
  * else empty. */
 static int expect_read;
 static char dir[] = "eval_test_XXXXXX";
@@ -66,7 +66,7 @@ static char *check_csv(const char *path)
         }
         if (rows++ == 0) {
             CHECK_MSG(strncmp(line, "method,pair,", 12) == 0, "%s", line);
-            CHECK_EQ_INT(nc, 28);
+            CHECK_EQ_INT(nc, 30);
         } else {
             methods[0] += strcmp(cols[0], "model") == 0;
             methods[1] += strcmp(cols[0], "warp") == 0;
@@ -74,12 +74,12 @@ static char *check_csv(const char *path)
             bad += strcmp(cols[10], "ok") != 0;
             /* Angles (cols 14-19), PSNR, SSIM, id PSNR, id SSIM (20, 21,
              * 24, 25) always; eye metrics unless the eyes are closed. */
-            for (int k = 14; k < 26 && nc == 28; k++)
+            for (int k = 14; k < 26 && nc == 30; k++)
                 bad += (*cols[k] == 0 || !isfinite(strtod(cols[k], NULL))) &&
                        k != 22 && k != 23;
-            for (int k = 26; k < 28 && nc == 28; k++)
+            for (int k = 26; k < 30 && nc == 30; k++)
                 bad += expect_read ? *cols[k] == 0 ||
-                                         !(strtod(cols[k], NULL) >= 0 &&
+                                         !(strtod(cols[k], NULL) >= -180 &&
                                            strtod(cols[k], NULL) <= 180)
                                    : *cols[k] != 0;
             if (strcmp(cols[0], "model") == 0)
@@ -386,6 +386,7 @@ int main(int argc, char **argv)
     sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "read gaze° | read floor° |") &&
                   strstr(sum, "- readout: read gaze°") &&
+                  strstr(sum, "- readout: gaze only median ") &&
                   strstr(sum, "non-finite outputs 0"),
               "%s", sum ? sum : "");
     expect_read = 0;
