@@ -411,11 +411,12 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
      * the pitch) are no help for the alignment: probe renders at the
      * corners of the gaze range mark them (2 in eye[]). */
     size_t ne = 3 * (size_t)c->ew * c->eh;
-    float *ref = malloc(sizeof *ref * 3 * ne), *pb = ref + ne;
+    float *ref = malloc(sizeof *ref * 3 * ne);
     if (!ref) {
         free(eye);
         return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
     }
+    float *pb = ref + ne;
     memcpy(ref, c->ebuf, sizeof *ref * ne);
     static const double probe[4][2] = {{-30, 0}, {30, 0}, {0, -45}, {0, 45}};
     for (int k = 0; !rc && k < 4; k++) {
