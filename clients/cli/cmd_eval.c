@@ -77,7 +77,7 @@ const cli_command cli_eval_command = {
     "  --transfer-eye-warp DEG  the transfer method at another gaze, same\n"
     "                    head pose: the input's eyeball pixels, turned with\n"
     "                    the eye inside its opening, weighted\n"
-    "                    exp(-(turn / DEG)^2); 0..90 (default 14; 0 = off)\n"
+    "                    exp(-(turn / DEG)^2); 0..90 (default 20; 0 = off)\n"
     "  --light-on-head   model and transfer methods: at a head change keep\n"
     "                    the fitted light on the head (default: the lights\n"
     "                    stay in the camera, as in the ground truth)\n"

@@ -106,7 +106,7 @@ const cli_command cli_redirect_command = {
     "  --transfer-eye-warp DEG  (with --transfer) at the input's head pose\n"
     "                   the input's eyeball pixels, turned with the eye\n"
     "                   inside its opening, weighted exp(-(turn / DEG)^2);\n"
-    "                   0..90 (14; 0 = off)\n"
+    "                   0..90 (20; 0 = off)\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
 };

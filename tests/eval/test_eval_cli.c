@@ -294,7 +294,7 @@ int main(int argc, char **argv)
                   strstr(sum, "lights at another head pose: kept in the camera") &&
                   strstr(sum, "smoothed skin residual x 0.5") &&
                   strstr(sum, "eyeball residual x 0.5 once") &&
-                  strstr(sum, "exp(-(turn / 14 deg)^2) (--transfer-eye-warp)") &&
+                  strstr(sum, "exp(-(turn / 20 deg)^2) (--transfer-eye-warp)") &&
                   !strstr(sum, "nan"),
               "%s", sum ? sum : "");
     /* Render settings on run 2's fits: 100 % and scale 1 are the normal

@@ -200,7 +200,7 @@ typedef struct gs_model_render_options {
 } gs_model_render_options;
 #define GS_XFER_HEAD_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WEIGHT_DEFAULT 0.5
-#define GS_XFER_EYE_WARP_DEG_DEFAULT 14.0
+#define GS_XFER_EYE_WARP_DEG_DEFAULT 20.0
 void gs_model_render_options_default(gs_model_render_options *o);
 /* Takes effect from the next render; drops the context's kept renders.
  * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */
