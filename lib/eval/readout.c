@@ -71,8 +71,10 @@ typedef struct rd_ctx {
     float ker[2 * RD_MAX_R + 1];
     int x0, y0, w, h;           /* bounding box of the eye boxes */
     uint8_t *inbox;             /* w * h: inside an eye box */
-    int ex, ey, ew, eh;         /* box rendered: the bounding box + R */
-    float *bimg;                /* the image, blurred, over box b* */
+    int ex, ey, ew, eh;         /* box rendered: the bounding box + R + 1 */
+    float *bimg;                /* the image, blurred, over the box
+                                   (bx, by, bw, bh): the bounding box +
+                                   R + the shift range + 1 */
     int bx, by, bw, bh;
     int n;                      /* eyeball pixels of the reference */
     int *idx;                   /* their indices in the bounding box */
