@@ -46,7 +46,7 @@ const cli_command cli_eval_command = {
     "                    target: the floor) by synthesis: the target scene\n"
     "                    rendered at candidate gazes over the eye regions,\n"
     "                    the best match wins (gs_eval_gaze_readout); about\n"
-    "                    1.4 s per image on 2 threads\n"
+    "                    0.9 s per image on 2 threads\n"
     "  --method LIST     comma-separated: model, transfer (the model with\n"
     "                    detail transfer from the input), warp (2D eye\n"
     "                    warping), identity (output = input); default model\n"

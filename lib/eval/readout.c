@@ -12,13 +12,14 @@
  *     corners of the gaze range mark the eyeballs and the lids, which
  *     follow the pitch): corners, skin, brow edge. A face placed a pixel
  *     off is then not read as a gaze change, and neither moves the lids.
- *  2. Gaze. Candidates are rendered with the lids pulled back
- *     (gs_synth_render_opts.open_lids), so that only the eyeball's turn
- *     changes them, and compared with the shifted image on the pixels
- *     where the reference shows eyeball: the gaze is read from the iris
- *     and sclera inside the true eye opening, not from where the lids sit
- *     (the synthetic lids follow the gaze's pitch; a redirected image's
- *     lids may not).
+ *  2. Gaze. Candidates are compared with the shifted image on the pixels
+ *     where the reference shows eyeball only: the gaze is read from the
+ *     iris and sclera inside the true eye opening, not from the lids
+ *     around it (the synthetic lids follow the gaze's pitch; a redirected
+ *     image's lids may not). Candidates keep their lids: rendered with
+ *     the lids pulled back (gs_synth_render_opts.open_lids) the eyeball
+ *     loses the lids' shading, and the true target itself read 2-4.5
+ *     degrees off.
  * Image and candidates are blurred alike first (blur_px), which makes the
  * match less sensitive to a slightly soft image.
  *
@@ -52,6 +53,8 @@
 #define RD_STILL 3.0f
 /* Fewer still pixels than this: no alignment (the shift stays 0). */
 #define RD_MIN_STILL 16
+/* Two gazes closer than this (radians) in pitch and yaw are the same. */
+#define RD_SAME 1e-9
 
 void gs_eval_readout_options_default(gs_eval_readout_options *o)
 {
@@ -91,6 +94,9 @@ typedef struct rd_ctx {
     int rc[RD_MAX_CAND];
     gs_error err[RD_MAX_CAND];
     int renders;
+    /* every gaze evaluated so far: pitch, yaw, energy */
+    double (*memo)[3];
+    int nmemo, memo_cap;
 } rd_ctx;
 
 /* The blurred image at (u, v) = pixel (x, y) + shift, bilinear. */
@@ -107,43 +113,43 @@ static void sample_at(const rd_ctx *c, int x, int y, double tx, double ty,
                           ay * ((1 - ax) * q[ch] + ax * q[3 + ch]));
 }
 
-/* Separable blur of a w x h RGB float image in place (tmp: its size),
- * edges clamped. */
+/* One pass of the blur along x (dx 1) or y (dx 0) of a w x h RGB float
+ * image, in to out, edges clamped. */
+static void blur_pass(const rd_ctx *c, const float *in, float *out, int w,
+                      int h, int dx)
+{
+    int R = c->R, len = dx ? w : h;
+    for (int y = 0; y < h; y++)
+        for (int x = 0; x < w; x++) {
+            int at = dx ? x : y;
+            for (int ch = 0; ch < 3; ch++) {
+                float a = 0;
+                for (int d = -R; d <= R; d++) {
+                    int q = at + d < 0 ? 0 : at + d >= len ? len - 1 : at + d;
+                    size_t i = dx ? (size_t)y * w + q : (size_t)q * w + x;
+                    a += c->ker[d + R] * in[3 * i + ch];
+                }
+                out[3 * ((size_t)y * w + x) + ch] = a;
+            }
+        }
+}
+
+/* Separable blur of a w x h RGB float image in place (tmp: its size). */
 static void blur_rgb(const rd_ctx *c, float *img, float *tmp, int w, int h)
 {
-    int R = c->R;
-    if (!R)
+    if (!c->R)
         return;
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++)
-            for (int ch = 0; ch < 3; ch++) {
-                float a = 0;
-                for (int d = -R; d <= R; d++) {
-                    int xx = x + d < 0 ? 0 : x + d >= w ? w - 1 : x + d;
-                    a += c->ker[d + R] * img[3 * ((size_t)y * w + xx) + ch];
-                }
-                tmp[3 * ((size_t)y * w + x) + ch] = a;
-            }
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++)
-            for (int ch = 0; ch < 3; ch++) {
-                float a = 0;
-                for (int d = -R; d <= R; d++) {
-                    int yy = y + d < 0 ? 0 : y + d >= h ? h - 1 : y + d;
-                    a += c->ker[d + R] * tmp[3 * ((size_t)yy * w + x) + ch];
-                }
-                img[3 * ((size_t)y * w + x) + ch] = a;
-            }
+    blur_pass(c, img, tmp, w, h, 1);
+    blur_pass(c, tmp, img, w, h, 0);
 }
 
 /* Renders `sc` over the rendered box into sample s and its blurred RGB
  * (white outside the head, as the targets are) into eb (2 * ew * eh * 3
  * floats, the second half scratch). */
 static int render_box(const rd_ctx *c, const gs_synth_scene *sc,
-                      int open_lids, gs_synth_sample *s, float *eb,
-                      gs_error *err)
+                      gs_synth_sample *s, float *eb, gs_error *err)
 {
-    gs_synth_render_opts o = {.supersample = 1, .open_lids = open_lids,
+    gs_synth_render_opts o = {.supersample = 1,
                               .region = {c->ex, c->ey, c->ex + c->ew,
                                          c->ey + c->eh}};
     int rc = gs_synth_render(sc, &c->cam, &o, NULL, s, err);
@@ -170,8 +176,8 @@ static const float *box_px(const rd_ctx *c, const float *eb, int k)
     return eb + 3 * ((size_t)y * c->ew + x);
 }
 
-/* One candidate gaze: render with the lids open, compare the eyeball
- * pixels with the shifted image. */
+/* One candidate gaze: render, compare the eyeball pixels with the shifted
+ * image. */
 static void eval_candidate(void *vctx, int task, int worker)
 {
     rd_ctx *c = vctx;
@@ -180,7 +186,7 @@ static void eval_candidate(void *vctx, int task, int worker)
     sc.gaze_yaw = c->g[task][1];
     float *eb = c->ebuf + (size_t)worker * 6 * c->ew * c->eh;
     c->e[task] = INFINITY;
-    c->rc[task] = render_box(c, &sc, 0, &c->smp[worker], eb, &c->err[task]);
+    c->rc[task] = render_box(c, &sc, &c->smp[worker], eb, &c->err[task]);
     if (c->rc[task])
         return;
     double s = 0;
@@ -204,6 +210,54 @@ static int run_batch(rd_ctx *c, gs_pool *pool, gs_error *err)
             if (err)
                 *err = c->err[i];
             return c->rc[i];
+        }
+    return GS_OK;
+}
+
+/* The energies of the gazes pts[0..n) (n <= RD_MAX_CAND) into e[]. Each
+ * gaze is rendered once per reading: the search's neighbourhoods overlap
+ * after a move, and its moves return to grid points, so a gaze met
+ * before takes its remembered energy. */
+static int eval_points(rd_ctx *c, gs_pool *pool, double (*pts)[2], int n,
+                       double *e, gs_error *err)
+{
+    int slot[RD_MAX_CAND];
+    c->nc = 0;
+    for (int k = 0; k < n; k++) {
+        slot[k] = -1;
+        e[k] = NAN;
+        for (int m = 0; m < c->nmemo && isnan(e[k]); m++)
+            if (fabs(c->memo[m][0] - pts[k][0]) < RD_SAME &&
+                fabs(c->memo[m][1] - pts[k][1]) < RD_SAME)
+                e[k] = c->memo[m][2];
+        if (isnan(e[k])) {
+            slot[k] = c->nc;
+            c->g[c->nc][0] = pts[k][0];
+            c->g[c->nc][1] = pts[k][1];
+            c->nc++;
+        }
+    }
+    if (!c->nc)
+        return GS_OK;
+    int rc = run_batch(c, pool, err);
+    if (rc)
+        return rc;
+    if (c->nmemo + c->nc > c->memo_cap) {
+        int cap = 2 * (c->nmemo + c->nc);
+        double(*m)[3] = realloc(c->memo, sizeof *m * (size_t)cap);
+        if (!m)
+            return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of "
+                                "memory");
+        c->memo = m;
+        c->memo_cap = cap;
+    }
+    for (int k = 0; k < n; k++)
+        if (slot[k] >= 0) {
+            e[k] = c->e[slot[k]];
+            double *m = c->memo[c->nmemo++];
+            m[0] = pts[k][0];
+            m[1] = pts[k][1];
+            m[2] = e[k];
         }
     return GS_OK;
 }
@@ -260,6 +314,14 @@ static int make_boxes(rd_ctx *c, const gs_synth_labels *l, double smax,
     return GS_OK;
 }
 
+/* Offset (in steps) of the minimum of the parabola through a, b, c at
+ * -1, 0, 1; 0 when it is not convex. */
+static double parabola_min(double a, double b, double c)
+{
+    double den = a - 2 * b + c;
+    return den > 0 ? 0.5 * (a - c) / den : 0;
+}
+
 /* Stage 1: the shift of the image that best matches the reference (eb,
  * the rendered box) on the boxes' still pixels (eye[] 0: neither eyeball
  * nor changed by a probe gaze, with a pixel's margin): a grid of
@@ -310,16 +372,10 @@ static int align(rd_ctx *c, const float *eb, const uint8_t *eye,
     }
     int bx = bi % ns, by = bi / ns;
     double d[2] = {0, 0};
-    if (bx > 0 && bx < ns - 1) {
-        double den = eg[bi - 1] - 2 * eg[bi] + eg[bi + 1];
-        if (den > 0)
-            d[0] = 0.5 * (eg[bi - 1] - eg[bi + 1]) / den;
-    }
-    if (by > 0 && by < ns - 1) {
-        double den = eg[bi - ns] - 2 * eg[bi] + eg[bi + ns];
-        if (den > 0)
-            d[1] = 0.5 * (eg[bi - ns] - eg[bi + ns]) / den;
-    }
+    if (bx > 0 && bx < ns - 1)
+        d[0] = parabola_min(eg[bi - 1], eg[bi], eg[bi + 1]);
+    if (by > 0 && by < ns - 1)
+        d[1] = parabola_min(eg[bi - ns], eg[bi], eg[bi + ns]);
     c->t[0] = (bx + d[0]) * RD_SHIFT_STEP - smax;
     c->t[1] = (by + d[1]) * RD_SHIFT_STEP - smax;
 done:
@@ -339,6 +395,7 @@ static void rd_free(rd_ctx *c)
     free(c->img);
     free(c->idx);
     free(c->inbox);
+    free(c->memo);
 }
 
 /* Boxes, blur, buffers, the reference, the alignment and the eyeball
@@ -397,7 +454,7 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
     blur_rgb(c, c->bimg, c->bimg + nb, c->bw, c->bh);
     /* The reference: the scene at its own gaze, lids as they are. */
     gs_synth_sample *s = &c->smp[0];
-    if ((rc = render_box(c, scene, 0, s, c->ebuf, err)))
+    if ((rc = render_box(c, scene, s, c->ebuf, err)))
         return rc;
     uint8_t *eye = calloc((size_t)size * size, 1);
     if (!eye)
@@ -425,7 +482,7 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
         gs_synth_scene ps = *scene;
         ps.gaze_pitch = probe[k][0] * RD_DEG;
         ps.gaze_yaw = probe[k][1] * RD_DEG;
-        if ((rc = render_box(c, &ps, 0, s, pb, err)))
+        if ((rc = render_box(c, &ps, s, pb, err)))
             break;
         for (int y = 0; y < c->eh; y++)
             for (int x = 0; x < c->ew; x++) {
@@ -493,17 +550,18 @@ int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
     double(*grid)[4] = rc ? NULL : malloc(sizeof *grid * (size_t)ng);
     if (!rc && !grid)
         rc = gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    double pts[RD_MAX_CAND][2], e_pts[RD_MAX_CAND];
     for (int k0 = 0; !rc && k0 < ng; k0 += RD_MAX_CAND) {
-        c->nc = ng - k0 < RD_MAX_CAND ? ng - k0 : RD_MAX_CAND;
-        for (int k = 0; k < c->nc; k++) {
-            c->g[k][0] = ((k0 + k) / row - np) * o.grid_deg * RD_DEG;
-            c->g[k][1] = ((k0 + k) % row - ny) * o.grid_deg * RD_DEG;
+        int n = ng - k0 < RD_MAX_CAND ? ng - k0 : RD_MAX_CAND;
+        for (int k = 0; k < n; k++) {
+            pts[k][0] = ((k0 + k) / row - np) * o.grid_deg * RD_DEG;
+            pts[k][1] = ((k0 + k) % row - ny) * o.grid_deg * RD_DEG;
         }
-        rc = run_batch(c, pool, err);
-        for (int k = 0; !rc && k < c->nc; k++) {
-            grid[k0 + k][0] = c->g[k][0];
-            grid[k0 + k][1] = c->g[k][1];
-            grid[k0 + k][2] = c->e[k];
+        rc = eval_points(c, pool, pts, n, e_pts, err);
+        for (int k = 0; !rc && k < n; k++) {
+            grid[k0 + k][0] = pts[k][0];
+            grid[k0 + k][1] = pts[k][1];
+            grid[k0 + k][2] = e_pts[k];
         }
     }
     /* Starts: the best few local minima of the grid (no lower neighbour
@@ -533,26 +591,26 @@ int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
         for (double st = o.grid_deg / 2 * RD_DEG;
              !rc && st >= o.tol_deg * RD_DEG * (1 - 1e-9); st /= 2) {
             for (int moves = 0; !rc && moves < 64; moves++) {
-                c->nc = 0;
+                int n = 0;
                 for (int d = 0; d < 9; d++) {
                     double p = g[0] + (d / 3 - 1) * st;
                     double y = g[1] + (d % 3 - 1) * st;
                     if (d == 4 || fabs(p) > RD_LIMIT || fabs(y) > RD_LIMIT)
                         continue;
-                    c->g[c->nc][0] = p;
-                    c->g[c->nc][1] = y;
-                    c->nc++;
+                    pts[n][0] = p;
+                    pts[n][1] = y;
+                    n++;
                 }
-                rc = run_batch(c, pool, err);
+                rc = eval_points(c, pool, pts, n, e_pts, err);
                 int bk = -1;
-                for (int k = 0; !rc && k < c->nc; k++)
-                    if (c->e[k] < e && (bk < 0 || c->e[k] < c->e[bk]))
+                for (int k = 0; !rc && k < n; k++)
+                    if (e_pts[k] < e && (bk < 0 || e_pts[k] < e_pts[bk]))
                         bk = k;
                 if (bk < 0)
                     break;
-                e = c->e[bk];
-                g[0] = c->g[bk][0];
-                g[1] = c->g[bk][1];
+                e = e_pts[bk];
+                g[0] = pts[bk][0];
+                g[1] = pts[bk][1];
             }
         }
         if (e < best_e) {
