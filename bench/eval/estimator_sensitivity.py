@@ -73,14 +73,20 @@ def changes(img, seed):
     }
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def parse_args(doc, prog):
+    """The scripts' common arguments: gazesplat, estimator, --count."""
+    ap = argparse.ArgumentParser(description=doc.split("\n\n")[0])
     ap.add_argument("gazesplat")
     ap.add_argument("estimator")
     ap.add_argument("--count", type=int, default=40)
     a = ap.parse_args()
     if a.count < 1:
-        sys.exit("estimator_sensitivity: --count must be >= 1")
+        sys.exit(f"{prog}: --count must be >= 1")
+    return a
+
+
+def main():
+    a = parse_args(__doc__, "estimator_sensitivity")
     with tempfile.TemporaryDirectory() as tmp:
         probe = os.path.join(tmp, "probe.png")
         res = {}

@@ -16,14 +16,13 @@ image alone, averaged (as unit gaze vectors) over the 5 shifts of at most
         models/gaze-resnet-white.safetensors [--count 40]
 
 Needs numpy and PIL (python3-numpy, python3-pil)."""
-import argparse
 import os
-import sys
 import tempfile
 
 import numpy as np
 
-from estimator_sensitivity import angle, direction, estimate, test_faces
+from estimator_sensitivity import (angle, direction, estimate, parse_args,
+                                   test_faces)
 
 
 def shifted(img, dx, dy):
@@ -36,13 +35,7 @@ def shifted(img, dx, dy):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("gazesplat")
-    ap.add_argument("estimator")
-    ap.add_argument("--count", type=int, default=40)
-    a = ap.parse_args()
-    if a.count < 1:
-        sys.exit("estimator_tta: --count must be >= 1")
+    a = parse_args(__doc__, "estimator_tta")
     plus = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]
     square = [(dx, dy) for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
     err = {"alone": [], "5 shifts": [], "9 shifts": []}
