@@ -41,6 +41,9 @@ const cli_command cli_train_command = {
     "                      with --resume, switches a model's source\n"
     "  --single-stream     ablation: one stream, gaze through the pose MLP\n"
     "  --no-eye-rotation   ablation: eyes deformed like the face\n"
+    "  --lids              lids that follow the gaze's pitch (docs/model.md);\n"
+    "                      with --resume --fresh-optimizer, adds them to a\n"
+    "                      model without\n"
     "  --gaze-loss FILE    add the gaze loss: angular error of this gaze\n"
     "                      estimator (gazesplat train-estimator) on the render\n"
     "  --gaze-weight X     its weight (0.1, the paper's)\n",
@@ -60,7 +63,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
-       O_FRESH, O_COS, O_N };
+       O_FRESH, O_COS, O_LIDS, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -72,7 +75,8 @@ static int run_train(int argc, char **argv)
         {"--guidance", 1, NULL}, {"--single-stream", 0, NULL},
         {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL},
         {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL},
-        {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL}};
+        {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL},
+        {"--lids", 0, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -163,6 +167,13 @@ static int run_train(int argc, char **argv)
         t.fresh_from_step = v;
     }
     t.cosine = o[O_COS].value != NULL;
+    if (o[O_LIDS].value) {
+        if (t.resume && t.fresh_from_step < 0)
+            return cli_usage_error(cmd, "--lids with --resume needs "
+                                        "--fresh-optimizer STEP (the face "
+                                        "stream is reordered)");
+        spec.lids = 1;
+    }
     t.log = log_line;
 
     gs_nn_blas_set_threads(1);
@@ -172,6 +183,12 @@ static int run_train(int argc, char **argv)
                   : gs_model_new(&spec, (uint64_t)seed, &m, &err);
     if (!rc && t.resume && spec.guide_source >= 0)
         rc = gs_model_set_guide_source(m, spec.guide_source, &err);
+    if (!rc && t.resume && spec.lids == 1 && !gs_model_has_lids(m)) {
+        gs_model *l = NULL;
+        rc = gs_model_add_lids(m, GS_MODEL_LID_RADIUS_MM, &l, &err);
+        gs_model_destroy(m);
+        m = l;
+    }
     if (rc) {
         gs_model_destroy(m);
         return cli_fail(cmd, "%s", err.msg);

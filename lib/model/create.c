@@ -240,6 +240,7 @@ void gs_model_spec_default(gs_model_spec *s)
     s->two_stream = -1;
     s->eye_rotation = -1;
     s->guide_source = -1;
+    s->lids = -1;
 }
 
 int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
@@ -281,7 +282,14 @@ int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
     if (s->guide_source >= 0)
         c.guide_source = s->guide_source;
     c.n_face = 1; /* counted from the template by gs_model_create */
-    return gs_model_create(&c, seed, out, err);
+    int rc = gs_model_create(&c, seed, out, err);
+    if (rc || s->lids != 1)
+        return rc;
+    gs_model *l = NULL;
+    rc = gs_model_add_lids(*out, GS_MODEL_LID_RADIUS_MM, &l, err);
+    gs_model_destroy(*out);
+    *out = l;
+    return rc;
 }
 
 int gs_model_set_guide_source(gs_model *m, int source, gs_error *err)

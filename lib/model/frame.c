@@ -108,6 +108,9 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->nf = k->n_face;
     c->ne = k->two_stream ? 2 * k->n_eye_each : 0;
     c->n = c->nf + c->ne;
+    c->nl = gs_model_n_lid(k);
+    c->nl0 = k->n_lid0;
+    c->nm = c->nf - c->nl;
     c->F = k->feat_dim;
     c->D = gs_model_code_dim(k);
     c->C = k->channels;
@@ -176,6 +179,7 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->gvec = falloc((size_t)c->C, &fail);
     c->rgb8 = malloc(isz * 3);
     c->fbox = calloc(nf ? nf : 1, 4 * sizeof(int16_t));
+    c->lid_save = falloc((size_t)(c->nl ? c->nl : 1) * 7, &fail);
     c->k_mean = falloc(n * 3, &fail);
     c->k_scale = falloc(n * 3, &fail);
     c->k_quat = falloc(n * 4, &fail);
@@ -232,6 +236,7 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
         free(*bufs[i]);
     free(c->rgb8);
     free(c->fbox);
+    free(c->lid_save);
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         sweep_slot_free(&c->slots[i]);
     free(c->slots);
@@ -458,6 +463,53 @@ static void to_camera(gs_model_ctx *c, const gs_frame *fr, int from, int to,
     }
 }
 
+/* ---- lids ---- */
+
+/* The pitch the lids follow. */
+static double lid_pitch_of(const gs_model_ctx *c, const gs_frame *fr)
+{
+    return c->lid_hold ? c->lid_pitch : fr->gaze[0];
+}
+
+/* Lid j's turn about its eyeball's centre: Rx(a), a = -k_j pitch (the
+ * eyeball's own turn for a pitch p is Rx(-p): k_j = 1 turns with it). */
+static double lid_angle(const gs_model_ctx *c, const gs_frame *fr, int j)
+{
+    const gs_model_params *p = &c->m->p;
+    int i0;
+    float w[4];
+    float k = gs_lid_k(p->lid_k, p->lid_uv, j < c->nl0 ? 0 : 1, j, &i0, w);
+    return -(double)k * lid_pitch_of(c, fr);
+}
+
+/* Lid Gaussians into the camera: each face-stream position x (x_head)
+ * and quaternion q (q_head) turned about its eyeball's centre c_e (after
+ * eye_forward): x' = c_e + Rx(a) (x - c_e), q' = qx(a) q. */
+static void lid_forward(gs_model_ctx *c, const gs_frame *fr, const double qR[4])
+{
+    const double *R = fr->head_R, *t = fr->head_t;
+    for (int j = 0; j < c->nl; j++) {
+        int i = c->nm + j, e = j < c->nl0 ? 0 : 1;
+        double a = lid_angle(c, fr, j), ca = cos(a), sa = sin(a);
+        const float *x = c->x_head + 3 * (size_t)i;
+        const double *ce = c->eye_c[e];
+        double r[3] = {x[0] - ce[0], x[1] - ce[1], x[2] - ce[2]};
+        double xr[3] = {ce[0] + r[0], ce[1] + ca * r[1] - sa * r[2],
+                        ce[2] + sa * r[1] + ca * r[2]};
+        float *o = c->g_mean + 3 * (size_t)i;
+        for (int k = 0; k < 3; k++)
+            o[k] = (float)(R[3 * k] * xr[0] + R[3 * k + 1] * xr[1] +
+                           R[3 * k + 2] * xr[2] + t[k]);
+        const float *qh = c->q_head + 4 * (size_t)i;
+        double qx[4] = {cos(0.5 * a), sin(0.5 * a), 0, 0};
+        double q[4] = {qh[0], qh[1], qh[2], qh[3]}, ql[4], qc[4];
+        quat_mul(qx, q, ql);
+        quat_mul(qR, ql, qc);
+        for (int k = 0; k < 4; k++)
+            c->g_quat[4 * (size_t)i + k] = (float)qc[k];
+    }
+}
+
 static int same_face_key(const gs_model_ctx *c, const gs_frame *fr)
 {
     const gs_frame *k = &c->face_key;
@@ -490,6 +542,7 @@ void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
     if (c->ne) {
         eye_forward(c, fr, 0);
         to_camera(c, fr, c->nf, c->n, qR);
+        lid_forward(c, fr, qR);
     }
     c->fr = *fr;
 }
@@ -547,7 +600,7 @@ static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, int render,
     if (c->face_map_valid && c->face_map_fs == fsr)
         return GS_OK;
     c->face_map_valid = 0;
-    gs_gaussians g = gaussians_of(c, 0, c->nf);
+    gs_gaussians g = gaussians_of(c, 0, c->nm); /* the lids move: not */
     int rc = raster_at(c, c->raster_face, pool, &g, fsr, render, c->fmap_face,
                        c->alpha_face, c->v_fmap_face, err);
     if (!rc) {
@@ -655,15 +708,15 @@ static void splat_box(const gs_camera *cam, const float *x, const float *ls,
 }
 
 /* Tile-aligned box (pixels of cam, x0 y0 x1 y1, x1 y1 exclusive, clipped
- * to its image; empty when x0 >= x1) of every tile the eye stream's
- * Gaussians can reach. The rasterizer bins a Gaussian to each tile its
+ * to its image; empty when x0 >= x1) of every tile the moving Gaussians
+ * (lids and eye stream) can reach. The rasterizer bins a Gaussian to each tile its
  * 3-sigma box touches and composites it on any pixel of those tiles where
  * its alpha passes 1/255, so its reach is a set of whole tiles: those of
  * the union of splat_box. */
 void gs_frame_eye_tiles(const gs_model_ctx *c, const gs_camera *cam, int r[4])
 {
     int lo[2] = {INT_MAX, INT_MAX}, hi[2] = {INT_MIN, INT_MIN};
-    for (int i = c->nf; i < c->n; i++) {
+    for (int i = c->nm; i < c->n; i++) { /* the lids and the eye stream */
         int b[4];
         splat_box(cam, c->g_mean + 3 * (size_t)i, c->g_scale + 3 * (size_t)i, b);
         if (b[0] >= b[2] || b[1] >= b[3]) /* behind the camera */
@@ -799,7 +852,7 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
                         .opacity_logits = c->g_opac, .features = c->g_feat};
     gs_frame_soa kept = {c->k_mean, c->k_scale, c->k_quat, c->k_opac,
                          c->k_feat};
-    gs_gaussians g = gs_frame_gather(&all, c->nf, c->fbox, d, &kept);
+    gs_gaussians g = gs_frame_gather(&all, c->nm, c->fbox, d, &kept);
     float *out = c->v_fmap, *alpha = c->v_fmap_face; /* scratch here */
     int rc = gs_frame_raster_crop(c->raster_crop, pool, full, d, &g,
                                   c->bg_crop, out, alpha, NULL, err);
@@ -876,6 +929,7 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
     swap_f(&c->g_feat, &s->g_feat), swap_f(&c->fmap, &s->fmap);
     swap_f(&c->rgb, &s->rgb), swap_f(&c->gvec, &s->gvec);
     swap_f(&c->eye_base, &s->eye_base);
+    swap_f(&c->x_head, &s->x_head), swap_f(&c->q_head, &s->q_head);
     float code[GS_MODEL_MAX_CODE];
     memcpy(code, c->eye_base_code, sizeof code);
     memcpy(c->eye_base_code, s->eye_base_code, sizeof code);
@@ -906,7 +960,8 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
 static void sweep_slot_free(gs_sweep_slot *s)
 {
     float *f[] = {s->g_mean, s->g_scale, s->g_quat, s->g_opac,
-                  s->g_feat, s->fmap, s->rgb, s->gvec, s->eye_base};
+                  s->g_feat, s->fmap, s->rgb, s->gvec, s->eye_base,
+                  s->x_head, s->q_head};
     for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
         free(f[i]);
     free(s->fbox);
@@ -926,6 +981,9 @@ static int sweep_slot_alloc(const gs_model_ctx *c, gs_sweep_slot *s)
     s->fmap = falloc(fsz * c->C, &fail), s->rgb = falloc(isz * 3, &fail);
     s->gvec = falloc((size_t)c->C, &fail);
     s->eye_base = falloc((size_t)(c->ne ? c->ne : 1) * c->m->p.eye.dims[1], &fail);
+    /* the lids turn the face stream's head-frame ones (lid_forward) */
+    s->x_head = falloc(n * 3, &fail);
+    s->q_head = falloc((size_t)(c->nf ? c->nf : 1) * 4, &fail);
     s->fbox = calloc((size_t)(c->nf ? c->nf : 1), 4 * sizeof(int16_t));
     s->rgb8 = malloc(isz * 3);
     if (fail || !s->fbox || !s->rgb8) {
@@ -1083,6 +1141,7 @@ static void eye_streams(gs_model_ctx *c, const gs_frame *fr)
     mat_to_quat(fr->head_R, qR);
     eye_forward(c, fr, 1);
     to_camera(c, fr, c->nf, c->n, qR);
+    lid_forward(c, fr, qR);
     c->fr = *fr;
 }
 
@@ -1259,6 +1318,98 @@ static void face_backward(gs_model_ctx *c, const gs_model_params *gp,
                     dpe[k] += dinp[(size_t)i * dw + F + GS_PE_DIM(3) + k];
             gs_model_pe_backward(c->fr.gaze, 2, dpe, fg->gaze);
         }
+    }
+}
+
+/* The lids' turn backward (after pose_grad, before face_backward): the
+ * gradients of the turned Gaussians in v_mean / v_quat are saved to
+ * lid_save and replaced by those of the unturned ones, as face_backward
+ * reads them (camera frame: R dx, L(qR) dq); the turn's own gradients go
+ * to k, the pitch, the eyeball centre's W_e and tau. lid_restore puts the
+ * saved ones back. */
+static void lid_backward(gs_model_ctx *c, const gs_model_params *gp,
+                         gs_frame_grad *fg, const double qR[4])
+{
+    const gs_model_params *p = &c->m->p;
+    const double *R = c->fr.head_R;
+    int D = c->D;
+    double pitch = lid_pitch_of(c, &c->fr), dce[2][3] = {{0}}, dpitch = 0;
+    for (int j = 0; j < c->nl; j++) {
+        int i = c->nm + j, e = j < c->nl0 ? 0 : 1;
+        float *vm = c->v_mean + 3 * (size_t)i, *vq = c->v_quat + 4 * (size_t)i;
+        memcpy(c->lid_save + 7 * (size_t)j, vm, 3 * sizeof(float));
+        memcpy(c->lid_save + 7 * (size_t)j + 3, vq, 4 * sizeof(float));
+        double a = lid_angle(c, &c->fr, j), ca = cos(a), sa = sin(a);
+        /* position: x' = c + Rx(a) (x - c); g = dL/dx' (head frame) */
+        double g[3];
+        for (int k = 0; k < 3; k++)
+            g[k] = R[k] * vm[0] + R[3 + k] * vm[1] + R[6 + k] * vm[2];
+        const float *xh = c->x_head + 3 * (size_t)i;
+        const double *ce = c->eye_c[e];
+        double r[3] = {xh[0] - ce[0], xh[1] - ce[1], xh[2] - ce[2]};
+        double dx[3] = {g[0], ca * g[1] + sa * g[2], -sa * g[1] + ca * g[2]};
+        for (int k = 0; k < 3; k++)
+            dce[e][k] += g[k] - dx[k];
+        double da = g[1] * (-sa * r[1] - ca * r[2]) + g[2] * (ca * r[1] - sa * r[2]);
+        /* quaternion: q_cam = qR (qx q); dq' = L(qR)^T dq_cam */
+        double u[4] = {vq[0], vq[1], vq[2], vq[3]}, w[4];
+        double A = qR[0], B = qR[1], Cq = qR[2], Dq = qR[3];
+        w[0] = A * u[0] + B * u[1] + Cq * u[2] + Dq * u[3];
+        w[1] = -B * u[0] + A * u[1] + Dq * u[2] - Cq * u[3];
+        w[2] = -Cq * u[0] - Dq * u[1] + A * u[2] + B * u[3];
+        w[3] = -Dq * u[0] + Cq * u[1] - B * u[2] + A * u[3];
+        /* qx q with qx = (h0, h1, 0, 0): dq = L(qx)^T w, dqx = Rt(q)^T w */
+        double h0 = cos(0.5 * a), h1 = sin(0.5 * a);
+        const float *q = c->q_head + 4 * (size_t)i;
+        double dq[4] = {h0 * w[0] + h1 * w[1], -h1 * w[0] + h0 * w[1],
+                        h0 * w[2] + h1 * w[3], -h1 * w[2] + h0 * w[3]};
+        /* qx q = (h0 q0 - h1 q1, h0 q1 + h1 q0, h0 q2 - h1 q3, h0 q3 + h1 q2) */
+        double dh0 = w[0] * q[0] + w[1] * q[1] + w[2] * q[2] + w[3] * q[3];
+        double dh1 = -w[0] * q[1] + w[1] * q[0] - w[2] * q[3] + w[3] * q[2];
+        da += 0.5 * (-h1 * dh0 + h0 * dh1);
+        /* what face_backward reads: R dx and L(qR) dq */
+        for (int k = 0; k < 3; k++)
+            vm[k] = (float)(R[3 * k] * dx[0] + R[3 * k + 1] * dx[1] +
+                            R[3 * k + 2] * dx[2]);
+        vq[0] = (float)(A * dq[0] - B * dq[1] - Cq * dq[2] - Dq * dq[3]);
+        vq[1] = (float)(B * dq[0] + A * dq[1] - Dq * dq[2] + Cq * dq[3]);
+        vq[2] = (float)(Cq * dq[0] + Dq * dq[1] + A * dq[2] - B * dq[3]);
+        vq[3] = (float)(Dq * dq[0] - Cq * dq[1] + B * dq[2] + A * dq[3]);
+        /* a = -k pitch, k bilinear in the eye's knots */
+        int i0;
+        float wk[4];
+        float kj = gs_lid_k(p->lid_k, p->lid_uv, e, j, &i0, wk);
+        if (gp) {
+            float dk = (float)(-pitch * da);
+            gp->lid_k[i0] += wk[0] * dk, gp->lid_k[i0 + 1] += wk[1] * dk;
+            gp->lid_k[i0 + GS_LID_NU] += wk[2] * dk;
+            gp->lid_k[i0 + GS_LID_NU + 1] += wk[3] * dk;
+        }
+        dpitch += -(double)kj * da;
+    }
+    if (fg && !c->lid_hold)
+        fg->gaze[0] += dpitch;
+    for (int e = 0; e < 2; e++) /* c_e = centre + W_e tau */
+        for (int k = 0; k < 3; k++) {
+            const float *wr = p->eye_centre_w + (size_t)(3 * e + k) * D;
+            if (gp) {
+                float *dw = gp->eye_centre_w + (size_t)(3 * e + k) * D;
+                for (int j = 0; j < D; j++)
+                    dw[j] += (float)(dce[e][k] * c->fr.code[j]);
+            }
+            if (fg)
+                for (int j = 0; j < D; j++)
+                    fg->code[j] += (float)(dce[e][k] * wr[j]);
+        }
+}
+
+static void lid_restore(gs_model_ctx *c)
+{
+    for (int j = 0; j < c->nl; j++) {
+        size_t i = (size_t)(c->nm + j);
+        memcpy(c->v_mean + 3 * i, c->lid_save + 7 * (size_t)j, 3 * sizeof(float));
+        memcpy(c->v_quat + 4 * i, c->lid_save + 7 * (size_t)j + 3,
+               4 * sizeof(float));
     }
 }
 
@@ -1575,8 +1726,11 @@ void gs_frame_backward_streams(gs_model_ctx *c, const gs_model_params *grads,
     mat_to_quat(c->fr.head_R, qR);
     if (fg)
         pose_grad(c, fg);
-    if (c->stream != GS_STREAM_EYE)
+    if (c->stream != GS_STREAM_EYE) {
+        lid_backward(c, grads, fg, qR);
         face_backward(c, grads, fg, qR);
+        lid_restore(c);
+    }
     if (c->ne && c->stream != GS_STREAM_FACE)
         eye_backward(c, grads, fg);
 }

@@ -31,7 +31,7 @@ typedef struct gs_sweep_slot {
     gs_frame key;
     int rect[4];
     float *g_mean, *g_scale, *g_quat, *g_opac, *g_feat, *fmap, *rgb, *gvec;
-    float *eye_base;
+    float *eye_base, *x_head, *q_head;
     float eye_base_code[GS_MODEL_MAX_CODE];
     int eye_base_valid;
     int16_t *fbox;
@@ -64,6 +64,15 @@ float *gs_xfer_eye_opening(gs_xfer *x);
 struct gs_model_ctx {
     const gs_model *m;
     int nf, ne, n;         /* face, eye, total Gaussians */
+    /* lids: the face Gaussians [nm, nf), eye 0's first (nl0 of them);
+     * they move with the gaze, so renders treat [nm, n) as the moving
+     * part and the guidance source is [0, nm) */
+    int nl, nl0, nm;
+    /* the pitch the lids follow: the frame's gaze, or lid_pitch while
+     * lid_hold is set (the transfer's probes: lids held, eyes turned) */
+    int lid_hold;
+    double lid_pitch;
+    float *lid_save;                  /* [nl, 7] backward scratch */
     int F, D, C, fs, S;
     /* face stream */
     float *fe_in, *fe_act, *fe_out;   /* [nf, F+D], acts, [nf, FACE_OUT] */
@@ -229,9 +238,9 @@ typedef struct gs_frame_soa {
 } gs_frame_soa;
 
 /* The tile-aligned box (pixels of cam: x0 y0 x1 y1, exclusive, clipped to
- * its image; empty when x0 >= x1) that the eye stream's Gaussians in c->g_*
- * can reach: the rasterizer changes no pixel outside it when only they
- * move. */
+ * its image; empty when x0 >= x1) that the moving Gaussians in c->g_* (the
+ * lids and the eye stream, [nm, n)) can reach: the rasterizer changes no
+ * pixel outside it when only they move. */
 void gs_frame_eye_tiles(const gs_model_ctx *c, const gs_camera *cam,
                         int r[4]);
 
@@ -244,8 +253,9 @@ void gs_frame_face_boxes(const gs_model_ctx *c, const gs_camera *cam,
 /* a = the bounding box of a and b (an empty one adds nothing) */
 void gs_frame_box_union(int a[4], const int b[4]);
 
-/* Copies into dst the first nf Gaussians of src (the face) whose fbox
- * meets the box d, then all the others (the eye stream), and returns them
+/* Copies into dst the first nf Gaussians of src (the still face: c->nm)
+ * whose fbox meets the box d, then all the others (lids, eye stream),
+ * and returns them
  * as Gaussians in dst's arrays: what a crop at d needs. */
 gs_gaussians gs_frame_gather(const gs_gaussians *src, int nf,
                              const int16_t *fbox, const int d[4],

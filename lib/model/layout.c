@@ -46,7 +46,13 @@ int gs_model_config_check(const gs_model_config *c, gs_error *err)
     RANGE(two_stream, 0, 1)
     RANGE(eye_rotation, 0, 1)
     RANGE(n_train_ids, 0, 100000)
+    RANGE(n_lid0, 0, c->n_face)
+    RANGE(n_lid1, 0, c->n_face - c->n_lid0)
 #undef RANGE
+    if (gs_model_n_lid(c) && !(c->two_stream && c->eye_rotation))
+        return gs_error_set(err, GS_ERR_FORMAT,
+                            "model config: lids need two streams and eye "
+                            "rotation");
     if (c->image_size != 4 * c->feat_size)
         return gs_error_set(err, GS_ERR_FORMAT,
                             "model config: image_size %d != 4 x feat_size %d",
@@ -151,6 +157,10 @@ int gs_model_layout(const gs_model_config *cfg, gs_model *m, gs_error *err)
     add(&b, "face.colour", GS_PG_GAUSS_FEAT, 2, nf, C, 0);
     add(&b, "face.feat", GS_PG_GAUSS_FEAT, 2, nf, F, 0);
     add(&b, "face.lambda", GS_PG_FIXED, 1, nf, 0, 0);
+    if (gs_model_n_lid(cfg)) {
+        add(&b, "face.lid_k", GS_PG_GAUSS_XYZ, 3, 2, GS_LID_NV, GS_LID_NU);
+        add(&b, "face.lid_uv", GS_PG_FIXED, 2, gs_model_n_lid(cfg), 2, 0);
+    }
     add(&b, "eye.xyz", GS_PG_GAUSS_XYZ, 2, ne, 3, 0);
     add(&b, "eye.log_scale", GS_PG_GAUSS_ATTR, 1, ne, 0, 0);
     add(&b, "eye.opacity", GS_PG_GAUSS_ATTR, 1, ne, 0, 0);
@@ -229,6 +239,8 @@ void gs_model_bind(const gs_model *m, float *base, gs_model_params *p)
     p->f_colour = at(m, base, "face.colour");
     p->f_feat = at(m, base, "face.feat");
     p->f_lambda = at(m, base, "face.lambda");
+    p->lid_k = at(m, base, "face.lid_k");
+    p->lid_uv = at(m, base, "face.lid_uv");
     p->e_xyz = at(m, base, "eye.xyz");
     p->e_scale = at(m, base, "eye.log_scale");
     p->e_opacity = at(m, base, "eye.opacity");

@@ -7,6 +7,7 @@
 #include <stdint.h>
 
 #include "gazesplat/model.h"
+#include "gazesplat/train.h"
 #include "gazesplat/raster.h"
 #include "renderer.h"
 
@@ -26,6 +27,9 @@ typedef struct gs_model_config {
     int two_stream;   /* 0: single-stream ablation */
     int eye_rotation; /* 0: no explicit eye rotation (ablation) */
     int n_train_ids;  /* auto-decoder codes kept in the file (may be 0) */
+    int n_lid0, n_lid1; /* lid Gaussians of eye 0 and eye 1: the last
+                           n_lid0 + n_lid1 face Gaussians, eye 0's first
+                           (gs_model_add_lids; files without the keys: 0) */
     double template_spacing_mm; /* face Gaussian spacing at creation */
     double d_n_mm;    /* normalized camera distance */
     double focal;     /* normalized camera focal at image_size, pixels */
@@ -60,6 +64,39 @@ void gs_model_pe_backward(const double *x, int n, const float *dout,
 #define GS_MODEL_POS_SCALE 4.0f   /* mm per unit of position output */
 #define GS_MODEL_ATTR_SCALE 0.2f  /* paper: 0.2 for scale/rotation/opacity */
 #define GS_MODEL_EYE_POS_SCALE 1.0f
+
+/* The lids' field of k: knots every 30 degrees of azimuth (u: atan2(x,
+ * -z) of the rest position about the eyeball's centre, -90..90) and every
+ * 15 degrees of elevation (v: atan2(-y, -z), -90..90), clamped at the
+ * ends. */
+#define GS_LID_NU 7
+#define GS_LID_NV 13
+#define GS_LID_DU_DEG 30.0
+#define GS_LID_DV_DEG 15.0
+/* k of lid j (eye e) and the bilinear weights of its four knots (first
+ * knot index into the eye's [NV, NU] grid: i, i + 1, i + NU, i + NU + 1). */
+static inline float gs_lid_k(const float *K, const float *uv, int e, int j,
+                             int *i0, float w[4])
+{
+    float u = uv[2 * j], v = uv[2 * j + 1];
+    int a = (int)u, b = (int)v;
+    a = a < 0 ? 0 : a > GS_LID_NU - 2 ? GS_LID_NU - 2 : a;
+    b = b < 0 ? 0 : b > GS_LID_NV - 2 ? GS_LID_NV - 2 : b;
+    float fu = u - (float)a, fv = v - (float)b;
+    w[0] = (1 - fu) * (1 - fv), w[1] = fu * (1 - fv);
+    w[2] = (1 - fu) * fv, w[3] = fu * fv;
+    const float *k = K + (size_t)e * GS_LID_NU * GS_LID_NV;
+    int i = b * GS_LID_NU + a;
+    *i0 = e * GS_LID_NU * GS_LID_NV + i;
+    return w[0] * k[i] + w[1] * k[i + 1] + w[2] * k[i + GS_LID_NU] +
+           w[3] * k[i + GS_LID_NU + 1];
+}
+
+/* Lid Gaussians of a configuration (GS_MODEL_LID_RADIUS_MM: train.h). */
+static inline int gs_model_n_lid(const gs_model_config *c)
+{
+    return c->n_lid0 + c->n_lid1;
+}
 
 /* ---- parameter table ---- */
 enum gs_pgroup {
@@ -99,6 +136,11 @@ typedef struct gs_model_params {
     float *code_mean;      /* [code_dim]: starting point of a fit */
     /* fixed (not trained) */
     float *f_lambda;       /* [n_face]: lambda_tau, distance weight */
+    /* lids (NULL without): the share k of the gaze's pitch by which a lid
+     * Gaussian turns, a field over the eyeball's directions per eye,
+     * [2, GS_LID_NV, GS_LID_NU] (trained, GS_PG_GAUSS_XYZ), read at each
+     * lid Gaussian's grid place [n_lid, 2] (u, v; fixed) bilinearly */
+    float *lid_k, *lid_uv;
     float *eye_centre;     /* [2, 3] */
 } gs_model_params;
 

@@ -102,13 +102,15 @@ static int choose(const gs_model *m, gs_pool *pool, int k, unsigned char *keep,
                       : gs_error_set(err, GS_ERR_NOMEM, "prune: out of memory");
     if (!rc)
         rc = gs_model_face_importance(m, pool, imp, err);
-    if (!rc) {
-        for (int i = 0; i < n; i++)
+    if (!rc) { /* lids (the last ones) are always kept, like the eyes */
+        int nm = n - gs_model_n_lid(&m->cfg);
+        for (int i = 0; i < nm; i++)
             r[i] = (ranked){imp[i], i};
-        qsort(r, (size_t)n, sizeof *r, by_importance);
+        qsort(r, (size_t)nm, sizeof *r, by_importance);
         memset(keep, 0, (size_t)n);
-        for (int i = 0; i < k; i++)
+        for (int i = 0; i < k - (n - nm); i++)
             keep[r[i].index] = 1;
+        memset(keep + nm, 1, (size_t)(n - nm));
     }
     free(imp);
     free(r);
@@ -123,7 +125,8 @@ static void copy_tensors(const gs_model *m, const unsigned char *keep,
         const gs_ptensor *d = &o->t[t], *s = &m->t[t]; /* same table order */
         float *dst = o->params + d->offset;
         const float *src = m->params + s->offset;
-        if (strncmp(d->name, "face.", 5) != 0) {
+        if (strncmp(d->name, "face.", 5) != 0 ||
+            !strncmp(d->name, "face.lid_", 9)) { /* lids: all kept */
             memcpy(dst, src, s->count * sizeof(float));
             continue;
         }
@@ -146,6 +149,9 @@ int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
                             "prune: keep %d face Gaussians (want >= 1)",
                             keep_face);
     int n = m->cfg.n_face, k = keep_face < n ? keep_face : n;
+    int nl = gs_model_n_lid(&m->cfg);
+    if (k < nl + 1) /* the lids and at least one other */
+        k = nl + 1 < n ? nl + 1 : n;
     unsigned char *keep = NULL;
     if (k < n) {
         keep = malloc((size_t)n);

@@ -44,8 +44,9 @@
  *     when only the gaze changes (GS_XFER_PROBES renders at the input's
  *     gaze +- GS_XFER_PROBE_YAW / _PITCH), the largest change summed over
  *     RGB from GS_XFER_AP_LO to GS_XFER_AP_HI (8-bit units) mapped to 0..1.
- *     The face stream does not see the gaze, so the lids and the skin
- *     never count; the renderer learned where an eyeball shows.
+ *     The probes hold the lids at the input's pitch (a model with lids
+ *     moves them with the gaze), so the lids and the skin never count;
+ *     the renderer learned where an eyeball shows.
  * Target pixel p inside the eye stream's tiles and the opening: its ray
  * meets a proxy eyeball at h (the iris plane inside the limbus), turned
  * back to the input's gaze h_s = c + R_g,s R_g,t^T (h - c) and projected to
@@ -360,7 +361,7 @@ static int aux_crop(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
                     const gs_camera *ct, const int d[4], gs_error *err)
 {
     gs_gaussians all = map_gaussians(c, x);
-    gs_gaussians g = gs_frame_gather(&all, c->nf, x->cur.fbox, d, &x->k);
+    gs_gaussians g = gs_frame_gather(&all, c->nm, x->cur.fbox, d, &x->k);
     int w = d[2] - d[0], h = d[3] - d[1], S = x->S;
     int rc = gs_frame_raster_crop(x->raster_crop, pool, ct, d, &g, NULL,
                                   x->af, x->aa, x->ad, err);
@@ -802,7 +803,12 @@ static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
         gs_view v = {clamp_abs(s->gaze_pitch + probe[k][0], GS_MODEL_MAX_GAZE_PITCH),
                      clamp_abs(s->gaze_yaw + probe[k][1], GS_MODEL_MAX_GAZE_YAW),
                      0, {0}, {0}, 0};
+        /* the lids held at the subject's pitch: the opening is where the
+         * eyeball shows, not where the lids go */
+        c->lid_hold = 1;
+        c->lid_pitch = s->gaze_pitch;
         int rc = gs_model_render(c, pool, s, &v, x->probe8, 3 * (size_t)S, err);
+        c->lid_hold = 0;
         if (rc)
             return rc;
         for (size_t i = 0; i < px; i++) {

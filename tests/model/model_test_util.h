@@ -41,6 +41,24 @@ static inline gs_model *tiny_model(int guidance, uint64_t seed)
     return m;
 }
 
+/* m with lids (gs_model_add_lids, the default radius), the knots of the
+ * lids' share of the pitch set to a spread of values in [-0.6, 1.2] so
+ * that they move; m is consumed. NULL on failure. */
+static inline gs_model *with_lids(gs_model *m)
+{
+    gs_model *l = NULL;
+    gs_error err;
+    if (!m || gs_model_add_lids(m, GS_MODEL_LID_RADIUS_MM, &l, &err) != GS_OK) {
+        fprintf(stderr, "with_lids: %s\n", m ? err.msg : "no model");
+        gs_model_destroy(m);
+        return NULL;
+    }
+    gs_model_destroy(m);
+    for (int j = 0; j < 2 * GS_LID_NU * GS_LID_NV; j++)
+        l->p.lid_k[j] = -0.6f + 1.8f * (float)((j * 37) % 17) / 16.0f;
+    return l;
+}
+
 static inline void frame_default(const gs_model *m, gs_frame *fr)
 {
     memset(fr, 0, sizeof *fr);

@@ -31,6 +31,12 @@ Definitions used (not the C code):
                   o = Eye([f, tau, PE(gaze)]) = [pos 3 | feat C | s 1 | a 1];
                   isotropic log-scale s0 + 0.2 o.s, opacity a0 + 0.2 o.a,
                   c = c0 + o.feat, quaternion identity (head frame).
+  lids           the last n_lid0 + n_lid1 face Gaussians (eye 0's first),
+                  after the face stream: with k bilinear in the eye's knots
+                  face.lid_k [2, NV, NU] at the Gaussian's place
+                  face.lid_uv (u, v; cell floor(.) clamped to the grid),
+                  a = -k pitch and c = c_e + W_e tau, x = c + Rx(a) (x - c)
+                  and q = (cos a/2, sin a/2, 0, 0) (x) q.
   camera         x_cam = R x + t, q_cam = q_R (x) q (Hamilton, wxyz, q_R with
                   w > 0); R perturbed on the left, R <- exp([w]) R, w = 0.
 
@@ -54,12 +60,13 @@ POS_SCALE, ATTR_SCALE, EYE_POS_SCALE = 4.0, 0.2, 1.0
 GAUSS = ["face.xyz", "face.log_scale", "face.quat", "face.opacity",
          "face.colour", "face.feat", "eye.xyz", "eye.log_scale",
          "eye.opacity", "eye.colour", "eye.feat", "eye.centre_w"]
+LIDS = ["face.lid_k"]
 MLPS = {"mlp.face_e": 3, "mlp.face_p": 2, "mlp.eye": 3, "mlp.eye_rot0": 2,
         "mlp.eye_rot1": 2}
 
 
-def trainable_names():
-    names = list(GAUSS)
+def trainable_names(cfg):
+    names = list(GAUSS) + (LIDS if cfg["n_lid"][0] + cfg["n_lid"][1] else [])
     for m, nl in MLPS.items():
         for l in range(nl):
             names += [f"{m}.l{l}.weight", f"{m}.l{l}.bias"]
@@ -159,7 +166,36 @@ def face_stream(p, cfg, code, gaze, R):
     s = p["face.log_scale"] + ATTR_SCALE * blend(3 + C, 6 + C)
     q = p["face.quat"] + ATTR_SCALE * blend(6 + C, 10 + C)
     a = p["face.opacity"] + ATTR_SCALE * blend(10 + C, 11 + C)[:, 0]
+    nl0, nl1 = cfg["n_lid"]
+    if nl0 + nl1:
+        x, q = lids(p, cfg, code, gaze, x, q)
     return x, s, q, a, feat
+
+
+def lids(p, cfg, code, gaze, x, q):
+    """The lid Gaussians turned about their eyeball's centre."""
+    nl0, nl1 = cfg["n_lid"]
+    nm = cfg["n_face"] - nl0 - nl1
+    xs, qs = [x[:nm]], [q[:nm]]
+    for e, (b, n) in enumerate(((nm, nl0), (nm + nl0, nl1))):
+        ce = p["eye.centre"][e] + p["eye.centre_w"][e] @ code
+        knots = p["face.lid_k"][e]
+        nv, nu = knots.shape
+        for j in range(b, b + n):
+            u, v = (float(t) for t in p["face.lid_uv"][j - nm])
+            iu = min(max(int(np.floor(u)), 0), nu - 2)
+            iv = min(max(int(np.floor(v)), 0), nv - 2)
+            fu, fv = u - iu, v - iv
+            k = ((1 - fu) * (1 - fv) * knots[iv, iu]
+                 + fu * (1 - fv) * knots[iv, iu + 1]
+                 + (1 - fu) * fv * knots[iv + 1, iu]
+                 + fu * fv * knots[iv + 1, iu + 1])
+            a = -k * gaze[0]
+            xs.append((ce + rot_x(a) @ (x[j] - ce))[None])
+            qx = torch.stack([torch.cos(a / 2), torch.sin(a / 2),
+                              torch.zeros_like(a), torch.zeros_like(a)])
+            qs.append(quat_mul(qx, q[j:j + 1]))
+    return torch.cat(xs), torch.cat(qs)
 
 
 def eye_stream(p, cfg, code, gaze):
@@ -203,11 +239,13 @@ def run_case(d):
 
     k = load("config").numpy().astype(int)
     cfg = dict(n_face=k[0], n_eye_each=k[1], F=k[2], D=k[3], C=k[4],
-               two_stream=k[5], eye_rotation=k[6])
-    names = trainable_names()
+               two_stream=k[5], eye_rotation=k[6], n_lid=(k[7], k[8]))
+    names = trainable_names(cfg)
     p = {nm: load("param." + nm).requires_grad_() for nm in names}
     p["face.lambda"] = load("param.face.lambda")
     p["eye.centre"] = load("param.eye.centre")
+    if "face.lid_k" in names:
+        p["face.lid_uv"] = load("param.face.lid_uv")
     code = load("code").requires_grad_()
     gaze = load("gaze").requires_grad_()
     trans = load("head_t").requires_grad_()

@@ -32,7 +32,7 @@ static float urand(float b)
     return b * (2.0f * (float)((double)(z >> 11) / 9007199254740992.0) - 1.0f);
 }
 
-static gs_model *make_model(int guidance, int feat_size)
+static gs_model *make_model(int guidance, int feat_size, int lids)
 {
     gs_model_config cfg;
     gs_model_config_default(&cfg);
@@ -62,7 +62,7 @@ static gs_model *make_model(int guidance, int feat_size)
         for (int i = 0; i < C; i++)
             r->value_b[i] = urand(0.5f);
     }
-    return m;
+    return lids ? with_lids(m) : m;
 }
 
 static double max_diff(const float *a, const float *b, size_t n)
@@ -73,12 +73,79 @@ static double max_diff(const float *a, const float *b, size_t n)
     return w;
 }
 
-static void sweep(int guidance, int feat_size, gs_pool *pool, const char *name)
+/* With lids: the lids move the image (k = 0 renders another one), so the
+ * sweep checks them. */
+static void lids_move(gs_model *m, gs_pool *pool, const char *name)
 {
-    gs_model *m = make_model(guidance, feat_size);
+    gs_frame fr;
+    frame_default(m, &fr);
+    fr.gaze[0] = 0.5;
+    size_t nrgb = 3 * (size_t)m->cfg.image_size * m->cfg.image_size;
+    float *a = malloc(nrgb * sizeof(float));
+    int nl = gs_model_n_lid(&m->cfg);
+    size_t nk = 2 * GS_LID_NU * GS_LID_NV;
+    float *k = malloc(nk * sizeof(float));
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    gs_error err;
+    CHECK(a && k && c);
+    if (!a || !k || !c)
+        goto out;
+    CHECK(gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 1, &err) == GS_OK);
+    memcpy(a, c->rgb, nrgb * sizeof(float));
+    memcpy(k, m->p.lid_k, nk * sizeof(float));
+    memset(m->p.lid_k, 0, nk * sizeof(float));
+    CHECK(gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 1, &err) == GS_OK);
+    memcpy(m->p.lid_k, k, nk * sizeof(float));
+    double d = max_diff(a, c->rgb, nrgb);
+    size_t moved = 0; /* output values moved by more than 1/255 */
+    for (size_t i = 0; i < nrgb; i++)
+        moved += fabsf(a[i] - c->rgb[i]) > 1.0f / 255;
+    printf("%-34s %d lid Gaussians move %zu image values, by up to %.3f\n",
+           name, nl, moved, d);
+    CHECK_MSG(d > 2.0 / 255 && moved > 20, "%s: the lids do not move the "
+              "image (%.3g, %zu values)", name, d, moved);
+    /* held lids (the transfer's probes): at the held pitch whatever the
+     * gaze, while the eyes turn */
+    size_t nf = (size_t)m->cfg.n_face, nm = nf - (size_t)nl;
+    CHECK(gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 1, &err) == GS_OK);
+    float *lx = malloc(3 * nf * sizeof(float)), *ex = malloc(3 * sizeof(float));
+    CHECK(lx && ex);
+    if (lx && ex) {
+        memcpy(lx, c->g_mean, 3 * nf * sizeof(float));
+        memcpy(ex, c->g_mean + 3 * nf, 3 * sizeof(float));
+        c->lid_hold = 1;
+        c->lid_pitch = fr.gaze[0];
+        gs_frame f2 = fr;
+        f2.gaze[0] = -0.3;
+        CHECK(gs_frame_forward(c, pool, &f2, GS_STREAM_BOTH, 1, &err) == GS_OK);
+        c->lid_hold = 0;
+        CHECK_MSG(!memcmp(lx + 3 * nm, c->g_mean + 3 * nm,
+                          3 * (size_t)nl * sizeof(float)),
+                  "%s: held lids moved", name);
+        CHECK_MSG(memcmp(ex, c->g_mean + 3 * nf, 3 * sizeof(float)),
+                  "%s: the eyes did not turn under held lids", name);
+        CHECK(gs_frame_forward(c, pool, &f2, GS_STREAM_BOTH, 1, &err) == GS_OK);
+        CHECK_MSG(memcmp(lx + 3 * nm, c->g_mean + 3 * nm,
+                         3 * (size_t)nl * sizeof(float)),
+                  "%s: the lids did not follow the pitch", name);
+    }
+    free(lx);
+    free(ex);
+out:
+    gs_model_ctx_destroy(c);
+    free(a);
+    free(k);
+}
+
+static void sweep(int guidance, int feat_size, int lids, gs_pool *pool,
+                  const char *name)
+{
+    gs_model *m = make_model(guidance, feat_size, lids);
     CHECK(m != NULL);
     if (!m)
         return;
+    if (lids)
+        lids_move(m, pool, name);
     gs_model_ctx *inc = gs_model_ctx_create(m), *full = gs_model_ctx_create(m);
     CHECK(inc && full);
     gs_frame fr;
@@ -153,7 +220,7 @@ static void sweep(int guidance, int feat_size, gs_pool *pool, const char *name)
  * evicted; a cache of one keeps only the last. */
 static void subjects(gs_pool *pool)
 {
-    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32);
+    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32, 0);
     CHECK(m != NULL);
     if (!m)
         return;
@@ -222,7 +289,7 @@ static void subjects(gs_pool *pool)
  * that changes between calls applies to every pixel. */
 static void api_sweep(void)
 {
-    gs_model *m = make_model(GS_GUIDE_MULTIPLICATIVE, 32);
+    gs_model *m = make_model(GS_GUIDE_MULTIPLICATIVE, 32, 0);
     CHECK(m != NULL);
     if (!m)
         return;
@@ -289,7 +356,7 @@ static void api_sweep(void)
  * always render in full. */
 static void block_is_full(void)
 {
-    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32);
+    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32, 0);
     CHECK(m && gs_model_set_guide_source(m, GS_GUIDE_SRC_BLOCK, NULL) == GS_OK);
     gs_model_ctx *c = gs_model_ctx_create(m);
     gs_frame fr;
@@ -309,10 +376,12 @@ int main(void)
     gs_nn_blas_set_threads(1);
     gs_pool *pool = gs_pool_create(2);
     CHECK(pool != NULL);
-    sweep(GS_GUIDE_ADDITIVE, 32, NULL, "additive 32^2");
-    sweep(GS_GUIDE_MULTIPLICATIVE, 32, pool, "multiplicative 32^2, 2 threads");
-    sweep(GS_GUIDE_NONE, 32, NULL, "no guidance 32^2");
-    sweep(GS_GUIDE_ADDITIVE, 64, pool, "additive 64^2, 2 threads");
+    sweep(GS_GUIDE_ADDITIVE, 32, 0, NULL, "additive 32^2");
+    sweep(GS_GUIDE_MULTIPLICATIVE, 32, 0, pool, "multiplicative 32^2, 2 threads");
+    sweep(GS_GUIDE_NONE, 32, 0, NULL, "no guidance 32^2");
+    sweep(GS_GUIDE_ADDITIVE, 64, 0, pool, "additive 64^2, 2 threads");
+    sweep(GS_GUIDE_ADDITIVE, 32, 1, NULL, "additive 32^2, lids");
+    sweep(GS_GUIDE_MULTIPLICATIVE, 64, 1, pool, "multiplicative 64^2, lids, 2 thr");
     subjects(pool);
     api_sweep();
     block_is_full();

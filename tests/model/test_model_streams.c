@@ -62,10 +62,15 @@ static void compare(const char *what, double ana, double num)
         failures++;
 }
 
-static void run(int eye_rotation)
+static void run(int eye_rotation, int lids)
 {
     probe p;
     p.m = tiny_model(1, 11);
+    if (lids) {
+        p.m = with_lids(p.m);
+        CHECK(p.m && gs_model_n_lid(&p.m->cfg) > 10);
+        printf("  %d lid Gaussians\n", gs_model_n_lid(&p.m->cfg));
+    }
     CHECK(p.m != NULL);
     p.m->cfg.eye_rotation = eye_rotation;
     p.c = gs_model_ctx_create(p.m);
@@ -208,8 +213,10 @@ int main(void)
 {
     for (int er = 1; er >= 0; er--) {
         printf("eye_rotation %d\n", er);
-        run(er);
+        run(er, 0);
     }
+    printf("lids\n");
+    run(1, 1);
     printf("%d gradients compared\n", checks);
     CHECK_MSG(failures == 0, "%d stream gradient mismatches", failures);
     GS_TEST_END();

@@ -16,6 +16,10 @@
  * (fixed, codes, renderer) must get exactly zero. Tolerance per value:
  * |got - want| <= ATOL_REL max|want| + RTOL |want|.
  *
+ * The lids cases (gs_model_add_lids) check the lids' turn about the
+ * eyeball centre by their share of the pitch, and its gradients (k, the
+ * pitch, W_e and tau through the centre).
+ *
  * The single-stream case found a real gap, since fixed: the gaze enters
  * that ablation only through the pose MLP, whose input gradient the C code
  * did not carry to the gaze. */
@@ -34,6 +38,7 @@
 typedef struct stream_case {
     const char *name;
     int two_stream, eye_rotation;
+    int lids; /* gs_model_add_lids, then every lid's k moved by +0.7 */
     double head[3]; /* pitch, yaw, roll */
     double gaze[2]; /* pitch, yaw */
     uint64_t seed;
@@ -41,10 +46,12 @@ typedef struct stream_case {
 
 /* Gaze limits 0.8727 / 1.0472 rad (model.h); head pitch/yaw limit 1.2217. */
 static const stream_case g_cases[] = {
-    {"two_stream", 1, 1, {0.4, -0.7, 0.15}, {0.85, -1.02}, 21},
-    {"two_stream_far", 1, 1, {-0.6, 1.15, -0.25}, {-0.86, 1.04}, 22},
-    {"no_eye_rotation", 1, 0, {0.4, -0.7, 0.15}, {-0.8, 0.95}, 23},
-    {"single_stream", 0, 1, {0.3, 0.6, -0.1}, {0.82, 1.0}, 24},
+    {"two_stream", 1, 1, 0, {0.4, -0.7, 0.15}, {0.85, -1.02}, 21},
+    {"two_stream_far", 1, 1, 0, {-0.6, 1.15, -0.25}, {-0.86, 1.04}, 22},
+    {"no_eye_rotation", 1, 0, 0, {0.4, -0.7, 0.15}, {-0.8, 0.95}, 23},
+    {"single_stream", 0, 1, 0, {0.3, 0.6, -0.1}, {0.82, 1.0}, 24},
+    {"lids", 1, 1, 1, {0.4, -0.7, 0.15}, {0.85, -1.02}, 25},
+    {"lids_far", 1, 1, 1, {-0.6, 1.15, -0.25}, {-0.86, 1.04}, 26},
 };
 #define NCASES (int)(sizeof g_cases / sizeof g_cases[0])
 
@@ -70,6 +77,16 @@ static gs_model *make_model(const stream_case *sc)
         return NULL;
     }
     m->cfg.eye_rotation = sc->eye_rotation; /* a run-time switch */
+    if (sc->lids) {
+        gs_model *l = NULL;
+        int rc = gs_model_add_lids(m, GS_MODEL_LID_RADIUS_MM, &l, &err);
+        gs_model_destroy(m);
+        if (rc != GS_OK) {
+            fprintf(stderr, "%s: %s\n", sc->name, err.msg);
+            return NULL;
+        }
+        m = l;
+    }
     return m;
 }
 
@@ -182,6 +199,10 @@ static int export_case(const stream_case *sc)
     if (!m)
         return 0;
     perturb(m);
+    for (int j = 0; m->p.lid_k && j < 2 * GS_LID_NU * GS_LID_NV; j++)
+        m->p.lid_k[j] += 0.7f; /* lids that move, some twice as far */
+    CHECK_MSG(!sc->lids || gs_model_n_lid(&m->cfg) > 10, "%s: %d lids",
+              sc->name, gs_model_n_lid(&m->cfg));
     int ok = 1;
     for (int i = 0; i < m->ntensors && ok; i++) {
         const gs_ptensor *t = &m->t[i];
@@ -197,15 +218,16 @@ static int export_case(const stream_case *sc)
     int D = gs_model_code_dim(&m->cfg), nf = m->cfg.n_face;
     int n = nf + (sc->two_stream ? 2 * m->cfg.n_eye_each : 0);
     float R[9], t[3], gz[2] = {(float)fr.gaze[0], (float)fr.gaze[1]};
-    float cfg[7] = {(float)nf, (float)m->cfg.n_eye_each,
+    float cfg[9] = {(float)nf, (float)m->cfg.n_eye_each,
                     (float)m->cfg.feat_dim, (float)D,
                     (float)m->cfg.channels, (float)sc->two_stream,
-                    (float)sc->eye_rotation};
+                    (float)sc->eye_rotation, (float)m->cfg.n_lid0,
+                    (float)m->cfg.n_lid1};
     for (int k = 0; k < 9; k++)
         R[k] = (float)fr.head_R[k];
     for (int k = 0; k < 3; k++)
         t[k] = (float)fr.head_t[k];
-    size_t s7 = 7, sD = (size_t)D, s33[2] = {3, 3}, s3 = 3, s2 = 2;
+    size_t s7 = 9, sD = (size_t)D, s33[2] = {3, 3}, s3 = 3, s2 = 2;
     ok = ok && save(sc, "", "config", 1, &s7, cfg) &&
          save(sc, "", "code", 1, &sD, fr.code) &&
          save(sc, "", "head_R", 2, s33, R) && save(sc, "", "head_t", 1, &s3, t) &&

@@ -221,8 +221,10 @@ int gs_model_face_importance(const gs_model *m, gs_pool *pool, double *out,
 /* A new model with only the keep_face most important face Gaussians
  * (gs_model_face_importance; ties by index), kept in their original
  * order, and the whole eye stream; everything else is copied. keep_face
- * >= n_face gives an exact copy (same renders, bit for bit). Subjects
- * fitted with m render with the pruned model. keep_face < 1: GS_ERR_ARG. */
+ * >= n_face gives an exact copy (same renders, bit for bit). A model's
+ * lids (gs_model_add_lids) are always kept and count in keep_face (at
+ * least one other is kept). Subjects fitted with m render with the
+ * pruned model. keep_face < 1: GS_ERR_ARG. */
 int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
                    gs_model **out, gs_error *err);
 

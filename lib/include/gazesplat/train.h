@@ -27,6 +27,8 @@ typedef struct gs_model_spec {
                                features (released code); 1: one vector from
                                the face stream's map (local renderer, exact
                                incremental gaze sweeps; the default) */
+    int lids;               /* 1: lids that follow the gaze's pitch
+                               (gs_model_add_lids); -1, 0: none */
 } gs_model_spec;
 void gs_model_spec_default(gs_model_spec *s);
 int gs_model_new(const gs_model_spec *spec, uint64_t seed, gs_model **out,
@@ -35,6 +37,20 @@ int gs_model_new(const gs_model_spec *spec, uint64_t seed, gs_model **out,
  * model trained with one source can continue training with the other).
  * GS_ERR_ARG for a value other than 0 or 1. */
 int gs_model_set_guide_source(gs_model *m, int source, gs_error *err);
+/* A copy of m whose face Gaussians within radius_mm of an eyeball's
+ * centre become lids: turned about that centre by a learned share k of
+ * the gaze's pitch, each its own, starting at 0 (docs/model.md, "Lids
+ * that follow the gaze"; 16 mm: GS_MODEL_LID_RADIUS_MM). The face stream
+ * is reordered (the others in their order, then each eye's lids), so an
+ * optimizer state of m does not fit the copy. GS_ERR_ARG without two
+ * streams and explicit eye rotation, or with lids already. */
+int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
+                      gs_error *err);
+/* The lids' radius: the template's 12 mm eyeball, its 2.5 mm lid shell
+ * and a margin. */
+#define GS_MODEL_LID_RADIUS_MM 16.0
+/* 1 when m has lids. */
+int gs_model_has_lids(const gs_model *m);
 /* Writes a model file atomically (safetensors, docs/model.md). */
 int gs_model_write(const gs_model *m, const char *path, gs_error *err);
 
