@@ -167,13 +167,8 @@ static int run_train(int argc, char **argv)
         t.fresh_from_step = v;
     }
     t.cosine = o[O_COS].value != NULL;
-    if (o[O_LIDS].value) {
-        if (t.resume && t.fresh_from_step < 0)
-            return cli_usage_error(cmd, "--lids with --resume needs "
-                                        "--fresh-optimizer STEP (the face "
-                                        "stream is reordered)");
+    if (o[O_LIDS].value)
         spec.lids = 1;
-    }
     t.log = log_line;
 
     gs_nn_blas_set_threads(1);
@@ -183,6 +178,13 @@ static int run_train(int argc, char **argv)
                   : gs_model_new(&spec, (uint64_t)seed, &m, &err);
     if (!rc && t.resume && spec.guide_source >= 0)
         rc = gs_model_set_guide_source(m, spec.guide_source, &err);
+    if (!rc && t.resume && spec.lids == 1 && !gs_model_has_lids(m) &&
+        t.fresh_from_step < 0) {
+        gs_model_destroy(m);
+        return cli_usage_error(cmd, "--lids adds lids to this model only with "
+                                    "--fresh-optimizer STEP (the face stream "
+                                    "is reordered; FILE.opt would not fit)");
+    }
     if (!rc && t.resume && spec.lids == 1 && !gs_model_has_lids(m)) {
         gs_model *l = NULL;
         rc = gs_model_add_lids(m, GS_MODEL_LID_RADIUS_MM, &l, &err);

@@ -1,0 +1,199 @@
+/* Lids that follow the gaze (gs_model_add_lids, docs/model.md): which face
+ * Gaussians become lids and where they go in the face stream; a model
+ * whose lids do not move (k = 0) rasterizes the same feature maps as the
+ * model it came from; the file keeps the lids; pruning keeps them; bad
+ * arguments and configurations are refused. The gradients are checked by
+ * test_model_streams and test_streams_reference, incremental renders by
+ * test_model_incremental, transfers by test_model_transfer. */
+#include <math.h>
+#include <string.h>
+#include <unistd.h>
+
+#include "gazesplat/nn.h"
+#include "gs_test.h"
+#include "model_test_util.h"
+
+static double dist(const float *x, const float *c)
+{
+    double s = 0;
+    for (int k = 0; k < 3; k++)
+        s += ((double)x[k] - c[k]) * ((double)x[k] - c[k]);
+    return sqrt(s);
+}
+
+/* Row of face tensor name of model m for face Gaussian i. */
+static const float *row(const gs_model *m, const char *name, int i)
+{
+    for (int t = 0; t < m->ntensors; t++)
+        if (!strcmp(m->t[t].name, name))
+            return m->params + m->t[t].offset +
+                   (size_t)i * (m->t[t].count / (size_t)m->cfg.n_face);
+    return NULL;
+}
+
+static const char *const k_face[] = {"face.xyz", "face.log_scale", "face.quat",
+                                     "face.opacity", "face.colour", "face.feat",
+                                     "face.lambda"};
+
+/* The same face Gaussian: every face tensor's row equal. */
+static int same_row(const gs_model *a, int i, const gs_model *b, int j)
+{
+    for (size_t t = 0; t < sizeof k_face / sizeof k_face[0]; t++) {
+        size_t w = 0;
+        for (int q = 0; q < a->ntensors; q++)
+            if (!strcmp(a->t[q].name, k_face[t]))
+                w = a->t[q].count / (size_t)a->cfg.n_face;
+        if (memcmp(row(a, k_face[t], i), row(b, k_face[t], j), w * sizeof(float)))
+            return 0;
+    }
+    return 1;
+}
+
+int main(void)
+{
+    gs_nn_blas_set_threads(1);
+    gs_error err = {0, ""};
+    gs_model *m = tiny_model(1, 7);
+    CHECK(m != NULL);
+    if (!m)
+        return 1;
+    gs_model *l = NULL;
+    CHECK_MSG(gs_model_add_lids(m, GS_MODEL_LID_RADIUS_MM, &l, &err) == GS_OK, "%s",
+              err.msg);
+    if (!l)
+        return 1;
+    int nf = m->cfg.n_face, n0 = l->cfg.n_lid0, n1 = l->cfg.n_lid1, nl = n0 + n1,
+        nm = nf - nl;
+    printf("tiny model: %d face Gaussians, lids %d + %d\n", nf, n0, n1);
+    CHECK(l->cfg.n_face == nf && n0 > 10 && n1 > 10 && abs(n0 - n1) <= n0 / 4);
+    CHECK(gs_model_has_lids(l) && !gs_model_has_lids(m));
+
+    /* The others in their order, then eye 0's lids, then eye 1's: each a
+     * row of m, lids within the radius of their eye's centre, the others
+     * beyond both. */
+    const float *ec = m->p.eye_centre;
+    int j = 0, order_ok = 1, place_ok = 1;
+    for (int i = 0; i < nf; i++) {
+        const float *x = row(m, "face.xyz", i);
+        double d0 = dist(x, ec), d1 = dist(x, ec + 3);
+        int lid = d0 < GS_MODEL_LID_RADIUS_MM || d1 < GS_MODEL_LID_RADIUS_MM;
+        if (!lid)
+            order_ok &= j < nm && same_row(m, i, l, j++);
+    }
+    CHECK_MSG(order_ok && j == nm, "the others are not m's rows in order (%d of %d)", j,
+              nm);
+    for (int e = 0; e < 2; e++) {
+        int i = 0;
+        for (int q = 0; q < (e ? n1 : n0); q++) {
+            int lj = nm + (e ? n0 : 0) + q;
+            const float *x = row(l, "face.xyz", lj);
+            double d = dist(x, ec + 3 * e), o = dist(x, ec + 3 * (1 - e));
+            place_ok &= d < GS_MODEL_LID_RADIUS_MM && d <= o;
+            /* the next row of m that is eye e's lid */
+            for (; i < nf; i++) {
+                const float *y = row(m, "face.xyz", i);
+                double a = dist(y, ec + 3 * e), b = dist(y, ec + 3 * (1 - e));
+                if (a < GS_MODEL_LID_RADIUS_MM && a <= b)
+                    break;
+            }
+            order_ok &= i < nf && same_row(m, i, l, lj);
+            i++;
+            const float *uv = l->p.lid_uv + 2 * (size_t)(lj - nm);
+            place_ok &= uv[0] >= 0 && uv[0] <= GS_LID_NU - 1 && uv[1] >= 0 &&
+                        uv[1] <= GS_LID_NV - 1;
+        }
+    }
+    CHECK_MSG(order_ok, "the lids are not m's rows in order");
+    CHECK_MSG(place_ok, "a lid beyond the radius or off its grid");
+    int kz = 1;
+    for (int q = 0; q < 2 * GS_LID_NU * GS_LID_NV; q++)
+        kz &= l->p.lid_k[q] == 0.0f;
+    CHECK_MSG(kz, "the lids' k do not start at 0");
+
+    /* k = 0: the merged feature map is m's (the same Gaussians, other
+     * indices: only exact depth ties could blend in another order) at any
+     * gaze; the guidance source leaves the lids out, so the image differs. */
+    gs_model_ctx *cm = gs_model_ctx_create(m), *cl = gs_model_ctx_create(l);
+    CHECK(cm && cl);
+    gs_frame fr;
+    frame_default(m, &fr);
+    size_t nmap = (size_t)m->cfg.channels * m->cfg.feat_size * m->cfg.feat_size;
+    double worst = 0;
+    for (int g = 0; g < 3; g++) {
+        fr.gaze[0] = 0.4 * (g - 1);
+        CHECK(gs_frame_forward(cm, NULL, &fr, GS_STREAM_BOTH, 1, &err) == GS_OK);
+        CHECK(gs_frame_forward(cl, NULL, &fr, GS_STREAM_BOTH, 1, &err) == GS_OK);
+        for (size_t i = 0; i < nmap; i++)
+            worst = fmax(worst, fabs((double)cm->fmap[i] - cl->fmap[i]));
+    }
+    printf("k = 0: feature maps within %.2e of the model without lids\n", worst);
+    CHECK_MSG(worst <= 1e-5, "k = 0 moved the feature map by %.3g", worst);
+    gs_model_ctx_destroy(cm);
+    gs_model_ctx_destroy(cl);
+
+    /* The file keeps the lids (configuration and tensors). */
+    char path[128];
+    snprintf(path, sizeof path, "test_model_lids_%d.safetensors", (int)getpid());
+    for (int q = 0; q < 2 * GS_LID_NU * GS_LID_NV; q++)
+        l->p.lid_k[q] = 0.01f * (float)(q % 23);
+    CHECK(gs_model_save(l, path, &err) == GS_OK);
+    gs_model *r = NULL;
+    CHECK_MSG(gs_model_load(path, &r, &err) == GS_OK, "%s", err.msg);
+    if (r) {
+        CHECK(!memcmp(&r->cfg, &l->cfg, sizeof r->cfg));
+        CHECK(r->nparams == l->nparams &&
+              !memcmp(r->params, l->params, l->nparams * sizeof(float)));
+        CHECK(r->p.lid_k && r->p.lid_uv);
+        gs_model_destroy(r);
+    }
+    unlink(path);
+
+    /* Pruning keeps every lid (last, with k and places) and counts them. */
+    gs_model *p = NULL;
+    int keep = nl + 40;
+    CHECK_MSG(gs_model_prune(l, NULL, keep, &p, &err) == GS_OK, "%s", err.msg);
+    if (p) {
+        CHECK(p->cfg.n_face == keep && p->cfg.n_lid0 == n0 && p->cfg.n_lid1 == n1);
+        int lids_ok = 1;
+        for (int q = 0; q < nl; q++)
+            lids_ok &= same_row(l, nm + q, p, keep - nl + q);
+        CHECK_MSG(lids_ok, "pruning changed a lid");
+        CHECK(!memcmp(p->p.lid_k, l->p.lid_k, 2 * GS_LID_NU * GS_LID_NV * sizeof(float)));
+        CHECK(!memcmp(p->p.lid_uv, l->p.lid_uv, 2 * (size_t)nl * sizeof(float)));
+        gs_model_destroy(p);
+    }
+    CHECK(gs_model_prune(l, NULL, 3, &p, &err) == GS_OK);
+    if (p) { /* fewer than the lids: the lids and one other */
+        CHECK(p->cfg.n_face == nl + 1);
+        gs_model_destroy(p);
+    }
+
+    /* Refused: lids twice, a bad radius, NULL, a model without the
+     * explicit eye rotation or the eye stream; configurations with more
+     * lids than face Gaussians or lids without two streams. */
+    gs_model *x = NULL;
+    CHECK(gs_model_add_lids(l, 16.0, &x, &err) == GS_ERR_ARG && !x);
+    printf("refused: %s\n", err.msg);
+    CHECK(gs_model_add_lids(m, 0.0, &x, &err) == GS_ERR_ARG && !x);
+    CHECK(gs_model_add_lids(m, NAN, &x, &err) == GS_ERR_ARG && !x);
+    CHECK(gs_model_add_lids(NULL, 16.0, &x, &err) == GS_ERR_ARG);
+    m->cfg.eye_rotation = 0;
+    CHECK(gs_model_add_lids(m, 16.0, &x, &err) == GS_ERR_ARG && !x);
+    printf("refused: %s\n", err.msg);
+    m->cfg.eye_rotation = 1;
+    gs_model_config cfg = l->cfg;
+    cfg.n_lid0 = nf;
+    CHECK(gs_model_config_check(&cfg, &err) == GS_ERR_FORMAT);
+    printf("refused: %s\n", err.msg);
+    cfg = l->cfg;
+    cfg.two_stream = 0;
+    CHECK(gs_model_config_check(&cfg, &err) == GS_ERR_FORMAT);
+    printf("refused: %s\n", err.msg);
+    cfg.two_stream = 1;
+    cfg.n_lid1 = -1;
+    CHECK(gs_model_config_check(&cfg, &err) == GS_ERR_FORMAT);
+
+    gs_model_destroy(l);
+    gs_model_destroy(m);
+    GS_TEST_END();
+}
