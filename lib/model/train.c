@@ -233,13 +233,16 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
             t->wl1[i] = 1.0f + 4.0f * (float)((le[i] | re[i]) != 0);
         }
     int f = S / fs;
-    /* face-only mask: feature pixels with no eye pixel within one feature
-     * pixel (the eyes are missing from the face-only render) */
+    /* face-only mask: feature pixels with no eye pixel within g feature
+     * pixels (the eyes are missing from the face-only render; with lids,
+     * which it leaves out too, 3: the lids reach 2-4 mm beyond the eye's
+     * opening, a feature pixel is about 3.4 mm) */
+    int g = t->c->nl ? 3 : 1;
     for (int y = 0; y < fs; y++)
         for (int x = 0; x < fs; x++) {
             int eye = 0;
-            for (int yy = (y - 1) * f; yy < (y + 2) * f && !eye; yy++)
-                for (int xx = (x - 1) * f; xx < (x + 2) * f && !eye; xx++)
+            for (int yy = (y - g) * f; yy < (y + g + 1) * f && !eye; yy++)
+                for (int xx = (x - g) * f; xx < (x + g + 1) * f && !eye; xx++)
                     if (yy >= 0 && yy < S && xx >= 0 && xx < S)
                         eye = (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
             t->fmask[(size_t)y * fs + x] = eye ? 0.0f : 1.0f;
