@@ -46,7 +46,10 @@ const cli_command cli_train_command = {
     "                      model without\n"
     "  --gaze-loss FILE    add the gaze loss: angular error of this gaze\n"
     "                      estimator (gazesplat train-estimator) on the render\n"
-    "  --gaze-weight X     its weight (0.1, the paper's)\n",
+    "  --gaze-weight X     its weight (0.1, the paper's)\n"
+    "  --eye-cover-loss X  add X times the L1 of the eye stream's coverage\n"
+    "                      of the feature map against the visible eyeballs\n"
+    "                      (where the lids are; docs/model.md); 0 (default)\n",
     run_train,
 };
 
@@ -63,7 +66,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
-       O_FRESH, O_COS, O_LIDS, O_N };
+       O_FRESH, O_COS, O_LIDS, O_COVER, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -76,7 +79,7 @@ static int run_train(int argc, char **argv)
         {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL},
         {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL},
         {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL},
-        {"--lids", 0, NULL}};
+        {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -169,6 +172,12 @@ static int run_train(int argc, char **argv)
     t.cosine = o[O_COS].value != NULL;
     if (o[O_LIDS].value)
         spec.lids = 1;
+    if (o[O_COVER].value) {
+        char *end = NULL;
+        t.eye_cover_weight = strtod(o[O_COVER].value, &end);
+        if (!end || *end || !(t.eye_cover_weight >= 0 && t.eye_cover_weight <= 1000))
+            return cli_usage_error(cmd, "--eye-cover-loss: want 0..1000");
+    }
     t.log = log_line;
 
     gs_nn_blas_set_threads(1);

@@ -694,7 +694,10 @@ const char *gs_finetune_parts_name(unsigned parts, char *buf, size_t cap)
 unsigned gs_model_tensor_part(const gs_ptensor *t)
 {
     const char *n = t->name;
-    if (t->group == GS_PG_CODES || t->group == GS_PG_FIXED)
+    /* codes, fixed tensors, and the lids' share of the pitch: one image
+     * shows one pitch, and k is how the lids follow a change of it */
+    if (t->group == GS_PG_CODES || t->group == GS_PG_FIXED ||
+        !strcmp(n, "face.lid_k"))
         return 0;
     if (!strcmp(n, "face.colour") || !strcmp(n, "face.feat"))
         return GS_FT_FACE;

@@ -237,6 +237,8 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
     free(c->rgb8);
     free(c->fbox);
     free(c->lid_save);
+    free(c->cov_ind), free(c->cov_bg), free(c->cover), free(c->v_ind);
+    gs_raster_destroy(c->raster_cov);
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         sweep_slot_free(&c->slots[i]);
     free(c->slots);
@@ -622,6 +624,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         sweep_stash(c);
     c->inc_valid = 0;
     c->rgb8_valid = 0;
+    c->cover_valid = 0;
     gs_frame_forward_streams(c, fr, force_face);
     c->stream = stream;
     int first = 0, count = c->n;
@@ -669,6 +672,42 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                      int stream, int force_face, gs_error *err)
 {
     return forward_at(c, pool, fr, stream, force_face, c->fs, 0, err);
+}
+
+int gs_frame_eye_cover(gs_model_ctx *c, gs_pool *pool, gs_error *err)
+{
+    size_t n = (size_t)c->n, fsz = (size_t)c->fs * c->fs;
+    if (!c->ne || c->stream != GS_STREAM_BOTH)
+        return gs_error_set(err, GS_ERR_STATE,
+                            "eye cover: needs a forward of both streams");
+    if (!c->raster_cov) {
+        c->raster_cov = gs_raster_create();
+        c->cov_ind = calloc(n, sizeof(float));
+        c->v_ind = calloc(n, sizeof(float));
+        c->cov_bg = calloc(fsz, sizeof(float));
+        c->cover = calloc(2 * fsz, sizeof(float)); /* and its alpha */
+        if (!c->raster_cov || !c->cov_ind || !c->v_ind || !c->cov_bg ||
+            !c->cover) {
+            gs_raster_destroy(c->raster_cov);
+            free(c->cov_ind), free(c->v_ind), free(c->cov_bg), free(c->cover);
+            c->raster_cov = NULL;
+            c->cov_ind = c->v_ind = c->cov_bg = c->cover = NULL;
+            return gs_error_set(err, GS_ERR_NOMEM, "eye cover: out of memory");
+        }
+        for (size_t i = (size_t)c->nf; i < n; i++)
+            c->cov_ind[i] = 1.0f;
+    }
+    gs_gaussians g = gaussians_of(c, 0, c->n);
+    g.channels = 1;
+    g.features = c->cov_ind;
+    gs_camera cam;
+    gs_frame_camera(c->m, c->fr.head_t, &cam);
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    gs_raster_set_records(c->raster_cov, 1);
+    int rc = gs_raster_forward(c->raster_cov, pool, &cam, &g, c->cov_bg, &ro,
+                               c->cover, c->cover + fsz, NULL, err);
+    c->cover_valid = rc == GS_OK;
+    return rc;
 }
 
 /* ---- incremental renders ---- */
@@ -1700,6 +1739,14 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                                 c->v_feat};
         rc = gs_raster_backward(c->raster_face, pool, c->v_fmap_face, NULL,
                                 NULL, &gf, NULL, err);
+        if (rc)
+            return rc;
+    }
+    if (c->cover_grad && c->cover_valid) { /* the eye stream's coverage */
+        gs_gaussian_grads gc = {c->v_mean, c->v_scale, c->v_quat, c->v_opac,
+                                c->v_ind};
+        rc = gs_raster_backward(c->raster_cov, pool, c->cover_grad, NULL,
+                                NULL, &gc, NULL, err);
         if (rc)
             return rc;
     }

@@ -41,6 +41,13 @@ typedef struct gs_sweep_slot {
     int rgb_dirty[4];
 } gs_sweep_slot;
 
+/* The eye stream's coverage of the merged feature map of the last forward
+ * (GS_STREAM_BOTH) into c->cover [fs, fs]: its Gaussians' share of each
+ * pixel, the visible eyeball. With c->cover_grad set (d loss / d cover),
+ * the next gs_frame_backward carries it to the Gaussians and the streams
+ * (the lids' placement, mostly). */
+int gs_frame_eye_cover(gs_model_ctx *c, gs_pool *pool, gs_error *err);
+
 /* Detail transfer's state (transfer.c). */
 typedef struct gs_xfer gs_xfer;
 void gs_xfer_free(gs_xfer *x);
@@ -73,6 +80,14 @@ struct gs_model_ctx {
     int lid_hold;
     double lid_pitch;
     float *lid_save;                  /* [nl, 7] backward scratch */
+    /* the eye stream's coverage of the merged map (gs_frame_eye_cover,
+     * training): an indicator channel (1 eye, 0 face) rasterized with
+     * every Gaussian; cover_grad, when set, is its gradient and
+     * gs_frame_backward adds its Gaussian gradients */
+    gs_raster *raster_cov;
+    float *cov_ind, *cov_bg, *cover, *v_ind; /* [n], [fs^2], [2 fs^2], [n] */
+    int cover_valid;
+    const float *cover_grad;
     int F, D, C, fs, S;
     /* face stream */
     float *fe_in, *fe_act, *fe_out;   /* [nf, F+D], acts, [nf, FACE_OUT] */

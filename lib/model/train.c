@@ -70,6 +70,8 @@ typedef struct trainer {
     float *target, *wl1, *dimg, *ftarget, *dfmap, *ssim;
     float *fmask, *dfmap_face; /* face-only render: mask [fs^2], gradient */
     float *emask, *dfmap_eye;  /* eye-only render: eye area [fs^2], gradient */
+    float *dcover;             /* the eye coverage's gradient [fs^2] */
+    double cover_w;            /* its weight (eye_cover_weight) */
     float gaze_label[2];       /* normalized-camera gaze of the sample */
     gs_gaze_net *gnet;         /* the loss estimator, or NULL */
     double gaze_w, gaze_rad;   /* its weight; the last angle */
@@ -149,9 +151,12 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     t->fmask = malloc(fs * fs * sizeof(float));
     t->dfmap_eye = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
     t->emask = malloc(fs * fs * sizeof(float));
+    t->dcover = calloc(fs * fs, sizeof(float));
+    t->cover_w = o->eye_cover_weight;
     t->ssim = malloc(t->ssim_len * sizeof(float));
     if (!t->target || !t->wl1 || !t->dimg || !t->ftarget || !t->dfmap ||
-        !t->ssim || !t->dfmap_face || !t->fmask || !t->dfmap_eye || !t->emask)
+        !t->ssim || !t->dfmap_face || !t->fmask || !t->dfmap_eye || !t->emask ||
+        !t->dcover)
         return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
     return GS_OK;
 }
@@ -171,6 +176,7 @@ static void trainer_free(trainer *t)
     free(t->fmask);
     free(t->dfmap_eye);
     free(t->emask);
+    free(t->dcover);
     free(t->ssim);
 }
 
@@ -325,7 +331,19 @@ static double losses(trainer *t, gs_pool *pool, double *psnr)
                           t->emask, 3, (int)fplane);
     }
     double lg = t->gnet ? gaze_loss(t, pool) : 0.0;
-    return (double)l1 + 0.1 * ls + lf + lface + 5.0 * leye + lg;
+    double lc = 0; /* the eye stream's coverage against the visible eyes */
+    c->cover_grad = NULL;
+    if (t->cover_w > 0 && gs_frame_eye_cover(c, pool, NULL) == GS_OK) {
+        double w = t->cover_w / (double)fplane;
+        for (size_t i = 0; i < fplane; i++) {
+            double d = (double)c->cover[i] - t->emask[i];
+            lc += fabs(d);
+            t->dcover[i] = (float)(d > 0 ? w : d < 0 ? -w : 0.0);
+        }
+        lc *= w;
+        c->cover_grad = t->dcover;
+    }
+    return (double)l1 + 0.1 * ls + lf + lface + 5.0 * leye + lg + lc;
 }
 
 static int save_checkpoint(trainer *t, const char *path, long step,

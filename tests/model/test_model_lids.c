@@ -49,6 +49,103 @@ static int same_row(const gs_model *a, int i, const gs_model *b, int j)
     return 1;
 }
 
+/* sum_p w_p cover_p of frame fr (the eye stream's coverage, training's
+ * eye-cover loss with weights w). */
+static double cover_obj(gs_model_ctx *c, const gs_frame *fr, const float *w)
+{
+    gs_error err;
+    if (gs_frame_forward(c, NULL, fr, GS_STREAM_BOTH, 1, &err) != GS_OK ||
+        gs_frame_eye_cover(c, NULL, &err) != GS_OK)
+        return NAN;
+    double s = 0;
+    for (int i = 0; i < c->fs * c->fs; i++)
+        s += (double)w[i] * c->cover[i];
+    return s;
+}
+
+/* The eye-cover loss's gradient (gs_frame_eye_cover, then
+ * gs_frame_backward with cover_grad) against central differences: the
+ * lids' knots, their positions, the eyes' positions and opacities, the
+ * gaze's pitch. */
+static void cover_grad_check(gs_model *l)
+{
+    for (int q = 0; q < 2 * GS_LID_NU * GS_LID_NV; q++)
+        l->p.lid_k[q] = 0.5f + 0.02f * (float)(q % 11);
+    gs_model_ctx *c = gs_model_ctx_create(l);
+    int fs = l->cfg.feat_size;
+    float *w = malloc((size_t)fs * fs * sizeof(float));
+    float *grad = calloc(l->nparams, sizeof(float));
+    CHECK(c && w && grad);
+    if (!c || !w || !grad)
+        goto out;
+    gs_frame fr;
+    frame_default(l, &fr);
+    fr.gaze[0] = -0.4;
+    uint64_t r = 99;
+    for (int i = 0; i < fs * fs; i++) {
+        r = r * 6364136223846793005ull + 1442695040888963407ull;
+        w[i] = (float)((r >> 40) % 1000) / 1000.0f - 0.3f;
+    }
+    double f0 = cover_obj(c, &fr, w);
+    CHECK(isfinite(f0));
+    gs_model_params g;
+    gs_model_bind(l, grad, &g);
+    gs_frame_grad fg;
+    memset(&fg, 0, sizeof fg);
+    gs_error err;
+    c->cover_grad = w;
+    CHECK(gs_frame_backward(c, NULL, NULL, NULL, NULL, NULL, &g, &fg, &err) == GS_OK);
+    c->cover_grad = NULL;
+    const char *names[] = {"face.lid_k", "face.xyz", "eye.xyz", "eye.opacity"};
+    int bad = 0, n = 0;
+    for (size_t t = 0; t < sizeof names / sizeof names[0]; t++) {
+        const gs_ptensor *pt = NULL;
+        for (int q = 0; q < l->ntensors; q++)
+            if (!strcmp(l->t[q].name, names[t]))
+                pt = &l->t[q];
+        if (!pt)
+            continue;
+        /* the entries with the largest gradients: where it matters */
+        for (int rep = 0; rep < 3; rep++) {
+            size_t best = 0;
+            double bv = -1;
+            for (size_t i = 0; i < pt->count; i++) {
+                double v = fabs(grad[pt->offset + i]);
+                if (v > bv)
+                    bv = v, best = i;
+            }
+            float *x = l->params + pt->offset + best, x0 = *x;
+            double h = !strcmp(names[t], "face.lid_k") ? 0.02 : 0.05;
+            *x = x0 + (float)h;
+            double up = cover_obj(c, &fr, w);
+            *x = x0 - (float)h;
+            double dn = cover_obj(c, &fr, w);
+            *x = x0;
+            double num = (up - dn) / (2 * h), ana = grad[pt->offset + best];
+            double tol = 0.1 * fmax(fabs(num), fabs(ana)) + 1e-3 * (1 + fabs(f0));
+            n++;
+            bad += fabs(num - ana) > tol;
+            printf("cover gradient %-12s [%zu]: analytic %+.5e numeric %+.5e\n", names[t],
+                   best, ana, num);
+            grad[pt->offset + best] = 0; /* the next largest next time */
+        }
+    }
+    gs_frame f2 = fr;
+    f2.gaze[0] = fr.gaze[0] + 0.002;
+    double up = cover_obj(c, &f2, w);
+    f2.gaze[0] = fr.gaze[0] - 0.002;
+    double dn = cover_obj(c, &f2, w);
+    double num = (up - dn) / 0.004;
+    n++;
+    bad += fabs(num - fg.gaze[0]) > 0.1 * fmax(fabs(num), fabs(fg.gaze[0])) + 1e-3;
+    printf("cover gradient gaze pitch: analytic %+.5e numeric %+.5e\n", fg.gaze[0], num);
+    CHECK_MSG(bad == 0, "%d of %d eye-cover gradients disagree", bad, n);
+out:
+    free(w);
+    free(grad);
+    gs_model_ctx_destroy(c);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -193,6 +290,7 @@ int main(void)
     cfg.n_lid1 = -1;
     CHECK(gs_model_config_check(&cfg, &err) == GS_ERR_FORMAT);
 
+    cover_grad_check(l);
     gs_model_destroy(l);
     gs_model_destroy(m);
     GS_TEST_END();

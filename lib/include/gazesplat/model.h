@@ -272,7 +272,8 @@ enum {
     GS_FT_EYE = 2,      /* eye Gaussians' colour and features */
     GS_FT_RENDERER = 4, /* the neural renderer's weights */
     GS_FT_MLP = 8,      /* the deformation MLPs and the eyeball shift */
-    GS_FT_GEOMETRY = 16 /* Gaussian positions, scales, rotations, opacities */
+    GS_FT_GEOMETRY = 16 /* Gaussian positions, scales, rotations, opacities
+                           (never the lids' share of the pitch) */
 };
 /* The face Gaussians' colours and features and the Gaussians' geometry:
  * better than the face alone on every image and gaze figure, on the

@@ -87,6 +87,10 @@ typedef struct gs_train_options {
      * and nothing else may use it while gs_train runs. */
     struct gs_gaze_net *gaze_net;
     double gaze_weight;     /* 0.1 by default */
+    double eye_cover_weight; /* > 0: L1 of the eye stream's coverage of the
+                                merged feature map against the visible
+                                eyeball (the eye masks), times this: where
+                                the lids are (docs/model.md); 0 default */
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
 
