@@ -748,10 +748,10 @@ static void splat_box(const gs_camera *cam, const float *x, const float *ls,
 
 /* Tile-aligned box (pixels of cam, x0 y0 x1 y1, x1 y1 exclusive, clipped
  * to its image; empty when x0 >= x1) of every tile the moving Gaussians
- * (lids and eye stream) can reach. The rasterizer bins a Gaussian to each tile its
- * 3-sigma box touches and composites it on any pixel of those tiles where
- * its alpha passes 1/255, so its reach is a set of whole tiles: those of
- * the union of splat_box. */
+ * (lids and eye stream) can reach. The rasterizer bins a Gaussian to each
+ * tile its 3-sigma box touches and composites it on any pixel of those
+ * tiles where its alpha passes 1/255, so its reach is a set of whole
+ * tiles: those of the union of splat_box. */
 void gs_frame_eye_tiles(const gs_model_ctx *c, const gs_camera *cam, int r[4])
 {
     int lo[2] = {INT_MAX, INT_MAX}, hi[2] = {INT_MIN, INT_MIN};
