@@ -187,14 +187,14 @@ static int run_train(int argc, char **argv)
                   : gs_model_new(&spec, (uint64_t)seed, &m, &err);
     if (!rc && t.resume && spec.guide_source >= 0)
         rc = gs_model_set_guide_source(m, spec.guide_source, &err);
-    if (!rc && t.resume && spec.lids == 1 && !gs_model_has_lids(m) &&
-        t.fresh_from_step < 0) {
-        gs_model_destroy(m);
-        return cli_usage_error(cmd, "--lids adds lids to this model only with "
-                                    "--fresh-optimizer STEP (the face stream "
-                                    "is reordered; FILE.opt would not fit)");
-    }
     if (!rc && t.resume && spec.lids == 1 && !gs_model_has_lids(m)) {
+        if (t.fresh_from_step < 0) {
+            gs_model_destroy(m);
+            return cli_usage_error(cmd, "--lids adds lids to this model only "
+                                        "with --fresh-optimizer STEP (the face "
+                                        "stream is reordered; FILE.opt would "
+                                        "not fit)");
+        }
         gs_model *l = NULL;
         rc = gs_model_add_lids(m, GS_MODEL_LID_RADIUS_MM, &l, &err);
         gs_model_destroy(m);

@@ -36,6 +36,16 @@ static void quat_mul(const double a[4], const double b[4], double o[4])
     o[3] = a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0];
 }
 
+/* o = L(q)^T v: the gradient of v through q (x) . (o = q^-1 v for unit q). */
+static void quat_lmul_t(const double q[4], const double v[4], double o[4])
+{
+    double a = q[0], b = q[1], c = q[2], d = q[3];
+    o[0] = a * v[0] + b * v[1] + c * v[2] + d * v[3];
+    o[1] = -b * v[0] + a * v[1] + d * v[2] - c * v[3];
+    o[2] = -c * v[0] - d * v[1] + a * v[2] + b * v[3];
+    o[3] = -d * v[0] + c * v[1] - b * v[2] + a * v[3];
+}
+
 /* Rotation matrix of a unit quaternion. */
 static void quat_to_mat(const double q[4], double r[9])
 {
@@ -1304,12 +1314,8 @@ static void face_backward(gs_model_ctx *c, const gs_model_params *gp,
                 d[3 + C + k] = GS_MODEL_ATTR_SCALE * w * c->v_scale[3 * i + k];
             /* q_cam = L(qR) q: dq = L(qR)^T dq_cam */
             const float *vq = c->v_quat + 4 * (size_t)i;
-            double dq[4];
-            double a = qR[0], b = qR[1], cc = qR[2], dd = qR[3];
-            dq[0] = a * vq[0] + b * vq[1] + cc * vq[2] + dd * vq[3];
-            dq[1] = -b * vq[0] + a * vq[1] + dd * vq[2] - cc * vq[3];
-            dq[2] = -cc * vq[0] - dd * vq[1] + a * vq[2] + b * vq[3];
-            dq[3] = -dd * vq[0] + cc * vq[1] - b * vq[2] + a * vq[3];
+            double vqd[4] = {vq[0], vq[1], vq[2], vq[3]}, dq[4];
+            quat_lmul_t(qR, vqd, dq);
             for (int k = 0; k < 4; k++)
                 d[6 + C + k] = (float)(GS_MODEL_ATTR_SCALE * w * dq[k]);
             d[10 + C] = GS_MODEL_ATTR_SCALE * w * c->v_opac[i];
@@ -1360,6 +1366,27 @@ static void face_backward(gs_model_ctx *c, const gs_model_params *gp,
     }
 }
 
+/* dce[e] (the gradient of eyeball centre e, c_e = c_e,0 + W_e tau) into
+ * W_e and tau. */
+static void centre_backward(const gs_model_ctx *c, const gs_model_params *gp,
+                            gs_frame_grad *fg, const double dce[2][3])
+{
+    const float *W = c->m->p.eye_centre_w;
+    int D = c->D;
+    for (int e = 0; e < 2; e++)
+        for (int k = 0; k < 3; k++) {
+            const float *w = W + (size_t)(3 * e + k) * D;
+            if (gp) {
+                float *dw = gp->eye_centre_w + (size_t)(3 * e + k) * D;
+                for (int j = 0; j < D; j++)
+                    dw[j] += (float)(dce[e][k] * c->fr.code[j]);
+            }
+            if (fg)
+                for (int j = 0; j < D; j++)
+                    fg->code[j] += (float)(dce[e][k] * w[j]);
+        }
+}
+
 /* The lids' turn backward (after pose_grad, before face_backward): the
  * gradients of the turned Gaussians in v_mean / v_quat are saved to
  * lid_save and replaced by those of the unturned ones, as face_backward
@@ -1371,14 +1398,16 @@ static void lid_backward(gs_model_ctx *c, const gs_model_params *gp,
 {
     const gs_model_params *p = &c->m->p;
     const double *R = c->fr.head_R;
-    int D = c->D;
     double pitch = lid_pitch_of(c, &c->fr), dce[2][3] = {{0}}, dpitch = 0;
     for (int j = 0; j < c->nl; j++) {
         int i = c->nm + j, e = j < c->nl0 ? 0 : 1;
         float *vm = c->v_mean + 3 * (size_t)i, *vq = c->v_quat + 4 * (size_t)i;
         memcpy(c->lid_save + 7 * (size_t)j, vm, 3 * sizeof(float));
         memcpy(c->lid_save + 7 * (size_t)j + 3, vq, 4 * sizeof(float));
-        double a = lid_angle(c, &c->fr, j), ca = cos(a), sa = sin(a);
+        int i0; /* a = -k pitch, k bilinear in the eye's knots */
+        float wk[4];
+        float kj = gs_lid_k(p->lid_k, p->lid_uv, e, j, &i0, wk);
+        double a = -(double)kj * pitch, ca = cos(a), sa = sin(a);
         /* position: x' = c + Rx(a) (x - c); g = dL/dx' (head frame) */
         double g[3];
         for (int k = 0; k < 3; k++)
@@ -1391,17 +1420,12 @@ static void lid_backward(gs_model_ctx *c, const gs_model_params *gp,
             dce[e][k] += g[k] - dx[k];
         double da = g[1] * (-sa * r[1] - ca * r[2]) + g[2] * (ca * r[1] - sa * r[2]);
         /* quaternion: q_cam = qR (qx q); dq' = L(qR)^T dq_cam */
-        double u[4] = {vq[0], vq[1], vq[2], vq[3]}, w[4];
-        double A = qR[0], B = qR[1], Cq = qR[2], Dq = qR[3];
-        w[0] = A * u[0] + B * u[1] + Cq * u[2] + Dq * u[3];
-        w[1] = -B * u[0] + A * u[1] + Dq * u[2] - Cq * u[3];
-        w[2] = -Cq * u[0] - Dq * u[1] + A * u[2] + B * u[3];
-        w[3] = -Dq * u[0] + Cq * u[1] - B * u[2] + A * u[3];
+        double u[4] = {vq[0], vq[1], vq[2], vq[3]}, w[4], dq[4], vr[4];
+        quat_lmul_t(qR, u, w);
         /* qx q with qx = (h0, h1, 0, 0): dq = L(qx)^T w, dqx = Rt(q)^T w */
-        double h0 = cos(0.5 * a), h1 = sin(0.5 * a);
+        double h0 = cos(0.5 * a), h1 = sin(0.5 * a), qx[4] = {h0, h1, 0, 0};
         const float *q = c->q_head + 4 * (size_t)i;
-        double dq[4] = {h0 * w[0] + h1 * w[1], -h1 * w[0] + h0 * w[1],
-                        h0 * w[2] + h1 * w[3], -h1 * w[2] + h0 * w[3]};
+        quat_lmul_t(qx, w, dq);
         /* qx q = (h0 q0 - h1 q1, h0 q1 + h1 q0, h0 q2 - h1 q3, h0 q3 + h1 q2) */
         double dh0 = w[0] * q[0] + w[1] * q[1] + w[2] * q[2] + w[3] * q[3];
         double dh1 = -w[0] * q[1] + w[1] * q[0] - w[2] * q[3] + w[3] * q[2];
@@ -1410,14 +1434,9 @@ static void lid_backward(gs_model_ctx *c, const gs_model_params *gp,
         for (int k = 0; k < 3; k++)
             vm[k] = (float)(R[3 * k] * dx[0] + R[3 * k + 1] * dx[1] +
                             R[3 * k + 2] * dx[2]);
-        vq[0] = (float)(A * dq[0] - B * dq[1] - Cq * dq[2] - Dq * dq[3]);
-        vq[1] = (float)(B * dq[0] + A * dq[1] - Dq * dq[2] + Cq * dq[3]);
-        vq[2] = (float)(Cq * dq[0] + Dq * dq[1] + A * dq[2] - B * dq[3]);
-        vq[3] = (float)(Dq * dq[0] - Cq * dq[1] + B * dq[2] + A * dq[3]);
-        /* a = -k pitch, k bilinear in the eye's knots */
-        int i0;
-        float wk[4];
-        float kj = gs_lid_k(p->lid_k, p->lid_uv, e, j, &i0, wk);
+        quat_mul(qR, dq, vr);
+        for (int k = 0; k < 4; k++)
+            vq[k] = (float)vr[k];
         if (gp) {
             float dk = (float)(-pitch * da);
             gp->lid_k[i0] += wk[0] * dk, gp->lid_k[i0 + 1] += wk[1] * dk;
@@ -1428,18 +1447,7 @@ static void lid_backward(gs_model_ctx *c, const gs_model_params *gp,
     }
     if (fg && !c->lid_hold)
         fg->gaze[0] += dpitch;
-    for (int e = 0; e < 2; e++) /* c_e = centre + W_e tau */
-        for (int k = 0; k < 3; k++) {
-            const float *wr = p->eye_centre_w + (size_t)(3 * e + k) * D;
-            if (gp) {
-                float *dw = gp->eye_centre_w + (size_t)(3 * e + k) * D;
-                for (int j = 0; j < D; j++)
-                    dw[j] += (float)(dce[e][k] * c->fr.code[j]);
-            }
-            if (fg)
-                for (int j = 0; j < D; j++)
-                    fg->code[j] += (float)(dce[e][k] * wr[j]);
-        }
+    centre_backward(c, gp, fg, dce);
 }
 
 static void lid_restore(gs_model_ctx *c)
@@ -1561,19 +1569,7 @@ static void eye_backward(gs_model_ctx *c, const gs_model_params *gp,
         for (int k = 0; k < GS_PE_DIM(2); k++)
             dpe[k] += di[F + D + k];
     }
-    /* Eyeball centres: c_e + W_e tau. */
-    for (int e = 0; e < 2; e++)
-        for (int k = 0; k < 3; k++) {
-            const float *w = p->eye_centre_w + (size_t)(3 * e + k) * D;
-            if (gp) {
-                float *dw = gp->eye_centre_w + (size_t)(3 * e + k) * D;
-                for (int j = 0; j < D; j++)
-                    dw[j] += (float)(dce[e][k] * c->fr.code[j]);
-            }
-            if (fg)
-                for (int j = 0; j < D; j++)
-                    fg->code[j] += (float)(dce[e][k] * w[j]);
-        }
+    centre_backward(c, gp, fg, dce); /* eyeball centres: c_e + W_e tau */
     /* Rotations: R_e = R_res,e R_g. */
     double dgaze[2] = {0, 0};
     if (m->cfg.eye_rotation) {

@@ -25,14 +25,6 @@ static int lid_eye(const gs_model *m, int i, double r)
     return e;
 }
 
-static int lid_uv_index(const gs_model *m)
-{
-    for (int i = 0; i < m->ntensors; i++)
-        if (!strcmp(m->t[i].name, "face.lid_uv"))
-            return i;
-    return 0;
-}
-
 int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
                       gs_error *err)
 {
@@ -77,10 +69,8 @@ int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
         rc = gs_error_set(err, GS_ERR_NOMEM, "lids: out of memory");
     for (int t = 0; !rc && t < o->ntensors; t++) {
         const gs_ptensor *d = &o->t[t];
-        if (!strcmp(d->name, "face.lid_k"))
-            continue; /* 0: the lids start where they were */
-        if (!strcmp(d->name, "face.lid_uv"))
-            continue; /* below */
+        if (!strncmp(d->name, "face.lid_", 9))
+            continue; /* k 0: the lids start where they were; places below */
         const gs_ptensor *s = NULL;
         for (int j = 0; j < m->ntensors && !s; j++)
             if (!strcmp(m->t[j].name, d->name))
@@ -100,21 +90,6 @@ int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
             memcpy(dst + (size_t)i * row, src + (size_t)order[i] * row,
                    row * sizeof(float));
     }
-    for (int j = 0; !rc && j < cnt[0] + cnt[1]; j++) { /* grid places */
-        const float *x = o->params + o->t[0].offset; /* face.xyz */
-        int i = n - cnt[0] - cnt[1] + j, e = j < cnt[0] ? 0 : 1;
-        const float *c = m->p.eye_centre + 3 * e;
-        double r[3];
-        for (int q = 0; q < 3; q++)
-            r[q] = (double)x[3 * (size_t)i + q] - c[q];
-        double az = atan2(r[0], -r[2]) * 180.0 / GS_MODEL_PI;
-        double el = atan2(-r[1], -r[2]) * 180.0 / GS_MODEL_PI;
-        az = az < -90 ? -90 : az > 90 ? 90 : az;
-        el = el < -90 ? -90 : el > 90 ? 90 : el;
-        float *uv = o->params + o->t[lid_uv_index(o)].offset + 2 * (size_t)j;
-        uv[0] = (float)((az + 90.0) / GS_LID_DU_DEG);
-        uv[1] = (float)((el + 90.0) / GS_LID_DV_DEG);
-    }
     free(order);
     if (rc) {
         gs_model_destroy(o);
@@ -122,6 +97,17 @@ int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
     }
     o->rcfg = m->rcfg;
     gs_model_bind(o, o->params, &o->p);
+    for (int j = 0; j < cnt[0] + cnt[1]; j++) { /* grid places */
+        int i = n - cnt[0] - cnt[1] + j, e = j < cnt[0] ? 0 : 1;
+        const float *x = o->p.f_xyz + 3 * (size_t)i, *c = m->p.eye_centre + 3 * e;
+        double r[3] = {(double)x[0] - c[0], (double)x[1] - c[1], (double)x[2] - c[2]};
+        double az = atan2(r[0], -r[2]) * 180.0 / GS_MODEL_PI;
+        double el = atan2(-r[1], -r[2]) * 180.0 / GS_MODEL_PI;
+        az = az < -90 ? -90 : az > 90 ? 90 : az;
+        el = el < -90 ? -90 : el > 90 ? 90 : el;
+        o->p.lid_uv[2 * j] = (float)((az + 90.0) / GS_LID_DU_DEG);
+        o->p.lid_uv[2 * j + 1] = (float)((el + 90.0) / GS_LID_DV_DEG);
+    }
     o->id = gs_model_param_id(o);
     *out = o;
     return GS_OK;

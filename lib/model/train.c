@@ -334,6 +334,7 @@ static double losses(trainer *t, gs_pool *pool, double *psnr)
     double lc = 0; /* the eye stream's coverage against the visible eyes */
     c->cover_grad = NULL;
     if (t->cover_w > 0 && gs_frame_eye_cover(c, pool, NULL) == GS_OK) {
+        /* (gs_train refuses the weight without an eye stream) */
         double w = t->cover_w / (double)fplane;
         for (size_t i = 0; i < fplane; i++) {
             double d = (double)c->cover[i] - t->emask[i];
@@ -469,6 +470,14 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (o->gaze_net && !(o->gaze_weight >= 0 && o->gaze_weight <= 100))
         return gs_error_set(err, GS_ERR_ARG, "train: gaze weight %g not in 0..100",
                             o->gaze_weight);
+    if (!(o->eye_cover_weight >= 0 && o->eye_cover_weight <= 1000))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: eye-cover weight %g not in 0..1000",
+                            o->eye_cover_weight);
+    if (o->eye_cover_weight > 0 && !m->cfg.two_stream)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: the eye-cover loss needs the eye stream "
+                            "(not the single-stream ablation)");
     trainer t;
     int rc = trainer_init(&t, m, o, err);
     long step = 0;

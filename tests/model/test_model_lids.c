@@ -21,14 +21,25 @@ static double dist(const float *x, const float *c)
     return sqrt(s);
 }
 
-/* Row of face tensor name of model m for face Gaussian i. */
-static const float *row(const gs_model *m, const char *name, int i)
+/* Tensor name of model m (NULL when it has none). */
+static const gs_ptensor *tensor(const gs_model *m, const char *name)
 {
     for (int t = 0; t < m->ntensors; t++)
         if (!strcmp(m->t[t].name, name))
-            return m->params + m->t[t].offset +
-                   (size_t)i * (m->t[t].count / (size_t)m->cfg.n_face);
+            return &m->t[t];
     return NULL;
+}
+
+/* Floats per face Gaussian of face tensor name. */
+static size_t width(const gs_model *m, const char *name)
+{
+    return tensor(m, name)->count / (size_t)m->cfg.n_face;
+}
+
+/* Row of face tensor name of model m for face Gaussian i. */
+static const float *row(const gs_model *m, const char *name, int i)
+{
+    return m->params + tensor(m, name)->offset + (size_t)i * width(m, name);
 }
 
 static const char *const k_face[] = {"face.xyz", "face.log_scale", "face.quat",
@@ -39,10 +50,7 @@ static const char *const k_face[] = {"face.xyz", "face.log_scale", "face.quat",
 static int same_row(const gs_model *a, int i, const gs_model *b, int j)
 {
     for (size_t t = 0; t < sizeof k_face / sizeof k_face[0]; t++) {
-        size_t w = 0;
-        for (int q = 0; q < a->ntensors; q++)
-            if (!strcmp(a->t[q].name, k_face[t]))
-                w = a->t[q].count / (size_t)a->cfg.n_face;
+        size_t w = width(a, k_face[t]);
         if (memcmp(row(a, k_face[t], i), row(b, k_face[t], j), w * sizeof(float)))
             return 0;
     }
@@ -99,10 +107,8 @@ static void cover_grad_check(gs_model *l)
     const char *names[] = {"face.lid_k", "face.xyz", "eye.xyz", "eye.opacity"};
     int bad = 0, n = 0;
     for (size_t t = 0; t < sizeof names / sizeof names[0]; t++) {
-        const gs_ptensor *pt = NULL;
-        for (int q = 0; q < l->ntensors; q++)
-            if (!strcmp(l->t[q].name, names[t]))
-                pt = &l->t[q];
+        const gs_ptensor *pt = tensor(l, names[t]);
+        CHECK_MSG(pt != NULL, "no tensor %s", names[t]);
         if (!pt)
             continue;
         /* the entries with the largest gradients: where it matters */

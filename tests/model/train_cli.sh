@@ -3,8 +3,9 @@
 # through the CLI on a tiny model: the refused resume names the way out and
 # writes nothing, bad combinations are usage errors (exit 2), a fresh
 # resume continues from its step with the learning rate ramping up, --lids
-# adds lids by a fresh resume only, and a cosine run's rate falls to lr / 20
-# at its last step.
+# adds lids by a fresh resume only, --eye-cover-loss refuses bad weights and
+# models without an eye stream, and a cosine run's rate falls to lr / 20 at
+# its last step.
 set -euo pipefail
 G=$1
 T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
@@ -62,6 +63,25 @@ grep -aq '"config.n_lid1":"[1-9]' n.safetensors || fail "a new --lids model has 
 "$G" train --resume --lids --steps 3 --checkpoint 100 --out n.safetensors >/dev/null 2>&1 ||
   fail "a plain resume of a model with lids failed"
 grep -aq '"face.lid_uv"' n.safetensors || fail "the resumed model lost its lids"
+
+# the eye-cover loss: bad weights are usage errors, and the single-stream
+# ablation (no eye stream) is refused with a message
+for bad in "-1" "x" "2000"; do
+  set +e
+  "$G" train --preset tiny --identities 2 --steps 1 --eye-cover-loss "$bad" \
+    --out e.safetensors >/dev/null 2>err.txt; rc=$?
+  set -e
+  [ $rc -eq 2 ] || fail "--eye-cover-loss $bad: exit $rc, want 2"
+  grep -q "eye-cover-loss" err.txt || { cat err.txt; fail "--eye-cover-loss $bad: no message"; }
+done
+set +e
+"$G" train --preset tiny --identities 2 --steps 1 --single-stream --eye-cover-loss 1 \
+  --out e.safetensors >/dev/null 2>err.txt; rc=$?
+set -e
+[ $rc -eq 1 ] || fail "--eye-cover-loss on a single stream: exit $rc, want 1"
+grep -q "needs the eye stream" err.txt || { cat err.txt; fail "single stream: no message"; }
+"$G" train --preset tiny --identities 2 --steps 2 --lids --eye-cover-loss 1 --checkpoint 100 \
+  --out e.safetensors >/dev/null 2>&1 || fail "--lids --eye-cover-loss 1 failed"
 
 # a cosine run from scratch: lr at step 0, then falling towards lr / 20 at
 # step 6, the end (step 5, the last run, has 0.05 + 0.475 (1 + cos(5 pi / 6)))
