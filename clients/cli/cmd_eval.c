@@ -2,6 +2,7 @@
  * (docs/eval.md), and write the fixed pairing file it reads. */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
 
+#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -25,6 +26,7 @@ const cli_command cli_eval_command = {
     "measure redirection (model, warp baseline, identity) on held-out heads",
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
+    "                      [--fit-lr CODE[,COLOUR]]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -52,6 +54,9 @@ const cli_command cli_eval_command = {
     "                    warping), identity (output = input); default model\n"
     "  --limit-inputs N  only the first N inputs of the file\n"
     "  --iters N         fit iteration cap (default 200)\n"
+    "  --fit-lr CODE[,COLOUR]  the fit's Adam rates for the latent code and\n"
+    "                    the colour gain and bias, each in (0, 10]\n"
+    "                    (default 0.12,0.02; COLOUR defaults to CODE / 6)\n"
     "  --threads N       worker threads (default 2); results are the same\n"
     "                    for a given count, timings aside\n"
     "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
@@ -105,7 +110,7 @@ const cli_command cli_eval_command = {
 };
 
 enum {
-    O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_THREADS,
+    O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
@@ -172,6 +177,7 @@ typedef struct evaluator {
     int readout;                /* --readout */
     gs_pool *pool;
     int S, iters;
+    double lr_code, lr_colour;  /* --fit-lr */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -346,8 +352,8 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
         ev->fits_reused++;
         return GS_OK;
     }
-    int rc = gs_eval_fit_sample(ev->c, ev->pool, in, ev->iters, sub, secs,
-                                err);
+    int rc = gs_eval_fit_sample(ev->c, ev->pool, in, ev->iters, ev->lr_code,
+                                ev->lr_colour, sub, secs, err);
     if (rc)
         return rc;
     if (gs_eval_fit_cache_write(path, sub, *secs, NULL))
@@ -752,6 +758,27 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     return rc;
 }
 
+/* "CODE[,COLOUR]", each in (0, 10] (doubles, as given); COLOUR defaults
+ * to CODE / 6, the defaults' ratio. Returns 0 or -1. */
+static int parse_fit_lr(const char *s, double *code, double *colour)
+{
+    char *end;
+    double v[2];
+    errno = 0;
+    v[0] = strtod(s, &end);
+    int two = *end == ',';
+    if (two)
+        v[1] = strtod(end + 1, &end);
+    else
+        v[1] = v[0] / 6.0;
+    if (errno || end == s || *end || !(v[0] > 0 && v[0] <= 10) ||
+        !(v[1] > 0 && v[1] <= 10))
+        return -1;
+    *code = v[0];
+    *colour = v[1];
+    return 0;
+}
+
 static int run_eval(int argc, char **argv)
 {
     const cli_command *cmd = &cli_eval_command;
@@ -759,6 +786,7 @@ static int run_eval(int argc, char **argv)
         {"--model", 1, NULL},   {"--pairs", 1, NULL},  {"--out", 1, NULL},
         {"--estimator", 1, NULL}, {"--method", 1, NULL},
         {"--limit-inputs", 1, NULL}, {"--iters", 1, NULL},
+        {"--fit-lr", 1, NULL},
         {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
         {"--save-images", 1, NULL}, {"--prune", 1, NULL},
         {"--feature-scale", 1, NULL}, {"--full-render", 0, NULL},
@@ -848,6 +876,12 @@ static int run_eval(int argc, char **argv)
         return cli_usage_error(cmd, "--finetune-parts, --finetune-lr and "
                                "--finetune-eye-weight go with --finetune N");
     ev.iters = (int)iters;
+    ev.lr_code = GS_FIT_LR_CODE_DEFAULT;
+    ev.lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
+    if (o[O_FIT_LR].value && parse_fit_lr(o[O_FIT_LR].value, &ev.lr_code,
+                                          &ev.lr_colour))
+        return cli_usage_error(cmd, "--fit-lr: want CODE[,COLOUR], each in "
+                               "(0, 10]; got '%s'", o[O_FIT_LR].value);
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
@@ -862,6 +896,8 @@ static int run_eval(int argc, char **argv)
     info.command = line;
     info.threads = (int)threads;
     info.iters = (int)iters;
+    info.fit_lr_code = ev.lr_code;
+    info.fit_lr_colour = ev.lr_colour;
     info.feature_scale = 1.0;
     info.ft_iters = ev.fo.iters;
     info.ft_parts = ev.fo.parts;

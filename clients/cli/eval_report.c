@@ -238,8 +238,9 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
 {
     fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
-               "iterations cap %d; %d threads\n", info->model,
-            info->image_size, info->pairs, info->inputs, info->iters,
+               "iterations cap %d, rates %g (code) and %g (colour); %d "
+               "threads\n", info->model, info->image_size, info->pairs,
+            info->inputs, info->iters, info->fit_lr_code, info->fit_lr_colour,
             info->threads);
     if (info->n_face > 0)
         fprintf(f, "- model renders: %d of %d face Gaussians (%.0f %%), "

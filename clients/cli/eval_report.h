@@ -47,6 +47,7 @@ typedef struct eval_run_info {
     const char *model, *estimator, *pairs, *command;
     int readout;          /* --readout */
     int threads, iters, inputs, image_size;
+    double fit_lr_code, fit_lr_colour; /* the fit's Adam rates */
     int fits_reused;      /* fits taken from an earlier run's DIR/fits */
     /* render settings of the model method (--prune, --feature-scale,
      * --full-render): face Gaussians kept of n_face, the scale, 0/1 */

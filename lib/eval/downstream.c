@@ -241,7 +241,7 @@ static int fit(ds_run *r, gs_model_ctx *c, const char *path, int reuse,
         gs_eval_fit_cache_read(path, sub, &res->fit_s, NULL) == GS_OK) {
         res->fit_reused = 1;
     } else {
-        int rc = gs_eval_fit_sample(c, r->pool, &r->in, r->o->fit_iters, sub,
+        int rc = gs_eval_fit_sample(c, r->pool, &r->in, r->o->fit_iters, 0, 0, sub,
                                     &res->fit_s, err);
         if (rc)
             return rc;

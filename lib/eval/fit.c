@@ -16,14 +16,17 @@ static double now_s(void)
 }
 
 int gs_eval_fit_sample(gs_model_ctx *c, gs_pool *pool,
-                       const gs_synth_sample *in, int iters, gs_subject *sub,
-                       double *secs, gs_error *err)
+                       const gs_synth_sample *in, int iters, double lr_code,
+                       double lr_colour, gs_subject *sub, double *secs,
+                       gs_error *err)
 {
     if (!c || !in || !sub)
         return gs_error_set(err, GS_ERR_ARG, "eval fit: NULL argument");
     gs_fit_options o;
     gs_fit_options_default(&o);
     o.max_iters = iters > 0 ? iters : 200;
+    o.lr_code = lr_code;
+    o.lr_colour = lr_colour;
     /* The dataset labels are given, as GazeNeRF's protocol uses
      * ETH-XGaze's: the fit only has to find the person. */
     o.known_gaze = 1;

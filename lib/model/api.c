@@ -465,11 +465,11 @@ static void fit_init(const gs_model_ctx *c, const gs_fit_options *o,
     for (int k = 0; k < 3; k++) {
         s->lr[V_ROT + k] = o->known_head ? 0.0 : 0.004;
         s->lr[V_TRANS + k] = o->known_head ? 0.0 : 1.0;
-        s->lr[V_GAIN + k] = 0.005;
-        s->lr[V_BIAS + k] = 0.005;
+        s->lr[V_GAIN + k] = o->lr_colour > 0 ? o->lr_colour : GS_FIT_LR_COLOUR_DEFAULT;
+        s->lr[V_BIAS + k] = s->lr[V_GAIN + k];
     }
     for (int k = 0; k < c->D; k++)
-        s->lr[V_CODE + k] = 0.03;
+        s->lr[V_CODE + k] = o->lr_code > 0 ? o->lr_code : GS_FIT_LR_CODE_DEFAULT;
 }
 
 /* PSNR over the weighted pixels of the composite in b->pred. */
@@ -506,6 +506,11 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = check_gaze(o.gaze_pitch, o.gaze_yaw, err);
     if (!rc && o.known_head)
         rc = check_pose(o.head_R, o.head_t, err);
+    if (!rc && !(o.lr_code >= 0 && o.lr_code <= 10 && o.lr_colour >= 0 &&
+                 o.lr_colour <= 10))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: rates %g (code) and %g (colour): want [0, 10], "
+                          "0 for the defaults", o.lr_code, o.lr_colour);
     if (rc)
         return rc;
     int iters = o.max_iters > 0 ? o.max_iters : 200;

@@ -161,7 +161,11 @@ static void usage_errors(const char *model, const char *pairs)
         {"--feature-scale", "0.1"}, /* 3 of the tiny model's 32 px */
         {"--finetune", "0"},        {"--finetune", "-3"},
         {"--finetune-parts", "face"}, /* without --finetune N */
-        {"--finetune-lr", "0.01"},   {"--finetune-eye-weight", "0.5"}};
+        {"--finetune-lr", "0.01"},   {"--finetune-eye-weight", "0.5"},
+        {"--fit-lr", "0"},          {"--fit-lr", "-0.1"},
+        {"--fit-lr", "11"},         {"--fit-lr", "nan"},
+        {"--fit-lr", "0.1,0"},      {"--fit-lr", "0.1,"},
+        {"--fit-lr", "0.1,0.02,1"}, {"--fit-lr", "fast"}};
     for (size_t k = 0; k < sizeof bad_render / sizeof bad_render[0]; k++) {
         const char *args[] = {"eval", "--model", model, "--pairs", pairs,
                               "--out", dir, bad_render[k][0],
@@ -252,7 +256,8 @@ int main(int argc, char **argv)
     char *sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "diverged fits 0, errors 0, non-finite "
                                  "outputs 0") &&
-                  strstr(sum, "| warp |") && strstr(sum, "gaze change 0-15°"),
+                  strstr(sum, "| warp |") && strstr(sum, "gaze change 0-15°") &&
+                  strstr(sum, "rates 0.12 (code) and 0.02 (colour)"),
               "summary:\n%s", sum ? sum : "(none)");
     CHECK(sum && !strstr(sum, "nan") && !strstr(sum, "inf"));
     /* The same thread count gives the same numbers (timings aside). */

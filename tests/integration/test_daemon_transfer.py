@@ -103,7 +103,11 @@ def inline_and_keys(t, c, imgs, faces_rgb):
     t.check(st["input_entries"] == 2 and st["input_saves"] == 2, "two inputs kept and saved: %d, %d"
             % (st["input_entries"], st["input_saves"]))
     t.check(c.health().state == gc.pb.Health.READY, "still READY")
-    return fit.subject_key, tuned.subject_key, bykey[1], tx[0]
+    # The plain subject's renders are compared after restarts with the same
+    # sequence of targets: a sweep's second render is incremental, and the
+    # incremental transfer agrees with a full one within a level on a few
+    # bytes (docs/model.md), not bit for bit.
+    return fit.subject_key, tuned.subject_key, (targets[:2], bykey[:2]), tx[0]
 
 
 def main():
@@ -126,7 +130,8 @@ def main():
         d, addr = start_ready(t, Daemon, daemon, base)
         with gc.Client(addr) as c:
             t.check(c.stats()["input_entries"] == 2, "inputs restored: %d" % c.stats()["input_entries"])
-            t.check(np.array_equal(render(c, [(10, -15)], subject=k0, transfer=True)[0], x0),
+            t.check(all(np.array_equal(a, b) for a, b in
+                        zip(render(c, x0[0], subject=k0, transfer=True), x0[1])),
                     "transfer by key after a restart: same bytes")
             t.check(np.array_equal(render(c, [(10, -15)], subject=kt, transfer=True)[0], xt),
                     "fine-tuned transfer after a restart: same bytes")
@@ -145,7 +150,8 @@ def main():
             with gc.Client(addr) as c:
                 refused(t, lambda: render(c, [(10, -15)], subject=kt, transfer=True),
                         gc.pb.ERR_UNKNOWN_SUBJECT, "damaged input file", "no kept input")
-                t.check(np.array_equal(render(c, [(10, -15)], subject=k0, transfer=True)[0], x0),
+                t.check(all(np.array_equal(a, b) for a, b in
+                            zip(render(c, x0[0], subject=k0, transfer=True), x0[1])),
                         "the other subject's input still serves")
                 r = c.fit(imgs[2], max_iters=FAST, finetune_steps=2, keep_image=True)
                 t.check(r.cached and r.image_kept and r.subject_key == kt, "kept anew: %s" % r)

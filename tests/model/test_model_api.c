@@ -49,6 +49,37 @@ int main(void)
     printf("fit: %d iterations, loss %.4f -> %.4f, PSNR %.2f dB\n", fr.iters,
            fr.loss_first, fr.loss_last, sub.fit_psnr);
 
+    /* The fit's rates: 0 means the defaults, bit for bit; another rate
+     * changes the fit; rates outside [0, 10] or NaN are refused and leave
+     * the subject alone. */
+    {
+        gs_fit_options fx = fo;
+        gs_subject s1, s2, keep;
+        fx.lr_code = GS_FIT_LR_CODE_DEFAULT;
+        fx.lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s1, NULL,
+                           &err) == GS_OK);
+        CHECK(memcmp(s1.code, sub.code, sizeof(float) * sub.code_dim) == 0 &&
+              memcmp(s1.colour_gain, sub.colour_gain, sizeof s1.colour_gain) == 0);
+        fx.lr_code = 0.03;
+        fx.lr_colour = 0.005;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s2, NULL,
+                           &err) == GS_OK);
+        CHECK(memcmp(s2.code, sub.code, sizeof(float) * sub.code_dim) != 0);
+        const double bad_lr[][2] = {{-0.1, 0}, {0, -1}, {NAN, 0}, {0, NAN},
+                                    {11, 0}, {0, INFINITY}};
+        for (size_t k = 0; k < sizeof bad_lr / sizeof bad_lr[0]; k++) {
+            fx.lr_code = bad_lr[k][0];
+            fx.lr_colour = bad_lr[k][1];
+            memset(&keep, 0x5a, sizeof keep);
+            s2 = keep;
+            CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s2, NULL,
+                               &err) == GS_ERR_ARG);
+            CHECK(memcmp(&s2, &keep, sizeof keep) == 0);
+        }
+        CHECK(strstr(err.msg, "rates") != NULL);
+    }
+
     /* Subjects survive encode/decode; bad bytes are refused. */
     uint8_t buf[GS_SUBJECT_ENCODED_MAX];
     size_t n = gs_subject_encode(&sub, buf, sizeof buf);

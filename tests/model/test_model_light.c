@@ -181,7 +181,7 @@ static void check_physics(const char *model_path, int n_inputs)
             gs_synth_sample_free(&in);
             CHECK(gs_eval_render_scene(&is, S, info.distance_mm, info.focal, pool, &in,
                                        &err) == GS_OK);
-            CHECK_MSG(gs_eval_fit_sample(c, pool, &in, 25, &sub, NULL, &err) == GS_OK,
+            CHECK_MSG(gs_eval_fit_sample(c, pool, &in, 25, 0, 0, &sub, NULL, &err) == GS_OK,
                       "%s", err.msg);
             last_input = p->input;
         }

@@ -217,11 +217,13 @@ int gs_eval_warp_redirect(const gs_synth_sample *in, double pitch, double yaw,
 
 /* Fits m's subject to a ground-truth sample with its true head pose and
  * gaze given and kept fixed (known_head, known_gaze), no mask, iteration
- * cap iters (<= 0: 200), the default plateau stop. secs: wall time (may be
- * NULL). GS_ERR_NONFINITE when the fit diverges. */
+ * cap iters (<= 0: 200), the default plateau stop, Adam's rates lr_code
+ * and lr_colour (gs_fit_options; 0: the defaults). secs: wall time (may
+ * be NULL). GS_ERR_NONFINITE when the fit diverges. */
 int gs_eval_fit_sample(gs_model_ctx *c, gs_pool *pool,
-                       const gs_synth_sample *in, int iters, gs_subject *sub,
-                       double *secs, gs_error *err);
+                       const gs_synth_sample *in, int iters, double lr_code,
+                       double lr_colour, gs_subject *sub, double *secs,
+                       gs_error *err);
 
 /* A cached fit: 8 bytes of fit seconds (a native double), then the
  * gs_subject_encode bytes. The file does not record the model or the fit

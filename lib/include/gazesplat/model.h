@@ -240,7 +240,13 @@ typedef struct gs_fit_options {
     double head_R[9], head_t[3];
     const uint8_t *mask; /* image_size^2 weights 0..255 (face region), or
                             NULL for the whole image */
+    /* Adam's rates for the latent code and for the colour gain and bias;
+     * 0: GS_FIT_LR_CODE_DEFAULT, GS_FIT_LR_COLOUR_DEFAULT. Each in
+     * [0, 10]. (docs/model.md, "Fitting") */
+    double lr_code, lr_colour;
 } gs_fit_options;
+#define GS_FIT_LR_CODE_DEFAULT 0.12
+#define GS_FIT_LR_COLOUR_DEFAULT 0.02
 void gs_fit_options_default(gs_fit_options *o);
 
 typedef struct gs_fit_report {
