@@ -225,3 +225,22 @@ int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len)
     }
     return ok ? 0 : -1;
 }
+
+int cli_parse_fit_lr(const char *s, double *code, double *colour)
+{
+    char *end;
+    double v[2];
+    errno = 0;
+    v[0] = strtod(s, &end);
+    int two = *end == ',';
+    if (two)
+        v[1] = strtod(end + 1, &end);
+    else
+        v[1] = v[0] / 6.0;
+    if (errno || end == s || *end || !(v[0] > 0 && v[0] <= 10) ||
+        !(v[1] > 0 && v[1] <= 10))
+        return -1;
+    *code = v[0];
+    *colour = v[1];
+    return 0;
+}

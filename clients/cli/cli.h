@@ -63,6 +63,10 @@ int cli_parse_floats(const char *s, float *out, int n);
 /* A decimal integer in [lo, hi]. Returns 0 or -1. */
 int cli_parse_long(const char *s, long lo, long hi, long *out);
 
+/* --fit-lr's "CODE[,COLOUR]": each in (0, 10] (doubles, as given); COLOUR
+ * defaults to CODE / 6, the defaults' ratio. Returns 0 or -1. */
+int cli_parse_fit_lr(const char *s, double *code, double *colour);
+
 /* "WxH", each in [1, max]. Returns 0 or -1. */
 int cli_parse_size(const char *s, int max, int *w, int *h);
 

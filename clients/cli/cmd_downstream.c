@@ -47,6 +47,9 @@ const cli_command cli_eval_downstream_command = {
     "  --real-fraction X   mixed sets: real images fill at least this share\n"
     "                      of each batch, and at least k/set-size (0.25)\n"
     "  --iters N           fit iteration cap (200)\n"
+    "  --fit-lr CODE[,COLOUR]  the fit's Adam rates for the latent code and\n"
+    "                      the colour, each in (0, 10] (0.12,0.02; COLOUR\n"
+    "                      defaults to CODE / 6)\n"
     "  --seed N            scenes, targets and batches (1)\n"
     "  --threads N         worker threads (2); the numbers are the same for\n"
     "                      any count, timings aside\n"
@@ -57,7 +60,7 @@ const cli_command cli_eval_downstream_command = {
 
 enum {
     O_MODEL, O_OUT, O_EST, O_IDS, O_TESTS, O_SET, O_MAXK, O_STEPS, O_BATCH,
-    O_LR, O_FRAC, O_ITERS, O_SEED, O_THREADS, O_REUSE, O_N
+    O_LR, O_FRAC, O_ITERS, O_FIT_LR, O_SEED, O_THREADS, O_REUSE, O_N
 };
 
 typedef struct ds_cli {
@@ -125,6 +128,12 @@ static int parse(const cli_opt *o, ds_cli *d)
         return cli_usage_error(cmd, "--real-fraction: want 0..1");
     if (opt_int(&o[O_ITERS], 1, 100000, &p->fit_iters))
         return cli_usage_error(cmd, "--iters: want 1..100000");
+    p->fit_lr_code = GS_FIT_LR_CODE_DEFAULT;
+    p->fit_lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
+    if (o[O_FIT_LR].value && cli_parse_fit_lr(o[O_FIT_LR].value, &p->fit_lr_code,
+                                              &p->fit_lr_colour))
+        return cli_usage_error(cmd, "--fit-lr: want CODE[,COLOUR], each in "
+                               "(0, 10]; got '%s'", o[O_FIT_LR].value);
     if (o[O_SEED].value && cli_parse_long(o[O_SEED].value, 0, 4294967295L,
                                           &seed))
         return cli_usage_error(cmd, "--seed: want 0..4294967295");
@@ -189,11 +198,12 @@ static void md_write(FILE *f, const ds_cli *d, const gs_eval_ds_result *res,
     fprintf(f, "Model `%s`, estimator `%s`. %d test identities (%d "
                "finished), %d test images each, %d real images, sets of "
                "%d, %d steps of batch %d at lr %g, real images at least "
-               "%.0f %% of each mixed batch, fit cap %d iterations, seed "
-               "%llu.\n\n",
+               "%.0f %% of each mixed batch, fit cap %d iterations at rates "
+               "%g (code) and %g (colour), seed %llu.\n\n",
             d->model, d->est, n, done, o->test_images, GS_EVAL_DS_POOL,
             o->set_size, o->steps, o->batch, o->lr, 100 * o->real_fraction,
-            o->fit_iters, (unsigned long long)o->seed);
+            o->fit_iters, o->fit_lr_code, o->fit_lr_colour,
+            (unsigned long long)o->seed);
     fputs("Mean gaze angle (degrees) of the fine-tuned estimator against "
           "the true labels of each identity's test images, mean over "
           "identities; k = 0 is the estimator as given.\n\n", f);
@@ -324,7 +334,7 @@ static int run_downstream(int argc, char **argv)
         {"--set-size", 1, NULL}, {"--max-k", 1, NULL},
         {"--steps", 1, NULL}, {"--batch", 1, NULL}, {"--lr", 1, NULL},
         {"--real-fraction", 1, NULL}, {"--iters", 1, NULL},
-        {"--seed", 1, NULL}, {"--threads", 1, NULL},
+        {"--fit-lr", 1, NULL}, {"--seed", 1, NULL}, {"--threads", 1, NULL},
         {"--reuse-fits", 0, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {

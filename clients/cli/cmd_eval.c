@@ -2,7 +2,6 @@
  * (docs/eval.md), and write the fixed pairing file it reads. */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
 
-#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -758,27 +757,6 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     return rc;
 }
 
-/* "CODE[,COLOUR]", each in (0, 10] (doubles, as given); COLOUR defaults
- * to CODE / 6, the defaults' ratio. Returns 0 or -1. */
-static int parse_fit_lr(const char *s, double *code, double *colour)
-{
-    char *end;
-    double v[2];
-    errno = 0;
-    v[0] = strtod(s, &end);
-    int two = *end == ',';
-    if (two)
-        v[1] = strtod(end + 1, &end);
-    else
-        v[1] = v[0] / 6.0;
-    if (errno || end == s || *end || !(v[0] > 0 && v[0] <= 10) ||
-        !(v[1] > 0 && v[1] <= 10))
-        return -1;
-    *code = v[0];
-    *colour = v[1];
-    return 0;
-}
-
 static int run_eval(int argc, char **argv)
 {
     const cli_command *cmd = &cli_eval_command;
@@ -878,7 +856,7 @@ static int run_eval(int argc, char **argv)
     ev.iters = (int)iters;
     ev.lr_code = GS_FIT_LR_CODE_DEFAULT;
     ev.lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
-    if (o[O_FIT_LR].value && parse_fit_lr(o[O_FIT_LR].value, &ev.lr_code,
+    if (o[O_FIT_LR].value && cli_parse_fit_lr(o[O_FIT_LR].value, &ev.lr_code,
                                           &ev.lr_colour))
         return cli_usage_error(cmd, "--fit-lr: want CODE[,COLOUR], each in "
                                "(0, 10]; got '%s'", o[O_FIT_LR].value);

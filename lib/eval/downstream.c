@@ -91,6 +91,9 @@ int gs_eval_ds_options_check(const gs_eval_ds_options *o, gs_error *err)
         what = "real_fraction outside [0, 1]";
     else if (o->fit_iters < 1 || o->fit_iters > 100000)
         what = "fit_iters outside 1..100000";
+    else if (!(o->fit_lr_code >= 0 && o->fit_lr_code <= 10 &&
+               o->fit_lr_colour >= 0 && o->fit_lr_colour <= 10))
+        what = "fit rates outside [0, 10]";
     return what ? gs_error_set(err, GS_ERR_ARG, "eval-downstream: %s", what)
                 : GS_OK;
 }
@@ -241,7 +244,8 @@ static int fit(ds_run *r, gs_model_ctx *c, const char *path, int reuse,
         gs_eval_fit_cache_read(path, sub, &res->fit_s, NULL) == GS_OK) {
         res->fit_reused = 1;
     } else {
-        int rc = gs_eval_fit_sample(c, r->pool, &r->in, r->o->fit_iters, 0, 0, sub,
+        int rc = gs_eval_fit_sample(c, r->pool, &r->in, r->o->fit_iters,
+                                    r->o->fit_lr_code, r->o->fit_lr_colour, sub,
                                     &res->fit_s, err);
         if (rc)
             return rc;

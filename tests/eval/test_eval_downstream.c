@@ -121,7 +121,8 @@ static void usage_errors(const char *exe, const char *model, const char *est)
         {"--set-size", "5"}, {"--real-fraction", "1.5"}, {"--lr", "0"},
         {"--lr", "x"}, {"--identities", "0"}, {"--threads", "0"},
         {"--test-images", "-1"}, {"--batch", "0"}, {"--iters", "0"},
-        {"--seed", "-2"}, {"--bogus", "1"}};
+        {"--seed", "-2"}, {"--bogus", "1"}, {"--fit-lr", "0"},
+        {"--fit-lr", "0.1,11"}, {"--fit-lr", "nan"}};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         const char *a[] = {exe, "eval-downstream", "--model", model,
                            "--estimator", est, "--out", dir, bad[i][0],
@@ -179,6 +180,19 @@ int main(int argc, char **argv)
     }
     const char *exe = argv[1];
     CHECK(mkdtemp(dir) != NULL);
+    /* The library refuses fit rates outside [0, 10] (0: the defaults). */
+    {
+        gs_eval_ds_options o;
+        gs_error e = {0, ""};
+        gs_eval_ds_options_default(&o);
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_OK);
+        o.fit_lr_code = -0.1;
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_ERR_ARG &&
+              strstr(e.msg, "fit rates"));
+        o.fit_lr_code = 0.12;
+        o.fit_lr_colour = NAN;
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_ERR_ARG);
+    }
     char model[256], est[256], out1[256], out2[256], md[320], png[320];
     snprintf(model, sizeof model, "%s/tiny.safetensors", dir);
     snprintf(est, sizeof est, "%s/est.safetensors", dir);
@@ -200,6 +214,7 @@ int main(int argc, char **argv)
     CHECK_MSG(strstr(sum, "| k | real only | real + ours | real + warp |") &&
                   strstr(sum, "Failed identities: 0.") &&
                   strstr(sum, "gazesplat eval-downstream --model") &&
+                  strstr(sum, "rates 0.12 (code) and 0.02 (colour)") &&
                   !strstr(sum, "nan"),
               "summary:\n%s", sum);
     free(sum);

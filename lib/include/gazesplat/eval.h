@@ -264,12 +264,14 @@ typedef struct gs_eval_ds_options {
                               batch is real images (0.25), and never less
                               than the real images' share k / set_size */
     int fit_iters;         /* fit iteration cap (200) */
+    double fit_lr_code, fit_lr_colour; /* the fit's rates (gs_fit_options;
+                                          0: the defaults) */
     uint64_t seed;         /* scenes, targets and batch draws (1) */
 } gs_eval_ds_options;
 void gs_eval_ds_options_default(gs_eval_ds_options *o);
 /* GS_ERR_ARG with a message for options outside their ranges:
  * test_images 1..100000, steps 1..1000000, batch 1..4096, lr in (0, 1],
- * real_fraction in [0, 1], fit_iters 1..100000. */
+ * real_fraction in [0, 1], fit_iters 1..100000, fit rates in [0, 10]. */
 int gs_eval_ds_options_check(const gs_eval_ds_options *o, gs_error *err);
 
 /* Scene of sample `index` of test identity `identity` (the identity seed
