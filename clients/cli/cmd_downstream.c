@@ -128,8 +128,6 @@ static int parse(const cli_opt *o, ds_cli *d)
         return cli_usage_error(cmd, "--real-fraction: want 0..1");
     if (opt_int(&o[O_ITERS], 1, 100000, &p->fit_iters))
         return cli_usage_error(cmd, "--iters: want 1..100000");
-    p->fit_lr_code = GS_FIT_LR_CODE_DEFAULT;
-    p->fit_lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
     if (o[O_FIT_LR].value && cli_parse_fit_lr(o[O_FIT_LR].value, &p->fit_lr_code,
                                               &p->fit_lr_colour))
         return cli_usage_error(cmd, "--fit-lr: want CODE[,COLOUR], each in "

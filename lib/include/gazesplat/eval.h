@@ -265,7 +265,8 @@ typedef struct gs_eval_ds_options {
                               than the real images' share k / set_size */
     int fit_iters;         /* fit iteration cap (200) */
     double fit_lr_code, fit_lr_colour; /* the fit's rates (gs_fit_options;
-                                          0: the defaults) */
+                                          GS_FIT_LR_*_DEFAULT; 0 means
+                                          them too) */
     uint64_t seed;         /* scenes, targets and batch draws (1) */
 } gs_eval_ds_options;
 void gs_eval_ds_options_default(gs_eval_ds_options *o);
