@@ -617,12 +617,18 @@ typedef struct gsd_finetune {
     unsigned parts; /* GS_FT_* */
     uint32_t outline; /* gs_finetune_options.outline_px */
     uint32_t no_mirror; /* !gs_finetune_options.mirror */
+    double lr;          /* gs_finetune_options.lr: the request's, or the server's */
 } gsd_finetune;
 
-static gsd_finetune finetune_of(uint32_t steps, const char *parts, uint32_t outline,
-                                int no_mirror)
+/* The rate fine-tuning ran at before requests could choose one (the
+ * library's default): keys of subjects tuned at it are unchanged. */
+#define FINETUNE_LR_KEYLESS 1e-3
+
+static gsd_finetune finetune_of(const gsd_job *j, uint32_t steps, const char *parts,
+                                uint32_t outline, int no_mirror, double lr)
 {
-    gsd_finetune f = {steps, GS_FT_DEFAULT, steps ? outline : 0, steps && no_mirror};
+    gsd_finetune f = {steps, GS_FT_DEFAULT, steps ? outline : 0, steps && no_mirror,
+                      steps ? (lr > 0 ? lr : j->finetune_lr) : 0};
     if (steps && parts && parts[0] && gs_finetune_parts_parse(parts, &f.parts, NULL) != GS_OK)
         f.parts = GS_FT_DEFAULT; /* validated on the loop thread already */
     return f;
@@ -650,6 +656,11 @@ static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, 
         if (ft->no_mirror) {
             static const char tag[] = "no-mirror";
             hash_bytes(&h, tag, sizeof tag);
+        }
+        if (ft->lr != FINETUNE_LR_KEYLESS) { /* another rate tunes another subject */
+            static const char tag[] = "lr";
+            hash_bytes(&h, tag, sizeof tag);
+            hash_bytes(&h, &ft->lr, sizeof ft->lr);
         }
     }
     hash_out(&h, key);
@@ -1034,6 +1045,7 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
     fo.parts = ft->parts;
     fo.outline_px = (int)ft->outline;
     fo.mirror = !ft->no_mirror;
+    fo.lr = ft->lr;
     fo.mask = mask;
     fo.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
     if (fo.time_budget_s <= 0)
@@ -1188,8 +1200,10 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     subject_out so;
     char msg[400];
     photo_input photo;
-    subject_ask a = {r, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
-                                   r->finetune_no_mirror), r->keep_image, 0};
+    subject_ask a = {r, r->max_iters,
+                     finetune_of(j, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
+                                 r->finetune_no_mirror, r->finetune_lr),
+                     r->keep_image, 0};
     int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
     photo_input_free(&photo);
     if (e)
@@ -1224,6 +1238,7 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     if (so.ft_ran) {
         m.finetune_steps = (uint32_t)so.ft.iters;
         m.finetune_psnr = so.ft.psnr_best;
+        m.finetune_lr = a.ft.lr;
     }
     return gsd_frame_new(j, T(FIT_OK), &m.base);
 }
@@ -1375,9 +1390,10 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     photo_input photo;
     memset(&photo, 0, sizeof photo);
     if (r->image) {
-        subject_ask a = {NULL, r->max_iters, finetune_of(r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
-                                   r->finetune_no_mirror), 0,
-                         r->transfer};
+        subject_ask a = {NULL, r->max_iters,
+                         finetune_of(j, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
+                                     r->finetune_no_mirror, r->finetune_lr),
+                         0, r->transfer};
         int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {
             photo_input_free(&photo);

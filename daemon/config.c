@@ -3,6 +3,7 @@
 #include "config.h"
 
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -10,13 +11,13 @@
 #include "gazesplat/face.h"
 #include "log.h"
 
-enum { T_STR, T_INT, T_OCT, T_BOOL, T_LEVEL };
+enum { T_STR, T_INT, T_OCT, T_BOOL, T_LEVEL, T_REAL };
 
 typedef struct key_def {
     const char *name;
     int type;
     size_t offset;
-    long min, max; /* T_INT, T_OCT */
+    double min, max; /* T_INT, T_OCT: [min, max]; T_REAL: a finite value in (min, max] */
     const char *def;
 } key_def;
 
@@ -50,6 +51,7 @@ static const key_def keys[] = {
     {"tuned_cache_mb", T_INT, OFF(tuned_cache_mb), 1, 65536, "256"},
     {"input_cache_mb", T_INT, OFF(input_cache_mb), 1, 65536, "64"},
     {"max_finetune_steps", T_INT, OFF(max_finetune_steps), 0, 100000, "1000"},
+    {"finetune_lr", T_REAL, OFF(finetune_lr), 0, 1, "0.004"},
     {"tuned_subjects", T_INT, OFF(tuned_subjects), 1, GSD_TUNED_SLOTS_MAX, "2"},
     {"log_level", T_LEVEL, OFF(log_level), 0, 3, "info"},
     {"debug_requests", T_BOOL, OFF(debug_requests), 0, 1, "no"},
@@ -106,6 +108,18 @@ static int set_value(gsd_config *c, const key_def *k, const char *value, char *m
             return -1;
         }
         break;
+    case T_REAL: {
+        char *end;
+        errno = 0;
+        double d = strtod(value, &end);
+        if (errno || end == value || *end != '\0' || !isfinite(d) || !(d > k->min) || d > k->max) {
+            snprintf(msg, cap, "%s: want a number in (%g, %g], got '%s'", k->name, k->min, k->max,
+                     value);
+            return -1;
+        }
+        *(double *)field = d;
+        return 0;
+    }
     case T_LEVEL:
         v = gsd_log_parse_level(value);
         if (v < 0) {
@@ -117,7 +131,7 @@ static int set_value(gsd_config *c, const key_def *k, const char *value, char *m
         if (parse_long(value, k->type == T_OCT ? 8 : 10, &v) != 0 || v < k->min || v > k->max) {
             snprintf(msg, cap, k->type == T_OCT ? "%s: want an octal number in [%lo, %lo], got '%s'"
                                                 : "%s: want an integer in [%ld, %ld], got '%s'",
-                     k->name, k->min, k->max, value);
+                     k->name, (long)k->min, (long)k->max, value);
             return -1;
         }
     }
@@ -226,6 +240,17 @@ void gsd_config_print(const gsd_config *c, void *file)
     for (size_t i = 0; i < NKEYS; i++) {
         const key_def *k = &keys[i];
         const void *field = (const char *)c + k->offset;
+        if (k->type == T_REAL) { /* the shortest text that reads back the same */
+            double d = *(const double *)field;
+            char buf[40];
+            for (int prec = 6; prec <= 17; prec++) {
+                snprintf(buf, sizeof buf, "%.*g", prec, d);
+                if (strtod(buf, NULL) == d)
+                    break;
+            }
+            fprintf(f, "%s = %s\n", k->name, buf);
+            continue;
+        }
         int v = *(const int *)field;
         if (k->type == T_STR)
             fprintf(f, "%s = %s\n", k->name,

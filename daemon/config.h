@@ -33,6 +33,7 @@ typedef struct gsd_config {
     int tuned_cache_mb;      /* fine-tuned parameter blocks */
     int input_cache_mb;      /* kept FIT inputs (keep_image) */
     int max_finetune_steps;  /* per FIT; 0: fine-tuning refused */
+    double finetune_lr;      /* Adam's base rate when a request gives none */
     int tuned_subjects;      /* fine-tuned subjects each worker holds ready */
     int log_level;
     int debug_requests;

@@ -577,6 +577,7 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
     j->deadline_ms = j->enqueued_ms + (deadline ? deadline : (uint32_t)s->cfg.request_timeout_ms);
     j->max_side = s->cfg.max_image_side;
     j->max_pixels = (size_t)s->cfg.max_image_mpix << 20;
+    j->finetune_lr = s->cfg.finetune_lr; /* a reload may change it meanwhile */
     j->req = m;
     if (gsd_work_push(s, j) != 0) {
         bump(&s->ctr.busy, 1);

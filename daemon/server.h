@@ -58,6 +58,7 @@ typedef struct gsd_job {
     atomic_int stop;             /* 0, or ERR_CANCELLED / ERR_DEADLINE / ERR_SHUTTING_DOWN */
     int max_side;                /* image limits when the job was accepted */
     size_t max_pixels;
+    double finetune_lr;          /* the server's finetune_lr when the job was accepted */
     ProtobufCMessage *req;       /* unpacked request, owned */
 } gsd_job;
 

@@ -153,17 +153,22 @@ static int check_intrinsics(const Gazesplat__Intrinsics *k, char *msg, size_t ca
 /* finetune_steps / finetune_parts / finetune_outline_px of FIT and
  * REDIRECT. */
 static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts,
-                          uint32_t outline, int no_mirror, char *msg, size_t cap)
+                          uint32_t outline, int no_mirror, double lr, char *msg, size_t cap)
 {
     int has_parts = parts && parts[0];
-    if ((has_parts || outline || no_mirror) && !steps) {
+    if ((has_parts || outline || no_mirror || lr != 0) && !steps) {
         snprintf(msg, cap, "%s without finetune_steps",
                  has_parts ? "finetune_parts"
-                 : outline ? "finetune_outline_px" : "finetune_no_mirror");
+                 : outline ? "finetune_outline_px"
+                 : no_mirror ? "finetune_no_mirror" : "finetune_lr");
         return E(ERR_INVALID_ARGUMENT);
     }
     if (outline > 8) {
         snprintf(msg, cap, "finetune_outline_px %u over 8", outline);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    if (!isfinite(lr) || lr < 0 || lr > 1) { /* 0: the server's finetune_lr */
+        snprintf(msg, cap, "finetune_lr %g out of (0, 1]", lr);
         return E(ERR_INVALID_ARGUMENT);
     }
     if (!steps)
@@ -207,7 +212,7 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
         return E(ERR_INVALID_ARGUMENT);
     }
     if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
-                              r->finetune_no_mirror, msg, cap)) != 0)
+                              r->finetune_no_mirror, r->finetune_lr, msg, cap)) != 0)
         return e;
     return gsd_check_deadline(s, r->deadline_ms, msg, cap);
 }
@@ -252,13 +257,14 @@ int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
         return E(ERR_INVALID_ARGUMENT);
     }
     if (!r->image && (r->finetune_steps || r->finetune_outline_px || r->finetune_no_mirror ||
+                      r->finetune_lr != 0 ||
                       (r->finetune_parts && r->finetune_parts[0]))) {
         snprintf(msg, cap, "finetune_steps go with an inline image (a fitted subject keeps "
                            "its own fine-tuning)");
         return E(ERR_INVALID_ARGUMENT);
     }
     if ((e = check_finetune(s, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
-                              r->finetune_no_mirror, msg, cap)) != 0)
+                              r->finetune_no_mirror, r->finetune_lr, msg, cap)) != 0)
         return e;
     if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
         return e;

@@ -168,12 +168,8 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
     if (parts && gs_finetune_parts_parse(parts, &fo->parts, NULL))
         return cli_usage_error(cmd, "--finetune-parts: want a list of face, eye, renderer, "
                                "mlp, geometry; got '%s'", parts);
-    if (lr) {
-        float x;
-        if (cli_parse_floats(lr, &x, 1) || !(x > 0 && x <= 1))
-            return cli_usage_error(cmd, "--finetune-lr: want a rate in (0, 1]");
-        fo->lr = x;
-    }
+    if (lr && cli_parse_rate(lr, 1.0, &fo->lr))
+        return cli_usage_error(cmd, "--finetune-lr: want a rate in (0, 1]");
     if (plateau) {
         float x;
         if (cli_parse_floats(plateau, &x, 1) || !(x > 0 && x < 1))
@@ -224,6 +220,17 @@ int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len)
         *out = NULL;
     }
     return ok ? 0 : -1;
+}
+
+int cli_parse_rate(const char *s, double hi, double *out)
+{
+    char *end;
+    errno = 0;
+    double v = strtod(s, &end);
+    if (errno || end == s || *end || !(v > 0 && v <= hi))
+        return -1;
+    *out = v;
+    return 0;
 }
 
 int cli_parse_fit_lr(const char *s, double *code, double *colour)

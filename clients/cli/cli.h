@@ -67,6 +67,11 @@ int cli_parse_long(const char *s, long lo, long hi, long *out);
  * defaults to CODE / 6, the defaults' ratio. Returns 0 or -1. */
 int cli_parse_fit_lr(const char *s, double *code, double *colour);
 
+/* A rate: a finite decimal number in (0, hi], read as a double (so 0.004
+ * on the command line is the 0.004 a protocol field or a config key
+ * holds). Returns 0 or -1. */
+int cli_parse_rate(const char *s, double hi, double *out);
+
 /* "WxH", each in [1, max]. Returns 0 or -1. */
 int cli_parse_size(const char *s, int max, int *w, int *h);
 

@@ -50,6 +50,8 @@ const cli_command cli_client_command = {
     "                       --finetune-mirror 0: fewer background-coloured patches)\n"
     "  --finetune-mirror B  with --finetune: 1 (default) also fits the image mirrored\n"
     "                       left to right from the mirrored pose; 0: the image alone\n"
+    "  --finetune-lr X      with --finetune, (0, 1]: Adam's base rate (default: the\n"
+    "                       server's finetune_lr, 0.004 unless configured)\n"
     "  --keep-image         fit: the server keeps the input with the subject, for\n"
     "                       redirect --transfer by key\n"
     "  --transfer           redirect: detail transfer (keep the input's own detail;\n"
@@ -69,20 +71,24 @@ const cli_command cli_client_command = {
 enum {
     O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
     O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_FT, O_FT_PARTS, O_KEEP,
-    O_TRANSFER, O_FT_OUTLINE, O_FT_MIRROR, O_N
+    O_TRANSFER, O_FT_OUTLINE, O_FT_MIRROR, O_FT_LR, O_N
 };
 
-/* --finetune N [--finetune-parts L] [--finetune-outline PX]: 0 or
- * CLI_USAGE (reported). */
+/* --finetune N [--finetune-parts L] [--finetune-outline PX]
+ * [--finetune-mirror B] [--finetune-lr X]: 0 or CLI_USAGE (reported). */
 static int finetune_opts(const cli_command *cmd, const cli_opt *o, uint32_t *steps, char **parts,
-                         uint32_t *outline, protobuf_c_boolean *no_mirror)
+                         uint32_t *outline, protobuf_c_boolean *no_mirror, double *lr)
 {
     long n = 0, px = 0, mir = 1;
     if (o[O_FT].value && cli_parse_long(o[O_FT].value, 1, 100000, &n) != 0)
         return cli_usage_error(cmd, "--finetune wants 1..100000 steps");
-    if ((o[O_FT_PARTS].value || o[O_FT_OUTLINE].value || o[O_FT_MIRROR].value) && !o[O_FT].value)
-        return cli_usage_error(cmd, "--finetune-parts, --finetune-outline and --finetune-mirror "
-                                    "go with --finetune N");
+    if ((o[O_FT_PARTS].value || o[O_FT_OUTLINE].value || o[O_FT_MIRROR].value || o[O_FT_LR].value) &&
+        !o[O_FT].value)
+        return cli_usage_error(cmd, "--finetune-parts, --finetune-outline, --finetune-mirror and "
+                                    "--finetune-lr go with --finetune N");
+    *lr = 0; /* the server's */
+    if (o[O_FT_LR].value && cli_parse_rate(o[O_FT_LR].value, 1.0, lr) != 0)
+        return cli_usage_error(cmd, "--finetune-lr wants a rate in (0, 1]");
     if (o[O_FT_MIRROR].value && cli_parse_long(o[O_FT_MIRROR].value, 0, 1, &mir) != 0)
         return cli_usage_error(cmd, "--finetune-mirror wants 0 or 1");
     *no_mirror = !mir;
@@ -332,7 +338,7 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
     if (o[O_DEADLINE].value && cli_parse_long(o[O_DEADLINE].value, 1, 3600000, &deadline) != 0)
         return cli_usage_error(cmd, "--deadline-ms wants 1..3600000");
     int rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts,
-                           &req.finetune_outline_px, &req.finetune_no_mirror);
+                           &req.finetune_outline_px, &req.finetune_no_mirror, &req.finetune_lr);
     if (rc != CLI_OK)
         return rc;
     rc = load_image(cmd, o, &img, &data);
@@ -361,7 +367,8 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
                m->iters, m->seconds, m->cached ? "yes" : "no", m->finetuned ? "yes" : "no",
                m->image_kept ? "yes" : "no");
         if (m->finetune_steps)
-            printf("finetune_steps %u\nfinetune_psnr %.2f\n", m->finetune_steps, m->finetune_psnr);
+            printf("finetune_steps %u\nfinetune_psnr %.2f\nfinetune_lr %.6g\n", m->finetune_steps,
+                   m->finetune_psnr, m->finetune_lr);
         rc = CLI_OK;
     } else {
         rc = f.header.type == T(BUSY) ? print_busy(&f) : f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
@@ -463,7 +470,8 @@ static int do_redirect(gs_client *c, const cli_opt *o, int timeout)
             req.max_iters = (uint32_t)iters;
         gs_error err;
         if ((rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts,
-                                &req.finetune_outline_px, &req.finetune_no_mirror)) != CLI_OK)
+                                &req.finetune_outline_px, &req.finetune_no_mirror,
+                                &req.finetune_lr)) != CLI_OK)
             ; /* reported */
         else if (gs_client_send(c, T(REDIRECT), key, 1, &req.base, &err) != GS_OK)
             rc = cli_fail(cmd, "%s", err.msg);
@@ -494,6 +502,7 @@ static int run_client(int argc, char **argv)
         {"--paste-back", 0, NULL}, {"--refit", 0, NULL}, {"--finetune", 1, NULL},
         {"--finetune-parts", 1, NULL}, {"--keep-image", 0, NULL}, {"--transfer", 0, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
+        {"--finetune-lr", 1, NULL},
     };
     /* --set may repeat: take every one out before the common parser. */
     const char *sets[MAX_SETS];

@@ -234,7 +234,7 @@ class Client:
 
     def fit(self, image, gaze_deg=None, head_deg=None, key=None, max_iters=0, deadline_ms=0,
             photo=False, finetune_steps=0, finetune_parts="", keep_image=False,
-            finetune_outline_px=0, finetune_mirror=True):
+            finetune_outline_px=0, finetune_mirror=True, finetune_lr=0.0):
         """Fits a subject to a normalized face (PNG/JPEG bytes or HxWx3
         uint8 array); returns the FitResult (subject_key, labels, quality).
         finetune_steps > 0: the server then fine-tunes a copy of the model
@@ -242,14 +242,16 @@ class Client:
         renders with it; finetune_outline_px (0..8) keeps its colours from
         learning near the model's outline (fewer background-coloured patches
         at other head poses); finetune_mirror=False fits the input alone, not
-        also its mirror image. keep_image: the server keeps the (normalized)
+        also its mirror image; finetune_lr in (0, 1] is Adam's base rate (0:
+        the server's finetune_lr, 0.004 unless configured; the result's
+        finetune_lr says which ran). keep_image: the server keeps the (normalized)
         input with the subject, so that redirect(subject=..., transfer=True)
         works by key."""
         kind = pb.KIND_PHOTO if photo else pb.KIND_NORMALIZED_FACE
         req = pb.FitRequest(image=_image(image, kind), max_iters=max_iters, deadline_ms=deadline_ms,
                             finetune_steps=finetune_steps, finetune_parts=finetune_parts,
                             keep_image=keep_image, finetune_outline_px=finetune_outline_px,
-                            finetune_no_mirror=not finetune_mirror)
+                            finetune_no_mirror=not finetune_mirror, finetune_lr=finetune_lr)
         if gaze_deg is not None:
             req.gaze.CopyFrom(_angles(gaze_deg))
         if head_deg is not None:
@@ -259,12 +261,12 @@ class Client:
     def redirect(self, gaze_deg, subject=None, image=None, head_deg=None, fmt="png",
                  jpeg_quality=0, deadline_ms=0, max_iters=0, photo=False, paste_back=False,
                  finetune_steps=0, finetune_parts="", transfer=False, finetune_outline_px=0,
-                 finetune_mirror=True):
+                 finetune_mirror=True, finetune_lr=0.0):
         """Yields one ImageResult per target as the server streams them.
         gaze_deg: [(pitch, yaw), ...]; head_deg: None or one pose per target.
         photo: the image is a photo (the server finds the face); paste_back:
         return the photo with the redirected face blended in. finetune_steps,
-        finetune_parts, finetune_outline_px, finetune_mirror: for an inline
+        finetune_parts, finetune_outline_px, finetune_mirror, finetune_lr: for an inline
         image, as fit().
         transfer: keep the
         input's own detail (detail transfer); by subject key it needs a fit
@@ -275,7 +277,8 @@ class Client:
             output_format={"png": pb.FORMAT_PNG, "jpeg": pb.FORMAT_JPEG, "raw": pb.FORMAT_RAW_RGB8}[fmt],
             jpeg_quality=jpeg_quality, deadline_ms=deadline_ms, max_iters=max_iters,
             finetune_steps=finetune_steps, finetune_parts=finetune_parts, transfer=transfer,
-            finetune_outline_px=finetune_outline_px, finetune_no_mirror=not finetune_mirror)
+            finetune_outline_px=finetune_outline_px, finetune_no_mirror=not finetune_mirror,
+            finetune_lr=finetune_lr)
         if image is not None:
             req.image.CopyFrom(_image(image, pb.KIND_PHOTO if photo else pb.KIND_NORMALIZED_FACE))
         if paste_back:

@@ -56,6 +56,21 @@ static void test_size_and_long(void)
     CHECK(cli_parse_long("4294967295", 0, 4294967295L, &l) == 0 && l == 4294967295L);
 }
 
+/* Rates are read as doubles: "0.004" is the double 0.004 that a config key
+ * or a protocol field holds, not a float widened. */
+static void test_rate(void)
+{
+    double r = -1;
+    CHECK(cli_parse_rate("0.004", 1.0, &r) == 0 && r == 0.004);
+    CHECK(cli_parse_rate("1", 1.0, &r) == 0 && r == 1.0);
+    CHECK(cli_parse_rate("2.5e-4", 1.0, &r) == 0 && r == 2.5e-4);
+    const char *bad[] = {"0", "-0.001", "1.0000001", "nan", "inf", "", "0.01x", "x", "1e999", "1e-999"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        r = 0.5;
+        CHECK_MSG(cli_parse_rate(bad[i], 1.0, &r) == -1 && r == 0.5, "'%s'", bad[i]);
+    }
+}
+
 static int parse(int n, const char **args, cli_opt *o, int no)
 {
     char *argv[16];
@@ -88,6 +103,7 @@ int main(void)
 {
     test_floats();
     test_size_and_long();
+    test_rate();
     test_options();
     GS_TEST_END();
 }

@@ -42,6 +42,40 @@ int main(void)
     CHECK(gsd_config_set(&c, "log_level", "debug", msg, sizeof msg) == 0 && c.log_level == 3);
     CHECK(gsd_config_set(&c, "log_level", "loud", msg, sizeof msg) == -1);
     CHECK(gsd_config_set(&c, "nope", "1", msg, sizeof msg) == -1 && strstr(msg, "unknown key"));
+    /* a real-valued key: a finite number in (0, 1], the last good value kept */
+    CHECK(c.finetune_lr == 0.004);
+    CHECK(gsd_config_set(&c, "finetune_lr", "0.002", msg, sizeof msg) == 0 && c.finetune_lr == 0.002);
+    CHECK(gsd_config_set(&c, "finetune_lr", "1e-3", msg, sizeof msg) == 0 && c.finetune_lr == 1e-3);
+    CHECK(gsd_config_set(&c, "finetune_lr", "1", msg, sizeof msg) == 0 && c.finetune_lr == 1.0);
+    const char *bad_lr[] = {"0", "-0.001", "1.5", "nan", "inf", "0.01x", "", "x", "1e999"};
+    for (size_t i = 0; i < sizeof bad_lr / sizeof bad_lr[0]; i++) {
+        CHECK_MSG(gsd_config_set(&c, "finetune_lr", bad_lr[i], msg, sizeof msg) == -1 &&
+                      strstr(msg, "finetune_lr: want a number in (0, 1]"),
+                  "'%s': %s", bad_lr[i], msg);
+        CHECK(c.finetune_lr == 1.0);
+    }
+    /* printed values read back as they were */
+    CHECK(gsd_config_set(&c, "finetune_lr", "0.0012345678901234567", msg, sizeof msg) == 0);
+    {
+        double want = c.finetune_lr;
+        char *buf = NULL;
+        size_t len = 0;
+        FILE *mf = open_memstream(&buf, &len);
+        gsd_config_print(&c, mf);
+        fclose(mf);
+        CHECK(strstr(buf, "finetune_lr = 0.0012345678901234567\n") != NULL);
+        gsd_config c2; /* the whole printed configuration loads back */
+        gsd_config_default(&c2);
+        CHECK_MSG(load_text(&c2, buf, msg, sizeof msg) == 0, "%s", msg);
+        CHECK(c2.finetune_lr == want && c2.workers == c.workers);
+        free(buf);
+        gsd_config_default(&c2);
+        mf = open_memstream(&buf, &len);
+        gsd_config_print(&c2, mf);
+        fclose(mf);
+        CHECK(strstr(buf, "\nfinetune_lr = 0.004\n") != NULL);
+        free(buf);
+    }
     char longv[GSD_STR_MAX + 10];
     memset(longv, 'a', sizeof longv - 1);
     longv[sizeof longv - 1] = '\0';

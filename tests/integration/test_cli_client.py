@@ -68,8 +68,9 @@ def main():
         r = run(cli, "client", "fit", addr, "--image", face, "--max-iters", "3", "--finetune", "2",
                 "--finetune-parts", "face")
         tkey = [ln.split()[1] for ln in r.stdout.splitlines() if ln.startswith("subject ")]
-        t.check(r.returncode == 0 and "finetuned yes" in r.stdout and "finetune_steps 2" in r.stdout,
-                "fit --finetune: %d %s %s" % (r.returncode, r.stdout, r.stderr))
+        t.check(r.returncode == 0 and "finetuned yes" in r.stdout and "finetune_steps 2" in r.stdout
+                and "finetune_lr 0.004\n" in r.stdout,
+                "fit --finetune (the server's rate, 0.004): %d %s %s" % (r.returncode, r.stdout, r.stderr))
         tout = os.path.join(work, "cli_out_tuned")
         r = run(cli, "client", "redirect", addr, "--subject", tkey[0] if tkey else "0" * 32,
                 "--gaze-deg", "0,0", "--out", tout)
@@ -112,6 +113,18 @@ def main():
         t.check(r.returncode == 2, "--finetune-outline 9 is a usage error: %d" % r.returncode)
         r = run(cli, "client", "fit", addr, "--image", face, "--finetune", "2", "--finetune-mirror", "2")
         t.check(r.returncode == 2, "--finetune-mirror 2 is a usage error: %d" % r.returncode)
+        # --finetune-lr: the rate that ran is reported; another rate, another subject.
+        r = run(cli, "client", "fit", addr, "--image", face, "--max-iters", "3", "--finetune", "2",
+                "--finetune-parts", "face", "--finetune-lr", "0.0015")
+        lkey = [ln.split()[1] for ln in r.stdout.splitlines() if ln.startswith("subject ")]
+        t.check(r.returncode == 0 and "finetune_lr 0.0015\n" in r.stdout and lkey and lkey != tkey,
+                "fit --finetune-lr 0.0015: %d %s %s" % (r.returncode, r.stdout, r.stderr))
+        for bad in ("0", "1.5", "nan", "-1", "x"):
+            r = run(cli, "client", "fit", addr, "--image", face, "--finetune", "2", "--finetune-lr", bad)
+            t.check(r.returncode == 2 and "--finetune-lr" in r.stderr,
+                    "--finetune-lr %s is a usage error: %d %s" % (bad, r.returncode, r.stderr))
+        r = run(cli, "client", "fit", addr, "--image", face, "--finetune-lr", "0.01")
+        t.check(r.returncode == 2, "--finetune-lr alone is a usage error: %d" % r.returncode)
         r = run(cli, "client", "frobnicate", addr)
         t.check(r.returncode == 2, "unknown action: %d" % r.returncode)
         r = run(cli, "client", "health", "--addr=" + os.path.join(work, "nope.sock"))

@@ -9,6 +9,7 @@ dropping them all.
 usage: test_daemon_finetune.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import os
 import sys
+import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
@@ -174,10 +175,47 @@ def main():
         t.check(d.stop() == 0, "clean exit")
 
         # finetune_outline_px: a subject of its own (the library test checks
-        # what it changes); 0..8, with finetune_steps only.
-        d, addr = start_ready(t, Daemon, daemon, ["--model", other, "--set", "photo_input=no"])
+        # what it changes); 0..8, with finetune_steps only. This server
+        # fine-tunes at 0.002 when a request names no rate (its file says).
+        conf = os.path.join(work, "finetune_lr.conf")
+        with open(conf, "w") as f:
+            f.write("finetune_lr = 0.002\n")
+        d, addr = start_ready(t, Daemon, daemon, ["-c", conf, "--model", other, "--set", "photo_input=no"])
         with gc.Client(addr) as c:
             a = c.fit(imgs[0], max_iters=FAST, finetune_steps=2)
+            t.check(a.finetuned and a.finetune_lr == 0.002, "the server's rate ran: %s" % a)
+            # finetune_lr: the server's rate named is the same subject;
+            # another rate tunes another one, rendered by key or inline alike.
+            same = c.fit(imgs[0], max_iters=FAST, finetune_steps=2, finetune_lr=0.002)
+            t.check(same.cached and same.subject_key == a.subject_key and same.finetune_lr == 0,
+                    "the server's rate by name: the same subject, a cache hit: %s" % same)
+            slow = c.fit(imgs[0], max_iters=FAST, finetune_steps=2, finetune_lr=0.0005)
+            t.check(slow.finetuned and not slow.cached and slow.finetune_lr == 0.0005 and
+                    slow.subject_key != a.subject_key, "rate 0.0005: a subject of its own: %s" % slow)
+            t.check(raw(c, slow.subject_key, (0, 10)) != raw(c, a.subject_key, (0, 10)),
+                    "rate 0.0005 renders other bytes")
+            inl = list(c.redirect([(0, 10)], image=imgs[0], max_iters=FAST, finetune_steps=2,
+                                  finetune_lr=0.0005, fmt="raw"))
+            t.check(len(inl) == 1 and inl[0].image.data == raw(c, slow.subject_key, (0, 10)),
+                    "inline REDIRECT at rate 0.0005 is that subject")
+            for bad in (1.5, -0.001, float("nan"), float("inf")):
+                refused(t, lambda: c.fit(imgs[0], finetune_steps=2, finetune_lr=bad),
+                        gc.pb.ERR_INVALID_ARGUMENT, "rate %r" % bad, "out of (0, 1]")
+            refused(t, lambda: c.fit(imgs[0], finetune_lr=0.01), gc.pb.ERR_INVALID_ARGUMENT,
+                    "rate without steps", "finetune_lr without finetune_steps")
+            refused(t, lambda: c.redirect([(0, 0)], subject=a.subject_key, finetune_lr=0.01),
+                    gc.pb.ERR_INVALID_ARGUMENT, "rate for a subject by key")
+            # SIGHUP re-reads the file: the next fine-tune runs at its new rate.
+            with open(conf, "w") as f:
+                f.write("finetune_lr = 0.003\n")
+            reloads = c.stats()["reloads"]
+            d.proc.send_signal(1)
+            for _ in range(100):
+                if c.stats()["reloads"] > reloads:
+                    break
+                time.sleep(0.05)
+            hup = c.fit(imgs[1], max_iters=FAST, finetune_steps=2)
+            t.check(hup.finetuned and hup.finetune_lr == 0.003, "after SIGHUP the file's new rate: %s" % hup)
             b = c.fit(imgs[0], max_iters=FAST, finetune_steps=2, finetune_outline_px=2)
             t.check(a.finetuned and b.finetuned and not b.cached and a.subject_key != b.subject_key,
                     "outline 2: fine-tuned, a key of its own: %s / %s" % (a, b))
