@@ -360,7 +360,7 @@ typedef struct fit_bufs {
     size_t ssim_len;
 } fit_bufs;
 
-static double image_loss(gs_model_ctx *c, fit_bufs *b, const fit_state *s,
+static double image_loss(gs_model_ctx *c, gs_pool *pool, fit_bufs *b, const fit_state *s,
                          double *dgain, double *dbias)
 {
     int S = c->S;
@@ -375,12 +375,12 @@ static double image_loss(gs_model_ctx *c, fit_bufs *b, const fit_state *s,
     }
     float l1 = 0, ls = 0;
     gs_nn_l1_forward(&l1, b->pred, b->target, NULL, 3, (int)plane);
-    gs_nn_ssim_loss_forward(&ls, b->pred, b->target, 3, S, S, GS_NN_SSIM_ZERO,
-                            b->ssim_scratch, b->ssim_len);
     memset(b->dpred, 0, 3 * plane * sizeof(float));
     gs_nn_l1_backward(b->dpred, 1.0f, b->pred, b->target, NULL, 3, (int)plane);
-    gs_nn_ssim_loss_backward(b->dpred, 0.1f, b->pred, b->target, 3, S, S,
-                             GS_NN_SSIM_ZERO, b->ssim_scratch, b->ssim_len);
+    /* the SSIM's loss and gradient in one pass, on the pool: the bytes of
+     * its forward and backward run one after the other */
+    gs_nn_ssim_loss_fused(pool, &ls, b->dpred, 0.1f, b->pred, b->target, 3, S, S,
+                          GS_NN_SSIM_ZERO, b->ssim_scratch, b->ssim_len);
     for (int k = 0; k < 3; k++) {
         double gn = s->x[V_GAIN + k];
         double sg = 0, sb = 0;
@@ -417,7 +417,7 @@ static int fit_bufs_init(fit_bufs *b, const gs_model_ctx *c,
 {
     int S = c->S;
     size_t plane = (size_t)S * S;
-    b->ssim_len = gs_nn_ssim_scratch_size(S, S, GS_NN_SSIM_ZERO);
+    b->ssim_len = gs_nn_ssim_fused_scratch_size(3, S, S, GS_NN_SSIM_ZERO);
     b->target = malloc(3 * plane * sizeof(float));
     b->w = malloc(plane * sizeof(float));
     b->pred = malloc(3 * plane * sizeof(float));
@@ -540,7 +540,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         if (rc)
             break;
         double dgain[3], dbias[3];
-        double loss = image_loss(c, &b, s, dgain, dbias);
+        double loss = image_loss(c, pool, &b, s, dgain, dbias);
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "fit diverged at iteration %d (loss %g, first "
@@ -600,12 +600,11 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         if (!rc) {
             /* Composites the best render into b.pred for the figures. */
             double dg[3], db[3];
-            image_loss(c, &b, best, dg, db);
+            image_loss(c, pool, &b, best, dg, db);
             int S = c->S;
             float ls = 0;
-            gs_nn_ssim_loss_forward(&ls, b.pred, b.target, 3, S, S,
-                                    GS_NN_SSIM_ZERO, b.ssim_scratch,
-                                    b.ssim_len);
+            gs_nn_ssim_loss_fused(pool, &ls, NULL, 0.0f, b.pred, b.target, 3, S, S,
+                                  GS_NN_SSIM_ZERO, b.ssim_scratch, b.ssim_len);
             gs_subject r;
             memset(&r, 0, sizeof r);
             r.code_dim = c->D;
@@ -921,7 +920,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         if (rc)
             break;
         double dg[3], db[3];
-        double loss = image_loss(r.c, &b, fs, dg, db);
+        double loss = image_loss(r.c, pool, &b, fs, dg, db);
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "finetune diverged at step %d (loss %g, "
@@ -957,7 +956,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         if (!rc && o.mirror) { /* the mirrored view adds its gradient */
             double dgm[3], dbm[3];
             rc = gs_frame_forward(r.c, pool, &frm, GS_STREAM_BOTH, 1, err);
-            if (!rc && !isfinite(image_loss(r.c, &bm, fs, dgm, dbm)))
+            if (!rc && !isfinite(image_loss(r.c, pool, &bm, fs, dgm, dbm)))
                 rc = gs_error_set(err, GS_ERR_NONFINITE,
                                   "finetune: mirrored view diverged at step %d", it);
             if (!rc && masked) { /* its own outline, from its first view */

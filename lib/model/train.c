@@ -141,7 +141,7 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     if (rc)
         return rc;
     size_t S = (size_t)m->cfg.image_size, fs = (size_t)m->cfg.feat_size;
-    t->ssim_len = gs_nn_ssim_scratch_size((int)S, (int)S, GS_NN_SSIM_ZERO);
+    t->ssim_len = gs_nn_ssim_fused_scratch_size(3, (int)S, (int)S, GS_NN_SSIM_ZERO);
     t->target = malloc(3 * S * S * sizeof(float));
     t->wl1 = malloc(S * S * sizeof(float));
     t->dimg = malloc(3 * S * S * sizeof(float));
@@ -296,8 +296,6 @@ static double losses(trainer *t, gs_pool *pool, double *psnr)
     size_t plane = (size_t)S * S, fplane = (size_t)fs * fs;
     float l1 = 0, ls = 0, lf = 0;
     gs_nn_l1_forward(&l1, c->rgb, t->target, t->wl1, 3, (int)plane);
-    gs_nn_ssim_loss_forward(&ls, c->rgb, t->target, 3, S, S, GS_NN_SSIM_ZERO,
-                            t->ssim, t->ssim_len);
     gs_nn_l1_forward(&lf, c->fmap, t->ftarget, NULL, 3, (int)fplane);
     float lface = 0; /* the face stream alone, away from the eyes */
     if (c->used_face_map) {
@@ -310,8 +308,9 @@ static double losses(trainer *t, gs_pool *pool, double *psnr)
     memset(t->dimg, 0, 3 * plane * sizeof(float));
     gs_nn_l1_backward(t->dimg, 1.0f, c->rgb, t->target, t->wl1, 3,
                       (int)plane);
-    gs_nn_ssim_loss_backward(t->dimg, 0.1f, c->rgb, t->target, 3, S, S,
-                             GS_NN_SSIM_ZERO, t->ssim, t->ssim_len);
+    /* the SSIM's loss and gradient in one pass, on the pool */
+    gs_nn_ssim_loss_fused(pool, &ls, t->dimg, 0.1f, c->rgb, t->target, 3, S, S,
+                          GS_NN_SSIM_ZERO, t->ssim, t->ssim_len);
     memset(t->dfmap, 0, 3 * fplane * sizeof(float));
     gs_nn_l1_backward(t->dfmap, 1.0f, c->fmap, t->ftarget, NULL, 3,
                       (int)fplane);

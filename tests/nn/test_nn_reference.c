@@ -11,6 +11,7 @@
  * Gradients are prefilled with 0.5 and compared with reference + 0.5, which
  * also checks that backward accumulates. A missing or malformed file fails. */
 #include "gazesplat/nn.h"
+#include "gazesplat/pool.h"
 #include "gs_test.h"
 #include "nn_test_util.h"
 
@@ -347,7 +348,19 @@ static void t_ssim(const char *kase, int padding)
                                           scratch, ns), GS_OK);
     compare(kase, "out", &loss, 1, 0, 1e-6, K_RTOL);
     compare(kase, "dx", dx, xt->n, ACC, 1e-7, K_RTOL);
-    free(scratch); free(dx);
+    /* the pooled one-pass version: the same bytes, so the same reference */
+    gs_pool *pool = gs_pool_create(2);
+    size_t nf = gs_nn_ssim_fused_scratch_size(C, H, W, padding);
+    float *sf = nn_alloc(nf), *dxf = grad_buf(xt->n), lossf;
+    CHECK(pool != NULL);
+    CHECK_EQ_INT(gs_nn_ssim_loss_fused(pool, &lossf, dxf, dloss, x, y, C, H, W, padding, sf, nf),
+                 GS_OK);
+    CHECK_MSG(memcmp(&lossf, &loss, sizeof loss) == 0 && memcmp(dxf, dx, xt->n * sizeof *dx) == 0,
+              "%s: fused != forward + backward", kase);
+    compare(kase, "out", &lossf, 1, 0, 1e-6, K_RTOL);
+    compare(kase, "dx", dxf, xt->n, ACC, 1e-7, K_RTOL);
+    gs_pool_destroy(pool);
+    free(scratch); free(dx); free(sf); free(dxf);
 }
 
 /* Several steps of two groups against torch.optim.Adam + clip_grad_norm_. */

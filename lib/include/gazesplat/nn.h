@@ -227,6 +227,18 @@ int gs_nn_ssim_loss_forward(float *loss, const float *x, const float *y,
 int gs_nn_ssim_loss_backward(float *dx, float dloss, const float *x,
                              const float *y, int C, int H, int W, int padding,
                              float *scratch, size_t scratch_len);
+/* The loss and, when dx is not NULL, its gradient (dx += dloss *
+ * d(loss)/dx) in one pass over the window statistics, on a pool (NULL:
+ * inline), channel by channel in bands of rows. The same bytes as
+ * gs_nn_ssim_loss_forward and gs_nn_ssim_loss_backward for any thread
+ * count (the sum of the loss keeps their order). scratch: at least
+ * gs_nn_ssim_fused_scratch_size(C, H, W, padding) floats (0: sizes out of
+ * range). */
+struct gs_pool;
+size_t gs_nn_ssim_fused_scratch_size(int C, int H, int W, int padding);
+int gs_nn_ssim_loss_fused(struct gs_pool *pool, float *loss, float *dx, float dloss,
+                          const float *x, const float *y, int C, int H, int W, int padding,
+                          float *scratch, size_t scratch_len);
 
 /* ---- Adam with parameter groups and gradient clipping ------------------- */
 
