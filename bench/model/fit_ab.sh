@@ -9,27 +9,32 @@
 #
 #   bench/model/fit_ab.sh GAZESPLAT_A GAZESPLAT_B [ROUNDS] [INPUTS]
 #
+# ITERS_A, ITERS_B (environment, default 25 each): the fit's iterations
+# for each binary, to time a larger budget against the old one; the figures
+# then differ, and the last line says so.
+#
 # GAZESPLAT_A is usually a build of the commit before a change (git
 # worktree add /tmp/before HEAD~1; cmake -S /tmp/before -B /tmp/before/build
 # -DCMAKE_BUILD_TYPE=Release; cmake --build /tmp/before/build -j2 --target
 # gazesplat_cli), GAZESPLAT_B this tree's build/clients/cli/gazesplat.
 set -eu
 [ $# -ge 2 ] || { echo "usage: $0 GAZESPLAT_A GAZESPLAT_B [ROUNDS] [INPUTS]" >&2; exit 2; }
-A=$1 B=$2 ROUNDS=${3:-3} INPUTS=${4:-2}
+A=$1 B=$2 ROUNDS=${3:-3} INPUTS=${4:-2} ITERS_A=${ITERS_A:-25} ITERS_B=${ITERS_B:-25}
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
-run() { # binary, out dir
+run() { # binary, out dir, iterations
     "$1" eval --model "$ROOT/models/gazegaussian-cpu.safetensors" \
-        --pairs "$ROOT/bench/eval/pairs-val.csv" --limit-inputs "$INPUTS" --iters 25 \
+        --pairs "$ROOT/bench/eval/pairs-val.csv" --limit-inputs "$INPUTS" --iters "$3" \
         --finetune 15 --finetune-lr 0.004 --threads 2 --method model --out "$2" > /dev/null 2>&1
     sed -n 's/^- fit: .* mean \([0-9.]*\) s.*/\1/p' "$2/summary.md"
 }
+echo "fit iterations: A $ITERS_A, B $ITERS_B"
 echo "round | A s/face | B s/face"
 i=1
 while [ "$i" -le "$ROUNDS" ]; do
-    ta=$(run "$A" "$WORK/a$i")
-    tb=$(run "$B" "$WORK/b$i")
+    ta=$(run "$A" "$WORK/a$i" "$ITERS_A")
+    tb=$(run "$B" "$WORK/b$i" "$ITERS_B")
     echo "$i | $ta | $tb"
     echo "$ta" >> "$WORK/ta"
     echo "$tb" >> "$WORK/tb"
@@ -39,6 +44,10 @@ med() { sort -n "$1" | awk '{v[NR] = $1} END {print (NR % 2) ? v[(NR + 1) / 2] :
 ma=$(med "$WORK/ta") mb=$(med "$WORK/tb")
 echo "median | $ma | $mb"
 awk -v a="$ma" -v b="$mb" 'BEGIN {printf "B takes %.3f of A'"'"'s time (%.2fx faster)\n", b / a, a / b}'
+if [ "$ITERS_A" != "$ITERS_B" ]; then
+    echo "figures: not compared (the iterations differ)"
+    exit 0
+fi
 # every column but the timings (fit_s, render_ms) must agree
 cols() { awk -F, 'NR == 1 {for (i = 1; i <= NF; i++) if ($i != "fit_s" && $i != "render_ms") k[i] = 1}
                   {s = ""; for (i = 1; i <= NF; i++) if (i in k) s = s $i ","; print s}' "$1"; }
