@@ -14,8 +14,8 @@
 # then differ, and the last line says so.
 #
 # GAZESPLAT_A is usually a build of the commit before a change (git
-# worktree add /tmp/before HEAD~1; cmake -S /tmp/before -B /tmp/before/build
-# -DCMAKE_BUILD_TYPE=Release; cmake --build /tmp/before/build -j2 --target
+# worktree add ../before HEAD~1; cmake -S ../before -B ../before/build
+# -DCMAKE_BUILD_TYPE=Release; cmake --build ../before/build -j2 --target
 # gazesplat_cli), GAZESPLAT_B this tree's build/clients/cli/gazesplat.
 set -eu
 [ $# -ge 2 ] || { echo "usage: $0 GAZESPLAT_A GAZESPLAT_B [ROUNDS] [INPUTS]" >&2; exit 2; }
