@@ -233,7 +233,8 @@ int gs_nn_ssim_loss_backward(float *dx, float dloss, const float *x,
  * gs_nn_ssim_loss_forward and gs_nn_ssim_loss_backward for any thread
  * count (the sum of the loss keeps their order). scratch: at least
  * gs_nn_ssim_fused_scratch_size(C, H, W, padding) floats (0: sizes out of
- * range). */
+ * range). Like any gs_pool_for, not to be called from a task of the same
+ * pool. */
 struct gs_pool;
 size_t gs_nn_ssim_fused_scratch_size(int C, int H, int W, int padding);
 int gs_nn_ssim_loss_fused(struct gs_pool *pool, float *loss, float *dx, float dloss,
