@@ -2,12 +2,15 @@
  * Its contract is the bytes of gs_nn_ssim_loss_forward followed by
  * gs_nn_ssim_loss_backward (themselves checked against finite differences
  * and PyTorch) for any thread count and any size, the loss alone when no
- * gradient is asked for, and refusals that write nothing. A finite
+ * gradient is asked for, and refusals that write nothing. Both are also
+ * checked byte for byte against the scalar code they replaced
+ * (bench/nn/ssim_scalar.h), so no figure made before moves. A finite
  * difference check of its own gradient guards the chain end to end. */
 #include "gazesplat/nn.h"
 #include "gazesplat/pool.h"
 #include "gs_test.h"
 #include "nn_test_util.h"
+#include "ssim_scalar.h"
 
 #include <math.h>
 
@@ -25,6 +28,15 @@ static void same_bytes(nn_rng *r, gs_pool **pools, int npools, int C, int H, int
     float *start = nn_alloc(n);
     memcpy(start, dx0, n * sizeof *dx0);
     CHECK_EQ_INT(gs_nn_ssim_loss_backward(dx0, 0.3f, x, y, C, H, W, pad, s0, ns), GS_OK);
+    { /* the scalar code before: the same loss and gradient bytes */
+        float ls = -1, *dxs = nn_alloc(n);
+        memcpy(dxs, start, n * sizeof *dxs);
+        CHECK_EQ_INT(scalar_ssim_forward(&ls, x, y, C, H, W, pad, s0, ns), GS_OK);
+        CHECK_EQ_INT(scalar_ssim_backward(dxs, 0.3f, x, y, C, H, W, pad, s0, ns), GS_OK);
+        CHECK_MSG(memcmp(&ls, &l0, sizeof l0) == 0 && memcmp(dxs, dx0, n * sizeof *dxs) == 0,
+                  "%dx%dx%d pad %d: vector passes != the scalar code", C, H, W, pad);
+        free(dxs);
+    }
     size_t nf = gs_nn_ssim_fused_scratch_size(C, H, W, pad);
     CHECK(nf > 0);
     float *sf = nn_alloc(nf);
