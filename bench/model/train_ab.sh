@@ -37,12 +37,11 @@ i=1
 while [ "$i" -le "$ROUNDS" ]; do
     sa=$(scratch "$A"); sb=$(scratch "$B"); ga=$(gazeleg "$A"); gb=$(gazeleg "$B")
     echo "$i | $sa | $sb | $ga | $gb"
-    echo "$sa $sb $ga $gb" >> "$WORK/t"
+    echo "$sa" >> "$WORK/sa"; echo "$sb" >> "$WORK/sb"; echo "$ga" >> "$WORK/ga"; echo "$gb" >> "$WORK/gb"
     i=$((i + 1))
 done
-awk '{for (c = 1; c <= 4; c++) v[c, NR] = $c}
-     END {for (c = 1; c <= 4; c++) {n = NR; for (i = 1; i <= n; i++) s[i] = v[c, i];
-              for (i = 1; i <= n; i++) for (j = i + 1; j <= n; j++) if (s[j] < s[i]) {t = s[i]; s[i] = s[j]; s[j] = t}
-              m[c] = (n % 2) ? s[(n + 1) / 2] : (s[n / 2] + s[n / 2 + 1]) / 2}
-          printf "median | %.4f | %.4f | %.4f | %.4f\n", m[1], m[2], m[3], m[4]
-          printf "B takes %.3f of A'"'"'s time from scratch, %.3f in the gaze-loss leg\n", m[2] / m[1], m[4] / m[3]}' "$WORK/t"
+med() { sort -n "$1" | awk '{v[NR] = $1} END {print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2}'; }
+msa=$(med "$WORK/sa") msb=$(med "$WORK/sb") mga=$(med "$WORK/ga") mgb=$(med "$WORK/gb")
+echo "median | $msa | $msb | $mga | $mgb"
+awk -v sa="$msa" -v sb="$msb" -v ga="$mga" -v gb="$mgb" \
+    'BEGIN {printf "B takes %.3f of A'"'"'s time from scratch, %.3f in the gaze-loss leg\n", sb / sa, gb / ga}'

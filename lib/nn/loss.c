@@ -146,8 +146,30 @@ static inline void v_store(float *p, vf v)
     memcpy(p, &v, sizeof v);
 }
 
+/* The five horizontal statistics at position xo of a row, taps outside
+ * the row skipped; out[q * hsz]. */
+static void stats_h_at(const ssim_ctx *s, const float *xr, const float *yr, int xo, float *out,
+                       size_t hsz)
+{
+    float acc[NSTAT] = {0};
+    for (int k = 0; k < WIN; k++) {
+        int c = xo + k - s->pad;
+        if (c < 0 || c >= s->W)
+            continue;
+        float a = xr[c], b = yr[c], g = s->g[k];
+        acc[0] += g * a;
+        acc[1] += g * b;
+        acc[2] += g * a * a;
+        acc[3] += g * b * b;
+        acc[4] += g * a * b;
+    }
+    for (int q = 0; q < NSTAT; q++)
+        out[q * hsz] = acc[q];
+}
+
 /* Horizontal pass: hmap rows [r0, r1) from rows of x, y [H,W]. Positions
- * whose window lies inside the row ([pad, Wo - pad)) go four at a time. */
+ * whose window lies inside the row ([pad, Wo - pad)) go four at a time,
+ * the ones at the edges one at a time. */
 static void stats_h_rows(const ssim_ctx *s, const float *x, const float *y, float *hmap, int r0,
                          int r1)
 {
@@ -156,44 +178,26 @@ static void stats_h_rows(const ssim_ctx *s, const float *x, const float *y, floa
     for (int r = r0; r < r1; r++) {
         const float *xr = x + (size_t)r * (size_t)s->W;
         const float *yr = y + (size_t)r * (size_t)s->W;
+        float *hr = hmap + (size_t)r * (size_t)s->Wo;
         int xo = 0;
-        for (;;) {
-            if (xo >= in0 && xo + VL <= in1) {
-                vf acc[NSTAT] = {{0}};
-                for (int k = 0; k < WIN; k++) {
-                    vf a = v_load(xr + xo + k - s->pad), b = v_load(yr + xo + k - s->pad);
-                    float g = s->g[k];
-                    acc[0] += g * a;
-                    acc[1] += g * b;
-                    acc[2] += g * a * a;
-                    acc[3] += g * b * b;
-                    acc[4] += g * a * b;
-                }
-                size_t at = (size_t)r * (size_t)s->Wo + (size_t)xo;
-                for (int q = 0; q < NSTAT; q++)
-                    v_store(hmap + q * hsz + at, acc[q]);
-                xo += VL;
-                continue;
-            }
-            if (xo >= s->Wo)
-                break;
-            float acc[NSTAT] = {0};
+        for (; xo < in0 && xo < s->Wo; xo++)
+            stats_h_at(s, xr, yr, xo, hr + xo, hsz);
+        for (; xo + VL <= in1; xo += VL) {
+            vf acc[NSTAT] = {{0}};
             for (int k = 0; k < WIN; k++) {
-                int c = xo + k - s->pad;
-                if (c < 0 || c >= s->W)
-                    continue;
-                float a = xr[c], b = yr[c], g = s->g[k];
+                vf a = v_load(xr + xo + k - s->pad), b = v_load(yr + xo + k - s->pad);
+                float g = s->g[k];
                 acc[0] += g * a;
                 acc[1] += g * b;
                 acc[2] += g * a * a;
                 acc[3] += g * b * b;
                 acc[4] += g * a * b;
             }
-            size_t at = (size_t)r * (size_t)s->Wo + (size_t)xo;
             for (int q = 0; q < NSTAT; q++)
-                hmap[q * hsz + at] = acc[q];
-            xo++;
+                v_store(hr + q * hsz + xo, acc[q]);
         }
+        for (; xo < s->Wo; xo++)
+            stats_h_at(s, xr, yr, xo, hr + xo, hsz);
     }
 }
 
@@ -296,6 +300,23 @@ static void ssim_rows(const ssim_ctx *s, float *vmap, double *val, int grad, flo
     }
 }
 
+/* dr[c] += the horizontal adjoint at column c of one row, taps outside the
+ * positions skipped. */
+static void adjoint_h_at(const ssim_ctx *s, const float *gm, const float *gxx, const float *gxy,
+                         const float *xr, const float *yr, int c, float *dr)
+{
+    float t1 = 0.0f, t2 = 0.0f, t3 = 0.0f;
+    for (int k = 0; k < WIN; k++) {
+        int xo = c - k + s->pad;
+        if (xo < 0 || xo >= s->Wo)
+            continue;
+        t1 += s->g[k] * gm[xo];
+        t2 += s->g[k] * gxx[xo];
+        t3 += s->g[k] * gxy[xo];
+    }
+    dr[c] += t1 + 2.0f * xr[c] * t2 + yr[c] * t3;
+}
+
 /* Backward, rows [r0, r1) of the channel: hmap slots 0, 2, 4 take the
  * vertical adjoint of vmap's gradient maps (gathered per row: the sum runs
  * over yo ascending, the order the scatter form adds in), then
@@ -323,37 +344,28 @@ static void adjoint_rows(const ssim_ctx *s, const float *vmap, float *hmap, floa
         }
         const float *gm = hmap + hrow, *gxx = hmap + 2 * hsz + hrow, *gxy = hmap + 4 * hsz + hrow;
         size_t row = (size_t)r * (size_t)s->W;
-        /* columns whose taps all fall on positions: [WIN - 1 - pad, Wo - pad) */
-        int in0 = WIN - 1 - s->pad, in1 = s->Wo - s->pad;
-        for (int c = 0; c < s->W;) {
-            if (c >= in0 && c + VL <= in1) {
-                vf t1 = {0}, t2 = {0}, t3 = {0};
-                for (int k = 0; k < WIN; k++) {
-                    int xo = c - k + s->pad;
-                    float g = s->g[k];
-                    t1 += g * v_load(gm + xo);
-                    t2 += g * v_load(gxx + xo);
-                    t3 += g * v_load(gxy + xo);
-                }
-                vf d = v_load(dx + row + (size_t)c);
-                d += t1 + 2.0f * v_load(x + row + (size_t)c) * t2 +
-                     v_load(y + row + (size_t)c) * t3;
-                v_store(dx + row + (size_t)c, d);
-                c += VL;
-                continue;
-            }
-            float t1 = 0.0f, t2 = 0.0f, t3 = 0.0f;
+        const float *xr = x + row, *yr = y + row;
+        float *dr = dx + row;
+        /* columns whose taps all fall on positions, [WIN - 1 - pad, Wo - pad),
+         * four at a time; the ones at the edges one at a time */
+        int in0 = WIN - 1 - s->pad, in1 = s->Wo - s->pad, c = 0;
+        for (; c < in0 && c < s->W; c++)
+            adjoint_h_at(s, gm, gxx, gxy, xr, yr, c, dr);
+        for (; c + VL <= in1; c += VL) {
+            vf t1 = {0}, t2 = {0}, t3 = {0};
             for (int k = 0; k < WIN; k++) {
                 int xo = c - k + s->pad;
-                if (xo < 0 || xo >= s->Wo)
-                    continue;
-                t1 += s->g[k] * gm[xo];
-                t2 += s->g[k] * gxx[xo];
-                t3 += s->g[k] * gxy[xo];
+                float g = s->g[k];
+                t1 += g * v_load(gm + xo);
+                t2 += g * v_load(gxx + xo);
+                t3 += g * v_load(gxy + xo);
             }
-            dx[row + (size_t)c] += t1 + 2.0f * x[row + (size_t)c] * t2 + y[row + (size_t)c] * t3;
-            c++;
+            vf d = v_load(dr + c);
+            d += t1 + 2.0f * v_load(xr + c) * t2 + v_load(yr + c) * t3;
+            v_store(dr + c, d);
         }
+        for (; c < s->W; c++)
+            adjoint_h_at(s, gm, gxx, gxy, xr, yr, c, dr);
     }
 }
 
