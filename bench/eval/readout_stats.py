@@ -1,7 +1,8 @@
 #!/usr/bin/python3
 """The spread of the synthesis readout's gaze errors in `gazesplat eval
 --readout` runs: per method, for gaze-only pairs (all, and by gaze change
-0-15, 15-30, 30-50 degrees) and for head-change pairs, the mean, the
+0-15, 15-30, 30-50 degrees) and for head-change pairs (all, and by the
+head's turn 0-20, 20-40, 40-60, 60 degrees and more), the mean, the
 median and the share of pairs within 2 and 5 degrees of the target's true
 gaze, with the readout's floor (its error on the true targets). Means hide
 a few gross misses; the median and the shares do not.
@@ -14,7 +15,9 @@ import statistics
 import sys
 
 BINS = (("gaze only", None), ("  0-15°", (0, 15)), ("  15-30°", (15, 30)),
-        ("  30-50°", (30, 50)), ("head change", None))
+        ("  30-50°", (30, 50)), ("head change", None),
+        ("  head 0-20°", (0, 20)), ("  head 20-40°", (20, 40)),
+        ("  head 40-60°", (40, 60)), ("  head 60°+", (60, 360)))
 
 
 def rows_of(path):
@@ -24,8 +27,12 @@ def rows_of(path):
 
 
 def group(rows, name, rng):
-    if name == "head change":
-        return [r for r in rows if r["head_change"] == "1"]
+    if name.startswith("head") or name.startswith("  head"):
+        g = [r for r in rows if r["head_change"] == "1"]
+        if rng:
+            g = [r for r in g
+                 if rng[0] <= float(r["head_change_deg"]) < rng[1]]
+        return g
     g = [r for r in rows if r["head_change"] == "0"]
     if rng:
         g = [r for r in g if rng[0] <= float(r["gaze_change_deg"]) < rng[1]]

@@ -33,7 +33,7 @@ const cli_command cli_eval_command = {
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "                      [--finetune-outline PX] [--finetune-mirror 0|1]\n"
-    "                      [--readout]\n"
+    "                      [--readout] [--readout-shift PX]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N] [--split S]\n"
     "\n"
@@ -48,6 +48,9 @@ const cli_command cli_eval_command = {
     "                    rendered at candidate gazes over the eye regions,\n"
     "                    the best match wins (gs_eval_gaze_readout); about\n"
     "                    0.9 s per image on 2 threads\n"
+    "  --readout-shift PX  the readout's alignment: the largest 2D shift\n"
+    "                    (px) searched before the eyeballs are compared,\n"
+    "                    0..8 (default 4; 0: none)\n"
     "  --method LIST     comma-separated: model, transfer (the model with\n"
     "                    detail transfer from the input), warp (2D eye\n"
     "                    warping), identity (output = input); default model\n"
@@ -111,7 +114,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_MAKE, O_IDS, O_INPUTS,
+    O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT, O_MAKE, O_IDS, O_INPUTS,
     O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -174,6 +177,7 @@ typedef struct evaluator {
     int light_on_head;    /* --light-on-head */
     eval_estimator *est;
     int readout;                /* --readout */
+    gs_eval_readout_options read_opts; /* --readout-shift */
     gs_pool *pool;
     int S, iters;
     double lr_code, lr_colour;  /* --fit-lr */
@@ -224,7 +228,7 @@ static double read_err(evaluator *ev, const gs_synth_scene *ts,
     gs_eval_readout rd;
     gs_error err = {0, ""};
     if (gs_eval_gaze_readout(ts, ev->S, ev->d_n, ev->focal, rgb, stride,
-                             NULL, ev->pool, &rd, &err)) {
+                             &ev->read_opts, ev->pool, &rd, &err)) {
         fprintf(stderr, "gazesplat eval: pair %d: readout: %s\n", pair,
                 err.msg);
         return NAN;
@@ -773,7 +777,8 @@ static int run_eval(int argc, char **argv)
         {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
         {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
-        {"--readout", 0, NULL}, {"--make-pairs", 1, NULL},
+        {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
+        {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -863,6 +868,13 @@ static int run_eval(int argc, char **argv)
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
+    gs_eval_readout_options_default(&ev.read_opts);
+    if (o[O_READ_SHIFT].value && !ev.readout)
+        return cli_usage_error(cmd, "--readout-shift goes with --readout");
+    if ((rc = cli_parse_range(cmd, "--readout-shift", o[O_READ_SHIFT].value, 0.0, 8.0,
+                              "pixels in [0, 8] (0: no alignment)",
+                              &ev.read_opts.max_shift_px)))
+        return rc;
     char line[2048];
     command_line(argc, argv, line, sizeof line);
     eval_run_info info;
@@ -870,6 +882,7 @@ static int run_eval(int argc, char **argv)
     info.model = o[O_MODEL].value;
     info.estimator = o[O_EST].value;
     info.readout = ev.readout;
+    info.readout_shift = ev.read_opts.max_shift_px;
     info.pairs = o[O_PAIRS].value;
     info.command = line;
     info.threads = (int)threads;

@@ -299,12 +299,13 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
         fputs("- no estimator given: gaze and head errors are not "
               "measured\n", f);
     if (info->readout)
-        fputs("- readout: read gaze° = the gaze the output shows, read by "
-              "synthesis (the target scene rendered at candidate gazes, "
-              "compared over the target's eyeballs after aligning on the "
-              "pixels no gaze changes; the best match wins), against the "
-              "target's true gaze; read floor° = the same on the GT target "
-              "itself; closed eyes are not read\n", f);
+        fprintf(f, "- readout: read gaze° = the gaze the output shows, read by "
+                   "synthesis (the target scene rendered at candidate gazes, "
+                   "compared over the target's eyeballs after aligning, by a "
+                   "shift of up to %g px, on the pixels no gaze changes; the "
+                   "best match wins), against the target's true gaze; read "
+                   "floor° = the same on the GT target itself; closed eyes "
+                   "are not read\n", info->readout_shift);
     fputs("- degrees: mean angular error; gaze°/head° = estimator(output) vs "
           "estimator(GT target); PSNR dB and SSIM against the GT target "
           "(white outside the head); eye = eye region; id = face without "

@@ -46,6 +46,7 @@ typedef struct eval_row {
 typedef struct eval_run_info {
     const char *model, *estimator, *pairs, *command;
     int readout;          /* --readout */
+    double readout_shift; /* --readout-shift (its alignment, px) */
     int threads, iters, inputs, image_size;
     double fit_lr_code, fit_lr_colour; /* the fit's Adam rates */
     int fits_reused;      /* fits taken from an earlier run's DIR/fits */

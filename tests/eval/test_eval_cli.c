@@ -130,6 +130,18 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK_EQ_INT(run(ids0), 2);
     const char *positional[] = {"eval", "extra", NULL};
     CHECK_EQ_INT(run(positional), 2);
+    /* --readout-shift: only with --readout, and within [0, 8] px */
+    const char *shift_alone[] = {"eval", "--model", model, "--pairs", pairs,
+                                 "--out", dir, "--readout-shift", "2", NULL};
+    CHECK_EQ_INT(run(shift_alone), 2);
+    const char *bad_shift[] = {"eval", "--model", model, "--pairs", pairs,
+                               "--out", dir, "--readout", "--readout-shift",
+                               "9", NULL};
+    CHECK_EQ_INT(run(bad_shift), 2);
+    bad_shift[8] = "-1";
+    CHECK_EQ_INT(run(bad_shift), 2);
+    bad_shift[8] = "nan";
+    CHECK_EQ_INT(run(bad_shift), 2);
     /* --split: validation pairs are written and say so; training refused */
     char vpairs[200];
     snprintf(vpairs, sizeof vpairs, "%s/val_pairs.csv", dir);
@@ -391,9 +403,20 @@ int main(int argc, char **argv)
     sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "read gaze° | read floor° |") &&
                   strstr(sum, "- readout: read gaze°") &&
+                  strstr(sum, "shift of up to 4 px") &&
                   strstr(sum, "- readout: gaze only median ") &&
                   strstr(sum, "non-finite outputs 0"),
               "%s", sum ? sum : "");
+    /* --readout-shift 0: no alignment, and the summary says so */
+    const char *ev9[] = {"eval", "--model", model, "--pairs", pairs,
+                         "--out", out2, "--method", "identity",
+                         "--iters", "4", "--threads", "2", "--estimator",
+                         est, "--reuse-fits", "--readout", "--readout-shift",
+                         "0", NULL};
+    CHECK_EQ_INT(run(ev9), 0);
+    free(sum);
+    sum = ev_slurp(md);
+    CHECK_MSG(sum && strstr(sum, "shift of up to 0 px"), "%s", sum ? sum : "");
     expect_read = 0;
     free(a);
     free(b);
