@@ -14,10 +14,16 @@ import csv
 import statistics
 import sys
 
-BINS = (("gaze only", None), ("  0-15°", (0, 15)), ("  15-30°", (15, 30)),
-        ("  30-50°", (30, 50)), ("head change", None),
-        ("  head 0-20°", (0, 20)), ("  head 20-40°", (20, 40)),
-        ("  head 40-60°", (40, 60)), ("  head 60°+", (60, 360)))
+# (label, head change 0|1, the column a range bins on, its range or None)
+BINS = (("gaze only", "0", None, None),
+        ("0-15°", "0", "gaze_change_deg", (0, 15)),
+        ("15-30°", "0", "gaze_change_deg", (15, 30)),
+        ("30-50°", "0", "gaze_change_deg", (30, 50)),
+        ("head change", "1", None, None),
+        ("head 0-20°", "1", "head_change_deg", (0, 20)),
+        ("head 20-40°", "1", "head_change_deg", (20, 40)),
+        ("head 40-60°", "1", "head_change_deg", (40, 60)),
+        ("head 60°+", "1", "head_change_deg", (60, 360)))
 
 
 def rows_of(path):
@@ -26,17 +32,9 @@ def rows_of(path):
                 if r["status"] == "ok" and r.get("read_gaze_err_deg")]
 
 
-def group(rows, name, rng):
-    if name.startswith("head") or name.startswith("  head"):
-        g = [r for r in rows if r["head_change"] == "1"]
-        if rng:
-            g = [r for r in g
-                 if rng[0] <= float(r["head_change_deg"]) < rng[1]]
-        return g
-    g = [r for r in rows if r["head_change"] == "0"]
-    if rng:
-        g = [r for r in g if rng[0] <= float(r["gaze_change_deg"]) < rng[1]]
-    return g
+def group(rows, head_change, col, rng):
+    return [r for r in rows if r["head_change"] == head_change and
+            (rng is None or rng[0] <= float(r[col]) < rng[1])]
 
 
 def main():
@@ -53,11 +51,12 @@ def main():
         print("|---|---|---:|---:|---:|---:|---:|")
         for m in dict.fromkeys(r["method"] for r in rows):
             mr = [r for r in rows if r["method"] == m]
-            for name, rng in BINS:
-                v = [float(r["read_gaze_err_deg"]) for r in group(mr, name, rng)]
+            for name, hc, col, rng in BINS:
+                v = [float(r["read_gaze_err_deg"])
+                     for r in group(mr, hc, col, rng)]
                 if not v:
                     continue
-                print(f"| {m} | {name.strip()} | {len(v)} | "
+                print(f"| {m} | {name} | {len(v)} | "
                       f"{statistics.mean(v):.2f} | {statistics.median(v):.2f} | "
                       f"{100 * sum(x <= 2 for x in v) / len(v):.0f} % | "
                       f"{100 * sum(x <= 5 for x in v) / len(v):.0f} % |")
