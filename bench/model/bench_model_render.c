@@ -10,7 +10,7 @@
  * path (for a profiler: `perf record` or callgrind over the loop alone).
  * --prune K renders with the K most important face Gaussians
  * (gs_model_prune) and --feature-scale S with the feature map rasterized at
- * S x its size (gs_model_ctx_set_render_options; below 1 the "incremental"
+ * S x its size (gs_model_ctx_set_render_options; off 1 the "incremental"
  * column renders in full too), for the render side of the speed grid.
  * Without --model, a cpu-preset model as initialised (the timing does not
  * depend on training). A model

@@ -71,7 +71,9 @@ const cli_command cli_eval_command = {
     "  --prune K|P%      render with only the K (or P percent of the) most\n"
     "                    important face Gaussians (gs_model_prune)\n"
     "  --feature-scale S rasterize the feature map at S x its size, S in\n"
-    "                    (0, 1] (default 1), resampled for the renderer\n"
+    "                    (0, 1] (default 1), resampled for the renderer;\n"
+    "                    2, 3 or 4: supersampled, each pixel the mean of\n"
+    "                    S x S\n"
     "  --full-render     every render from scratch (no incremental sweeps,\n"
     "                    no cached face stream)\n"
     "  --transfer-head-weight W  the transfer method at another head pose:\n"
@@ -830,9 +832,12 @@ static int run_eval(int argc, char **argv)
     gs_model_render_options_default(&ev.ro);
     float fscale = 1.0f;
     if (o[O_FSCALE].value && (cli_parse_floats(o[O_FSCALE].value, &fscale, 1) ||
-                              !(fscale > 0.0f && fscale <= 1.0f)))
+                              !((fscale > 0.0f && fscale <= 1.0f) ||
+                                fscale == 2.0f || fscale == 3.0f ||
+                                fscale == 4.0f)))
         return cli_usage_error(cmd, "--feature-scale: want a number in "
-                               "(0, 1]; got '%s'", o[O_FSCALE].value);
+                               "(0, 1], or 2, 3 or 4 (supersampled); got "
+                               "'%s'", o[O_FSCALE].value);
     ev.ro.feature_scale = fscale;
     ev.ro.full = o[O_FULL].value != NULL;
     if ((rc = cli_parse_unit(cmd, "--transfer-head-weight", o[O_XHW].value,

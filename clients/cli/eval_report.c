@@ -244,12 +244,14 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
             info->threads);
     if (info->n_face > 0)
         fprintf(f, "- model renders: %d of %d face Gaussians (%.0f %%), "
-                   "feature scale %.3g, %s\n", info->face_kept,
+                   "feature scale %.3g%s, %s\n", info->face_kept,
                 info->n_face, 100.0 * info->face_kept / info->n_face,
                 info->feature_scale,
+                info->feature_scale > 1 ? " (supersampled)" : "",
                 info->full_render ? "every render from scratch "
                                     "(--full-render)"
-                                  : "incremental where possible");
+                : info->feature_scale != 1 ? "every render full"
+                                           : "incremental where possible");
     if (info->n_face > 0)
         fprintf(f, "- lights at another head pose: %s\n",
                 info->light_on_head ? "kept on the head (--light-on-head)"

@@ -248,6 +248,7 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
     free(c->fbox);
     free(c->lid_save);
     free(c->cov_ind), free(c->cov_bg), free(c->cover), free(c->v_ind);
+    free(c->ss_buf);
     gs_raster_destroy(c->raster_cov);
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         sweep_slot_free(&c->slots[i]);
@@ -572,6 +573,53 @@ static gs_gaussians gaussians_of(const gs_model_ctx *c, int first, int count)
     return g;
 }
 
+/* raster_at above the model's size: g through cam at fsr = k fs pixels
+ * (k = 2..4, the same view: focal and principal point times k), each
+ * feature and alpha pixel the mean of its k x k block (a box filter: the
+ * map's value over the pixel's area rather than at its centre). */
+static int raster_super(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
+                        gs_camera *cam, const gs_gaussians *g, int fsr,
+                        float *out, float *alpha, gs_error *err)
+{
+    int fs = c->fs, C = c->C, k = fsr / fs;
+    size_t plane = (size_t)fsr * fsr, want = (2 * (size_t)C + 1) * plane;
+    if (want > c->ss_cap) {
+        float *b = malloc(want * sizeof *b);
+        if (!b)
+            return gs_error_set(err, GS_ERR_NOMEM,
+                                "model: supersampled map (%zu floats)", want);
+        free(c->ss_buf);
+        c->ss_buf = b;
+        c->ss_cap = want;
+    }
+    float *hi = c->ss_buf, *ahi = hi + (size_t)C * plane, *bg = ahi + plane;
+    for (int ch = 0; ch < C; ch++) /* the background is constant per channel */
+        for (size_t i = 0; i < plane; i++)
+            bg[ch * plane + i] = c->bg[(size_t)ch * fs * fs];
+    float s = (float)k;
+    cam->fx *= s, cam->fy *= s;
+    cam->cx *= s, cam->cy *= s;
+    cam->width = cam->height = fsr;
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    int rc = gs_raster_forward(r, pool, cam, g, bg, &ro, hi, ahi, NULL, err);
+    if (rc)
+        return rc;
+    float inv = 1.0f / (float)(k * k);
+    for (int ch = 0; ch <= C; ch++) { /* channel C: alpha */
+        const float *src = ch < C ? hi + ch * plane : ahi;
+        float *dst = ch < C ? out + (size_t)ch * fs * fs : alpha;
+        for (int y = 0; y < fs; y++)
+            for (int x = 0; x < fs; x++) {
+                float a = 0.0f;
+                for (int dy = 0; dy < k; dy++)
+                    for (int dx = 0; dx < k; dx++)
+                        a += src[(size_t)(k * y + dy) * fsr + k * x + dx];
+                dst[(size_t)y * fs + x] = a * inv;
+            }
+    }
+    return GS_OK;
+}
+
 /* Rasterizes g into out [C, fs, fs] at the feature size fsr: at fs
  * directly; below, through a camera of the same view at fsr pixels into
  * lo [C, fsr, fsr] (scratch), resampled bilinearly to fs. Only renders
@@ -588,6 +636,8 @@ static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
     if (fsr == c->fs)
         return gs_raster_forward(r, pool, &cam, g, c->bg, &ro, out, alpha,
                                  NULL, err);
+    if (fsr > c->fs)
+        return raster_super(c, r, pool, &cam, g, fsr, out, alpha, err);
     float s = (float)fsr / (float)c->fs;
     cam.fx *= s, cam.fy *= s;
     cam.cx = cam.cy = 0.5f * (float)fsr;
@@ -1128,10 +1178,13 @@ int gs_model_ctx_set_render_options(gs_model_ctx *c,
         return gs_error_set(err, GS_ERR_ARG, "render options: NULL argument");
     double s = o->feature_scale;
     long fsr = s > 0 && s <= 1 ? lround(s * c->fs) : 0;
-    if (fsr < 4 || fsr > c->fs)
+    if (s == 2 || s == 3 || s == 4) /* supersampled: s x s per pixel */
+        fsr = (long)s * c->fs;
+    if (fsr < 4 || (s <= 1 && fsr > c->fs))
         return gs_error_set(err, GS_ERR_ARG,
                             "feature scale %g: want (0, 1] and at least 4 "
-                            "of the %d feature pixels", s, c->fs);
+                            "of the %d feature pixels, or 2, 3 or 4 "
+                            "(supersampled)", s, c->fs);
     double hw = o->transfer_head_weight;
     if (!(hw >= 0 && hw <= 1))
         return gs_error_set(err, GS_ERR_ARG,

@@ -124,6 +124,10 @@ struct gs_model_ctx {
     gs_raster *raster_eye;
     float *fmap_eye, *alpha_eye, *v_fmap_eye; /* the eye stream alone */
     float *bg_crop;                   /* [C, fs*fs] background of a crop */
+    /* supersampled renders (feature scale 2..4): the map, its alpha and
+     * background at s fs pixels, [C + 1 + C, (s fs)^2], made on first use */
+    float *ss_buf;
+    size_t ss_cap;
     /* the eye MLP's first layer for renders: W0 [f_i, tau] + b0 of every
      * eye Gaussian for the code eye_base_code (W0's [f | tau] columns are
      * copied to eye_w0 [h, F+D]; PE(gaze) adds one vector to all) */

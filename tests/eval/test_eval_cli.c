@@ -155,13 +155,14 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK(vf && fgets(head, sizeof head, vf) && strstr(head, "validation-split"));
     if (vf)
         fclose(vf);
-    /* Render settings: --prune K or P%, --feature-scale in (0, 1]. */
+    /* Render settings: --prune K or P%, --feature-scale in (0, 1] or 2..4. */
     const char *bad_render[][2] = {
         {"--prune", "0"},          {"--prune", "0%"},
         {"--prune", "150%"},       {"--prune", "many"},
         {"--prune", "%"},          {"--feature-scale", "0"},
         {"--feature-scale", "1.5"}, {"--feature-scale", "half"},
-        {"--feature-scale", "nan"},
+        {"--feature-scale", "nan"}, {"--feature-scale", "2.5"},
+        {"--feature-scale", "5"},
         {"--transfer-head-weight", "1.5"}, {"--transfer-head-weight", "-0.1"},
         {"--transfer-head-weight", "nan"},
         {"--transfer-eye-weight", "1.5"}, {"--transfer-eye-weight", "-0.1"},
@@ -338,6 +339,17 @@ int main(int argc, char **argv)
     sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "face Gaussians (10 %), feature scale "
                                  "0.5, every render from scratch") &&
+                  strstr(sum, "non-finite outputs 0"),
+              "%s", sum ? sum : "");
+    const char *ev5s[] = {"eval", "--model", model, "--pairs", pairs,
+                          "--out", out2, "--method", "model",
+                          "--iters", "4", "--threads", "2", "--estimator",
+                          est, "--reuse-fits", "--feature-scale", "2", NULL};
+    CHECK_EQ_INT(run(ev5s), 0);
+    free(sum);
+    sum = ev_slurp(md);
+    CHECK_MSG(sum && strstr(sum, "face Gaussians (100 %), feature scale 2 "
+                                 "(supersampled), every render full") &&
                   strstr(sum, "non-finite outputs 0"),
               "%s", sum ? sum : "");
     /* Fine-tuned per input on run 2's fits: finite, deterministic, other

@@ -2,7 +2,8 @@
  * pruning the face stream (gs_model_prune) and the feature-map scale and
  * full renders (gs_model_ctx_set_render_options). Identity at 100 % / 1.0,
  * the pruned set is the most important one and nested, renders stay finite
- * with few Gaussians or a coarse map, bad settings are refused. */
+ * with few Gaussians or a coarse or supersampled map, supersampling
+ * converges, bad settings are refused. */
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -305,7 +306,7 @@ static void coarse_maps(const gs_model *m, gs_pool *pool)
     gs_subject s = subject_of(m);
     gs_model_ctx *c0 = gs_model_ctx_create(m);
     CHECK(render_views(c0, pool, &s, N, ref, stride, bytes) == 0);
-    const double scales[] = {0.75, 0.5, 0.25};
+    const double scales[] = {0.75, 0.5, 0.25, 2.0, 3.0};
     for (size_t t = 0; t < sizeof scales / sizeof scales[0]; t++) {
         gs_model_ctx *c = gs_model_ctx_create(m);
         gs_model_render_options o;
@@ -346,13 +347,92 @@ static void coarse_maps(const gs_model *m, gs_pool *pool)
     free(img);
 }
 
+/* Supersampled maps (feature scale 2..4): each feature pixel the mean of
+ * k x k. They converge: scale 2 is nearer scale 4 than the point-sampled
+ * map is; the same bytes with and without a pool; back at scale 1 the
+ * context renders the exact images again. */
+static void super_maps(const gs_model *m, gs_pool *pool)
+{
+    enum { N = 3 };
+    gs_error err = {0, ""};
+    int S = m->cfg.image_size;
+    size_t stride = 3 * (size_t)S, bytes = stride * S;
+    uint8_t *img[4];
+    for (int i = 0; i < 4; i++)
+        img[i] = malloc(N * bytes);
+    gs_subject s = subject_of(m);
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    CHECK(render_views(c, pool, &s, N, img[0], stride, bytes) == 0);
+    gs_model_render_options o;
+    gs_model_render_options_default(&o);
+    o.feature_scale = 4.0;
+    CHECK(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK);
+    CHECK(render_views(c, pool, &s, N, img[1], stride, bytes) == 0);
+    o.feature_scale = 2.0;
+    CHECK(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK);
+    CHECK(render_views(c, pool, &s, N, img[2], stride, bytes) == 0);
+    CHECK(render_views(c, NULL, &s, N, img[3], stride, bytes) == 0);
+    CHECK_MSG(memcmp(img[2], img[3], N * bytes) == 0,
+              "scale 2: pool and no pool differ");
+    { /* the map the renderer saw: the 2 x 2 means of one rasterized at
+       * twice the size through the same view */
+        int fs = c->fs, C = c->C, hs = 2 * fs;
+        size_t hp = (size_t)hs * hs;
+        float *hi = malloc(sizeof(float) * ((size_t)C + 1) * hp);
+        float *bg = malloc(sizeof(float) * (size_t)C * hp);
+        for (int k = 0; k < C; k++)
+            for (size_t i = 0; i < hp; i++)
+                bg[k * hp + i] = c->bg[(size_t)k * fs * fs];
+        gs_camera cam;
+        gs_frame_camera(m, s.head_t, &cam);
+        cam.fx *= 2, cam.fy *= 2, cam.cx *= 2, cam.cy *= 2;
+        cam.width = cam.height = hs;
+        gs_gaussians g = {.n = c->n, .channels = C, .means = c->g_mean,
+                          .log_scales = c->g_scale, .quats = c->g_quat,
+                          .opacity_logits = c->g_opac, .features = c->g_feat};
+        gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+        gs_raster *r = gs_raster_create();
+        CHECK(gs_raster_forward(r, NULL, &cam, &g, bg, &ro, hi, hi + C * hp,
+                                NULL, &err) == GS_OK);
+        double worst = 0;
+        for (int k = 0; k < C; k++)
+            for (int y = 0; y < fs; y++)
+                for (int x = 0; x < fs; x++) {
+                    const float *h = hi + k * hp + (size_t)2 * y * hs + 2 * x;
+                    double want = 0.25 * ((double)h[0] + h[1] + h[hs] +
+                                          h[hs + 1]);
+                    double got = c->fmap[((size_t)k * fs + y) * fs + x];
+                    worst = fmax(worst, fabs(got - want));
+                }
+        CHECK_MSG(worst < 1e-6, "scale 2: map off the 2 x 2 means by %g",
+                  worst);
+        gs_raster_destroy(r);
+        free(hi);
+        free(bg);
+    }
+    double d1 = mean_abs_diff(img[0], img[1], N * bytes);
+    double d2 = mean_abs_diff(img[2], img[1], N * bytes);
+    printf("against scale 4: scale 1 %.3f, scale 2 %.3f (8-bit)\n", d1, d2);
+    CHECK_MSG(d2 < 0.7 * d1, "scale 2 is not nearer scale 4: %.3f vs %.3f",
+              d2, d1);
+    o.feature_scale = 1.0;
+    CHECK(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK);
+    CHECK(render_views(c, pool, &s, N, img[3], stride, bytes) == 0);
+    CHECK_MSG(memcmp(img[0], img[3], N * bytes) == 0,
+              "scale 1 after 2: images differ");
+    gs_model_ctx_destroy(c);
+    for (int i = 0; i < 4; i++)
+        free(img[i]);
+}
+
 static void bad_options(const gs_model *m)
 {
     gs_error err = {0, ""};
     gs_model_ctx *c = gs_model_ctx_create(m);
     gs_model_render_options o;
     gs_model_render_options_default(&o);
-    const double bad[] = {0.0, -0.5, 1.01, NAN, 3.0 / m->cfg.feat_size};
+    const double bad[] = {0.0, -0.5, 1.01, 1.5, 2.5, 5.0, INFINITY, NAN,
+                          3.0 / m->cfg.feat_size};
     for (size_t t = 0; t < sizeof bad / sizeof bad[0]; t++) {
         o.feature_scale = bad[t];
         CHECK_MSG(gs_model_ctx_set_render_options(c, &o, &err) == GS_ERR_ARG,
@@ -402,6 +482,7 @@ int main(void)
     scale_identity(m, pool);
     full_renders(m, NULL);
     coarse_maps(m, pool);
+    super_maps(m, pool);
     bad_options(m);
     gs_pool_destroy(pool);
     gs_model_destroy(m);

@@ -170,9 +170,10 @@ void gs_model_ctx_reset(gs_model_ctx *c);
 typedef struct gs_model_render_options {
     /* Rasterize the feature map at round(feature_scale * feat_size) pixels
      * and resample it bilinearly (align_corners = False) to feat_size for
-     * the renderer. (0, 1]; 1 is the normal path, bit for bit. Below 1
-     * every render is a full one (the incremental path works at the
-     * model's resolution). */
+     * the renderer. (0, 1]; 1 is the normal path, bit for bit. 2, 3 or 4:
+     * supersampled, each feature pixel the mean of the k x k pixels of a
+     * map rasterized at k * feat_size. Off 1 every render is a full one
+     * (the incremental path works at the model's resolution). */
     double feature_scale;
     /* 1: every render from scratch: no incremental sweep, no cached face
      * stream (what a render costs with nothing to reuse). */
