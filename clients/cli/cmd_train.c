@@ -49,7 +49,12 @@ const cli_command cli_train_command = {
     "  --gaze-weight X     its weight (0.1, the paper's)\n"
     "  --eye-cover-loss X  add X times the L1 of the eye stream's coverage\n"
     "                      of the feature map against the visible eyeballs\n"
-    "                      (where the lids are; docs/model.md); 0 (default)\n",
+    "                      (where the lids are; docs/model.md); 0 (default)\n"
+    "  --supersample K     rasterize the feature map at K times its size and\n"
+    "                      give each pixel the mean of K x K samples (1..4;\n"
+    "                      1, point-sampled, is the default); with --resume,\n"
+    "                      switches a model's sampling (not with\n"
+    "                      --eye-cover-loss)\n",
     run_train,
 };
 
@@ -66,7 +71,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
-       O_FRESH, O_COS, O_LIDS, O_COVER, O_N };
+       O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -79,7 +84,8 @@ static int run_train(int argc, char **argv)
         {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL},
         {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL},
         {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL},
-        {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL}};
+        {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
+        {"--supersample", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -178,6 +184,16 @@ static int run_train(int argc, char **argv)
         if (!end || *end || !(t.eye_cover_weight >= 0 && t.eye_cover_weight <= 1000))
             return cli_usage_error(cmd, "--eye-cover-loss: want 0..1000");
     }
+    if (o[O_SS].value) {
+        char *end = NULL;
+        long k = strtol(o[O_SS].value, &end, 10);
+        if (!end || end == o[O_SS].value || *end || k < 1 || k > 4)
+            return cli_usage_error(cmd, "--supersample: want 1..4");
+        spec.supersample = (int)k;
+    }
+    if (spec.supersample > 1 && t.eye_cover_weight > 0)
+        return cli_usage_error(cmd, "--eye-cover-loss does not go with "
+                                    "--supersample");
     t.log = log_line;
 
     gs_nn_blas_set_threads(1);
@@ -187,6 +203,8 @@ static int run_train(int argc, char **argv)
                   : gs_model_new(&spec, (uint64_t)seed, &m, &err);
     if (!rc && t.resume && spec.guide_source >= 0)
         rc = gs_model_set_guide_source(m, spec.guide_source, &err);
+    if (!rc && t.resume && spec.supersample >= 1)
+        rc = gs_model_set_supersample(m, spec.supersample, &err);
     if (!rc && t.resume && spec.lids == 1 && !gs_model_has_lids(m)) {
         if (t.fresh_from_step < 0) {
             gs_model_destroy(m);

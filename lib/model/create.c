@@ -241,6 +241,7 @@ void gs_model_spec_default(gs_model_spec *s)
     s->eye_rotation = -1;
     s->guide_source = -1;
     s->lids = -1;
+    s->supersample = -1;
 }
 
 int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
@@ -281,6 +282,8 @@ int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
         c.eye_rotation = s->eye_rotation;
     if (s->guide_source >= 0)
         c.guide_source = s->guide_source;
+    if (s->supersample >= 0)
+        c.supersample = s->supersample;
     c.n_face = 1; /* counted from the template by gs_model_create */
     int rc = gs_model_create(&c, seed, out, err);
     if (rc || s->lids != 1)
@@ -290,6 +293,14 @@ int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
     gs_model_destroy(*out);
     *out = l;
     return rc;
+}
+
+int gs_model_set_supersample(gs_model *m, int k, gs_error *err)
+{
+    if (!m || k < 1 || k > 4)
+        return gs_error_set(err, GS_ERR_ARG, "supersample %d: want 1..4", k);
+    m->cfg.supersample = k;
+    return GS_OK;
 }
 
 int gs_model_set_guide_source(gs_model *m, int source, gs_error *err)

@@ -196,7 +196,8 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->k_opac = falloc(n, &fail);
     c->k_feat = falloc(n * c->C, &fail);
     c->sweep_n = GS_MODEL_SWEEP_CACHE_DEFAULT;
-    c->render_fs = c->face_map_fs = c->fs;
+    c->ss = m->cfg.supersample > 1 ? m->cfg.supersample : 1;
+    c->render_fs = c->face_map_fs = c->ss * c->fs;
     c->xfer_head_w = GS_XFER_HEAD_WEIGHT_DEFAULT;
     c->xfer_eye_w = GS_XFER_EYE_WEIGHT_DEFAULT;
     c->xfer_warp_deg = GS_XFER_EYE_WARP_DEG_DEFAULT;
@@ -217,7 +218,9 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     const gs_renderer_config *rc = &m->rcfg;
     c->src_mode = c->ne > 0 && rc->guidance != GS_GUIDE_NONE &&
                   rc->guide_source == GS_GUIDE_SRC_SOURCE;
-    c->inc_ok = c->ne > 0 && (rc->guidance == GS_GUIDE_NONE || c->src_mode);
+    /* the incremental path rasterizes crops at fs: point-sampled maps only */
+    c->inc_ok = c->ne > 0 && (rc->guidance == GS_GUIDE_NONE || c->src_mode) &&
+                c->ss == 1;
     /* White RGB background, zero for the other channels. */
     for (size_t i = 0; i < 3 * fsz; i++)
         c->bg[i] = 1.0f;
@@ -711,11 +714,8 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss;
     if (c->used_eye_map) { /* the eye stream alone, for its training loss */
         gs_gaussians ge = gaussians_of(c, c->nf, c->ne);
-        gs_camera cam;
-        gs_frame_camera(c->m, fr->head_t, &cam);
-        gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
-        rc = gs_raster_forward(c->raster_eye, pool, &cam, &ge, c->bg, &ro,
-                               c->fmap_eye, c->alpha_eye, NULL, err);
+        rc = raster_at(c, c->raster_eye, pool, &ge, fsr, render, c->fmap_eye,
+                       c->alpha_eye, c->v_fmap_eye, err);
         if (rc)
             return rc;
     }
@@ -731,7 +731,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                      int stream, int force_face, gs_error *err)
 {
-    return forward_at(c, pool, fr, stream, force_face, c->fs, 0, err);
+    return forward_at(c, pool, fr, stream, force_face, c->ss * c->fs, 0, err);
 }
 
 int gs_frame_eye_cover(gs_model_ctx *c, gs_pool *pool, gs_error *err)
@@ -740,6 +740,9 @@ int gs_frame_eye_cover(gs_model_ctx *c, gs_pool *pool, gs_error *err)
     if (!c->ne || c->stream != GS_STREAM_BOTH)
         return gs_error_set(err, GS_ERR_STATE,
                             "eye cover: needs a forward of both streams");
+    if (c->ss > 1)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "eye cover: not with a supersampled model");
     if (!c->raster_cov) {
         c->raster_cov = gs_raster_create();
         c->cov_ind = calloc(n, sizeof(float));
@@ -1178,9 +1181,11 @@ int gs_model_ctx_set_render_options(gs_model_ctx *c,
         return gs_error_set(err, GS_ERR_ARG, "render options: NULL argument");
     double s = o->feature_scale;
     long fsr = s > 0 && s <= 1 ? lround(s * c->fs) : 0;
+    if (s == 1) /* the model's own sampling */
+        fsr = (long)c->ss * c->fs;
     if (s == 2 || s == 3 || s == 4) /* supersampled: s x s per pixel */
         fsr = (long)s * c->fs;
-    if (fsr < 4 || (s <= 1 && fsr > c->fs))
+    if (fsr < 4 || (s < 1 && fsr > c->fs))
         return gs_error_set(err, GS_ERR_ARG,
                             "feature scale %g: want (0, 1] and at least 4 "
                             "of the %d feature pixels, or 2, 3 or 4 "
@@ -1722,6 +1727,29 @@ static void mask_map(const float *src, const float *mask, int C, size_t plane,
             dst[k * plane + i] = src[k * plane + i] * mask[i];
 }
 
+/* gs_raster_backward of a map rasterized by gs_frame_forward, given the
+ * gradient v [C, fs, fs] of the map the renderer saw: at k fs (a
+ * supersampled model) each of a pixel's k x k samples takes v / k^2. */
+static int raster_back(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
+                       const float *v, gs_gaussian_grads *gg, gs_error *err)
+{
+    int k = c->ss, fs = c->fs, fsr = k * fs;
+    if (k == 1)
+        return gs_raster_backward(r, pool, v, NULL, NULL, gg, NULL, err);
+    size_t plane = (size_t)fsr * fsr;
+    if ((size_t)c->C * plane > c->ss_cap) /* a forward at fsr made it */
+        return gs_error_set(err, GS_ERR_STATE, "model: backward before forward");
+    float inv = 1.0f / (float)(k * k), *hi = c->ss_buf;
+    for (int ch = 0; ch < c->C; ch++)
+        for (int y = 0; y < fsr; y++) {
+            const float *src = v + ((size_t)ch * fs + y / k) * fs;
+            float *dst = hi + ch * plane + (size_t)y * fsr;
+            for (int x = 0; x < fsr; x++)
+                dst[x] = src[x / k] * inv;
+        }
+    return gs_raster_backward(r, pool, hi, NULL, NULL, gg, NULL, err);
+}
+
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap, const float *d_fmap_face,
                       const float *d_fmap_eye, const gs_model_params *grads,
@@ -1763,15 +1791,14 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         size_t plane = (size_t)c->fs * c->fs;
         gs_frame_clear_gaussian_grads(c);
         mask_map(c->v_fmap, c->feat_mask, c->C, plane, c->v_fmap_m);
-        rc = gs_raster_backward(c->raster, pool, c->v_fmap_m, NULL, NULL, &gg,
-                                NULL, err);
+        rc = raster_back(c, c->raster, pool, c->v_fmap_m, &gg, err);
         if (!rc && c->used_face_map) {
             gs_gaussian_grads gf = {c->v_mean, c->v_scale, c->v_quat,
                                     c->v_opac, c->v_feat};
             mask_map(c->v_fmap_face, c->feat_mask, c->C, plane,
                      c->v_fmap_face_m);
-            rc = gs_raster_backward(c->raster_face, pool, c->v_fmap_face_m,
-                                    NULL, NULL, &gf, NULL, err);
+            rc = raster_back(c, c->raster_face, pool, c->v_fmap_face_m, &gf,
+                             err);
         }
         if (rc)
             return rc;
@@ -1779,15 +1806,13 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                (size_t)c->n * c->C * sizeof(float));
     }
     gs_frame_clear_gaussian_grads(c);
-    rc = gs_raster_backward(c->raster, pool, c->v_fmap, NULL, NULL, &gg,
-                            NULL, err);
+    rc = raster_back(c, c->raster, pool, c->v_fmap, &gg, err);
     if (rc)
         return rc;
     if (c->used_face_map) { /* the face-only map adds to the face stream */
         gs_gaussian_grads gf = {c->v_mean, c->v_scale, c->v_quat, c->v_opac,
                                 c->v_feat};
-        rc = gs_raster_backward(c->raster_face, pool, c->v_fmap_face, NULL,
-                                NULL, &gf, NULL, err);
+        rc = raster_back(c, c->raster_face, pool, c->v_fmap_face, &gf, err);
         if (rc)
             return rc;
     }
@@ -1804,8 +1829,7 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         gs_gaussian_grads ge = {c->v_mean + 3 * e, c->v_scale + 3 * e,
                                 c->v_quat + 4 * e, c->v_opac + e,
                                 c->v_feat + e * c->C};
-        rc = gs_raster_backward(c->raster_eye, pool, d_fmap_eye, NULL, NULL,
-                                &ge, NULL, err);
+        rc = raster_back(c, c->raster_eye, pool, d_fmap_eye, &ge, err);
         if (rc)
             return rc;
     }

@@ -161,6 +161,10 @@ struct gs_model_ctx {
      * (fs: the normal path) and whether every render starts from scratch */
     int render_fs;
     int render_full;
+    /* the model's supersampling k (config.supersample): training and
+     * fitting forwards rasterize at k fs, and backwards spread each
+     * pixel's gradient over its k x k samples */
+    int ss;
     float xfer_head_w; /* transfer_head_weight (render options) */
     float xfer_eye_w;  /* transfer_eye_weight (render options) */
     double xfer_warp_deg; /* transfer_eye_warp_deg (render options) */

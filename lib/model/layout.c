@@ -19,6 +19,7 @@ void gs_model_config_default(gs_model_config *c)
     c->image_size = 256;
     c->guidance = GS_GUIDE_ADDITIVE;
     c->guide_source = GS_GUIDE_SRC_SOURCE;
+    c->supersample = 1;
     c->two_stream = 1;
     c->eye_rotation = 1;
     c->n_train_ids = 0;
@@ -48,6 +49,7 @@ int gs_model_config_check(const gs_model_config *c, gs_error *err)
     RANGE(n_train_ids, 0, 100000)
     RANGE(n_lid0, 0, c->n_face)
     RANGE(n_lid1, 0, c->n_face - c->n_lid0)
+    RANGE(supersample, 1, 4)
 #undef RANGE
     if (gs_model_n_lid(c) && !(c->two_stream && c->eye_rotation))
         return gs_error_set(err, GS_ERR_FORMAT,

@@ -30,6 +30,9 @@ typedef struct gs_model_config {
     int n_lid0, n_lid1; /* lid Gaussians of eye 0 and eye 1: the last
                            n_lid0 + n_lid1 face Gaussians, eye 0's first
                            (gs_model_add_lids; files without the keys: 0) */
+    int supersample;  /* k: the feature map is rasterized at k feat_size and
+                         each pixel is the mean of k x k (1..4; files
+                         without the key: 1, point-sampled) */
     double template_spacing_mm; /* face Gaussian spacing at creation */
     double d_n_mm;    /* normalized camera distance */
     double focal;     /* normalized camera focal at image_size, pixels */

@@ -473,6 +473,10 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         return gs_error_set(err, GS_ERR_ARG,
                             "train: eye-cover weight %g not in 0..1000",
                             o->eye_cover_weight);
+    if (o->eye_cover_weight > 0 && m->cfg.supersample > 1)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: the eye-cover loss needs a point-sampled "
+                            "model (supersample 1)");
     if (o->eye_cover_weight > 0 && !m->cfg.two_stream)
         return gs_error_set(err, GS_ERR_ARG,
                             "train: the eye-cover loss needs the eye stream "

@@ -4,7 +4,8 @@
 # writes nothing, bad combinations are usage errors (exit 2), a fresh
 # resume continues from its step with the learning rate ramping up, --lids
 # adds lids by a fresh resume only, --eye-cover-loss refuses bad weights and
-# models without an eye stream, and a cosine run's rate falls to lr / 20 at
+# models without an eye stream, --supersample is kept by the file and
+# switched by a resume, and a cosine run's rate falls to lr / 20 at
 # its last step.
 set -euo pipefail
 G=$1
@@ -82,6 +83,31 @@ set -e
 grep -q "needs the eye stream" err.txt || { cat err.txt; fail "single stream: no message"; }
 "$G" train --preset tiny --identities 2 --steps 2 --lids --eye-cover-loss 1 --checkpoint 100 \
   --out e.safetensors >/dev/null 2>&1 || fail "--lids --eye-cover-loss 1 failed"
+
+# --supersample: 1..4, kept by the file and switched by a resume; not with
+# the eye-cover loss
+for bad in "0" "5" "2x"; do
+  set +e
+  "$G" train --preset tiny --identities 2 --steps 1 --supersample "$bad" \
+    --out s.safetensors >/dev/null 2>err.txt; rc=$?
+  set -e
+  [ $rc -eq 2 ] || fail "--supersample $bad: exit $rc, want 2"
+  grep -q "supersample" err.txt || { cat err.txt; fail "--supersample $bad: no message"; }
+done
+set +e
+"$G" train --preset tiny --identities 2 --steps 1 --supersample 2 --eye-cover-loss 1 \
+  --out s.safetensors >/dev/null 2>err.txt; rc=$?
+set -e
+[ $rc -eq 2 ] || fail "--supersample 2 --eye-cover-loss 1: exit $rc, want 2"
+"$G" train --preset tiny --identities 2 --steps 2 --supersample 2 --checkpoint 100 \
+  --out s.safetensors >/dev/null 2>&1 || fail "a new run with --supersample 2 failed"
+grep -aq '"config.supersample":"2"' s.safetensors || fail "the file lost --supersample 2"
+"$G" train --resume --steps 3 --checkpoint 100 --out s.safetensors >/dev/null 2>&1 ||
+  fail "a plain resume of a supersampled model failed"
+grep -aq '"config.supersample":"2"' s.safetensors || fail "a resume lost supersample 2"
+"$G" train --resume --supersample 1 --steps 4 --checkpoint 100 --out s.safetensors \
+  >/dev/null 2>&1 || fail "a resume with --supersample 1 failed"
+grep -aq '"config.supersample":"1"' s.safetensors || fail "a resume did not switch to 1"
 
 # a cosine run from scratch: lr at step 0, then falling towards lr / 20 at
 # step 6, the end (step 5, the last run, has 0.05 + 0.475 (1 + cos(5 pi / 6)))

@@ -29,6 +29,9 @@ typedef struct gs_model_spec {
                                incremental gaze sweeps; the default) */
     int lids;               /* 1: lids that follow the gaze's pitch
                                (gs_model_add_lids); -1, 0: none */
+    int supersample;        /* k = 1..4: the feature map rasterized at k
+                               times its size, each pixel the mean of
+                               k x k (1, point-sampled: the default) */
 } gs_model_spec;
 void gs_model_spec_default(gs_model_spec *s);
 int gs_model_new(const gs_model_spec *spec, uint64_t seed, gs_model **out,
@@ -37,6 +40,12 @@ int gs_model_new(const gs_model_spec *spec, uint64_t seed, gs_model **out,
  * model trained with one source can continue training with the other).
  * GS_ERR_ARG for a value other than 0 or 1. */
 int gs_model_set_guide_source(gs_model *m, int source, gs_error *err);
+/* Changes how a model in memory samples its feature map (same tensors):
+ * k = 1 at the pixel centres, k = 2..4 the mean of k x k samples per
+ * pixel, in training, fitting and rendering alike (docs/model.md,
+ * "Supersampled feature maps"). GS_ERR_ARG outside 1..4. Contexts made
+ * before keep the old value. */
+int gs_model_set_supersample(gs_model *m, int k, gs_error *err);
 /* A copy of m whose face Gaussians within radius_mm of an eyeball's
  * centre become lids: turned about that centre by a learned share k of
  * the gaze's pitch, each its own, starting at 0 (docs/model.md, "Lids
