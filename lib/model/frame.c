@@ -576,6 +576,16 @@ static gs_gaussians gaussians_of(const gs_model_ctx *c, int first, int count)
     return g;
 }
 
+/* dst [C, plane]: the background of a map of plane pixels (it is constant
+ * per channel, so c->bg's first pixel of each channel). */
+static void fill_bg(const gs_model_ctx *c, float *dst, size_t plane)
+{
+    size_t fsz = (size_t)c->fs * c->fs;
+    for (int k = 0; k < c->C; k++)
+        for (size_t i = 0; i < plane; i++)
+            dst[k * plane + i] = c->bg[k * fsz];
+}
+
 /* raster_at above the model's size: g through cam at fsr = k fs pixels
  * (k = 2..4, the same view: focal and principal point times k), each
  * feature and alpha pixel the mean of its k x k block (a box filter: the
@@ -596,9 +606,7 @@ static int raster_super(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
         c->ss_cap = want;
     }
     float *hi = c->ss_buf, *ahi = hi + (size_t)C * plane, *bg = ahi + plane;
-    for (int ch = 0; ch < C; ch++) /* the background is constant per channel */
-        for (size_t i = 0; i < plane; i++)
-            bg[ch * plane + i] = c->bg[(size_t)ch * fs * fs];
+    fill_bg(c, bg, plane);
     float s = (float)k;
     cam->fx *= s, cam->fy *= s;
     cam->cx *= s, cam->cy *= s;
@@ -645,10 +653,7 @@ static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
     cam.fx *= s, cam.fy *= s;
     cam.cx = cam.cy = 0.5f * (float)fsr;
     cam.width = cam.height = fsr;
-    size_t plane = (size_t)fsr * fsr;
-    for (int k = 0; k < c->C; k++) /* the background is constant per channel */
-        for (size_t i = 0; i < plane; i++)
-            c->bg_crop[k * plane + i] = c->bg[(size_t)k * c->fs * c->fs];
+    fill_bg(c, c->bg_crop, (size_t)fsr * fsr);
     int rc = gs_raster_forward(r, pool, &cam, g, c->bg_crop, &ro, lo, alpha,
                                NULL, err);
     if (!rc && gs_nn_resize_bilinear_forward(out, lo, c->C, fsr, fsr, c->fs,
@@ -946,9 +951,7 @@ static int raster_box(gs_model_ctx *c, gs_pool *pool, const gs_camera *full,
 {
     int w = d[2] - d[0], h = d[3] - d[1], fs = c->fs, C = c->C;
     size_t plane = (size_t)w * h;
-    for (int k = 0; k < C; k++) /* the background is constant per channel */
-        for (size_t i = 0; i < plane; i++)
-            c->bg_crop[k * plane + i] = c->bg[(size_t)k * fs * fs];
+    fill_bg(c, c->bg_crop, plane);
     gs_gaussians all = {.n = c->n, .channels = C, .means = c->g_mean,
                         .log_scales = c->g_scale, .quats = c->g_quat,
                         .opacity_logits = c->g_opac, .features = c->g_feat};

@@ -2,7 +2,10 @@
 #ifndef GS_MODEL_TEST_UTIL_H
 #define GS_MODEL_TEST_UTIL_H
 
+#include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 #include <unistd.h>
 
 #include "../../lib/model/frame.h"
@@ -69,6 +72,79 @@ static inline void frame_default(const gs_model *m, gs_frame *fr)
     for (int k = 0; k < gs_model_code_dim(&m->cfg); k++)
         fr->code[k] = 0.1f * (float)((k * 7) % 5 - 2);
 }
+/* The subject of frame_default's code and head pose, gain 1, bias 0. */
+static inline gs_subject frame_subject(const gs_model *m)
+{
+    gs_frame fr;
+    frame_default(m, &fr);
+    gs_subject s;
+    memset(&s, 0, sizeof s);
+    s.code_dim = gs_model_code_dim(&m->cfg);
+    memcpy(s.code, fr.code, sizeof(float) * (size_t)s.code_dim);
+    memcpy(s.head_R, fr.head_R, sizeof s.head_R);
+    memcpy(s.head_t, fr.head_t, sizeof s.head_t);
+    for (int k = 0; k < 3; k++)
+        s.colour_gain[k] = 1.0f;
+    return s;
+}
+
+/* How far c's last map (c->fmap, and c->alpha unless NULL) is from the
+ * k x k means of the same Gaussians rasterized at k times the size
+ * through the view at head_t: the largest differences into *map and
+ * *alpha. -1 when the reference raster fails. */
+static inline int supersample_error(gs_model_ctx *c, const double head_t[3],
+                                    int k, double *map, double *alpha)
+{
+    int fs = c->fs, C = c->C, hs = k * fs;
+    size_t hp = (size_t)hs * hs;
+    float *hi = malloc(sizeof(float) * ((size_t)C + 1) * hp);
+    float *bg = malloc(sizeof(float) * (size_t)C * hp);
+    if (!hi || !bg) {
+        free(hi);
+        free(bg);
+        return -1;
+    }
+    for (int ch = 0; ch < C; ch++)
+        for (size_t i = 0; i < hp; i++)
+            bg[ch * hp + i] = c->bg[(size_t)ch * fs * fs];
+    gs_camera cam;
+    gs_frame_camera(c->m, head_t, &cam);
+    cam.fx *= (float)k, cam.fy *= (float)k;
+    cam.cx *= (float)k, cam.cy *= (float)k;
+    cam.width = cam.height = hs;
+    gs_gaussians g = {.n = c->n, .channels = C, .means = c->g_mean,
+                      .log_scales = c->g_scale, .quats = c->g_quat,
+                      .opacity_logits = c->g_opac, .features = c->g_feat};
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    gs_raster *r = gs_raster_create();
+    gs_error err;
+    int rc = r && gs_raster_forward(r, NULL, &cam, &g, bg, &ro, hi, hi + C * hp,
+                                    NULL, &err) == GS_OK
+                 ? 0
+                 : -1;
+    *map = *alpha = 0;
+    for (int ch = 0; !rc && ch <= C; ch++) /* channel C: alpha */
+        for (int y = 0; y < fs; y++)
+            for (int x = 0; x < fs; x++) {
+                double want = 0;
+                for (int dy = 0; dy < k; dy++)
+                    for (int dx = 0; dx < k; dx++)
+                        want += hi[ch * hp + (size_t)(k * y + dy) * hs +
+                                   k * x + dx];
+                want /= k * k;
+                size_t at = (size_t)y * fs + x;
+                if (ch < C)
+                    *map = fmax(*map, fabs(c->fmap[(size_t)ch * fs * fs + at] -
+                                           want));
+                else if (c->alpha)
+                    *alpha = fmax(*alpha, fabs(c->alpha[at] - want));
+            }
+    gs_raster_destroy(r);
+    free(hi);
+    free(bg);
+    return rc;
+}
+
 /* The tiny preset (2 training identities, seed 5) trained for `steps`
  * steps; checkpoints go to path and path.opt. NULL on failure (err). */
 static inline gs_model *trained_tiny(const char *path, int steps,

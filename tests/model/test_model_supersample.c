@@ -48,49 +48,12 @@ static void map_means(int k)
     gs_frame fr;
     frame_default(m, &fr);
     CHECK(gs_frame_forward(c, NULL, &fr, GS_STREAM_BOTH, 1, &err) == GS_OK);
-    int fs = c->fs, C = c->C, hs = k * fs;
-    size_t hp = (size_t)hs * hs;
-    float *hi = malloc(sizeof(float) * ((size_t)C + 1) * hp);
-    float *bg = malloc(sizeof(float) * (size_t)C * hp);
-    for (int ch = 0; ch < C; ch++)
-        for (size_t i = 0; i < hp; i++)
-            bg[ch * hp + i] = c->bg[(size_t)ch * fs * fs];
-    gs_camera cam;
-    gs_frame_camera(m, fr.head_t, &cam);
-    cam.fx *= (float)k, cam.fy *= (float)k;
-    cam.cx *= (float)k, cam.cy *= (float)k;
-    cam.width = cam.height = hs;
-    gs_gaussians g = {.n = c->n, .channels = C, .means = c->g_mean,
-                      .log_scales = c->g_scale, .quats = c->g_quat,
-                      .opacity_logits = c->g_opac, .features = c->g_feat};
-    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
-    gs_raster *r = gs_raster_create();
-    CHECK(gs_raster_forward(r, NULL, &cam, &g, bg, &ro, hi, hi + C * hp, NULL,
-                            &err) == GS_OK);
-    double worst = 0, worst_a = 0;
-    for (int ch = 0; ch <= C; ch++)
-        for (int y = 0; y < fs; y++)
-            for (int x = 0; x < fs; x++) {
-                double want = 0;
-                for (int dy = 0; dy < k; dy++)
-                    for (int dx = 0; dx < k; dx++)
-                        want += hi[ch * hp + (size_t)(k * y + dy) * hs +
-                                   k * x + dx];
-                want /= k * k;
-                size_t at = (size_t)y * fs + x;
-                if (ch < C)
-                    worst = fmax(worst, fabs(c->fmap[ch * (size_t)fs * fs +
-                                                     at] - want));
-                else
-                    worst_a = fmax(worst_a, fabs(c->alpha[at] - want));
-            }
+    double worst = 1, worst_a = 1;
+    CHECK(supersample_error(c, fr.head_t, k, &worst, &worst_a) == 0);
     printf("k %d: map off the %d x %d means by %.2e, alpha by %.2e\n", k, k,
            k, worst, worst_a);
     CHECK_MSG(worst < 1e-6 && worst_a < 1e-6, "k %d: %g, %g", k, worst,
               worst_a);
-    gs_raster_destroy(r);
-    free(hi);
-    free(bg);
     gs_model_ctx_destroy(c);
     gs_model_destroy(m);
 }
@@ -242,21 +205,6 @@ static int gradcheck(int k)
     return bad;
 }
 
-static gs_subject subject_of(const gs_model *m)
-{
-    gs_frame fr;
-    frame_default(m, &fr);
-    gs_subject s;
-    memset(&s, 0, sizeof s);
-    s.code_dim = gs_model_code_dim(&m->cfg);
-    memcpy(s.code, fr.code, sizeof(float) * (size_t)s.code_dim);
-    memcpy(s.head_R, fr.head_R, sizeof s.head_R);
-    memcpy(s.head_t, fr.head_t, sizeof s.head_t);
-    for (int i = 0; i < 3; i++)
-        s.colour_gain[i] = 1.0f;
-    return s;
-}
-
 /* File, renders, fit, refusals. */
 static void model_level(gs_pool *pool)
 {
@@ -293,7 +241,7 @@ static void model_level(gs_pool *pool)
     uint8_t *img[4];
     for (int i = 0; i < 4; i++)
         img[i] = malloc(N * bytes);
-    gs_subject s = subject_of(m);
+    gs_subject s = frame_subject(m);
     gs_model_ctx *c = gs_model_ctx_create(m), *c1 = gs_model_ctx_create(m1);
     for (int v = 0; v < N; v++) {
         gs_view view;
