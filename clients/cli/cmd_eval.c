@@ -702,6 +702,7 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     info->face_kept = (int)k;
     info->n_face = mi.n_face;
     info->feature_scale = ev->ro.feature_scale;
+    info->supersample = mi.supersample;
     info->full_render = ev->ro.full;
     info->transfer_head_weight = ev->ro.transfer_head_weight;
     info->transfer_eye_weight = ev->ro.transfer_eye_weight;
@@ -895,6 +896,7 @@ static int run_eval(int argc, char **argv)
     info.fit_lr_code = ev.lr_code;
     info.fit_lr_colour = ev.lr_colour;
     info.feature_scale = 1.0;
+    info.supersample = 1;
     info.ft_iters = ev.fo.iters;
     info.ft_parts = ev.fo.parts;
     info.ft_lr = ev.fo.lr;

@@ -242,16 +242,21 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                "threads\n", info->model, info->image_size, info->pairs,
             info->inputs, info->iters, info->fit_lr_code, info->fit_lr_colour,
             info->threads);
+    /* the incremental path needs the model's point-sampled map */
+    int full = info->feature_scale != 1 || info->supersample > 1;
     if (info->n_face > 0)
         fprintf(f, "- model renders: %d of %d face Gaussians (%.0f %%), "
                    "feature scale %.3g%s, %s\n", info->face_kept,
                 info->n_face, 100.0 * info->face_kept / info->n_face,
                 info->feature_scale,
-                info->feature_scale > 1 ? " (supersampled)" : "",
+                info->feature_scale > 1 ? " (supersampled)"
+                : info->supersample > 1 && info->feature_scale == 1
+                    ? " (the model's own: supersampled)"
+                    : "",
                 info->full_render ? "every render from scratch "
                                     "(--full-render)"
-                : info->feature_scale != 1 ? "every render full"
-                                           : "incremental where possible");
+                : full ? "every render full"
+                       : "incremental where possible");
     if (info->n_face > 0)
         fprintf(f, "- lights at another head pose: %s\n",
                 info->light_on_head ? "kept on the head (--light-on-head)"

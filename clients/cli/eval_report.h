@@ -54,6 +54,7 @@ typedef struct eval_run_info {
      * --full-render): face Gaussians kept of n_face, the scale, 0/1 */
     int face_kept, n_face;
     double feature_scale;
+    int supersample;      /* the model's own (config.supersample) */
     int full_render;
     double transfer_head_weight; /* render option, transfer method */
     double transfer_eye_weight;  /* render option, transfer method */

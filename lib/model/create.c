@@ -221,6 +221,7 @@ void gs_model_get_info(const gs_model *m, gs_model_info *info)
     memset(info, 0, sizeof *info);
     info->image_size = m->cfg.image_size;
     info->feat_size = m->cfg.feat_size;
+    info->supersample = m->cfg.supersample;
     info->code_dim = gs_model_code_dim(&m->cfg);
     info->n_face = m->cfg.n_face;
     info->n_eye = m->cfg.two_stream ? 2 * m->cfg.n_eye_each : 0;

@@ -352,6 +352,26 @@ int main(int argc, char **argv)
                                  "(supersampled), every render full") &&
                   strstr(sum, "non-finite outputs 0"),
               "%s", sum ? sum : "");
+    { /* a supersampled model: its renders at scale 1 are full too */
+        char ssm[300];
+        snprintf(ssm, sizeof ssm, "%s/tiny-ss2.safetensors", dir);
+        gs_model *m = NULL;
+        CHECK(gs_model_load(model, &m, &err) == GS_OK);
+        CHECK(gs_model_set_supersample(m, 2, &err) == GS_OK);
+        CHECK_MSG(gs_model_write(m, ssm, &err) == GS_OK, "%s", err.msg);
+        gs_model_destroy(m);
+        const char *evss[] = {"eval", "--model", ssm, "--pairs", pairs,
+                              "--out", out2, "--method", "model",
+                              "--iters", "4", "--threads", "2", "--estimator",
+                              est, "--reuse-fits", NULL};
+        CHECK_EQ_INT(run(evss), 0);
+        free(sum);
+        sum = ev_slurp(md);
+        CHECK_MSG(sum && strstr(sum, "feature scale 1 (the model's own: "
+                                     "supersampled), every render full") &&
+                      strstr(sum, "non-finite outputs 0"),
+                  "%s", sum ? sum : "");
+    }
     /* Fine-tuned per input on run 2's fits: finite, deterministic, other
      * numbers than without, the input reproduced better. */
     const char *ev6[] = {"eval", "--model", model, "--pairs", pairs,

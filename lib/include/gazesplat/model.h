@@ -56,6 +56,8 @@ void gs_model_destroy(gs_model *m);
 typedef struct gs_model_info {
     int image_size;   /* output images are image_size x image_size RGB */
     int feat_size;    /* rasterized feature map edge */
+    int supersample;  /* k: each feature pixel the mean of k x k samples
+                         (1: point-sampled; docs/model.md) */
     int code_dim;     /* latent code length */
     int n_face, n_eye; /* Gaussians: face stream, eye stream (both eyes) */
     double focal;     /* normalized camera focal length, pixels */
