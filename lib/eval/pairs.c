@@ -1,4 +1,5 @@
-/* The evaluation pairing: held-out identities, input scenes chosen to cover
+/* The evaluation pairing: held-out identities (or, as a diagnostic, the
+ * training ones), input scenes chosen to cover
  * the head-pose bins and the hard cases, targets chosen to cover the
  * gaze-change bins. Everything is a pure function of the seeds. */
 #include <math.h>
@@ -199,9 +200,10 @@ int gs_eval_pairs_make(const gs_eval_pairs_spec *sp, gs_eval_pairs *out,
 {
     out->n = 0;
     out->p = NULL;
-    if (sp->split != GS_SYNTH_TEST && sp->split != GS_SYNTH_VAL)
-        return gs_error_set(err, GS_ERR_ARG, "eval: pairs come from the test or "
-                            "validation identities, never the training ones");
+    if (sp->split != GS_SYNTH_TEST && sp->split != GS_SYNTH_VAL &&
+        sp->split != GS_SYNTH_TRAIN)
+        return gs_error_set(err, GS_ERR_ARG, "eval: pairs come from the test, "
+                            "validation or training identities");
     if (sp->identities < 1 || sp->identities > 100000 || sp->inputs < 1 ||
         sp->inputs > 1000 || sp->targets < 1 || sp->targets > 1000)
         return gs_error_set(err, GS_ERR_ARG, "eval: pairs spec out of range "
@@ -245,10 +247,14 @@ static const char CSV_HEADER[] =
 
 int gs_eval_pairs_write(FILE *f, const gs_eval_pairs *ps, gs_error *err)
 {
-    int val = ps->n > 0 && gs_synth_seed_split(ps->p[0].identity_seed) == GS_SYNTH_VAL;
+    int split = ps->n > 0 ? gs_synth_seed_split(ps->p[0].identity_seed)
+                          : GS_SYNTH_TEST;
     fprintf(f, "# gazesplat eval pairs v1: %s-split identities; scenes from "
                "gs_synth_scene_random(identity_seed, scene_seed, "
-               "gs_eval_ranges); docs/eval.md\n%s\n", val ? "validation" : "test",
+               "gs_eval_ranges); docs/eval.md\n%s\n",
+            split == GS_SYNTH_VAL     ? "validation"
+            : split == GS_SYNTH_TRAIN ? "training"
+                                      : "test",
             CSV_HEADER);
     for (int i = 0; i < ps->n; i++) {
         const gs_eval_pair *p = &ps->p[i];
@@ -313,17 +319,19 @@ static int parse_line(char *line, int *index, gs_eval_pair *p)
 }
 
 /* The stated derived values must be the generator's (to the 3 decimals
- * written), and the identity a held-out one (test or validation). */
+ * written), and the identity the k-th of its split (a held-out one, test
+ * or validation, or a training one for the seen-identity diagnostic). */
 static int check_pair(const gs_eval_pair *got, int line, gs_error *err)
 {
     gs_eval_pair p = *got;
     int split = gs_synth_seed_split(p.identity_seed);
-    if ((split != GS_SYNTH_TEST && split != GS_SYNTH_VAL) ||
+    if ((split != GS_SYNTH_TEST && split != GS_SYNTH_VAL &&
+         split != GS_SYNTH_TRAIN) ||
         p.identity_seed != gs_synth_split_seed((gs_synth_split)split,
                                                (uint64_t)p.identity))
         return gs_error_set(err, GS_ERR_FORMAT, "eval pairs line %d: "
-                            "identity_seed is not test or validation identity "
-                            "%d", line, p.identity);
+                            "identity_seed is not identity %d of a split",
+                            line, p.identity);
     int rc = gs_eval_pair_derive(&p, err);
     if (rc)
         return rc;
@@ -391,7 +399,7 @@ int gs_eval_pairs_read(FILE *f, gs_eval_pairs *out, gs_error *err)
                      gs_synth_seed_split(p.identity_seed) !=
                          gs_synth_seed_split(out->p[0].identity_seed))
                 rc = gs_error_set(err, GS_ERR_FORMAT, "eval pairs line %d: "
-                                  "test and validation identities mixed",
+                                  "identities of two splits mixed",
                                   lineno);
             else if (!(rc = check_pair(&p, lineno, err)) &&
                      append(out, &cap, &p))

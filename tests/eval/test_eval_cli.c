@@ -142,11 +142,20 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK_EQ_INT(run(bad_shift), 2);
     bad_shift[8] = "nan";
     CHECK_EQ_INT(run(bad_shift), 2);
-    /* --split: validation pairs are written and say so; training refused */
+    /* --split: validation and training pairs are written and say so;
+     * another split is refused */
     char vpairs[200];
     snprintf(vpairs, sizeof vpairs, "%s/val_pairs.csv", dir);
-    const char *split_train[] = {"eval", "--make-pairs", vpairs, "--split", "train", NULL};
-    CHECK_EQ_INT(run(split_train), 2);
+    const char *split_bad[] = {"eval", "--make-pairs", vpairs, "--split", "training", NULL};
+    CHECK_EQ_INT(run(split_bad), 2);
+    const char *split_train[] = {"eval", "--make-pairs", vpairs, "--split", "train",
+                                 "--identities", "1", "--inputs", "1", "--targets", "2", NULL};
+    CHECK_EQ_INT(run(split_train), 0);
+    FILE *tf = fopen(vpairs, "r");
+    char thead[160] = "";
+    CHECK(tf && fgets(thead, sizeof thead, tf) && strstr(thead, "training-split"));
+    if (tf)
+        fclose(tf);
     const char *split_val[] = {"eval", "--make-pairs", vpairs, "--split", "validation",
                                "--identities", "1", "--inputs", "1", "--targets", "2", NULL};
     CHECK_EQ_INT(run(split_val), 0);
@@ -273,6 +282,26 @@ int main(int argc, char **argv)
                   strstr(sum, "rates 0.12 (code) and 0.02 (colour)"),
               "summary:\n%s", sum ? sum : "(none)");
     CHECK(sum && !strstr(sum, "nan") && !strstr(sum, "inf"));
+    CHECK(sum && !strstr(sum, "training identities"));
+    /* Pairs of training identities run the same way and the summary says
+     * they are no held-out figure. */
+    char tpairs[256], tout[256], tmd[300];
+    snprintf(tpairs, sizeof tpairs, "%s/train_pairs.csv", dir);
+    snprintf(tout, sizeof tout, "%s/runt", dir);
+    snprintf(tmd, sizeof tmd, "%s/summary.md", tout);
+    const char *mkt[] = {"eval", "--make-pairs", tpairs, "--split", "train",
+                         "--identities", "2", "--inputs", "1", "--targets", "2", NULL};
+    CHECK_EQ_INT(run(mkt), 0);
+    const char *evtr[] = {"eval", "--model", model, "--pairs", tpairs,
+                          "--out", tout, "--method", "model", "--iters", "4",
+                          "--threads", "2", "--estimator", est, NULL};
+    CHECK_EQ_INT(run(evtr), 0);
+    char *tsum = ev_slurp(tmd);
+    CHECK_MSG(tsum && strstr(tsum, "**training identities** (`--split train`): faces "
+                                   "a model trained on 2 or more identities") &&
+                  strstr(tsum, "diverged fits 0, errors 0, non-finite outputs 0"),
+              "%s", tsum ? tsum : "(none)");
+    free(tsum);
     /* The same thread count gives the same numbers (timings aside). */
     const char *ev2[] = {"eval", "--model", model, "--pairs", pairs,
                          "--out", out2, "--method", "model,warp,identity",

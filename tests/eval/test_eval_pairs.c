@@ -147,8 +147,9 @@ int main(void)
     CHECK(memcmp(in.head_R, tg.head_R, sizeof in.head_R) != 0);
 
     /* Validation identities: the same schedule on other identities; a
-     * file of them reads back; a file mixing the splits is refused, and
-     * the training identities cannot be drawn. */
+     * file of them reads back; a file mixing the splits is refused. The
+     * training identities (the seen-identity diagnostic) likewise, and a
+     * split out of range is refused. */
     gs_eval_pairs v;
     sp.split = GS_SYNTH_VAL;
     CHECK_MSG(gs_eval_pairs_make(&sp, &v, &err) == GS_OK, "%s", err.msg);
@@ -177,7 +178,42 @@ int main(void)
     remove(path);
     v.p[v.n - 1] = keep_v;
     gs_eval_pairs_free(&v);
+    gs_eval_pairs t;
     sp.split = GS_SYNTH_TRAIN;
+    CHECK_MSG(gs_eval_pairs_make(&sp, &t, &err) == GS_OK, "%s", err.msg);
+    int train = t.n == a.n;
+    for (int i = 0; train && i < t.n; i++)
+        train = gs_synth_seed_split(t.p[i].identity_seed) == GS_SYNTH_TRAIN &&
+                t.p[i].identity_seed ==
+                    gs_synth_split_seed(GS_SYNTH_TRAIN, (uint64_t)t.p[i].identity) &&
+                t.p[i].input_scene == a.p[i].input_scene;
+    CHECK_MSG(train, "training pairs: the same schedule on training identities");
+    f = fopen(path, "w");
+    CHECK(f && gs_eval_pairs_write(f, &t, &err) == GS_OK);
+    fclose(f);
+    f = fopen(path, "r");
+    char first[200] = "";
+    CHECK(fgets(first, sizeof first, f) && strstr(first, "training-split"));
+    rewind(f);
+    CHECK_MSG(gs_eval_pairs_read(f, &r, &err) == GS_OK && r.n == t.n, "%s", err.msg);
+    fclose(f);
+    int tsame = r.n == t.n;
+    for (int i = 0; tsame && i < r.n; i++)
+        tsame = r.p[i].identity_seed == t.p[i].identity_seed &&
+                r.p[i].target_scene == t.p[i].target_scene;
+    CHECK(tsame);
+    gs_eval_pairs_free(&r);
+    t.p[0] = a.p[0]; /* a test pair first */
+    f = fopen(path, "w");
+    gs_eval_pairs_write(f, &t, &err);
+    fclose(f);
+    f = fopen(path, "r");
+    CHECK(gs_eval_pairs_read(f, &r, &err) == GS_ERR_FORMAT);
+    CHECK_MSG(strstr(err.msg, "mixed") != NULL, "%s", err.msg);
+    fclose(f);
+    remove(path);
+    gs_eval_pairs_free(&t);
+    sp.split = (gs_synth_split)3;
     CHECK(gs_eval_pairs_make(&sp, &r, &err) == GS_ERR_ARG);
     sp.split = GS_SYNTH_TEST;
 
