@@ -293,6 +293,12 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
         r->m[M_READ_YAW] = rd[1];
         r->m[M_READ_FLOOR] = read_floor;
     }
+    /* The truth the readout is held to, for signed errors downstream. */
+    const double deg = 180.0 / 3.14159265358979323846;
+    r->m[M_TRUE_PITCH] = ts->gaze_pitch * deg;
+    r->m[M_TRUE_YAW] = ts->gaze_yaw * deg;
+    r->m[M_THEAD_PITCH] = l->head_norm_pitch * deg;
+    r->m[M_THEAD_YAW] = l->head_norm_yaw * deg;
     /* Every metric that should exist must be finite. */
     for (int k = 0; k < M_COUNT; k++) {
         int eye_metric = k == M_EYE_PSNR || k == M_EYE_SSIM;

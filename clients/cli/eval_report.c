@@ -12,7 +12,8 @@ const char *const eval_metric_names[M_COUNT] = {
     "head_err_label_deg", "est_gt_gaze_err_deg", "est_gt_head_err_deg",
     "psnr", "ssim", "eye_psnr", "eye_ssim", "id_psnr", "id_ssim",
     "read_gaze_err_deg", "read_floor_gaze_deg", "read_pitch_deg",
-    "read_yaw_deg"};
+    "read_yaw_deg", "target_pitch_deg", "target_yaw_deg",
+    "target_head_pitch_deg", "target_head_yaw_deg"};
 
 void eval_csv_header(FILE *f)
 {

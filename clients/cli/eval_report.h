@@ -30,6 +30,10 @@ enum {
                              on the output, and on the GT target */
     M_READ_PITCH, M_READ_YAW, /* --readout: the gaze read on the output
                                  (head frame, degrees) */
+    M_TRUE_PITCH, M_TRUE_YAW, /* the target's true gaze, in the readout's
+                                 frame (head frame, degrees) */
+    M_THEAD_PITCH, M_THEAD_YAW, /* the target's head pose (normalized
+                                   camera, degrees) */
     M_COUNT
 };
 extern const char *const eval_metric_names[M_COUNT];

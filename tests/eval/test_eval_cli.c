@@ -66,7 +66,7 @@ static char *check_csv(const char *path)
         }
         if (rows++ == 0) {
             CHECK_MSG(strncmp(line, "method,pair,", 12) == 0, "%s", line);
-            CHECK_EQ_INT(nc, 30);
+            CHECK_EQ_INT(nc, 34);
         } else {
             methods[0] += strcmp(cols[0], "model") == 0;
             methods[1] += strcmp(cols[0], "warp") == 0;
@@ -74,14 +74,35 @@ static char *check_csv(const char *path)
             bad += strcmp(cols[10], "ok") != 0;
             /* Angles (cols 14-19), PSNR, SSIM, id PSNR, id SSIM (20, 21,
              * 24, 25) always; eye metrics unless the eyes are closed. */
-            for (int k = 14; k < 26 && nc == 30; k++)
+            for (int k = 14; k < 26 && nc == 34; k++)
                 bad += (*cols[k] == 0 || !isfinite(strtod(cols[k], NULL))) &&
                        k != 22 && k != 23;
-            for (int k = 26; k < 30 && nc == 30; k++)
+            for (int k = 26; k < 30 && nc == 34; k++)
                 bad += expect_read ? *cols[k] == 0 ||
                                          !(strtod(cols[k], NULL) >= -180 &&
                                            strtod(cols[k], NULL) <= 180)
                                    : *cols[k] != 0;
+            /* The target's true gaze and head pose (30-33): always, and
+             * within the evaluation's ranges (gaze +-40, head +-50 deg,
+             * head-frame gaze a little wider). */
+            for (int k = 30; k < 34 && nc == 34; k++)
+                bad += *cols[k] == 0 || !(fabs(strtod(cols[k], NULL)) <= 90.0);
+            /* ... and the read error is the angle from the read gaze to
+             * that truth. */
+            if (expect_read && nc == 34 && *cols[26] && *cols[28]) {
+                double v[2][3], pr[2][2] = {{strtod(cols[28], NULL), strtod(cols[29], NULL)},
+                                            {strtod(cols[30], NULL), strtod(cols[31], NULL)}};
+                for (int j = 0; j < 2; j++) {
+                    const double rad = 3.14159265358979323846 / 180;
+                    double pp = pr[j][0] * rad, yy = pr[j][1] * rad;
+                    v[j][0] = -cos(pp) * sin(yy);
+                    v[j][1] = -sin(pp);
+                    v[j][2] = -cos(pp) * cos(yy);
+                }
+                double d = v[0][0] * v[1][0] + v[0][1] * v[1][1] + v[0][2] * v[1][2];
+                double a = acos(d > 1 ? 1 : d < -1 ? -1 : d) * (180 / 3.14159265358979323846);
+                bad += !(fabs(a - strtod(cols[26], NULL)) < 0.01);
+            }
             if (strcmp(cols[0], "model") == 0)
                 bad += !(strtod(cols[11], NULL) > 0) ||
                        !isfinite(strtod(cols[12], NULL));
