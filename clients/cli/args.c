@@ -167,7 +167,7 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
     }
     if (parts && gs_finetune_parts_parse(parts, &fo->parts, NULL))
         return cli_usage_error(cmd, "--finetune-parts: want a list of face, eye, renderer, "
-                               "mlp, geometry; got '%s'", parts);
+                               "mlp, geometry, face-geometry; got '%s'", parts);
     if (lr && cli_parse_rate(lr, 1.0, &fo->lr))
         return cli_usage_error(cmd, "--finetune-lr: want a rate in (0, 1]");
     if (plateau) {

@@ -44,7 +44,7 @@ const cli_command cli_client_command = {
     "                       of the model on the image for N steps; the subject\n"
     "                       renders with it (the server's max_finetune_steps)\n"
     "  --finetune-parts L   with --finetune: face, eye, renderer, mlp, geometry,\n"
-    "                       comma-separated (default face,geometry)\n"
+    "                       face-geometry, comma-separated (default face,geometry)\n"
     "  --finetune-outline PX  with --finetune, 0..8: the colours learn nothing within\n"
     "                       PX feature pixels of the model's outline (2 with\n"
     "                       --finetune-mirror 0: fewer background-coloured patches)\n"

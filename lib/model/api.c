@@ -652,7 +652,8 @@ static const struct {
     const char *name;
     unsigned bit;
 } ft_names[] = {{"face", GS_FT_FACE}, {"eye", GS_FT_EYE}, {"renderer", GS_FT_RENDERER},
-                {"mlp", GS_FT_MLP}, {"geometry", GS_FT_GEOMETRY}};
+                {"mlp", GS_FT_MLP}, {"geometry", GS_FT_GEOMETRY},
+                {"face-geometry", GS_FT_FACE_GEOMETRY}};
 #define N_FT_NAMES (sizeof ft_names / sizeof ft_names[0])
 
 int gs_finetune_parts_parse(const char *s, unsigned *parts, gs_error *err)
@@ -671,7 +672,7 @@ int gs_finetune_parts_parse(const char *s, unsigned *parts, gs_error *err)
         if (k == N_FT_NAMES)
             return gs_error_set(err, GS_ERR_ARG,
                                 "finetune parts: '%.*s' in '%.64s' is none of face, eye, renderer, "
-                                "mlp, geometry", (int)(n < 32 ? n : 32), p, s);
+                                "mlp, geometry, face-geometry", (int)(n < 32 ? n : 32), p, s);
         bits |= ft_names[k].bit;
         p += n;
         if (*p == '\0')
@@ -711,7 +712,11 @@ unsigned gs_model_tensor_part(const gs_ptensor *t)
         return GS_FT_RENDERER;
     if (t->group == GS_PG_MLP)
         return GS_FT_MLP;
-    return GS_FT_GEOMETRY; /* xyz, scales, rotations, opacities */
+    /* xyz, scales, rotations, opacities; the face stream's (lids included)
+     * belong to face-geometry too */
+    if (!strncmp(n, "face.", 5))
+        return GS_FT_GEOMETRY | GS_FT_FACE_GEOMETRY;
+    return GS_FT_GEOMETRY;
 }
 
 /* Learning-rate multipliers of the training run (train.c). */
@@ -853,7 +858,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     unsigned parts = o.parts ? o.parts : GS_FT_DEFAULT;
     if (!isfinite(o.lr) || o.lr > 1.0 || iters > 100000 || !isfinite(o.plateau_rel) ||
         isnan(o.time_budget_s) ||
-        (parts & ~0x1fu))
+        (parts & ~GS_FT_ALL_PARTS))
         return gs_error_set(err, GS_ERR_ARG,
                             "finetune: lr %g (want <= 1), iterations %d "
                             "(<= 100000) or parts 0x%x out of range",

@@ -18,7 +18,7 @@
 #define TUNED_MAGIC 0x54465347u /* "GSFT" */
 #define TUNED_VERSION 1u
 #define TUNED_HEAD 24
-#define TUNED_ALL_PARTS 0x1fu
+#define TUNED_ALL_PARTS GS_FT_ALL_PARTS
 
 static inline uint64_t rotl(uint64_t x, int r)
 {

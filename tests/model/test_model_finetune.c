@@ -215,6 +215,21 @@ int main(void)
             CHECK_MSG(tensor_same(m, ft, i), "%s moved", m->t[i].name);
     }
 
+    /* The face with its geometry alone: the face stream's colours and
+     * geometry move, the eyeballs' geometry and everything else stay. */
+    CHECK(gs_model_copy_params(ft, m, &err) == GS_OK);
+    o.parts = GS_FT_FACE | GS_FT_FACE_GEOMETRY;
+    o.iters = 3;
+    CHECK(gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &o, &rep, &err) == GS_OK);
+    for (int i = 0; i < m->ntensors; i++) {
+        const char *tn = m->t[i].name;
+        int moves = is_tuned_default(tn) && strncmp(tn, "eye.", 4) != 0;
+        if (!moves)
+            CHECK_MSG(tensor_same(m, ft, i), "%s moved", tn);
+        else if (strcmp(tn, "face.quat") != 0) /* flat discs may keep theirs */
+            CHECK_MSG(!tensor_same(m, ft, i), "%s did not move", tn);
+    }
+
     /* A non-finite loss: error, parameters as before the call. */
     CHECK(gs_model_copy_params(ft, m, &err) == GS_OK);
     int ri = -1;

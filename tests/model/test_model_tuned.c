@@ -97,11 +97,12 @@ int main(void)
     memcpy(enc + 8, &bad_dim, 4);
     CHECK(gs_subject_encoded_len(enc, elen) == 0);
 
-    /* Subject 0: the face; subject 1: the face and the eyes. */
+    /* Subject 0: the face; subject 1: the face with its geometry (not the
+     * eyeballs') and the eyes' colours. */
     gs_model *ft[2] = {NULL, NULL};
     uint8_t *blk[2] = {NULL, NULL};
     size_t len[2] = {0, 0};
-    unsigned parts[2] = {GS_FT_FACE, GS_FT_FACE | GS_FT_EYE};
+    unsigned parts[2] = {GS_FT_FACE, GS_FT_FACE | GS_FT_FACE_GEOMETRY | GS_FT_EYE};
     for (int k = 0; k < 2; k++) {
         CHECK(gs_model_clone(m, &ft[k], &err) == GS_OK);
         CHECK(ft[k]->id == m->id);
@@ -117,9 +118,13 @@ int main(void)
         CHECK(info.tuned_parts == parts[k] && info.param_id == m->id);
         CHECK_MSG(gs_model_tuned_encode(ft[k], &blk[k], &len[k], &err) == GS_OK, "%s", err.msg);
         size_t want = 32;
+        int eye_geom = 0;
         for (int i = 0; i < m->ntensors; i++)
-            if (gs_model_tensor_part(&m->t[i]) & parts[k])
+            if (gs_model_tensor_part(&m->t[i]) & parts[k]) {
                 want += 8 + m->t[i].count * sizeof(float);
+                eye_geom += !strcmp(m->t[i].name, "eye.xyz");
+            }
+        CHECK(!eye_geom);
         CHECK_EQ_INT(len[k], want);
         printf("subject %d: block of %zu bytes\n", k, len[k]);
     }
@@ -244,6 +249,9 @@ int main(void)
     CHECK(gs_finetune_parts_parse("geometry,renderer,mlp", &bits, &err) == GS_OK && bits == 28u);
     CHECK(!strcmp(gs_finetune_parts_name(0x1f, names, sizeof names),
                   "face,eye,renderer,mlp,geometry"));
+    CHECK(gs_finetune_parts_parse("face,face-geometry", &bits, &err) == GS_OK && bits == 33u);
+    CHECK(!strcmp(gs_finetune_parts_name(GS_FT_ALL_PARTS, names, sizeof names),
+                  "face,eye,renderer,mlp,geometry,face-geometry"));
     CHECK(!strcmp(gs_finetune_parts_name(0, names, sizeof names), ""));
     const char *badp[] = {"", "face,", ",face", "nose", "face,,eye", "Face"};
     for (size_t i = 0; i < sizeof badp / sizeof badp[0]; i++) {

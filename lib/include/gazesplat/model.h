@@ -281,9 +281,12 @@ enum {
     GS_FT_EYE = 2,      /* eye Gaussians' colour and features */
     GS_FT_RENDERER = 4, /* the neural renderer's weights */
     GS_FT_MLP = 8,      /* the deformation MLPs and the eyeball shift */
-    GS_FT_GEOMETRY = 16 /* Gaussian positions, scales, rotations, opacities
-                           (never the lids' share of the pitch) */
+    GS_FT_GEOMETRY = 16, /* Gaussian positions, scales, rotations, opacities
+                            (never the lids' share of the pitch) */
+    GS_FT_FACE_GEOMETRY = 32 /* the same for the face stream (and lids)
+                                alone: the eyeballs keep the model's shape */
 };
+#define GS_FT_ALL_PARTS 0x3fu
 /* The face Gaussians' colours and features and the Gaussians' geometry:
  * better than the face alone on every image and gaze figure, on the
  * validation pairs at 15 and 100 steps and on the test pairs
@@ -318,7 +321,7 @@ typedef struct gs_finetune_options {
 void gs_finetune_options_default(gs_finetune_options *o);
 
 /* GS_FT_* bits from names, comma-separated: face, eye, renderer, mlp,
- * geometry ("face,eye"). GS_ERR_ARG for an unknown or empty name. */
+ * geometry, face-geometry ("face,eye"). GS_ERR_ARG for an unknown or empty name. */
 int gs_finetune_parts_parse(const char *s, unsigned *parts, gs_error *err);
 /* The names of GS_FT_* bits, comma-separated, into buf; returns buf. */
 const char *gs_finetune_parts_name(unsigned parts, char *buf, size_t cap);
