@@ -17,6 +17,7 @@
 #include "gazesplat/image_io.h"
 #include "gazesplat/model.h"
 #include "gazesplat/nn.h"
+#include "gazesplat/train.h"
 
 static int run_eval(int argc, char **argv);
 
@@ -53,7 +54,11 @@ const cli_command cli_eval_command = {
     "                    0..8 (default 4; 0: none)\n"
     "  --method LIST     comma-separated: model, transfer (the model with\n"
     "                    detail transfer from the input), warp (2D eye\n"
-    "                    warping), identity (output = input); default model\n"
+    "                    warping), identity (output = input), oracle\n"
+    "                    (training pairs only: the model with the\n"
+    "                    identity's learned code and the target's true\n"
+    "                    expression and lights, no fit: what it can draw);\n"
+    "                    default model\n"
     "  --limit-inputs N  only the first N inputs of the file\n"
     "  --iters N         fit iteration cap (default 200)\n"
     "  --fit-lr CODE[,COLOUR]  the fit's Adam rates for the latent code and\n"
@@ -329,7 +334,8 @@ static eval_row *new_row(evaluator *ev, int method, int pair)
 /* Produces the method's output for one target into ev->out. */
 static int produce(evaluator *ev, int method, const gs_subject *sub,
                    const gs_synth_sample *in, const gs_synth_sample *gt,
-                   const gs_synth_scene *tscene, double *ms, gs_error *err)
+                   const gs_synth_scene *tscene, int identity, double *ms,
+                   gs_error *err)
 {
     size_t st = 3 * (size_t)ev->S;
     double t0 = cli_now_s();
@@ -345,6 +351,16 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
     memcpy(v.head_t, gt->labels.head_t, sizeof v.head_t);
     if (method == EVAL_MODEL) {
         rc = gs_model_render(ev->rctx, ev->pool, sub, &v, ev->out, st, err);
+    } else if (method == EVAL_ORACLE) {
+        /* the shared model (never the fine-tuned or pruned copy) at the
+         * training subject's own view: what training drew */
+        gs_subject os;
+        rc = gs_model_training_subject(ev->m, identity, tscene, &gt->labels,
+                                       &os, err);
+        if (!rc) {
+            gs_view own = {.gaze_pitch = os.gaze_pitch, .gaze_yaw = os.gaze_yaw};
+            rc = gs_model_render(ev->c, ev->pool, &os, &own, ev->out, st, err);
+        }
     } else if (method == EVAL_TRANSFER) {
         rc = gs_model_render_transfer(ev->rctx, ev->pool, sub, in->rgb,
                                       in->stride, &v, ev->out, st, err);
@@ -477,7 +493,7 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
         }
     }
     float fit_psnr = sub.fit_psnr;
-    if (fit_status == EVAL_ROW_OK && ev->fo.iters > 0 && ev->nmethods > 0) {
+    if (fit_status == EVAL_ROW_OK && ev->fo.iters > 0 && fits) {
         double ft_s = 0;
         rc = finetune_input(ev, &in, &sub, &ft_s, &fit_psnr, &err);
         if (rc) {
@@ -519,8 +535,8 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
                 r->status = EVAL_ROW_ERROR;
             if (r->status == EVAL_ROW_OK) {
                 gs_error e2 = {0, ""};
-                if (produce(ev, mth, &sub, &in, &gt, &tscene, &r->render_ms,
-                            &e2)) {
+                if (produce(ev, mth, &sub, &in, &gt, &tscene,
+                            ps->p[i].identity, &r->render_ms, &e2)) {
                     r->status = EVAL_ROW_ERROR;
                     fprintf(stderr, "gazesplat eval: pair %d %s: %s\n", i,
                             eval_method_names[mth], e2.msg);
@@ -756,6 +772,22 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
         ev->focal = mi.focal;
         ev->d_n = mi.distance_mm;
         info->image_size = mi.image_size;
+        int oracle = 0, top = -1;
+        for (int k = 0; k < ev->nmethods; k++)
+            oracle |= ev->methods[k] == EVAL_ORACLE;
+        for (int i = 0; oracle && i < ps.n; i++)
+            top = ps.p[i].identity > top ? ps.p[i].identity : top;
+        if (oracle && ps.n > 0 &&
+            gs_synth_seed_split(ps.p[0].identity_seed) != GS_SYNTH_TRAIN)
+            rc = cli_usage_error(cmd, "--method oracle: the pairs must be of "
+                                      "training identities (--make-pairs FILE "
+                                      "--split train)");
+        else if (oracle && top >= mi.n_train_ids)
+            rc = cli_usage_error(cmd, "--method oracle: the pairs reach training "
+                                      "identity %d; %s holds codes for %d",
+                                 top, o[O_MODEL].value, mi.n_train_ids);
+    }
+    if (!rc) {
         ev->c = gs_model_ctx_create(ev->m);
         ev->pool = gs_pool_create((int)threads);
         if (!ev->c || !ev->pool)

@@ -6,7 +6,7 @@
 #include "eval_report.h"
 
 const char *const eval_method_names[EVAL_METHODS] = {
-    "model", "warp", "identity", "transfer"};
+    "model", "warp", "identity", "transfer", "oracle"};
 const char *const eval_metric_names[M_COUNT] = {
     "gaze_err_deg", "gaze_err_label_deg", "head_err_deg",
     "head_err_label_deg", "est_gt_gaze_err_deg", "est_gt_head_err_deg",
@@ -289,14 +289,8 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
     else if (has_transfer)
         fprintf(f, "- transfer eyeball warp: off (--transfer-eye-warp 0)\n");
     if (info->ft_iters > 0) {
-        static const char *pn[] = {"face", "eye", "renderer", "mlp", "geometry"};
-        char parts[64] = "";
-        for (int k = 0; k < 5; k++)
-            if (info->ft_parts & (1u << k)) {
-                if (parts[0])
-                    strcat(parts, ",");
-                strcat(parts, pn[k]);
-            }
+        char parts[96];
+        gs_finetune_parts_name(info->ft_parts, parts, sizeof parts);
         fprintf(f, "- fine-tuned per input (--finetune %d, parts %s, rate %g, "
                    "eye weight %g, outline %d px, mirror %s): %d inputs, mean "
                    "%.2f s each (in the fit times), input PSNR %.2f -> %.2f dB "
@@ -305,6 +299,14 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                 info->ft_mirror ? "on" : "off", info->ft_n, info->ft_s,
                 info->ft_psnr_first, info->ft_psnr_best);
     }
+    int has_oracle = 0;
+    for (int k = 0; k < nmethods; k++)
+        has_oracle |= methods[k] == EVAL_ORACLE;
+    if (has_oracle)
+        fputs("- oracle: the shared model with each training identity's "
+              "learned code and the target's true expression and lights, "
+              "at the target's view; no fit, no fine-tuning, no colour "
+              "transform (what training drew)\n", f);
     if (info->fits_reused)
         fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
                    "their fit times are that run's\n", info->fits_reused);

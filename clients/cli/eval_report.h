@@ -11,7 +11,10 @@ enum {
     EVAL_WARP = 1,
     EVAL_IDENTITY = 2,
     EVAL_TRANSFER = 3, /* the model with detail transfer */
-    EVAL_METHODS = 4
+    EVAL_ORACLE = 4,   /* training pairs: the model with the identity's
+                          learned code, the target's true expression and
+                          lights, no fit (gs_model_training_subject) */
+    EVAL_METHODS = 5
 };
 /* Methods that fit the model to the input. */
 static inline int eval_method_fits(int m)

@@ -223,6 +223,7 @@ void gs_model_get_info(const gs_model *m, gs_model_info *info)
     info->feat_size = m->cfg.feat_size;
     info->supersample = m->cfg.supersample;
     info->code_dim = gs_model_code_dim(&m->cfg);
+    info->n_train_ids = m->p.codes ? m->cfg.n_train_ids : 0;
     info->n_face = m->cfg.n_face;
     info->n_eye = m->cfg.two_stream ? 2 * m->cfg.n_eye_each : 0;
     info->focal = m->cfg.focal;

@@ -188,6 +188,40 @@ static int identity_index(const trainer *t, uint64_t seed)
     return -1;
 }
 
+int gs_model_training_subject(const gs_model *m, int k,
+                              const gs_synth_scene *scene,
+                              const gs_synth_labels *labels, gs_subject *s,
+                              gs_error *err)
+{
+    if (!m || !scene || !labels || !s)
+        return gs_error_set(err, GS_ERR_ARG, "training subject: NULL argument");
+    const gs_model_config *mc = &m->cfg;
+    if (!m->p.codes || mc->n_train_ids < 1)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "training subject: the model has no training codes");
+    if (k < 0 || k >= mc->n_train_ids)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "training subject: identity %d of %d", k,
+                            mc->n_train_ids);
+    if (labels->identity.seed != gs_synth_split_seed(GS_SYNTH_TRAIN, (uint64_t)k))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "training subject: the labels are not of training "
+                            "identity %d", k);
+    memset(s, 0, sizeof *s);
+    s->code_dim = gs_model_code_dim(mc);
+    memcpy(s->code, m->p.codes + (size_t)k * mc->id_dim,
+           mc->id_dim * sizeof(float));
+    gs_synth_expression_to_array(&labels->expr, s->code + mc->id_dim);
+    gs_model_light_code(scene, s->code + mc->id_dim + GS_MODEL_EXPR_DIM);
+    memcpy(s->head_R, labels->head_R, sizeof s->head_R);
+    memcpy(s->head_t, labels->head_t, sizeof s->head_t);
+    s->gaze_pitch = labels->gaze_head_pitch;
+    s->gaze_yaw = labels->gaze_head_yaw;
+    for (int c = 0; c < 3; c++)
+        s->colour_gain[c] = 1.0f;
+    return GS_OK;
+}
+
 /* Builds the frame and the targets of sample `index`. */
 static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
                    gs_error *err)
@@ -205,19 +239,20 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
         return gs_error_set(err, GS_ERR_STATE, "train: unknown identity");
     *ident = k;
     const gs_model_config *mc = &t->m->cfg;
+    gs_subject sub; /* the training subject, as a render at its view sees it */
+    rc = gs_model_training_subject(t->m, k, &scene, lab, &sub, err);
+    if (rc)
+        return rc;
     memset(fr, 0, sizeof *fr);
-    memcpy(fr->code, t->m->p.codes + (size_t)k * mc->id_dim,
-           mc->id_dim * sizeof(float));
-    gs_synth_expression_to_array(&lab->expr, fr->code + mc->id_dim);
-    float *light = fr->code + mc->id_dim + GS_MODEL_EXPR_DIM;
-    gs_model_light_code(&scene, light);
+    memcpy(fr->code, sub.code, sizeof(float) * (size_t)sub.code_dim);
+    const float *light = fr->code + mc->id_dim + GS_MODEL_EXPR_DIM;
     for (int i = 0; i < GS_MODEL_LIGHT_DIM; i++)
         t->light_sum[i] += light[i];
     t->light_n++;
-    memcpy(fr->head_R, lab->head_R, sizeof fr->head_R);
-    memcpy(fr->head_t, lab->head_t, sizeof fr->head_t);
-    fr->gaze[0] = lab->gaze_head_pitch;
-    fr->gaze[1] = lab->gaze_head_yaw;
+    memcpy(fr->head_R, sub.head_R, sizeof fr->head_R);
+    memcpy(fr->head_t, sub.head_t, sizeof fr->head_t);
+    fr->gaze[0] = sub.gaze_pitch;
+    fr->gaze[1] = sub.gaze_yaw;
     t->gaze_label[0] = (float)lab->gaze_norm_pitch;
     t->gaze_label[1] = (float)lab->gaze_norm_yaw;
     /* Targets: white outside the head; eyes weighted 5x in the L1. */

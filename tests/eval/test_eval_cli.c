@@ -314,15 +314,27 @@ int main(int argc, char **argv)
                          "--identities", "2", "--inputs", "1", "--targets", "2", NULL};
     CHECK_EQ_INT(run(mkt), 0);
     const char *evtr[] = {"eval", "--model", model, "--pairs", tpairs,
-                          "--out", tout, "--method", "model", "--iters", "4",
+                          "--out", tout, "--method", "model,oracle", "--iters", "4",
                           "--threads", "2", "--estimator", est, NULL};
     CHECK_EQ_INT(run(evtr), 0);
     char *tsum = ev_slurp(tmd);
     CHECK_MSG(tsum && strstr(tsum, "**training identities** (`--split train`): faces "
                                    "a model trained on 2 or more identities") &&
-                  strstr(tsum, "diverged fits 0, errors 0, non-finite outputs 0"),
+                  strstr(tsum, "diverged fits 0, errors 0, non-finite outputs 0") &&
+                  strstr(tsum, "| oracle | 4 |") &&
+                  strstr(tsum, "- oracle: the shared model with each training identity's"),
               "%s", tsum ? tsum : "(none)");
     free(tsum);
+    /* The oracle needs training pairs, of identities the model has codes
+     * for (the tiny model: 2). */
+    const char *or_test[] = {"eval", "--model", model, "--pairs", pairs,
+                             "--out", tout, "--method", "oracle", NULL};
+    CHECK_EQ_INT(run(or_test), 2);
+    const char *mkt3[] = {"eval", "--make-pairs", tpairs, "--split", "train",
+                          "--identities", "3", "--inputs", "1", "--targets", "1", NULL};
+    CHECK_EQ_INT(run(mkt3), 0);
+    or_test[4] = tpairs;
+    CHECK_EQ_INT(run(or_test), 2);
     /* The same thread count gives the same numbers (timings aside). */
     const char *ev2[] = {"eval", "--model", model, "--pairs", pairs,
                          "--out", out2, "--method", "model,warp,identity",

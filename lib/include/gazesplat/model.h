@@ -59,6 +59,7 @@ typedef struct gs_model_info {
     int supersample;  /* k: each feature pixel the mean of k x k samples
                          (1: point-sampled; docs/model.md) */
     int code_dim;     /* latent code length */
+    int n_train_ids;  /* training identities with a learned code (0: none) */
     int n_face, n_eye; /* Gaussians: face stream, eye stream (both eyes) */
     double focal;     /* normalized camera focal length, pixels */
     double distance_mm; /* normalized camera distance d_n */

@@ -7,6 +7,7 @@
 #include "gazesplat/error.h"
 #include "gazesplat/model.h"
 #include "gazesplat/pool.h"
+#include "gazesplat/synth.h"
 
 #ifdef __cplusplus
 extern "C" {
@@ -62,6 +63,19 @@ int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
 int gs_model_has_lids(const gs_model *m);
 /* Writes a model file atomically (safetensors, docs/model.md). */
 int gs_model_write(const gs_model *m, const char *path, gs_error *err);
+
+/* The subject a training step sees (`gazesplat train`): training identity
+ * k (the k-th of GS_SYNTH_TRAIN, which labels->identity must be) with its
+ * learned code, the scene's expression and lights, and the labels' head
+ * pose (in the image's camera) and head-frame gaze; colour gain 1, bias 0;
+ * fit_psnr and fit_ssim 0. gs_model_render with a view at the subject's
+ * own pose then draws what training drew: what the model can do for a face
+ * it has learned, no fit in between (`gazesplat eval --method oracle`).
+ * GS_ERR_ARG: no training codes, k out of range, another identity. */
+int gs_model_training_subject(const gs_model *m, int k,
+                              const gs_synth_scene *scene,
+                              const gs_synth_labels *labels, gs_subject *s,
+                              gs_error *err);
 
 typedef void (*gs_train_log_fn)(void *ctx, const char *fmt, ...)
     __attribute__((format(printf, 2, 3)));

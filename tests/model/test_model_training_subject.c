@@ -1,0 +1,129 @@
+/* gs_model_training_subject: the subject a training step sees (the oracle
+ * of `gazesplat eval --method oracle`). Checked on a tiny model with two
+ * training identities and samples of the training generator: the code is
+ * the identity's learned code, then the sample's expression, then its
+ * lights in the head frame; head pose and gaze are the labels'; colour
+ * gain 1, bias 0. The code reaches the render (the two identities in one
+ * scene render differently; one of them twice, the same bytes). Refused:
+ * another identity's labels, k out of range, NULL arguments, a model
+ * without training codes. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gazesplat/synth.h"
+#include "gazesplat/train.h"
+#include "gs_test.h"
+#include "model_test_util.h"
+
+int main(void)
+{
+    gs_error err = {0, ""};
+    gs_model_spec spec;
+    gs_model_spec_default(&spec);
+    spec.preset = "tiny";
+    spec.train_identities = 2;
+    gs_model *m = NULL;
+    CHECK_MSG(gs_model_new(&spec, 5, &m, &err) == GS_OK, "%s", err.msg);
+    if (!m)
+        GS_TEST_END();
+    gs_model_info mi;
+    gs_model_get_info(m, &mi);
+    CHECK_EQ_INT(mi.n_train_ids, 2);
+    const int id = m->cfg.id_dim, D = mi.code_dim, S = mi.image_size;
+
+    /* The training generator's samples until both identities showed. */
+    gs_synth_gen_config g;
+    gs_synth_gen_config_default(&g);
+    g.split = GS_SYNTH_TRAIN;
+    g.identities = 2;
+    g.size = S;
+    g.rig = GS_SYNTH_RIG_NORMALIZED;
+    gs_synth_scene sc[2];
+    gs_synth_sample smp[2];
+    int have[2] = {0, 0};
+    for (int k = 0; k < 2; k++)
+        CHECK(gs_synth_sample_alloc(&smp[k], S, S, &err) == GS_OK);
+    for (uint64_t i = 0; i < 64 && !(have[0] && have[1]); i++) {
+        gs_synth_scene s;
+        gs_synth_camera cam;
+        CHECK(gs_synth_gen_scene(&g, i, &s, &cam, &err) == GS_OK);
+        int k = s.identity.seed == gs_synth_split_seed(GS_SYNTH_TRAIN, 1);
+        if (have[k])
+            continue;
+        sc[k] = s;
+        CHECK_MSG(gs_synth_gen_sample(&g, i, NULL, &smp[k], &err) == GS_OK, "%s", err.msg);
+        have[k] = 1;
+    }
+    CHECK(have[0] && have[1]);
+
+    for (int k = 0; k < 2; k++) {
+        gs_subject s;
+        const gs_synth_labels *l = &smp[k].labels;
+        CHECK_MSG(gs_model_training_subject(m, k, &sc[k], l, &s, &err) == GS_OK, "%s",
+                  err.msg);
+        CHECK_EQ_INT(s.code_dim, D);
+        CHECK(!memcmp(s.code, m->p.codes + (size_t)k * id, id * sizeof(float)));
+        float ex[GS_MODEL_EXPR_DIM], li[GS_MODEL_LIGHT_DIM];
+        gs_synth_expression_to_array(&l->expr, ex);
+        gs_model_light_code(&sc[k], li);
+        CHECK(!memcmp(s.code + id, ex, sizeof ex));
+        CHECK(!memcmp(s.code + id + GS_MODEL_EXPR_DIM, li, sizeof li));
+        float lsum = 0;
+        for (int j = 0; j < GS_MODEL_LIGHT_DIM; j++)
+            lsum += fabsf(li[j]);
+        CHECK(lsum > 0); /* a lit scene: the light part is not left at 0 */
+        CHECK(!memcmp(s.head_R, l->head_R, sizeof s.head_R));
+        CHECK(!memcmp(s.head_t, l->head_t, sizeof s.head_t));
+        CHECK(s.gaze_pitch == l->gaze_head_pitch && s.gaze_yaw == l->gaze_head_yaw);
+        for (int c = 0; c < 3; c++)
+            CHECK(s.colour_gain[c] == 1.0f && s.colour_bias[c] == 0.0f);
+        /* another identity's labels, k out of range, NULLs */
+        gs_subject t;
+        CHECK(gs_model_training_subject(m, 1 - k, &sc[k], l, &t, &err) == GS_ERR_ARG);
+        CHECK(strstr(err.msg, "identity") != NULL);
+        CHECK(gs_model_training_subject(m, 2, &sc[k], l, &t, &err) == GS_ERR_ARG);
+        CHECK(gs_model_training_subject(m, -1, &sc[k], l, &t, &err) == GS_ERR_ARG);
+        CHECK(gs_model_training_subject(NULL, k, &sc[k], l, &t, &err) == GS_ERR_ARG);
+        CHECK(gs_model_training_subject(m, k, NULL, l, &t, &err) == GS_ERR_ARG);
+        CHECK(gs_model_training_subject(m, k, &sc[k], NULL, &t, &err) == GS_ERR_ARG);
+        CHECK(gs_model_training_subject(m, k, &sc[k], l, NULL, &err) == GS_ERR_ARG);
+    }
+
+    /* The code reaches the render: identity 1's code in identity 0's scene
+     * draws another image; identity 0's, twice, the same bytes. */
+    gs_subject a, b;
+    CHECK(gs_model_training_subject(m, 0, &sc[0], &smp[0].labels, &a, &err) == GS_OK);
+    b = a;
+    memcpy(b.code, m->p.codes + id, id * sizeof(float));
+    gs_view own = {.gaze_pitch = a.gaze_pitch, .gaze_yaw = a.gaze_yaw};
+    size_t isz = 3 * (size_t)S * S;
+    uint8_t *ia = malloc(isz), *ib = malloc(isz), *ic = malloc(isz);
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    CHECK(c && ia && ib && ic);
+    CHECK(gs_model_render(c, NULL, &a, &own, ia, 3 * (size_t)S, &err) == GS_OK);
+    CHECK(gs_model_render(c, NULL, &b, &own, ib, 3 * (size_t)S, &err) == GS_OK);
+    gs_model_ctx_reset(c);
+    CHECK(gs_model_render(c, NULL, &a, &own, ic, 3 * (size_t)S, &err) == GS_OK);
+    CHECK(memcmp(ia, ib, isz) != 0);
+    CHECK(!memcmp(ia, ic, isz));
+    gs_model_ctx_destroy(c);
+
+    /* A model without training codes (as one written without them loads):
+     * refused, and its info says 0. */
+    m->cfg.n_train_ids = 0;
+    gs_model_get_info(m, &mi);
+    CHECK_EQ_INT(mi.n_train_ids, 0);
+    CHECK(gs_model_training_subject(m, 0, &sc[0], &smp[0].labels, &a, &err) == GS_ERR_ARG);
+    CHECK(strstr(err.msg, "no training codes") != NULL);
+    m->cfg.n_train_ids = 2;
+
+    free(ia);
+    free(ib);
+    free(ic);
+    for (int k = 0; k < 2; k++)
+        gs_synth_sample_free(&smp[k]);
+    gs_model_destroy(m);
+    GS_TEST_END();
+}
