@@ -47,6 +47,8 @@ const cli_command cli_train_command = {
     "  --gaze-loss FILE    add the gaze loss: angular error of this gaze\n"
     "                      estimator (gazesplat train-estimator) on the render\n"
     "  --gaze-weight X     its weight (0.1, the paper's)\n"
+    "  --eye-weight W      weight of the eye pixels in the image loss and of\n"
+    "                      the eye stream's own feature loss (1..100, 5)\n"
     "  --eye-cover-loss X  add X times the L1 of the eye stream's coverage\n"
     "                      of the feature map against the visible eyeballs\n"
     "                      (where the lids are; docs/model.md); 0 (default)\n"
@@ -71,7 +73,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
-       O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_N };
+       O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -85,7 +87,7 @@ static int run_train(int argc, char **argv)
         {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL},
         {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL},
         {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
-        {"--supersample", 1, NULL}};
+        {"--supersample", 1, NULL}, {"--eye-weight", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -183,6 +185,13 @@ static int run_train(int argc, char **argv)
         t.eye_cover_weight = strtod(o[O_COVER].value, &end);
         if (!end || *end || !(t.eye_cover_weight >= 0 && t.eye_cover_weight <= 1000))
             return cli_usage_error(cmd, "--eye-cover-loss: want 0..1000");
+    }
+    if (o[O_EYEW].value) {
+        char *end = NULL;
+        t.eye_weight = strtod(o[O_EYEW].value, &end);
+        if (!end || end == o[O_EYEW].value || *end ||
+            !(t.eye_weight >= 1 && t.eye_weight <= 100))
+            return cli_usage_error(cmd, "--eye-weight: want 1..100");
     }
     if (o[O_SS].value) {
         char *end = NULL;

@@ -72,6 +72,7 @@ typedef struct trainer {
     float *emask, *dfmap_eye;  /* eye-only render: eye area [fs^2], gradient */
     float *dcover;             /* the eye coverage's gradient [fs^2] */
     double cover_w;            /* its weight (eye_cover_weight) */
+    float eye_w;               /* eye pixels' and eye map's weight (5) */
     float gaze_label[2];       /* normalized-camera gaze of the sample */
     gs_gaze_net *gnet;         /* the loss estimator, or NULL */
     double gaze_w, gaze_rad;   /* its weight; the last angle */
@@ -153,6 +154,7 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     t->emask = malloc(fs * fs * sizeof(float));
     t->dcover = calloc(fs * fs, sizeof(float));
     t->cover_w = o->eye_cover_weight;
+    t->eye_w = o->eye_weight > 0 ? (float)o->eye_weight : 5.0f;
     t->ssim = malloc(t->ssim_len * sizeof(float));
     if (!t->target || !t->wl1 || !t->dimg || !t->ftarget || !t->dfmap ||
         !t->ssim || !t->dfmap_face || !t->fmask || !t->dfmap_eye || !t->emask ||
@@ -271,7 +273,7 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
                                         3 * x + ch] / 255.0f;
                 t->target[ch * plane + i] = hm * v + (1 - hm);
             }
-            t->wl1[i] = 1.0f + 4.0f * (float)((le[i] | re[i]) != 0);
+            t->wl1[i] = 1.0f + (t->eye_w - 1.0f) * (float)((le[i] | re[i]) != 0);
         }
     int f = S / fs;
     /* face-only mask: feature pixels with no eye pixel within g feature
@@ -356,12 +358,12 @@ static double losses(trainer *t, gs_pool *pool, double *psnr)
     }
     double mse = se / (3.0 * plane);
     *psnr = mse > 1e-12 ? -10 * log10(mse) : 120;
-    float leye = 0; /* the eye stream alone, over the visible eyes, x5 */
+    float leye = 0; /* the eye stream alone, over the visible eyes, x eye_w */
     if (c->used_eye_map) {
         gs_nn_l1_forward(&leye, c->fmap_eye, t->ftarget, t->emask, 3,
                          (int)fplane);
         memset(t->dfmap_eye, 0, 3 * fplane * sizeof(float));
-        gs_nn_l1_backward(t->dfmap_eye, 5.0f, c->fmap_eye, t->ftarget,
+        gs_nn_l1_backward(t->dfmap_eye, t->eye_w, c->fmap_eye, t->ftarget,
                           t->emask, 3, (int)fplane);
     }
     double lg = t->gnet ? gaze_loss(t, pool) : 0.0;
@@ -378,7 +380,7 @@ static double losses(trainer *t, gs_pool *pool, double *psnr)
         lc *= w;
         c->cover_grad = t->dcover;
     }
-    return (double)l1 + 0.1 * ls + lf + lface + 5.0 * leye + lg + lc;
+    return (double)l1 + 0.1 * ls + lf + lface + t->eye_w * leye + lg + lc;
 }
 
 static int save_checkpoint(trainer *t, const char *path, long step,
@@ -504,6 +506,9 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (o->gaze_net && !(o->gaze_weight >= 0 && o->gaze_weight <= 100))
         return gs_error_set(err, GS_ERR_ARG, "train: gaze weight %g not in 0..100",
                             o->gaze_weight);
+    if (!(o->eye_weight == 0 || (o->eye_weight >= 1 && o->eye_weight <= 100)))
+        return gs_error_set(err, GS_ERR_ARG, "train: eye weight %g not in 1..100",
+                            o->eye_weight);
     if (!(o->eye_cover_weight >= 0 && o->eye_cover_weight <= 1000))
         return gs_error_set(err, GS_ERR_ARG,
                             "train: eye-cover weight %g not in 0..1000",

@@ -5,8 +5,9 @@
 # resume continues from its step with the learning rate ramping up, --lids
 # adds lids by a fresh resume only, --eye-cover-loss refuses bad weights and
 # models without an eye stream, --supersample is kept by the file and
-# switched by a resume, and a cosine run's rate falls to lr / 20 at
-# its last step.
+# switched by a resume, --eye-weight refuses bad weights, reaches the loss
+# and is 5 by default, and a cosine run's rate falls to lr / 20 at its
+# last step.
 set -euo pipefail
 G=$1
 T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
@@ -108,6 +109,25 @@ grep -aq '"config.supersample":"2"' s.safetensors || fail "a resume lost supersa
 "$G" train --resume --supersample 1 --steps 4 --checkpoint 100 --out s.safetensors \
   >/dev/null 2>&1 || fail "a resume with --supersample 1 failed"
 grep -aq '"config.supersample":"1"' s.safetensors || fail "a resume did not switch to 1"
+
+# --eye-weight: 1..100; 5 is the default (the same bytes as without it),
+# another weight trains another model
+set +e
+for bad in 0 0.5 101 nan x ""; do
+  "$G" train --preset tiny --identities 2 --steps 1 --eye-weight "$bad" \
+    --out w.safetensors >/dev/null 2>err.txt
+  rc=$?
+  [ $rc -eq 2 ] || fail "--eye-weight '$bad': exit $rc, want 2"
+  grep -q "eye-weight" err.txt || { cat err.txt; fail "--eye-weight '$bad': no message"; }
+done
+set -e
+for w in default 5 20; do
+  arg=(); [ "$w" = default ] || arg=(--eye-weight "$w")
+  "$G" train --preset tiny --identities 2 --steps 3 --checkpoint 100 "${arg[@]}" \
+    --out "w$w.safetensors" >/dev/null 2>&1 || fail "--eye-weight $w: the run failed"
+done
+cmp -s wdefault.safetensors w5.safetensors || fail "--eye-weight 5 is not the default"
+cmp -s w5.safetensors w20.safetensors && fail "--eye-weight 20 trained the same model"
 
 # a cosine run from scratch: lr at step 0, then falling towards lr / 20 at
 # step 6, the end (step 5, the last run, has 0.05 + 0.475 (1 + cos(5 pi / 6)))

@@ -114,6 +114,9 @@ typedef struct gs_train_options {
                                 merged feature map against the visible
                                 eyeball (the eye masks), times this: where
                                 the lids are (docs/model.md); 0 default */
+    double eye_weight;      /* weight of the eye pixels in the image L1 and
+                               of the eye stream's own feature loss, 1..100;
+                               0 or 5 (default): 5 */
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
 
