@@ -169,22 +169,19 @@ static void usage_errors(const char *model, const char *pairs)
     snprintf(vpairs, sizeof vpairs, "%s/val_pairs.csv", dir);
     const char *split_bad[] = {"eval", "--make-pairs", vpairs, "--split", "training", NULL};
     CHECK_EQ_INT(run(split_bad), 2);
-    const char *split_train[] = {"eval", "--make-pairs", vpairs, "--split", "train",
-                                 "--identities", "1", "--inputs", "1", "--targets", "2", NULL};
-    CHECK_EQ_INT(run(split_train), 0);
-    FILE *tf = fopen(vpairs, "r");
-    char thead[160] = "";
-    CHECK(tf && fgets(thead, sizeof thead, tf) && strstr(thead, "training-split"));
-    if (tf)
-        fclose(tf);
-    const char *split_val[] = {"eval", "--make-pairs", vpairs, "--split", "validation",
-                               "--identities", "1", "--inputs", "1", "--targets", "2", NULL};
-    CHECK_EQ_INT(run(split_val), 0);
-    FILE *vf = fopen(vpairs, "r");
-    char head[160] = "";
-    CHECK(vf && fgets(head, sizeof head, vf) && strstr(head, "validation-split"));
-    if (vf)
-        fclose(vf);
+    const char *const split[2][2] = {{"train", "training-split"},
+                                     {"validation", "validation-split"}};
+    for (int k = 0; k < 2; k++) {
+        const char *mk[] = {"eval", "--make-pairs", vpairs, "--split", split[k][0],
+                            "--identities", "1", "--inputs", "1", "--targets", "2", NULL};
+        CHECK_EQ_INT(run(mk), 0);
+        FILE *vf = fopen(vpairs, "r");
+        char head[160] = "";
+        CHECK_MSG(vf && fgets(head, sizeof head, vf) && strstr(head, split[k][1]),
+                  "--split %s: %s", split[k][0], head);
+        if (vf)
+            fclose(vf);
+    }
     /* Render settings: --prune K or P%, --feature-scale in (0, 1] or 2..4. */
     const char *bad_render[][2] = {
         {"--prune", "0"},          {"--prune", "0%"},

@@ -75,6 +75,30 @@ static void schedule(const gs_eval_pairs *ps, const gs_eval_pairs_spec *sp)
     CHECK(headbin[0] > 0 && headbin[1] > 0 && headbin[2] > 0);
 }
 
+/* ps with pair `at` replaced by `other` (of another split), written to
+ * path, reads back as a format error that says the splits are mixed; ps
+ * is left as it was and path removed. */
+static void mixed_refused(const char *path, gs_eval_pairs *ps, int at,
+                          const gs_eval_pair *other)
+{
+    gs_error err = {0, ""};
+    gs_eval_pairs r = {0, NULL};
+    gs_eval_pair keep = ps->p[at];
+    ps->p[at] = *other;
+    FILE *f = fopen(path, "w");
+    CHECK(f && gs_eval_pairs_write(f, ps, &err) == GS_OK);
+    if (f)
+        fclose(f);
+    ps->p[at] = keep;
+    f = fopen(path, "r");
+    CHECK(f && gs_eval_pairs_read(f, &r, &err) == GS_ERR_FORMAT);
+    CHECK_MSG(strstr(err.msg, "mixed") != NULL, "%s", err.msg);
+    if (f)
+        fclose(f);
+    gs_eval_pairs_free(&r);
+    remove(path);
+}
+
 int main(void)
 {
     bins();
@@ -166,17 +190,7 @@ int main(void)
     CHECK_MSG(gs_eval_pairs_read(f, &r, &err) == GS_OK && r.n == v.n, "%s", err.msg);
     fclose(f);
     gs_eval_pairs_free(&r);
-    gs_eval_pair keep_v = v.p[v.n - 1];
-    v.p[v.n - 1] = a.p[a.n - 1]; /* a test pair last */
-    f = fopen(path, "w");
-    gs_eval_pairs_write(f, &v, &err);
-    fclose(f);
-    f = fopen(path, "r");
-    CHECK(gs_eval_pairs_read(f, &r, &err) == GS_ERR_FORMAT);
-    CHECK_MSG(strstr(err.msg, "mixed") != NULL, "%s", err.msg);
-    fclose(f);
-    remove(path);
-    v.p[v.n - 1] = keep_v;
+    mixed_refused(path, &v, v.n - 1, &a.p[a.n - 1]); /* a test pair last */
     gs_eval_pairs_free(&v);
     gs_eval_pairs t;
     sp.split = GS_SYNTH_TRAIN;
@@ -203,15 +217,7 @@ int main(void)
                 r.p[i].target_scene == t.p[i].target_scene;
     CHECK(tsame);
     gs_eval_pairs_free(&r);
-    t.p[0] = a.p[0]; /* a test pair first */
-    f = fopen(path, "w");
-    gs_eval_pairs_write(f, &t, &err);
-    fclose(f);
-    f = fopen(path, "r");
-    CHECK(gs_eval_pairs_read(f, &r, &err) == GS_ERR_FORMAT);
-    CHECK_MSG(strstr(err.msg, "mixed") != NULL, "%s", err.msg);
-    fclose(f);
-    remove(path);
+    mixed_refused(path, &t, 0, &a.p[0]); /* a test pair first */
     gs_eval_pairs_free(&t);
     sp.split = (gs_synth_split)3;
     CHECK(gs_eval_pairs_make(&sp, &r, &err) == GS_ERR_ARG);
