@@ -20,7 +20,9 @@ const cli_command cli_train_command = {
     "                      and FILE.opt keeps the optimizer state\n"
     "  --preset NAME       cpu (default), tiny (tests), paper\n"
     "  --steps N           total steps (default 2000)\n"
-    "  --identities N      training identities, each with its own code (64)\n"
+    "  --identities N      training identities, each with its own code (64);\n"
+    "                      with --resume --fresh-optimizer, more than the\n"
+    "                      model's adds new ones (codes from the mean)\n"
     "  --lr X              base Adam learning rate (1e-3)\n"
     "  --seed N            model initialisation and sample stream (1)\n"
     "  --threads N         worker threads (2)\n"
@@ -226,6 +228,27 @@ static int run_train(int argc, char **argv)
         rc = gs_model_add_lids(m, GS_MODEL_LID_RADIUS_MM, &l, &err);
         gs_model_destroy(m);
         m = l;
+    }
+    if (!rc && t.resume && o[O_IDS].value) {
+        gs_model_info mi;
+        gs_model_get_info(m, &mi);
+        const char *why = NULL;
+        if (spec.train_identities < mi.n_train_ids)
+            why = "a resume keeps every identity the model has";
+        else if (spec.train_identities > mi.n_train_ids && t.fresh_from_step < 0)
+            why = "more identities only with --fresh-optimizer STEP (the "
+                  "codes grow; FILE.opt would not fit)";
+        if (why) {
+            gs_model_destroy(m);
+            return cli_usage_error(cmd, "--identities %d: the model has %d; %s",
+                                   spec.train_identities, mi.n_train_ids, why);
+        }
+        if (spec.train_identities > mi.n_train_ids) {
+            gs_model *g = NULL;
+            rc = gs_model_add_identities(m, spec.train_identities, &g, &err);
+            gs_model_destroy(m);
+            m = g;
+        }
     }
     if (rc) {
         gs_model_destroy(m);

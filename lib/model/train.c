@@ -616,3 +616,60 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     m->id = gs_model_param_id(m); /* the parameters it now holds */
     return rc;
 }
+
+int gs_model_add_identities(const gs_model *m, int n, gs_model **out,
+                            gs_error *err)
+{
+    if (!m || !out)
+        return gs_error_set(err, GS_ERR_ARG, "identities: NULL argument");
+    int had = m->cfg.n_train_ids;
+    if (!m->p.codes || had < 1)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "identities: the model has no training codes");
+    if (n <= had || n > 100000)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "identities: %d for a model of %d (want more, "
+                            "up to 100000)", n, had);
+    gs_model_config cfg = m->cfg;
+    cfg.n_train_ids = n;
+    gs_model *o = calloc(1, sizeof *o);
+    int rc = o ? gs_model_layout(&cfg, o, err)
+               : gs_error_set(err, GS_ERR_NOMEM, "identities: out of memory");
+    if (!rc && !(o->params = calloc(o->nparams, sizeof(float))))
+        rc = gs_error_set(err, GS_ERR_NOMEM, "identities: out of memory");
+    for (int i = 0; !rc && i < o->ntensors; i++) {
+        const gs_ptensor *d = &o->t[i];
+        const gs_ptensor *s = NULL;
+        for (int j = 0; j < m->ntensors && !s; j++)
+            if (!strcmp(m->t[j].name, d->name))
+                s = &m->t[j];
+        int codes = !strcmp(d->name, "codes.train");
+        if (!s || (!codes && s->count != d->count)) {
+            rc = gs_error_set(err, GS_ERR_STATE, "identities: tensor %s",
+                              d->name);
+            break;
+        }
+        memcpy(o->params + d->offset, m->params + s->offset,
+               s->count * sizeof(float));
+    }
+    if (rc) {
+        gs_model_destroy(o);
+        return rc;
+    }
+    o->rcfg = m->rcfg;
+    gs_model_bind(o, o->params, &o->p);
+    /* the new identities start at the mean of the learned codes (where a
+     * fit of a new face starts too) */
+    int id = cfg.id_dim;
+    for (int j = 0; j < id; j++) {
+        double mean = 0;
+        for (int k = 0; k < had; k++)
+            mean += m->p.codes[(size_t)k * id + j];
+        mean /= had;
+        for (int k = had; k < n; k++)
+            o->p.codes[(size_t)k * id + j] = (float)mean;
+    }
+    o->id = gs_model_param_id(o);
+    *out = o;
+    return GS_OK;
+}

@@ -6,7 +6,10 @@
  * gain 1, bias 0. The code reaches the render (the two identities in one
  * scene render differently; one of them twice, the same bytes). Refused:
  * another identity's labels, k out of range, NULL arguments, a model
- * without training codes. */
+ * without training codes.
+ * gs_model_add_identities: a copy with more identities keeps every other
+ * tensor and the learned codes to the bit, the new codes at their mean;
+ * fewer or as many identities, or too many, are refused. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -110,6 +113,47 @@ int main(void)
     CHECK(!memcmp(ia, ic, isz));
     gs_model_ctx_destroy(c);
 
+    /* More identities: 2 -> 5. */
+    gs_model *gm = NULL;
+    CHECK_MSG(gs_model_add_identities(m, 5, &gm, &err) == GS_OK, "%s", err.msg);
+    if (gm) {
+        gs_model_info gi;
+        gs_model_get_info(gm, &gi);
+        CHECK_EQ_INT(gi.n_train_ids, 5);
+        CHECK_EQ_INT(gm->ntensors, m->ntensors);
+        for (int i = 0; i < gm->ntensors && i < m->ntensors; i++) {
+            const gs_ptensor *d = &gm->t[i], *s = &m->t[i];
+            CHECK(!strcmp(d->name, s->name));
+            if (strcmp(d->name, "codes.train") != 0)
+                CHECK_MSG(d->count == s->count &&
+                              !memcmp(gm->params + d->offset, m->params + s->offset,
+                                      s->count * sizeof(float)),
+                          "%s changed", d->name);
+        }
+        CHECK(!memcmp(gm->p.codes, m->p.codes, 2 * (size_t)id * sizeof(float)));
+        int mean_ok = 1;
+        for (int j = 0; j < id; j++) {
+            float want = (float)(((double)m->p.codes[j] + m->p.codes[id + j]) / 2);
+            for (int k = 2; k < 5; k++)
+                mean_ok &= fabsf(gm->p.codes[(size_t)k * id + j] - want) <= 1e-6f * (1 + fabsf(want));
+        }
+        CHECK_MSG(mean_ok, "the new codes are not the mean of the learned ones");
+        gs_subject ga;
+        CHECK(gs_model_training_subject(gm, 0, &sc[0], &smp[0].labels, &ga, &err) == GS_OK);
+        CHECK(!memcmp(ga.code, a.code, sizeof(float) * (size_t)D));
+        CHECK(gs_model_training_subject(gm, 4, &sc[0], &smp[0].labels, &ga, &err) == GS_ERR_ARG);
+        CHECK(gm->id != m->id);
+        gs_model_destroy(gm);
+    }
+    const int bad_n[] = {2, 1, 0, 100001};
+    for (size_t i = 0; i < sizeof bad_n / sizeof bad_n[0]; i++) {
+        gm = NULL;
+        CHECK_MSG(gs_model_add_identities(m, bad_n[i], &gm, &err) == GS_ERR_ARG && !gm,
+                  "%d identities accepted", bad_n[i]);
+    }
+    CHECK(gs_model_add_identities(NULL, 5, &gm, &err) == GS_ERR_ARG);
+    CHECK(gs_model_add_identities(m, 5, NULL, &err) == GS_ERR_ARG);
+
     /* A model without training codes (as one written without them loads):
      * refused, and its info says 0. */
     m->cfg.n_train_ids = 0;
@@ -117,6 +161,8 @@ int main(void)
     CHECK_EQ_INT(mi.n_train_ids, 0);
     CHECK(gs_model_training_subject(m, 0, &sc[0], &smp[0].labels, &a, &err) == GS_ERR_ARG);
     CHECK(strstr(err.msg, "no training codes") != NULL);
+    gm = NULL;
+    CHECK(gs_model_add_identities(m, 5, &gm, &err) == GS_ERR_ARG && !gm);
     m->cfg.n_train_ids = 2;
 
     free(ia);

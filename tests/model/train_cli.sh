@@ -129,6 +129,29 @@ done
 cmp -s wdefault.safetensors w5.safetensors || fail "--eye-weight 5 is not the default"
 cmp -s w5.safetensors w20.safetensors && fail "--eye-weight 20 trained the same model"
 
+# --identities on a resume: fewer is refused, more needs --fresh-optimizer
+# and grows the codes (the file's codes.train has the new count), the same
+# count is a plain resume
+"$G" train --preset tiny --identities 2 --steps 2 --checkpoint 100 --out i.safetensors \
+  >/dev/null 2>&1 || fail "the identities' base run failed"
+set +e
+"$G" train --resume --identities 1 --steps 3 --out i.safetensors >/dev/null 2>err.txt
+rc=$?
+[ $rc -eq 2 ] && grep -q "keeps every identity" err.txt || { cat err.txt; fail "--identities 1 on a resume: exit $rc"; }
+"$G" train --resume --identities 4 --steps 3 --out i.safetensors >/dev/null 2>err.txt
+rc=$?
+[ $rc -eq 2 ] && grep -q "fresh-optimizer" err.txt || { cat err.txt; fail "--identities 4 without --fresh-optimizer: exit $rc"; }
+set -e
+"$G" train --resume --identities 2 --steps 3 --checkpoint 100 --out i.safetensors >/dev/null 2>&1 ||
+  fail "a resume with the model's own count failed"
+grep -aq '"codes.train":{"dtype":"F32","shape":\[2,' i.safetensors || fail "codes.train is not [2, ...]"
+"$G" train --resume --fresh-optimizer 3 --identities 4 --steps 6 --checkpoint 100 \
+  --out i.safetensors >/dev/null 2>&1 || fail "a fresh resume with --identities 4 failed"
+grep -aq '"codes.train":{"dtype":"F32","shape":\[4,' i.safetensors || {
+  head -c 3000 i.safetensors | tr -c '[:print:]' ' ' | grep -o '"codes.train[^}]*}'; fail "codes.train is not [4, ...]"; }
+"$G" train --resume --steps 8 --checkpoint 100 --out i.safetensors >/dev/null 2>&1 ||
+  fail "a plain resume of the grown model failed"
+
 # a cosine run from scratch: lr at step 0, then falling towards lr / 20 at
 # step 6, the end (step 5, the last run, has 0.05 + 0.475 (1 + cos(5 pi / 6)))
 "$G" train --preset tiny --identities 2 --steps 6 --cosine --log-every 1 --checkpoint 100 \

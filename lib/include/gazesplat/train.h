@@ -61,6 +61,14 @@ int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
 #define GS_MODEL_LID_RADIUS_MM 16.0
 /* 1 when m has lids. */
 int gs_model_has_lids(const gs_model *m);
+/* A copy of m trained on n identities instead of its n_train_ids (n
+ * more, up to 100000): the learned codes kept, the new ones at their
+ * mean, every other tensor as it was. The codes' tensor grows, so an
+ * optimizer state of m does not fit the copy (`train --resume
+ * --fresh-optimizer STEP --identities N`). GS_ERR_ARG without training
+ * codes or for n not above n_train_ids. */
+int gs_model_add_identities(const gs_model *m, int n, gs_model **out,
+                            gs_error *err);
 /* Writes a model file atomically (safetensors, docs/model.md). */
 int gs_model_write(const gs_model *m, const char *path, gs_error *err);
 
