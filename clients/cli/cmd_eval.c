@@ -19,6 +19,8 @@
 #include "gazesplat/nn.h"
 #include "gazesplat/train.h"
 
+#define RAD_TO_DEG (180.0 / 3.14159265358979323846)
+
 static int run_eval(int argc, char **argv);
 
 const cli_command cli_eval_command = {
@@ -251,8 +253,8 @@ static double read_err(evaluator *ev, const gs_synth_scene *ts,
         return NAN;
     }
     if (read) {
-        read[0] = rd.pitch * (180.0 / 3.14159265358979323846);
-        read[1] = rd.yaw * (180.0 / 3.14159265358979323846);
+        read[0] = rd.pitch * RAD_TO_DEG;
+        read[1] = rd.yaw * RAD_TO_DEG;
     }
     return gs_eval_angle_deg(rd.pitch, rd.yaw, ts->gaze_pitch, ts->gaze_yaw);
 }
@@ -300,11 +302,10 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
         r->m[M_READ_FLOOR] = read_floor;
     }
     /* The truth the readout is held to, for signed errors downstream. */
-    const double deg = 180.0 / 3.14159265358979323846;
-    r->m[M_TRUE_PITCH] = ts->gaze_pitch * deg;
-    r->m[M_TRUE_YAW] = ts->gaze_yaw * deg;
-    r->m[M_THEAD_PITCH] = l->head_norm_pitch * deg;
-    r->m[M_THEAD_YAW] = l->head_norm_yaw * deg;
+    r->m[M_TRUE_PITCH] = ts->gaze_pitch * RAD_TO_DEG;
+    r->m[M_TRUE_YAW] = ts->gaze_yaw * RAD_TO_DEG;
+    r->m[M_THEAD_PITCH] = l->head_norm_pitch * RAD_TO_DEG;
+    r->m[M_THEAD_YAW] = l->head_norm_yaw * RAD_TO_DEG;
     /* Every metric that should exist must be finite. */
     for (int k = 0; k < M_COUNT; k++) {
         int eye_metric = k == M_EYE_PSNR || k == M_EYE_SSIM;
@@ -772,11 +773,9 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
         ev->focal = mi.focal;
         ev->d_n = mi.distance_mm;
         info->image_size = mi.image_size;
-        int oracle = 0, top = -1;
+        int oracle = 0, top = eval_pairs_identities(&ps) - 1;
         for (int k = 0; k < ev->nmethods; k++)
             oracle |= ev->methods[k] == EVAL_ORACLE;
-        for (int i = 0; oracle && i < ps.n; i++)
-            top = ps.p[i].identity > top ? ps.p[i].identity : top;
         if (oracle && ps.n > 0 &&
             gs_synth_seed_split(ps.p[0].identity_seed) != GS_SYNTH_TRAIN)
             rc = cli_usage_error(cmd, "--method oracle: the pairs must be of "

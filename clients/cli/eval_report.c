@@ -243,14 +243,11 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                "threads\n", info->model, info->image_size, info->pairs,
             info->inputs, info->iters, info->fit_lr_code, info->fit_lr_colour,
             info->threads);
-    if (ps->n > 0 && gs_synth_seed_split(ps->p[0].identity_seed) == GS_SYNTH_TRAIN) {
-        int top = 0;
-        for (int i = 0; i < ps->n; i++)
-            top = ps->p[i].identity > top ? ps->p[i].identity : top;
+    if (ps->n > 0 && gs_synth_seed_split(ps->p[0].identity_seed) == GS_SYNTH_TRAIN)
         fprintf(f, "- **training identities** (`--split train`): faces a model "
                    "trained on %d or more identities has seen; a diagnostic "
-                   "of what it can draw, not a held-out figure\n", top + 1);
-    }
+                   "of what it can draw, not a held-out figure\n",
+                eval_pairs_identities(ps));
     /* the incremental path needs the model's point-sampled map */
     int full = info->feature_scale != 1 || info->supersample > 1;
     if (info->n_face > 0)

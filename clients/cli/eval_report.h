@@ -16,6 +16,15 @@ enum {
                           lights, no fit (gs_model_training_subject) */
     EVAL_METHODS = 5
 };
+/* Identities a pairing reaches: its largest identity index + 1 (0 when
+ * empty). */
+static inline int eval_pairs_identities(const gs_eval_pairs *ps)
+{
+    int top = -1;
+    for (int i = 0; i < ps->n; i++)
+        top = ps->p[i].identity > top ? ps->p[i].identity : top;
+    return top + 1;
+}
 /* Methods that fit the model to the input. */
 static inline int eval_method_fits(int m)
 {
