@@ -132,9 +132,12 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     t->gen.size = m->cfg.image_size;
     t->gen.rig = GS_SYNTH_RIG_NORMALIZED;
     t->gen.supersample = 1;
-    /* The model's documented range, a little inside the generator's. */
-    t->gen.ranges.head_yaw = 40.0 * GS_MODEL_PI / 180;
-    t->gen.ranges.head_pitch = 25.0 * GS_MODEL_PI / 180;
+    /* The model's documented range, a little inside the generator's,
+     * unless the caller widens or narrows the head's. */
+    t->gen.ranges.head_yaw =
+        (o->head_yaw_deg > 0 ? o->head_yaw_deg : 40.0) * GS_MODEL_PI / 180;
+    t->gen.ranges.head_pitch =
+        (o->head_pitch_deg > 0 ? o->head_pitch_deg : 25.0) * GS_MODEL_PI / 180;
     t->gen.ranges.head_roll = 5.0 * GS_MODEL_PI / 180;
     t->gen.ranges.gaze_yaw = 40.0 * GS_MODEL_PI / 180;
     t->gen.ranges.gaze_pitch = 30.0 * GS_MODEL_PI / 180;
@@ -509,6 +512,13 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (!(o->eye_weight == 0 || (o->eye_weight >= 1 && o->eye_weight <= 100)))
         return gs_error_set(err, GS_ERR_ARG, "train: eye weight %g not in 1..100",
                             o->eye_weight);
+    if (!(o->head_yaw_deg == 0 || (o->head_yaw_deg >= 1 && o->head_yaw_deg <= 60)) ||
+        !(o->head_pitch_deg == 0 ||
+          (o->head_pitch_deg >= 1 && o->head_pitch_deg <= 40)))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: head range yaw %g, pitch %g deg not within "
+                            "1..60 and 1..40",
+                            o->head_yaw_deg, o->head_pitch_deg);
     if (!(o->eye_cover_weight >= 0 && o->eye_cover_weight <= 1000))
         return gs_error_set(err, GS_ERR_ARG,
                             "train: eye-cover weight %g not in 0..1000",

@@ -6,7 +6,8 @@
 # adds lids by a fresh resume only, --eye-cover-loss refuses bad weights and
 # models without an eye stream, --supersample is kept by the file and
 # switched by a resume, --eye-weight refuses bad weights, reaches the loss
-# and is 5 by default, and a cosine run's rate falls to lr / 20 at its
+# and is 5 by default, --head-range refuses bad ranges, reaches the samples
+# and is 40,25 by default, and a cosine run's rate falls to lr / 20 at its
 # last step.
 set -euo pipefail
 G=$1
@@ -128,6 +129,25 @@ for w in default 5 20; do
 done
 cmp -s wdefault.safetensors w5.safetensors || fail "--eye-weight 5 is not the default"
 cmp -s w5.safetensors w20.safetensors && fail "--eye-weight 20 trained the same model"
+
+# --head-range YAW,PITCH: within 1..60 and 1..40 degrees; 40,25 is the
+# default (the same bytes as without it), a wider range trains another model
+set +e
+for bad in 0,25 61,25 40,0 40,41 40 40, ,25 40,25,1 nan,25 x; do
+  "$G" train --preset tiny --identities 2 --steps 1 --head-range "$bad" \
+    --out h.safetensors >/dev/null 2>err.txt
+  rc=$?
+  [ $rc -eq 2 ] || fail "--head-range '$bad': exit $rc, want 2"
+  grep -q "head-range" err.txt || { cat err.txt; fail "--head-range '$bad': no message"; }
+  [ ! -e h.safetensors ] || fail "--head-range '$bad' wrote a model"
+done
+set -e
+"$G" train --preset tiny --identities 2 --steps 3 --checkpoint 100 --head-range 40,25 \
+  --out h40.safetensors >/dev/null 2>&1 || fail "--head-range 40,25: the run failed"
+"$G" train --preset tiny --identities 2 --steps 3 --checkpoint 100 --head-range 50,30 \
+  --out h50.safetensors >/dev/null 2>&1 || fail "--head-range 50,30: the run failed"
+cmp -s wdefault.safetensors h40.safetensors || fail "--head-range 40,25 is not the default"
+cmp -s h40.safetensors h50.safetensors && fail "--head-range 50,30 trained the same model"
 
 # --identities on a resume: fewer is refused, more needs --fresh-optimizer
 # and grows the codes (the file's codes.train has the new count), the same

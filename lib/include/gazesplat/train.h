@@ -125,6 +125,11 @@ typedef struct gs_train_options {
     double eye_weight;      /* weight of the eye pixels in the image L1 and
                                of the eye stream's own feature loss, 1..100;
                                0 or 5 (default): 5 */
+    /* Head poses of the training samples: yaw within +-head_yaw_deg
+     * (1..60) and pitch within +-head_pitch_deg (1..40) of the camera;
+     * 0 (default): 40 and 25, the model's documented range. The
+     * evaluation's scenes reach yaw 50 and pitch 30 (gs_eval_ranges). */
+    double head_yaw_deg, head_pitch_deg;
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
 
