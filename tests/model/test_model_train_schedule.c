@@ -7,7 +7,7 @@
  * the curve's first step into FILE.opt, moves the weights, and gives the
  * same bytes twice; a plain resume of that run continues the same curve
  * (FILE.opt's first step is kept); a huge ramp moves the weights far less
- * than no ramp. */
+ * than no ramp; a head range out of bounds is refused. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -166,6 +166,41 @@ static void fresh_resume(void)
     gs_model_destroy(m0);
 }
 
+/* Head ranges outside 1..60 (yaw) and 1..40 (pitch) degrees, or not a
+ * number, are refused before a step, the model untouched; 0 is the
+ * default's 40,25. */
+static void head_range(void)
+{
+    gs_error err = {0, ""};
+    gs_train_report rep;
+    gs_model *m0 = trained_tiny(g_path, 1, &rep, &err);
+    CHECK_MSG(m0 != NULL, "tiny model: %s", err.msg);
+    if (!m0)
+        return;
+    const double bad[][2] = {{61, 25}, {0.5, 25}, {-40, 25}, {40, 41},
+                             {40, 0.5}, {NAN, 25}, {40, INFINITY}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        CHECK(gs_model_write(m0, g_path, &err) == GS_OK);
+        remove(g_opt);
+        gs_train_options o;
+        gs_train_options_default(&o);
+        CHECK(o.head_yaw_deg == 0 && o.head_pitch_deg == 0);
+        o.out_path = g_path;
+        o.checkpoint_every = 0;
+        o.steps = 1;
+        o.head_yaw_deg = bad[i][0];
+        o.head_pitch_deg = bad[i][1];
+        gs_model *m = NULL;
+        int rc = train_file(&o, &m, &rep, &err);
+        CHECK_MSG(rc == GS_ERR_ARG && strstr(err.msg, "head range"),
+                  "head range %g,%g: %d \"%s\"", bad[i][0], bad[i][1], rc, err.msg);
+        if (m)
+            CHECK_MSG(moved(m0->params, m) == 0, "a refused head range moved the model");
+        gs_model_destroy(m);
+    }
+    gs_model_destroy(m0);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -173,6 +208,7 @@ int main(void)
     snprintf(g_opt, sizeof g_opt, "%s.opt", g_path);
     curve();
     fresh_resume();
+    head_range();
     tiny_remove(g_path);
     GS_TEST_END();
 }
