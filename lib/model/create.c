@@ -171,20 +171,10 @@ int gs_model_create(const gs_model_config *cfg_in, uint64_t seed,
         return rc;
     gs_model_config cfg = *cfg_in;
     cfg.n_face = count_face(&t, cfg.two_stream);
-    gs_model *m = calloc(1, sizeof *m);
-    if (!m) {
-        gs_synth_template_free(&t);
-        return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
-    }
-    rc = gs_model_layout(&cfg, m, err);
-    if (rc == GS_OK) {
-        m->params = calloc(m->nparams, sizeof(float));
-        if (!m->params)
-            rc = gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
-    }
+    gs_model *m = NULL;
+    rc = gs_model_alloc(&cfg, "model", &m, err);
     if (rc) {
         gs_synth_template_free(&t);
-        gs_model_destroy(m);
         return rc;
     }
     gs_model_bind(m, m->params, &m->p);

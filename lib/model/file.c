@@ -126,16 +126,8 @@ static int load_from(gs_st_file *f, gs_model **out, gs_error *err)
     gs_model_config cfg;
     gs_model *m = NULL;
     rc = read_config(f, &cfg, err);
-    if (!rc) {
-        m = calloc(1, sizeof *m);
-        rc = m ? gs_model_layout(&cfg, m, err)
-               : gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
-    }
-    if (!rc) {
-        m->params = calloc(m->nparams, sizeof(float));
-        if (!m->params)
-            rc = gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
-    }
+    if (!rc)
+        rc = gs_model_alloc(&cfg, "model", &m, err);
     for (int i = 0; !rc && i < m->ntensors; i++) {
         const gs_ptensor *t = &m->t[i];
         const float *data = NULL;

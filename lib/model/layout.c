@@ -2,6 +2,7 @@
  * the one parameter array and optimizer group. The same table names the
  * tensors of the model file. */
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "model_internal.h"
@@ -139,6 +140,31 @@ static void mlp_dims(const gs_model_config *c, int which, int *nl, int *d)
         *nl = 2; d[0] = GS_PE_DIM(2); d[1] = 32; d[2] = 4;
         break;
     }
+}
+
+int gs_model_alloc(const gs_model_config *cfg, const char *what, gs_model **out,
+                   gs_error *err)
+{
+    *out = NULL;
+    gs_model *m = calloc(1, sizeof *m);
+    int rc = m ? gs_model_layout(cfg, m, err)
+               : gs_error_set(err, GS_ERR_NOMEM, "%s: out of memory", what);
+    if (!rc && !(m->params = calloc(m->nparams, sizeof(float))))
+        rc = gs_error_set(err, GS_ERR_NOMEM, "%s: out of memory", what);
+    if (rc) {
+        gs_model_destroy(m);
+        return rc;
+    }
+    *out = m;
+    return GS_OK;
+}
+
+const gs_ptensor *gs_model_find_tensor(const gs_model *m, const char *name)
+{
+    for (int j = 0; j < m->ntensors; j++)
+        if (!strcmp(m->t[j].name, name))
+            return &m->t[j];
+    return NULL;
 }
 
 int gs_model_layout(const gs_model_config *cfg, gs_model *m, gs_error *err)

@@ -62,19 +62,13 @@ int gs_model_add_lids(const gs_model *m, double radius_mm, gs_model **out,
     gs_model_config cfg = m->cfg;
     cfg.n_lid0 = cnt[0];
     cfg.n_lid1 = cnt[1];
-    gs_model *o = calloc(1, sizeof *o);
-    int rc = o ? gs_model_layout(&cfg, o, err)
-               : gs_error_set(err, GS_ERR_NOMEM, "lids: out of memory");
-    if (!rc && !(o->params = calloc(o->nparams, sizeof(float))))
-        rc = gs_error_set(err, GS_ERR_NOMEM, "lids: out of memory");
+    gs_model *o = NULL;
+    int rc = gs_model_alloc(&cfg, "lids", &o, err);
     for (int t = 0; !rc && t < o->ntensors; t++) {
         const gs_ptensor *d = &o->t[t];
         if (!strncmp(d->name, "face.lid_", 9))
             continue; /* k 0: the lids start where they were; places below */
-        const gs_ptensor *s = NULL;
-        for (int j = 0; j < m->ntensors && !s; j++)
-            if (!strcmp(m->t[j].name, d->name))
-                s = &m->t[j];
+        const gs_ptensor *s = gs_model_find_tensor(m, d->name);
         if (!s || s->count != d->count) {
             rc = gs_error_set(err, GS_ERR_STATE, "lids: tensor %s", d->name);
             break;

@@ -170,6 +170,12 @@ unsigned gs_model_tensor_part(const gs_ptensor *t);
 
 /* Builds the tensor table of cfg and carves p out of base. */
 int gs_model_layout(const gs_model_config *cfg, gs_model *m, gs_error *err);
+/* A new model of cfg's layout with zeroed parameters (p not yet bound);
+ * `what` names the caller in the out-of-memory message. */
+int gs_model_alloc(const gs_model_config *cfg, const char *what, gs_model **out,
+                   gs_error *err);
+/* m's tensor called name, or NULL. */
+const gs_ptensor *gs_model_find_tensor(const gs_model *m, const char *name);
 void gs_model_bind(const gs_model *m, float *base, gs_model_params *p);
 int gs_model_config_check(const gs_model_config *c, gs_error *err);
 

@@ -165,11 +165,8 @@ int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
     }
     gs_model_config cfg = m->cfg;
     cfg.n_face = k;
-    gs_model *o = calloc(1, sizeof *o);
-    int rc = o ? gs_model_layout(&cfg, o, err)
-               : gs_error_set(err, GS_ERR_NOMEM, "prune: out of memory");
-    if (!rc && !(o->params = calloc(o->nparams, sizeof(float))))
-        rc = gs_error_set(err, GS_ERR_NOMEM, "prune: out of memory");
+    gs_model *o = NULL;
+    int rc = gs_model_alloc(&cfg, "prune", &o, err);
     if (!rc && o->ntensors != m->ntensors)
         rc = gs_error_set(err, GS_ERR_STATE, "prune: tensor tables differ");
     if (rc) {

@@ -642,17 +642,11 @@ int gs_model_add_identities(const gs_model *m, int n, gs_model **out,
                             "up to 100000)", n, had);
     gs_model_config cfg = m->cfg;
     cfg.n_train_ids = n;
-    gs_model *o = calloc(1, sizeof *o);
-    int rc = o ? gs_model_layout(&cfg, o, err)
-               : gs_error_set(err, GS_ERR_NOMEM, "identities: out of memory");
-    if (!rc && !(o->params = calloc(o->nparams, sizeof(float))))
-        rc = gs_error_set(err, GS_ERR_NOMEM, "identities: out of memory");
+    gs_model *o = NULL;
+    int rc = gs_model_alloc(&cfg, "identities", &o, err);
     for (int i = 0; !rc && i < o->ntensors; i++) {
         const gs_ptensor *d = &o->t[i];
-        const gs_ptensor *s = NULL;
-        for (int j = 0; j < m->ntensors && !s; j++)
-            if (!strcmp(m->t[j].name, d->name))
-                s = &m->t[j];
+        const gs_ptensor *s = gs_model_find_tensor(m, d->name);
         int codes = !strcmp(d->name, "codes.train");
         if (!s || (!codes && s->count != d->count)) {
             rc = gs_error_set(err, GS_ERR_STATE, "identities: tensor %s",
