@@ -16,6 +16,8 @@
  *     of what should be eyeball the eye stream covers;
  *   - beta over the skin ring around it (pixels within 6 image pixels of
  *     an eye mask, outside it): how much eyeball shows through the lids;
+ *   - the eye Gaussians' size (largest axis, in image pixels at their
+ *     depth) and opacity, medians;
  *   - the eye masks' PSNR of the model's image, and of a direct composite
  *     at the image's size, image (1 - beta) + E, E the eye stream's own
  *     colour (its Gaussians' first three feature channels) composited in
@@ -46,6 +48,19 @@ static void die(const char *what, const gs_error *e)
 }
 
 /* Rows 70..139, columns 40..215 of a 256-px image (scaled for others). */
+static int cmp_float(const void *a, const void *b)
+{
+    float x = *(const float *)a, y = *(const float *)b;
+    return (x > y) - (x < y);
+}
+
+/* The median of v[n] (sorted in place). */
+static double median(float *v, int n)
+{
+    qsort(v, (size_t)n, sizeof *v, cmp_float);
+    return n % 2 ? v[n / 2] : 0.5 * ((double)v[n / 2 - 1] + v[n / 2]);
+}
+
 static void write_band(const char *dir, int idx, const char *name,
                        const float *img, int S, int grey)
 {
@@ -129,6 +144,10 @@ int main(int argc, char **argv)
     /* [size: map, image][eyeball, ring]: beta weighted by mask area */
     double bsum[2][2] = {{0, 0}, {0, 0}}, wsum[2][2] = {{0, 0}, {0, 0}};
     double se_model = 0, se_direct = 0, n_eye = 0;
+    /* the eye Gaussians as rendered: sigma (largest axis) in image pixels
+     * at their depth, and opacity; means over samples of their medians */
+    double sig_px = 0, opac = 0;
+    float *tmp = NULL;
     for (int idx = 0; idx < count; idx++) {
         gs_synth_scene scene;
         gs_synth_camera scam;
@@ -152,6 +171,23 @@ int main(int argc, char **argv)
         if (gs_frame_forward(c, NULL, &fr, GS_STREAM_BOTH, 1, &err))
             die("forward", &err);
 
+        {
+            int ne = c->n - c->nf;
+            gs_camera cam;
+            gs_frame_camera(m, fr.head_t, &cam);
+            double up = (double)S / fs;
+            if (!tmp && !(tmp = malloc(2 * (size_t)ne * sizeof *tmp)))
+                die("memory", NULL);
+            for (int i = 0; i < ne; i++) {
+                const float *ls = c->g_scale + 3 * (size_t)(c->nf + i);
+                float l = ls[0] > ls[1] ? ls[0] : ls[1];
+                l = l > ls[2] ? l : ls[2];
+                tmp[i] = (float)(up * cam.fx * exp(l) / c->g_mean[3 * (size_t)(c->nf + i) + 2]);
+                tmp[ne + i] = 1.0f / (1.0f + expf(-c->g_opac[c->nf + i]));
+            }
+            sig_px += median(tmp, ne);
+            opac += median(tmp + ne, ne);
+        }
         /* masks at the image's size: eyeball, and the skin ring around it */
         const uint8_t *le = gs_synth_sample_mask(&smp, GS_SYNTH_MASK_LEFT_EYE);
         const uint8_t *re = gs_synth_sample_mask(&smp, GS_SYNTH_MASK_RIGHT_EYE);
@@ -241,10 +277,15 @@ int main(int argc, char **argv)
            bsum[0][0] / wsum[0][0], bsum[1][0] / wsum[1][0]);
     printf("| skin within %d px of it | %.3f | %.3f |\n", RING_PX,
            bsum[0][1] / wsum[0][1], bsum[1][1] / wsum[1][1]);
+    printf("eye Gaussians: sigma %.2g px at %d px (%.2g px at %d px, where the "
+           "rasterizer's dilation alone is %.2f px), opacity %.2f (medians)\n",
+           sig_px / count, S, sig_px / count * fs / S, fs, sqrt(GS_RASTER_EPS2D),
+           opac / count);
     printf("eye masks' PSNR: the model's image %.2f dB, the direct composite "
            "at %d px %.2f dB\n",
            10 * log10(n_eye / se_model), S, 10 * log10(n_eye / se_direct));
     free(feat4);
+    free(tmp);
     free(out4), free(alpha), free(bg4), free(direct), free(target), free(eye), free(ring);
     gs_raster_destroy(r);
     gs_model_ctx_destroy(c);

@@ -55,6 +55,10 @@ const cli_command cli_train_command = {
     "                      within +-P degrees (Y 1..60, P 1..40; 40,25: the\n"
     "                      model's documented range, the default; the\n"
     "                      evaluation's scenes reach 50,30)\n"
+    "  --eye-direct 0|1    1: the eye stream is also drawn at the image's\n"
+    "                      size and composited over the renderer's image\n"
+    "                      (docs/model.md); with --resume, switches a\n"
+    "                      model (same tensors)\n"
     "  --eye-cover-loss X  add X times the L1 of the eye stream's coverage\n"
     "                      of the feature map against the visible eyeballs\n"
     "                      (where the lids are; docs/model.md); 0 (default)\n"
@@ -79,7 +83,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
-       O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_HEAD, O_N };
+       O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_HEAD, O_EDIR, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -94,7 +98,7 @@ static int run_train(int argc, char **argv)
         {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL},
         {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
         {"--supersample", 1, NULL}, {"--eye-weight", 1, NULL},
-        {"--head-range", 1, NULL}};
+        {"--head-range", 1, NULL}, {"--eye-direct", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -215,6 +219,14 @@ static int run_train(int argc, char **argv)
             return cli_usage_error(cmd, "--head-range: want YAW,PITCH in "
                                         "degrees, YAW 1..60, PITCH 1..40");
     }
+    if (o[O_EDIR].value) {
+        if (strcmp(o[O_EDIR].value, "0") && strcmp(o[O_EDIR].value, "1"))
+            return cli_usage_error(cmd, "--eye-direct: want 0 or 1");
+        spec.eye_direct = o[O_EDIR].value[0] - '0';
+        if (spec.eye_direct && o[O_SINGLE].value)
+            return cli_usage_error(cmd, "--eye-direct 1 needs the eye stream "
+                                        "(not --single-stream)");
+    }
     if (o[O_SS].value) {
         char *end = NULL;
         long k = strtol(o[O_SS].value, &end, 10);
@@ -236,6 +248,8 @@ static int run_train(int argc, char **argv)
         rc = gs_model_set_guide_source(m, spec.guide_source, &err);
     if (!rc && t.resume && spec.supersample >= 1)
         rc = gs_model_set_supersample(m, spec.supersample, &err);
+    if (!rc && t.resume && spec.eye_direct >= 0)
+        rc = gs_model_set_eye_direct(m, spec.eye_direct, &err);
     if (!rc && t.resume && spec.lids == 1 && !gs_model_has_lids(m)) {
         if (t.fresh_from_step < 0) {
             gs_model_destroy(m);

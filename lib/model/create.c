@@ -212,6 +212,7 @@ void gs_model_get_info(const gs_model *m, gs_model_info *info)
     info->image_size = m->cfg.image_size;
     info->feat_size = m->cfg.feat_size;
     info->supersample = m->cfg.supersample;
+    info->eye_direct = m->cfg.eye_direct;
     info->code_dim = gs_model_code_dim(&m->cfg);
     info->n_train_ids = m->p.codes ? m->cfg.n_train_ids : 0;
     info->n_face = m->cfg.n_face;
@@ -234,6 +235,7 @@ void gs_model_spec_default(gs_model_spec *s)
     s->guide_source = -1;
     s->lids = -1;
     s->supersample = -1;
+    s->eye_direct = -1;
 }
 
 int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
@@ -276,6 +278,8 @@ int gs_model_new(const gs_model_spec *s, uint64_t seed, gs_model **out,
         c.guide_source = s->guide_source;
     if (s->supersample >= 0)
         c.supersample = s->supersample;
+    if (s->eye_direct >= 0)
+        c.eye_direct = s->eye_direct;
     c.n_face = 1; /* counted from the template by gs_model_create */
     int rc = gs_model_create(&c, seed, out, err);
     if (rc || s->lids != 1)
@@ -292,6 +296,18 @@ int gs_model_set_supersample(gs_model *m, int k, gs_error *err)
     if (!m || k < 1 || k > 4)
         return gs_error_set(err, GS_ERR_ARG, "supersample %d: want 1..4", k);
     m->cfg.supersample = k;
+    return GS_OK;
+}
+
+int gs_model_set_eye_direct(gs_model *m, int on, gs_error *err)
+{
+    if (!m || (on != 0 && on != 1))
+        return gs_error_set(err, GS_ERR_ARG, "eye direct %d: want 0 or 1", on);
+    if (on && !m->cfg.two_stream)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "eye direct: the model has no eye stream "
+                            "(single-stream ablation)");
+    m->cfg.eye_direct = on;
     return GS_OK;
 }
 

@@ -219,8 +219,9 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->src_mode = c->ne > 0 && rc->guidance != GS_GUIDE_NONE &&
                   rc->guide_source == GS_GUIDE_SRC_SOURCE;
     /* the incremental path rasterizes crops at fs: point-sampled maps only */
+    c->eye_direct = c->ne > 0 && m->cfg.eye_direct;
     c->inc_ok = c->ne > 0 && (rc->guidance == GS_GUIDE_NONE || c->src_mode) &&
-                c->ss == 1;
+                c->ss == 1 && !c->eye_direct;
     /* White RGB background, zero for the other channels. */
     for (size_t i = 0; i < 3 * fsz; i++)
         c->bg[i] = 1.0f;
@@ -252,6 +253,9 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
     free(c->lid_save);
     free(c->cov_ind), free(c->cov_bg), free(c->cover), free(c->v_ind);
     free(c->ss_buf);
+    free(c->dir_feat), free(c->dir_vfeat), free(c->dir_out), free(c->dir_alpha);
+    free(c->dir_bg), free(c->rgb_main), free(c->dir_dmain), free(c->dir_d);
+    gs_raster_destroy(c->raster_dir);
     gs_raster_destroy(c->raster_cov);
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         sweep_slot_free(&c->slots[i]);
@@ -680,6 +684,72 @@ static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, int render,
     return rc;
 }
 
+/* The eye stream at the image's size (config.eye_direct), after the
+ * renderer wrote c->rgb: every Gaussian rasterized through the map's view
+ * at S x S pixels with the eye stream's colour and an indicator (face
+ * Gaussians: zeros; they occlude), so that E (3 planes) is the eye
+ * stream's composited colour and beta its share of each pixel; the image
+ * becomes rgb_main (1 - beta) + E. render: no backward follows. */
+static int direct_forward(gs_model_ctx *c, gs_pool *pool, int render,
+                          gs_error *err)
+{
+    size_t n = (size_t)c->n, plane = (size_t)c->S * c->S;
+    if (!c->raster_dir) {
+        c->raster_dir = gs_raster_create();
+        c->dir_feat = malloc(4 * n * sizeof(float));
+        c->dir_vfeat = malloc(4 * n * sizeof(float));
+        c->dir_out = malloc(4 * plane * sizeof(float));
+        c->dir_alpha = malloc(plane * sizeof(float));
+        c->dir_bg = calloc(4 * plane, sizeof(float));
+        c->rgb_main = malloc(3 * plane * sizeof(float));
+        c->dir_dmain = malloc(3 * plane * sizeof(float));
+        c->dir_d = malloc(4 * plane * sizeof(float));
+        if (!c->raster_dir || !c->dir_feat || !c->dir_vfeat || !c->dir_out ||
+            !c->dir_alpha || !c->dir_bg || !c->rgb_main || !c->dir_dmain ||
+            !c->dir_d) {
+            gs_raster_destroy(c->raster_dir);
+            free(c->dir_feat), free(c->dir_vfeat), free(c->dir_out);
+            free(c->dir_alpha), free(c->dir_bg), free(c->rgb_main);
+            free(c->dir_dmain), free(c->dir_d);
+            c->raster_dir = NULL;
+            c->dir_feat = c->dir_vfeat = c->dir_out = c->dir_alpha = NULL;
+            c->dir_bg = c->rgb_main = c->dir_dmain = c->dir_d = NULL;
+            return gs_error_set(err, GS_ERR_NOMEM, "eye direct: out of memory");
+        }
+    }
+    for (size_t i = 0; i < n; i++) {
+        float ind = i >= (size_t)c->nf ? 1.0f : 0.0f;
+        for (int k = 0; k < 3; k++)
+            c->dir_feat[4 * i + k] = ind * c->g_feat[i * (size_t)c->C + k];
+        c->dir_feat[4 * i + 3] = ind;
+    }
+    gs_gaussians g = gaussians_of(c, 0, c->n);
+    g.channels = 4;
+    g.features = c->dir_feat;
+    gs_camera cam;
+    gs_frame_camera(c->m, c->fr.head_t, &cam);
+    float s = (float)c->S / (float)c->fs;
+    cam.fx *= s, cam.fy *= s;
+    cam.cx *= s, cam.cy *= s;
+    cam.width = cam.height = c->S;
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    gs_raster_set_records(c->raster_dir, !render);
+    int rc = gs_raster_forward(c->raster_dir, pool, &cam, &g, c->dir_bg, &ro,
+                               c->dir_out, c->dir_alpha, NULL, err);
+    if (rc)
+        return rc;
+    memcpy(c->rgb_main, c->rgb, 3 * plane * sizeof(float));
+    const float *beta = c->dir_out + 3 * plane;
+    for (int k = 0; k < 3; k++) {
+        float *o = c->rgb + k * plane;
+        const float *e = c->dir_out + k * plane;
+        for (size_t i = 0; i < plane; i++)
+            o[i] = o[i] * (1.0f - beta[i]) + e[i];
+    }
+    c->dir_valid = 1;
+    return GS_OK;
+}
+
 /* gs_frame_forward with the feature map rasterized at fsr pixels; render:
  * no backward follows (gs_frame_render). */
 static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
@@ -693,6 +763,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->inc_valid = 0;
     c->rgb8_valid = 0;
     c->cover_valid = 0;
+    c->dir_valid = 0;
     gs_frame_forward_streams(c, fr, force_face);
     c->stream = stream;
     int first = 0, count = c->n;
@@ -730,6 +801,8 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                                  pool);
     if (rc)
         return gs_error_set(err, rc, "model: renderer forward failed");
+    if (c->eye_direct && stream == GS_STREAM_BOTH)
+        return direct_forward(c, pool, render, err);
     return GS_OK;
 }
 
@@ -1772,13 +1845,30 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         memcpy(c->v_fmap_face, d_fmap_face, fsz * sizeof(float));
     else
         memset(c->v_fmap_face, 0, fsz * sizeof(float));
+    int direct = d_rgb && c->dir_valid;
+    if (direct) { /* rgb = rgb_main (1 - beta) + E */
+        size_t plane = (size_t)c->S * c->S;
+        const float *beta = c->dir_out + 3 * plane;
+        float *db = c->dir_d + 3 * plane;
+        memset(db, 0, plane * sizeof(float));
+        memcpy(c->dir_d, d_rgb, 3 * plane * sizeof(float));
+        for (int k = 0; k < 3; k++) {
+            const float *d = d_rgb + k * plane, *mn = c->rgb_main + k * plane;
+            float *dm = c->dir_dmain + k * plane;
+            for (size_t i = 0; i < plane; i++) {
+                dm[i] = d[i] * (1.0f - beta[i]);
+                db[i] -= d[i] * mn[i];
+            }
+        }
+    }
     if (d_rgb) {
         if (!grads)
             memset(c->r_grad, 0,
                    gs_renderer_param_count(&c->m->rcfg) * sizeof(float));
         int rc = gs_renderer_backward_src(
             &c->m->rcfg, &c->m->p.rend, c->r_act, c->r_act_len, c->fmap,
-            c->fr.code, c->used_src ? c->fmap_face : NULL, d_rgb, c->fs, c->fs,
+            c->fr.code, c->used_src ? c->fmap_face : NULL,
+            direct ? c->dir_dmain : d_rgb, c->fs, c->fs,
             grads ? &grads->rend : &c->r_grad_p, c->v_fmap,
             c->used_src ? c->v_fmap_face : NULL, fg ? fg->code : NULL, pool);
         if (rc)
@@ -1838,6 +1928,21 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
     }
     if (c->feat_mask)
         memcpy(c->v_feat, c->v_feat_keep, (size_t)c->n * c->C * sizeof(float));
+    if (direct) { /* the eye stream at the image's size: every Gaussian's
+                     geometry, the eye stream's colours (not masked by a
+                     feature mask: the eyes are far from the outline it
+                     is for) */
+        memset(c->dir_vfeat, 0, 4 * (size_t)c->n * sizeof(float));
+        gs_gaussian_grads gd = {c->v_mean, c->v_scale, c->v_quat, c->v_opac,
+                                c->dir_vfeat};
+        rc = gs_raster_backward(c->raster_dir, pool, c->dir_d, NULL, NULL,
+                                &gd, NULL, err);
+        if (rc)
+            return rc;
+        for (size_t i = (size_t)c->nf; i < (size_t)c->n; i++)
+            for (int k = 0; k < 3; k++)
+                c->v_feat[i * (size_t)c->C + k] += c->dir_vfeat[4 * i + k];
+    }
     gs_frame_backward_streams(c, grads, fg);
     return GS_OK;
 }

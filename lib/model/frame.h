@@ -165,6 +165,19 @@ struct gs_model_ctx {
      * fitting forwards rasterize at k fs, and backwards spread each
      * pixel's gradient over its k x k samples */
     int ss;
+    /* the eye stream at the image's size (config.eye_direct): every
+     * Gaussian rasterized at S x S with 4 channels, the eye stream's
+     * colour (first three feature channels) and an indicator (1 eye, 0
+     * face), background 0: E and beta; rgb = rgb_main (1 - beta) + E.
+     * Made on first use; dir_valid: the last forward made them. */
+    int eye_direct, dir_valid;
+    gs_raster *raster_dir;
+    float *dir_feat, *dir_vfeat;      /* [n, 4] features, their gradient */
+    float *dir_out, *dir_alpha, *dir_bg; /* [4, S, S], [S, S], [4, S, S] */
+    float *rgb_main, *dir_dmain;      /* [3, S, S] the renderer's image and
+                                         its gradient */
+    float *dir_d;                     /* [4, S, S] the raster's output
+                                         gradient */
     float xfer_head_w; /* transfer_head_weight (render options) */
     float xfer_eye_w;  /* transfer_eye_weight (render options) */
     double xfer_warp_deg; /* transfer_eye_warp_deg (render options) */

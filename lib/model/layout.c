@@ -21,6 +21,7 @@ void gs_model_config_default(gs_model_config *c)
     c->guidance = GS_GUIDE_ADDITIVE;
     c->guide_source = GS_GUIDE_SRC_SOURCE;
     c->supersample = 1;
+    c->eye_direct = 0;
     c->two_stream = 1;
     c->eye_rotation = 1;
     c->n_train_ids = 0;
@@ -51,7 +52,11 @@ int gs_model_config_check(const gs_model_config *c, gs_error *err)
     RANGE(n_lid0, 0, c->n_face)
     RANGE(n_lid1, 0, c->n_face - c->n_lid0)
     RANGE(supersample, 1, 4)
+    RANGE(eye_direct, 0, 1)
 #undef RANGE
+    if (c->eye_direct && !c->two_stream)
+        return gs_error_set(err, GS_ERR_FORMAT,
+                            "model config: eye_direct needs two streams");
     if (gs_model_n_lid(c) && !(c->two_stream && c->eye_rotation))
         return gs_error_set(err, GS_ERR_FORMAT,
                             "model config: lids need two streams and eye "

@@ -33,6 +33,10 @@ typedef struct gs_model_config {
     int supersample;  /* k: the feature map is rasterized at k feat_size and
                          each pixel is the mean of k x k (1..4; files
                          without the key: 1, point-sampled) */
+    int eye_direct;   /* 1: the eye stream also drawn at the image's size
+                         and composited over the renderer's image
+                         (docs/model.md, "The eye at the image's size");
+                         needs two streams; files without the key: 0 */
     double template_spacing_mm; /* face Gaussian spacing at creation */
     double d_n_mm;    /* normalized camera distance */
     double focal;     /* normalized camera focal at image_size, pixels */

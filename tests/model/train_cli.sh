@@ -149,6 +149,30 @@ set -e
 cmp -s wdefault.safetensors h40.safetensors || fail "--head-range 40,25 is not the default"
 cmp -s h40.safetensors h50.safetensors && fail "--head-range 50,30 trained the same model"
 
+# --eye-direct 0|1: other values and the single-stream ablation refused; a
+# new model keeps the key, a resume switches it (same tensors, so the
+# optimizer state still fits)
+set +e
+for bad in 2 -1 yes ""; do
+  "$G" train --preset tiny --identities 2 --steps 1 --eye-direct "$bad" \
+    --out ed.safetensors >/dev/null 2>err.txt
+  rc=$?
+  [ $rc -eq 2 ] || fail "--eye-direct '$bad': exit $rc, want 2"
+  grep -q "eye-direct" err.txt || { cat err.txt; fail "--eye-direct '$bad': no message"; }
+done
+"$G" train --preset tiny --identities 2 --steps 1 --eye-direct 1 --single-stream \
+  --out ed.safetensors >/dev/null 2>err.txt
+rc=$?
+[ $rc -eq 2 ] || fail "--eye-direct 1 --single-stream: exit $rc, want 2"
+[ ! -e ed.safetensors ] || fail "a refused --eye-direct wrote a model"
+set -e
+"$G" train --preset tiny --identities 2 --steps 2 --checkpoint 100 --eye-direct 1 \
+  --out ed.safetensors >/dev/null 2>&1 || fail "--eye-direct 1: the run failed"
+grep -aq '"config.eye_direct":"1"' ed.safetensors || fail "--eye-direct 1 not in the file"
+"$G" train --resume --steps 3 --eye-direct 0 --out ed.safetensors >/dev/null 2>&1 \
+  || fail "a resume with --eye-direct 0 failed"
+grep -aq '"config.eye_direct":"0"' ed.safetensors || fail "a resume did not switch to 0"
+
 # --identities on a resume: fewer is refused, more needs --fresh-optimizer
 # and grows the codes (the file's codes.train has the new count), the same
 # count is a plain resume

@@ -58,6 +58,8 @@ typedef struct gs_model_info {
     int feat_size;    /* rasterized feature map edge */
     int supersample;  /* k: each feature pixel the mean of k x k samples
                          (1: point-sampled; docs/model.md) */
+    int eye_direct;   /* 1: the eye stream is also drawn at the image's
+                         size (docs/model.md, "The eye at the image's size") */
     int code_dim;     /* latent code length */
     int n_train_ids;  /* training identities with a learned code (0: none) */
     int n_face, n_eye; /* Gaussians: face stream, eye stream (both eyes) */

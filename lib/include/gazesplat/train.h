@@ -33,6 +33,9 @@ typedef struct gs_model_spec {
     int supersample;        /* k = 1..4: the feature map rasterized at k
                                times its size, each pixel the mean of
                                k x k (1, point-sampled: the default) */
+    int eye_direct;         /* 1: the eye stream also drawn at the image's
+                               size over the renderer's image (docs/model.md,
+                               "The eye at the image's size"); -1, 0: not */
 } gs_model_spec;
 void gs_model_spec_default(gs_model_spec *s);
 int gs_model_new(const gs_model_spec *spec, uint64_t seed, gs_model **out,
@@ -47,6 +50,11 @@ int gs_model_set_guide_source(gs_model *m, int source, gs_error *err);
  * "Supersampled feature maps"). GS_ERR_ARG outside 1..4. Contexts made
  * before keep the old value. */
 int gs_model_set_supersample(gs_model *m, int k, gs_error *err);
+/* Switches the eye stream's drawing at the image's size on (1) or off
+ * (0) for a model in memory (same tensors: an optimizer state still
+ * fits). GS_ERR_ARG for other values and, for 1, a single-stream model.
+ * Contexts made before keep the old value. */
+int gs_model_set_eye_direct(gs_model *m, int on, gs_error *err);
 /* A copy of m whose face Gaussians within radius_mm of an eyeball's
  * centre become lids: turned about that centre by a learned share k of
  * the gaze's pitch, each its own, starting at 0 (docs/model.md, "Lids
