@@ -689,7 +689,10 @@ static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, int render,
  * at S x S pixels with the eye stream's colour and an indicator (face
  * Gaussians: zeros; they occlude), so that E (3 planes) is the eye
  * stream's composited colour and beta its share of each pixel; the image
- * becomes rgb_main (1 - beta) + E. render: no backward follows. */
+ * becomes rgb_main (1 - beta) + E. Only the tiles the eye stream can
+ * reach are rasterized (a crop with the full image's frustum: each pixel
+ * as the whole image's); elsewhere beta and E are 0 and the image is the
+ * renderer's. render: no backward follows. */
 static int direct_forward(gs_model_ctx *c, gs_pool *pool, int render,
                           gs_error *err)
 {
@@ -726,27 +729,43 @@ static int direct_forward(gs_model_ctx *c, gs_pool *pool, int render,
     gs_gaussians g = gaussians_of(c, 0, c->n);
     g.channels = 4;
     g.features = c->dir_feat;
-    gs_camera cam;
-    gs_frame_camera(c->m, c->fr.head_t, &cam);
+    gs_camera full;
+    gs_frame_camera(c->m, c->fr.head_t, &full);
     float s = (float)c->S / (float)c->fs;
-    cam.fx *= s, cam.fy *= s;
-    cam.cx *= s, cam.cy *= s;
-    cam.width = cam.height = c->S;
-    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
-    gs_raster_set_records(c->raster_dir, !render);
-    int rc = gs_raster_forward(c->raster_dir, pool, &cam, &g, c->dir_bg, &ro,
-                               c->dir_out, c->dir_alpha, NULL, err);
-    if (rc)
-        return rc;
+    full.fx *= s, full.fy *= s;
+    full.cx *= s, full.cy *= s;
+    full.width = full.height = c->S;
+    int *d = c->dir_box;
+    gs_frame_eye_tiles(c, &full, d);
     memcpy(c->rgb_main, c->rgb, 3 * plane * sizeof(float));
-    const float *beta = c->dir_out + 3 * plane;
-    for (int k = 0; k < 3; k++) {
-        float *o = c->rgb + k * plane;
-        const float *e = c->dir_out + k * plane;
-        for (size_t i = 0; i < plane; i++)
-            o[i] = o[i] * (1.0f - beta[i]) + e[i];
-    }
     c->dir_valid = 1;
+    if (d[0] >= d[2] || d[1] >= d[3]) /* no eye in the image */
+        return GS_OK;
+    gs_camera cam = full;
+    cam.cx -= (float)d[0], cam.cy -= (float)d[1];
+    int w = d[2] - d[0], h = d[3] - d[1], S = c->S;
+    cam.width = w, cam.height = h;
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    int rc = gs_raster_set_frustum(c->raster_dir, &full, err);
+    if (!rc) {
+        gs_raster_set_records(c->raster_dir, !render);
+        rc = gs_raster_forward(c->raster_dir, pool, &cam, &g, c->dir_bg, &ro,
+                               c->dir_out, c->dir_alpha, NULL, err);
+    }
+    if (rc) {
+        c->dir_valid = 0;
+        return rc;
+    }
+    size_t cp = (size_t)w * h;
+    const float *beta = c->dir_out + 3 * cp;
+    for (int k = 0; k < 3; k++)
+        for (int y = 0; y < h; y++) {
+            float *o = c->rgb + k * plane + (size_t)(d[1] + y) * S + d[0];
+            const float *e = c->dir_out + k * cp + (size_t)y * w;
+            const float *b = beta + (size_t)y * w;
+            for (int x = 0; x < w; x++)
+                o[x] = o[x] * (1.0f - b[x]) + e[x];
+        }
     return GS_OK;
 }
 
@@ -1845,21 +1864,30 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         memcpy(c->v_fmap_face, d_fmap_face, fsz * sizeof(float));
     else
         memset(c->v_fmap_face, 0, fsz * sizeof(float));
-    int direct = d_rgb && c->dir_valid;
-    if (direct) { /* rgb = rgb_main (1 - beta) + E */
-        size_t plane = (size_t)c->S * c->S;
-        const float *beta = c->dir_out + 3 * plane;
-        float *db = c->dir_d + 3 * plane;
-        memset(db, 0, plane * sizeof(float));
-        memcpy(c->dir_d, d_rgb, 3 * plane * sizeof(float));
-        for (int k = 0; k < 3; k++) {
-            const float *d = d_rgb + k * plane, *mn = c->rgb_main + k * plane;
-            float *dm = c->dir_dmain + k * plane;
-            for (size_t i = 0; i < plane; i++) {
-                dm[i] = d[i] * (1.0f - beta[i]);
-                db[i] -= d[i] * mn[i];
+    const int *box = c->dir_box;
+    int direct = d_rgb && c->dir_valid,
+        crop = direct && box[0] < box[2] && box[1] < box[3];
+    if (direct) { /* rgb = rgb_main (1 - beta) + E over the crop */
+        int S = c->S, w = box[2] - box[0], h = box[3] - box[1];
+        size_t plane = (size_t)S * S, cp = crop ? (size_t)w * h : 0;
+        memcpy(c->dir_dmain, d_rgb, 3 * plane * sizeof(float));
+        const float *beta = c->dir_out + 3 * cp;
+        float *db = c->dir_d + 3 * cp;
+        memset(db, 0, cp * sizeof(float));
+        for (int k = 0; crop && k < 3; k++)
+            for (int y = 0; y < h; y++) {
+                size_t at = k * plane + (size_t)(box[1] + y) * S + box[0];
+                const float *dr = d_rgb + at, *mn = c->rgb_main + at;
+                const float *b = beta + (size_t)y * w;
+                float *dm = c->dir_dmain + at;
+                float *de = c->dir_d + k * cp + (size_t)y * w;
+                float *dbr = db + (size_t)y * w;
+                for (int x = 0; x < w; x++) {
+                    de[x] = dr[x];
+                    dm[x] = dr[x] * (1.0f - b[x]);
+                    dbr[x] -= dr[x] * mn[x];
+                }
             }
-        }
     }
     if (d_rgb) {
         if (!grads)
@@ -1928,7 +1956,7 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
     }
     if (c->feat_mask)
         memcpy(c->v_feat, c->v_feat_keep, (size_t)c->n * c->C * sizeof(float));
-    if (direct) { /* the eye stream at the image's size: every Gaussian's
+    if (crop) { /* the eye stream at the image's size: every Gaussian's
                      geometry, the eye stream's colours (not masked by a
                      feature mask: the eyes are far from the outline it
                      is for) */

@@ -171,12 +171,17 @@ struct gs_model_ctx {
      * face), background 0: E and beta; rgb = rgb_main (1 - beta) + E.
      * Made on first use; dir_valid: the last forward made them. */
     int eye_direct, dir_valid;
+    int dir_box[4];                   /* the crop rasterized: the eye
+                                         stream's reach (gs_frame_eye_tiles
+                                         at S), x0 y0 x1 y1; beta and E are
+                                         0 outside it */
     gs_raster *raster_dir;
     float *dir_feat, *dir_vfeat;      /* [n, 4] features, their gradient */
-    float *dir_out, *dir_alpha, *dir_bg; /* [4, S, S], [S, S], [4, S, S] */
+    float *dir_out, *dir_alpha, *dir_bg; /* the crop's [4, h, w], [h, w],
+                                            [4, h, w] (sized for S x S) */
     float *rgb_main, *dir_dmain;      /* [3, S, S] the renderer's image and
                                          its gradient */
-    float *dir_d;                     /* [4, S, S] the raster's output
+    float *dir_d;                     /* [4, h, w] the raster's output
                                          gradient */
     float xfer_head_w; /* transfer_head_weight (render options) */
     float xfer_eye_w;  /* transfer_eye_weight (render options) */

@@ -2,8 +2,9 @@
  * Gaussian rasterized at S x S with the eye stream's colour and an
  * indicator, the image = the renderer's (1 - beta) + E. Checks: the
  * renderer's image is the plain model's, and the composite equals one made
- * here from an independent raster (beta in [0, 1], eyeball where the eyes
- * are and none in the corner); the gradients of a fixed random linear
+ * here from an independent raster of the whole image (beta in [0, 1],
+ * eyeball where the eyes are, none outside the crop the model rasterized,
+ * which is less than half the image); the gradients of a fixed random linear
  * function of the image and the maps against central differences (code,
  * colours, latent features, opacities); the file
  * keeps the flag and a file without the key is 0; renders are full, the
@@ -77,9 +78,13 @@ static void composite(void)
     cam.width = cam.height = S;
     gs_raster *r = gs_raster_create();
     CHECK(gs_raster_forward(r, NULL, &cam, &g, bg, NULL, out, al, NULL, &err) == GS_OK);
-    double worst = 0, bmax = 0, bmin = 1;
+    double worst = 0, bmax = 0, bmin = 1, outside = 0;
+    const int *d = c->dir_box;
     for (size_t i = 0; i < plane; i++) {
         double b = out[3 * plane + i];
+        int x = (int)(i % (size_t)S), y = (int)(i / (size_t)S);
+        if (x < d[0] || x >= d[2] || y < d[1] || y >= d[3])
+            outside = fmax(outside, b);
         bmax = fmax(bmax, b);
         bmin = fmin(bmin, b);
         for (int k = 0; k < 3; k++) {
@@ -87,8 +92,11 @@ static void composite(void)
             worst = fmax(worst, fabs(want - c->rgb[k * plane + i]));
         }
     }
-    printf("composite off an independent one by %.2e; beta in [%.3f, %.3f]\n",
-           worst, bmin, bmax);
+    printf("composite off an independent one by %.2e; beta in [%.3f, %.3f]; "
+           "crop %d x %d of %d x %d, beta outside it %.1e\n",
+           worst, bmin, bmax, d[2] - d[0], d[3] - d[1], S, S, outside);
+    CHECK_MSG(outside == 0 && (d[2] - d[0]) * (d[3] - d[1]) < S * S / 2,
+              "the crop misses beta %g or is not a crop", outside);
     CHECK_MSG(worst < 1e-6, "composite off by %g", worst);
     CHECK_MSG(bmin >= 0 && bmax <= 1 + 1e-6 && bmax > 0.3, "beta [%g, %g]", bmin, bmax);
     CHECK_MSG(out[3 * plane] == 0.0f, "eyeball in the corner: %g", out[3 * plane]);
