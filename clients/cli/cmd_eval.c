@@ -736,6 +736,7 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     info->n_face = mi.n_face;
     info->feature_scale = ev->ro.feature_scale;
     info->supersample = mi.supersample;
+    info->eye_direct = mi.eye_direct;
     info->full_render = ev->ro.full;
     info->transfer_head_weight = ev->ro.transfer_head_weight;
     info->transfer_eye_weight = ev->ro.transfer_eye_weight;

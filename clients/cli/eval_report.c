@@ -249,7 +249,8 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                    "of what it can draw, not a held-out figure\n",
                 eval_pairs_identities(ps));
     /* the incremental path needs the model's point-sampled map */
-    int full = info->feature_scale != 1 || info->supersample > 1;
+    int full = info->feature_scale != 1 || info->supersample > 1 ||
+               info->eye_direct;
     if (info->n_face > 0)
         fprintf(f, "- model renders: %d of %d face Gaussians (%.0f %%), "
                    "feature scale %.3g%s, %s\n", info->face_kept,
@@ -263,6 +264,9 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                                     "(--full-render)"
                 : full ? "every render full"
                        : "incremental where possible");
+    if (info->n_face > 0 && info->eye_direct)
+        fputs("- the eye stream also drawn at the image's size over the "
+              "renderer's image (config.eye_direct)\n", f);
     if (info->n_face > 0)
         fprintf(f, "- lights at another head pose: %s\n",
                 info->light_on_head ? "kept on the head (--light-on-head)"

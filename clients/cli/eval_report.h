@@ -71,6 +71,7 @@ typedef struct eval_run_info {
     int face_kept, n_face;
     double feature_scale;
     int supersample;      /* the model's own (config.supersample) */
+    int eye_direct;       /* the model's config.eye_direct */
     int full_render;
     double transfer_head_weight; /* render option, transfer method */
     double transfer_eye_weight;  /* render option, transfer method */

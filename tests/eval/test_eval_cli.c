@@ -430,6 +430,22 @@ int main(int argc, char **argv)
                               "supersampled), every render full",
                           "non-finite outputs 0", NULL));
     }
+    { /* a model with the eye at the image's size: full renders, named */
+        char edm[300];
+        snprintf(edm, sizeof edm, "%s/tiny-ed.safetensors", dir);
+        gs_model *m = NULL;
+        CHECK(gs_model_load(model, &m, &err) == GS_OK);
+        CHECK(gs_model_set_eye_direct(m, 1, &err) == GS_OK);
+        CHECK_MSG(gs_model_write(m, edm, &err) == GS_OK, "%s", err.msg);
+        gs_model_destroy(m);
+        const char *eved[] = {"eval", "--model", edm, "--pairs", pairs,
+                              "--out", out2, "--method", "model",
+                              "--iters", "4", "--threads", "2", "--estimator",
+                              est, "--reuse-fits", NULL};
+        CHECK_EQ_INT(run(eved), 0);
+        CHECK(summary_has(md, "feature scale 1, every render full",
+                          "(config.eye_direct)", "non-finite outputs 0", NULL));
+    }
     /* Fine-tuned per input on run 2's fits: finite, deterministic, other
      * numbers than without, the input reproduced better. */
     const char *ev6[] = {"eval", "--model", model, "--pairs", pairs,
