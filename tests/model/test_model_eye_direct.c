@@ -8,7 +8,8 @@
  * function of the image and the maps against central differences (code,
  * colours, latent features, opacities); the file
  * keeps the flag and a file without the key is 0; renders are full, the
- * same bytes with and without a pool and not the plain model's; a fit of
+ * same bytes with and without a pool and not the plain model's; detail
+ * transfer from its own render gives that render back; a fit of
  * its own render converges; bad values and single-stream models are
  * refused. */
 #define _POSIX_C_SOURCE 200809L
@@ -326,6 +327,30 @@ static void model_level(gs_pool *pool)
     gs_model_ctx_stats st;
     gs_model_ctx_get_stats(c, &st);
     CHECK(st.renders_incremental == 0 && st.renders_full == 2 * N);
+    /* Detail transfer from its own render: the residual is nothing, so
+     * at the input's own view it gives the render back, and it runs at
+     * another gaze. */
+    {
+        gs_subject si = s; /* the subject of img[0]'s first view */
+        si.gaze_pitch = -0.1, si.gaze_yaw = 0.3;
+        gs_view own;
+        memset(&own, 0, sizeof own);
+        own.gaze_pitch = si.gaze_pitch, own.gaze_yaw = si.gaze_yaw;
+        uint8_t *tr = malloc(bytes);
+        CHECK(gs_model_render_transfer(c, pool, &si, img[0], stride, &own, tr,
+                                       stride, &err) == GS_OK);
+        int most = 0;
+        for (size_t i = 0; i < bytes; i++) {
+            int dv = abs((int)tr[i] - (int)img[0][i]);
+            most = dv > most ? dv : most;
+        }
+        printf("transfer at the input's own view: largest difference %d levels\n", most);
+        CHECK_MSG(most <= 1, "transfer at the own view differs by %d", most);
+        own.gaze_yaw = -0.2;
+        CHECK(gs_model_render_transfer(c, pool, &si, img[0], stride, &own, tr,
+                                       stride, &err) == GS_OK);
+        free(tr);
+    }
 
     /* A fit of the model's own render at another code comes close. */
     gs_fit_options fo;
