@@ -18,8 +18,9 @@
  *     an eye mask, outside it): how much eyeball shows through the lids;
  *   - the eye Gaussians' size (largest axis, in image pixels at their
  *     depth) and opacity, medians;
- *   - the eye masks' PSNR of the model's image, and of a direct composite
- *     at the image's size, image (1 - beta) + E, E the eye stream's own
+ *   - the eye masks' PSNR of the renderer's image, and of a direct
+ *     composite at the image's size, image (1 - beta) + E (the model's
+ *     own image when config.eye_direct is set), E the eye stream's own
  *     colour (its Gaussians' first three feature channels) composited in
  *     the same pass: what the eye stream's Gaussians draw without the
  *     renderer.
@@ -245,17 +246,19 @@ int main(int argc, char **argv)
                     wsum[size][1] += wr;
                 }
         }
-        /* out4 holds the image-size pass: the direct composite */
+        /* out4 holds the image-size pass: the direct composite over the
+         * renderer's image (for an eye_direct model, the model's image) */
+        const float *rend = c->eye_direct ? c->rgb_main : c->rgb;
         for (size_t i = 0; i < plane; i++) {
             float b = out4[3 * plane + i];
             b = b < 0 ? 0 : b > 1 ? 1 : b;
             for (int q = 0; q < 3; q++) {
                 size_t j = (size_t)q * plane + i;
-                direct[j] = c->rgb[j] * (1 - b) + out4[j];
+                direct[j] = rend[j] * (1 - b) + out4[j];
                 target[j] = smp.rgb[(i / (size_t)S) * smp.stride + 3 * (i % (size_t)S) + (size_t)q] /
                             255.0f;
                 if (eye[i]) {
-                    double d0 = c->rgb[j] - target[j], d1 = direct[j] - target[j];
+                    double d0 = rend[j] - target[j], d1 = direct[j] - target[j];
                     se_model += d0 * d0;
                     se_direct += d1 * d1;
                     n_eye += 1;
@@ -264,7 +267,7 @@ int main(int argc, char **argv)
         }
         if (images && idx < 4) {
             write_band(images, idx, "target", target, S, 0);
-            write_band(images, idx, "model", c->rgb, S, 0);
+            write_band(images, idx, "model", rend, S, 0);
             write_band(images, idx, "direct", direct, S, 0);
             write_band(images, idx, "beta", out4 + 3 * plane, S, 1);
         }
@@ -281,9 +284,11 @@ int main(int argc, char **argv)
            "rasterizer's dilation alone is %.2f px), opacity %.2f (medians)\n",
            sig_px / count, S, sig_px / count * fs / S, fs, sqrt(GS_RASTER_EPS2D),
            opac / count);
-    printf("eye masks' PSNR: the model's image %.2f dB, the direct composite "
-           "at %d px %.2f dB\n",
-           10 * log10(n_eye / se_model), S, 10 * log10(n_eye / se_direct));
+    printf("eye masks' PSNR: the renderer's image %.2f dB, the direct composite "
+           "at %d px %.2f dB (%s)\n",
+           10 * log10(n_eye / se_model), S, 10 * log10(n_eye / se_direct),
+           m->cfg.eye_direct ? "the model's image: config.eye_direct"
+                             : "the model's image is the renderer's");
     free(feat4);
     free(tmp);
     free(out4), free(alpha), free(bg4), free(direct), free(target), free(eye), free(ring);
