@@ -25,6 +25,22 @@
 #include "gs_test.h"
 #include "model_test_util.h"
 
+/* A tiny model of cfg (additive guidance from the face stream's map
+ * recommended: every renderer path) with live guidance weights, or NULL
+ * (printed). */
+static gs_model *fg_model(const gs_model_config *cfg, uint64_t seed)
+{
+    gs_model *m = NULL;
+    gs_error err;
+    if (gs_model_create(cfg, seed, &m, &err) != GS_OK) {
+        fprintf(stderr, "fg_model: %s\n", err.msg);
+        return NULL;
+    }
+    for (int i = 0; i < cfg->channels * cfg->channels; i++)
+        m->p.rend.value_w[i] = 0.02f * (float)((i * 7) % 11 - 5);
+    return m;
+}
+
 typedef struct fg_objective {
     gs_model_ctx *c;
     float *w_rgb, *w_map, *w_face;

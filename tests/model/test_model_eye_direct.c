@@ -31,15 +31,7 @@ static gs_model *ed_model(int on, uint64_t seed)
     cfg.guidance = GS_GUIDE_ADDITIVE;
     cfg.guide_source = GS_GUIDE_SRC_SOURCE;
     cfg.eye_direct = on;
-    gs_model *m = NULL;
-    gs_error err;
-    if (gs_model_create(&cfg, seed, &m, &err) != GS_OK) {
-        fprintf(stderr, "ed_model: %s\n", err.msg);
-        return NULL;
-    }
-    for (int i = 0; i < cfg.channels * cfg.channels; i++) /* live guidance */
-        m->p.rend.value_w[i] = 0.02f * (float)((i * 7) % 11 - 5);
-    return m;
+    return fg_model(&cfg, seed);
 }
 
 /* The composite against the plain model's image and an independent

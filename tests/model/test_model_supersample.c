@@ -25,15 +25,7 @@ static gs_model *ss_model(int k, uint64_t seed)
     cfg.guidance = GS_GUIDE_ADDITIVE;
     cfg.guide_source = GS_GUIDE_SRC_SOURCE;
     cfg.supersample = k;
-    gs_model *m = NULL;
-    gs_error err;
-    if (gs_model_create(&cfg, seed, &m, &err) != GS_OK) {
-        fprintf(stderr, "ss_model: %s\n", err.msg);
-        return NULL;
-    }
-    for (int i = 0; i < cfg.channels * cfg.channels; i++) /* live guidance */
-        m->p.rend.value_w[i] = 0.02f * (float)((i * 7) % 11 - 5);
-    return m;
+    return fg_model(&cfg, seed);
 }
 
 /* The training forward's map against the k x k means of the Gaussians it
