@@ -115,20 +115,11 @@ int main(int argc, char **argv)
     int S = m->cfg.image_size, fs = m->cfg.feat_size, C = m->cfg.channels;
     size_t plane = (size_t)S * S;
 
-    /* the trainer's sample stream (lib/model/train.c), default ranges */
+    /* the trainer's sample stream, seed 1, the default head range */
+    gs_train_options topt;
+    gs_train_options_default(&topt);
     gs_synth_gen_config gen;
-    gs_synth_gen_config_default(&gen);
-    gen.split = GS_SYNTH_TRAIN;
-    gen.identities = (uint64_t)m->cfg.n_train_ids;
-    gen.seed = 1;
-    gen.size = S;
-    gen.rig = GS_SYNTH_RIG_NORMALIZED;
-    gen.supersample = 1;
-    gen.ranges.head_yaw = 40.0 * GS_MODEL_PI / 180;
-    gen.ranges.head_pitch = 25.0 * GS_MODEL_PI / 180;
-    gen.ranges.head_roll = 5.0 * GS_MODEL_PI / 180;
-    gen.ranges.gaze_yaw = 40.0 * GS_MODEL_PI / 180;
-    gen.ranges.gaze_pitch = 30.0 * GS_MODEL_PI / 180;
+    gs_train_sample_config(m, &topt, &gen);
     gs_synth_sample smp;
     if (gs_synth_sample_alloc(&smp, S, S, &err))
         die("sample", &err);

@@ -243,10 +243,8 @@ int gs_model_layout(const gs_model_config *cfg, gs_model *m, gs_error *err)
 
 static float *at(const gs_model *m, float *base, const char *name)
 {
-    for (int i = 0; i < m->ntensors; i++)
-        if (strcmp(m->t[i].name, name) == 0)
-            return base + m->t[i].offset;
-    return NULL;
+    const gs_ptensor *t = gs_model_find_tensor(m, name);
+    return t ? base + t->offset : NULL;
 }
 
 static void bind_mlp(const gs_model *m, float *base, const char *prefix,

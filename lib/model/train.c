@@ -21,6 +21,27 @@
 #include "gazesplat/synth.h"
 #include "gazesplat/train.h"
 
+void gs_train_sample_config(const gs_model *m, const gs_train_options *o,
+                            gs_synth_gen_config *gen)
+{
+    gs_synth_gen_config_default(gen);
+    gen->split = GS_SYNTH_TRAIN;
+    gen->identities = (uint64_t)m->cfg.n_train_ids;
+    gen->seed = o->seed;
+    gen->size = m->cfg.image_size;
+    gen->rig = GS_SYNTH_RIG_NORMALIZED;
+    gen->supersample = 1;
+    /* The model's documented range, a little inside the generator's,
+     * unless the caller widens or narrows the head's. */
+    gen->ranges.head_yaw =
+        (o->head_yaw_deg > 0 ? o->head_yaw_deg : 40.0) * GS_MODEL_PI / 180;
+    gen->ranges.head_pitch =
+        (o->head_pitch_deg > 0 ? o->head_pitch_deg : 25.0) * GS_MODEL_PI / 180;
+    gen->ranges.head_roll = 5.0 * GS_MODEL_PI / 180;
+    gen->ranges.gaze_yaw = 40.0 * GS_MODEL_PI / 180;
+    gen->ranges.gaze_pitch = 30.0 * GS_MODEL_PI / 180;
+}
+
 void gs_train_options_default(gs_train_options *o)
 {
     memset(o, 0, sizeof *o);
@@ -125,22 +146,7 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     int rc = gs_nn_adam_create(&t->adam, groups, ng, &ac, err);
     if (rc)
         return rc;
-    gs_synth_gen_config_default(&t->gen);
-    t->gen.split = GS_SYNTH_TRAIN;
-    t->gen.identities = (uint64_t)m->cfg.n_train_ids;
-    t->gen.seed = o->seed;
-    t->gen.size = m->cfg.image_size;
-    t->gen.rig = GS_SYNTH_RIG_NORMALIZED;
-    t->gen.supersample = 1;
-    /* The model's documented range, a little inside the generator's,
-     * unless the caller widens or narrows the head's. */
-    t->gen.ranges.head_yaw =
-        (o->head_yaw_deg > 0 ? o->head_yaw_deg : 40.0) * GS_MODEL_PI / 180;
-    t->gen.ranges.head_pitch =
-        (o->head_pitch_deg > 0 ? o->head_pitch_deg : 25.0) * GS_MODEL_PI / 180;
-    t->gen.ranges.head_roll = 5.0 * GS_MODEL_PI / 180;
-    t->gen.ranges.gaze_yaw = 40.0 * GS_MODEL_PI / 180;
-    t->gen.ranges.gaze_pitch = 30.0 * GS_MODEL_PI / 180;
+    gs_train_sample_config(m, o, &t->gen);
     rc = gs_synth_sample_alloc(&t->sample, t->gen.size, t->gen.size, err);
     if (rc)
         return rc;

@@ -166,9 +166,9 @@ static void fresh_resume(void)
     gs_model_destroy(m0);
 }
 
-/* Head ranges outside 1..60 (yaw) and 1..40 (pitch) degrees, or not a
- * number, are refused before a step, the model untouched; 0 is the
- * default's 40,25. */
+/* The sample stream's head range: 0 is the default's 40,25, a set range
+ * is taken; ranges outside 1..60 (yaw) and 1..40 (pitch) degrees, or not
+ * a number, are refused before a step, the model untouched. */
 static void head_range(void)
 {
     gs_error err = {0, ""};
@@ -177,6 +177,23 @@ static void head_range(void)
     CHECK_MSG(m0 != NULL, "tiny model: %s", err.msg);
     if (!m0)
         return;
+    /* the sample stream takes the range (and the model's identities) */
+    {
+        gs_train_options o;
+        gs_train_options_default(&o);
+        gs_synth_gen_config gen;
+        gs_train_sample_config(m0, &o, &gen);
+        CHECK_CLOSE(gen.ranges.head_yaw, 40 * GS_MODEL_PI / 180, 1e-12, 0);
+        CHECK_CLOSE(gen.ranges.head_pitch, 25 * GS_MODEL_PI / 180, 1e-12, 0);
+        CHECK(gen.split == GS_SYNTH_TRAIN && gen.seed == 1 &&
+              gen.identities == (uint64_t)m0->cfg.n_train_ids &&
+              gen.size == m0->cfg.image_size);
+        o.head_yaw_deg = 50, o.head_pitch_deg = 30, o.seed = 9;
+        gs_train_sample_config(m0, &o, &gen);
+        CHECK_CLOSE(gen.ranges.head_yaw, 50 * GS_MODEL_PI / 180, 1e-12, 0);
+        CHECK_CLOSE(gen.ranges.head_pitch, 30 * GS_MODEL_PI / 180, 1e-12, 0);
+        CHECK(gen.seed == 9);
+    }
     const double bad[][2] = {{61, 25}, {0.5, 25}, {-40, 25}, {40, 41},
                              {40, 0.5}, {NAN, 25}, {40, INFINITY}};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {

@@ -140,6 +140,11 @@ typedef struct gs_train_options {
     double head_yaw_deg, head_pitch_deg;
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
+/* The sample stream gs_train draws for m under o: m's training identities,
+ * o's seed and head range, normalized images at m's size (sample k of the
+ * stream is step k's). */
+void gs_train_sample_config(const gs_model *m, const gs_train_options *o,
+                            gs_synth_gen_config *gen);
 
 typedef struct gs_train_report {
     long steps, skipped;
