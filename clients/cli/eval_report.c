@@ -249,8 +249,7 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                    "of what it can draw, not a held-out figure\n",
                 eval_pairs_identities(ps));
     /* the incremental path needs the model's point-sampled map */
-    int full = info->feature_scale != 1 || info->supersample > 1 ||
-               info->eye_direct;
+    int full = info->feature_scale != 1 || info->supersample > 1;
     if (info->n_face > 0)
         fprintf(f, "- model renders: %d of %d face Gaussians (%.0f %%), "
                    "feature scale %.3g%s, %s\n", info->face_kept,

@@ -221,7 +221,7 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     /* the incremental path rasterizes crops at fs: point-sampled maps only */
     c->eye_direct = c->ne > 0 && m->cfg.eye_direct;
     c->inc_ok = c->ne > 0 && (rc->guidance == GS_GUIDE_NONE || c->src_mode) &&
-                c->ss == 1 && !c->eye_direct;
+                c->ss == 1;
     /* White RGB background, zero for the other channels. */
     for (size_t i = 0; i < 3 * fsz; i++)
         c->bg[i] = 1.0f;
@@ -684,6 +684,28 @@ static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, int render,
     return rc;
 }
 
+/* The eye_direct buffers, each made on first use (rgb_main also comes
+ * and goes with the sweep cache's slots, which swap it). */
+static int direct_alloc(gs_model_ctx *c)
+{
+    size_t n = (size_t)c->n, plane = (size_t)c->S * c->S;
+    if (!c->raster_dir)
+        c->raster_dir = gs_raster_create();
+    float **b[] = {&c->dir_feat, &c->dir_vfeat, &c->dir_out, &c->dir_alpha,
+                   &c->rgb_main, &c->dir_dmain, &c->dir_d};
+    size_t len[] = {4 * n, 4 * n, 4 * plane, plane, 3 * plane, 3 * plane,
+                    4 * plane};
+    for (size_t i = 0; i < sizeof b / sizeof b[0]; i++)
+        if (!*b[i])
+            *b[i] = malloc(len[i] * sizeof(float));
+    if (!c->dir_bg)
+        c->dir_bg = calloc(4 * plane, sizeof(float));
+    int ok = c->raster_dir && c->dir_bg;
+    for (size_t i = 0; i < sizeof b / sizeof b[0]; i++)
+        ok = ok && *b[i];
+    return ok ? GS_OK : GS_ERR_NOMEM;
+}
+
 /* The eye stream at the image's size (config.eye_direct), after the
  * renderer wrote c->rgb: every Gaussian rasterized through the map's view
  * at S x S pixels with the eye stream's colour and an indicator (face
@@ -697,29 +719,8 @@ static int direct_forward(gs_model_ctx *c, gs_pool *pool, int render,
                           gs_error *err)
 {
     size_t n = (size_t)c->n, plane = (size_t)c->S * c->S;
-    if (!c->raster_dir) {
-        c->raster_dir = gs_raster_create();
-        c->dir_feat = malloc(4 * n * sizeof(float));
-        c->dir_vfeat = malloc(4 * n * sizeof(float));
-        c->dir_out = malloc(4 * plane * sizeof(float));
-        c->dir_alpha = malloc(plane * sizeof(float));
-        c->dir_bg = calloc(4 * plane, sizeof(float));
-        c->rgb_main = malloc(3 * plane * sizeof(float));
-        c->dir_dmain = malloc(3 * plane * sizeof(float));
-        c->dir_d = malloc(4 * plane * sizeof(float));
-        if (!c->raster_dir || !c->dir_feat || !c->dir_vfeat || !c->dir_out ||
-            !c->dir_alpha || !c->dir_bg || !c->rgb_main || !c->dir_dmain ||
-            !c->dir_d) {
-            gs_raster_destroy(c->raster_dir);
-            free(c->dir_feat), free(c->dir_vfeat), free(c->dir_out);
-            free(c->dir_alpha), free(c->dir_bg), free(c->rgb_main);
-            free(c->dir_dmain), free(c->dir_d);
-            c->raster_dir = NULL;
-            c->dir_feat = c->dir_vfeat = c->dir_out = c->dir_alpha = NULL;
-            c->dir_bg = c->rgb_main = c->dir_dmain = c->dir_d = NULL;
-            return gs_error_set(err, GS_ERR_NOMEM, "eye direct: out of memory");
-        }
-    }
+    if (direct_alloc(c))
+        return gs_error_set(err, GS_ERR_NOMEM, "eye direct: out of memory");
     for (size_t i = 0; i < n; i++) {
         float ind = i >= (size_t)c->nf ? 1.0f : 0.0f;
         for (int k = 0; k < 3; k++)
@@ -767,6 +768,24 @@ static int direct_forward(gs_model_ctx *c, gs_pool *pool, int render,
                 o[x] = o[x] * (1.0f - b[x]) + e[x];
         }
     return GS_OK;
+}
+
+/* Takes the eye stream's composite off the live image (the renderer's
+ * own image comes back over the last crop), before an incremental render
+ * re-renders part of it; those pixels join c->rgb_dirty. */
+static void direct_undo(gs_model_ctx *c)
+{
+    const int *d = c->dir_box;
+    int S = c->S;
+    if (d[0] >= d[2] || d[1] >= d[3])
+        return;
+    for (int k = 0; k < 3; k++)
+        for (int y = d[1]; y < d[3]; y++) {
+            size_t at = ((size_t)k * S + y) * S + d[0];
+            memcpy(c->rgb + at, c->rgb_main + at,
+                   (size_t)(d[2] - d[0]) * sizeof(float));
+        }
+    gs_frame_box_union(c->rgb_dirty, d);
 }
 
 /* gs_frame_forward with the feature map rasterized at fsr pixels; render:
@@ -1127,6 +1146,7 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
     swap_f(&c->rgb, &s->rgb), swap_f(&c->gvec, &s->gvec);
     swap_f(&c->eye_base, &s->eye_base);
     swap_f(&c->x_head, &s->x_head), swap_f(&c->q_head, &s->q_head);
+    swap_f(&c->rgb_main, &s->rgb_main);
     float code[GS_MODEL_MAX_CODE];
     memcpy(code, c->eye_base_code, sizeof code);
     memcpy(c->eye_base_code, s->eye_base_code, sizeof code);
@@ -1149,6 +1169,8 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
     memcpy(s->rgb8_tf, tf, sizeof tf);
     memcpy(r, c->rgb_dirty, sizeof r), memcpy(c->rgb_dirty, s->rgb_dirty, sizeof r);
     memcpy(s->rgb_dirty, r, sizeof r);
+    memcpy(r, c->dir_box, sizeof r), memcpy(c->dir_box, s->dir_box, sizeof r);
+    memcpy(s->dir_box, r, sizeof r);
     /* the face cache's outputs are not what g_* now holds */
     c->face_valid = 0;
     c->face_map_valid = 0;
@@ -1158,7 +1180,7 @@ static void sweep_slot_free(gs_sweep_slot *s)
 {
     float *f[] = {s->g_mean, s->g_scale, s->g_quat, s->g_opac,
                   s->g_feat, s->fmap, s->rgb, s->gvec, s->eye_base,
-                  s->x_head, s->q_head};
+                  s->x_head, s->q_head, s->rgb_main};
     for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
         free(f[i]);
     free(s->fbox);
@@ -1183,6 +1205,8 @@ static int sweep_slot_alloc(const gs_model_ctx *c, gs_sweep_slot *s)
     s->q_head = falloc((size_t)(c->nf ? c->nf : 1) * 4, &fail);
     s->fbox = calloc((size_t)(c->nf ? c->nf : 1), 4 * sizeof(int16_t));
     s->rgb8 = malloc(isz * 3);
+    if (c->eye_direct) /* the renderer's image under the eye stream's */
+        s->rgb_main = falloc(isz * 3, &fail);
     if (fail || !s->fbox || !s->rgb8) {
         sweep_slot_free(s);
         return GS_ERR_NOMEM;
@@ -1378,6 +1402,8 @@ static int render_inc(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     eye_streams(c, fr);
     gs_frame_camera(c->m, fr->head_t, &cam);
     int now[4], dirty[4];
+    if (c->eye_direct)
+        direct_undo(c);
     gs_frame_eye_tiles(c, &cam, now);
     memcpy(dirty, c->inc_rect, sizeof dirty);
     gs_frame_box_union(dirty, now);
@@ -1392,6 +1418,12 @@ static int render_inc(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
             return gs_error_set(err, rc, "model: incremental renderer failed");
         c->inc_stats[0] += (double)(dirty[2] - dirty[0]) * (dirty[3] - dirty[1]);
         c->inc_stats[1] += (double)(changed[2] - changed[0]) * (changed[3] - changed[1]);
+    }
+    if (c->eye_direct) { /* the eye stream over the renderer's new image */
+        int rc = direct_forward(c, pool, 1, err);
+        if (rc)
+            return rc;
+        gs_frame_box_union(c->rgb_dirty, c->dir_box);
     }
     memcpy(c->inc_rect, now, sizeof now);
     c->inc_key = *fr;

@@ -39,6 +39,8 @@ typedef struct gs_sweep_slot {
     int rgb8_valid;
     float rgb8_tf[6];
     int rgb_dirty[4];
+    float *rgb_main;                  /* eye_direct: the renderer's image */
+    int dir_box[4];
 } gs_sweep_slot;
 
 /* The eye stream's coverage of the merged feature map of the last forward

@@ -430,7 +430,7 @@ int main(int argc, char **argv)
                               "supersampled), every render full",
                           "non-finite outputs 0", NULL));
     }
-    { /* a model with the eye at the image's size: full renders, named */
+    { /* a model with the eye at the image's size: incremental, named */
         char edm[300];
         snprintf(edm, sizeof edm, "%s/tiny-ed.safetensors", dir);
         gs_model *m = NULL;
@@ -443,7 +443,7 @@ int main(int argc, char **argv)
                               "--iters", "4", "--threads", "2", "--estimator",
                               est, "--reuse-fits", NULL};
         CHECK_EQ_INT(run(eved), 0);
-        CHECK(summary_has(md, "feature scale 1, every render full",
+        CHECK(summary_has(md, "feature scale 1, incremental where possible",
                           "(config.eye_direct)", "non-finite outputs 0", NULL));
     }
     /* Fine-tuned per input on run 2's fits: finite, deterministic, other

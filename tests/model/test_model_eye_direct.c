@@ -7,8 +7,9 @@
  * which is less than half the image); the gradients of a fixed random linear
  * function of the image and the maps against central differences (code,
  * colours, latent features, opacities); the file
- * keeps the flag and a file without the key is 0; renders are full, the
- * same bytes with and without a pool and not the plain model's; detail
+ * keeps the flag and a file without the key is 0; a gaze sweep renders
+ * incrementally (test_model_incremental compares it with full renders),
+ * the same bytes with and without a pool and not the plain model's; detail
  * transfer from its own render gives that render back; a fit of
  * its own render converges; bad values and single-stream models are
  * refused. */
@@ -165,8 +166,8 @@ static void model_level(gs_pool *pool)
         CHECK(gs_model_create(&cfg, 1, &ss, &err) != GS_OK && ss == NULL);
     }
 
-    /* Renders: full, the same bytes with and without a pool, not the
-     * plain model's. */
+    /* Renders: a sweep (the first full, the rest incremental), the same
+     * bytes with and without a pool, not the plain model's. */
     enum { N = 3 };
     int S = m->cfg.image_size;
     size_t stride = 3 * (size_t)S, bytes = stride * S;
@@ -174,7 +175,8 @@ static void model_level(gs_pool *pool)
     for (int i = 0; i < 3; i++)
         img[i] = malloc(N * bytes);
     gs_subject s = frame_subject(m);
-    gs_model_ctx *c = gs_model_ctx_create(m), *c0 = gs_model_ctx_create(m0);
+    gs_model_ctx *c = gs_model_ctx_create(m), *c0 = gs_model_ctx_create(m0),
+                 *c1 = gs_model_ctx_create(m);
     for (int v = 0; v < N; v++) {
         gs_view view;
         memset(&view, 0, sizeof view);
@@ -182,7 +184,7 @@ static void model_level(gs_pool *pool)
         view.gaze_yaw = 0.3 - 0.15 * v;
         CHECK(gs_model_render(c, pool, &s, &view, img[0] + v * bytes, stride,
                               &err) == GS_OK);
-        CHECK(gs_model_render(c, NULL, &s, &view, img[1] + v * bytes, stride,
+        CHECK(gs_model_render(c1, NULL, &s, &view, img[1] + v * bytes, stride,
                               &err) == GS_OK);
         CHECK(gs_model_render(c0, pool, &s, &view, img[2] + v * bytes, stride,
                               &err) == GS_OK);
@@ -192,7 +194,10 @@ static void model_level(gs_pool *pool)
               "the direct eye changed no pixel");
     gs_model_ctx_stats st;
     gs_model_ctx_get_stats(c, &st);
-    CHECK(st.renders_incremental == 0 && st.renders_full == 2 * N);
+    CHECK_MSG(st.renders_incremental == N - 1 && st.renders_full == 1,
+              "%llu full, %llu incremental renders",
+              (unsigned long long)st.renders_full,
+              (unsigned long long)st.renders_incremental);
     /* Detail transfer from its own render: the residual is nothing, so
      * at the input's own view it gives the render back, and it runs at
      * another gaze. */
@@ -215,6 +220,28 @@ static void model_level(gs_pool *pool)
         own.gaze_yaw = -0.2;
         CHECK(gs_model_render_transfer(c, pool, &si, img[0], stride, &own, tr,
                                        stride, &err) == GS_OK);
+        /* its eyeball map is the composite's beta: the target's render
+         * left beta over its crop in c */
+        const float *tz, *ta, *te;
+        gs_xfer_target_maps(c->xfer, &tz, &ta, &te);
+        const int *d = c->dir_box;
+        int w = d[2] - d[0];
+        double off = 0, most_b = 0, outside = 0;
+        for (int y = 0; te && y < S; y++)
+            for (int x = 0; x < S; x++) {
+                float e = te[(size_t)y * S + x];
+                if (x >= d[0] && x < d[2] && y >= d[1] && y < d[3]) {
+                    float b = c->dir_out[3 * (size_t)w * (d[3] - d[1]) +
+                                         (size_t)(y - d[1]) * w + x - d[0]];
+                    off = fmax(off, fabs((double)e - b));
+                    most_b = fmax(most_b, b);
+                } else
+                    outside = fmax(outside, e);
+            }
+        printf("transfer's eyeball map against beta: off by %.2e (beta up to "
+               "%.3f), %.2e outside the crop\n", off, most_b, outside);
+        CHECK_MSG(te && off < 1e-5 && most_b > 0.1 && outside == 0,
+                  "transfer's eyeball map is not beta: %.3g", off);
         free(tr);
     }
 
@@ -234,6 +261,7 @@ static void model_level(gs_pool *pool)
               fit.fit_psnr);
     gs_model_ctx_destroy(c);
     gs_model_ctx_destroy(c0);
+    gs_model_ctx_destroy(c1);
     for (int i = 0; i < 3; i++)
         free(img[i]);
     gs_model_destroy(m);

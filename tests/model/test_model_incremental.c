@@ -32,7 +32,7 @@ static float urand(float b)
     return b * (2.0f * (float)((double)(z >> 11) / 9007199254740992.0) - 1.0f);
 }
 
-static gs_model *make_model(int guidance, int feat_size, int lids)
+static gs_model *make_model(int guidance, int feat_size, int lids, int direct)
 {
     gs_model_config cfg;
     gs_model_config_default(&cfg);
@@ -48,6 +48,7 @@ static gs_model *make_model(int guidance, int feat_size, int lids)
     cfg.guidance = guidance;
     cfg.guide_source = GS_GUIDE_SRC_SOURCE;
     cfg.n_train_ids = 2;
+    cfg.eye_direct = direct;
     gs_model *m = NULL;
     gs_error err;
     if (gs_model_create(&cfg, 11, &m, &err) != GS_OK) {
@@ -137,10 +138,10 @@ out:
     free(k);
 }
 
-static void sweep(int guidance, int feat_size, int lids, gs_pool *pool,
-                  const char *name)
+static void sweep(int guidance, int feat_size, int lids, int direct,
+                  gs_pool *pool, const char *name)
 {
-    gs_model *m = make_model(guidance, feat_size, lids);
+    gs_model *m = make_model(guidance, feat_size, lids, direct);
     CHECK(m != NULL);
     if (!m)
         return;
@@ -152,11 +153,12 @@ static void sweep(int guidance, int feat_size, int lids, gs_pool *pool,
     frame_default(m, &fr);
     size_t nrgb = 3 * (size_t)m->cfg.image_size * m->cfg.image_size;
     size_t nmap = (size_t)m->cfg.channels * feat_size * feat_size;
-    /* gaze (pitch, yaw) in degrees: small steps, the range's corners, back */
+    /* gaze (pitch, yaw) in degrees: small steps, the range's corners, the
+     * same gaze again (nothing moves), back */
     static const double gz[][2] = {{0, 0},   {2, 1},    {-5, 10}, {30, -40},
-                                   {-30, 40}, {-30, 39}, {15, 0},  {0, 0},
-                                   {40, 50}, {-40, -50}, {0, 0}};
-    double worst = 0.0, worst_map = 0.0;
+                                   {-30, 40}, {-30, 39}, {15, 0},  {15, 0},
+                                   {0, 0},   {40, 50},  {-40, -50}, {0, 0}};
+    double worst = 0.0, worst_map = 0.0, drawn = 0.0;
     int incs = 0, n = (int)(sizeof gz / sizeof gz[0]);
     gs_error err = {0, ""};
     for (int k = 0; k < n; k++) {
@@ -174,10 +176,14 @@ static void sweep(int guidance, int feat_size, int lids, gs_pool *pool,
         CHECK(gs_frame_forward(full, pool, &fr, GS_STREAM_BOTH, 0, &err) == GS_OK);
         double d = max_diff(inc->rgb, full->rgb, nrgb);
         worst = fmax(worst, d);
+        if (direct) /* the composite is on: the eye stream drew pixels */
+            drawn = fmax(drawn, max_diff(inc->rgb, inc->rgb_main, nrgb));
         worst_map = fmax(worst_map, max_diff(inc->fmap, full->fmap, nmap));
         CHECK_MSG(d <= TOL, "%s gaze (%g, %g): incremental differs by %.3g",
                   name, gz[k][0], gz[k][1], d);
     }
+    CHECK_MSG(!direct || drawn > 0.01, "%s: the eye stream drew nothing "
+              "over the renderer's image (%.3g)", name, drawn);
     double area = (double)feat_size * feat_size * (incs ? incs : 1);
     printf("%-34s %d incremental renders, max |diff| image %.2e, features "
            "%.2e; re-rasterized %.0f%%, changed %.0f%% of the map\n",
@@ -218,9 +224,9 @@ static void sweep(int guidance, int feat_size, int lids, gs_pool *pool,
  * sweep cache keeps each one's render, so every return to a kept one is
  * incremental and equals the full render; least recently used renders are
  * evicted; a cache of one keeps only the last. */
-static void subjects(gs_pool *pool)
+static void subjects(gs_pool *pool, int direct)
 {
-    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32, 0);
+    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32, 0, direct);
     CHECK(m != NULL);
     if (!m)
         return;
@@ -287,9 +293,9 @@ static void subjects(gs_pool *pool)
  * is written (the 8-bit image is updated only where the render changed,
  * then copied whole), the stride's padding is not, and a colour transform
  * that changes between calls applies to every pixel. */
-static void api_sweep(void)
+static void api_sweep(int direct)
 {
-    gs_model *m = make_model(GS_GUIDE_MULTIPLICATIVE, 32, 0);
+    gs_model *m = make_model(GS_GUIDE_MULTIPLICATIVE, 32, 0, direct);
     CHECK(m != NULL);
     if (!m)
         return;
@@ -356,7 +362,7 @@ static void api_sweep(void)
  * always render in full. */
 static void block_is_full(void)
 {
-    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32, 0);
+    gs_model *m = make_model(GS_GUIDE_ADDITIVE, 32, 0, 0);
     CHECK(m && gs_model_set_guide_source(m, GS_GUIDE_SRC_BLOCK, NULL) == GS_OK);
     gs_model_ctx *c = gs_model_ctx_create(m);
     gs_frame fr;
@@ -376,14 +382,19 @@ int main(void)
     gs_nn_blas_set_threads(1);
     gs_pool *pool = gs_pool_create(2);
     CHECK(pool != NULL);
-    sweep(GS_GUIDE_ADDITIVE, 32, 0, NULL, "additive 32^2");
-    sweep(GS_GUIDE_MULTIPLICATIVE, 32, 0, pool, "multiplicative 32^2, 2 threads");
-    sweep(GS_GUIDE_NONE, 32, 0, NULL, "no guidance 32^2");
-    sweep(GS_GUIDE_ADDITIVE, 64, 0, pool, "additive 64^2, 2 threads");
-    sweep(GS_GUIDE_ADDITIVE, 32, 1, NULL, "additive 32^2, lids");
-    sweep(GS_GUIDE_MULTIPLICATIVE, 64, 1, pool, "multiplicative 64^2, lids, 2 thr");
-    subjects(pool);
-    api_sweep();
+    sweep(GS_GUIDE_ADDITIVE, 32, 0, 0, NULL, "additive 32^2");
+    sweep(GS_GUIDE_MULTIPLICATIVE, 32, 0, 0, pool, "multiplicative 32^2, 2 threads");
+    sweep(GS_GUIDE_NONE, 32, 0, 0, NULL, "no guidance 32^2");
+    sweep(GS_GUIDE_ADDITIVE, 64, 0, 0, pool, "additive 64^2, 2 threads");
+    sweep(GS_GUIDE_ADDITIVE, 32, 1, 0, NULL, "additive 32^2, lids");
+    sweep(GS_GUIDE_MULTIPLICATIVE, 64, 1, 0, pool, "multiplicative 64^2, lids, 2 thr");
+    /* the eye stream also drawn at the image's size (config.eye_direct) */
+    sweep(GS_GUIDE_ADDITIVE, 32, 0, 1, NULL, "additive 32^2, eye direct");
+    sweep(GS_GUIDE_MULTIPLICATIVE, 64, 1, 1, pool, "mult. 64^2, lids, eye direct, 2 thr");
+    subjects(pool, 0);
+    subjects(pool, 1);
+    api_sweep(0);
+    api_sweep(1);
     block_is_full();
     gs_pool_destroy(pool);
     GS_TEST_END();
