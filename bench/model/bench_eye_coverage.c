@@ -2,9 +2,11 @@
  * the groundwork for drawing the eyeball at the image's resolution.
  *
  *   bench_eye_coverage --model FILE [--count N] [--images DIR]
+ *                      [--head-range Y,P]
  *
  * For the first N (default 20) samples of the model's own training stream
- * (its training identities, seed 1, the default head range), each rendered
+ * (its training identities, seed 1, the default head range or the one of
+ * --head-range, as `train --head-range`), each rendered
  * from the identity's learned code and the sample's true expression, lights,
  * head pose and gaze (gs_model_training_subject: what a training step sees),
  * the merged streams are rasterized once more with one channel that is 1
@@ -89,6 +91,8 @@ int main(int argc, char **argv)
 {
     const char *path = NULL, *images = NULL;
     int count = 20;
+    double hy = 0, hp = 0; /* 0: the trainer's default */
+    const char *argv_range = NULL;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--model") && i + 1 < argc)
             path = argv[++i];
@@ -96,9 +100,19 @@ int main(int argc, char **argv)
             count = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--images") && i + 1 < argc)
             images = argv[++i];
-        else {
+        else if (!strcmp(argv[i], "--head-range") && i + 1 < argc) {
+            char tail;
+            argv_range = argv[++i];
+            if (sscanf(argv_range, "%lf,%lf%c", &hy, &hp, &tail) != 2 ||
+                !(hy >= 1 && hy <= 60 && hp >= 1 && hp <= 40)) {
+                fprintf(stderr, "bench_eye_coverage: --head-range '%s': want "
+                                "YAW,PITCH degrees within 1..60 and 1..40\n",
+                        argv[i]);
+                return 2;
+            }
+        } else {
             fprintf(stderr, "usage: bench_eye_coverage --model FILE [--count N] "
-                            "[--images DIR]\n");
+                            "[--images DIR] [--head-range Y,P]\n");
             return 2;
         }
     }
@@ -115,9 +129,10 @@ int main(int argc, char **argv)
     int S = m->cfg.image_size, fs = m->cfg.feat_size, C = m->cfg.channels;
     size_t plane = (size_t)S * S;
 
-    /* the trainer's sample stream, seed 1, the default head range */
+    /* the trainer's sample stream, seed 1, its head range */
     gs_train_options topt;
     gs_train_options_default(&topt);
+    topt.head_yaw_deg = hy, topt.head_pitch_deg = hp;
     gs_synth_gen_config gen;
     gs_train_sample_config(m, &topt, &gen);
     gs_synth_sample smp;
@@ -263,7 +278,8 @@ int main(int argc, char **argv)
             write_band(images, idx, "beta", out4 + 3 * plane, S, 1);
         }
     }
-    printf("%s, %d training samples (seed 1):\n", path, count);
+    printf("%s, %d training samples (seed 1, head range %s):\n", path, count,
+           hy > 0 ? argv_range : "the default");
     printf("| eye stream's share (beta) | at %d px (the map) | at %d px (the image) |\n",
            fs, S);
     printf("|---|---:|---:|\n");
