@@ -92,7 +92,6 @@ int main(int argc, char **argv)
     const char *path = NULL, *images = NULL;
     int count = 20;
     double hy = 0, hp = 0; /* 0: the trainer's default */
-    const char *argv_range = NULL;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--model") && i + 1 < argc)
             path = argv[++i];
@@ -102,8 +101,7 @@ int main(int argc, char **argv)
             images = argv[++i];
         else if (!strcmp(argv[i], "--head-range") && i + 1 < argc) {
             char tail;
-            argv_range = argv[++i];
-            if (sscanf(argv_range, "%lf,%lf%c", &hy, &hp, &tail) != 2 ||
+            if (sscanf(argv[++i], "%lf,%lf%c", &hy, &hp, &tail) != 2 ||
                 !(hy >= 1 && hy <= 60 && hp >= 1 && hp <= 40)) {
                 fprintf(stderr, "bench_eye_coverage: --head-range '%s': want "
                                 "YAW,PITCH degrees within 1..60 and 1..40\n",
@@ -278,8 +276,12 @@ int main(int argc, char **argv)
             write_band(images, idx, "beta", out4 + 3 * plane, S, 1);
         }
     }
-    printf("%s, %d training samples (seed 1, head range %s):\n", path, count,
-           hy > 0 ? argv_range : "the default");
+    if (hy > 0)
+        printf("%s, %d training samples (seed 1, head range %g,%g):\n", path,
+               count, hy, hp);
+    else
+        printf("%s, %d training samples (seed 1, the default head range):\n",
+               path, count);
     printf("| eye stream's share (beta) | at %d px (the map) | at %d px (the image) |\n",
            fs, S);
     printf("|---|---:|---:|\n");
