@@ -25,7 +25,10 @@ const cli_command cli_train_command = {
     "                      model's adds new ones (codes from the mean)\n"
     "  --lr X              base Adam learning rate (1e-3)\n"
     "  --seed N            model initialisation and sample stream (1)\n"
-    "  --threads N         worker threads (2)\n"
+    "  --threads N         worker threads (2); a thread more makes each\n"
+    "                      step's sample while the step before runs\n"
+    "  --sync-samples      make each sample at its step instead, on the\n"
+    "                      workers' first thread (the same bytes; slower)\n"
     "  --resume            continue a run from FILE and FILE.opt\n"
     "  --fresh-optimizer STEP\n"
     "                      with --resume, for a FILE without FILE.opt (a\n"
@@ -83,7 +86,8 @@ static void log_line(void *ctx, const char *fmt, ...)
 
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
-       O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_HEAD, O_EDIR, O_N };
+       O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_HEAD, O_EDIR, O_SYNC,
+       O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -98,7 +102,8 @@ static int run_train(int argc, char **argv)
         {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL},
         {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
         {"--supersample", 1, NULL}, {"--eye-weight", 1, NULL},
-        {"--head-range", 1, NULL}, {"--eye-direct", 1, NULL}};
+        {"--head-range", 1, NULL}, {"--eye-direct", 1, NULL},
+        {"--sync-samples", 0, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -114,6 +119,7 @@ static int run_train(int argc, char **argv)
     gs_train_options t;
     gs_train_options_default(&t);
     t.out_path = o[O_OUT].value;
+    t.sync_samples = o[O_SYNC].value != NULL;
     long v, threads = 2, seed = 1;
     if (o[O_PRESET].value)
         spec.preset = o[O_PRESET].value;

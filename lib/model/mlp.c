@@ -44,6 +44,22 @@ static void leaky_forward(float *out, const float *in, float slope, size_t n)
     }
 }
 
+/* d[i] = pre[i] > 0 ? d[i] : slope d[i], in place, by the same blend
+ * (a branch on random signs mispredicts about half the time). */
+static void leaky_backward(float *d, const float *pre, float slope, size_t n)
+{
+    for (size_t i = 0; i < n; i++) {
+        float b = slope * d[i];
+        int32_t k, id, ib, r;
+        memcpy(&k, &pre[i], sizeof k);
+        memcpy(&id, &d[i], sizeof id);
+        memcpy(&ib, &b, sizeof ib);
+        int32_t m = -(int32_t)(k > 0);
+        r = (id & m) | (ib & ~m);
+        memcpy(&d[i], &r, sizeof r);
+    }
+}
+
 void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,
                     float *out)
 {
@@ -118,9 +134,7 @@ void gs_mlp_backward(const gs_mlp *m, const gs_mlp *g, const float *in, int n,
         memset(dx, 0, sz * sizeof(float));
         gs_nn_linear_backward(dx, g->w[l], g->b[l], d, x, m->w[l], n, ic, oc);
         /* Through the LeakyReLU of layer l-1. */
-        const float *pr = pre[l - 1];
-        for (size_t i = 0; i < sz; i++)
-            dx[i] = pr[i] > 0.0f ? dx[i] : GS_MLP_SLOPE * dx[i];
+        leaky_backward(dx, pre[l - 1], GS_MLP_SLOPE, sz);
         d = dx;
     }
 }

@@ -6,9 +6,17 @@
  * with a white background outside the head mask, plus L1 of the feature
  * map's first 3 channels against the 4x area-downsampled target. Adam with
  * per-group learning rates; a step whose loss or gradient is non-finite,
- * or whose loss spikes above 4x the running mean, is skipped and counted. */
+ * or whose loss spikes above 4x the running mean, is skipped and counted.
+ *
+ * A sample (the synthetic image, its targets and masks) is a pure function
+ * of its index: nothing a step changes goes into it. So a producer thread
+ * makes step i + 1's sample while step i runs (two slots), and the bytes
+ * are those of making each in turn (gs_train_options.sync_samples). What
+ * a sample takes from the model, its identity's code, is read at its
+ * step, after the step before has updated it. */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
+#include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -80,17 +88,50 @@ static double now_s(void)
     return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
+/* What making a sample reads: fixed for the run, the producer's copy. */
+typedef struct item_maker {
+    gs_synth_gen_config gen;
+    int n_ids;    /* training identities */
+    int S, fs;    /* image and feature map sizes */
+    int g;        /* the face-only mask's margin around the eyes, feature px */
+    float eye_w;  /* eye pixels' weight in the image L1 */
+} item_maker;
+
+/* One sample and its targets, made ahead of its step. */
+typedef struct train_item {
+    uint64_t index;
+    int filled;               /* index's sample is here */
+    gs_synth_scene scene;
+    gs_synth_sample sample;
+    int ident;                /* its training identity */
+    float *target, *wl1;      /* [3 S^2] white outside the head; [S^2] */
+    float *ftarget;           /* [3 fs^2] area-downsampled target */
+    float *fmask, *emask;     /* [fs^2] face-only mask; eye share */
+    int rc;
+    gs_error err;
+} train_item;
+
 typedef struct trainer {
     gs_model *m;
     gs_model_ctx *c;
     float *grad;
     gs_model_params g;
     gs_nn_adam *adam;
-    gs_synth_gen_config gen;
-    gs_synth_sample sample;
-    float *target, *wl1, *dimg, *ftarget, *dfmap, *ssim;
-    float *fmask, *dfmap_face; /* face-only render: mask [fs^2], gradient */
-    float *emask, *dfmap_eye;  /* eye-only render: eye area [fs^2], gradient */
+    item_maker mk;
+    train_item item[2];        /* step i's sample is in item[i & 1] */
+    train_item *cur;           /* this step's */
+    /* the producer: fills item[want] with sample want_index */
+    pthread_t producer;
+    int producer_on;
+    pthread_mutex_t lock;
+    pthread_cond_t cv;
+    int want, busy, quit;
+    uint64_t want_index;
+    /* this step's targets (cur's) */
+    const float *target, *wl1, *ftarget, *fmask, *emask;
+    float *dimg, *dfmap, *ssim;
+    float *dfmap_face;         /* face-only render's gradient */
+    float *dfmap_eye;          /* eye-only render's gradient */
     float *dcover;             /* the eye coverage's gradient [fs^2] */
     double cover_w;            /* its weight (eye_cover_weight) */
     float eye_w;               /* eye pixels' and eye map's weight (5) */
@@ -146,54 +187,73 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
     int rc = gs_nn_adam_create(&t->adam, groups, ng, &ac, err);
     if (rc)
         return rc;
-    gs_train_sample_config(m, o, &t->gen);
-    rc = gs_synth_sample_alloc(&t->sample, t->gen.size, t->gen.size, err);
-    if (rc)
-        return rc;
     size_t S = (size_t)m->cfg.image_size, fs = (size_t)m->cfg.feat_size;
-    t->ssim_len = gs_nn_ssim_fused_scratch_size(3, (int)S, (int)S, GS_NN_SSIM_ZERO);
-    t->target = malloc(3 * S * S * sizeof(float));
-    t->wl1 = malloc(S * S * sizeof(float));
-    t->dimg = malloc(3 * S * S * sizeof(float));
-    t->ftarget = malloc(3 * fs * fs * sizeof(float));
-    t->dfmap = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
-    t->dfmap_face = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
-    t->fmask = malloc(fs * fs * sizeof(float));
-    t->dfmap_eye = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
-    t->emask = malloc(fs * fs * sizeof(float));
-    t->dcover = calloc(fs * fs, sizeof(float));
     t->cover_w = o->eye_cover_weight;
     t->eye_w = o->eye_weight > 0 ? (float)o->eye_weight : 5.0f;
+    item_maker *mk = &t->mk;
+    gs_train_sample_config(m, o, &mk->gen);
+    mk->n_ids = m->cfg.n_train_ids;
+    mk->S = (int)S;
+    mk->fs = (int)fs;
+    /* the eyes are missing from the face-only render; with lids, which it
+     * leaves out too, 3: the lids reach 2-4 mm beyond the eye's opening, a
+     * feature pixel is about 3.4 mm */
+    mk->g = t->c->nl ? 3 : 1;
+    mk->eye_w = t->eye_w;
+    for (int i = 0; i < 2; i++) {
+        train_item *it = &t->item[i];
+        rc = gs_synth_sample_alloc(&it->sample, mk->gen.size, mk->gen.size, err);
+        if (rc)
+            return rc;
+        it->target = malloc(3 * S * S * sizeof(float));
+        it->wl1 = malloc(S * S * sizeof(float));
+        it->ftarget = malloc(3 * fs * fs * sizeof(float));
+        it->fmask = malloc(fs * fs * sizeof(float));
+        it->emask = malloc(fs * fs * sizeof(float));
+        if (!it->target || !it->wl1 || !it->ftarget || !it->fmask || !it->emask)
+            return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
+    }
+    t->ssim_len = gs_nn_ssim_fused_scratch_size(3, (int)S, (int)S, GS_NN_SSIM_ZERO);
+    t->dimg = malloc(3 * S * S * sizeof(float));
+    t->dfmap = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->dfmap_face = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->dfmap_eye = calloc((size_t)m->cfg.channels * fs * fs, sizeof(float));
+    t->dcover = calloc(fs * fs, sizeof(float));
     t->ssim = malloc(t->ssim_len * sizeof(float));
-    if (!t->target || !t->wl1 || !t->dimg || !t->ftarget || !t->dfmap ||
-        !t->ssim || !t->dfmap_face || !t->fmask || !t->dfmap_eye || !t->emask ||
+    if (!t->dimg || !t->dfmap || !t->ssim || !t->dfmap_face || !t->dfmap_eye ||
         !t->dcover)
         return gs_error_set(err, GS_ERR_NOMEM, "train: out of memory");
     return GS_OK;
 }
 
+static void producer_stop(trainer *t);
+
 static void trainer_free(trainer *t)
 {
+    producer_stop(t);
     gs_model_ctx_destroy(t->c);
     free(t->grad);
     gs_nn_adam_destroy(t->adam);
-    gs_synth_sample_free(&t->sample);
-    free(t->target);
-    free(t->wl1);
+    for (int i = 0; i < 2; i++) {
+        train_item *it = &t->item[i];
+        gs_synth_sample_free(&it->sample);
+        free(it->target);
+        free(it->wl1);
+        free(it->ftarget);
+        free(it->fmask);
+        free(it->emask);
+    }
     free(t->dimg);
-    free(t->ftarget);
     free(t->dfmap);
     free(t->dfmap_face);
-    free(t->fmask);
     free(t->dfmap_eye);
-    free(t->emask);
     free(t->dcover);
     free(t->ssim);
 }
 
-static int identity_index(const trainer *t, uint64_t seed)
+static int identity_index(int n_ids, uint64_t seed)
 {
-    for (int k = 0; k < t->m->cfg.n_train_ids; k++)
+    for (int k = 0; k < n_ids; k++)
         if (gs_synth_split_seed(GS_SYNTH_TRAIN, (uint64_t)k) == seed)
             return k;
     return -1;
@@ -233,25 +293,177 @@ int gs_model_training_subject(const gs_model *m, int k,
     return GS_OK;
 }
 
-/* Builds the frame and the targets of sample `index`. */
-static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
-                   gs_error *err)
+/* Makes sample `index` and its targets into it (any thread: reads only mk). */
+static int make_item(const item_maker *mk, uint64_t index, train_item *it)
 {
-    gs_synth_scene scene;
+    it->filled = 0;
+    it->index = index;
+    gs_error *err = &it->err;
     gs_synth_camera cam;
-    int rc = gs_synth_gen_scene(&t->gen, index, &scene, &cam, err);
+    int rc = gs_synth_gen_scene(&mk->gen, index, &it->scene, &cam, err);
     if (!rc)
-        rc = gs_synth_gen_sample(&t->gen, index, NULL, &t->sample, err);
+        rc = gs_synth_gen_sample(&mk->gen, index, NULL, &it->sample, err);
+    if (!rc) {
+        it->ident = identity_index(mk->n_ids, it->sample.labels.identity.seed);
+        if (it->ident < 0)
+            rc = gs_error_set(err, GS_ERR_STATE, "train: unknown identity");
+    }
+    it->rc = rc;
     if (rc)
         return rc;
-    const gs_synth_labels *lab = &t->sample.labels;
-    int k = identity_index(t, lab->identity.seed);
-    if (k < 0)
-        return gs_error_set(err, GS_ERR_STATE, "train: unknown identity");
+    /* Targets: white outside the head; eyes weighted eye_w in the L1. */
+    int S = mk->S, fs = mk->fs;
+    size_t plane = (size_t)S * S;
+    const gs_synth_sample *sm = &it->sample;
+    const uint8_t *head = gs_synth_sample_mask(sm, GS_SYNTH_MASK_HEAD);
+    const uint8_t *le = gs_synth_sample_mask(sm, GS_SYNTH_MASK_LEFT_EYE);
+    const uint8_t *re = gs_synth_sample_mask(sm, GS_SYNTH_MASK_RIGHT_EYE);
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            size_t i = (size_t)y * S + x;
+            float hm = head[i] / 255.0f;
+            for (int ch = 0; ch < 3; ch++) {
+                float v = sm->rgb[(size_t)y * sm->stride + 3 * x + ch] / 255.0f;
+                it->target[ch * plane + i] = hm * v + (1 - hm);
+            }
+            it->wl1[i] = 1.0f + (mk->eye_w - 1.0f) * (float)((le[i] | re[i]) != 0);
+        }
+    int f = S / fs, g = mk->g;
+    /* face-only mask: feature pixels with no eye pixel within g feature
+     * pixels */
+    for (int y = 0; y < fs; y++)
+        for (int x = 0; x < fs; x++) {
+            int eye = 0;
+            for (int yy = (y - g) * f; yy < (y + g + 1) * f && !eye; yy++)
+                for (int xx = (x - g) * f; xx < (x + g + 1) * f && !eye; xx++)
+                    if (yy >= 0 && yy < S && xx >= 0 && xx < S)
+                        eye = (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
+            it->fmask[(size_t)y * fs + x] = eye ? 0.0f : 1.0f;
+            int in_eye = 0; /* share of the feature pixel that is eye */
+            for (int yy = y * f; yy < (y + 1) * f; yy++)
+                for (int xx = x * f; xx < (x + 1) * f; xx++)
+                    in_eye += (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
+            it->emask[(size_t)y * fs + x] = (float)in_eye / (float)(f * f);
+        }
+    for (int ch = 0; ch < 3; ch++)
+        for (int y = 0; y < fs; y++)
+            for (int x = 0; x < fs; x++) {
+                double sum = 0;
+                for (int dy = 0; dy < f; dy++)
+                    for (int dx = 0; dx < f; dx++)
+                        sum += it->target[ch * plane +
+                                          (size_t)(y * f + dy) * S + x * f + dx];
+                it->ftarget[(size_t)ch * fs * fs + (size_t)y * fs + x] =
+                    (float)(sum / (f * f));
+            }
+    it->filled = 1;
+    return GS_OK;
+}
+
+static void *producer_main(void *arg)
+{
+    trainer *t = arg;
+    pthread_mutex_lock(&t->lock);
+    for (;;) {
+        while (!t->quit && t->want < 0)
+            pthread_cond_wait(&t->cv, &t->lock);
+        if (t->quit)
+            break;
+        int slot = t->want;
+        uint64_t index = t->want_index;
+        t->want = -1;
+        t->busy = 1;
+        pthread_mutex_unlock(&t->lock);
+        make_item(&t->mk, index, &t->item[slot]);
+        pthread_mutex_lock(&t->lock);
+        t->busy = 0;
+        pthread_cond_broadcast(&t->cv);
+    }
+    pthread_mutex_unlock(&t->lock);
+    return NULL;
+}
+
+/* Starts the producer; without one (sync, or no thread to be had) every
+ * sample is made at its step on the calling thread. */
+static void producer_start(trainer *t, int sync)
+{
+    t->want = -1;
+    t->busy = t->quit = 0;
+    if (sync || pthread_mutex_init(&t->lock, NULL))
+        return;
+    if (pthread_cond_init(&t->cv, NULL)) {
+        pthread_mutex_destroy(&t->lock);
+        return;
+    }
+    if (pthread_create(&t->producer, NULL, producer_main, t)) {
+        pthread_cond_destroy(&t->cv);
+        pthread_mutex_destroy(&t->lock);
+        return;
+    }
+    t->producer_on = 1;
+}
+
+/* Lets the sample in the making finish, then ends the producer. */
+static void producer_stop(trainer *t)
+{
+    if (!t->producer_on)
+        return;
+    pthread_mutex_lock(&t->lock);
+    t->quit = 1;
+    pthread_cond_broadcast(&t->cv);
+    pthread_mutex_unlock(&t->lock);
+    pthread_join(t->producer, NULL);
+    pthread_cond_destroy(&t->cv);
+    pthread_mutex_destroy(&t->lock);
+    t->producer_on = 0;
+}
+
+/* Sample `index` into t->cur (the producer's, when it made it; else made
+ * here), and sample `next` asked of the producer unless next is
+ * UINT64_MAX. */
+static int take_item(trainer *t, uint64_t index, uint64_t next, gs_error *err)
+{
+    train_item *it = &t->item[index & 1];
+    if (t->producer_on) {
+        pthread_mutex_lock(&t->lock);
+        while (t->want >= 0 || t->busy)
+            pthread_cond_wait(&t->cv, &t->lock);
+        pthread_mutex_unlock(&t->lock);
+    }
+    int rc = it->filled && it->index == index ? GS_OK
+                                               : make_item(&t->mk, index, it);
+    if (it->rc || rc) {
+        it->filled = 0;
+        return gs_error_set(err, it->rc ? it->rc : rc, "%s", it->err.msg);
+    }
+    if (t->producer_on && next != UINT64_MAX) {
+        pthread_mutex_lock(&t->lock);
+        t->item[next & 1].filled = 0;
+        t->want = (int)(next & 1);
+        t->want_index = next;
+        pthread_cond_broadcast(&t->cv);
+        pthread_mutex_unlock(&t->lock);
+    }
+    t->cur = it;
+    t->target = it->target;
+    t->wl1 = it->wl1;
+    t->ftarget = it->ftarget;
+    t->fmask = it->fmask;
+    t->emask = it->emask;
+    return GS_OK;
+}
+
+/* The frame of this step's sample: its identity's code as the model holds
+ * it now, its expression, light, head pose and gaze. */
+static int prepare(trainer *t, gs_frame *fr, int *ident, gs_error *err)
+{
+    const train_item *it = t->cur;
+    const gs_synth_labels *lab = &it->sample.labels;
+    int k = it->ident;
     *ident = k;
     const gs_model_config *mc = &t->m->cfg;
     gs_subject sub; /* the training subject, as a render at its view sees it */
-    rc = gs_model_training_subject(t->m, k, &scene, lab, &sub, err);
+    int rc = gs_model_training_subject(t->m, k, &it->scene, lab, &sub, err);
     if (rc)
         return rc;
     memset(fr, 0, sizeof *fr);
@@ -266,55 +478,6 @@ static int prepare(trainer *t, uint64_t index, gs_frame *fr, int *ident,
     fr->gaze[1] = sub.gaze_yaw;
     t->gaze_label[0] = (float)lab->gaze_norm_pitch;
     t->gaze_label[1] = (float)lab->gaze_norm_yaw;
-    /* Targets: white outside the head; eyes weighted 5x in the L1. */
-    int S = mc->image_size, fs = mc->feat_size;
-    size_t plane = (size_t)S * S;
-    const uint8_t *head = gs_synth_sample_mask(&t->sample, GS_SYNTH_MASK_HEAD);
-    const uint8_t *le = gs_synth_sample_mask(&t->sample, GS_SYNTH_MASK_LEFT_EYE);
-    const uint8_t *re = gs_synth_sample_mask(&t->sample,
-                                             GS_SYNTH_MASK_RIGHT_EYE);
-    for (int y = 0; y < S; y++)
-        for (int x = 0; x < S; x++) {
-            size_t i = (size_t)y * S + x;
-            float hm = head[i] / 255.0f;
-            for (int ch = 0; ch < 3; ch++) {
-                float v = t->sample.rgb[(size_t)y * t->sample.stride +
-                                        3 * x + ch] / 255.0f;
-                t->target[ch * plane + i] = hm * v + (1 - hm);
-            }
-            t->wl1[i] = 1.0f + (t->eye_w - 1.0f) * (float)((le[i] | re[i]) != 0);
-        }
-    int f = S / fs;
-    /* face-only mask: feature pixels with no eye pixel within g feature
-     * pixels (the eyes are missing from the face-only render; with lids,
-     * which it leaves out too, 3: the lids reach 2-4 mm beyond the eye's
-     * opening, a feature pixel is about 3.4 mm) */
-    int g = t->c->nl ? 3 : 1;
-    for (int y = 0; y < fs; y++)
-        for (int x = 0; x < fs; x++) {
-            int eye = 0;
-            for (int yy = (y - g) * f; yy < (y + g + 1) * f && !eye; yy++)
-                for (int xx = (x - g) * f; xx < (x + g + 1) * f && !eye; xx++)
-                    if (yy >= 0 && yy < S && xx >= 0 && xx < S)
-                        eye = (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
-            t->fmask[(size_t)y * fs + x] = eye ? 0.0f : 1.0f;
-            int in_eye = 0; /* share of the feature pixel that is eye */
-            for (int yy = y * f; yy < (y + 1) * f; yy++)
-                for (int xx = x * f; xx < (x + 1) * f; xx++)
-                    in_eye += (le[(size_t)yy * S + xx] | re[(size_t)yy * S + xx]) != 0;
-            t->emask[(size_t)y * fs + x] = (float)in_eye / (float)(f * f);
-        }
-    for (int ch = 0; ch < 3; ch++)
-        for (int y = 0; y < fs; y++)
-            for (int x = 0; x < fs; x++) {
-                double s = 0;
-                for (int dy = 0; dy < f; dy++)
-                    for (int dx = 0; dx < f; dx++)
-                        s += t->target[ch * plane +
-                                       (size_t)(y * f + dy) * S + x * f + dx];
-                t->ftarget[(size_t)ch * fs * fs + (size_t)y * fs + x] =
-                    (float)(s / (f * f));
-            }
     return GS_OK;
 }
 
@@ -545,6 +708,8 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         step = t.sched_first = o->fresh_from_step;
     else if (!rc && o->resume)
         rc = load_optimizer(&t, o->out_path, &step, err);
+    if (!rc)
+        producer_start(&t, o->sync_samples);
     int ramp = o->resume && o->fresh_from_step >= 0 && o->warmup > 0;
     double t0 = now_s(), run_mean = 0, last_log = t0;
     long skipped = 0, done = 0;
@@ -554,7 +719,10 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     for (; !rc && step < o->steps; step++) {
         gs_frame fr;
         int k = 0;
-        rc = prepare(&t, (uint64_t)step, &fr, &k, err);
+        rc = take_item(&t, (uint64_t)step,
+                       step + 1 < o->steps ? (uint64_t)step + 1 : UINT64_MAX, err);
+        if (!rc)
+            rc = prepare(&t, &fr, &k, err);
         if (rc)
             break;
         rc = gs_frame_forward(t.c, pool, &fr, GS_STREAM_BOTH, 1, err);

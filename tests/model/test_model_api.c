@@ -91,12 +91,15 @@ int main(void)
     buf[0] ^= 1;
     CHECK(gs_subject_decode(buf, n, &back, &err) == GS_ERR_FORMAT);
 
-    /* A gaze sweep reuses the face stream; it must equal renders from a
-     * fresh context, byte for byte. */
+    /* A gaze sweep reuses the face stream and renders incrementally; it
+     * must equal renders from a fresh context within one 8-bit level (the
+     * incremental render is the full one within 1e-5, not bit for bit:
+     * with OpenBLAS's generic Prescott kernels one value in this sweep
+     * lands on the other side of a rounding step). */
     size_t isz = 3 * (size_t)S * S;
     uint8_t *a = malloc(isz), *b = malloc(isz);
     gs_model_ctx *c2 = gs_model_ctx_create(m);
-    int same = 1;
+    int worst = 0;
     for (int k = 0; k < 4; k++) {
         gs_view v = {0};
         v.gaze_pitch = 0.1 * k - 0.15;
@@ -107,9 +110,13 @@ int main(void)
         c2 = gs_model_ctx_create(m);
         CHECK(gs_model_render(c2, NULL, &sub, &v, b, 3 * (size_t)S, &err) ==
               GS_OK);
-        same &= memcmp(a, b, isz) == 0;
+        for (size_t i = 0; i < isz; i++) {
+            int d = abs((int)a[i] - (int)b[i]);
+            worst = d > worst ? d : worst;
+        }
     }
-    CHECK_MSG(same, "cached face stream render differs from a fresh one");
+    CHECK_MSG(worst <= 1, "cached face stream render differs from a fresh one by %d levels",
+              worst);
     /* Different gazes give different images. */
     gs_view v0 = {0}, v1 = {0};
     v1.gaze_yaw = 0.5;

@@ -138,6 +138,11 @@ typedef struct gs_train_options {
      * 0 (default): 40 and 25, the model's documented range. The
      * evaluation's scenes reach yaw 50 and pitch 30 (gs_eval_ranges). */
     double head_yaw_deg, head_pitch_deg;
+    /* 0 (default): a second thread makes each step's sample (the synthetic
+     * image and its targets) while the step before runs. 1: every sample
+     * is made at its step on the calling thread. The trained bytes are the
+     * same either way. */
+    int sync_samples;
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
 /* The sample stream gs_train draws for m under o: m's training identities,
