@@ -109,6 +109,35 @@ static void sweep_slot_free(gs_sweep_slot *s);
 static void sweep_drop(gs_model_ctx *c);
 static void sweep_stash(gs_model_ctx *c);
 
+/* ---- the face stream in blocks ----
+ *
+ * The face Gaussians go through the MLPs in fixed blocks of rows, one pool
+ * task each, from the inputs to the camera-frame Gaussians (forward) and
+ * from their gradients back to the parameters (backward). The blocks
+ * depend only on the face count (at least GS_FACE_BLOCK_MIN rows, at most
+ * GS_FACE_BLOCKS_MAX blocks), so the bytes do not depend on the thread
+ * count. A block's MLP activations lie at its first row's offset in
+ * fe_act / fp_act (block-major: gs_mlp_act_size(m, 1) floats a row), its
+ * MLP scratch at 2 r0 widest floats in the MLP part of c->scratch. Sums
+ * over Gaussians (the MLP weights' gradients, the code's, the gaze
+ * encoding's) are taken per block and then added block by block. */
+#define GS_FACE_BLOCK_MIN 1024
+#define GS_FACE_BLOCKS_MAX 16
+
+static int face_block_rows(int nf)
+{
+    int r = (nf + GS_FACE_BLOCKS_MAX - 1) / GS_FACE_BLOCKS_MAX;
+    return r > GS_FACE_BLOCK_MIN ? r : GS_FACE_BLOCK_MIN;
+}
+
+static size_t mlp_param_count(const gs_mlp *m)
+{
+    size_t n = 0;
+    for (int l = 0; l < m->nl; l++)
+        n += (size_t)m->dims[l] * m->dims[l + 1] + (size_t)m->dims[l + 1];
+    return n;
+}
+
 int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
 {
     const gs_model_config *k = &m->cfg;
@@ -134,6 +163,12 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->fp_in = falloc(nf * p->face_p.dims[0], &fail);
     c->fp_act = falloc(gs_mlp_act_size(&p->face_p, c->nf), &fail);
     c->fp_out = falloc(nf * GS_FACE_OUT(c->C), &fail);
+    c->fblk = face_block_rows(c->nf);
+    c->nfblk = c->nf > 0 ? (c->nf + c->fblk - 1) / c->fblk : 0;
+    size_t pe = mlp_param_count(&p->face_e), pp = mlp_param_count(&p->face_p);
+    c->blk_grad_len = pe > pp ? pe : pp;
+    c->blk_grad = falloc((size_t)c->nfblk * c->blk_grad_len, &fail);
+    c->blk_red = falloc((size_t)c->nfblk * (size_t)(c->D + GS_PE_DIM(2)), &fail);
     c->e_in = falloc(ne * p->eye.dims[0], &fail);
     c->e_act = falloc(gs_mlp_act_size(&p->eye, (int)ne), &fail);
     c->e_out = falloc(ne * GS_EYE_OUT(c->C), &fail);
@@ -245,7 +280,8 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,
                       &c->k_scale, &c->k_quat, &c->k_opac, &c->k_feat,
                       &c->eye_w0, &c->eye_base, &c->eye_v,
-                      &c->v_fmap_m, &c->v_fmap_face_m, &c->v_feat_keep};
+                      &c->v_fmap_m, &c->v_fmap_face_m, &c->v_feat_keep,
+                      &c->blk_grad, &c->blk_red};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(*bufs[i]);
     free(c->rgb8);
@@ -300,11 +336,51 @@ void gs_frame_camera(const gs_model *m, const double head_t[3],
 
 /* ---- face stream ---- */
 
-static void face_mlps(gs_model_ctx *c, const gs_frame *fr)
+/* One forward block: the MLP inputs of rows [r0, r1), both MLPs, then
+ * the head-frame Gaussians and their camera-frame copies. */
+typedef struct face_fwd_job {
+    gs_model_ctx *c;
+    const gs_frame *fr;
+    const double *qR;
+    const float *pe;   /* PE(rvec) [| PE(gaze)], npe floats */
+    int npe;
+} face_fwd_job;
+
+static void face_assemble(gs_model_ctx *c, const double qR[4], int from,
+                          int to);
+static void to_camera(gs_model_ctx *c, const gs_frame *fr, int from, int to,
+                      const double qR[4]);
+
+static void face_fwd_task(void *ctx, int b, int worker)
 {
+    (void)worker;
+    const face_fwd_job *j = ctx;
+    gs_model_ctx *c = j->c;
     const gs_model_params *p = &c->m->p;
-    int nf = c->nf, F = c->F, D = c->D;
+    int F = c->F, D = c->D, O = GS_FACE_OUT(c->C);
     int de = p->face_e.dims[0], dp = p->face_p.dims[0];
+    int r0 = b * c->fblk, r1 = r0 + c->fblk < c->nf ? r0 + c->fblk : c->nf;
+    for (int i = r0; i < r1; i++) {
+        float *a = c->fe_in + (size_t)i * de, *bb = c->fp_in + (size_t)i * dp;
+        memcpy(a, p->f_feat + (size_t)i * F, F * sizeof(float));
+        memcpy(a + F, j->fr->code, D * sizeof(float));
+        memcpy(bb, p->f_feat + (size_t)i * F, F * sizeof(float));
+        memcpy(bb + F, j->pe, j->npe * sizeof(float));
+    }
+    gs_mlp_forward(&p->face_e, c->fe_in + (size_t)r0 * de, r1 - r0,
+                   c->fe_act + gs_mlp_act_size(&p->face_e, r0),
+                   c->fe_out + (size_t)r0 * O);
+    gs_mlp_forward(&p->face_p, c->fp_in + (size_t)r0 * dp, r1 - r0,
+                   c->fp_act + gs_mlp_act_size(&p->face_p, r0),
+                   c->fp_out + (size_t)r0 * O);
+    face_assemble(c, j->qR, r0, r1);
+    to_camera(c, j->fr, r0, r1, j->qR);
+}
+
+/* The face stream: MLPs, head-frame Gaussians, into the camera. */
+static void face_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                         const double qR[4])
+{
     double rvec[3];
     float pe[GS_PE_DIM(3) + GS_PE_DIM(2)];
     gs_geom_rot_to_rodrigues(fr->head_R, rvec);
@@ -314,23 +390,17 @@ static void face_mlps(gs_model_ctx *c, const gs_frame *fr)
         gs_model_pe(fr->gaze, 2, pe + npe);
         npe += GS_PE_DIM(2);
     }
-    for (int i = 0; i < nf; i++) {
-        float *a = c->fe_in + (size_t)i * de, *b = c->fp_in + (size_t)i * dp;
-        memcpy(a, p->f_feat + (size_t)i * F, F * sizeof(float));
-        memcpy(a + F, fr->code, D * sizeof(float));
-        memcpy(b, p->f_feat + (size_t)i * F, F * sizeof(float));
-        memcpy(b + F, pe, npe * sizeof(float));
-    }
-    gs_mlp_forward(&p->face_e, c->fe_in, nf, c->fe_act, c->fe_out);
-    gs_mlp_forward(&p->face_p, c->fp_in, nf, c->fp_act, c->fp_out);
+    face_fwd_job j = {c, fr, qR, pe, npe};
+    gs_pool_for(pool, c->nfblk, face_fwd_task, &j);
 }
 
-/* Head-frame face Gaussians from the MLP outputs, then into the camera. */
-static void face_assemble(gs_model_ctx *c, const double qR[4])
+/* Head-frame face Gaussians [from, to) from the MLP outputs. */
+static void face_assemble(gs_model_ctx *c, const double qR[4], int from,
+                          int to)
 {
     const gs_model_params *p = &c->m->p;
     int C = c->C, O = GS_FACE_OUT(C);
-    for (int i = 0; i < c->nf; i++) {
+    for (int i = from; i < to; i++) {
         const float *oe = c->fe_out + (size_t)i * O;
         const float *op = c->fp_out + (size_t)i * O;
         float l = p->f_lambda[i], lp = 1.0f - l;
@@ -542,15 +612,13 @@ static int same_face_key(const gs_model_ctx *c, const gs_frame *fr)
     return 1;
 }
 
-void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
-                              int force_face)
+void gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
+                              const gs_frame *fr, int force_face)
 {
     double qR[4];
     mat_to_quat(fr->head_R, qR);
     if (force_face || !c->face_valid || !same_face_key(c, fr)) {
-        face_mlps(c, fr);
-        face_assemble(c, qR);
-        to_camera(c, fr, 0, c->nf, qR);
+        face_forward(c, pool, fr, qR);
         c->face_key = *fr;
         c->face_valid = 1;
         c->face_fresh = 1;
@@ -802,7 +870,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->rgb8_valid = 0;
     c->cover_valid = 0;
     c->dir_valid = 0;
-    gs_frame_forward_streams(c, fr, force_face);
+    gs_frame_forward_streams(c, pool, fr, force_face);
     c->stream = stream;
     int first = 0, count = c->n;
     if (stream == GS_STREAM_FACE)
@@ -1473,81 +1541,144 @@ static void scratch_parts(const gs_model_ctx *c, float **mlp, float **dout,
     *din = c->scratch + c->scratch_len - blk;
 }
 
-static void face_backward(gs_model_ctx *c, const gs_model_params *gp,
-                          gs_frame_grad *fg, const double qR[4])
+/* One backward block of one pass (0: the expression MLP E, weight lambda;
+ * 1: the pose MLP P, weight 1 - lambda). */
+typedef struct face_bwd_job {
+    gs_model_ctx *c;
+    const gs_model_params *gp;
+    const double *qR;
+    int pass;
+    int weights;   /* the MLP's weight gradients are wanted */
+    int need_din;  /* its input gradient */
+    int code, gz;  /* the code's (E), the gaze encoding's (P, single stream) */
+} face_bwd_job;
+
+static void face_bwd_task(void *ctx, int b, int worker)
 {
-    const gs_model_params *p = &c->m->p;
-    int nf = c->nf, C = c->C, O = GS_FACE_OUT(C), F = c->F, D = c->D;
-    const double *R = c->fr.head_R;
+    (void)worker;
+    const face_bwd_job *j = ctx;
+    gs_model_ctx *c = j->c;
+    const gs_model_params *p = &c->m->p, *gp = j->gp;
+    int C = c->C, O = GS_FACE_OUT(C), F = c->F, D = c->D, pass = j->pass;
+    const double *R = c->fr.head_R, *qR = j->qR;
+    int r0 = b * c->fblk, r1 = r0 + c->fblk < c->nf ? r0 + c->fblk : c->nf;
     float *sc, *d_o, *dinp;
     scratch_parts(c, &sc, &d_o, &dinp);
-    gs_mlp nog;
-    memset(&nog, 0, sizeof nog);
-    for (int pass = 0; pass < 2; pass++) {
-        /* pass 0: E (weight lambda), pass 1: P (weight 1 - lambda) */
-        for (int i = 0; i < nf; i++) {
-            float l = p->f_lambda[i], w = pass == 0 ? l : 1.0f - l;
-            float *d = d_o + (size_t)i * O;
-            const float *vm = c->v_mean + 3 * (size_t)i;
-            double dx[3];
-            for (int k = 0; k < 3; k++)
-                dx[k] = R[k] * vm[0] + R[3 + k] * vm[1] + R[6 + k] * vm[2];
-            for (int k = 0; k < 3; k++)
-                d[k] = (float)(GS_MODEL_POS_SCALE * w * dx[k]);
-            memcpy(d + 3, c->v_feat + (size_t)i * C, C * sizeof(float));
-            for (int k = 0; k < 3; k++)
-                d[3 + C + k] = GS_MODEL_ATTR_SCALE * w * c->v_scale[3 * i + k];
-            /* q_cam = L(qR) q: dq = L(qR)^T dq_cam */
-            const float *vq = c->v_quat + 4 * (size_t)i;
-            double vqd[4] = {vq[0], vq[1], vq[2], vq[3]}, dq[4];
-            quat_lmul_t(qR, vqd, dq);
-            for (int k = 0; k < 4; k++)
-                d[6 + C + k] = (float)(GS_MODEL_ATTR_SCALE * w * dq[k]);
-            d[10 + C] = GS_MODEL_ATTR_SCALE * w * c->v_opac[i];
-            if (gp && pass == 0) {
-                for (int k = 0; k < 3; k++) {
-                    gp->f_xyz[3 * i + k] += (float)dx[k];
-                    gp->f_scale[3 * i + k] += c->v_scale[3 * i + k];
-                }
-                for (int k = 0; k < 4; k++)
-                    gp->f_quat[4 * i + k] += (float)dq[k];
-                gp->f_opacity[i] += c->v_opac[i];
-                float *dc = gp->f_colour + (size_t)i * C;
-                for (int k = 0; k < C; k++)
-                    dc[k] += c->v_feat[(size_t)i * C + k];
+    for (int i = r0; i < r1; i++) {
+        float l = p->f_lambda[i], w = pass == 0 ? l : 1.0f - l;
+        float *d = d_o + (size_t)i * O;
+        const float *vm = c->v_mean + 3 * (size_t)i;
+        double dx[3];
+        for (int k = 0; k < 3; k++)
+            dx[k] = R[k] * vm[0] + R[3 + k] * vm[1] + R[6 + k] * vm[2];
+        for (int k = 0; k < 3; k++)
+            d[k] = (float)(GS_MODEL_POS_SCALE * w * dx[k]);
+        memcpy(d + 3, c->v_feat + (size_t)i * C, C * sizeof(float));
+        for (int k = 0; k < 3; k++)
+            d[3 + C + k] = GS_MODEL_ATTR_SCALE * w * c->v_scale[3 * i + k];
+        /* q_cam = L(qR) q: dq = L(qR)^T dq_cam */
+        const float *vq = c->v_quat + 4 * (size_t)i;
+        double vqd[4] = {vq[0], vq[1], vq[2], vq[3]}, dq[4];
+        quat_lmul_t(qR, vqd, dq);
+        for (int k = 0; k < 4; k++)
+            d[6 + C + k] = (float)(GS_MODEL_ATTR_SCALE * w * dq[k]);
+        d[10 + C] = GS_MODEL_ATTR_SCALE * w * c->v_opac[i];
+        if (gp && pass == 0) {
+            for (int k = 0; k < 3; k++) {
+                gp->f_xyz[3 * i + k] += (float)dx[k];
+                gp->f_scale[3 * i + k] += c->v_scale[3 * i + k];
             }
+            for (int k = 0; k < 4; k++)
+                gp->f_quat[4 * i + k] += (float)dq[k];
+            gp->f_opacity[i] += c->v_opac[i];
+            float *dc = gp->f_colour + (size_t)i * C;
+            for (int k = 0; k < C; k++)
+                dc[k] += c->v_feat[(size_t)i * C + k];
         }
-        const gs_mlp *mlp = pass == 0 ? &p->face_e : &p->face_p;
-        const gs_mlp *gm = gp ? (pass == 0 ? &gp->face_e : &gp->face_p) : &nog;
-        const float *in = pass == 0 ? c->fe_in : c->fp_in;
-        const float *act = pass == 0 ? c->fe_act : c->fp_act;
-        int dw = mlp->dims[0];
+    }
+    const gs_mlp *mlp = pass == 0 ? &p->face_e : &p->face_p;
+    const float *in = pass == 0 ? c->fe_in : c->fp_in;
+    const float *act = pass == 0 ? c->fe_act : c->fp_act;
+    int dw = mlp->dims[0], n = r1 - r0;
+    gs_mlp gb; /* this block's weight gradients, or none */
+    memset(&gb, 0, sizeof gb);
+    if (j->weights) {
+        float *g = c->blk_grad + (size_t)b * c->blk_grad_len;
+        memset(g, 0, mlp_param_count(mlp) * sizeof(float));
+        for (int l = 0; l < mlp->nl; l++) {
+            gb.w[l] = g;
+            g += (size_t)mlp->dims[l] * mlp->dims[l + 1];
+            gb.b[l] = g;
+            g += mlp->dims[l + 1];
+        }
+    }
+    float *din = j->need_din ? dinp + (size_t)r0 * dw : NULL;
+    if (din)
+        memset(din, 0, (size_t)n * dw * sizeof(float));
+    gs_mlp_backward(mlp, &gb, in + (size_t)r0 * dw, n,
+                    act + gs_mlp_act_size(mlp, r0), d_o + (size_t)r0 * O, din,
+                    sc + gs_mlp_scratch_size(mlp, r0));
+    if (!din)
+        return;
+    float *red = c->blk_red + (size_t)b * (D + GS_PE_DIM(2));
+    memset(red, 0, (size_t)(D + GS_PE_DIM(2)) * sizeof(float));
+    for (int i = 0; i < n; i++) {
+        const float *di = din + (size_t)i * dw;
+        if (gp)
+            for (int k = 0; k < F; k++)
+                gp->f_feat[(size_t)(r0 + i) * F + k] += di[k];
+        if (j->code)
+            for (int k = 0; k < D; k++)
+                red[k] += di[F + k];
+        if (j->gz) /* P's input: [f | PE(rvec) | PE(gaze)] */
+            for (int k = 0; k < GS_PE_DIM(2); k++)
+                red[D + k] += di[F + GS_PE_DIM(3) + k];
+    }
+}
+
+static void face_backward(gs_model_ctx *c, gs_pool *pool,
+                          const gs_model_params *gp, gs_frame_grad *fg,
+                          const double qR[4])
+{
+    const gs_model_params *p = &c->m->p;
+    int D = c->D;
+    for (int pass = 0; pass < 2; pass++) {
+        const gs_mlp *gm = gp ? (pass == 0 ? &gp->face_e : &gp->face_p) : NULL;
+        face_bwd_job j = {c, gp, qR, pass, 0, 0, 0, 0};
+        j.weights = gm && gm->w[0];
         /* The pose MLP's input gradient matters for the features and, in
          * the single-stream ablation, for the gaze it also sees (rvec(R)
          * is a stop-gradient, docs/model.md). */
-        int gz = pass == 1 && fg && !c->m->cfg.two_stream;
-        int need_din = gp || (pass == 0 && fg) || gz;
-        if (need_din)
-            memset(dinp, 0, (size_t)nf * dw * sizeof(float));
-        gs_mlp_backward(mlp, gm, in, nf, act, d_o, need_din ? dinp : NULL, sc);
-        if (!need_din)
-            continue;
-        for (int i = 0; i < nf; i++) {
-            const float *di = dinp + (size_t)i * dw;
-            if (gp)
-                for (int k = 0; k < F; k++)
-                    gp->f_feat[(size_t)i * F + k] += di[k];
-            if (pass == 0 && fg)
+        j.code = pass == 0 && fg;
+        j.gz = pass == 1 && fg && !c->m->cfg.two_stream;
+        j.need_din = gp || j.code || j.gz;
+        gs_pool_for(pool, c->nfblk, face_bwd_task, &j);
+        /* the blocks' sums, block by block */
+        const gs_mlp *mlp = pass == 0 ? &p->face_e : &p->face_p;
+        float dpe[GS_PE_DIM(2)] = {0};
+        for (int b = 0; b < c->nfblk; b++) {
+            if (j.weights) {
+                const float *g = c->blk_grad + (size_t)b * c->blk_grad_len;
+                for (int l = 0; l < mlp->nl; l++) {
+                    size_t nw = (size_t)mlp->dims[l] * mlp->dims[l + 1];
+                    for (size_t q = 0; q < nw; q++)
+                        gm->w[l][q] += g[q];
+                    g += nw;
+                    for (int q = 0; q < mlp->dims[l + 1]; q++)
+                        gm->b[l][q] += g[q];
+                    g += mlp->dims[l + 1];
+                }
+            }
+            const float *red = c->blk_red + (size_t)b * (D + GS_PE_DIM(2));
+            if (j.code)
                 for (int k = 0; k < D; k++)
-                    fg->code[k] += di[F + k];
-        }
-        if (gz) { /* P's input: [f | PE(rvec) | PE(gaze)] */
-            float dpe[GS_PE_DIM(2)] = {0};
-            for (int i = 0; i < nf; i++)
+                    fg->code[k] += red[k];
+            if (j.gz)
                 for (int k = 0; k < GS_PE_DIM(2); k++)
-                    dpe[k] += dinp[(size_t)i * dw + F + GS_PE_DIM(3) + k];
-            gs_model_pe_backward(c->fr.gaze, 2, dpe, fg->gaze);
+                    dpe[k] += red[D + k];
         }
+        if (j.gz)
+            gs_model_pe_backward(c->fr.gaze, 2, dpe, fg->gaze);
     }
 }
 
@@ -2003,12 +2134,12 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
             for (int k = 0; k < 3; k++)
                 c->v_feat[i * (size_t)c->C + k] += c->dir_vfeat[4 * i + k];
     }
-    gs_frame_backward_streams(c, grads, fg);
+    gs_frame_backward_streams(c, pool, grads, fg);
     return GS_OK;
 }
 
-void gs_frame_backward_streams(gs_model_ctx *c, const gs_model_params *grads,
-                               gs_frame_grad *fg)
+void gs_frame_backward_streams(gs_model_ctx *c, gs_pool *pool,
+                               const gs_model_params *grads, gs_frame_grad *fg)
 {
     double qR[4];
     mat_to_quat(c->fr.head_R, qR);
@@ -2016,7 +2147,7 @@ void gs_frame_backward_streams(gs_model_ctx *c, const gs_model_params *grads,
         pose_grad(c, fg);
     if (c->stream != GS_STREAM_EYE) {
         lid_backward(c, grads, fg, qR);
-        face_backward(c, grads, fg, qR);
+        face_backward(c, pool, grads, fg, qR);
         lid_restore(c);
     }
     if (c->ne && c->stream != GS_STREAM_FACE)

@@ -94,6 +94,12 @@ struct gs_model_ctx {
     /* face stream */
     float *fe_in, *fe_act, *fe_out;   /* [nf, F+D], acts, [nf, FACE_OUT] */
     float *fp_in, *fp_act, *fp_out;   /* [nf, F+PE], acts, [nf, FACE_OUT] */
+    /* the face stream's MLPs run in nfblk blocks of fblk rows on the pool
+     * (frame.c, "the face stream in blocks"); per block: the MLP's weight
+     * gradients, then the code's and the gaze encoding's */
+    int fblk, nfblk;
+    size_t blk_grad_len;              /* floats per block in blk_grad */
+    float *blk_grad, *blk_red;        /* [nfblk, blk_grad_len], [nfblk, D+PE2] */
     /* eye stream */
     float *e_in, *e_act, *e_out;      /* [ne, F+D+PE2], acts, [ne, EYE_OUT] */
     float er_in[GS_PE_DIM(2)];
@@ -221,8 +227,8 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 
 /* Only the streams of gs_frame_forward: the camera-frame Gaussians in
  * c->g_* (tests of the stream gradients). */
-void gs_frame_forward_streams(gs_model_ctx *c, const gs_frame *fr,
-                              int force_face);
+void gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
+                              const gs_frame *fr, int force_face);
 
 /* Backward of the last forward from d_rgb [3,S,S] (may be NULL),
  * d_fmap [C,fs,fs] (may be NULL), d_fmap_face (the face-only map
@@ -262,8 +268,8 @@ int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 /* The stream part of the backward: from the Gaussian gradients in
  * c->v_mean, v_scale, v_quat, v_opac, v_feat (camera frame) to the
  * parameters and the frame inputs. */
-void gs_frame_backward_streams(gs_model_ctx *c, const gs_model_params *grads,
-                               gs_frame_grad *fg);
+void gs_frame_backward_streams(gs_model_ctx *c, gs_pool *pool,
+                               const gs_model_params *grads, gs_frame_grad *fg);
 
 /* Zeroes the camera-frame Gaussian gradients c->v_mean .. v_feat (all n
  * Gaussians) before a rasterizer backward adds into them. */

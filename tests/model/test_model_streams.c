@@ -37,7 +37,7 @@ static float **varr(gs_model_ctx *c, int k)
 
 static double objective(probe *p, const gs_frame *fr)
 {
-    gs_frame_forward_streams(p->c, fr, 1);
+    gs_frame_forward_streams(p->c, NULL, fr, 1);
     p->c->stream = GS_STREAM_BOTH;
     double s = 0;
     for (int k = 0; k < 5; k++) {
@@ -116,7 +116,7 @@ static void run(int eye_rotation, int lids)
     gs_model_bind(p.m, grad, &g);
     gs_frame_grad fg;
     memset(&fg, 0, sizeof fg);
-    gs_frame_backward_streams(p.c, &g, &fg);
+    gs_frame_backward_streams(p.c, NULL, &g, &fg);
     char name[96];
     for (int k = 0; k < gs_model_code_dim(&p.m->cfg); k++) {
         gs_frame f2 = fr;

@@ -308,7 +308,7 @@ static void check_case(const stream_case *sc)
         CHECK_MSG(0, "%s: cannot set up the case", sc->name);
         goto done;
     }
-    gs_frame_forward_streams(c, &fr, 1);
+    gs_frame_forward_streams(c, NULL, &fr, 1);
     c->stream = GS_STREAM_BOTH;
     for (int k = 0; k < 5; k++) {
         size_t len = (size_t)c->n * width(c, k);
@@ -324,7 +324,7 @@ static void check_case(const stream_case *sc)
     gs_model_bind(m, grad, &g);
     gs_frame_grad fg;
     memset(&fg, 0, sizeof fg);
-    gs_frame_backward_streams(c, &g, &fg);
+    gs_frame_backward_streams(c, NULL, &g, &fg);
 
     for (int k = 0; k < 5; k++) {
         size_t len = (size_t)c->n * width(c, k);
