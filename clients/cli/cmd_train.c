@@ -27,6 +27,9 @@ const cli_command cli_train_command = {
     "  --seed N            model initialisation and sample stream (1)\n"
     "  --threads N         worker threads (2); a thread more makes each\n"
     "                      step's sample while the step before runs\n"
+    "  --clip-grad-norm X  scale the gradients so that their global L2\n"
+    "                      norm is at most X before each step (0, the\n"
+    "                      default: no clipping)\n"
     "  --sync-samples      make each sample at its step instead, on the\n"
     "                      workers' first thread (the same bytes; slower)\n"
     "  --resume            continue a run from FILE and FILE.opt\n"
@@ -87,7 +90,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
        O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_HEAD, O_EDIR, O_SYNC,
-       O_N };
+       O_CLIP, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -103,7 +106,7 @@ static int run_train(int argc, char **argv)
         {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
         {"--supersample", 1, NULL}, {"--eye-weight", 1, NULL},
         {"--head-range", 1, NULL}, {"--eye-direct", 1, NULL},
-        {"--sync-samples", 0, NULL}};
+        {"--sync-samples", 0, NULL}, {"--clip-grad-norm", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -120,6 +123,12 @@ static int run_train(int argc, char **argv)
     gs_train_options_default(&t);
     t.out_path = o[O_OUT].value;
     t.sync_samples = o[O_SYNC].value != NULL;
+    if (o[O_CLIP].value) {
+        char *end = NULL;
+        t.max_grad_norm = strtod(o[O_CLIP].value, &end);
+        if (!end || *end || !(t.max_grad_norm >= 0 && t.max_grad_norm <= 1e6))
+            return cli_usage_error(cmd, "--clip-grad-norm: want 0..1e6");
+    }
     long v, threads = 2, seed = 1;
     if (o[O_PRESET].value)
         spec.preset = o[O_PRESET].value;

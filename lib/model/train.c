@@ -184,6 +184,7 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
         ng++;
     }
     gs_nn_adam_config ac = gs_nn_adam_default_config();
+    ac.max_grad_norm = o->max_grad_norm;
     int rc = gs_nn_adam_create(&t->adam, groups, ng, &ac, err);
     if (rc)
         return rc;
@@ -688,6 +689,10 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
                             "train: head range yaw %g, pitch %g deg not within "
                             "1..60 and 1..40",
                             o->head_yaw_deg, o->head_pitch_deg);
+    if (!(o->max_grad_norm >= 0 && o->max_grad_norm <= 1e6))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: gradient-norm clip %g not in 0..1e6",
+                            o->max_grad_norm);
     if (!(o->eye_cover_weight >= 0 && o->eye_cover_weight <= 1000))
         return gs_error_set(err, GS_ERR_ARG,
                             "train: eye-cover weight %g not in 0..1000",
@@ -746,7 +751,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
                 dc[j] += fg.code[j];
             double gn;
             lr = gs_train_lr(o, t.sched_first, step, ramp ? done : -1);
-            int arc = gs_nn_adam_step(t.adam, lr, &gn);
+            int arc = gs_nn_adam_step_pool(t.adam, pool, lr, &gn);
             if (arc == GS_ERR_NONFINITE)
                 skip = 1;
             else if (arc) {

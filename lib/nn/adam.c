@@ -1,12 +1,27 @@
 /* Adam over parameter groups with global gradient-norm clipping.
- * The object, its copy of the groups and both moment arrays are one
- * allocation. */
+ * The object, its copy of the groups, the chunk table and both moment
+ * arrays are one allocation.
+ *
+ * The parameters are cut into fixed chunks (ADAM_CHUNK of a group at a
+ * time), the pool's tasks: the update is element by element, so any
+ * thread count gives the same bytes; the squared norm is summed per chunk
+ * (four running sums, combined in a fixed order) and then chunk by chunk,
+ * so it too is the same for any thread count, with or without a pool. */
 #include "gazesplat/nn.h"
+#include "gazesplat/pool.h"
 
+#include <limits.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
+
+#define ADAM_CHUNK 32768
+
+typedef struct adam_chunk {
+    int group;
+    size_t from, n; /* elements [from, from + n) of the group */
+} adam_chunk;
 
 struct gs_nn_adam {
     gs_nn_adam_config cfg;
@@ -15,6 +30,9 @@ struct gs_nn_adam {
     gs_nn_param_group *groups; /* [ngroups] */
     size_t *offset;            /* [ngroups] first moment index of each group */
     float *m, *v;              /* [total] each */
+    int nchunks;
+    adam_chunk *chunks;        /* [nchunks] */
+    double *partial;           /* [nchunks] squared norms */
 };
 
 gs_nn_adam_config gs_nn_adam_default_config(void)
@@ -83,10 +101,16 @@ int gs_nn_adam_create(gs_nn_adam **out, const gs_nn_param_group *groups,
         rc = check_groups(groups, ngroups, &total, err);
     if (rc)
         return rc;
-    size_t ng = (size_t)ngroups;
+    size_t ng = (size_t)ngroups, nch = 0;
+    for (int i = 0; i < ngroups; i++)
+        nch += (groups[i].n + ADAM_CHUNK - 1) / ADAM_CHUNK;
+    if (nch > INT_MAX)
+        return gs_error_set(err, GS_ERR_LIMIT, "adam: too many parameters");
     size_t off_groups = align64(sizeof(gs_nn_adam));
     size_t off_offset = align64(off_groups + ng * sizeof(gs_nn_param_group));
-    size_t off_m = align64(off_offset + ng * sizeof(size_t));
+    size_t off_chunks = align64(off_offset + ng * sizeof(size_t));
+    size_t off_partial = align64(off_chunks + nch * sizeof(adam_chunk));
+    size_t off_m = align64(off_partial + nch * sizeof(double));
     size_t off_v = align64(off_m + total * sizeof(float));
     size_t bytes = off_v + total * sizeof(float);
     void *base = calloc(1, bytes);
@@ -100,11 +124,22 @@ int gs_nn_adam_create(gs_nn_adam **out, const gs_nn_param_group *groups,
     a->offset = carve(base, off_offset);
     a->m = carve(base, off_m);
     a->v = carve(base, off_v);
+    a->chunks = carve(base, off_chunks);
+    a->partial = carve(base, off_partial);
+    a->nchunks = (int)nch;
     size_t at = 0;
+    int k = 0;
     for (int i = 0; i < ngroups; i++) {
         a->groups[i] = groups[i];
         a->offset[i] = at;
         at += groups[i].n;
+        for (size_t f = 0; f < groups[i].n; f += ADAM_CHUNK) {
+            size_t left = groups[i].n - f;
+            a->chunks[k].group = i;
+            a->chunks[k].from = f;
+            a->chunks[k].n = left < ADAM_CHUNK ? left : ADAM_CHUNK;
+            k++;
+        }
     }
     *out = a;
     return GS_OK;
@@ -115,39 +150,67 @@ void gs_nn_adam_destroy(gs_nn_adam *adam)
     free(adam);
 }
 
-/* L2 norm of every gradient, summed in double in group order. */
-static double grad_norm(const gs_nn_adam *a)
+/* The squared gradient of chunk k, in double: four running sums over
+ * j mod 4, then (s0 + s1) + (s2 + s3). */
+static void norm_task(void *ctx, int k, int worker)
 {
-    double ss = 0.0;
-    for (int i = 0; i < a->ngroups; i++) {
-        const float *g = a->groups[i].grad;
-        for (size_t j = 0; j < a->groups[i].n; j++)
-            ss += (double)g[j] * g[j];
-    }
-    return sqrt(ss);
+    (void)worker;
+    gs_nn_adam *a = ctx;
+    const adam_chunk *ch = &a->chunks[k];
+    const float *g = a->groups[ch->group].grad + ch->from;
+    double s[4] = {0, 0, 0, 0};
+    size_t j = 0;
+    for (; j + 4 <= ch->n; j += 4)
+        for (int q = 0; q < 4; q++)
+            s[q] += (double)g[j + q] * g[j + q];
+    for (; j < ch->n; j++)
+        s[j & 3] += (double)g[j] * g[j];
+    a->partial[k] = (s[0] + s[1]) + (s[2] + s[3]);
 }
 
 /* The PyTorch single-tensor Adam update, in its operation order. */
-static void update_group(const gs_nn_param_group *grp, float *m, float *v,
-                         const gs_nn_adam_config *c, float clip,
-                         float step_size, float bc2_sqrt)
+typedef struct update_job {
+    gs_nn_adam *a;
+    double lr;
+    float clip, bc2_sqrt;
+    double bc1;
+} update_job;
+
+static void update_task(void *ctx, int k, int worker)
 {
+    (void)worker;
+    const update_job *u = ctx;
+    gs_nn_adam *a = u->a;
+    const adam_chunk *ch = &a->chunks[k];
+    const gs_nn_param_group *grp = &a->groups[ch->group];
+    const gs_nn_adam_config *c = &a->cfg;
+    size_t at = a->offset[ch->group] + ch->from;
+    float *restrict m = a->m + at, *restrict v = a->v + at;
+    float *restrict param = grp->param + ch->from;
+    const float *restrict grad = grp->grad + ch->from;
+    float step_size = (float)(u->lr * grp->lr_mult / u->bc1);
     float b1 = (float)c->beta1, b2 = (float)c->beta2, eps = (float)c->eps;
     float a1 = (float)(1.0 - c->beta1), a2 = (float)(1.0 - c->beta2);
-    for (size_t j = 0; j < grp->n; j++) {
-        float g = grp->grad[j] * clip;
+    float clip = u->clip, bc2_sqrt = u->bc2_sqrt;
+    for (size_t j = 0; j < ch->n; j++) {
+        float g = grad[j] * clip;
         m[j] = m[j] * b1 + g * a1;
         v[j] = v[j] * b2 + a2 * (g * g);
         float denom = sqrtf(v[j]) / bc2_sqrt + eps;
-        grp->param[j] += -step_size * (m[j] / denom);
+        param[j] += -step_size * (m[j] / denom);
     }
 }
 
-int gs_nn_adam_step(gs_nn_adam *adam, double lr, double *grad_norm_out)
+int gs_nn_adam_step_pool(gs_nn_adam *adam, gs_pool *pool, double lr,
+                         double *grad_norm_out)
 {
     if (!adam || !(lr >= 0.0) || !isfinite(lr))
         return GS_ERR_ARG;
-    double norm = grad_norm(adam);
+    gs_pool_for(pool, adam->nchunks, norm_task, adam);
+    double ss = 0.0;
+    for (int k = 0; k < adam->nchunks; k++)
+        ss += adam->partial[k];
+    double norm = sqrt(ss);
     if (grad_norm_out)
         *grad_norm_out = norm;
     if (!isfinite(norm))
@@ -159,15 +222,16 @@ int gs_nn_adam_step(gs_nn_adam *adam, double lr, double *grad_norm_out)
             clip = (float)coef;
     }
     adam->t++;
-    double bc1 = 1.0 - pow(adam->cfg.beta1, (double)adam->t);
-    double bc2 = 1.0 - pow(adam->cfg.beta2, (double)adam->t);
-    for (int i = 0; i < adam->ngroups; i++) {
-        const gs_nn_param_group *grp = &adam->groups[i];
-        float step_size = (float)(lr * grp->lr_mult / bc1);
-        update_group(grp, adam->m + adam->offset[i], adam->v + adam->offset[i],
-                     &adam->cfg, clip, step_size, (float)sqrt(bc2));
-    }
+    update_job u = {adam, lr, clip, 0.0f, 0.0};
+    u.bc1 = 1.0 - pow(adam->cfg.beta1, (double)adam->t);
+    u.bc2_sqrt = (float)sqrt(1.0 - pow(adam->cfg.beta2, (double)adam->t));
+    gs_pool_for(pool, adam->nchunks, update_task, &u);
     return GS_OK;
+}
+
+int gs_nn_adam_step(gs_nn_adam *adam, double lr, double *grad_norm_out)
+{
+    return gs_nn_adam_step_pool(adam, NULL, lr, grad_norm_out);
 }
 
 void gs_nn_adam_zero_grad(gs_nn_adam *adam)

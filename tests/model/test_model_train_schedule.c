@@ -7,7 +7,10 @@
  * the curve's first step into FILE.opt, moves the weights, and gives the
  * same bytes twice; a plain resume of that run continues the same curve
  * (FILE.opt's first step is kept); a huge ramp moves the weights far less
- * than no ramp; a head range out of bounds is refused. */
+ * than no ramp; a head range out of bounds is refused; gradient-norm
+ * clipping (max_grad_norm) changes the run when it bites, gives the bytes
+ * of no clipping when the bound is never reached, and bad bounds are
+ * refused. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -218,6 +221,69 @@ static void head_range(void)
     gs_model_destroy(m0);
 }
 
+/* Six steps from the tiny model m0 with max_grad_norm `clip`: the
+ * weights (malloc'd), or NULL when the run fails (its status in *rc). */
+static float *clipped_run(const gs_model *m0, double clip, int *rc, gs_error *err)
+{
+    gs_train_report rep;
+    CHECK(gs_model_write(m0, g_path, err) == GS_OK);
+    remove(g_opt);
+    gs_train_options o;
+    gs_train_options_default(&o);
+    o.out_path = g_path;
+    o.checkpoint_every = 0;
+    o.steps = 6;
+    o.max_grad_norm = clip;
+    gs_model *m = NULL;
+    *rc = train_file(&o, &m, &rep, err);
+    float *w = NULL;
+    if (*rc == GS_OK && m) {
+        w = malloc(m->nparams * sizeof(float));
+        if (w)
+            memcpy(w, m->params, m->nparams * sizeof(float));
+    }
+    gs_model_destroy(m);
+    return w;
+}
+
+static void clip(void)
+{
+    gs_error err = {0, ""};
+    gs_train_report rep;
+    gs_model *m0 = trained_tiny(g_path, 1, &rep, &err);
+    CHECK_MSG(m0 != NULL, "tiny model: %s", err.msg);
+    if (!m0)
+        return;
+    gs_train_options d;
+    gs_train_options_default(&d);
+    CHECK(d.max_grad_norm == 0);
+    size_t n = m0->nparams;
+    int rc;
+    float *none = clipped_run(m0, 0, &rc, &err);
+    float *huge = clipped_run(m0, 1e6, &rc, &err);
+    float *tight = clipped_run(m0, 1e-4, &rc, &err);
+    CHECK_MSG(none && huge && tight, "clip runs: %s", err.msg);
+    if (none && huge && tight) {
+        CHECK_MSG(memcmp(none, huge, n * sizeof(float)) == 0,
+                  "a bound never reached changed the run");
+        CHECK_MSG(memcmp(none, tight, n * sizeof(float)) != 0,
+                  "a bound of 1e-4 did not change the run");
+        CHECK_MSG(moved(tight, m0) > n / 4, "the clipped run moved %zu of %zu weights",
+                  moved(tight, m0), n);
+    }
+    free(none);
+    free(huge);
+    free(tight);
+    const double bad[] = {-1, 2e6, NAN, INFINITY};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        float *w = clipped_run(m0, bad[i], &rc, &err);
+        CHECK_MSG(!w && rc == GS_ERR_ARG && strstr(err.msg, "clip"),
+                  "clip %g: %d \"%s\"", bad[i], rc, err.msg);
+        free(w);
+    }
+    gs_model_destroy(m0);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -226,6 +292,7 @@ int main(void)
     curve();
     fresh_resume();
     head_range();
+    clip();
     tiny_remove(g_path);
     GS_TEST_END();
 }

@@ -2,6 +2,7 @@
  * kernel's semantics, backward accumulation, and Adam (a hand-computed
  * two-step example, clipping, refusal of non-finite gradients). */
 #include "gazesplat/nn.h"
+#include "gazesplat/pool.h"
 #include "gs_test.h"
 #include "nn_test_util.h"
 
@@ -401,6 +402,85 @@ static void test_adam_clip(void)
     gs_nn_adam_destroy(adam);
 }
 
+/* The step on a pool: groups that span several chunks (and end inside
+ * one), with clipping on, give the same bytes (parameters, moments, norm)
+ * on no pool, a pool of 2 and a pool of 3, and the norm is the double sum
+ * of the squares to 1e-12. A NaN in a late chunk is refused on a pool too,
+ * changing nothing. */
+static void test_adam_pool(void)
+{
+    enum { NA = 100003, NB = 7, NC = 32768 * 2 };
+    size_t ns[3] = {NA, NB, NC};
+    float *p[3][3], *g[3];
+    uint32_t r = 12345;
+    for (int i = 0; i < 3; i++) {
+        g[i] = malloc(ns[i] * sizeof(float));
+        for (int run = 0; run < 3; run++)
+            p[run][i] = malloc(ns[i] * sizeof(float));
+    }
+    gs_pool *pools[3] = {NULL, gs_pool_create(2), gs_pool_create(3)};
+    gs_nn_adam *adam[3] = {NULL, NULL, NULL};
+    double norms[3][3];
+    gs_nn_adam_config cfg = gs_nn_adam_default_config();
+    cfg.max_grad_norm = 50.0;
+    for (int run = 0; run < 3; run++) {
+        for (int i = 0; i < 3; i++)
+            for (size_t j = 0; j < ns[i]; j++)
+                p[run][i][j] = (float)j / (float)ns[i] - 0.5f;
+        gs_nn_param_group groups[3];
+        for (int i = 0; i < 3; i++) {
+            groups[i].param = p[run][i];
+            groups[i].grad = g[i];
+            groups[i].n = ns[i];
+            groups[i].lr_mult = 1.0 + i;
+        }
+        CHECK_EQ_INT(gs_nn_adam_create(&adam[run], groups, 3, &cfg, NULL), GS_OK);
+    }
+    for (int step = 0; step < 3; step++) {
+        double want = 0;
+        r = 12345u + (uint32_t)step;
+        for (int i = 0; i < 3; i++)
+            for (size_t j = 0; j < ns[i]; j++) {
+                r = r * 1664525u + 1013904223u;
+                g[i][j] = ((float)(r >> 8) / 16777216.0f - 0.5f) * (step == 1 ? 2.0f : 0.2f);
+                want += (double)g[i][j] * g[i][j];
+            }
+        for (int run = 0; run < 3 && adam[run]; run++) {
+            CHECK_EQ_INT(gs_nn_adam_step_pool(adam[run], pools[run], 1e-3, &norms[run][step]),
+                         GS_OK);
+        }
+        CHECK_CLOSE(norms[0][step], sqrt(want), 0, 1e-12);
+        CHECK(norms[1][step] == norms[0][step] && norms[2][step] == norms[0][step]);
+    }
+    CHECK_MSG(norms[0][1] > 50.0 && norms[0][0] < 50.0, "the clip was not reached once: %g %g",
+              norms[0][0], norms[0][1]);
+    for (int run = 1; run < 3; run++) {
+        for (int i = 0; i < 3; i++) {
+            CHECK_MSG(memcmp(p[run][i], p[0][i], ns[i] * sizeof(float)) == 0,
+                      "pool run %d: group %d's parameters differ", run, i);
+            float *m0, *v0, *m1, *v1;
+            gs_nn_adam_moments(adam[0], i, &m0, &v0);
+            gs_nn_adam_moments(adam[run], i, &m1, &v1);
+            CHECK(memcmp(m0, m1, ns[i] * sizeof(float)) == 0 &&
+                  memcmp(v0, v1, ns[i] * sizeof(float)) == 0);
+        }
+    }
+    /* a NaN in group C's last chunk: refused, nothing changes */
+    float keep = p[1][2][NC - 1];
+    g[2][NC - 3] = NAN;
+    double norm = 0;
+    CHECK_EQ_INT(gs_nn_adam_step_pool(adam[1], pools[1], 1e-3, &norm), GS_ERR_NONFINITE);
+    CHECK(!isfinite(norm) && p[1][2][NC - 1] == keep && gs_nn_adam_steps(adam[1]) == 3);
+    for (int run = 0; run < 3; run++) {
+        gs_nn_adam_destroy(adam[run]);
+        gs_pool_destroy(pools[run]);
+        for (int i = 0; i < 3; i++)
+            free(p[run][i]);
+    }
+    for (int i = 0; i < 3; i++)
+        free(g[i]);
+}
+
 /* A NaN or Inf gradient is refused: no parameter, moment or count changes. */
 static void test_adam_nonfinite(void)
 {
@@ -499,6 +579,7 @@ int main(void)
     test_ssim_identity();
     test_adam_two_steps();
     test_adam_clip();
+    test_adam_pool();
     test_adam_nonfinite();
     test_adam_bad_config();
     GS_TEST_END();

@@ -275,7 +275,8 @@ int gs_nn_adam_create(gs_nn_adam **out, const gs_nn_param_group *groups,
 void gs_nn_adam_destroy(gs_nn_adam *adam);
 
 /* One step with base learning rate lr (>= 0), as PyTorch's Adam:
- *   norm = sqrt(sum of every squared gradient) (in double, in group order)
+ *   norm = sqrt(sum of every squared gradient) (in double, in fixed
+ *          chunks of each group, chunk by chunk in group order)
  *   if non-finite: return GS_ERR_NONFINITE and change nothing (skip the step)
  *   g = grad * min(1, max_grad_norm / (norm + 1e-6)) when clipping is on
  *       (torch.nn.utils.clip_grad_norm_); the grad buffers are not modified
@@ -283,6 +284,10 @@ void gs_nn_adam_destroy(gs_nn_adam *adam);
  *   param -= (lr_mult lr / (1 - b1^t)) m / (sqrt(v) / sqrt(1 - b2^t) + eps)
  * grad_norm (may be NULL) receives the norm before clipping. */
 int gs_nn_adam_step(gs_nn_adam *adam, double lr, double *grad_norm);
+/* The same step with its chunks on the pool (NULL: inline): the same
+ * bytes for any thread count. */
+int gs_nn_adam_step_pool(gs_nn_adam *adam, struct gs_pool *pool, double lr,
+                         double *grad_norm);
 
 /* Sets every group's gradient to zero. */
 void gs_nn_adam_zero_grad(gs_nn_adam *adam);

@@ -143,6 +143,11 @@ typedef struct gs_train_options {
      * is made at its step on the calling thread. The trained bytes are the
      * same either way. */
     int sync_samples;
+    /* > 0: the gradient of every parameter is scaled so that their global
+     * L2 norm is at most this (torch.nn.utils.clip_grad_norm_) before the
+     * Adam step; 0 (default, as the shipped models were trained): none.
+     * 0..1e6. */
+    double max_grad_norm;
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
 /* The sample stream gs_train draws for m under o: m's training identities,
