@@ -586,6 +586,16 @@ static int save_checkpoint(trainer *t, const char *path, long step,
     gs_st_writer_meta(w, "adam_steps", val);
     snprintf(val, sizeof val, "%ld", t->sched_first);
     gs_st_writer_meta(w, "schedule_first", val);
+    /* the lights seen so far, so that a resumed run's mean light counts
+     * every sample since the run's start, as a run without a stop does */
+    char lights[GS_MODEL_LIGHT_DIM * 26];
+    size_t at = 0;
+    for (int i = 0; i < GS_MODEL_LIGHT_DIM; i++)
+        at += (size_t)snprintf(lights + at, sizeof lights - at, "%s%.17g",
+                               i ? "," : "", t->light_sum[i]);
+    gs_st_writer_meta(w, "light_sum", lights);
+    snprintf(val, sizeof val, "%ld", t->light_n);
+    gs_st_writer_meta(w, "light_n", val);
     int gi = 0;
     for (int i = 0; i < m->ntensors && !rc; i++) {
         if (group_lr(m->t[i].group) <= 0)
@@ -644,6 +654,29 @@ static int load_optimizer(trainer *t, const char *path, long *step,
     gs_nn_adam_set_steps(t->adam, atol(a));
     const char *sf = gs_st_meta(f, "schedule_first"); /* absent before the cosine: 0 */
     t->sched_first = sf ? atol(sf) : 0;
+    /* the lights seen before the stop (absent in older files: none) */
+    const char *ls = gs_st_meta(f, "light_sum"), *ln = gs_st_meta(f, "light_n");
+    if (ls && ln) {
+        const char *q = ls;
+        for (int i = 0; i < GS_MODEL_LIGHT_DIM; i++) {
+            char *end = NULL;
+            t->light_sum[i] = strtod(q, &end);
+            if (end == q || !isfinite(t->light_sum[i]) ||
+                *end != (i + 1 < GS_MODEL_LIGHT_DIM ? ',' : '\0')) {
+                gs_st_close(f);
+                return gs_error_set(err, GS_ERR_FORMAT,
+                                    "train: %s: light_sum is not %d numbers",
+                                    opath, GS_MODEL_LIGHT_DIM);
+            }
+            q = end + 1;
+        }
+        t->light_n = atol(ln);
+        if (t->light_n < 0) {
+            gs_st_close(f);
+            return gs_error_set(err, GS_ERR_FORMAT, "train: %s: light_n %s",
+                                opath, ln);
+        }
+    }
     int gi = 0;
     const gs_model *m = t->m;
     for (int i = 0; i < m->ntensors && !rc; i++) {
