@@ -102,7 +102,7 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--head-range") && i + 1 < argc) {
             char tail;
             if (sscanf(argv[++i], "%lf,%lf%c", &hy, &hp, &tail) != 2 ||
-                !(hy >= 1 && hy <= 60 && hp >= 1 && hp <= 40)) {
+                hy == 0 || hp == 0 || gs_train_check_head_range(hy, hp, NULL)) {
                 fprintf(stderr, "bench_eye_coverage: --head-range '%s': want "
                                 "YAW,PITCH degrees within 1..60 and 1..40\n",
                         argv[i]);

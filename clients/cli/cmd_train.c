@@ -229,8 +229,8 @@ static int run_train(int argc, char **argv)
             t.head_pitch_deg = strtod(s, &end);
             ok = end && end != s && !*end;
         }
-        if (!ok || !(t.head_yaw_deg >= 1 && t.head_yaw_deg <= 60) ||
-            !(t.head_pitch_deg >= 1 && t.head_pitch_deg <= 40))
+        if (!ok || t.head_yaw_deg == 0 || t.head_pitch_deg == 0 ||
+            gs_train_check_head_range(t.head_yaw_deg, t.head_pitch_deg, NULL))
             return cli_usage_error(cmd, "--head-range: want YAW,PITCH in "
                                         "degrees, YAW 1..60, PITCH 1..40");
     }

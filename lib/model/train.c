@@ -50,6 +50,18 @@ void gs_train_sample_config(const gs_model *m, const gs_train_options *o,
     gen->ranges.gaze_pitch = 30.0 * GS_MODEL_PI / 180;
 }
 
+int gs_train_check_head_range(double yaw_deg, double pitch_deg, gs_error *err)
+{
+    if (!(yaw_deg == 0 || (yaw_deg >= 1 && yaw_deg <= GS_TRAIN_HEAD_YAW_MAX)) ||
+        !(pitch_deg == 0 || (pitch_deg >= 1 && pitch_deg <= GS_TRAIN_HEAD_PITCH_MAX)))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: head range yaw %g, pitch %g deg not within "
+                            "1..%g and 1..%g",
+                            yaw_deg, pitch_deg, GS_TRAIN_HEAD_YAW_MAX,
+                            GS_TRAIN_HEAD_PITCH_MAX);
+    return GS_OK;
+}
+
 void gs_train_options_default(gs_train_options *o)
 {
     memset(o, 0, sizeof *o);
@@ -715,13 +727,9 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (!(o->eye_weight == 0 || (o->eye_weight >= 1 && o->eye_weight <= 100)))
         return gs_error_set(err, GS_ERR_ARG, "train: eye weight %g not in 1..100",
                             o->eye_weight);
-    if (!(o->head_yaw_deg == 0 || (o->head_yaw_deg >= 1 && o->head_yaw_deg <= 60)) ||
-        !(o->head_pitch_deg == 0 ||
-          (o->head_pitch_deg >= 1 && o->head_pitch_deg <= 40)))
-        return gs_error_set(err, GS_ERR_ARG,
-                            "train: head range yaw %g, pitch %g deg not within "
-                            "1..60 and 1..40",
-                            o->head_yaw_deg, o->head_pitch_deg);
+    int hrc = gs_train_check_head_range(o->head_yaw_deg, o->head_pitch_deg, err);
+    if (hrc)
+        return hrc;
     if (!(o->max_grad_norm >= 0 && o->max_grad_norm <= 1e6))
         return gs_error_set(err, GS_ERR_ARG,
                             "train: gradient-norm clip %g not in 0..1e6",

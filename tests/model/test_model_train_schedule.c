@@ -199,6 +199,15 @@ static void head_range(void)
     }
     const double bad[][2] = {{61, 25}, {0.5, 25}, {-40, 25}, {40, 41},
                              {40, 0.5}, {NAN, 25}, {40, INFINITY}};
+    /* the one check behind them (and the CLI's and the bench's) */
+    CHECK(gs_train_check_head_range(0, 0, NULL) == GS_OK);
+    CHECK(gs_train_check_head_range(60, 40, NULL) == GS_OK);
+    CHECK(gs_train_check_head_range(1, 1, NULL) == GS_OK);
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        gs_error e = {0, ""};
+        CHECK(gs_train_check_head_range(bad[i][0], bad[i][1], &e) == GS_ERR_ARG &&
+              strstr(e.msg, "head range") && strstr(e.msg, "1..60"));
+    }
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
         CHECK(gs_model_write(m0, g_path, &err) == GS_OK);
         remove(g_opt);

@@ -150,6 +150,15 @@ typedef struct gs_train_options {
     double max_grad_norm;
 } gs_train_options;
 void gs_train_options_default(gs_train_options *o);
+/* The bounds of gs_train_options' head range, degrees. */
+#define GS_TRAIN_HEAD_YAW_MAX 60.0
+#define GS_TRAIN_HEAD_PITCH_MAX 40.0
+/* GS_OK when yaw_deg and pitch_deg make a head range gs_train takes: each
+ * 0 (the default) or within 1..GS_TRAIN_HEAD_YAW_MAX and
+ * 1..GS_TRAIN_HEAD_PITCH_MAX; else GS_ERR_ARG with a message naming
+ * them. The one check behind gs_train, `gazesplat train --head-range` and
+ * the benches that draw its samples. */
+int gs_train_check_head_range(double yaw_deg, double pitch_deg, gs_error *err);
 /* The sample stream gs_train draws for m under o: m's training identities,
  * o's seed and head range, normalized images at m's size (sample k of the
  * stream is step k's). */
