@@ -7,8 +7,10 @@
 # models without an eye stream, --supersample is kept by the file and
 # switched by a resume, --eye-weight refuses bad weights, reaches the loss
 # and is 5 by default, --head-range refuses bad ranges, reaches the samples
-# and is 40,25 by default, and a cosine run's rate falls to lr / 20 at its
-# last step.
+# and is 40,25 by default, --sync-samples gives the bytes of the default
+# (samples made ahead), --clip-grad-norm refuses bad bounds and gives the
+# default's bytes when it is never reached, and a cosine run's rate falls
+# to lr / 20 at its last step.
 set -euo pipefail
 G=$1
 T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
@@ -195,6 +197,32 @@ grep -aq '"codes.train":{"dtype":"F32","shape":\[4,' i.safetensors || {
   head -c 3000 i.safetensors | tr -c '[:print:]' ' ' | grep -o '"codes.train[^}]*}'; fail "codes.train is not [4, ...]"; }
 "$G" train --resume --steps 8 --checkpoint 100 --out i.safetensors >/dev/null 2>&1 ||
   fail "a plain resume of the grown model failed"
+
+# samples made at their steps (--sync-samples) or ahead (the default): the
+# same bytes; a gradient bound never reached changes nothing, a tight one
+# does; bad bounds are usage errors
+for v in ahead sync clip-huge clip-tight; do
+  arg=()
+  case $v in
+    sync) arg=(--sync-samples) ;;
+    clip-huge) arg=(--clip-grad-norm 1e6) ;;
+    clip-tight) arg=(--clip-grad-norm 1e-4) ;;
+  esac
+  "$G" train --preset tiny --identities 2 --steps 4 --checkpoint 100 "${arg[@]}" \
+    --out "s-$v.safetensors" >/dev/null 2>&1 || fail "train ($v) failed"
+done
+cmp s-ahead.safetensors s-sync.safetensors || fail "--sync-samples trained another model"
+cmp s-ahead.safetensors.opt s-sync.safetensors.opt || fail "--sync-samples: another FILE.opt"
+cmp s-ahead.safetensors s-clip-huge.safetensors || fail "a bound never reached changed the run"
+! cmp -s s-ahead.safetensors s-clip-tight.safetensors || fail "--clip-grad-norm 1e-4 changed nothing"
+for bad in -1 2e6 x nan; do
+  set +e
+  "$G" train --preset tiny --identities 2 --steps 1 --clip-grad-norm "$bad" \
+    --out bad.safetensors >/dev/null 2>err.txt; rc=$?
+  set -e
+  [ $rc -eq 2 ] || fail "--clip-grad-norm '$bad': exit $rc, want 2"
+  grep -q "clip-grad-norm" err.txt || { cat err.txt; fail "--clip-grad-norm '$bad': no message"; }
+done
 
 # a cosine run from scratch: lr at step 0, then falling towards lr / 20 at
 # step 6, the end (step 5, the last run, has 0.05 + 0.475 (1 + cos(5 pi / 6)))
