@@ -154,6 +154,10 @@ typedef struct trainer {
     double light_sum[GS_MODEL_LIGHT_DIM];
     long light_n;
     long sched_first;          /* the learning-rate curve's first step */
+    /* the running means of the loss (the spike guard's) and of the loss
+     * estimator's angle, over mean_n steps; kept in FILE.opt */
+    double loss_mean, gaze_mean;
+    long mean_n;
 } trainer;
 
 static double group_lr(int group)
@@ -608,6 +612,14 @@ static int save_checkpoint(trainer *t, const char *path, long step,
     gs_st_writer_meta(w, "light_sum", lights);
     snprintf(val, sizeof val, "%ld", t->light_n);
     gs_st_writer_meta(w, "light_n", val);
+    /* the spike guard's running mean, so that a resumed run skips what a
+     * run without a stop skips */
+    snprintf(lights, sizeof lights, "%.17g", t->loss_mean);
+    gs_st_writer_meta(w, "loss_mean", lights);
+    snprintf(lights, sizeof lights, "%.17g", t->gaze_mean);
+    gs_st_writer_meta(w, "gaze_mean", lights);
+    snprintf(val, sizeof val, "%ld", t->mean_n);
+    gs_st_writer_meta(w, "mean_n", val);
     int gi = 0;
     for (int i = 0; i < m->ntensors && !rc; i++) {
         if (group_lr(m->t[i].group) <= 0)
@@ -689,6 +701,22 @@ static int load_optimizer(trainer *t, const char *path, long *step,
                                 opath, ln);
         }
     }
+    /* the running means (absent in older files: they start again) */
+    const char *lm = gs_st_meta(f, "loss_mean"), *gm = gs_st_meta(f, "gaze_mean"),
+               *mn = gs_st_meta(f, "mean_n");
+    if (lm && gm && mn) {
+        char *end_l = NULL, *end_g = NULL;
+        t->loss_mean = strtod(lm, &end_l);
+        t->gaze_mean = strtod(gm, &end_g);
+        t->mean_n = atol(mn);
+        if (end_l == lm || *end_l || end_g == gm || *end_g || !isfinite(t->loss_mean) ||
+            !isfinite(t->gaze_mean) || t->mean_n < 0) {
+            gs_st_close(f);
+            return gs_error_set(err, GS_ERR_FORMAT,
+                                "train: %s: loss_mean, gaze_mean or mean_n is "
+                                "not a number", opath);
+        }
+    }
     int gi = 0;
     const gs_model *m = t->m;
     for (int i = 0; i < m->ntensors && !rc; i++) {
@@ -757,10 +785,10 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (!rc)
         producer_start(&t, o->sync_samples);
     int ramp = o->resume && o->fresh_from_step >= 0 && o->warmup > 0;
-    double t0 = now_s(), run_mean = 0, last_log = t0;
+    double t0 = now_s(), last_log = t0;
     long skipped = 0, done = 0;
     double lr = o->lr; /* this step's learning rate */
-    double psnr_acc = 0, loss_acc = 0, gaze_acc = 0, gaze_mean = 0;
+    double psnr_acc = 0, loss_acc = 0, gaze_acc = 0;
     int acc_n = 0;
     for (; !rc && step < o->steps; step++) {
         gs_frame fr;
@@ -776,7 +804,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
             break;
         double psnr;
         double loss = losses(&t, pool, &psnr);
-        int skip = !isfinite(loss) || (done > 50 && loss > 4 * run_mean);
+        int skip = !isfinite(loss) || (t.mean_n > 50 && loss > 4 * t.loss_mean);
         if (!skip) {
             gs_nn_adam_zero_grad(t.adam);
             gs_frame_grad fg;
@@ -804,15 +832,16 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
             skipped++;
             if (o->log)
                 o->log(o->log_ctx, "step %ld skipped (loss %g, mean %g)",
-                       step, loss, run_mean);
+                       step, loss, t.loss_mean);
             continue;
         }
         done++;
-        run_mean = done == 1 ? loss : 0.98 * run_mean + 0.02 * loss;
+        t.mean_n++;
+        t.loss_mean = t.mean_n == 1 ? loss : 0.98 * t.loss_mean + 0.02 * loss;
         psnr_acc += psnr;
         loss_acc += loss;
         gaze_acc += t.gaze_rad;
-        gaze_mean = done == 1 ? t.gaze_rad : 0.98 * gaze_mean + 0.02 * t.gaze_rad;
+        t.gaze_mean = t.mean_n == 1 ? t.gaze_rad : 0.98 * t.gaze_mean + 0.02 * t.gaze_rad;
         acc_n++;
         if (o->log && o->log_every > 0 && (step + 1) % o->log_every == 0) {
             double el = now_s() - t0, rate = done / el;
@@ -839,8 +868,8 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         rep->steps = step;
         rep->skipped = skipped;
         rep->seconds = now_s() - t0;
-        rep->final_loss = run_mean;
-        rep->final_gaze_deg = gaze_mean * 180.0 / GS_MODEL_PI;
+        rep->final_loss = t.loss_mean;
+        rep->final_gaze_deg = t.gaze_mean * 180.0 / GS_MODEL_PI;
     }
     trainer_free(&t);
     m->id = gs_model_param_id(m); /* the parameters it now holds */

@@ -3,8 +3,9 @@
  * tiny model from one starting file. Checked: the weights and the optimizer
  * state are the same bytes with and without the producer, on no pool and on
  * a pool of two; a run stopped after 7 steps and resumed to 12 (the
- * producer starts mid-stream) gives the bytes of the run without a stop
- * (FILE.opt keeps the lights seen, for the saved mean light, and a
+ * producer starts mid-stream) gives the bytes and the running mean loss of
+ * the run without a stop (FILE.opt keeps the lights seen, for the saved
+ * mean light, and the spike guard's running mean; a
  * FILE.opt whose lights are not 12 numbers is refused); a run of one
  * step
  * (nothing asked ahead) works; and the 12 steps did move the weights (so
@@ -47,6 +48,7 @@ typedef struct run_out {
     unsigned char *opt;
     size_t opt_len;
     long steps;
+    double final_loss; /* the running mean (the spike guard's) */
 } run_out;
 
 static void run_free(run_out *r)
@@ -91,6 +93,7 @@ static int run(int sync, gs_pool *pool, long stop_at, long steps, run_out *out)
     CHECK_MSG(rc == GS_OK, "train (sync %d, stop %ld): %s", sync, stop_at, err.msg);
     if (rc == GS_OK) {
         out->steps = rep.steps;
+        out->final_loss = rep.final_loss;
         out->params = malloc(m->nparams * sizeof(float));
         if (out->params)
             memcpy(out->params, m->params, m->nparams * sizeof(float));
@@ -109,14 +112,18 @@ static void same(const run_out *a, const run_out *b, size_t n, const char *what)
                   memcmp(a->opt, b->opt, a->opt_len) == 0,
               "%s: the optimizer states differ", what);
     CHECK_EQ_INT((int)a->steps, (int)b->steps);
+    CHECK_MSG(a->final_loss == b->final_loss, "%s: running mean loss %.17g against %.17g",
+              what, a->final_loss, b->final_loss);
 }
 
-/* A resume whose FILE.opt carries malformed lights: refused, naming them. */
+/* A resume whose FILE.opt carries malformed lights or running means:
+ * refused, naming them. */
 static void bad_lights(void)
 {
     const char *bad[] = {"1,2", "1,2,3,4,5,6,7,8,9,10,11,x", "1,2,3,4,5,6,7,8,9,10,11,12,13",
-                         "nan,2,3,4,5,6,7,8,9,10,11,12"};
+                         "nan,2,3,4,5,6,7,8,9,10,11,12", "1,2,3,4,5,6,7,8,9,10,11,12"};
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        int means = i == 4; /* good lights, a bad running mean */
         gs_error err = {0, ""};
         CHECK(gs_model_write(g_start, g_path, &err) == GS_OK);
         gs_st_writer *w = gs_st_writer_create();
@@ -127,6 +134,11 @@ static void bad_lights(void)
         gs_st_writer_meta(w, "adam_steps", "7");
         gs_st_writer_meta(w, "light_sum", bad[i]);
         gs_st_writer_meta(w, "light_n", "7");
+        if (means) {
+            gs_st_writer_meta(w, "loss_mean", "0.5x");
+            gs_st_writer_meta(w, "gaze_mean", "0");
+            gs_st_writer_meta(w, "mean_n", "7");
+        }
         CHECK(gs_st_writer_save(w, g_opt, &err) == GS_OK);
         gs_st_writer_destroy(w);
         gs_model *m = NULL;
@@ -137,7 +149,7 @@ static void bad_lights(void)
         o.resume = 1;
         o.steps = 9;
         int rc = m ? gs_train(m, &o, NULL, NULL, &err) : GS_ERR_ARG;
-        CHECK_MSG(rc == GS_ERR_FORMAT && strstr(err.msg, "light_sum"),
+        CHECK_MSG(rc == GS_ERR_FORMAT && strstr(err.msg, means ? "loss_mean" : "light_sum"),
                   "lights \"%s\": %d \"%s\"", bad[i], rc, err.msg);
         gs_model_destroy(m);
     }
