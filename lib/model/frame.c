@@ -1553,6 +1553,20 @@ typedef struct face_bwd_job {
     int code, gz;  /* the code's (E), the gaze encoding's (P, single stream) */
 } face_bwd_job;
 
+/* Block b's weight gradients of mlp in c->blk_grad, as a gs_mlp. */
+static void block_grads(const gs_model_ctx *c, const gs_mlp *mlp, int b,
+                        gs_mlp *out)
+{
+    float *g = c->blk_grad + (size_t)b * c->blk_grad_len;
+    memset(out, 0, sizeof *out);
+    for (int l = 0; l < mlp->nl; l++) {
+        out->w[l] = g;
+        g += (size_t)mlp->dims[l] * mlp->dims[l + 1];
+        out->b[l] = g;
+        g += mlp->dims[l + 1];
+    }
+}
+
 static void face_bwd_task(void *ctx, int b, int worker)
 {
     (void)worker;
@@ -1603,14 +1617,9 @@ static void face_bwd_task(void *ctx, int b, int worker)
     gs_mlp gb; /* this block's weight gradients, or none */
     memset(&gb, 0, sizeof gb);
     if (j->weights) {
-        float *g = c->blk_grad + (size_t)b * c->blk_grad_len;
-        memset(g, 0, mlp_param_count(mlp) * sizeof(float));
-        for (int l = 0; l < mlp->nl; l++) {
-            gb.w[l] = g;
-            g += (size_t)mlp->dims[l] * mlp->dims[l + 1];
-            gb.b[l] = g;
-            g += mlp->dims[l + 1];
-        }
+        memset(c->blk_grad + (size_t)b * c->blk_grad_len, 0,
+               mlp_param_count(mlp) * sizeof(float));
+        block_grads(c, mlp, b, &gb);
     }
     float *din = j->need_din ? dinp + (size_t)r0 * dw : NULL;
     if (din)
@@ -1658,15 +1667,14 @@ static void face_backward(gs_model_ctx *c, gs_pool *pool,
         float dpe[GS_PE_DIM(2)] = {0};
         for (int b = 0; b < c->nfblk; b++) {
             if (j.weights) {
-                const float *g = c->blk_grad + (size_t)b * c->blk_grad_len;
+                gs_mlp gb;
+                block_grads(c, mlp, b, &gb);
                 for (int l = 0; l < mlp->nl; l++) {
                     size_t nw = (size_t)mlp->dims[l] * mlp->dims[l + 1];
                     for (size_t q = 0; q < nw; q++)
-                        gm->w[l][q] += g[q];
-                    g += nw;
+                        gm->w[l][q] += gb.w[l][q];
                     for (int q = 0; q < mlp->dims[l + 1]; q++)
-                        gm->b[l][q] += g[q];
-                    g += mlp->dims[l + 1];
+                        gm->b[l][q] += gb.b[l][q];
                 }
             }
             const float *red = c->blk_red + (size_t)b * (D + GS_PE_DIM(2));

@@ -27,36 +27,23 @@ size_t gs_mlp_scratch_size(const gs_mlp *m, int n)
     return 2 * (size_t)n * (size_t)widest;
 }
 
-/* out[n] = in > 0 ? in : slope in, the same values as gs_nn's LeakyReLU,
+/* out[i] = pre[i] > 0 ? x[i] : slope x[i] (out may be x): the LeakyReLU
+ * (x = pre) and its backward (x = the gradient), the same values as gs_nn's,
  * with the choice made as a bitwise blend on the sign-tested bits: GCC
  * keeps the float compare as a branch that random signs make mispredict,
  * while this form vectorises (renderer_ops.c's select_pos). */
-static void leaky_forward(float *out, const float *in, float slope, size_t n)
+static void leaky_select(float *out, const float *x, const float *pre,
+                         float slope, size_t n)
 {
     for (size_t i = 0; i < n; i++) {
-        float b = slope * in[i];
-        int32_t k, ib, r;
-        memcpy(&k, &in[i], sizeof k);
-        memcpy(&ib, &b, sizeof ib);
-        int32_t m = -(int32_t)(k > 0);
-        r = (k & m) | (ib & ~m);
-        memcpy(&out[i], &r, sizeof r);
-    }
-}
-
-/* d[i] = pre[i] > 0 ? d[i] : slope d[i], in place, by the same blend
- * (a branch on random signs mispredicts about half the time). */
-static void leaky_backward(float *d, const float *pre, float slope, size_t n)
-{
-    for (size_t i = 0; i < n; i++) {
-        float b = slope * d[i];
-        int32_t k, id, ib, r;
+        float b = slope * x[i];
+        int32_t k, ix, ib, r;
         memcpy(&k, &pre[i], sizeof k);
-        memcpy(&id, &d[i], sizeof id);
+        memcpy(&ix, &x[i], sizeof ix);
         memcpy(&ib, &b, sizeof ib);
         int32_t m = -(int32_t)(k > 0);
-        r = (id & m) | (ib & ~m);
-        memcpy(&d[i], &r, sizeof r);
+        r = (ix & m) | (ib & ~m);
+        memcpy(&out[i], &r, sizeof r);
     }
 }
 
@@ -72,7 +59,7 @@ void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,
         }
         float *pre = acts, *post = acts + (size_t)n * oc;
         gs_nn_linear_forward(pre, x, m->w[l], m->b[l], n, ic, oc);
-        leaky_forward(post, pre, GS_MLP_SLOPE, (size_t)n * oc);
+        leaky_select(post, pre, pre, GS_MLP_SLOPE, (size_t)n * oc);
         x = post;
         acts += 2 * (size_t)n * oc;
     }
@@ -87,7 +74,7 @@ void gs_mlp_forward_after_first(const gs_mlp *m, int n, float *acts,
         return;
     }
     float *post = acts + (size_t)n * h;
-    leaky_forward(post, acts, GS_MLP_SLOPE, (size_t)n * h);
+    leaky_select(post, acts, acts, GS_MLP_SLOPE, (size_t)n * h);
     const float *x = post;
     acts += 2 * (size_t)n * h;
     for (int l = 1; l < m->nl; l++) {
@@ -99,7 +86,7 @@ void gs_mlp_forward_after_first(const gs_mlp *m, int n, float *acts,
         float *pre = acts;
         post = acts + (size_t)n * oc;
         gs_nn_linear_forward(pre, x, m->w[l], m->b[l], n, ic, oc);
-        leaky_forward(post, pre, GS_MLP_SLOPE, (size_t)n * oc);
+        leaky_select(post, pre, pre, GS_MLP_SLOPE, (size_t)n * oc);
         x = post;
         acts += 2 * (size_t)n * oc;
     }
@@ -134,7 +121,7 @@ void gs_mlp_backward(const gs_mlp *m, const gs_mlp *g, const float *in, int n,
         memset(dx, 0, sz * sizeof(float));
         gs_nn_linear_backward(dx, g->w[l], g->b[l], d, x, m->w[l], n, ic, oc);
         /* Through the LeakyReLU of layer l-1. */
-        leaky_backward(dx, pre[l - 1], GS_MLP_SLOPE, sz);
+        leaky_select(dx, dx, pre[l - 1], GS_MLP_SLOPE, sz);
         d = dx;
     }
 }

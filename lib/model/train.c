@@ -119,8 +119,7 @@ typedef struct train_item {
     float *target, *wl1;      /* [3 S^2] white outside the head; [S^2] */
     float *ftarget;           /* [3 fs^2] area-downsampled target */
     float *fmask, *emask;     /* [fs^2] face-only mask; eye share */
-    int rc;
-    gs_error err;
+    gs_error err;             /* why the last making failed */
 } train_item;
 
 typedef struct trainer {
@@ -139,8 +138,6 @@ typedef struct trainer {
     pthread_cond_t cv;
     int want, busy, quit;
     uint64_t want_index;
-    /* this step's targets (cur's) */
-    const float *target, *wl1, *ftarget, *fmask, *emask;
     float *dimg, *dfmap, *ssim;
     float *dfmap_face;         /* face-only render's gradient */
     float *dfmap_eye;          /* eye-only render's gradient */
@@ -325,7 +322,6 @@ static int make_item(const item_maker *mk, uint64_t index, train_item *it)
         if (it->ident < 0)
             rc = gs_error_set(err, GS_ERR_STATE, "train: unknown identity");
     }
-    it->rc = rc;
     if (rc)
         return rc;
     /* Targets: white outside the head; eyes weighted eye_w in the L1. */
@@ -447,11 +443,12 @@ static int take_item(trainer *t, uint64_t index, uint64_t next, gs_error *err)
             pthread_cond_wait(&t->cv, &t->lock);
         pthread_mutex_unlock(&t->lock);
     }
-    int rc = it->filled && it->index == index ? GS_OK
-                                               : make_item(&t->mk, index, it);
-    if (it->rc || rc) {
-        it->filled = 0;
-        return gs_error_set(err, it->rc ? it->rc : rc, "%s", it->err.msg);
+    /* (a sample the producer failed to make is made again here, and its
+     * error reported) */
+    if (!(it->filled && it->index == index)) {
+        int rc = make_item(&t->mk, index, it);
+        if (rc)
+            return gs_error_set(err, rc, "%s", it->err.msg);
     }
     if (t->producer_on && next != UINT64_MAX) {
         pthread_mutex_lock(&t->lock);
@@ -462,11 +459,6 @@ static int take_item(trainer *t, uint64_t index, uint64_t next, gs_error *err)
         pthread_mutex_unlock(&t->lock);
     }
     t->cur = it;
-    t->target = it->target;
-    t->wl1 = it->wl1;
-    t->ftarget = it->ftarget;
-    t->fmask = it->fmask;
-    t->emask = it->emask;
     return GS_OK;
 }
 
@@ -518,42 +510,43 @@ static double gaze_loss(trainer *t, gs_pool *pool)
 static double losses(trainer *t, gs_pool *pool, double *psnr)
 {
     gs_model_ctx *c = t->c;
+    const train_item *it = t->cur; /* this step's targets */
     int S = c->S, fs = c->fs;
     size_t plane = (size_t)S * S, fplane = (size_t)fs * fs;
     float l1 = 0, ls = 0, lf = 0;
-    gs_nn_l1_forward(&l1, c->rgb, t->target, t->wl1, 3, (int)plane);
-    gs_nn_l1_forward(&lf, c->fmap, t->ftarget, NULL, 3, (int)fplane);
+    gs_nn_l1_forward(&l1, c->rgb, it->target, it->wl1, 3, (int)plane);
+    gs_nn_l1_forward(&lf, c->fmap, it->ftarget, NULL, 3, (int)fplane);
     float lface = 0; /* the face stream alone, away from the eyes */
     if (c->used_face_map) {
-        gs_nn_l1_forward(&lface, c->fmap_face, t->ftarget, t->fmask, 3,
+        gs_nn_l1_forward(&lface, c->fmap_face, it->ftarget, it->fmask, 3,
                          (int)fplane);
         memset(t->dfmap_face, 0, 3 * fplane * sizeof(float));
-        gs_nn_l1_backward(t->dfmap_face, 1.0f, c->fmap_face, t->ftarget,
-                          t->fmask, 3, (int)fplane);
+        gs_nn_l1_backward(t->dfmap_face, 1.0f, c->fmap_face, it->ftarget,
+                          it->fmask, 3, (int)fplane);
     }
     memset(t->dimg, 0, 3 * plane * sizeof(float));
-    gs_nn_l1_backward(t->dimg, 1.0f, c->rgb, t->target, t->wl1, 3,
+    gs_nn_l1_backward(t->dimg, 1.0f, c->rgb, it->target, it->wl1, 3,
                       (int)plane);
     /* the SSIM's loss and gradient in one pass, on the pool */
-    gs_nn_ssim_loss_fused(pool, &ls, t->dimg, 0.1f, c->rgb, t->target, 3, S, S,
+    gs_nn_ssim_loss_fused(pool, &ls, t->dimg, 0.1f, c->rgb, it->target, 3, S, S,
                           GS_NN_SSIM_ZERO, t->ssim, t->ssim_len);
     memset(t->dfmap, 0, 3 * fplane * sizeof(float));
-    gs_nn_l1_backward(t->dfmap, 1.0f, c->fmap, t->ftarget, NULL, 3,
+    gs_nn_l1_backward(t->dfmap, 1.0f, c->fmap, it->ftarget, NULL, 3,
                       (int)fplane);
     double se = 0;
     for (size_t i = 0; i < 3 * plane; i++) {
-        double e = c->rgb[i] - t->target[i];
+        double e = c->rgb[i] - it->target[i];
         se += e * e;
     }
     double mse = se / (3.0 * plane);
     *psnr = mse > 1e-12 ? -10 * log10(mse) : 120;
     float leye = 0; /* the eye stream alone, over the visible eyes, x eye_w */
     if (c->used_eye_map) {
-        gs_nn_l1_forward(&leye, c->fmap_eye, t->ftarget, t->emask, 3,
+        gs_nn_l1_forward(&leye, c->fmap_eye, it->ftarget, it->emask, 3,
                          (int)fplane);
         memset(t->dfmap_eye, 0, 3 * fplane * sizeof(float));
-        gs_nn_l1_backward(t->dfmap_eye, t->eye_w, c->fmap_eye, t->ftarget,
-                          t->emask, 3, (int)fplane);
+        gs_nn_l1_backward(t->dfmap_eye, t->eye_w, c->fmap_eye, it->ftarget,
+                          it->emask, 3, (int)fplane);
     }
     double lg = t->gnet ? gaze_loss(t, pool) : 0.0;
     double lc = 0; /* the eye stream's coverage against the visible eyes */
@@ -562,7 +555,7 @@ static double losses(trainer *t, gs_pool *pool, double *psnr)
         /* (gs_train refuses the weight without an eye stream) */
         double w = t->cover_w / (double)fplane;
         for (size_t i = 0; i < fplane; i++) {
-            double d = (double)c->cover[i] - t->emask[i];
+            double d = (double)c->cover[i] - it->emask[i];
             lc += fabs(d);
             t->dcover[i] = (float)(d > 0 ? w : d < 0 ? -w : 0.0);
         }

@@ -169,6 +169,18 @@ static void fresh_resume(void)
     gs_model_destroy(m0);
 }
 
+/* A run of `steps` from m0: m0 written to g_path without FILE.opt, the
+ * default options but for no checkpoints. */
+static void from_m0(const gs_model *m0, long steps, gs_train_options *o, gs_error *err)
+{
+    CHECK(gs_model_write(m0, g_path, err) == GS_OK);
+    remove(g_opt);
+    gs_train_options_default(o);
+    o->out_path = g_path;
+    o->checkpoint_every = 0;
+    o->steps = steps;
+}
+
 /* The sample stream's head range: 0 is the default's 40,25, a set range
  * is taken; ranges outside 1..60 (yaw) and 1..40 (pitch) degrees, or not
  * a number, are refused before a step, the model untouched. */
@@ -209,14 +221,9 @@ static void head_range(void)
               strstr(e.msg, "head range") && strstr(e.msg, "1..60"));
     }
     for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
-        CHECK(gs_model_write(m0, g_path, &err) == GS_OK);
-        remove(g_opt);
         gs_train_options o;
-        gs_train_options_default(&o);
+        from_m0(m0, 1, &o, &err);
         CHECK(o.head_yaw_deg == 0 && o.head_pitch_deg == 0);
-        o.out_path = g_path;
-        o.checkpoint_every = 0;
-        o.steps = 1;
         o.head_yaw_deg = bad[i][0];
         o.head_pitch_deg = bad[i][1];
         gs_model *m = NULL;
@@ -235,13 +242,8 @@ static void head_range(void)
 static float *clipped_run(const gs_model *m0, double clip, int *rc, gs_error *err)
 {
     gs_train_report rep;
-    CHECK(gs_model_write(m0, g_path, err) == GS_OK);
-    remove(g_opt);
     gs_train_options o;
-    gs_train_options_default(&o);
-    o.out_path = g_path;
-    o.checkpoint_every = 0;
-    o.steps = 6;
+    from_m0(m0, 6, &o, err);
     o.max_grad_norm = clip;
     gs_model *m = NULL;
     *rc = train_file(&o, &m, &rep, err);

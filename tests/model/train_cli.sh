@@ -16,6 +16,22 @@ G=$1
 T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
 cd "$T"
 fail() { echo "FAIL: $*"; exit 1; }
+# refused OPTION VALUE...: a new run with each value is a usage error (exit
+# 2) whose message names the option, and it writes no model
+refused() {
+  local opt=$1 bad rc
+  shift
+  for bad in "$@"; do
+    set +e
+    "$G" train --preset tiny --identities 2 --steps 1 "$opt" "$bad" \
+      --out refused.safetensors >/dev/null 2>err.txt
+    rc=$?
+    set -e
+    [ $rc -eq 2 ] || fail "$opt '$bad': exit $rc, want 2"
+    grep -q -- "$opt" err.txt || { cat err.txt; fail "$opt '$bad': no message"; }
+    [ ! -e refused.safetensors ] || fail "$opt '$bad' wrote a model"
+  done
+}
 "$G" train --preset tiny --identities 2 --steps 2 --checkpoint 100 --out m.safetensors >/dev/null 2>&1
 rm m.safetensors.opt
 cp m.safetensors orig.safetensors
@@ -71,14 +87,7 @@ grep -aq '"face.lid_uv"' n.safetensors || fail "the resumed model lost its lids"
 
 # the eye-cover loss: bad weights are usage errors, and the single-stream
 # ablation (no eye stream) is refused with a message
-for bad in "-1" "x" "2000"; do
-  set +e
-  "$G" train --preset tiny --identities 2 --steps 1 --eye-cover-loss "$bad" \
-    --out e.safetensors >/dev/null 2>err.txt; rc=$?
-  set -e
-  [ $rc -eq 2 ] || fail "--eye-cover-loss $bad: exit $rc, want 2"
-  grep -q "eye-cover-loss" err.txt || { cat err.txt; fail "--eye-cover-loss $bad: no message"; }
-done
+refused --eye-cover-loss -1 x 2000
 set +e
 "$G" train --preset tiny --identities 2 --steps 1 --single-stream --eye-cover-loss 1 \
   --out e.safetensors >/dev/null 2>err.txt; rc=$?
@@ -90,14 +99,7 @@ grep -q "needs the eye stream" err.txt || { cat err.txt; fail "single stream: no
 
 # --supersample: 1..4, kept by the file and switched by a resume; not with
 # the eye-cover loss
-for bad in "0" "5" "2x"; do
-  set +e
-  "$G" train --preset tiny --identities 2 --steps 1 --supersample "$bad" \
-    --out s.safetensors >/dev/null 2>err.txt; rc=$?
-  set -e
-  [ $rc -eq 2 ] || fail "--supersample $bad: exit $rc, want 2"
-  grep -q "supersample" err.txt || { cat err.txt; fail "--supersample $bad: no message"; }
-done
+refused --supersample 0 5 2x
 set +e
 "$G" train --preset tiny --identities 2 --steps 1 --supersample 2 --eye-cover-loss 1 \
   --out s.safetensors >/dev/null 2>err.txt; rc=$?
@@ -115,15 +117,7 @@ grep -aq '"config.supersample":"1"' s.safetensors || fail "a resume did not swit
 
 # --eye-weight: 1..100; 5 is the default (the same bytes as without it),
 # another weight trains another model
-set +e
-for bad in 0 0.5 101 nan x ""; do
-  "$G" train --preset tiny --identities 2 --steps 1 --eye-weight "$bad" \
-    --out w.safetensors >/dev/null 2>err.txt
-  rc=$?
-  [ $rc -eq 2 ] || fail "--eye-weight '$bad': exit $rc, want 2"
-  grep -q "eye-weight" err.txt || { cat err.txt; fail "--eye-weight '$bad': no message"; }
-done
-set -e
+refused --eye-weight 0 0.5 101 nan x ""
 for w in default 5 20; do
   arg=(); [ "$w" = default ] || arg=(--eye-weight "$w")
   "$G" train --preset tiny --identities 2 --steps 3 --checkpoint 100 "${arg[@]}" \
@@ -134,16 +128,7 @@ cmp -s w5.safetensors w20.safetensors && fail "--eye-weight 20 trained the same 
 
 # --head-range YAW,PITCH: within 1..60 and 1..40 degrees; 40,25 is the
 # default (the same bytes as without it), a wider range trains another model
-set +e
-for bad in 0,25 61,25 40,0 40,41 40 40, ,25 40,25,1 nan,25 x; do
-  "$G" train --preset tiny --identities 2 --steps 1 --head-range "$bad" \
-    --out h.safetensors >/dev/null 2>err.txt
-  rc=$?
-  [ $rc -eq 2 ] || fail "--head-range '$bad': exit $rc, want 2"
-  grep -q "head-range" err.txt || { cat err.txt; fail "--head-range '$bad': no message"; }
-  [ ! -e h.safetensors ] || fail "--head-range '$bad' wrote a model"
-done
-set -e
+refused --head-range 0,25 61,25 40,0 40,41 40 40, ,25 40,25,1 nan,25 x
 "$G" train --preset tiny --identities 2 --steps 3 --checkpoint 100 --head-range 40,25 \
   --out h40.safetensors >/dev/null 2>&1 || fail "--head-range 40,25: the run failed"
 "$G" train --preset tiny --identities 2 --steps 3 --checkpoint 100 --head-range 50,30 \
@@ -154,14 +139,8 @@ cmp -s h40.safetensors h50.safetensors && fail "--head-range 50,30 trained the s
 # --eye-direct 0|1: other values and the single-stream ablation refused; a
 # new model keeps the key, a resume switches it (same tensors, so the
 # optimizer state still fits)
+refused --eye-direct 2 -1 yes ""
 set +e
-for bad in 2 -1 yes ""; do
-  "$G" train --preset tiny --identities 2 --steps 1 --eye-direct "$bad" \
-    --out ed.safetensors >/dev/null 2>err.txt
-  rc=$?
-  [ $rc -eq 2 ] || fail "--eye-direct '$bad': exit $rc, want 2"
-  grep -q "eye-direct" err.txt || { cat err.txt; fail "--eye-direct '$bad': no message"; }
-done
 "$G" train --preset tiny --identities 2 --steps 1 --eye-direct 1 --single-stream \
   --out ed.safetensors >/dev/null 2>err.txt
 rc=$?
@@ -215,14 +194,7 @@ cmp s-ahead.safetensors s-sync.safetensors || fail "--sync-samples trained anoth
 cmp s-ahead.safetensors.opt s-sync.safetensors.opt || fail "--sync-samples: another FILE.opt"
 cmp s-ahead.safetensors s-clip-huge.safetensors || fail "a bound never reached changed the run"
 ! cmp -s s-ahead.safetensors s-clip-tight.safetensors || fail "--clip-grad-norm 1e-4 changed nothing"
-for bad in -1 2e6 x nan; do
-  set +e
-  "$G" train --preset tiny --identities 2 --steps 1 --clip-grad-norm "$bad" \
-    --out bad.safetensors >/dev/null 2>err.txt; rc=$?
-  set -e
-  [ $rc -eq 2 ] || fail "--clip-grad-norm '$bad': exit $rc, want 2"
-  grep -q "clip-grad-norm" err.txt || { cat err.txt; fail "--clip-grad-norm '$bad': no message"; }
-done
+refused --clip-grad-norm -1 2e6 x nan
 
 # a cosine run from scratch: lr at step 0, then falling towards lr / 20 at
 # step 6, the end (step 5, the last run, has 0.05 + 0.475 (1 + cos(5 pi / 6)))
