@@ -27,6 +27,9 @@ const cli_command cli_train_command = {
     "  --seed N            model initialisation and sample stream (1)\n"
     "  --threads N         worker threads (2); a thread more makes each\n"
     "                      step's sample while the step before runs\n"
+    "  --sample-threads N  threads of that sample's synthetic render (1);\n"
+    "                      more for a machine of many cores, where a step\n"
+    "                      takes less than a sample (the same bytes)\n"
     "  --clip-grad-norm X  scale the gradients so that their global L2\n"
     "                      norm is at most X before each step (0, the\n"
     "                      default: no clipping)\n"
@@ -90,7 +93,7 @@ static void log_line(void *ctx, const char *fmt, ...)
 enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_CKPT, O_LOG, O_GUIDE, O_SINGLE, O_NOEYE, O_GSRC, O_GLOSS, O_GW,
        O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_HEAD, O_EDIR, O_SYNC,
-       O_CLIP, O_N };
+       O_CLIP, O_STHREADS, O_N };
 
 static int run_train(int argc, char **argv)
 {
@@ -106,7 +109,8 @@ static int run_train(int argc, char **argv)
         {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
         {"--supersample", 1, NULL}, {"--eye-weight", 1, NULL},
         {"--head-range", 1, NULL}, {"--eye-direct", 1, NULL},
-        {"--sync-samples", 0, NULL}, {"--clip-grad-norm", 1, NULL}};
+        {"--sync-samples", 0, NULL}, {"--clip-grad-norm", 1, NULL},
+        {"--sample-threads", 1, NULL}};
     const cli_command *cmd = &cli_train_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -130,6 +134,12 @@ static int run_train(int argc, char **argv)
             return cli_usage_error(cmd, "--clip-grad-norm: want 0..1e6");
     }
     long v, threads = 2, seed = 1;
+    if (o[O_STHREADS].value) {
+        if (cli_parse_long(o[O_STHREADS].value, 1, GS_TRAIN_SAMPLE_THREADS_MAX, &v))
+            return cli_usage_error(cmd, "--sample-threads: want 1..%d",
+                                   GS_TRAIN_SAMPLE_THREADS_MAX);
+        t.sample_threads = (int)v;
+    }
     if (o[O_PRESET].value)
         spec.preset = o[O_PRESET].value;
     if (o[O_STEPS].value) {

@@ -107,6 +107,7 @@ typedef struct item_maker {
     int S, fs;    /* image and feature map sizes */
     int g;        /* the face-only mask's margin around the eyes, feature px */
     float eye_w;  /* eye pixels' weight in the image L1 */
+    gs_pool *pool; /* renders the synthetic image (sample_threads > 1), or NULL */
 } item_maker;
 
 /* One sample and its targets, made ahead of its step. */
@@ -214,6 +215,16 @@ static int trainer_init(trainer *t, gs_model *m, const gs_train_options *o,
      * feature pixel is about 3.4 mm */
     mk->g = t->c->nl ? 3 : 1;
     mk->eye_w = t->eye_w;
+    if (o->sample_threads > 1) {
+        /* its own pool: the workers' is busy with the step before; no
+         * spinning between its jobs, which come once a step */
+        mk->pool = gs_pool_create(o->sample_threads);
+        if (!mk->pool)
+            return gs_error_set(err, GS_ERR_NOMEM,
+                                "train: cannot start %d sample threads",
+                                o->sample_threads);
+        gs_pool_set_spin_us(mk->pool, 0);
+    }
     for (int i = 0; i < 2; i++) {
         train_item *it = &t->item[i];
         rc = gs_synth_sample_alloc(&it->sample, mk->gen.size, mk->gen.size, err);
@@ -245,6 +256,7 @@ static void producer_stop(trainer *t);
 static void trainer_free(trainer *t)
 {
     producer_stop(t);
+    gs_pool_destroy(t->mk.pool);
     gs_model_ctx_destroy(t->c);
     free(t->grad);
     gs_nn_adam_destroy(t->adam);
@@ -316,7 +328,7 @@ static int make_item(const item_maker *mk, uint64_t index, train_item *it)
     gs_synth_camera cam;
     int rc = gs_synth_gen_scene(&mk->gen, index, &it->scene, &cam, err);
     if (!rc)
-        rc = gs_synth_gen_sample(&mk->gen, index, NULL, &it->sample, err);
+        rc = gs_synth_gen_sample(&mk->gen, index, mk->pool, &it->sample, err);
     if (!rc) {
         it->ident = identity_index(mk->n_ids, it->sample.labels.identity.seed);
         if (it->ident < 0)
@@ -755,6 +767,10 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         return gs_error_set(err, GS_ERR_ARG,
                             "train: gradient-norm clip %g not in 0..1e6",
                             o->max_grad_norm);
+    if (!(o->sample_threads >= 0 && o->sample_threads <= GS_TRAIN_SAMPLE_THREADS_MAX))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train: sample threads %d not in 0..%d",
+                            o->sample_threads, GS_TRAIN_SAMPLE_THREADS_MAX);
     if (!(o->eye_cover_weight >= 0 && o->eye_cover_weight <= 1000))
         return gs_error_set(err, GS_ERR_ARG,
                             "train: eye-cover weight %g not in 0..1000",

@@ -2,7 +2,9 @@
  * sync_samples 0, the default) against each made at its step (1), on a
  * tiny model from one starting file. Checked: the weights and the optimizer
  * state are the same bytes with and without the producer, on no pool and on
- * a pool of two; a run stopped after 7 steps and resumed to 12 (the
+ * a pool of two, and with each sample rendered on a pool of its own
+ * (sample_threads 3, ahead and at its step); sample_threads out of its
+ * bounds is refused; a run stopped after 7 steps and resumed to 12 (the
  * producer starts mid-stream) gives the bytes and the running mean loss of
  * the run without a stop (FILE.opt keeps the lights seen, for the saved
  * mean light, and the spike guard's running mean; a
@@ -60,6 +62,8 @@ static void run_free(run_out *r)
 
 /* Trains from the starting point to `steps` (stopping at `stop_at` first
  * and resuming from there when stop_at > 0). */
+static int g_sample_threads; /* gs_train_options.sample_threads of run() */
+
 static int run(int sync, gs_pool *pool, long stop_at, long steps, run_out *out)
 {
     memset(out, 0, sizeof *out);
@@ -75,6 +79,7 @@ static int run(int sync, gs_pool *pool, long stop_at, long steps, run_out *out)
     o.out_path = g_path;
     o.checkpoint_every = 5;
     o.sync_samples = sync;
+    o.sample_threads = g_sample_threads;
     gs_train_report rep;
     int rc = GS_OK;
     if (stop_at > 0) {
@@ -179,6 +184,11 @@ int main(void)
     CHECK_EQ_INT(run(0, pool, 7, 12, &resumed), GS_OK);
     CHECK_EQ_INT(run(1, NULL, 0, 1, &one_sync), GS_OK);
     CHECK_EQ_INT(run(0, NULL, 0, 1, &one_ahead), GS_OK);
+    run_out st_ahead, st_sync;
+    g_sample_threads = 3;
+    CHECK_EQ_INT(run(0, pool, 0, 12, &st_ahead), GS_OK);
+    CHECK_EQ_INT(run(1, NULL, 0, 12, &st_sync), GS_OK);
+    g_sample_threads = 0;
 
     size_t moved = 0;
     for (size_t i = 0; sync.params && i < n; i++)
@@ -189,6 +199,19 @@ int main(void)
     same(&sync, &ahead2, n, "made ahead, a pool of two");
     same(&sync, &resumed, n, "stopped at 7 and resumed");
     same(&one_sync, &one_ahead, n, "one step");
+    same(&sync, &st_ahead, n, "samples on a pool of three, made ahead");
+    same(&sync, &st_sync, n, "samples on a pool of three, made at their steps");
+    for (int bad = -1; bad <= GS_TRAIN_SAMPLE_THREADS_MAX + 1; bad += GS_TRAIN_SAMPLE_THREADS_MAX + 2) {
+        gs_train_options o;
+        gs_train_options_default(&o);
+        o.out_path = g_path;
+        o.steps = 1;
+        o.sample_threads = bad;
+        gs_error e = {0, ""};
+        int rc = gs_train(g_start, &o, NULL, NULL, &e);
+        CHECK_MSG(rc == GS_ERR_ARG && strstr(e.msg, "sample threads"),
+                  "sample_threads %d: %d \"%s\"", bad, rc, e.msg);
+    }
     CHECK_MSG(one_sync.params && sync.params &&
                   memcmp(one_sync.params, sync.params, n * sizeof(float)) != 0,
               "one step and twelve gave the same weights");
@@ -200,6 +223,8 @@ int main(void)
     run_free(&resumed);
     run_free(&one_sync);
     run_free(&one_ahead);
+    run_free(&st_ahead);
+    run_free(&st_sync);
     gs_pool_destroy(pool);
     gs_model_destroy(g_start);
     tiny_remove(g_path);

@@ -8,7 +8,8 @@
 # switched by a resume, --eye-weight refuses bad weights, reaches the loss
 # and is 5 by default, --head-range refuses bad ranges, reaches the samples
 # and is 40,25 by default, --sync-samples gives the bytes of the default
-# (samples made ahead), --clip-grad-norm refuses bad bounds and gives the
+# (samples made ahead), --sample-threads 3 too and refuses bad counts,
+# --clip-grad-norm refuses bad bounds and gives the
 # default's bytes when it is never reached, and a cosine run's rate falls
 # to lr / 20 at its last step.
 set -euo pipefail
@@ -180,10 +181,11 @@ grep -aq '"codes.train":{"dtype":"F32","shape":\[4,' i.safetensors || {
 # samples made at their steps (--sync-samples) or ahead (the default): the
 # same bytes; a gradient bound never reached changes nothing, a tight one
 # does; bad bounds are usage errors
-for v in ahead sync clip-huge clip-tight; do
+for v in ahead sync sthreads clip-huge clip-tight; do
   arg=()
   case $v in
     sync) arg=(--sync-samples) ;;
+    sthreads) arg=(--sample-threads 3) ;;
     clip-huge) arg=(--clip-grad-norm 1e6) ;;
     clip-tight) arg=(--clip-grad-norm 1e-4) ;;
   esac
@@ -192,6 +194,8 @@ for v in ahead sync clip-huge clip-tight; do
 done
 cmp s-ahead.safetensors s-sync.safetensors || fail "--sync-samples trained another model"
 cmp s-ahead.safetensors.opt s-sync.safetensors.opt || fail "--sync-samples: another FILE.opt"
+cmp s-ahead.safetensors s-sthreads.safetensors || fail "--sample-threads 3 trained another model"
+refused --sample-threads 0 65 x
 cmp s-ahead.safetensors s-clip-huge.safetensors || fail "a bound never reached changed the run"
 ! cmp -s s-ahead.safetensors s-clip-tight.safetensors || fail "--clip-grad-norm 1e-4 changed nothing"
 refused --clip-grad-norm -1 2e6 x nan

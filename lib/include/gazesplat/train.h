@@ -148,7 +148,15 @@ typedef struct gs_train_options {
      * Adam step; 0 (default, as the shipped models were trained): none.
      * 0..1e6. */
     double max_grad_norm;
+    /* Threads that render each sample's synthetic image (the producer's
+     * own pool, beside the workers' pool given to gs_train): 0 or 1
+     * (default): the producer alone. More keeps a machine of many cores
+     * fed when a step takes less than a sample. The same bytes for any
+     * count (the synthetic renderer's rows do not depend on the pool).
+     * 0..GS_TRAIN_SAMPLE_THREADS_MAX. */
+    int sample_threads;
 } gs_train_options;
+#define GS_TRAIN_SAMPLE_THREADS_MAX 64
 void gs_train_options_default(gs_train_options *o);
 /* The bounds of gs_train_options' head range, degrees. */
 #define GS_TRAIN_HEAD_YAW_MAX 60.0
