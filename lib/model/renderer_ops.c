@@ -19,7 +19,13 @@
 enum {
     BAND_MIN = 2048, /* pixels per band at least (sgemm stays efficient) */
     MAX_BANDS = 64,  /* bands per map at most (bounds the partials) */
-    CHUNK = 65536    /* elements per task of the elementwise passes */
+    CHUNK = 65536,   /* elements per task of the elementwise passes */
+    /* Elementwise loops run in blocks of VEC_BLOCK elements through
+     * restrict pointers, then a scalar remainder: GCC at -O2 vectorises
+     * only a loop that needs no alias check and no remainder of its own,
+     * and these need both. Each element's arithmetic is unchanged, so the
+     * bytes are too. */
+    VEC_BLOCK = 8
 };
 
 /* ---- Partition -------------------------------------------------------- */
@@ -393,8 +399,14 @@ static void lrelu_backward_task(void *ctx, int t, int worker)
     (void)worker;
     const ew_job *j = ctx;
     size_t i0 = (size_t)t * CHUNK, i1 = i0 + CHUNK < j->n ? i0 + CHUNK : j->n;
-    for (size_t i = i0; i < i1; i++)
-        j->d[i] = select_pos(j->y[i], j->d[i], GS_ROP_LRELU_SLOPE * j->d[i]);
+    float *restrict d = j->d;
+    const float *restrict y = j->y;
+    size_t i = i0;
+    for (; i + VEC_BLOCK <= i1; i += VEC_BLOCK)
+        for (size_t k = i; k < i + VEC_BLOCK; k++)
+            d[k] = select_pos(y[k], d[k], GS_ROP_LRELU_SLOPE * d[k]);
+    for (; i < i1; i++)
+        d[i] = select_pos(y[i], d[i], GS_ROP_LRELU_SLOPE * d[i]);
 }
 
 void gs_rop_lrelu_backward(const gs_rop_ctx *x, float *d, const float *y,
@@ -519,14 +531,23 @@ static void apply_task(void *ctx, int c, int worker)
 {
     (void)worker;
     const guide_job *j = ctx;
-    const float *uc = j->u + (size_t)c * j->hw;
-    float *gc = j->g + (size_t)c * j->hw, a = j->a[c];
-    if (j->gd->mult)
-        for (size_t q = 0; q < j->hw; q++)
+    const float *restrict uc = j->u + (size_t)c * j->hw;
+    float *restrict gc = j->g + (size_t)c * j->hw;
+    float a = j->a[c];
+    size_t n = j->hw, q = 0;
+    if (j->gd->mult) {
+        for (; q + VEC_BLOCK <= n; q += VEC_BLOCK)
+            for (size_t k = q; k < q + VEC_BLOCK; k++)
+                gc[k] = uc[k] + uc[k] * a;
+        for (; q < n; q++)
             gc[q] = uc[q] + uc[q] * a;
-    else
-        for (size_t q = 0; q < j->hw; q++)
+    } else {
+        for (; q + VEC_BLOCK <= n; q += VEC_BLOCK)
+            for (size_t k = q; k < q + VEC_BLOCK; k++)
+                gc[k] = uc[k] + a;
+        for (; q < n; q++)
             gc[q] = uc[q] + a;
+    }
 }
 
 void gs_rop_guide_apply(const gs_rop_ctx *x, const gs_rop_guide *gd, float *g,
@@ -542,10 +563,14 @@ static void apply_back_task(void *ctx, int c, int worker)
     (void)worker;
     const guide_job *j = ctx;
     size_t off = (size_t)c * j->hw;
-    const float *gc = j->dg + off, *uc = j->u + off;
-    float *duc = j->du + off;
+    const float *restrict gc = j->dg + off, *uc = j->u + off;
+    float *restrict duc = j->du + off;
     float gain = j->gd->mult ? 1.0f + j->a[c] : 1.0f;
-    for (size_t q = 0; q < j->hw; q++)
+    size_t n = j->hw, q = 0;
+    for (; q + VEC_BLOCK <= n; q += VEC_BLOCK)
+        for (size_t k = q; k < q + VEC_BLOCK; k++)
+            duc[k] = gc[k] * gain;
+    for (; q < n; q++)
         duc[q] = gc[q] * gain;
     j->da[c] = (float)(j->gd->mult ? dot_double(gc, uc, j->hw)
                                    : sum_double(gc, j->hw));

@@ -7,6 +7,7 @@
 #include "gazesplat/pool.h"
 #include "gs_test.h"
 #include "renderer.h"
+#include "renderer_ops.h"
 
 #include <stdint.h>
 #include <string.h>
@@ -488,6 +489,73 @@ static void t_source_locality(int guidance)
     free(o2); free(a);
 }
 
+/* The elementwise passes run in vector blocks and a scalar remainder: at
+ * every length around the block (8) and the task chunk (65,536), on no
+ * pool and on a pool of two, each element equals its one-line definition
+ * to the bit (LeakyReLU backward: the gradient where the output is above
+ * zero, else 0.2 times it, zero outputs of either sign included; guidance
+ * applied: u + u a or u + a; its backward: dg (1 + a) or dg). */
+static void t_elementwise_lengths(void)
+{
+    const size_t lens[] = {1, 2, 7, 8, 9, 15, 16, 17, 31, 65535, 65536, 65537,
+                           2 * 65536 + 13};
+    gs_pool *pool2 = gs_pool_create(2);
+    CHECK(pool2 != NULL);
+    for (int pi = 0; pi < 2; pi++) {
+        gs_rop_ctx x = {.pool = pi ? pool2 : NULL};
+        for (size_t li = 0; li < sizeof lens / sizeof lens[0]; li++) {
+            size_t n = lens[li];
+            float *y = xcalloc(n), *d = xcalloc(n), *d0 = xcalloc(n);
+            fill(y, n, 11u + (uint32_t)n);
+            fill(d0, n, 12u + (uint32_t)n);
+            for (size_t i = 0; i < n; i += 5)
+                y[i] = (i / 5) % 2 ? 0.0f : -0.0f;
+            memcpy(d, d0, n * sizeof *d);
+            gs_rop_lrelu_backward(&x, d, y, n);
+            size_t bad = 0;
+            for (size_t i = 0; i < n; i++) {
+                float want = y[i] > 0.0f ? d0[i] : GS_ROP_LRELU_SLOPE * d0[i];
+                bad += memcmp(&d[i], &want, sizeof want) != 0;
+            }
+            CHECK_MSG(bad == 0, "lrelu backward, n %zu, pool %d: %zu elements differ",
+                      n, pi, bad);
+            /* guidance over two channels of n pixels each */
+            if (n <= 65537) {
+                float a[2] = {0.37f, -1.25f}, da[2];
+                float *u = xcalloc(2 * n), *dg = xcalloc(2 * n), *gg = xcalloc(2 * n),
+                      *duu = xcalloc(2 * n);
+                fill(u, 2 * n, 13u + (uint32_t)n);
+                fill(dg, 2 * n, 14u + (uint32_t)n);
+                for (int mult = 0; mult < 2; mult++) {
+                    gs_rop_guide gd = {.C = 2, .D = 1, .mult = mult, .temp = 1.0f};
+                    gs_rop_guide_apply(&x, &gd, gg, u, a, n);
+                    gs_rop_guide_apply_backward(&x, &gd, duu, da, dg, u, a, n);
+                    size_t bg = 0, bd = 0;
+                    for (int c = 0; c < 2; c++)
+                        for (size_t i = 0; i < n; i++) {
+                            size_t k = (size_t)c * n + i;
+                            float wg = mult ? u[k] + u[k] * a[c] : u[k] + a[c];
+                            float wd = dg[k] * (mult ? 1.0f + a[c] : 1.0f);
+                            bg += memcmp(&gg[k], &wg, sizeof wg) != 0;
+                            bd += memcmp(&duu[k], &wd, sizeof wd) != 0;
+                        }
+                    CHECK_MSG(bg == 0 && bd == 0,
+                              "guide apply (mult %d), n %zu, pool %d: %zu / %zu differ",
+                              mult, n, pi, bg, bd);
+                }
+                free(u);
+                free(dg);
+                free(gg);
+                free(duu);
+            }
+            free(y);
+            free(d);
+            free(d0);
+        }
+    }
+    gs_pool_destroy(pool2);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -505,5 +573,6 @@ int main(void)
     t_source_locality(GS_GUIDE_MULTIPLICATIVE);
     t_default_size();
     t_bad_args();
+    t_elementwise_lengths();
     GS_TEST_END();
 }
