@@ -11,7 +11,7 @@ set -eu
 [ $# -ge 2 ] || { echo "usage: $0 GAZESPLAT_A GAZESPLAT_B [ROUNDS] [STEPS]" >&2; exit 2; }
 A=$1 B=$2 ROUNDS=${3:-2} STEPS=${4:-200}
 ROOT=$(cd "$(dirname "$0")/../.." && pwd)
-M=$ROOT/models/gazegaussian-cpu.safetensors
+M=$ROOT/models/gazegaussian-cpu-48.safetensors
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 now() { date +%s.%N; }
