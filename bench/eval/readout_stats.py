@@ -2,12 +2,18 @@
 """The spread of the synthesis readout's gaze errors in `gazesplat eval
 --readout` runs: per method, for gaze-only pairs (all, and by gaze change
 0-15, 15-30, 30-50 degrees) and for head-change pairs (all, and by the
-head's turn 0-20, 20-40, 40-60, 60 degrees and more), the mean, the
+head's turn 0-20, 20-40, 40-60, 60 degrees and more, and by whether the
+target's head pose lies inside the training head range), the mean, the
 median and the share of pairs within 2 and 5 degrees of the target's true
 gaze, with the readout's floor (its error on the true targets). Means hide
 a few gross misses; the median and the shares do not.
 
-    bench/eval/readout_stats.py DIR/pairs.csv [MORE.csv ...]
+    bench/eval/readout_stats.py [--head-range Y,P] DIR/pairs.csv [MORE.csv ...]
+
+--head-range names the training head range (yaw within +-Y, pitch within
++-P degrees; default 40,25, `gazesplat train`'s own): head-change pairs
+whose target pose lies inside it and outside it get a row each. Files
+written before the target pose columns existed get no such rows.
 
 Prints a Markdown table per file. Standard library only."""
 import csv
@@ -37,10 +43,34 @@ def group(rows, head_change, col, rng):
             (rng is None or rng[0] <= float(r[col]) < rng[1])]
 
 
+def inside(r, head_range):
+    """1 when the target's head pose lies within the training range."""
+    return int(abs(float(r["target_head_yaw_deg"])) <= head_range[0] and
+               abs(float(r["target_head_pitch_deg"])) <= head_range[1])
+
+
+def parse_range(text):
+    try:
+        y, p = (float(v) for v in text.split(","))
+    except ValueError:
+        sys.exit(f"--head-range wants Y,P in degrees, got {text!r}")
+    if not (0 < y <= 90 and 0 < p <= 90):
+        sys.exit(f"--head-range {text}: each bound must be in (0, 90]")
+    return y, p
+
+
 def main():
-    if len(sys.argv) < 2:
+    args = sys.argv[1:]
+    head_range = (40.0, 25.0)
+    if args[:1] == ["--head-range"]:
+        if len(args) < 2:
+            sys.exit(__doc__)
+        head_range = parse_range(args[1])
+        args = args[2:]
+    if not args:
         sys.exit(__doc__)
-    for path in sys.argv[1:]:
+    hr = f"{head_range[0]:g},{head_range[1]:g}"
+    for path in args:
         rows = rows_of(path)
         if not rows:
             sys.exit(f"{path}: no readout columns (run eval with --readout)")
@@ -51,7 +81,15 @@ def main():
         print("|---|---|---:|---:|---:|---:|---:|")
         for m in dict.fromkeys(r["method"] for r in rows):
             mr = [r for r in rows if r["method"] == m]
-            for name, hc, col, rng in BINS:
+            bins = list(BINS)
+            if "target_head_yaw_deg" in mr[0]:
+                bins += [(f"head change, target inside {hr}", "1", "inside",
+                          (1, 2)),
+                         (f"head change, target outside {hr}", "1", "inside",
+                          (0, 1))]
+                for r in mr:
+                    r["inside"] = inside(r, head_range)
+            for name, hc, col, rng in bins:
                 v = [float(r["read_gaze_err_deg"])
                      for r in group(mr, hc, col, rng)]
                 if not v:
