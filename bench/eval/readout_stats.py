@@ -15,7 +15,14 @@ a few gross misses; the median and the shares do not.
 whose target pose lies inside it and outside it get a row each. Files
 written before the target pose columns existed get no such rows.
 
-Prints a Markdown table per file. Standard library only."""
+Files with the target's true gaze get a second table: by the target's
+pitch (the normalized camera's; below -15, -15 to 15, above 15 degrees),
+the mean signed pitch error (read minus true: negative reads lower) and
+the mean gaze error, for gaze-only and head-change pairs. A model whose
+lids do not follow the gaze reads strong upward and downward looks as
+nearer the middle (docs/model.md, "Lids that follow the gaze").
+
+Prints Markdown tables per file. Standard library only."""
 import csv
 import statistics
 import sys
@@ -41,6 +48,31 @@ def rows_of(path):
 def group(rows, head_change, col, rng):
     return [r for r in rows if r["head_change"] == head_change and
             (rng is None or rng[0] <= float(r[col]) < rng[1])]
+
+
+PITCH_BINS = (("< -15°", -90, -15),
+              ("-15-15°", -15, 15),
+              ("> 15°", 15, 90))
+
+
+def pitch_table(rows):
+    """Signed pitch error by the target's pitch, per method and pair kind."""
+    print("\n| method | pairs | target pitch | n | read − true pitch° | "
+          "gaze error° |")
+    print("|---|---|---|---:|---:|---:|")
+    for m in dict.fromkeys(r["method"] for r in rows):
+        for kind, hc in (("gaze only", "0"), ("head change", "1")):
+            for name, lo, hi in PITCH_BINS:
+                g = [r for r in rows if r["method"] == m and
+                     r["head_change"] == hc and
+                     lo <= float(r["target_pitch_deg"]) < hi]
+                if not g:
+                    continue
+                d = [float(r["read_pitch_deg"]) - float(r["target_pitch_deg"])
+                     for r in g]
+                e = [float(r["read_gaze_err_deg"]) for r in g]
+                print(f"| {m} | {kind} | {name} | {len(g)} | "
+                      f"{statistics.mean(d):+.2f} | {statistics.mean(e):.2f} |")
 
 
 def inside(r, head_range):
@@ -98,6 +130,8 @@ def main():
                       f"{statistics.mean(v):.2f} | {statistics.median(v):.2f} | "
                       f"{100 * sum(x <= 2 for x in v) / len(v):.0f} % | "
                       f"{100 * sum(x <= 5 for x in v) / len(v):.0f} % |")
+        if "target_pitch_deg" in rows[0] and "read_pitch_deg" in rows[0]:
+            pitch_table(rows)
 
 
 if __name__ == "__main__":
