@@ -28,7 +28,7 @@ const cli_command cli_eval_command = {
     "measure redirection (model, warp baseline, identity) on held-out heads",
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
-    "                      [--fit-lr CODE[,COLOUR]]\n"
+    "                      [--fit-lr CODE[,COLOUR]] [--true-code LIST]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -66,6 +66,10 @@ const cli_command cli_eval_command = {
     "  --fit-lr CODE[,COLOUR]  the fit's Adam rates for the latent code and\n"
     "                    the colour gain and bias, each in (0, 10]\n"
     "                    (default 0.12,0.02; COLOUR defaults to CODE / 6)\n"
+    "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
+    "                    the input's true expression and/or lights\n"
+    "                    (comma-separated: expr, light) and keeps them; how\n"
+    "                    much of the error is the fit getting them wrong\n"
     "  --threads N       worker threads (default 2); results are the same\n"
     "                    for a given count, timings aside\n"
     "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
@@ -128,8 +132,28 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_TRUE_CODE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
+
+/* --true-code LIST: comma-separated expr, light (each at most once). */
+static int parse_true_code(const char *s, unsigned *out)
+{
+    unsigned bits = 0;
+    while (*s) {
+        size_t n = strcspn(s, ",");
+        unsigned b = n == 4 && !strncmp(s, "expr", 4)    ? GS_SCENE_CODE_EXPR
+                     : n == 5 && !strncmp(s, "light", 5) ? GS_SCENE_CODE_LIGHT
+                                                         : 0;
+        if (!b || (bits & b))
+            return -1;
+        bits |= b;
+        s += n;
+        if (*s == ',' && !*++s)
+            return -1;
+    }
+    *out = bits;
+    return bits ? 0 : -1;
+}
 
 static int make_pairs(const cli_opt *o)
 {
@@ -200,6 +224,7 @@ typedef struct evaluator {
     gs_pool *pool;
     int S, iters;
     double lr_code, lr_colour;  /* --fit-lr */
+    unsigned true_code;         /* --true-code: GS_SCENE_CODE_* bits */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -381,7 +406,8 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
  * instead of fitting again (same model and options assumed: the file does
  * not record them). */
 static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
-                      gs_subject *sub, double *secs, gs_error *err)
+                      const gs_synth_scene *iscene, gs_subject *sub,
+                      double *secs, gs_error *err)
 {
     char path[4200];
     snprintf(path, sizeof path, "%s/fits/%05d.bin", ev->dir, input);
@@ -390,8 +416,9 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
         ev->fits_reused++;
         return GS_OK;
     }
-    int rc = gs_eval_fit_sample(ev->c, ev->pool, in, ev->iters, ev->lr_code,
-                                ev->lr_colour, sub, secs, err);
+    int rc = gs_eval_fit_sample_known(ev->m, ev->c, ev->pool, in, iscene,
+                                      ev->true_code, ev->iters, ev->lr_code,
+                                      ev->lr_colour, sub, secs, err);
     if (rc)
         return rc;
     if (gs_eval_fit_cache_write(path, sub, *secs, NULL))
@@ -484,7 +511,7 @@ static int eval_input(evaluator *ev, const gs_eval_pairs *ps, int first,
     for (int k = 0; k < ev->nmethods; k++)
         fits |= eval_method_fits(ev->methods[k]);
     if (fits) {
-        rc = cached_fit(ev, ps->p[first].input, &in, &sub, &fit_s,
+        rc = cached_fit(ev, ps->p[first].input, &in, &iscene, &sub, &fit_s,
                         &err);
         if (rc) {
             fit_status = rc == GS_ERR_NONFINITE ? EVAL_ROW_DIVERGED
@@ -829,7 +856,7 @@ static int run_eval(int argc, char **argv)
         {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
         {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
-        {"--make-pairs", 1, NULL},
+        {"--true-code", 1, NULL}, {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -919,6 +946,9 @@ static int run_eval(int argc, char **argv)
                                           &ev.lr_colour))
         return cli_usage_error(cmd, "--fit-lr: want CODE[,COLOUR], each in "
                                "(0, 10]; got '%s'", o[O_FIT_LR].value);
+    if (o[O_TRUE_CODE].value && parse_true_code(o[O_TRUE_CODE].value, &ev.true_code))
+        return cli_usage_error(cmd, "--true-code: want a list of expr, light; "
+                               "got '%s'", o[O_TRUE_CODE].value);
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
@@ -943,6 +973,7 @@ static int run_eval(int argc, char **argv)
     info.iters = (int)iters;
     info.fit_lr_code = ev.lr_code;
     info.fit_lr_colour = ev.lr_colour;
+    info.true_code = ev.true_code;
     info.feature_scale = 1.0;
     info.supersample = 1;
     info.ft_iters = ev.fo.iters;

@@ -4,6 +4,7 @@
 #include <string.h>
 
 #include "eval_report.h"
+#include "gazesplat/train.h"
 
 const char *const eval_method_names[EVAL_METHODS] = {
     "model", "warp", "identity", "transfer", "oracle"};
@@ -307,6 +308,16 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
               "learned code and the target's true expression and lights, "
               "at the target's view; no fit, no fine-tuning, no colour "
               "transform (what training drew)\n", f);
+    if (info->true_code)
+        fprintf(f, "- **a diagnostic, not a served figure** (--true-code): "
+                   "each fit was given the input's true %s and kept %s\n",
+                info->true_code == GS_SCENE_CODE_EXPR    ? "expression"
+                : info->true_code == GS_SCENE_CODE_LIGHT ? "lights"
+                                                         : "expression and lights",
+                info->true_code == GS_SCENE_CODE_EXPR ||
+                        info->true_code == GS_SCENE_CODE_LIGHT
+                    ? "it"
+                    : "them");
     if (info->fits_reused)
         fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
                    "their fit times are that run's\n", info->fits_reused);

@@ -459,7 +459,8 @@ static void fit_init(const gs_model_ctx *c, const gs_fit_options *o,
     if (!o->known_head)
         s->x[V_TRANS + 2] = c->m->cfg.d_n_mm;
     for (int k = 0; k < c->D; k++)
-        s->x[V_CODE + k] = c->m->p.code_mean[k];
+        s->x[V_CODE + k] = o->code_start ? o->code_start[k]
+                                         : c->m->p.code_mean[k];
     for (int k = 0; k < 2; k++)
         s->lr[V_GAZE + k] = o->known_gaze ? 0.0 : 0.01;
     for (int k = 0; k < 3; k++) {
@@ -469,7 +470,9 @@ static void fit_init(const gs_model_ctx *c, const gs_fit_options *o,
         s->lr[V_BIAS + k] = s->lr[V_GAIN + k];
     }
     for (int k = 0; k < c->D; k++)
-        s->lr[V_CODE + k] = o->lr_code > 0 ? o->lr_code : GS_FIT_LR_CODE_DEFAULT;
+        s->lr[V_CODE + k] = o->code_fixed && o->code_fixed[k] ? 0.0
+                            : o->lr_code > 0 ? o->lr_code
+                                             : GS_FIT_LR_CODE_DEFAULT;
 }
 
 /* PSNR over the weighted pixels of the composite in b->pred. */
@@ -511,6 +514,10 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = gs_error_set(err, GS_ERR_ARG,
                           "fit: rates %g (code) and %g (colour): want [0, 10], "
                           "0 for the defaults", o.lr_code, o.lr_colour);
+    for (int k = 0; !rc && o.code_start && k < c->D; k++)
+        if (!isfinite(o.code_start[k]))
+            rc = gs_error_set(err, GS_ERR_ARG,
+                              "fit: code_start[%d] is not finite", k);
     if (rc)
         return rc;
     int iters = o.max_iters > 0 ? o.max_iters : 200;

@@ -319,6 +319,32 @@ int gs_model_training_subject(const gs_model *m, int k,
     return GS_OK;
 }
 
+int gs_model_scene_code(const gs_model *m, const gs_synth_scene *scene,
+                        unsigned parts, float *code, uint8_t *fixed,
+                        gs_error *err)
+{
+    if (!m || !scene || !code || !fixed)
+        return gs_error_set(err, GS_ERR_ARG, "scene code: NULL argument");
+    const unsigned all = GS_SCENE_CODE_EXPR | GS_SCENE_CODE_LIGHT;
+    if (parts == 0 || (parts & ~all))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "scene code: parts 0x%x (want expression 0x1, "
+                            "lights 0x2 or both)", parts);
+    const gs_model_config *mc = &m->cfg;
+    int D = gs_model_code_dim(mc);
+    memcpy(code, m->p.code_mean, (size_t)D * sizeof(float));
+    memset(fixed, 0, (size_t)D);
+    if (parts & GS_SCENE_CODE_EXPR) {
+        gs_synth_expression_to_array(&scene->expr, code + mc->id_dim);
+        memset(fixed + mc->id_dim, 1, GS_MODEL_EXPR_DIM);
+    }
+    if (parts & GS_SCENE_CODE_LIGHT) {
+        gs_model_light_code(scene, code + mc->id_dim + GS_MODEL_EXPR_DIM);
+        memset(fixed + mc->id_dim + GS_MODEL_EXPR_DIM, 1, GS_MODEL_LIGHT_DIM);
+    }
+    return GS_OK;
+}
+
 /* Makes sample `index` and its targets into it (any thread: reads only mk). */
 static int make_item(const item_maker *mk, uint64_t index, train_item *it)
 {

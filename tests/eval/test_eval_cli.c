@@ -172,6 +172,13 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK_EQ_INT(run(ids0), 2);
     const char *positional[] = {"eval", "extra", NULL};
     CHECK_EQ_INT(run(positional), 2);
+    /* --true-code: a list of expr and light, each once */
+    const char *bad_tc[] = {"nope", "expr,expr", "expr,", ",light", "", "Expr"};
+    for (size_t i = 0; i < sizeof bad_tc / sizeof bad_tc[0]; i++) {
+        const char *tc[] = {"eval", "--model", model, "--pairs", pairs, "--out",
+                            dir, "--true-code", bad_tc[i], NULL};
+        CHECK_MSG(run(tc) == 2, "--true-code '%s' accepted", bad_tc[i]);
+    }
     /* --readout-shift: only with --readout, and within [0, 8] px */
     const char *shift_alone[] = {"eval", "--model", model, "--pairs", pairs,
                                  "--out", dir, "--readout-shift", "2", NULL};
@@ -487,6 +494,29 @@ int main(int argc, char **argv)
     free(sum);
     CHECK_EQ_INT(run(ev7), 0);
     CHECK(summary_has(md, "eye weight 0, outline 2 px, mirror on)", NULL));
+    /* --true-code: the fits are given the inputs' true expression and
+     * lights, so they (and the outputs) differ from run 1's; the summary
+     * says it is a diagnostic. */
+    {
+        char out3[256], csv3[300], md3[300];
+        snprintf(out3, sizeof out3, "%s/run3", dir);
+        snprintf(csv3, sizeof csv3, "%s/pairs.csv", out3);
+        snprintf(md3, sizeof md3, "%s/summary.md", out3);
+        const char *evtc[] = {"eval", "--model", model, "--pairs", pairs,
+                              "--out", out3, "--method", "model,warp,identity",
+                              "--iters", "4", "--threads", "2", "--estimator",
+                              est, "--true-code", "light,expr", NULL};
+        CHECK_EQ_INT(run(evtc), 0);
+        char *t = check_csv(csv3);
+        CHECK_MSG(t && a && strcmp(t, a) != 0, "--true-code changed nothing");
+        free(t);
+        CHECK(summary_has(md3, "**a diagnostic, not a served figure** (--true-code)",
+                          "true expression and lights and kept them",
+                          "non-finite outputs 0", NULL));
+        evtc[16] = "expr";
+        CHECK_EQ_INT(run(evtc), 0);
+        CHECK(summary_has(md3, "true expression and kept it", NULL));
+    }
     /* --readout: every output's gaze and the floor read by synthesis,
      * the same for 1 and 2 threads, in the summary's tables. */
     expect_read = 1;

@@ -7,6 +7,10 @@
  * scene render differently; one of them twice, the same bytes). Refused:
  * another identity's labels, k out of range, NULL arguments, a model
  * without training codes.
+ * gs_model_scene_code: the model's mean code with a scene's expression
+ * and/or lights written in (the same slots as the training subject's),
+ * flagged fixed; a fit from it keeps those to the bit and moves the rest;
+ * bad parts, NULLs and a non-finite start are refused.
  * gs_model_add_identities: a copy with more identities keeps every other
  * tensor and the learned codes to the bit, the new codes at their mean;
  * fewer or as many identities, or too many, are refused. */
@@ -92,6 +96,85 @@ int main(void)
         CHECK(gs_model_training_subject(m, k, NULL, l, &t, &err) == GS_ERR_ARG);
         CHECK(gs_model_training_subject(m, k, &sc[k], NULL, &t, &err) == GS_ERR_ARG);
         CHECK(gs_model_training_subject(m, k, &sc[k], l, NULL, &err) == GS_ERR_ARG);
+    }
+
+    /* gs_model_scene_code: the mean code with the scene's expression and
+     * lights written in as a training step writes them, flagged fixed. */
+    {
+        const gs_synth_scene *scn = &sc[0];
+        gs_subject ts;
+        CHECK(gs_model_training_subject(m, 0, scn, &smp[0].labels, &ts, &err) == GS_OK);
+        const unsigned parts[3] = {GS_SCENE_CODE_EXPR, GS_SCENE_CODE_LIGHT,
+                                   GS_SCENE_CODE_EXPR | GS_SCENE_CODE_LIGHT};
+        for (int p = 0; p < 3; p++) {
+            float code[GS_MODEL_MAX_CODE];
+            uint8_t fixed[GS_MODEL_MAX_CODE];
+            CHECK_MSG(gs_model_scene_code(m, scn, parts[p], code, fixed, &err) == GS_OK,
+                      "%s", err.msg);
+            for (int j = 0; j < D; j++) {
+                int ex = j >= id && j < id + GS_MODEL_EXPR_DIM;
+                int li = j >= id + GS_MODEL_EXPR_DIM;
+                int want = (ex && (parts[p] & GS_SCENE_CODE_EXPR)) ||
+                           (li && (parts[p] & GS_SCENE_CODE_LIGHT));
+                CHECK_MSG(fixed[j] == want, "parts %u slot %d fixed %d", parts[p], j,
+                          fixed[j]);
+                float v = want ? ts.code[j] : m->p.code_mean[j];
+                CHECK_MSG(code[j] == v, "parts %u slot %d: %g, want %g", parts[p], j,
+                          code[j], v);
+            }
+        }
+        float code[GS_MODEL_MAX_CODE];
+        uint8_t fixed[GS_MODEL_MAX_CODE];
+        CHECK(gs_model_scene_code(m, scn, 0, code, fixed, &err) == GS_ERR_ARG);
+        CHECK(gs_model_scene_code(m, scn, 4, code, fixed, &err) == GS_ERR_ARG);
+        CHECK(strstr(err.msg, "parts") != NULL);
+        CHECK(gs_model_scene_code(NULL, scn, 1, code, fixed, &err) == GS_ERR_ARG);
+        CHECK(gs_model_scene_code(m, NULL, 1, code, fixed, &err) == GS_ERR_ARG);
+        CHECK(gs_model_scene_code(m, scn, 1, NULL, fixed, &err) == GS_ERR_ARG);
+        CHECK(gs_model_scene_code(m, scn, 1, code, NULL, &err) == GS_ERR_ARG);
+
+        /* A fit from that code keeps the fixed slots to the bit and moves
+         * the others; a fit without keeps nothing at the truth. */
+        CHECK(gs_model_scene_code(m, scn, GS_SCENE_CODE_EXPR | GS_SCENE_CODE_LIGHT,
+                                  code, fixed, &err) == GS_OK);
+        gs_model_ctx *fc = gs_model_ctx_create(m);
+        CHECK(fc != NULL);
+        gs_fit_options fo;
+        gs_fit_options_default(&fo);
+        fo.max_iters = 6;
+        fo.known_head = 1;
+        memcpy(fo.head_R, smp[0].labels.head_R, sizeof fo.head_R);
+        memcpy(fo.head_t, smp[0].labels.head_t, sizeof fo.head_t);
+        fo.known_gaze = 1;
+        fo.gaze_pitch = smp[0].labels.gaze_head_pitch;
+        fo.gaze_yaw = smp[0].labels.gaze_head_yaw;
+        gs_subject plain, known;
+        CHECK_MSG(gs_model_fit(fc, NULL, smp[0].rgb, smp[0].stride, &fo, &plain, NULL,
+                               &err) == GS_OK, "%s", err.msg);
+        fo.code_start = code;
+        fo.code_fixed = fixed;
+        CHECK_MSG(gs_model_fit(fc, NULL, smp[0].rgb, smp[0].stride, &fo, &known, NULL,
+                               &err) == GS_OK, "%s", err.msg);
+        int kept = 1, moved = 0, plain_at_truth = 1;
+        for (int j = 0; j < D; j++) {
+            if (fixed[j]) {
+                kept &= known.code[j] == code[j];
+                plain_at_truth &= plain.code[j] == code[j];
+            } else {
+                moved |= known.code[j] != code[j];
+            }
+        }
+        CHECK_MSG(kept, "a fixed slot moved");
+        CHECK_MSG(moved, "no free slot moved");
+        CHECK_MSG(!plain_at_truth, "the plain fit landed on the truth");
+        float nan_code[GS_MODEL_MAX_CODE];
+        memcpy(nan_code, code, sizeof nan_code);
+        nan_code[id] = NAN;
+        fo.code_start = nan_code;
+        CHECK(gs_model_fit(fc, NULL, smp[0].rgb, smp[0].stride, &fo, &known, NULL,
+                           &err) == GS_ERR_ARG);
+        CHECK(strstr(err.msg, "code_start") != NULL);
+        gs_model_ctx_destroy(fc);
     }
 
     /* The code reaches the render: identity 1's code in identity 0's scene

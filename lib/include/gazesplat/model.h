@@ -250,6 +250,12 @@ typedef struct gs_fit_options {
      * 0: GS_FIT_LR_CODE_DEFAULT, GS_FIT_LR_COLOUR_DEFAULT. Each in
      * [0, 10]. (docs/model.md, "Fitting") */
     double lr_code, lr_colour;
+    /* Parts of the code known beforehand: NULL, or code_dim values each.
+     * The fit starts from code_start (NULL: the model's mean code) and
+     * keeps every slot whose code_fixed is nonzero where it started
+     * (gs_model_scene_code makes both from a synthetic scene). */
+    const float *code_start;
+    const uint8_t *code_fixed;
 } gs_fit_options;
 #define GS_FIT_LR_CODE_DEFAULT 0.12
 #define GS_FIT_LR_COLOUR_DEFAULT 0.02
