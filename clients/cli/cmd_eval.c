@@ -28,7 +28,8 @@ const cli_command cli_eval_command = {
     "measure redirection (model, warp baseline, identity) on held-out heads",
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
-    "                      [--fit-lr CODE[,COLOUR]] [--true-code LIST]\n"
+    "                      [--fit-lr CODE[,COLOUR]] [--bound-expression]\n"
+    "                      [--true-code LIST]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -66,6 +67,8 @@ const cli_command cli_eval_command = {
     "  --fit-lr CODE[,COLOUR]  the fit's Adam rates for the latent code and\n"
     "                    the colour gain and bias, each in (0, 10]\n"
     "                    (default 0.12,0.02; COLOUR defaults to CODE / 6)\n"
+    "  --bound-expression  the fit keeps the code's expression where\n"
+    "                    training put it (clamped each step); default free\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression and/or lights\n"
     "                    (comma-separated: expr, light) and keeps them; how\n"
@@ -132,7 +135,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_TRUE_CODE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_TRUE_CODE, O_BOUND_EXPR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light (each at most once). */
@@ -225,6 +228,7 @@ typedef struct evaluator {
     int S, iters;
     double lr_code, lr_colour;  /* --fit-lr */
     unsigned true_code;         /* --true-code: GS_SCENE_CODE_* bits */
+    int bound_expression;       /* --bound-expression */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -416,9 +420,23 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
         ev->fits_reused++;
         return GS_OK;
     }
-    int rc = gs_eval_fit_sample_known(ev->m, ev->c, ev->pool, in, iscene,
-                                      ev->true_code, ev->iters, ev->lr_code,
-                                      ev->lr_colour, sub, secs, err);
+    gs_fit_options o;
+    gs_fit_options_default(&o);
+    o.max_iters = ev->iters;
+    o.lr_code = ev->lr_code;
+    o.lr_colour = ev->lr_colour;
+    o.bound_expression = ev->bound_expression;
+    float code[GS_MODEL_MAX_CODE];
+    uint8_t fixed[GS_MODEL_MAX_CODE];
+    if (ev->true_code) {
+        int rc = gs_model_scene_code(ev->m, iscene, ev->true_code, code,
+                                     fixed, err);
+        if (rc)
+            return rc;
+        o.code_start = code;
+        o.code_fixed = fixed;
+    }
+    int rc = gs_eval_fit_sample_with(ev->c, ev->pool, in, &o, sub, secs, err);
     if (rc)
         return rc;
     if (gs_eval_fit_cache_write(path, sub, *secs, NULL))
@@ -856,7 +874,8 @@ static int run_eval(int argc, char **argv)
         {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
         {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
-        {"--true-code", 1, NULL}, {"--make-pairs", 1, NULL},
+        {"--true-code", 1, NULL}, {"--bound-expression", 0, NULL},
+        {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
@@ -949,6 +968,7 @@ static int run_eval(int argc, char **argv)
     if (o[O_TRUE_CODE].value && parse_true_code(o[O_TRUE_CODE].value, &ev.true_code))
         return cli_usage_error(cmd, "--true-code: want a list of expr, light; "
                                "got '%s'", o[O_TRUE_CODE].value);
+    ev.bound_expression = o[O_BOUND_EXPR].value != NULL;
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
@@ -974,6 +994,7 @@ static int run_eval(int argc, char **argv)
     info.fit_lr_code = ev.lr_code;
     info.fit_lr_colour = ev.lr_colour;
     info.true_code = ev.true_code;
+    info.bound_expression = ev.bound_expression;
     info.feature_scale = 1.0;
     info.supersample = 1;
     info.ft_iters = ev.fo.iters;

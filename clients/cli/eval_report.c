@@ -240,9 +240,12 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
 {
     fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
-               "iterations cap %d, rates %g (code) and %g (colour); %d "
+               "iterations cap %d, rates %g (code) and %g (colour)%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,
             info->inputs, info->iters, info->fit_lr_code, info->fit_lr_colour,
+            info->bound_expression ? ", expression kept in its training "
+                                     "range (--bound-expression)"
+                                   : "",
             info->threads);
     if (ps->n > 0 && gs_synth_seed_split(ps->p[0].identity_seed) == GS_SYNTH_TRAIN)
         fprintf(f, "- **training identities** (`--split train`): faces a model "

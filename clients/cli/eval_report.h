@@ -78,6 +78,7 @@ typedef struct eval_run_info {
     double transfer_eye_warp_deg; /* render option, transfer method */
     int light_on_head;    /* --light-on-head */
     unsigned true_code;   /* --true-code: GS_SCENE_CODE_* bits (0: none) */
+    int bound_expression; /* --bound-expression */
     /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
     int ft_iters;
     unsigned ft_parts;

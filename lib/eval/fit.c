@@ -7,7 +7,6 @@
 #include <time.h>
 
 #include "gazesplat/eval.h"
-#include "gazesplat/train.h"
 
 static double now_s(void)
 {
@@ -21,31 +20,22 @@ int gs_eval_fit_sample(gs_model_ctx *c, gs_pool *pool,
                        double lr_colour, gs_subject *sub, double *secs,
                        gs_error *err)
 {
-    return gs_eval_fit_sample_known(NULL, c, pool, in, NULL, 0, iters,
-                                    lr_code, lr_colour, sub, secs, err);
-}
-
-int gs_eval_fit_sample_known(const gs_model *m, gs_model_ctx *c,
-                             gs_pool *pool, const gs_synth_sample *in,
-                             const gs_synth_scene *scene, unsigned parts,
-                             int iters, double lr_code, double lr_colour,
-                             gs_subject *sub, double *secs, gs_error *err)
-{
-    if (!c || !in || !sub || (parts && (!m || !scene)))
-        return gs_error_set(err, GS_ERR_ARG, "eval fit: NULL argument");
-    float code[GS_MODEL_MAX_CODE];
-    uint8_t fixed[GS_MODEL_MAX_CODE];
-    if (parts) {
-        int rc = gs_model_scene_code(m, scene, parts,
-                                     code, fixed, err);
-        if (rc)
-            return rc;
-    }
     gs_fit_options o;
     gs_fit_options_default(&o);
     o.max_iters = iters > 0 ? iters : 200;
     o.lr_code = lr_code;
     o.lr_colour = lr_colour;
+    return gs_eval_fit_sample_with(c, pool, in, &o, sub, secs, err);
+}
+
+int gs_eval_fit_sample_with(gs_model_ctx *c, gs_pool *pool,
+                            const gs_synth_sample *in,
+                            const gs_fit_options *base, gs_subject *sub,
+                            double *secs, gs_error *err)
+{
+    if (!c || !in || !base || !sub)
+        return gs_error_set(err, GS_ERR_ARG, "eval fit: NULL argument");
+    gs_fit_options o = *base;
     /* The dataset labels are given, as GazeNeRF's protocol uses
      * ETH-XGaze's: the fit only has to find the person. */
     o.known_gaze = 1;
@@ -54,10 +44,6 @@ int gs_eval_fit_sample_known(const gs_model *m, gs_model_ctx *c,
     o.known_head = 1;
     memcpy(o.head_R, in->labels.head_R, sizeof o.head_R);
     memcpy(o.head_t, in->labels.head_t, sizeof o.head_t);
-    if (parts) {
-        o.code_start = code;
-        o.code_fixed = fixed;
-    }
     gs_fit_report rep;
     double t0 = now_s();
     int rc = gs_model_fit(c, pool, in->rgb, in->stride, &o, sub, &rep, err);

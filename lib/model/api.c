@@ -594,6 +594,11 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         if (rc)
             break;
         adam_update(s, it + 1);
+        /* bound_expression: the expression stays where training put it. */
+        for (int k = 0; o.bound_expression && k < GS_MODEL_EXPR_DIM; k++) {
+            double *v = &s->x[V_CODE + c->m->cfg.id_dim + k];
+            *v = fmax(gs_model_expr_lo[k], fmin(gs_model_expr_hi[k], *v));
+        }
         /* The gaze stays inside the model's documented range. */
         s->x[V_GAZE] = fmax(-GS_MODEL_MAX_GAZE_PITCH,
                             fmin(GS_MODEL_MAX_GAZE_PITCH, s->x[V_GAZE]));

@@ -48,6 +48,12 @@ typedef struct gs_model_config {
 #define GS_MODEL_PI 3.14159265358979323846
 #define GS_MODEL_EXPR_DIM 6
 #define GS_MODEL_LIGHT_DIM 12
+/* Where training put each expression slot (the synthetic sampler's
+ * support: mouth_open, smile, squint and blink from 0, brow_raise and
+ * pupil from -1; squint at most 0.7): a fit keeps a code's expression in
+ * it when gs_fit_options.bound_expression is set. */
+static const float gs_model_expr_lo[GS_MODEL_EXPR_DIM] = {0, 0, -1, 0, 0, -1};
+static const float gs_model_expr_hi[GS_MODEL_EXPR_DIM] = {1, 1, 1, 0.7f, 1, 1};
 static inline int gs_model_code_dim(const gs_model_config *c)
 {
     return c->id_dim + GS_MODEL_EXPR_DIM + GS_MODEL_LIGHT_DIM;

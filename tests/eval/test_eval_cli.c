@@ -515,7 +515,18 @@ int main(int argc, char **argv)
                           "non-finite outputs 0", NULL));
         evtc[16] = "expr";
         CHECK_EQ_INT(run(evtc), 0);
-        CHECK(summary_has(md3, "true expression and kept it", NULL));
+        CHECK(summary_has(md3, "true expression and kept it",
+                          "!--bound-expression", NULL));
+        /* --bound-expression: the fit keeps the expression in its
+         * training range, and the summary says so */
+        const char *evbe[] = {"eval", "--model", model, "--pairs", pairs,
+                              "--out", out3, "--method", "model",
+                              "--iters", "4", "--threads", "2",
+                              "--bound-expression", NULL};
+        CHECK_EQ_INT(run(evbe), 0);
+        CHECK(summary_has(md3, "expression kept in its training range "
+                               "(--bound-expression)",
+                          "!--true-code", "non-finite outputs 0", NULL));
     }
     /* --readout: every output's gaze and the floor read by synthesis,
      * the same for 1 and 2 threads, in the summary's tables. */

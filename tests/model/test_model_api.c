@@ -80,6 +80,30 @@ int main(void)
         CHECK(strstr(err.msg, "rates") != NULL);
     }
 
+    /* The expression: at a rate that moves the code far each step, the
+     * default (free) fit leaves some expression slot outside where
+     * training put it; bound_expression keeps every slot inside. */
+    {
+        gs_fit_options fx = fo;
+        fx.lr_code = 1.0;
+        gs_subject sb, sf;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sf, NULL,
+                           &err) == GS_OK);
+        fx.bound_expression = 1;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sb, NULL,
+                           &err) == GS_OK);
+        int id = m->cfg.id_dim, in_b = 1, in_f = 1;
+        for (int k = 0; k < GS_MODEL_EXPR_DIM; k++) {
+            float vb = sb.code[id + k], vf = sf.code[id + k];
+            printf("expression slot %d: bounded %+.3f, free %+.3f (range %g..%g)\n",
+                   k, vb, vf, gs_model_expr_lo[k], gs_model_expr_hi[k]);
+            in_b &= vb >= gs_model_expr_lo[k] && vb <= gs_model_expr_hi[k];
+            in_f &= vf >= gs_model_expr_lo[k] && vf <= gs_model_expr_hi[k];
+        }
+        CHECK_MSG(in_b, "the bounded fit left the expression's range");
+        CHECK_MSG(!in_f, "the free fit stayed inside: the check shows nothing");
+    }
+
     /* Subjects survive encode/decode; bad bytes are refused. */
     uint8_t buf[GS_SUBJECT_ENCODED_MAX];
     size_t n = gs_subject_encode(&sub, buf, sizeof buf);

@@ -224,15 +224,13 @@ int gs_eval_fit_sample(gs_model_ctx *c, gs_pool *pool,
                        const gs_synth_sample *in, int iters, double lr_code,
                        double lr_colour, gs_subject *sub, double *secs,
                        gs_error *err);
-/* The same fit with parts of the code given (gs_model_scene_code's
- * GS_SCENE_CODE_* bits of `scene`, the input's own scene) and kept: a
- * diagnostic (`gazesplat eval --true-code`); m is c's model. parts 0:
- * gs_eval_fit_sample (m and scene may be NULL). */
-int gs_eval_fit_sample_known(const gs_model *m, gs_model_ctx *c,
-                             gs_pool *pool, const gs_synth_sample *in,
-                             const gs_synth_scene *scene, unsigned parts,
-                             int iters, double lr_code, double lr_colour,
-                             gs_subject *sub, double *secs, gs_error *err);
+/* The same fit with the other options of base (its known gaze and head
+ * pose replaced by the sample's labels): iterations, rates, known parts
+ * of the code (`gazesplat eval --true-code`), a free expression. */
+int gs_eval_fit_sample_with(gs_model_ctx *c, gs_pool *pool,
+                            const gs_synth_sample *in,
+                            const gs_fit_options *base, gs_subject *sub,
+                            double *secs, gs_error *err);
 
 /* A cached fit: 8 bytes of fit seconds (a native double), then the
  * gs_subject_encode bytes. The file does not record the model or the fit

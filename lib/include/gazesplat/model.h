@@ -256,6 +256,10 @@ typedef struct gs_fit_options {
      * (gs_model_scene_code makes both from a synthetic scene). */
     const float *code_start;
     const uint8_t *code_fixed;
+    /* 1: the expression's slots are kept where training put them (each
+     * clamped to the synthetic sampler's range after every step); 0
+     * (default): free. Measured worse (docs/model.md, "Fitting"). */
+    int bound_expression;
 } gs_fit_options;
 #define GS_FIT_LR_CODE_DEFAULT 0.12
 #define GS_FIT_LR_COLOUR_DEFAULT 0.02
