@@ -226,7 +226,7 @@ int gs_eval_fit_sample(gs_model_ctx *c, gs_pool *pool,
                        gs_error *err);
 /* The same fit with the other options of base (its known gaze and head
  * pose replaced by the sample's labels): iterations, rates, known parts
- * of the code (`gazesplat eval --true-code`), a free expression. */
+ * of the code (`gazesplat eval --true-code`), a bounded expression. */
 int gs_eval_fit_sample_with(gs_model_ctx *c, gs_pool *pool,
                             const gs_synth_sample *in,
                             const gs_fit_options *base, gs_subject *sub,
