@@ -37,7 +37,7 @@ const cli_command cli_eval_command = {
     "                      [--finetune N] [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-eye-weight W]\n"
     "                      [--finetune-outline PX] [--finetune-mirror 0|1]\n"
-    "                      [--readout] [--readout-shift PX]\n"
+    "                      [--readout] [--readout-shift PX] [--readout-soft PX]\n"
     "       gazesplat eval --make-pairs FILE [--identities N] [--inputs N]\n"
     "                      [--targets N] [--seed N] [--split S]\n"
     "\n"
@@ -55,6 +55,10 @@ const cli_command cli_eval_command = {
     "  --readout-shift PX  the readout's alignment: the largest 2D shift\n"
     "                    (px) searched before the eyeballs are compared,\n"
     "                    0..8 (default 4; 0: none)\n"
+    "  --readout-soft PX  the readout also matches candidates blurred as an\n"
+    "                    output of softness up to PX would be (0..2.5,\n"
+    "                    steps of 0.25; default 0: off), so a soft eye is\n"
+    "                    read by where it points, not by its sharpness\n"
     "  --method LIST     comma-separated: model, transfer (the model with\n"
     "                    detail transfer from the input), warp (2D eye\n"
     "                    warping), identity (output = input), oracle\n"
@@ -135,7 +139,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_TRUE_CODE, O_BOUND_EXPR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light (each at most once). */
@@ -267,8 +271,9 @@ static int predict(evaluator *ev, const uint8_t *rgb, float out[4])
 }
 
 /* The synthesis readout's error (degrees) on an image of the target scene
- * against its true gaze, and the gaze read (head frame, degrees) into
- * read[2] when not NULL; NaN, and a message, if it fails. */
+ * against its true gaze, and the gaze read (head frame, degrees) and the
+ * softness matched (px) into read[3] when not NULL; NaN, and a message, if
+ * it fails. */
 static double read_err(evaluator *ev, const gs_synth_scene *ts,
                        const uint8_t *rgb, size_t stride, int pair,
                        double *read)
@@ -284,6 +289,7 @@ static double read_err(evaluator *ev, const gs_synth_scene *ts,
     if (read) {
         read[0] = rd.pitch * RAD_TO_DEG;
         read[1] = rd.yaw * RAD_TO_DEG;
+        read[2] = rd.soft_px;
     }
     return gs_eval_angle_deg(rd.pitch, rd.yaw, ts->gaze_pitch, ts->gaze_yaw);
 }
@@ -324,10 +330,11 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
                              l->head_norm_yaw);
     /* The readout reads eyes: none when the target's are closed. */
     if (ev->readout && !r->no_eye) {
-        double rd[2] = {NAN, NAN};
+        double rd[3] = {NAN, NAN, NAN};
         r->m[M_READ] = read_err(ev, ts, ev->out, st, r->pair, rd);
         r->m[M_READ_PITCH] = rd[0];
         r->m[M_READ_YAW] = rd[1];
+        r->m[M_READ_SOFT] = rd[2];
         r->m[M_READ_FLOOR] = read_floor;
     }
     /* The truth the readout is held to, for signed errors downstream. */
@@ -340,7 +347,7 @@ static void measure(evaluator *ev, const gs_synth_sample *gt,
         int eye_metric = k == M_EYE_PSNR || k == M_EYE_SSIM;
         int angle = k <= M_FLOOR_HEAD;
         int read = k == M_READ || k == M_READ_FLOOR || k == M_READ_PITCH ||
-                   k == M_READ_YAW;
+                   k == M_READ_YAW || k == M_READ_SOFT;
         if ((eye_metric && r->no_eye) || (angle && !ev->est) ||
             (read && (!ev->readout || r->no_eye)))
             continue;
@@ -874,6 +881,7 @@ static int run_eval(int argc, char **argv)
         {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
         {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
+        {"--readout-soft", 1, NULL},
         {"--true-code", 1, NULL}, {"--bound-expression", 0, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
@@ -979,6 +987,12 @@ static int run_eval(int argc, char **argv)
                               "pixels in [0, 8] (0: no alignment)",
                               &ev.read_opts.max_shift_px)))
         return rc;
+    if (o[O_READ_SOFT].value && !ev.readout)
+        return cli_usage_error(cmd, "--readout-soft goes with --readout");
+    if ((rc = cli_parse_range(cmd, "--readout-soft", o[O_READ_SOFT].value, 0.0, 2.5,
+                              "pixels in [0, 2.5] (0: off)",
+                              &ev.read_opts.soft_max_px)))
+        return rc;
     char line[2048];
     command_line(argc, argv, line, sizeof line);
     eval_run_info info;
@@ -987,6 +1001,7 @@ static int run_eval(int argc, char **argv)
     info.estimator = o[O_EST].value;
     info.readout = ev.readout;
     info.readout_shift = ev.read_opts.max_shift_px;
+    info.readout_soft = ev.read_opts.soft_max_px;
     info.pairs = o[O_PAIRS].value;
     info.command = line;
     info.threads = (int)threads;

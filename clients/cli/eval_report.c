@@ -14,7 +14,7 @@ const char *const eval_metric_names[M_COUNT] = {
     "psnr", "ssim", "eye_psnr", "eye_ssim", "id_psnr", "id_ssim",
     "read_gaze_err_deg", "read_floor_gaze_deg", "read_pitch_deg",
     "read_yaw_deg", "target_pitch_deg", "target_yaw_deg",
-    "target_head_pitch_deg", "target_head_yaw_deg"};
+    "target_head_pitch_deg", "target_head_yaw_deg", "read_soft_px"};
 
 void eval_csv_header(FILE *f)
 {
@@ -338,6 +338,14 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                    "best match wins), against the target's true gaze; read "
                    "floor° = the same on the GT target itself; closed eyes "
                    "are not read\n", info->readout_shift);
+    if (info->readout && info->readout_soft > 0)
+        fprintf(f, "- readout softness (`--readout-soft %g`): each candidate "
+                   "is also compared blurred as an output of softness up to "
+                   "%g px would be (Gaussian sigma, steps of 0.25 px; the "
+                   "alignment likewise), and keeps its best level, so a "
+                   "soft eye is read by where it points, not by how sharp "
+                   "it is; read_soft_px in pairs.csv is the level matched\n",
+                info->readout_soft, info->readout_soft);
     fputs("- degrees: mean angular error; gaze°/head° = estimator(output) vs "
           "estimator(GT target); PSNR dB and SSIM against the GT target "
           "(white outside the head); eye = eye region; id = face without "

@@ -46,6 +46,8 @@ enum {
                                  frame (head frame, degrees) */
     M_THEAD_PITCH, M_THEAD_YAW, /* the target's head pose (normalized
                                    camera, degrees) */
+    M_READ_SOFT,  /* --readout: the softness the readout matched the
+                     output at (px; 0 unless --readout-soft) */
     M_COUNT
 };
 extern const char *const eval_metric_names[M_COUNT];
@@ -63,6 +65,7 @@ typedef struct eval_run_info {
     const char *model, *estimator, *pairs, *command;
     int readout;          /* --readout */
     double readout_shift; /* --readout-shift (its alignment, px) */
+    double readout_soft;  /* --readout-soft (the softness searched, px) */
     int threads, iters, inputs, image_size;
     double fit_lr_code, fit_lr_colour; /* the fit's Adam rates */
     int fits_reused;      /* fits taken from an earlier run's DIR/fits */

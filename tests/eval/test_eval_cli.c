@@ -22,8 +22,8 @@
 #include "eval_fixture.h"
 
 static const char *exe;
-/* check_csv: the readout columns (26-29) are to be filled (--readout),
- * else empty. */
+/* check_csv: the readout columns (26-29, 34) are to be filled
+ * (--readout), else empty. */
 static int expect_read;
 static char dir[] = "eval_test_XXXXXX";
 
@@ -87,7 +87,7 @@ static char *check_csv(const char *path)
         }
         if (rows++ == 0) {
             CHECK_MSG(strncmp(line, "method,pair,", 12) == 0, "%s", line);
-            CHECK_EQ_INT(nc, 34);
+            CHECK_EQ_INT(nc, 35);
         } else {
             methods[0] += strcmp(cols[0], "model") == 0;
             methods[1] += strcmp(cols[0], "warp") == 0;
@@ -95,10 +95,10 @@ static char *check_csv(const char *path)
             bad += strcmp(cols[10], "ok") != 0;
             /* Angles (cols 14-19), PSNR, SSIM, id PSNR, id SSIM (20, 21,
              * 24, 25) always; eye metrics unless the eyes are closed. */
-            for (int k = 14; k < 26 && nc == 34; k++)
+            for (int k = 14; k < 26 && nc == 35; k++)
                 bad += (*cols[k] == 0 || !isfinite(strtod(cols[k], NULL))) &&
                        k != 22 && k != 23;
-            for (int k = 26; k < 30 && nc == 34; k++)
+            for (int k = 26; k < 30 && nc == 35; k++)
                 bad += expect_read ? *cols[k] == 0 ||
                                          !(strtod(cols[k], NULL) >= -180 &&
                                            strtod(cols[k], NULL) <= 180)
@@ -106,11 +106,17 @@ static char *check_csv(const char *path)
             /* The target's true gaze and head pose (30-33): always, and
              * within the evaluation's ranges (gaze +-40, head +-50 deg,
              * head-frame gaze a little wider). */
-            for (int k = 30; k < 34 && nc == 34; k++)
+            for (int k = 30; k < 34 && nc == 35; k++)
                 bad += *cols[k] == 0 || !(fabs(strtod(cols[k], NULL)) <= 90.0);
+            /* The readout's softness (34): within what was searched. */
+            if (nc == 35)
+                bad += expect_read ? *cols[34] == 0 ||
+                                         !(strtod(cols[34], NULL) >= 0 &&
+                                           strtod(cols[34], NULL) <= 2.5)
+                                   : *cols[34] != 0;
             /* ... and the read error is the angle from the read gaze to
              * that truth. */
-            if (expect_read && nc == 34 && *cols[26] && *cols[28]) {
+            if (expect_read && nc == 35 && *cols[26] && *cols[28]) {
                 double v[2][3], pr[2][2] = {{strtod(cols[28], NULL), strtod(cols[29], NULL)},
                                             {strtod(cols[30], NULL), strtod(cols[31], NULL)}};
                 for (int j = 0; j < 2; j++) {
@@ -190,6 +196,14 @@ static void usage_errors(const char *model, const char *pairs)
     bad_shift[8] = "-1";
     CHECK_EQ_INT(run(bad_shift), 2);
     bad_shift[8] = "nan";
+    CHECK_EQ_INT(run(bad_shift), 2);
+    /* --readout-soft: only with --readout, and within [0, 2.5] px */
+    shift_alone[7] = "--readout-soft";
+    CHECK_EQ_INT(run(shift_alone), 2);
+    bad_shift[7] = "--readout-soft";
+    bad_shift[8] = "3";
+    CHECK_EQ_INT(run(bad_shift), 2);
+    bad_shift[8] = "-0.5";
     CHECK_EQ_INT(run(bad_shift), 2);
     /* --split: validation and training pairs are written and say so;
      * another split is refused */
@@ -548,13 +562,36 @@ int main(int argc, char **argv)
                       "shift of up to 4 px", "- readout: gaze only median ",
                       "non-finite outputs 0", NULL));
     /* --readout-shift 0: no alignment, and the summary says so */
-    const char *ev9[] = {"eval", "--model", model, "--pairs", pairs,
+    const char *ev9[22] = {"eval", "--model", model, "--pairs", pairs,
                          "--out", out2, "--method", "identity",
                          "--iters", "4", "--threads", "2", "--estimator",
                          est, "--reuse-fits", "--readout", "--readout-shift",
                          "0", NULL};
     CHECK_EQ_INT(run(ev9), 0);
-    CHECK(summary_has(md, "shift of up to 0 px", NULL));
+    CHECK(summary_has(md, "shift of up to 0 px", "!--readout-soft", NULL));
+    /* --readout-soft: the softness searched, in the summary; every read
+     * output carries the level it matched */
+    ev9[18] = "4";
+    ev9[19] = "--readout-soft";
+    ev9[20] = "1.5";
+    ev9[21] = NULL;
+    CHECK_EQ_INT(run(ev9), 0);
+    CHECK(summary_has(md, "shift of up to 4 px", "(`--readout-soft 1.5`)",
+                      "non-finite outputs 0", NULL));
+    {
+        /* identity only: 4 rows, each read, its level the last column */
+        char *t = ev_slurp(csv), *save = NULL;
+        int rows = 0, soft_ok = 0;
+        for (char *line = t ? strtok_r(t, "\n", &save) : NULL; line;
+             line = strtok_r(NULL, "\n", &save), rows++) {
+            const char *last = strrchr(line, ',');
+            double v = last && last[1] ? strtod(last + 1, NULL) : NAN;
+            soft_ok += rows > 0 && v >= 0 && v <= 1.5;
+        }
+        CHECK_MSG(rows == 5 && soft_ok == 4, "read_soft_px: %d of %d rows",
+                  soft_ok, rows - 1);
+        free(t);
+    }
     expect_read = 0;
     free(a);
     free(b);
