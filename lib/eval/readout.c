@@ -522,9 +522,10 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
     c->nsoft = 1 + (int)floor(o->soft_max_px / RD_SOFT_STEP + 1e-9);
     int Rmax = 0;
     for (int lv = 0; lv < c->nsoft; lv++) {
-        double sg = sqrt(o->blur_px * o->blur_px +
-                         (lv * RD_SOFT_STEP) * (lv * RD_SOFT_STEP));
-        int R = sg > 0 ? (int)ceil(3 * sg - 1e-9) : 0;
+        double sg = lv ? sqrt(o->blur_px * o->blur_px +
+                              (lv * RD_SOFT_STEP) * (lv * RD_SOFT_STEP))
+                       : o->blur_px; /* level 0: the plain readout's, exactly */
+        int R = sg > 0 ? (int)ceil(3 * sg - (lv ? 1e-9 : 0)) : 0;
         R = c->R[lv] = R > RD_MAX_R ? RD_MAX_R : R;
         Rmax = R > Rmax ? R : Rmax;
         double ks = 0;
