@@ -22,13 +22,18 @@ the mean gaze error, for gaze-only and head-change pairs. A model whose
 lids do not follow the gaze reads strong upward and downward looks as
 nearer the middle (docs/model.md, "Lids that follow the gaze").
 
+A third table gives each input face's mean, median and largest error:
+a mean pulled up by a few fits shows there.
+
 Prints Markdown tables per file. Standard library only."""
 import csv
 import statistics
 import sys
 
-# (label, head change 0|1, the column a range bins on, its range or None)
-BINS = (("gaze only", "0", None, None),
+# (label, head change 0|1 or None for both, the column a range bins on,
+# its range or None)
+BINS = (("all pairs", None, None, None),
+        ("gaze only", "0", None, None),
         ("0-15°", "0", "gaze_change_deg", (0, 15)),
         ("15-30°", "0", "gaze_change_deg", (15, 30)),
         ("30-50°", "0", "gaze_change_deg", (30, 50)),
@@ -46,7 +51,7 @@ def rows_of(path):
 
 
 def group(rows, head_change, col, rng):
-    return [r for r in rows if r["head_change"] == head_change and
+    return [r for r in rows if head_change in (None, r["head_change"]) and
             (rng is None or rng[0] <= float(r[col]) < rng[1])]
 
 
@@ -73,6 +78,18 @@ def pitch_table(rows):
                 e = [float(r["read_gaze_err_deg"]) for r in g]
                 print(f"| {m} | {kind} | {name} | {len(g)} | "
                       f"{statistics.mean(d):+.2f} | {statistics.mean(e):.2f} |")
+
+
+def input_table(rows):
+    """Mean and median per input face: a few bad fits show up here."""
+    print("\n| method | input | n | mean° | median° | largest° |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for m in dict.fromkeys(r["method"] for r in rows):
+        mr = [r for r in rows if r["method"] == m]
+        for i in dict.fromkeys(r["input"] for r in mr):
+            v = [float(r["read_gaze_err_deg"]) for r in mr if r["input"] == i]
+            print(f"| {m} | {i} | {len(v)} | {statistics.mean(v):.2f} | "
+                  f"{statistics.median(v):.2f} | {max(v):.2f} |")
 
 
 def inside(r, head_range):
@@ -130,6 +147,7 @@ def main():
                       f"{statistics.mean(v):.2f} | {statistics.median(v):.2f} | "
                       f"{100 * sum(x <= 2 for x in v) / len(v):.0f} % | "
                       f"{100 * sum(x <= 5 for x in v) / len(v):.0f} % |")
+        input_table(rows)
         if "target_pitch_deg" in rows[0] and "read_pitch_deg" in rows[0]:
             pitch_table(rows)
 

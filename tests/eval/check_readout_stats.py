@@ -5,7 +5,8 @@ Gaze-only pairs read 1 degree off, head changes 4 (target head inside the
 default 40,25 range) or 10 (outside). Head changes whose target looks down
 (pitch -20) read 6 degrees higher than the truth, those looking up (+20)
 2 lower, the middle ones (0) exactly; gaze-only pairs read 0.5 higher.
-The tables must give those means, shares, splits and signs; a file
+The tables must give those means, shares, splits and signs, over all
+pairs and per input face; a file
 without the target pose and gaze columns gets neither the split nor the
 pitch table; a bad --head-range and a file without the readout are
 refused."""
@@ -92,6 +93,17 @@ with tempfile.TemporaryDirectory() as d:
     n, mean, _, _, _ = table_row(out, "transfer", "head change")
     if n != 20 or abs(mean - (4.0 * n_in + 10.0 * (20 - n_in)) / 20) > 0.006:
         fail(f"head change: {n} {mean}", out)
+    n, mean, _, _, _ = table_row(out, "transfer", "all pairs")
+    want = (20 * 1.0 + 4.0 * n_in + 10.0 * (20 - n_in)) / 40
+    if n != 40 or abs(mean - want) > 0.006:
+        fail(f"all pairs: {n} {mean}, want 40 pairs, {want:.2f}", out)
+    for face in range(4):  # per input face: its ten pairs
+        v = [r[7] for r in rows[:40] if r[2] == face]
+        got = table_row(out, "transfer", str(face))
+        if (got[0] != 10 or abs(got[1] - sum(v) / 10) > 0.006 or
+                got[3] != max(v)):
+            fail(f"input {face}: {got}, want mean {sum(v) / 10:.2f}, "
+                 f"largest {max(v)}", out)
     for pitch, want in (("< -15°", 6.0), ("-15-15°", 0.0), ("> 15°", -2.0)):
         v = table_row(out, "transfer", "head change", pitch)
         if v[1] != want:
