@@ -29,7 +29,7 @@ const cli_command cli_eval_command = {
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--fit-lr CODE[,COLOUR]] [--bound-expression]\n"
-    "                      [--true-code LIST]\n"
+    "                      [--code-prior W] [--true-code LIST]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -73,6 +73,9 @@ const cli_command cli_eval_command = {
     "                    (default 0.12,0.02; COLOUR defaults to CODE / 6)\n"
     "  --bound-expression  the fit keeps the code's expression where\n"
     "                    training put it (clamped each step); default free\n"
+    "  --code-prior W    the fit's prior on the code's expression and\n"
+    "                    lights (the training sampler's Gaussian), weight\n"
+    "                    W in [0, 10] (default 0: none)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression and/or lights\n"
     "                    (comma-separated: expr, light) and keeps them; how\n"
@@ -139,7 +142,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_CODE_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light (each at most once). */
@@ -233,6 +236,7 @@ typedef struct evaluator {
     double lr_code, lr_colour;  /* --fit-lr */
     unsigned true_code;         /* --true-code: GS_SCENE_CODE_* bits */
     int bound_expression;       /* --bound-expression */
+    double code_prior;          /* --code-prior */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -433,6 +437,7 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     o.lr_code = ev->lr_code;
     o.lr_colour = ev->lr_colour;
     o.bound_expression = ev->bound_expression;
+    o.code_prior = ev->code_prior;
     float code[GS_MODEL_MAX_CODE];
     uint8_t fixed[GS_MODEL_MAX_CODE];
     if (ev->true_code) {
@@ -883,6 +888,7 @@ static int run_eval(int argc, char **argv)
         {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
         {"--readout-soft", 1, NULL},
         {"--true-code", 1, NULL}, {"--bound-expression", 0, NULL},
+        {"--code-prior", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
@@ -977,6 +983,9 @@ static int run_eval(int argc, char **argv)
         return cli_usage_error(cmd, "--true-code: want a list of expr, light; "
                                "got '%s'", o[O_TRUE_CODE].value);
     ev.bound_expression = o[O_BOUND_EXPR].value != NULL;
+    if ((rc = cli_parse_range(cmd, "--code-prior", o[O_CODE_PRIOR].value, 0.0, 10.0,
+                              "a weight in [0, 10] (0: no prior)", &ev.code_prior)))
+        return rc;
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
@@ -1010,6 +1019,7 @@ static int run_eval(int argc, char **argv)
     info.fit_lr_colour = ev.lr_colour;
     info.true_code = ev.true_code;
     info.bound_expression = ev.bound_expression;
+    info.code_prior = ev.code_prior;
     info.feature_scale = 1.0;
     info.supersample = 1;
     info.ft_iters = ev.fo.iters;

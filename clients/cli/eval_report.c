@@ -239,14 +239,18 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                   int nmethods)
 {
     fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
+    char prior[64] = "";
+    if (info->code_prior > 0)
+        snprintf(prior, sizeof prior, ", code prior weight %g (--code-prior)",
+                 info->code_prior);
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
-               "iterations cap %d, rates %g (code) and %g (colour)%s; %d "
+               "iterations cap %d, rates %g (code) and %g (colour)%s%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,
             info->inputs, info->iters, info->fit_lr_code, info->fit_lr_colour,
             info->bound_expression ? ", expression kept in its training "
                                      "range (--bound-expression)"
                                    : "",
-            info->threads);
+            prior, info->threads);
     if (ps->n > 0 && gs_synth_seed_split(ps->p[0].identity_seed) == GS_SYNTH_TRAIN)
         fprintf(f, "- **training identities** (`--split train`): faces a model "
                    "trained on %d or more identities has seen; a diagnostic "

@@ -82,6 +82,7 @@ typedef struct eval_run_info {
     int light_on_head;    /* --light-on-head */
     unsigned true_code;   /* --true-code: GS_SCENE_CODE_* bits (0: none) */
     int bound_expression; /* --bound-expression */
+    double code_prior;    /* --code-prior */
     /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
     int ft_iters;
     unsigned ft_parts;

@@ -514,6 +514,10 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = gs_error_set(err, GS_ERR_ARG,
                           "fit: rates %g (code) and %g (colour): want [0, 10], "
                           "0 for the defaults", o.lr_code, o.lr_colour);
+    if (!rc && !(o.code_prior >= 0 && o.code_prior <= 10))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: code prior weight %g: want [0, 10], 0 for none",
+                          o.code_prior);
     for (int k = 0; !rc && o.code_start && k < c->D; k++)
         if (!isfinite(o.code_start[k]))
             rc = gs_error_set(err, GS_ERR_ARG,
@@ -531,11 +535,23 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     fit_bufs b;
     memset(&b, 0, sizeof b);
     fit_state *s = calloc(1, sizeof *s), *best = calloc(1, sizeof *best);
-    if (!s || !best || fit_bufs_init(&b, c, rgb, stride, o.mask)) {
+    gs_code_prior *prior = o.code_prior > 0 ? malloc(sizeof *prior) : NULL;
+    if (!s || !best || (o.code_prior > 0 && !prior) ||
+        fit_bufs_init(&b, c, rgb, stride, o.mask)) {
         free(s);
         free(best);
+        free(prior);
         fit_bufs_free(&b);
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
+    }
+    /* the prior's slots: [expression | lights] after the identity */
+    const int V_PRIOR = V_CODE + c->m->cfg.id_dim;
+    if (prior && (rc = gs_code_prior_make(c->m, prior, err)) != GS_OK) {
+        free(s);
+        free(best);
+        free(prior);
+        fit_bufs_free(&b);
+        return rc;
     }
     fit_init(c, &o, s);
     double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
@@ -548,6 +564,10 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             break;
         double dgain[3], dbias[3];
         double loss = image_loss(c, pool, &b, s, dgain, dbias);
+        double gprior[GS_CODE_PRIOR_DIM] = {0};
+        if (prior)
+            loss += gs_code_prior_eval(prior, o.code_prior, s->x + V_PRIOR,
+                                       gprior);
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "fit diverged at iteration %d (loss %g, first "
@@ -584,6 +604,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         }
         for (int k = 0; k < c->D; k++)
             s->g[V_CODE + k] = fg.code[k];
+        for (int k = 0; prior && k < GS_CODE_PRIOR_DIM; k++)
+            s->g[V_PRIOR + k] += gprior[k];
         for (int k = 0; k < s->n; k++)
             if (!isfinite(s->g[k])) {
                 rc = gs_error_set(err, GS_ERR_NONFINITE,
@@ -645,6 +667,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     }
     free(s);
     free(best);
+    free(prior);
     fit_bufs_free(&b);
     return rc;
 }

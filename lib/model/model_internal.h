@@ -198,6 +198,23 @@ void gs_model_config_default(gs_model_config *c);
 /* The light part of tau for a synthetic scene (head frame). */
 struct gs_synth_scene;
 void gs_model_light_code(const struct gs_synth_scene *s, float out[12]);
+
+/* The fit's code prior (prior.c): mean and precision of the code's
+ * [expression | lights] slots over the training sampler's scenes
+ * (gs_train_sample_config with the default options; deterministic). */
+#define GS_CODE_PRIOR_DIM (GS_MODEL_EXPR_DIM + GS_MODEL_LIGHT_DIM)
+typedef struct gs_code_prior {
+    double mean[GS_CODE_PRIOR_DIM];
+    double prec[GS_CODE_PRIOR_DIM * GS_CODE_PRIOR_DIM];
+} gs_code_prior;
+int gs_code_prior_make(const struct gs_model *m, gs_code_prior *p,
+                       gs_error *err);
+/* weight / N * (x - mean)^T prec (x - mean) over x = [expression | lights]
+ * (N = GS_CODE_PRIOR_DIM: the mean of the squared Mahalanobis terms, about
+ * `weight` for a code drawn from the sampler); adds its gradient into grad
+ * when grad is not NULL. */
+double gs_code_prior_eval(const gs_code_prior *p, double weight,
+                          const double *x, double *grad);
 /* Turns a code's light from head pose R_s to R_v (lights fixed in the
  * camera). */
 void gs_model_light_to_view(float *code, int code_dim, const double R_s[9],

@@ -104,6 +104,123 @@ int main(void)
         CHECK_MSG(!in_f, "the free fit stayed inside: the check shows nothing");
     }
 
+    /* The code prior: the sampler's mean and precision over [expression |
+     * lights]; the same numbers every time; zero at its mean; a gradient
+     * that is the loss's (central differences); about `weight` on average
+     * over codes drawn from the sampler. */
+    {
+        gs_code_prior p1, p2;
+        CHECK_MSG(gs_code_prior_make(m, &p1, &err) == GS_OK, "%s", err.msg);
+        CHECK(gs_code_prior_make(m, &p2, &err) == GS_OK);
+        CHECK(memcmp(&p1, &p2, sizeof p1) == 0);
+        enum { N = GS_CODE_PRIOR_DIM };
+        /* expression means of the sampler (identity.c): mouth_open
+         * 0.5 E[u^2], smile 0.5 E[u], brow 0, squint 0.5 * 0.7 E[u^2],
+         * blink 0.05 E[U(0.3, 1)], pupil 0 */
+        const double want[6] = {1.0 / 6, 0.25, 0, 0.35 / 3, 0.0325, 0};
+        for (int k = 0; k < 6; k++)
+            CHECK_MSG(fabs(p1.mean[k] - want[k]) < 0.02,
+                      "expression slot %d: mean %g, want about %g", k,
+                      p1.mean[k], want[k]);
+        int sym = 1, pos = 1;
+        for (int i = 0; i < N; i++) {
+            pos &= p1.prec[i * N + i] > 0;
+            for (int j = 0; j < N; j++)
+                sym &= p1.prec[i * N + j] == p1.prec[j * N + i];
+        }
+        CHECK(sym && pos);
+        double g[N] = {0};
+        CHECK(gs_code_prior_eval(&p1, 0.5, p1.mean, g) == 0.0);
+        for (int i = 0; i < N; i++)
+            CHECK(g[i] == 0.0);
+        double x[N], worst = 0;
+        for (int i = 0; i < N; i++)
+            x[i] = p1.mean[i] + 0.3 * sin(1.7 * i + 0.4);
+        memset(g, 0, sizeof g);
+        double l0 = gs_code_prior_eval(&p1, 0.5, x, g);
+        CHECK(l0 > 0 && isfinite(l0));
+        for (int i = 0; i < N; i++) {
+            double h = 1e-5, xp[N], xm[N];
+            memcpy(xp, x, sizeof x);
+            memcpy(xm, x, sizeof x);
+            xp[i] += h;
+            xm[i] -= h;
+            double fd = (gs_code_prior_eval(&p1, 0.5, xp, NULL) -
+                         gs_code_prior_eval(&p1, 0.5, xm, NULL)) / (2 * h);
+            double e = fabs(fd - g[i]) / fmax(1.0, fabs(g[i]));
+            worst = e > worst ? e : worst;
+        }
+        printf("code prior: loss %.4f at the probe, gradient vs central "
+               "differences: worst relative error %.2e\n", l0, worst);
+        CHECK(worst < 1e-6);
+        /* codes the sampler draws (other scenes than the prior's own
+         * 4096) cost at most about the weight each: less, for the ridge
+         * takes the light code's three colour-locked directions (and part
+         * of the small-variance ones) almost out of the sum */
+        gs_train_options to;
+        gs_train_options_default(&to);
+        gs_synth_gen_config gen;
+        gs_train_sample_config(m, &to, &gen);
+        double sum = 0;
+        for (int k = 0; k < 2000; k++) {
+            gs_synth_scene sc;
+            gs_synth_camera cam;
+            CHECK(gs_synth_gen_scene(&gen, 100000 + (uint64_t)k, &sc, &cam,
+                                     &err) == GS_OK);
+            float v[N];
+            double xv[N];
+            gs_synth_expression_to_array(&sc.expr, v);
+            gs_model_light_code(&sc, v + GS_MODEL_EXPR_DIM);
+            for (int i = 0; i < N; i++)
+                xv[i] = v[i];
+            sum += gs_code_prior_eval(&p1, 1.0, xv, NULL);
+        }
+        printf("code prior: mean loss over 2000 drawn codes %.3f (weight 1)\n",
+               sum / 2000);
+        CHECK(sum / 2000 > 0.5 && sum / 2000 < 1.05);
+    }
+
+    /* The fit with the prior: weight 0 is the plain fit bit for bit; a
+     * heavy prior ends nearer the sampler's codes than the free fit at
+     * the same (fast) rate; weights outside [0, 10] or NaN are refused
+     * and leave the subject alone. */
+    {
+        gs_code_prior pr;
+        CHECK(gs_code_prior_make(m, &pr, &err) == GS_OK);
+        gs_fit_options fx = fo;
+        gs_subject s0, sp, sf, keep;
+        fx.code_prior = 0;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL,
+                           &err) == GS_OK);
+        CHECK(memcmp(s0.code, sub.code, sizeof(float) * sub.code_dim) == 0);
+        fx.lr_code = 1.0;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sf, NULL,
+                           &err) == GS_OK);
+        fx.code_prior = 1.0;
+        CHECK_MSG(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL,
+                               &err) == GS_OK, "%s", err.msg);
+        double xf[GS_CODE_PRIOR_DIM], xp[GS_CODE_PRIOR_DIM];
+        for (int i = 0; i < GS_CODE_PRIOR_DIM; i++) {
+            xf[i] = sf.code[m->cfg.id_dim + i];
+            xp[i] = sp.code[m->cfg.id_dim + i];
+        }
+        double qf = gs_code_prior_eval(&pr, 1.0, xf, NULL);
+        double qp = gs_code_prior_eval(&pr, 1.0, xp, NULL);
+        printf("fit at rate 1: prior term %.3f free, %.3f with the prior "
+               "(weight 1)\n", qf, qp);
+        CHECK(qp < qf);
+        const double bad[] = {-0.1, 10.5, NAN, INFINITY};
+        for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+            fx.code_prior = bad[k];
+            memset(&keep, 0x5a, sizeof keep);
+            sp = keep;
+            CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL,
+                               &err) == GS_ERR_ARG);
+            CHECK(memcmp(&sp, &keep, sizeof keep) == 0);
+            CHECK(strstr(err.msg, "code prior") != NULL);
+        }
+    }
+
     /* Subjects survive encode/decode; bad bytes are refused. */
     uint8_t buf[GS_SUBJECT_ENCODED_MAX];
     size_t n = gs_subject_encode(&sub, buf, sizeof buf);

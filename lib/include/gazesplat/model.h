@@ -260,6 +260,11 @@ typedef struct gs_fit_options {
      * clamped to the synthetic sampler's range after every step); 0
      * (default): free. Measured worse (docs/model.md, "Fitting"). */
     int bound_expression;
+    /* Weight of a Gaussian prior on the code's expression and lights, with
+     * the mean and covariance those slots have over the training sampler
+     * (about `code_prior` added to the loss for a typical code); 0: none.
+     * In [0, 10]. (docs/model.md, "Fitting") */
+    double code_prior;
 } gs_fit_options;
 #define GS_FIT_LR_CODE_DEFAULT 0.12
 #define GS_FIT_LR_COLOUR_DEFAULT 0.02

@@ -1,0 +1,121 @@
+/* The fit's prior on the code's expression and lights: a Gaussian with the
+ * mean and covariance those slots have over the training sampler's scenes
+ * (docs/model.md, "Fitting", the code prior). */
+#include <math.h>
+#include <string.h>
+
+#include "gazesplat/train.h"
+#include "model_internal.h"
+
+/* Scenes drawn for the statistics: enough that the covariance's smallest
+ * kept directions are stable, few enough to cost a few milliseconds. */
+#define PRIOR_DRAWS 4096
+
+/* In-place Cholesky of the symmetric positive definite n x n matrix a
+ * (lower triangle), then its inverse into inv. 0, or -1 when a is not
+ * positive definite. */
+static int spd_inverse(double *a, int n, double *inv)
+{
+    for (int j = 0; j < n; j++) {
+        double d = a[j * n + j];
+        for (int k = 0; k < j; k++)
+            d -= a[j * n + k] * a[j * n + k];
+        if (!(d > 0))
+            return -1;
+        d = sqrt(d);
+        a[j * n + j] = d;
+        for (int i = j + 1; i < n; i++) {
+            double v = a[i * n + j];
+            for (int k = 0; k < j; k++)
+                v -= a[i * n + k] * a[j * n + k];
+            a[i * n + j] = v / d;
+        }
+    }
+    /* inv = L^-T L^-1, column by column: solve L y = e_c, then L^T x = y */
+    for (int c = 0; c < n; c++) {
+        double y[GS_CODE_PRIOR_DIM];
+        for (int i = 0; i < n; i++) {
+            double v = i == c ? 1.0 : 0.0;
+            for (int k = 0; k < i; k++)
+                v -= a[i * n + k] * y[k];
+            y[i] = v / a[i * n + i];
+        }
+        for (int i = n - 1; i >= 0; i--) {
+            double v = y[i];
+            for (int k = i + 1; k < n; k++)
+                v -= a[k * n + i] * inv[k * n + c];
+            inv[i * n + c] = v / a[i * n + i];
+        }
+    }
+    return 0;
+}
+
+int gs_code_prior_make(const gs_model *m, gs_code_prior *p, gs_error *err)
+{
+    enum { N = GS_CODE_PRIOR_DIM };
+    gs_train_options to;
+    gs_train_options_default(&to);
+    gs_synth_gen_config gen;
+    gs_train_sample_config(m, &to, &gen);
+    double sum[N] = {0}, cov[N * N] = {0};
+    for (int s = 0; s < PRIOR_DRAWS; s++) {
+        gs_synth_scene sc;
+        gs_synth_camera cam;
+        int rc = gs_synth_gen_scene(&gen, (uint64_t)s, &sc, &cam, err);
+        if (rc)
+            return rc;
+        float v[N];
+        gs_synth_expression_to_array(&sc.expr, v);
+        gs_model_light_code(&sc, v + GS_MODEL_EXPR_DIM);
+        for (int i = 0; i < N; i++) {
+            sum[i] += v[i];
+            for (int j = 0; j <= i; j++)
+                cov[i * N + j] += (double)v[i] * v[j];
+        }
+    }
+    double tr = 0;
+    for (int i = 0; i < N; i++)
+        p->mean[i] = sum[i] / PRIOR_DRAWS;
+    for (int i = 0; i < N; i++)
+        for (int j = 0; j <= i; j++) {
+            double c = cov[i * N + j] / PRIOR_DRAWS - p->mean[i] * p->mean[j];
+            cov[i * N + j] = cov[j * N + i] = c;
+            if (i == j)
+                tr += c;
+        }
+    /* The light code's three colours of one direction move almost
+     * together (a light's tint is within +-15 %): the covariance is
+     * nearly singular there. A ridge of 1 % of the mean variance keeps
+     * the precision finite: a code off that subspace is unlikely, not
+     * impossible. */
+    for (int i = 0; i < N; i++)
+        cov[i * N + i] += 0.01 * tr / N;
+    if (spd_inverse(cov, N, p->prec))
+        return gs_error_set(err, GS_ERR_STATE,
+                            "code prior: the sampler's covariance is not "
+                            "positive definite");
+    /* exactly symmetric, so that the gradient below is the loss's */
+    for (int i = 0; i < N; i++)
+        for (int j = 0; j < i; j++)
+            p->prec[i * N + j] = p->prec[j * N + i] =
+                0.5 * (p->prec[i * N + j] + p->prec[j * N + i]);
+    return GS_OK;
+}
+
+double gs_code_prior_eval(const gs_code_prior *p, double weight,
+                          const double *x, double *grad)
+{
+    enum { N = GS_CODE_PRIOR_DIM };
+    double d[N], q = 0;
+    for (int i = 0; i < N; i++)
+        d[i] = x[i] - p->mean[i];
+    for (int i = 0; i < N; i++) {
+        double pd = 0;
+        for (int j = 0; j < N; j++)
+            pd += p->prec[i * N + j] * d[j];
+        q += d[i] * pd;
+        if (grad)
+            grad[i] += 2.0 * weight / N * pd;
+    }
+    return weight / N * q;
+}
