@@ -318,7 +318,6 @@ void gs_fit_options_default(gs_fit_options *o)
     memset(o, 0, sizeof *o);
     o->max_iters = 200;
     o->plateau_rel = 1e-3;
-    o->code_prior = GS_FIT_CODE_PRIOR_DEFAULT;
     gs_geom_mat3_identity(o->head_R);
 }
 

@@ -247,7 +247,9 @@ static void usage_errors(const char *model, const char *pairs)
         {"--fit-lr", "0"},          {"--fit-lr", "-0.1"},
         {"--fit-lr", "11"},         {"--fit-lr", "nan"},
         {"--fit-lr", "0.1,0"},      {"--fit-lr", "0.1,"},
-        {"--fit-lr", "0.1,0.02,1"}, {"--fit-lr", "fast"}};
+        {"--fit-lr", "0.1,0.02,1"}, {"--fit-lr", "fast"},
+        {"--code-prior", "-0.001"}, {"--code-prior", "10.5"},
+        {"--code-prior", "nan"},    {"--code-prior", "strong"}};
     for (size_t k = 0; k < sizeof bad_render / sizeof bad_render[0]; k++) {
         const char *args[] = {"eval", "--model", model, "--pairs", pairs,
                               "--out", dir, bad_render[k][0],
@@ -541,6 +543,30 @@ int main(int argc, char **argv)
         CHECK(summary_has(md3, "expression kept in its training range "
                                "(--bound-expression)",
                           "!--true-code", "non-finite outputs 0", NULL));
+        /* --code-prior: the default is none (the same rows as naming
+         * 0, and the summary is silent); a weight fits otherwise and the
+         * summary names it */
+        const char *evcp[] = {"eval", "--model", model, "--pairs", pairs,
+                              "--out", out3, "--method", "model,warp,identity",
+                              "--iters", "4", "--threads", "2", "--estimator",
+                              est, NULL, NULL, NULL};
+        CHECK_EQ_INT(run(evcp), 0);
+        char *cp1 = check_csv(csv3);
+        CHECK(summary_has(md3, "!--code-prior", "!--bound-expression", NULL));
+        evcp[15] = "--code-prior";
+        evcp[16] = "0.0003";
+        CHECK_EQ_INT(run(evcp), 0);
+        char *cp0 = check_csv(csv3);
+        CHECK(summary_has(md3, "code prior weight 0.0003 (--code-prior)", NULL));
+        CHECK_MSG(cp0 && cp1 && strcmp(cp0, cp1) != 0, "--code-prior 0.0003 changed nothing");
+        evcp[16] = "0";
+        CHECK_EQ_INT(run(evcp), 0);
+        char *cp2 = check_csv(csv3);
+        CHECK_MSG(cp1 && cp2 && strcmp(cp1, cp2) == 0,
+                  "--code-prior 0 is not the default");
+        free(cp0);
+        free(cp1);
+        free(cp2);
     }
     /* --readout: every output's gaze and the floor read by synthesis,
      * the same for 1 and 2 threads, in the summary's tables. */

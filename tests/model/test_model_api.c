@@ -181,22 +181,22 @@ int main(void)
         CHECK(sum / 2000 > 0.5 && sum / 2000 < 1.05);
     }
 
-    /* The fit with the prior: the default options carry the default
-     * weight (the same bytes as naming it), weight 0 fits otherwise; a
-     * heavy prior ends nearer the sampler's codes than the free fit at
-     * the same (fast) rate; weights outside [0, 10] or NaN are refused
-     * and leave the subject alone. */
+    /* The fit with the prior: the default options have none (the same
+     * bytes as weight 0), weight 3e-4 fits otherwise; a heavy prior ends
+     * nearer the sampler's codes than the free fit at the same (fast)
+     * rate; weights outside [0, 10] or NaN are refused and leave the
+     * subject alone. */
     {
         gs_code_prior pr;
         CHECK(gs_code_prior_make(m, &pr, &err) == GS_OK);
         gs_fit_options fx = fo;
         gs_subject s0, sp, sf, keep;
-        CHECK(fo.code_prior == GS_FIT_CODE_PRIOR_DEFAULT && fo.code_prior > 0);
-        fx.code_prior = GS_FIT_CODE_PRIOR_DEFAULT;
+        CHECK(fo.code_prior == 0);
+        fx.code_prior = 0;
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL,
                            &err) == GS_OK);
         CHECK(memcmp(s0.code, sub.code, sizeof(float) * sub.code_dim) == 0);
-        fx.code_prior = 0;
+        fx.code_prior = 3e-4;
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL,
                            &err) == GS_OK);
         CHECK(memcmp(s0.code, sub.code, sizeof(float) * sub.code_dim) != 0);
