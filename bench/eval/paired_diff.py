@@ -10,7 +10,13 @@ readout); pairs only one run has are named and left out.
     bench/eval/paired_diff.py A/pairs.csv B/pairs.csv [--method M] [--reps N]
 
 --method: the method compared (default transfer); --reps: bootstrap
-resamples (default 10000). Standard library only."""
+resamples (default 10000). Standard library only.
+
+The interval counts the pairs' spread, not the fits': a change in the
+last digits of a fit's arithmetic moves a 15-input run's mean by about
+0.1 deg (bench/eval/README.md, "A prior on the fit's expression and
+lights"), so a difference that small is not an effect even when its
+interval leaves zero."""
 import argparse
 import csv
 import random
