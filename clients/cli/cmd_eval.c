@@ -2,7 +2,6 @@
  * (docs/eval.md), and write the fixed pairing file it reads. */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
 
-#include <errno.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>

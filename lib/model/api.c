@@ -522,6 +522,13 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         if (!isfinite(o.code_start[k]))
             rc = gs_error_set(err, GS_ERR_ARG,
                               "fit: code_start[%d] is not finite", k);
+    /* the prior (weight > 0): on the stack, made before anything is
+     * allocated; its slots are [expression | lights] after the identity */
+    gs_code_prior prior;
+    const int use_prior = o.code_prior > 0;
+    const int V_PRIOR = V_CODE + c->m->cfg.id_dim;
+    if (!rc && use_prior)
+        rc = gs_code_prior_make(c->m, &prior, err);
     if (rc)
         return rc;
     int iters = o.max_iters > 0 ? o.max_iters : 200;
@@ -535,23 +542,11 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     fit_bufs b;
     memset(&b, 0, sizeof b);
     fit_state *s = calloc(1, sizeof *s), *best = calloc(1, sizeof *best);
-    gs_code_prior *prior = o.code_prior > 0 ? malloc(sizeof *prior) : NULL;
-    if (!s || !best || (o.code_prior > 0 && !prior) ||
-        fit_bufs_init(&b, c, rgb, stride, o.mask)) {
+    if (!s || !best || fit_bufs_init(&b, c, rgb, stride, o.mask)) {
         free(s);
         free(best);
-        free(prior);
         fit_bufs_free(&b);
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
-    }
-    /* the prior's slots: [expression | lights] after the identity */
-    const int V_PRIOR = V_CODE + c->m->cfg.id_dim;
-    if (prior && (rc = gs_code_prior_make(c->m, prior, err)) != GS_OK) {
-        free(s);
-        free(best);
-        free(prior);
-        fit_bufs_free(&b);
-        return rc;
     }
     fit_init(c, &o, s);
     double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
@@ -565,8 +560,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         double dgain[3], dbias[3];
         double loss = image_loss(c, pool, &b, s, dgain, dbias);
         double gprior[GS_CODE_PRIOR_DIM] = {0};
-        if (prior)
-            loss += gs_code_prior_eval(prior, o.code_prior, s->x + V_PRIOR,
+        if (use_prior)
+            loss += gs_code_prior_eval(&prior, o.code_prior, s->x + V_PRIOR,
                                        gprior);
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
@@ -604,7 +599,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         }
         for (int k = 0; k < c->D; k++)
             s->g[V_CODE + k] = fg.code[k];
-        for (int k = 0; prior && k < GS_CODE_PRIOR_DIM; k++)
+        for (int k = 0; use_prior && k < GS_CODE_PRIOR_DIM; k++)
             s->g[V_PRIOR + k] += gprior[k];
         for (int k = 0; k < s->n; k++)
             if (!isfinite(s->g[k])) {
@@ -667,7 +662,6 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     }
     free(s);
     free(best);
-    free(prior);
     fit_bufs_free(&b);
     return rc;
 }

@@ -176,12 +176,14 @@ int main(void)
             gs_synth_camera cam;
             CHECK(gs_synth_gen_scene(&gen, 100000 + (uint64_t)k, &sc, &cam,
                                      &err) == GS_OK);
-            float v[N];
+            /* the slots a training step fills, as --true-code gives them */
+            float code[GS_MODEL_MAX_CODE];
+            uint8_t fixed[GS_MODEL_MAX_CODE];
+            CHECK(gs_model_scene_code(m, &sc, GS_SCENE_CODE_EXPR | GS_SCENE_CODE_LIGHT,
+                                      code, fixed, &err) == GS_OK);
             double xv[N];
-            gs_synth_expression_to_array(&sc.expr, v);
-            gs_model_light_code(&sc, v + GS_MODEL_EXPR_DIM);
             for (int i = 0; i < N; i++)
-                xv[i] = v[i];
+                xv[i] = code[m->cfg.id_dim + i];
             sum += gs_code_prior_eval(&p1, 1.0, xv, NULL);
         }
         printf("code prior: mean loss over 2000 drawn codes %.3f (weight 1)\n",
