@@ -304,6 +304,10 @@ void gsd_model_finish_load(gsd_server *s)
     model_unref(old);
     snprintf(detail, sizeof detail, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
     LOG_I("ready: %s", detail);
+#ifdef GSD_HAVE_MODEL
+    if (m->info.fit_code_prior > 0)
+        LOG_I("fits use the model's code prior, weight %g", m->info.fit_code_prior);
+#endif
     gsd_server_set_state(s, GSD_READY, detail);
     gsd_live_model_ready(s);
 }

@@ -75,9 +75,9 @@ const cli_command cli_eval_command = {
     "                    training put it (clamped each step); default free\n"
     "  --code-prior W    the fit's prior on the code's expression and\n"
     "                    lights (the training sampler's Gaussian), weight\n"
-    "                    W in [0, 10] (default 0: none; measured better\n"
-    "                    on the validation pairs at 0.0003, not on the\n"
-    "                    test pairs)\n"
+    "                    W in [0, 10], 0: none (default: the weight the\n"
+    "                    model file names, config.fit_code_prior; none\n"
+    "                    when it names none)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression and/or lights\n"
     "                    (comma-separated: expr, light) and keeps them; how\n"
@@ -833,6 +833,11 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
         ev->focal = mi.focal;
         ev->d_n = mi.distance_mm;
         info->image_size = mi.image_size;
+        if (ev->code_prior == GS_FIT_CODE_PRIOR_MODEL) {
+            ev->code_prior = mi.fit_code_prior; /* the report names it */
+            info->code_prior = mi.fit_code_prior;
+            info->code_prior_model = 1;
+        }
         int oracle = 0, top = eval_pairs_identities(&ps) - 1;
         for (int k = 0; k < ev->nmethods; k++)
             oracle |= ev->methods[k] == EVAL_ORACLE;
@@ -917,6 +922,7 @@ static int run_eval(int argc, char **argv)
         return cli_usage_error(cmd, "--model, --pairs and --out are needed");
     evaluator ev;
     memset(&ev, 0, sizeof ev);
+    ev.code_prior = GS_FIT_CODE_PRIOR_MODEL; /* --code-prior replaces it */
     ev.iters = 200;
     ev.nmethods = 1;
     long limit = 0, threads = 2, iters = 200;

@@ -56,7 +56,8 @@ const cli_command cli_fit_command = {
     "  --out FILE       the fitted subject (binary, gs_subject_encode),\n"
     "                   followed by the tuned block with --finetune\n"
     "                   (gs_model_tuned_encode; 3.4 MB for the default parts at cpu)\n"
-    "Prints the fit quality and the estimated labels.\n",
+    "Prints the fit quality and the estimated labels. The fit's code prior\n"
+    "is the one the model file names (gazesplat model; docs/model.md).\n",
     run_fit,
 };
 

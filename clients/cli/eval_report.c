@@ -241,8 +241,9 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
     fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
     char prior[64] = "";
     if (info->code_prior > 0)
-        snprintf(prior, sizeof prior, ", code prior weight %g (--code-prior)",
-                 info->code_prior);
+        snprintf(prior, sizeof prior, ", code prior weight %g (%s)",
+                 info->code_prior,
+                 info->code_prior_model ? "the model's" : "--code-prior");
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
                "iterations cap %d, rates %g (code) and %g (colour)%s%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,

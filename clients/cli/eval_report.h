@@ -82,7 +82,8 @@ typedef struct eval_run_info {
     int light_on_head;    /* --light-on-head */
     unsigned true_code;   /* --true-code: GS_SCENE_CODE_* bits (0: none) */
     int bound_expression; /* --bound-expression */
-    double code_prior;    /* --code-prior */
+    double code_prior;    /* --code-prior, or the model's */
+    int code_prior_model; /* 1: code_prior is the model file's */
     /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
     int ft_iters;
     unsigned ft_parts;

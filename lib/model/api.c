@@ -318,6 +318,7 @@ void gs_fit_options_default(gs_fit_options *o)
     memset(o, 0, sizeof *o);
     o->max_iters = 200;
     o->plateau_rel = 1e-3;
+    o->code_prior = GS_FIT_CODE_PRIOR_MODEL;
     gs_geom_mat3_identity(o->head_R);
 }
 
@@ -514,9 +515,12 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = gs_error_set(err, GS_ERR_ARG,
                           "fit: rates %g (code) and %g (colour): want [0, 10], "
                           "0 for the defaults", o.lr_code, o.lr_colour);
+    if (o.code_prior == GS_FIT_CODE_PRIOR_MODEL)
+        o.code_prior = c->m->cfg.fit_code_prior;
     if (!rc && !(o.code_prior >= 0 && o.code_prior <= 10))
         rc = gs_error_set(err, GS_ERR_ARG,
-                          "fit: code prior weight %g: want [0, 10], 0 for none",
+                          "fit: code prior weight %g: want [0, 10], 0 for "
+                          "none, -1 for the model's",
                           o.code_prior);
     for (int k = 0; !rc && o.code_start && k < c->D; k++)
         if (!isfinite(o.code_start[k]))

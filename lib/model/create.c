@@ -222,6 +222,7 @@ void gs_model_get_info(const gs_model *m, gs_model_info *info)
     info->param_bytes = m->nparams * sizeof(float);
     info->param_id = m->id;
     info->tuned_parts = m->tuned;
+    info->fit_code_prior = m->cfg.fit_code_prior;
 }
 
 void gs_model_spec_default(gs_model_spec *s)
@@ -308,6 +309,16 @@ int gs_model_set_eye_direct(gs_model *m, int on, gs_error *err)
                             "eye direct: the model has no eye stream "
                             "(single-stream ablation)");
     m->cfg.eye_direct = on;
+    return GS_OK;
+}
+
+int gs_model_set_fit_code_prior(gs_model *m, double weight, gs_error *err)
+{
+    if (!m || !(weight >= 0.0 && weight <= 10.0))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "fit code prior %g: want [0, 10], 0 for none",
+                            weight);
+    m->cfg.fit_code_prior = weight;
     return GS_OK;
 }
 

@@ -16,21 +16,25 @@ typedef struct cfg_field {
     int is_double;
     size_t off;
     int optional; /* added after format version 1 shipped */
-    int dflt;     /* its value when absent */
+    int dflt;     /* its value when absent (an int field) */
+    double ddflt; /* its value when absent (a double field) */
 } cfg_field;
 
-#define I(f) {#f, 0, offsetof(gs_model_config, f), 0, 0}
-#define D(f) {#f, 1, offsetof(gs_model_config, f), 0, 0}
-#define OPT_I(f, v) {#f, 0, offsetof(gs_model_config, f), 1, v}
+#define I(f) {#f, 0, offsetof(gs_model_config, f), 0, 0, 0}
+#define D(f) {#f, 1, offsetof(gs_model_config, f), 0, 0, 0}
+#define OPT_I(f, v) {#f, 0, offsetof(gs_model_config, f), 1, v, 0}
+#define OPT_D(f, v) {#f, 1, offsetof(gs_model_config, f), 1, 0, v}
 static const cfg_field k_fields[] = {
     I(n_face), I(n_eye_each), I(feat_dim), I(id_dim), I(hidden),
     I(channels), I(feat_size), I(image_size), I(guidance), I(two_stream),
     I(eye_rotation), I(n_train_ids), D(template_spacing_mm), D(d_n_mm),
     D(focal), OPT_I(guide_source, GS_GUIDE_SRC_BLOCK), OPT_I(n_lid0, 0),
-    OPT_I(n_lid1, 0), OPT_I(supersample, 1), OPT_I(eye_direct, 0)};
+    OPT_I(n_lid1, 0), OPT_I(supersample, 1), OPT_I(eye_direct, 0),
+    OPT_D(fit_code_prior, 0.0)};
 #undef I
 #undef D
 #undef OPT_I
+#undef OPT_D
 #define NFIELDS (int)(sizeof k_fields / sizeof k_fields[0])
 
 static int write_meta(gs_st_writer *w, const gs_model_config *c)
@@ -96,7 +100,10 @@ static int read_config(const gs_st_file *f, gs_model_config *c,
         const char *v = gs_st_meta(f, key);
         unsigned char *base = (unsigned char *)c + k_fields[i].off;
         if (!v && k_fields[i].optional) {
-            memcpy(base, &k_fields[i].dflt, sizeof k_fields[i].dflt);
+            if (k_fields[i].is_double)
+                memcpy(base, &k_fields[i].ddflt, sizeof k_fields[i].ddflt);
+            else
+                memcpy(base, &k_fields[i].dflt, sizeof k_fields[i].dflt);
             continue;
         }
         if (!v || !*v)

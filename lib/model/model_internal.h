@@ -40,6 +40,9 @@ typedef struct gs_model_config {
     double template_spacing_mm; /* face Gaussian spacing at creation */
     double d_n_mm;    /* normalized camera distance */
     double focal;     /* normalized camera focal at image_size, pixels */
+    double fit_code_prior; /* the weight of the fit's code prior that suits
+                              this model (gs_fit_options.code_prior's
+                              default; 0..10; files without the key: 0) */
 } gs_model_config;
 
 /* The latent code tau = [identity (id_dim) | expression (6) | light (12)].

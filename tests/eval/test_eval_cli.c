@@ -469,6 +469,53 @@ int main(int argc, char **argv)
         CHECK(summary_has(md, "feature scale 1, incremental where possible",
                           "(config.eye_direct)", "non-finite outputs 0", NULL));
     }
+    { /* a model naming a fit prior (gazesplat model): eval fits with it
+       * unless told otherwise, the same numbers as --code-prior with the
+       * plain model, and the report says whose weight it is; --code-prior
+       * 0 gives the plain model's numbers back */
+        char pm[300], o3[300], o4[300], o5[300], c3[320], c4[320], c5[320],
+            md3[320];
+        snprintf(pm, sizeof pm, "%s/tiny-prior.safetensors", dir);
+        snprintf(o3, sizeof o3, "%s/run3", dir);
+        snprintf(o4, sizeof o4, "%s/run4", dir);
+        snprintf(o5, sizeof o5, "%s/run5", dir);
+        const char *mk_pm[] = {"model", "--model", model, "--fit-code-prior",
+                               "0.5", "--out", pm, NULL};
+        CHECK_EQ_INT(run(mk_pm), 0);
+        const char *e3[] = {"eval", "--model", pm, "--pairs", pairs,
+                            "--out", o3, "--method", "model,warp,identity",
+                            "--iters", "4", "--threads", "2", "--estimator",
+                            est, NULL};
+        const char *e4[] = {"eval", "--model", model, "--pairs", pairs,
+                            "--out", o4, "--method", "model,warp,identity",
+                            "--iters", "4", "--threads", "2", "--estimator",
+                            est, "--code-prior", "0.5", NULL};
+        const char *e5[] = {"eval", "--model", pm, "--pairs", pairs,
+                            "--out", o5, "--method", "model,warp,identity",
+                            "--iters", "4", "--threads", "2", "--estimator",
+                            est, "--code-prior", "0", NULL};
+        CHECK_EQ_INT(run(e3), 0);
+        CHECK_EQ_INT(run(e4), 0);
+        CHECK_EQ_INT(run(e5), 0);
+        snprintf(c3, sizeof c3, "%s/pairs.csv", o3);
+        snprintf(c4, sizeof c4, "%s/pairs.csv", o4);
+        snprintf(c5, sizeof c5, "%s/pairs.csv", o5);
+        snprintf(md3, sizeof md3, "%s/summary.md", o3);
+        char *p3 = check_csv(c3), *p4 = check_csv(c4), *p5 = check_csv(c5);
+        CHECK_MSG(p3 && p4 && strcmp(p3, p4) == 0,
+                  "the model's prior differs from --code-prior:\n%s\n---\n%s", p3, p4);
+        CHECK_MSG(p3 && a && strcmp(p3, a) != 0, "the prior changed nothing");
+        CHECK_MSG(p5 && a && strcmp(p5, a) == 0,
+                  "--code-prior 0 differs from the plain model:\n%s", p5);
+        CHECK(summary_has(md3, "code prior weight 0.5 (the model's)", NULL));
+        snprintf(md3, sizeof md3, "%s/summary.md", o4);
+        CHECK(summary_has(md3, "code prior weight 0.5 (--code-prior)", NULL));
+        snprintf(md3, sizeof md3, "%s/summary.md", o5);
+        CHECK(summary_has(md3, "!code prior weight", NULL));
+        free(p3);
+        free(p4);
+        free(p5);
+    }
     /* Fine-tuned per input on run 2's fits: finite, deterministic, other
      * numbers than without, the input reproduced better. */
     const char *ev6[] = {"eval", "--model", model, "--pairs", pairs,

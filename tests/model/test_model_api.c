@@ -191,17 +191,20 @@ int main(void)
         CHECK(sum / 2000 > 0.5 && sum / 2000 < 1.05);
     }
 
-    /* The fit with the prior: the default options have none (the same
-     * bytes as weight 0), weight 3e-4 fits otherwise; a heavy prior ends
-     * nearer the sampler's codes than the free fit at the same (fast)
-     * rate; weights outside [0, 10] or NaN are refused and leave the
-     * subject alone. */
+    /* The fit with the prior: the default options take the model's weight,
+     * which is none here (the same bytes as weight 0), weight 3e-4 fits
+     * otherwise; a model naming 3e-4 fits with it by default (the same
+     * bytes as asking for it) and still without it when asked for 0; a
+     * heavy prior ends nearer the sampler's codes than the free fit at
+     * the same (fast) rate; weights outside [0, 10] other than the
+     * model's marker, or NaN, are refused and leave the subject alone. */
     {
         gs_code_prior pr;
         CHECK(gs_code_prior_make(m, &pr, &err) == GS_OK);
         gs_fit_options fx = fo;
         gs_subject s0, sp, sf, keep;
-        CHECK(fo.code_prior == 0);
+        CHECK(fo.code_prior == GS_FIT_CODE_PRIOR_MODEL);
+        CHECK(m->cfg.fit_code_prior == 0);
         fx.code_prior = 0;
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL,
                            &err) == GS_OK);
@@ -210,6 +213,28 @@ int main(void)
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL,
                            &err) == GS_OK);
         CHECK(memcmp(s0.code, sub.code, sizeof(float) * sub.code_dim) != 0);
+        CHECK(gs_model_set_fit_code_prior(m, 3e-4, &err) == GS_OK);
+        gs_subject sm, sz;
+        fx.code_prior = GS_FIT_CODE_PRIOR_MODEL;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sm, NULL,
+                           &err) == GS_OK);
+        CHECK(memcmp(sm.code, s0.code, sizeof(float) * sub.code_dim) == 0 &&
+              memcmp(sm.colour_gain, s0.colour_gain, sizeof sm.colour_gain) == 0 &&
+              sm.fit_psnr == s0.fit_psnr);
+        fx.code_prior = 0;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sz, NULL,
+                           &err) == GS_OK);
+        CHECK(memcmp(sz.code, sub.code, sizeof(float) * sub.code_dim) == 0);
+        /* NULL options: the defaults, so the model's weight */
+        gs_fit_options fd;
+        gs_fit_options_default(&fd);
+        fd.code_prior = 3e-4;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, NULL, &sz, NULL,
+                           &err) == GS_OK);
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fd, &sm, NULL,
+                           &err) == GS_OK);
+        CHECK(memcmp(sz.code, sm.code, sizeof(float) * sub.code_dim) == 0);
+        CHECK(gs_model_set_fit_code_prior(m, 0, &err) == GS_OK);
         fx.code_prior = 0; /* free */
         fx.lr_code = 1.0;
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sf, NULL,
@@ -227,7 +252,7 @@ int main(void)
         printf("fit at rate 1: prior term %.3f free, %.3f with the prior "
                "(weight 1)\n", qf, qp);
         CHECK(qp < qf);
-        const double bad[] = {-0.1, 10.5, NAN, INFINITY};
+        const double bad[] = {-0.1, -2.0, 10.5, NAN, INFINITY};
         for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
             fx.code_prior = bad[k];
             memset(&keep, 0x5a, sizeof keep);

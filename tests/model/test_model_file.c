@@ -1,5 +1,8 @@
 /* Model files: save -> load round trip (every tensor, the configuration),
- * and refusal of truncated, corrupt and inconsistent files. */
+ * and refusal of truncated, corrupt and inconsistent files; the optional
+ * config.fit_code_prior: kept exactly, 0 when absent (older files), refused
+ * outside [0, 10] or unparsable. */
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -36,6 +39,102 @@ static int load_bytes(const uint8_t *buf, size_t len, int *code)
         return 0; /* every refusal must say why */
     unlink(p2);
     return 1;
+}
+
+/* The file at path again with its metadata key `key` set to value (or
+ * left out, value NULL): the bytes in *out (free them). */
+static int with_meta(const char *key, const char *value, uint8_t **out,
+                     size_t *len)
+{
+    gs_error err = {0, ""};
+    gs_st_file *sf = NULL;
+    if (gs_st_open(path, NULL, &sf, &err) != GS_OK)
+        return 0;
+    gs_st_writer *w = gs_st_writer_create();
+    int rc = w ? 0 : -1;
+    for (int i = 0; !rc && i < gs_st_meta_count(sf); i++) {
+        const char *k, *v;
+        gs_st_meta_at(sf, i, &k, &v);
+        if (strcmp(k, key) != 0)
+            rc = gs_st_writer_meta(w, k, v);
+    }
+    if (!rc && value)
+        rc = gs_st_writer_meta(w, key, value);
+    for (int i = 0; !rc && i < gs_st_count(sf); i++) {
+        const gs_st_tensor *t = gs_st_at(sf, i);
+        rc = gs_st_writer_add(w, t->name, t->dtype, t->ndim, t->shape, t->data);
+    }
+    if (!rc)
+        rc = gs_st_writer_to_mem(w, out, len, &err);
+    gs_st_writer_destroy(w);
+    gs_st_close(sf);
+    return rc == 0;
+}
+
+/* Loads bytes; returns the code and the fit prior it named (or -1). */
+static int load_prior(const uint8_t *buf, size_t len, double *prior,
+                      char *msg, size_t cap)
+{
+    gs_model *m = NULL;
+    gs_error err = {0, ""};
+    int code = gs_model_load_mem(buf, len, &m, &err);
+    *prior = -1;
+    if (code == GS_OK) {
+        gs_model_info info;
+        gs_model_get_info(m, &info);
+        *prior = info.fit_code_prior;
+        gs_model_destroy(m);
+    }
+    snprintf(msg, cap, "%s", err.msg);
+    return code;
+}
+
+static void fit_prior_key(gs_model *m)
+{
+    gs_error err = {0, ""};
+    const double w = (double)3e-4f; /* as `--fit-code-prior 0.0003` reads */
+    CHECK(m->cfg.fit_code_prior == 0);
+    CHECK(gs_model_set_fit_code_prior(m, w, &err) == GS_OK);
+    CHECK(gs_model_save(m, path, &err) == GS_OK);
+    gs_model *l = NULL;
+    CHECK_MSG(gs_model_load(path, &l, &err) == GS_OK, "%s", err.msg);
+    CHECK(l && l->cfg.fit_code_prior == w); /* every bit (%.17g) */
+    CHECK(l && memcmp(&l->cfg, &m->cfg, sizeof m->cfg) == 0);
+    gs_model_destroy(l);
+    /* the setter refuses what the file would, and keeps the value */
+    const double bad[] = {-1.0, -1e-9, 10.5, NAN, INFINITY};
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        CHECK(gs_model_set_fit_code_prior(m, bad[k], &err) == GS_ERR_ARG);
+        CHECK(strstr(err.msg, "code prior") != NULL);
+    }
+    CHECK(gs_model_set_fit_code_prior(NULL, 0.1, &err) == GS_ERR_ARG);
+    CHECK(m->cfg.fit_code_prior == w);
+
+    struct { const char *value; int code; double prior; } cases[] = {
+        {NULL, GS_OK, 0.0},      /* a file from before the key: none */
+        {"0", GS_OK, 0.0},       {"10", GS_OK, 10.0},
+        {"0.00030000001424923539", GS_OK, w},
+        {"-0.5", GS_ERR_FORMAT, -1}, {"10.5", GS_ERR_FORMAT, -1},
+        {"nan", GS_ERR_FORMAT, -1},  {"inf", GS_ERR_FORMAT, -1},
+        {"1e", GS_ERR_FORMAT, -1},   {"", GS_ERR_FORMAT, -1},
+        {"0.1x", GS_ERR_FORMAT, -1}, {"1e400", GS_ERR_FORMAT, -1},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        uint8_t *b = NULL;
+        size_t n = 0;
+        CHECK(with_meta("config.fit_code_prior", cases[k].value, &b, &n));
+        double prior = -2;
+        char msg[256] = "";
+        int code = b ? load_prior(b, n, &prior, msg, sizeof msg) : -99;
+        CHECK_MSG(code == cases[k].code && prior == cases[k].prior,
+                  "fit_code_prior '%s': code %d, prior %g", cases[k].value ? cases[k].value : "(absent)",
+                  code, prior);
+        if (cases[k].code != GS_OK)
+            CHECK_MSG(strstr(msg, "fit_code_prior") != NULL, "'%s': %s",
+                      cases[k].value, msg);
+        free(b);
+    }
+    CHECK(gs_model_set_fit_code_prior(m, 0, &err) == GS_OK);
 }
 
 int main(void)
@@ -120,6 +219,7 @@ int main(void)
     gs_st_close(sf);
     free(bad);
     free(buf);
+    fit_prior_key(m);
     unlink(path);
     gs_model_destroy(m);
     GS_TEST_END();

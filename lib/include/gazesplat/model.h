@@ -70,6 +70,8 @@ typedef struct gs_model_info {
                            created or pruned with (a hash of them and of
                            the tensor table); clones keep it */
     unsigned tuned_parts; /* GS_FT_* parts fine-tuned since (0: none) */
+    double fit_code_prior; /* the fit's code prior weight the model file
+                              names (config.fit_code_prior; 0: none) */
 } gs_model_info;
 void gs_model_get_info(const gs_model *m, gs_model_info *info);
 
@@ -263,14 +265,20 @@ typedef struct gs_fit_options {
     /* Weight of a Gaussian prior on the code's expression and lights, with
      * the mean and covariance those slots have over the training sampler
      * (at most about `code_prior` added to the loss for a code the sampler
-     * draws); 0 (default): none. In [0, 10]. Measured better on the
-     * validation pairs at 3e-4, not on the test pairs (docs/model.md,
-     * "Fitting"). */
+     * draws); 0: none; in [0, 10]. GS_FIT_CODE_PRIOR_MODEL (the default of
+     * gs_fit_options_default): the weight the model file names
+     * (gs_model_info.fit_code_prior, 0 when it names none). Which weight
+     * suits depends on the model (docs/model.md, "Fitting"). */
     double code_prior;
 } gs_fit_options;
+#define GS_FIT_CODE_PRIOR_MODEL (-1.0)
 #define GS_FIT_LR_CODE_DEFAULT 0.12
 #define GS_FIT_LR_COLOUR_DEFAULT 0.02
 void gs_fit_options_default(gs_fit_options *o);
+/* Sets the code prior weight a model names for its fits (0..10; 0: none),
+ * kept in the file gs_model_write writes (config.fit_code_prior).
+ * GS_ERR_ARG outside [0, 10] or not finite. */
+int gs_model_set_fit_code_prior(gs_model *m, double weight, gs_error *err);
 
 typedef struct gs_fit_report {
     int iters;

@@ -1,0 +1,91 @@
+/* gazesplat model: what a model file holds, and the serving settings it
+ * names (the fit's code prior) set in a copy. */
+#include <inttypes.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "cli.h"
+#include "gazesplat/model.h"
+#include "gazesplat/train.h"
+
+static int run_model(int argc, char **argv);
+
+const cli_command cli_model_command = {
+    "model",
+    "show a model file's configuration; set the fit settings it names",
+    "usage: gazesplat model --model FILE [--fit-code-prior W --out OUT]\n"
+    "\n"
+    "  --model FILE        a model file (gazesplat train); loaded and checked\n"
+    "                      as the daemon loads it, then described on stdout\n"
+    "  --fit-code-prior W  write a copy naming W as the weight of the fit's\n"
+    "                      code prior (config.fit_code_prior, 0..10; 0: none),\n"
+    "                      the default of every fit made with the model (the\n"
+    "                      daemon's, gazesplat fit, redirect, live and eval);\n"
+    "                      read as eval's --code-prior reads it, so the model\n"
+    "                      fits as `eval --code-prior W` did (docs/model.md,\n"
+    "                      \"Fitting\")\n"
+    "  --out OUT           where the copy goes (written atomically; may be\n"
+    "                      FILE itself); the parameters are the same bytes\n",
+    run_model,
+};
+
+enum { O_MODEL, O_PRIOR, O_OUT, O_N };
+
+static void describe(const char *path, const gs_model *m)
+{
+    gs_model_info mi;
+    gs_model_get_info(m, &mi);
+    printf("model: %s\n", path);
+    printf("image_size: %d\n", mi.image_size);
+    printf("feat_size: %d\n", mi.feat_size);
+    printf("supersample: %d\n", mi.supersample);
+    printf("eye_direct: %d\n", mi.eye_direct);
+    printf("lids: %d\n", gs_model_has_lids(m));
+    printf("gaussians_face: %d\n", mi.n_face);
+    printf("gaussians_eye: %d\n", mi.n_eye);
+    printf("code_dim: %d\n", mi.code_dim);
+    printf("train_identities: %d\n", mi.n_train_ids);
+    printf("focal_px: %.17g\n", mi.focal);
+    printf("distance_mm: %.17g\n", mi.distance_mm);
+    printf("param_bytes: %zu\n", mi.param_bytes);
+    printf("param_id: %016" PRIx64 "\n", mi.param_id);
+    printf("fit_code_prior: %.17g\n", mi.fit_code_prior);
+}
+
+static int run_model(int argc, char **argv)
+{
+    cli_opt o[O_N] = {{"--model", 1, NULL}, {"--fit-code-prior", 1, NULL},
+                      {"--out", 1, NULL}};
+    const cli_command *cmd = &cli_model_command;
+    int rc = cli_parse(cmd, argc, argv, o, O_N);
+    if (rc == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (rc != CLI_PARSED)
+        return rc;
+    if (!o[O_MODEL].value)
+        return cli_usage_error(cmd, "missing --model");
+    if (!o[O_PRIOR].value != !o[O_OUT].value)
+        return cli_usage_error(cmd, "--fit-code-prior and --out go together");
+    double prior = -1.0;
+    if ((rc = cli_parse_range(cmd, "--fit-code-prior", o[O_PRIOR].value, 0.0, 10.0,
+                              "a weight in [0, 10] (0: no prior)", &prior)))
+        return rc;
+    gs_error err = {0, ""};
+    gs_model *m = NULL;
+    if (gs_model_load(o[O_MODEL].value, &m, &err))
+        return cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
+    if (o[O_OUT].value) {
+        if (gs_model_set_fit_code_prior(m, prior, &err) ||
+            gs_model_write(m, o[O_OUT].value, &err)) {
+            gs_model_destroy(m);
+            return cli_fail(cmd, "%s: %s", o[O_OUT].value, err.msg);
+        }
+        describe(o[O_OUT].value, m);
+    } else {
+        describe(o[O_MODEL].value, m);
+    }
+    gs_model_destroy(m);
+    return CLI_OK;
+}
