@@ -7,10 +7,16 @@ for both runs; fixed seed, so the figures repeat), with the PSNR's mean
 difference. A pair counts when both runs evaluated it ("ok" with a
 readout); pairs only one run has are named and left out.
 
-    bench/eval/paired_diff.py A/pairs.csv B/pairs.csv [--method M] [--reps N]
+    bench/eval/paired_diff.py A/pairs.csv B/pairs.csv [A2 B2 ...]
+        [--method M] [--reps N] [--leave-out-input K:I ...]
 
---method: the method compared (default transfer); --reps: bootstrap
-resamples (default 10000). Standard library only.
+More than one pairing (A2 against B2: another pairs file, such as the
+test pairs beside the validation pairs) pools them: one table over all
+their pairs, each pair resampled as one. --leave-out-input K:I leaves
+out input I of the K-th pairing (0: the first), to read a difference
+without one input's fits (repeatable). --method: the method compared
+(default transfer); --reps: bootstrap resamples (default 10000).
+Standard library only.
 
 The interval counts the pairs' spread, not the fits': a change in the
 last digits of a fit's arithmetic moves a 15-input run's mean by about
@@ -43,30 +49,57 @@ def interval(diffs, reps, rng):
     return means[int(0.025 * reps)], means[min(reps - 1, int(0.975 * reps))]
 
 
+def leave_outs(specs, npairings):
+    out = set()
+    for spec in specs:
+        k, _, i = spec.partition(":")
+        if not (k.isdigit() and i.isdigit()) or int(k) >= npairings:
+            sys.exit(f"--leave-out-input {spec}: want K:I, K a pairing "
+                     f"0..{npairings - 1} and I an input")
+        out.add((int(k), i))
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("a")
-    ap.add_argument("b")
+    ap.add_argument("runs", nargs="+", metavar="A B")
     ap.add_argument("--method", default="transfer")
     ap.add_argument("--reps", type=int, default=10000)
+    ap.add_argument("--leave-out-input", action="append", default=[])
     o = ap.parse_args()
     if o.reps < 100:
         sys.exit("--reps: want at least 100")
-    A, B = rows_of(o.a, o.method), rows_of(o.b, o.method)
-    if not A or not B:
-        sys.exit(f"no '{o.method}' rows with a readout in "
-                 f"{o.a if not A else o.b} (run eval with --readout)")
-    common = sorted(set(A) & set(B), key=int)
-    only = sorted(set(A) ^ set(B), key=int)
-    if only:
-        print(f"pairs in one run only (left out): {', '.join(only)}")
-    for p in common:
-        if (A[p]["input"], A[p]["head_change"]) != (B[p]["input"], B[p]["head_change"]):
-            sys.exit(f"pair {p} is another pair in the two runs: not the "
-                     "same pairs file")
+    if len(o.runs) < 2 or len(o.runs) % 2:
+        sys.exit("want runs in pairs: A B [A2 B2 ...]")
+    drop = leave_outs(o.leave_out_input, len(o.runs) // 2)
+    A, B, common = {}, {}, []
+    for k in range(len(o.runs) // 2):
+        fa, fb = o.runs[2 * k], o.runs[2 * k + 1]
+        a, b = rows_of(fa, o.method), rows_of(fb, o.method)
+        if not a or not b:
+            sys.exit(f"no '{o.method}' rows with a readout in "
+                     f"{fa if not a else fb} (run eval with --readout)")
+        only = sorted(set(a) ^ set(b), key=int)
+        if only:
+            print(f"pairs in one run only (left out){f' of pairing {k}' if k else ''}: "
+                  f"{', '.join(only)}")
+        for p in sorted(set(a) & set(b), key=int):
+            if (a[p]["input"], a[p]["head_change"]) != (b[p]["input"], b[p]["head_change"]):
+                sys.exit(f"pair {p} is another pair in {fa} and {fb}: not "
+                         "the same pairs file")
+            if (k, a[p]["input"]) in drop:
+                continue
+            A[(k, p)], B[(k, p)] = a[p], b[p]
+            common.append((k, p))
+    if not common:
+        sys.exit("no pairs left to compare")
     rng = random.Random(12345)
-    print(f"\n`{o.a}` (A) against `{o.b}` (B), method {o.method}, "
-          f"{o.reps} paired resamples\n")
+    names = " + ".join(f"`{o.runs[2 * k]}`" for k in range(len(o.runs) // 2))
+    namesb = " + ".join(f"`{o.runs[2 * k + 1]}`" for k in range(len(o.runs) // 2))
+    left = (f", inputs left out: {', '.join(sorted(o.leave_out_input))}"
+            if o.leave_out_input else "")
+    print(f"\n{names} (A) against {namesb} (B), method {o.method}, "
+          f"{o.reps} paired resamples{left}\n")
     print("| pairs | n | A gaze° | B gaze° | B − A | 95 % interval | "
           "B − A PSNR dB |")
     print("|---|---:|---:|---:|---:|---|---:|")

@@ -4,8 +4,10 @@ reads every head-change pair 1 degree worse than run A plus noise of
 0.5 degrees, and gaze-only pairs the same as A. The table must give +1.00
 at a head change with an interval about it that excludes 0, 0 on gaze-only
 pairs with an interval of width 0, +0.50 over all pairs; a pair only one
-run has is named and left out; runs over different pairs, and a file
-without the readout, are refused."""
+run has is named and left out; pooled with a second pairing 3 degrees
+apart, one table over both, and an input left out of it drops its pairs;
+runs over different pairs, a file without the readout, an odd count of
+runs and bad leave-out specs are refused."""
 import csv
 import os
 import random
@@ -76,6 +78,37 @@ with tempfile.TemporaryDirectory() as d:
     n, _, _, dm, _, _, _ = row("all pairs")
     if n != 120 or abs(dm - 0.5) > 0.1:
         fail(f"all pairs: {dm}, n {n}", out)
+    # pooled with a second pairing in which B reads every pair 3 degrees
+    # worse: one table over 240 pairs; leaving out input 0 of the second
+    # pairing drops its 10 pairs
+    a2 = [["transfer", p, p // 10, p % 2, "ok", 30.0, rnd.uniform(1, 10)]
+          for p in range(120)]
+    b2 = [x[:6] + [x[6] + 3.0] for x in a2]
+    pa2, pb2 = os.path.join(d, "a2.csv"), os.path.join(d, "b2.csv")
+    write(pa2, a2)
+    write(pb2, b2)
+    r = run(pa, pb, pa2, pb2, "--reps", "2000")
+    out = r.stdout
+    if r.returncode:
+        fail("the pooled run failed: " + r.stderr)
+    n, _, _, dm, _, _, _ = row("all pairs")
+    if n != 240 or abs(dm - 1.75) > 0.06:
+        fail(f"pooled all pairs: {dm}, n {n}", out)
+    n, _, _, dm, lo, hi, _ = row("gaze only")
+    if n != 120 or dm != 1.5 or not (lo < 1.5 < hi):
+        fail(f"pooled gaze only: {dm} ({lo} to {hi}), n {n}", out)
+    r = run(pa, pb, pa2, pb2, "--reps", "2000", "--leave-out-input", "1:0")
+    out = r.stdout
+    n, _, _, dm, _, _, _ = row("all pairs")
+    if r.returncode or n != 230 or "inputs left out: 1:0" not in out:
+        fail(f"leave-out: n {n}", out + r.stderr)
+    for bad in (["--leave-out-input", "2:0"], ["--leave-out-input", "x"]):
+        r = run(pa, pb, pa2, pb2, *bad)
+        if r.returncode == 0 or "leave-out-input" not in r.stderr:
+            fail(f"{bad} was not refused", r.stderr)
+    r = run(pa, pb, pa2)
+    if r.returncode == 0 or "in pairs" not in r.stderr:
+        fail("an odd count of runs was not refused", r.stderr)
     # the same pairs numbers for other pairs: refused
     b[0][2] = 99
     write(pb, b)
