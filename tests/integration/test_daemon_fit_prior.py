@@ -1,0 +1,64 @@
+"""gazesplatd fits with the code prior its model file names
+(config.fit_code_prior, set with `gazesplat model --fit-code-prior`): a
+tiny real model served as trained, with weight 1 and with weight 0, one
+daemon each over a real socket. The weight-1 model fits and renders
+otherwise and the daemon says so at load; the weight-0 copy fits and
+renders the plain model's bytes (and its id differs, so it is another
+model to the daemon).
+usage: test_daemon_fit_prior.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
+import os
+import subprocess
+import sys
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
+from daemon_util import Checks, Daemon  # noqa: E402
+from model_fixture import faces, tiny_model  # noqa: E402
+from client_checks import finish, start_ready  # noqa: E402
+import gazesplat_client as gc  # noqa: E402
+
+FAST = 6  # fit iterations
+
+
+def serve(t, daemon, model, img):
+    """FIT img and render it at one gaze on a daemon serving model:
+    (fit PSNR, render bytes, model id, log)."""
+    d, addr = start_ready(t, Daemon, daemon, ["--model", model, "--set", "photo_input=no"])
+    try:
+        with gc.Client(addr) as c:
+            r = c.fit(img, max_iters=FAST)
+            out = list(c.redirect([(10, -15)], subject=r.subject_key, fmt="raw"))[0].image.data
+            mid = c.health().model_id
+    finally:
+        finish(t, d)
+    return r.psnr, out, mid, d.log()
+
+
+def main():
+    daemon, cli, work = (os.path.abspath(a) for a in sys.argv[1:4])
+    os.makedirs(work, exist_ok=True)
+    t = Checks()
+    plain = tiny_model(cli, work, seed=1)
+    img = faces(cli, work, 128, 3)[0]
+    p1 = os.path.join(work, "prior1.safetensors")
+    p0 = os.path.join(work, "prior0.safetensors")
+    subprocess.run([cli, "model", "--model", plain, "--fit-code-prior", "1", "--out", p1],
+                   check=True, capture_output=True)
+    subprocess.run([cli, "model", "--model", p1, "--fit-code-prior", "0", "--out", p0],
+                   check=True, capture_output=True)
+    psnr_a, out_a, id_a, log_a = serve(t, daemon, plain, img)
+    psnr_1, out_1, id_1, log_1 = serve(t, daemon, p1, img)
+    psnr_0, out_0, id_0, log_0 = serve(t, daemon, p0, img)
+    t.check("code prior" not in log_a, "a model naming no prior: no prior in the log")
+    t.check("fits use the model's code prior, weight 1" in log_1, "the weight is logged at load")
+    t.check(psnr_1 != psnr_a and out_1 != out_a,
+            "weight 1 fits otherwise: PSNR %.4f against %.4f" % (psnr_1, psnr_a))
+    t.check(psnr_0 == psnr_a and out_0 == out_a, "weight 0 fits as the plain model: PSNR %.4f against %.4f"
+            % (psnr_0, psnr_a))
+    t.check(len({id_a, id_1, id_0}) == 3, "three files, three model ids: %s" % [id_a, id_1, id_0])
+    return t.status()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
