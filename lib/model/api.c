@@ -517,7 +517,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                           "0 for the defaults", o.lr_code, o.lr_colour);
     if (o.code_prior == GS_FIT_CODE_PRIOR_MODEL)
         o.code_prior = c->m->cfg.fit_code_prior;
-    if (!rc && !(o.code_prior >= 0 && o.code_prior <= 10))
+    if (!rc && !gs_code_prior_weight_ok(o.code_prior))
         rc = gs_error_set(err, GS_ERR_ARG,
                           "fit: code prior weight %g: want [0, 10], 0 for "
                           "none, -1 for the model's",

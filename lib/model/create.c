@@ -314,7 +314,7 @@ int gs_model_set_eye_direct(gs_model *m, int on, gs_error *err)
 
 int gs_model_set_fit_code_prior(gs_model *m, double weight, gs_error *err)
 {
-    if (!m || !(weight >= 0.0 && weight <= 10.0))
+    if (!m || !gs_code_prior_weight_ok(weight))
         return gs_error_set(err, GS_ERR_ARG,
                             "fit code prior %g: want [0, 10], 0 for none",
                             weight);

@@ -16,14 +16,13 @@ typedef struct cfg_field {
     int is_double;
     size_t off;
     int optional; /* added after format version 1 shipped */
-    int dflt;     /* its value when absent (an int field) */
-    double ddflt; /* its value when absent (a double field) */
+    double dflt;  /* its value when absent (an int field: exact) */
 } cfg_field;
 
-#define I(f) {#f, 0, offsetof(gs_model_config, f), 0, 0, 0}
-#define D(f) {#f, 1, offsetof(gs_model_config, f), 0, 0, 0}
-#define OPT_I(f, v) {#f, 0, offsetof(gs_model_config, f), 1, v, 0}
-#define OPT_D(f, v) {#f, 1, offsetof(gs_model_config, f), 1, 0, v}
+#define I(f) {#f, 0, offsetof(gs_model_config, f), 0, 0}
+#define D(f) {#f, 1, offsetof(gs_model_config, f), 0, 0}
+#define OPT_I(f, v) {#f, 0, offsetof(gs_model_config, f), 1, v}
+#define OPT_D(f, v) {#f, 1, offsetof(gs_model_config, f), 1, v}
 static const cfg_field k_fields[] = {
     I(n_face), I(n_eye_each), I(feat_dim), I(id_dim), I(hidden),
     I(channels), I(feat_size), I(image_size), I(guidance), I(two_stream),
@@ -100,10 +99,12 @@ static int read_config(const gs_st_file *f, gs_model_config *c,
         const char *v = gs_st_meta(f, key);
         unsigned char *base = (unsigned char *)c + k_fields[i].off;
         if (!v && k_fields[i].optional) {
-            if (k_fields[i].is_double)
-                memcpy(base, &k_fields[i].ddflt, sizeof k_fields[i].ddflt);
-            else
-                memcpy(base, &k_fields[i].dflt, sizeof k_fields[i].dflt);
+            if (k_fields[i].is_double) {
+                memcpy(base, &k_fields[i].dflt, sizeof(double));
+            } else {
+                int x = (int)k_fields[i].dflt;
+                memcpy(base, &x, sizeof x);
+            }
             continue;
         }
         if (!v || !*v)

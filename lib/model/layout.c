@@ -69,7 +69,7 @@ int gs_model_config_check(const gs_model_config *c, gs_error *err)
         return gs_error_set(err, GS_ERR_FORMAT,
                             "model config: template spacing %g mm",
                             c->template_spacing_mm);
-    if (!(c->fit_code_prior >= 0.0 && c->fit_code_prior <= 10.0))
+    if (!gs_code_prior_weight_ok(c->fit_code_prior))
         return gs_error_set(err, GS_ERR_FORMAT,
                             "model config: fit_code_prior %g outside [0, 10]",
                             c->fit_code_prior);

@@ -191,6 +191,12 @@ int gs_model_alloc(const gs_model_config *cfg, const char *what, gs_model **out,
 const gs_ptensor *gs_model_find_tensor(const gs_model *m, const char *name);
 void gs_model_bind(const gs_model *m, float *base, gs_model_params *p);
 int gs_model_config_check(const gs_model_config *c, gs_error *err);
+/* A code prior weight a fit, a model file or gs_model_set_fit_code_prior
+ * accepts: [0, 10] (0: none); NaN is not. */
+static inline int gs_code_prior_weight_ok(double w)
+{
+    return w >= 0.0 && w <= 10.0;
+}
 
 /* Creates a model with fresh parameters from the synthetic template. */
 int gs_model_create(const gs_model_config *cfg, uint64_t seed, gs_model **out,
