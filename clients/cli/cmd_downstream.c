@@ -54,7 +54,9 @@ const cli_command cli_eval_downstream_command = {
     "  --threads N         worker threads (2); the numbers are the same for\n"
     "                      any count, timings aside\n"
     "  --reuse-fits        take each identity's fit from DIR/fits/ when\n"
-    "                      there (same model and --iters assumed)\n",
+    "                      it was made with this model, --iters, --fit-lr\n"
+    "                      and input (each file is keyed by them; any\n"
+    "                      other is fitted again and rewritten)\n",
     run_downstream,
 };
 

@@ -85,8 +85,11 @@ const cli_command cli_eval_command = {
     "  --threads N       worker threads (default 2); results are the same\n"
     "                    for a given count, timings aside\n"
     "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
-    "                    every run) when there: rescoring with another\n"
-    "                    estimator or method list costs no fitting\n"
+    "                    every run) when there and made with this model,\n"
+    "                    these fit options and this input (each file is\n"
+    "                    keyed by them; any other is fitted again and\n"
+    "                    rewritten): rescoring with another estimator,\n"
+    "                    method list or render setting costs no fitting\n"
     "  --save-images N   write the input, target and outputs of the first N\n"
     "                    pairs as DIR/images/PAIR_WHAT.png\n"
     "  render settings of the model method (speed against error; the fit\n"
@@ -245,7 +248,7 @@ typedef struct evaluator {
     eval_row *rows;
     int nrows;
     const char *dir;            /* --out */
-    int reuse_fits, fits_reused;
+    int reuse_fits, fits_reused, fits_stale;
     int save_images;            /* pairs [0, save_images) as PNG */
     gs_finetune_options fo;     /* --finetune: fo.iters > 0 */
     double ft_eye_w;            /* --finetune-eye-weight */
@@ -419,20 +422,14 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
 }
 
 /* Fits are the slow part: each successful fit is kept as DIR/fits/N.bin
- * (gs_eval_fit_cache_write), and --reuse-fits takes them from there
- * instead of fitting again (same model and options assumed: the file does
- * not record them). */
+ * (gs_eval_fit_cache_write), keyed by what made it (the model, the fit's
+ * options and the input: gs_eval_fit_key), and --reuse-fits takes it from
+ * there instead of fitting again when the key is this run's. A fit of
+ * another key is made again (counted in fits_stale). */
 static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
                       const gs_synth_scene *iscene, gs_subject *sub,
                       double *secs, gs_error *err)
 {
-    char path[4200];
-    snprintf(path, sizeof path, "%s/fits/%05d.bin", ev->dir, input);
-    if (ev->reuse_fits &&
-        gs_eval_fit_cache_read(path, sub, secs, NULL) == GS_OK) {
-        ev->fits_reused++;
-        return GS_OK;
-    }
     gs_fit_options o;
     gs_fit_options_default(&o);
     o.max_iters = ev->iters;
@@ -450,10 +447,22 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
         o.code_start = code;
         o.code_fixed = fixed;
     }
+    char path[4200];
+    snprintf(path, sizeof path, "%s/fits/%05d.bin", ev->dir, input);
+    const uint64_t key = gs_eval_fit_key(ev->m, &o, in);
+    if (ev->reuse_fits) {
+        int rd = gs_eval_fit_cache_read(path, key, sub, secs, NULL);
+        if (rd == GS_OK) {
+            ev->fits_reused++;
+            return GS_OK;
+        }
+        if (rd == GS_ERR_STATE)
+            ev->fits_stale++;
+    }
     int rc = gs_eval_fit_sample_with(ev->c, ev->pool, in, &o, sub, secs, err);
     if (rc)
         return rc;
-    if (gs_eval_fit_cache_write(path, sub, *secs, NULL))
+    if (gs_eval_fit_cache_write(path, key, sub, *secs, NULL))
         fprintf(stderr, "gazesplat eval: cannot write %s\n", path);
     return GS_OK;
 }
@@ -727,6 +736,7 @@ static int evaluate(evaluator *ev, const cli_opt *o, const gs_eval_pairs *ps,
         rc = cli_fail(cmd, "cannot write %s", path);
     if (md) {
         info->fits_reused = ev->fits_reused;
+        info->fits_stale = ev->fits_stale;
         info->ft_n = ev->ft_n;
         if (ev->ft_n) {
             info->ft_s = ev->ft_s / ev->ft_n;

@@ -329,6 +329,10 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
     if (info->fits_reused)
         fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
                    "their fit times are that run's\n", info->fits_reused);
+    if (info->fits_stale)
+        fprintf(f, "- %d cached fits were made with another model, other fit "
+                   "options or another input (--reuse-fits): fitted again\n",
+                info->fits_stale);
     if (info->estimator)
         fprintf(f, "- estimator: `%s`; floor = its error on the ground-truth "
                    "target against the true label\n", info->estimator);

@@ -69,6 +69,8 @@ typedef struct eval_run_info {
     int threads, iters, inputs, image_size;
     double fit_lr_code, fit_lr_colour; /* the fit's Adam rates */
     int fits_reused;      /* fits taken from an earlier run's DIR/fits */
+    int fits_stale;       /* cached fits of another model, fit options or
+                             input, made again */
     /* render settings of the model method (--prune, --feature-scale,
      * --full-render): face Gaussians kept of n_face, the scale, 0/1 */
     int face_kept, n_face;

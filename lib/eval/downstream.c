@@ -239,11 +239,15 @@ static int target_labels(ds_run *r, double pitch, double yaw, float lab[4],
 }
 
 /* Fit (or the cached fit) on real sample 1. */
-static int fit(ds_run *r, gs_model_ctx *c, const char *path, int reuse,
-               gs_subject *sub, gs_eval_ds_result *res, gs_error *err)
+static int fit(ds_run *r, const gs_model *m, gs_model_ctx *c,
+               const char *path, int reuse, gs_subject *sub,
+               gs_eval_ds_result *res, gs_error *err)
 {
+    const uint64_t key = gs_eval_fit_sample_key(m, &r->in, r->o->fit_iters,
+                                                r->o->fit_lr_code,
+                                                r->o->fit_lr_colour);
     if (path && reuse &&
-        gs_eval_fit_cache_read(path, sub, &res->fit_s, NULL) == GS_OK) {
+        gs_eval_fit_cache_read(path, key, sub, &res->fit_s, NULL) == GS_OK) {
         res->fit_reused = 1;
     } else {
         int rc = gs_eval_fit_sample(c, r->pool, &r->in, r->o->fit_iters,
@@ -251,7 +255,7 @@ static int fit(ds_run *r, gs_model_ctx *c, const char *path, int reuse,
                                     &res->fit_s, err);
         if (rc)
             return rc;
-        if (path && gs_eval_fit_cache_write(path, sub, res->fit_s, NULL))
+        if (path && gs_eval_fit_cache_write(path, key, sub, res->fit_s, NULL))
             res->cache_write_failed = 1;
     }
     res->fit_psnr = sub->fit_psnr;
@@ -267,7 +271,7 @@ static int redirect(ds_run *r, const gs_model *m, const char *path,
         return gs_error_set(err, GS_ERR_NOMEM, "eval-downstream: out of "
                             "memory");
     gs_subject sub;
-    int rc = fit(r, c, path, reuse, &sub, res, err);
+    int rc = fit(r, m, c, path, reuse, &sub, res, err);
     size_t st = 3 * (size_t)r->S;
     for (int j = 0; !rc && j < r->o->set_size; j++) {
         double p, y;

@@ -100,6 +100,84 @@ uint64_t gs_model_param_id(const gs_model *m)
     return hash_final(&h);
 }
 
+/* One part of a key: its own hash and length, as one 32-byte block. */
+static void hash_part(hash64 *h, const void *p, size_t n)
+{
+    hash64 s;
+    hash_init(&s, 0x706172742d6b6579ULL);
+    hash_bytes(&s, p, n);
+    uint64_t b[4] = {hash_final(&s), (uint64_t)n, 0, 0};
+    hash_bytes(h, b, sizeof b);
+}
+
+static uint64_t bits(double x)
+{
+    uint64_t u;
+    memcpy(&u, &x, 8);
+    return u;
+}
+
+uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
+                          const uint8_t *rgb, size_t stride)
+{
+    gs_fit_options o;
+    if (opt)
+        o = *opt;
+    else
+        gs_fit_options_default(&o);
+    const gs_model_config *c = &m->cfg;
+    const int S = c->image_size, D = gs_model_code_dim(c);
+    /* What gs_model_fit makes of the options (api.c): the defaults that 0
+     * stands for, the model's prior weight for GS_FIT_CODE_PRIOR_MODEL,
+     * the known labels only when known. Every field of the configuration
+     * but fit_code_prior (resolved here) shapes the fit's renders. */
+    uint64_t r[48] = {
+        gs_model_param_id(m), 1 /* key version */,
+        (uint64_t)c->n_face, (uint64_t)c->n_eye_each, (uint64_t)c->feat_dim,
+        (uint64_t)c->id_dim, (uint64_t)c->hidden, (uint64_t)c->channels,
+        (uint64_t)c->feat_size, (uint64_t)S, (uint64_t)c->guidance,
+        (uint64_t)c->guide_source, (uint64_t)c->two_stream,
+        (uint64_t)c->eye_rotation, (uint64_t)c->n_train_ids,
+        (uint64_t)c->n_lid0, (uint64_t)c->n_lid1, (uint64_t)c->supersample,
+        (uint64_t)c->eye_direct, bits(c->template_spacing_mm), bits(c->d_n_mm),
+        bits(c->focal),
+        (uint64_t)(o.max_iters > 0 ? o.max_iters : 200),
+        bits(o.time_budget_s > 0 ? o.time_budget_s : 0),
+        bits(o.plateau_rel > 0 ? o.plateau_rel : 1e-3),
+        bits(o.lr_code > 0 ? o.lr_code : GS_FIT_LR_CODE_DEFAULT),
+        bits(o.lr_colour > 0 ? o.lr_colour : GS_FIT_LR_COLOUR_DEFAULT),
+        (uint64_t)(o.bound_expression != 0),
+        bits(o.code_prior == GS_FIT_CODE_PRIOR_MODEL ? c->fit_code_prior
+                                                     : o.code_prior),
+        (uint64_t)(o.known_gaze != 0), (uint64_t)(o.known_head != 0),
+        (uint64_t)(o.code_start != NULL), (uint64_t)(o.code_fixed != NULL),
+        (uint64_t)(o.mask != NULL),
+    };
+    int n = 34;
+    if (o.known_gaze) {
+        r[n++] = bits(o.gaze_pitch);
+        r[n++] = bits(o.gaze_yaw);
+    }
+    if (o.known_head) {
+        for (int k = 0; k < 9; k++)
+            r[n++] = bits(o.head_R[k]);
+        for (int k = 0; k < 3; k++)
+            r[n++] = bits(o.head_t[k]);
+    }
+    hash64 h;
+    hash_init(&h, 0x6669742d6b657931ULL);
+    hash_part(&h, r, (size_t)n * sizeof r[0]);
+    if (o.code_start)
+        hash_part(&h, o.code_start, (size_t)D * sizeof(float));
+    if (o.code_fixed)
+        hash_part(&h, o.code_fixed, (size_t)D);
+    for (int y = 0; o.mask && y < S; y++)
+        hash_part(&h, o.mask + (size_t)y * S, (size_t)S);
+    for (int y = 0; y < S; y++)
+        hash_part(&h, rgb + (size_t)y * stride, 3 * (size_t)S);
+    return hash_final(&h);
+}
+
 static uint64_t block_hash(const uint8_t *p, size_t n)
 {
     hash64 h;

@@ -512,6 +512,35 @@ int main(int argc, char **argv)
         CHECK(summary_has(md3, "code prior weight 0.5 (--code-prior)", NULL));
         snprintf(md3, sizeof md3, "%s/summary.md", o5);
         CHECK(summary_has(md3, "!code prior weight", NULL));
+        /* Cached fits are keyed by what made them: run 3's (the model's
+         * 0.5) serve the plain model at --code-prior 0.5, the same fit,
+         * but not the prior model at --code-prior 0, whose fits are made
+         * again, with a fresh run's numbers. */
+        const char *r4[] = {"eval", "--model", model, "--pairs", pairs,
+                            "--out", o3, "--method", "model,warp,identity",
+                            "--iters", "4", "--threads", "2", "--estimator",
+                            est, "--code-prior", "0.5", "--reuse-fits", NULL};
+        CHECK_EQ_INT(run(r4), 0);
+        char *q = check_csv(c3);
+        CHECK_MSG(q && p4 && strcmp(q, p4) == 0, "reused fits differ:\n%s", q);
+        free(q);
+        snprintf(md3, sizeof md3, "%s/summary.md", o3);
+        CHECK(summary_has(md3, "2 fits reused", "!fitted again", NULL));
+        const char *r5[] = {"eval", "--model", pm, "--pairs", pairs,
+                            "--out", o3, "--method", "model,warp,identity",
+                            "--iters", "4", "--threads", "2", "--estimator",
+                            est, "--code-prior", "0", "--reuse-fits", NULL};
+        CHECK_EQ_INT(run(r5), 0);
+        q = check_csv(c3);
+        CHECK_MSG(q && p5 && strcmp(q, p5) == 0,
+                  "stale fits were reused:\n%s", q);
+        free(q);
+        CHECK(summary_has(md3, "2 cached fits were made with another model, "
+                               "other fit options or another input",
+                          "!fits reused", NULL));
+        /* ... and the refitted files serve that setting from then on */
+        CHECK_EQ_INT(run(r5), 0);
+        CHECK(summary_has(md3, "2 fits reused", "!fitted again", NULL));
         free(p3);
         free(p4);
         free(p5);

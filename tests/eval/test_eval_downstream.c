@@ -144,19 +144,53 @@ static void usage_errors(const char *exe, const char *model, const char *est)
     CHECK_EQ_INT(ev_spawn(dir, noest), 1);
 }
 
+/* The cache file format: a file of the run reads as a keyed fit cache
+ * (of another key than 0: GS_ERR_STATE), a written one reads back with its
+ * key alone, and unkeyed files of the older format are stale, not bad. */
 static void fit_cache(const char *out)
 {
-    gs_subject s;
+    gs_subject s, t;
     double secs = -1;
     char path[320];
     snprintf(path, sizeof path, "%s/fits/seed1_00001.bin", out);
-    CHECK(gs_eval_fit_cache_read(path, &s, &secs, NULL) == GS_OK);
-    CHECK(secs >= 0);
+    CHECK(gs_eval_fit_cache_read(path, 0, &s, &secs, NULL) == GS_ERR_STATE);
+    FILE *f = fopen(path, "rb");
+    char magic[8] = {0};
+    CHECK(f && fread(magic, 1, 8, f) == 8 && fclose(f) == 0);
+    CHECK(memcmp(magic, "GSFITC2\n", 8) == 0);
+    memset(&s, 0, sizeof s);
+    s.code_dim = 4;
+    s.code[2] = 0.25f;
+    s.head_R[0] = s.head_R[4] = s.head_R[8] = 1;
+    s.fit_psnr = 30;
+    snprintf(path, sizeof path, "%s/fits/mine.bin", out);
+    const uint64_t key = 0x0123456789abcdefULL;
+    CHECK(gs_eval_fit_cache_write(path, key, &s, 1.5, NULL) == GS_OK);
+    CHECK(gs_eval_fit_cache_read(path, key, &t, &secs, NULL) == GS_OK);
+    CHECK(secs == 1.5 && t.code_dim == 4 && t.code[2] == 0.25f && t.fit_psnr == 30);
+    gs_error err = {0, ""};
+    CHECK(gs_eval_fit_cache_read(path, key ^ 1, &t, &secs, &err) == GS_ERR_STATE);
+    CHECK_MSG(strstr(err.msg, "another model"), "%s", err.msg);
+    /* the older format: seconds, then the subject */
+    uint8_t buf[8 + GS_SUBJECT_ENCODED_MAX];
+    memcpy(buf, &secs, 8);
+    size_t n = 8 + gs_subject_encode(&s, buf + 8, sizeof buf - 8);
+    f = fopen(path, "wb");
+    CHECK(f && fwrite(buf, 1, n, f) == n && fclose(f) == 0);
+    CHECK(gs_eval_fit_cache_read(path, key, &t, &secs, &err) == GS_ERR_STATE);
+    CHECK_MSG(strstr(err.msg, "older version"), "%s", err.msg);
     snprintf(path, sizeof path, "%s/fits/none.bin", out);
-    CHECK(gs_eval_fit_cache_read(path, &s, &secs, NULL) == GS_ERR_IO);
-    FILE *f = fopen(path, "wb");
+    CHECK(gs_eval_fit_cache_read(path, key, &t, &secs, NULL) == GS_ERR_IO);
+    f = fopen(path, "wb");
     CHECK(f && fwrite("12345678garbage", 1, 15, f) == 15 && fclose(f) == 0);
-    CHECK(gs_eval_fit_cache_read(path, &s, &secs, NULL) == GS_ERR_FORMAT);
+    CHECK(gs_eval_fit_cache_read(path, key, &t, &secs, NULL) == GS_ERR_FORMAT);
+    f = fopen(path, "wb");
+    CHECK(f && fwrite("GSFITC2\n0123456789abcdefgarbage", 1, 32, f) == 32 &&
+          fclose(f) == 0);
+    CHECK(gs_eval_fit_cache_read(path, key, &t, &secs, NULL) == GS_ERR_FORMAT);
+    /* a failed write leaves nothing behind */
+    snprintf(path, sizeof path, "%s/no-such-dir/x.bin", out);
+    CHECK(gs_eval_fit_cache_write(path, key, &s, 1.5, NULL) == GS_ERR_IO);
 }
 
 static int run_ds(const char *exe, const char *model, const char *est,

@@ -264,6 +264,71 @@ int main(void)
         }
     }
 
+    /* The fit key (gs_model_fit_key) names what the fit depends on and
+     * nothing else: the options as the fit reads them (0 for a default,
+     * the model's prior weight resolved), the known labels, the mask, the
+     * image and the model's parameters and configuration. */
+    {
+        gs_fit_options k0;
+        gs_fit_options_default(&k0);
+        const uint64_t base = gs_model_fit_key(m, &k0, smp.rgb, smp.stride);
+        CHECK(gs_model_fit_key(m, NULL, smp.rgb, smp.stride) == base);
+        gs_fit_options k = k0;
+        k.lr_code = GS_FIT_LR_CODE_DEFAULT;
+        k.lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
+        k.code_prior = 0; /* the model names none */
+        k.gaze_pitch = 0.3; /* not known: not read */
+        CHECK(gs_model_fit_key(m, &k, smp.rgb, smp.stride) == base);
+        int differ = 0, cases = 0;
+#define KEY_DIFFERS(stmt)                                                       \
+    do {                                                                        \
+        k = k0;                                                                 \
+        stmt;                                                                   \
+        cases++;                                                                \
+        differ += gs_model_fit_key(m, &k, smp.rgb, smp.stride) != base;         \
+    } while (0)
+        KEY_DIFFERS(k.max_iters = 199);
+        KEY_DIFFERS(k.lr_code = 0.121);
+        KEY_DIFFERS(k.code_prior = 3e-4);
+        KEY_DIFFERS(k.bound_expression = 1);
+        KEY_DIFFERS(k.known_gaze = 1);
+        KEY_DIFFERS((k.known_head = 1, k.head_t[2] = 600));
+        uint8_t mask[128 * 128];
+        memset(mask, 255, sizeof mask);
+        KEY_DIFFERS(k.mask = mask);
+        float cs[GS_MODEL_MAX_CODE] = {0};
+        KEY_DIFFERS(k.code_start = cs);
+#undef KEY_DIFFERS
+        CHECK_MSG(differ == cases, "%d of %d option changes changed the key",
+                  differ, cases);
+        /* known gaze: its values are read */
+        k = k0;
+        k.known_gaze = 1;
+        const uint64_t kg = gs_model_fit_key(m, &k, smp.rgb, smp.stride);
+        k.gaze_yaw = 1e-9;
+        CHECK(gs_model_fit_key(m, &k, smp.rgb, smp.stride) != kg);
+        /* one pixel's one level */
+        smp.rgb[smp.stride * 77 + 3 * 50 + 1] ^= 1;
+        CHECK(gs_model_fit_key(m, &k0, smp.rgb, smp.stride) != base);
+        smp.rgb[smp.stride * 77 + 3 * 50 + 1] ^= 1;
+        CHECK(gs_model_fit_key(m, &k0, smp.rgb, smp.stride) == base);
+        /* the model naming a weight: the same key as asking for it */
+        k = k0;
+        k.code_prior = 3e-4;
+        const uint64_t kp = gs_model_fit_key(m, &k, smp.rgb, smp.stride);
+        CHECK(gs_model_set_fit_code_prior(m, 3e-4, &err) == GS_OK);
+        CHECK(gs_model_fit_key(m, &k0, smp.rgb, smp.stride) == kp);
+        CHECK(gs_model_set_fit_code_prior(m, 0, &err) == GS_OK);
+        CHECK(gs_model_fit_key(m, &k0, smp.rgb, smp.stride) == base);
+        /* another parameter value: another model */
+        gs_model *mc = NULL;
+        CHECK(gs_model_clone(m, &mc, &err) == GS_OK);
+        CHECK(gs_model_fit_key(mc, &k0, smp.rgb, smp.stride) == base);
+        mc->params[mc->t[0].offset] += 1e-3f;
+        CHECK(gs_model_fit_key(mc, &k0, smp.rgb, smp.stride) != base);
+        gs_model_destroy(mc);
+    }
+
     /* Subjects survive encode/decode; bad bytes are refused. */
     uint8_t buf[GS_SUBJECT_ENCODED_MAX];
     size_t n = gs_subject_encode(&sub, buf, sizeof buf);

@@ -243,14 +243,28 @@ int gs_eval_fit_sample_with(gs_model_ctx *c, gs_pool *pool,
                             const gs_fit_options *base, gs_subject *sub,
                             double *secs, gs_error *err);
 
-/* A cached fit: 8 bytes of fit seconds (a native double), then the
- * gs_subject_encode bytes. The file does not record the model or the fit
- * options: a cache belongs to one model and one set of options. read:
- * GS_ERR_IO when there is no such file, GS_ERR_FORMAT when it is bad. */
-int gs_eval_fit_cache_read(const char *path, gs_subject *sub, double *secs,
-                           gs_error *err);
-int gs_eval_fit_cache_write(const char *path, const gs_subject *sub,
-                            double secs, gs_error *err);
+/* The key of gs_eval_fit_sample_with's fit of `in` with options base
+ * (gs_model_fit_key of the options that fit uses: the sample's labels
+ * given). m is the model the fit's context was made from. */
+uint64_t gs_eval_fit_key(const gs_model *m, const gs_fit_options *base,
+                         const gs_synth_sample *in);
+/* The same for gs_eval_fit_sample's options. */
+uint64_t gs_eval_fit_sample_key(const gs_model *m, const gs_synth_sample *in,
+                                int iters, double lr_code, double lr_colour);
+
+/* A cached fit, keyed by what made it: 8 bytes of magic "GSFITC2\n", the
+ * key (gs_eval_fit_key; u64 little-endian), the fit seconds (a native
+ * double), then the gs_subject_encode bytes. write replaces the file
+ * atomically. read: GS_OK only for a file written with this key;
+ * GS_ERR_IO when there is no such file, GS_ERR_FORMAT when it is not a
+ * fit cache file, GS_ERR_STATE when it is one of another key (another
+ * model, fit options or input) or an unkeyed one of an older version:
+ * the fit must run again. */
+int gs_eval_fit_cache_read(const char *path, uint64_t key, gs_subject *sub,
+                           double *secs, gs_error *err);
+int gs_eval_fit_cache_write(const char *path, uint64_t key,
+                            const gs_subject *sub, double secs,
+                            gs_error *err);
 
 /* ---- downstream: adapting a gaze estimator to a new person ---- */
 

@@ -294,6 +294,18 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                  size_t stride, const gs_fit_options *opt, gs_subject *out,
                  gs_fit_report *report, gs_error *err);
 
+/* A 64-bit name of what gs_model_fit would return for these arguments:
+ * the model's parameters (hashed as they are now, so a fine-tuned clone is
+ * another model) and configuration, the options as the fit reads them (the
+ * code prior weight resolved: the model's, when opt names
+ * GS_FIT_CODE_PRIOR_MODEL; the defaults that 0 means filled in), the mask
+ * and the image. The fit is deterministic for any thread count, so two
+ * fits with the same key give the same subject: a cache of fits keys its
+ * entries with it (gs_eval_fit_cache_read). Not cryptographic. opt NULL:
+ * the defaults. The image must be image_size^2 RGB rows of `stride`. */
+uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
+                          const uint8_t *rgb, size_t stride);
+
 /* ---- per-image fine-tuning (the paper's last step) ---- */
 
 /* A copy of m with its own parameters (same configuration), for
