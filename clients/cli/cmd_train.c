@@ -323,6 +323,10 @@ static int run_train(int argc, char **argv)
         t.gaze_net = gnet;
     }
     gs_pool *pool = threads > 1 ? gs_pool_create((int)threads) : NULL;
+    /* The bytes of a run depend on OpenBLAS's kernels (docs/model.md,
+     * "Training"): named so that runs on other machines can be compared. */
+    fprintf(stderr, "gazesplat train: %ld threads, OpenBLAS kernels %s\n", threads,
+            gs_nn_blas_core());
     gs_train_report rep;
     rc = gs_train(m, &t, pool, &rep, &err);
     gs_pool_destroy(pool);
