@@ -243,9 +243,11 @@ static int fit(ds_run *r, const gs_model *m, gs_model_ctx *c,
                const char *path, int reuse, gs_subject *sub,
                gs_eval_ds_result *res, gs_error *err)
 {
-    const uint64_t key = gs_eval_fit_sample_key(m, &r->in, r->o->fit_iters,
-                                                r->o->fit_lr_code,
-                                                r->o->fit_lr_colour);
+    /* the key hashes the model's parameters: only with a cache */
+    const uint64_t key = path ? gs_eval_fit_sample_key(m, &r->in, r->o->fit_iters,
+                                                       r->o->fit_lr_code,
+                                                       r->o->fit_lr_colour)
+                              : 0;
     if (path && reuse &&
         gs_eval_fit_cache_read(path, key, sub, &res->fit_s, NULL) == GS_OK) {
         res->fit_reused = 1;

@@ -131,7 +131,7 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
      * stands for, the model's prior weight for GS_FIT_CODE_PRIOR_MODEL,
      * the known labels only when known. Every field of the configuration
      * but fit_code_prior (resolved here) shapes the fit's renders. */
-    uint64_t r[48] = {
+    const uint64_t r[] = {
         gs_model_param_id(m), 1 /* key version */,
         (uint64_t)c->n_face, (uint64_t)c->n_eye_each, (uint64_t)c->feat_dim,
         (uint64_t)c->id_dim, (uint64_t)c->hidden, (uint64_t)c->channels,
@@ -153,26 +153,28 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
         (uint64_t)(o.code_start != NULL), (uint64_t)(o.code_fixed != NULL),
         (uint64_t)(o.mask != NULL),
     };
-    int n = 34;
+    uint64_t known[14]; /* the labels that are known */
+    int n = 0;
     if (o.known_gaze) {
-        r[n++] = bits(o.gaze_pitch);
-        r[n++] = bits(o.gaze_yaw);
+        known[n++] = bits(o.gaze_pitch);
+        known[n++] = bits(o.gaze_yaw);
     }
     if (o.known_head) {
         for (int k = 0; k < 9; k++)
-            r[n++] = bits(o.head_R[k]);
+            known[n++] = bits(o.head_R[k]);
         for (int k = 0; k < 3; k++)
-            r[n++] = bits(o.head_t[k]);
+            known[n++] = bits(o.head_t[k]);
     }
     hash64 h;
     hash_init(&h, 0x6669742d6b657931ULL);
-    hash_part(&h, r, (size_t)n * sizeof r[0]);
+    hash_part(&h, r, sizeof r);
+    hash_part(&h, known, (size_t)n * sizeof known[0]);
     if (o.code_start)
         hash_part(&h, o.code_start, (size_t)D * sizeof(float));
     if (o.code_fixed)
         hash_part(&h, o.code_fixed, (size_t)D);
-    for (int y = 0; o.mask && y < S; y++)
-        hash_part(&h, o.mask + (size_t)y * S, (size_t)S);
+    if (o.mask)
+        hash_part(&h, o.mask, (size_t)S * S);
     for (int y = 0; y < S; y++)
         hash_part(&h, rgb + (size_t)y * stride, 3 * (size_t)S);
     return hash_final(&h);
