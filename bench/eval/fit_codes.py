@@ -4,8 +4,11 @@
 usage: fit_codes.py TRUTH_DIR DIR [DIR ...]
 
 Each DIR is a `gazesplat eval --out DIR` folder (or its fits/ folder): its
-fits/NNNNN.bin are the fitted subjects (an 8-byte fit time, then
-gs_subject_encode: magic, version, code_dim, the code as float32, ...).
+fits/NNNNN.bin are the fitted subjects: the 8 bytes "GSFITC2\n", the
+8-byte key of what made the fit, the 8-byte fit time, then
+gs_subject_encode (magic, version, code_dim, the code as float32, ...).
+Caches written before fits were keyed (no "GSFITC2\n", the fit time
+first) are read too.
 TRUTH_DIR is a run with `--true-code expr,light` on the same pairs, whose
 codes hold each input's true expression and lights (gs_model_scene_code).
 The code is [identity (code_dim - 18) | expression (6) | lights (12)].
@@ -25,6 +28,7 @@ LO = [0.0, 0.0, -1.0, 0.0, 0.0, -1.0]
 HI = [1.0, 1.0, 1.0, 0.7, 1.0, 1.0]
 NEXPR, NLIGHT = 6, 12
 MAGIC = 0x42555347  # "GSUB", GS_SUBJECT_MAGIC
+CACHE_MAGIC = b"GSFITC2\n"  # lib/eval/fit.c: magic, key, seconds (24 bytes)
 EPS = 1e-6
 
 
@@ -40,14 +44,15 @@ def fits_dir(d):
 def read_code(path):
     with open(path, "rb") as f:
         b = f.read()
-    if len(b) < 8 + 12:
+    head = 24 if b[:8] == CACHE_MAGIC else 8
+    if len(b) < head + 12:
         fail(f"{path}: too short for a fit cache file")
-    magic, _ver, dim = struct.unpack_from("<III", b, 8)
+    magic, _ver, dim = struct.unpack_from("<III", b, head)
     if magic != MAGIC:
         fail(f"{path}: not a fit cache file (magic {magic:#x})")
-    if dim <= NEXPR + NLIGHT or len(b) < 20 + 4 * dim:
+    if dim <= NEXPR + NLIGHT or len(b) < head + 12 + 4 * dim:
         fail(f"{path}: code of {dim} values does not fit the file")
-    return list(struct.unpack_from(f"<{dim}f", b, 20))
+    return list(struct.unpack_from(f"<{dim}f", b, head + 12))
 
 
 def read_dir(d):

@@ -9,7 +9,9 @@ and blink's 0 on an end) and lights 0.6 and -0.4 in turn; for input 1, the truth
 itself (blink's 0 on an end). So: 2 of 12 slots outside, 3 on an end,
 errors mouth_open 0.5, brow_raise 1.0, squint 0.25, pupil 0.25, the
 others 0, lights L1 3.00. A file that is not a fit cache, a run with no
-input in common and a lone argument are refused."""
+input in common and a lone argument are refused. The run under test is
+written as eval writes caches now (keyed, "GSFITC2\n" first), the truth
+as caches were written before (the fit time first): both are read."""
 import os
 import re
 import struct
@@ -21,9 +23,10 @@ script = sys.argv[1]
 MAGIC = 0x42555347
 
 
-def write_fit(d, n, code):
+def write_fit(d, n, code, keyed=True):
     os.makedirs(os.path.join(d, "fits"), exist_ok=True)
-    b = struct.pack("<d", 6.5) + struct.pack("<III", MAGIC, 1, len(code))
+    head = b"GSFITC2\n" + struct.pack("<Q", 0x1234ABCD) if keyed else b""
+    b = head + struct.pack("<d", 6.5) + struct.pack("<III", MAGIC, 1, len(code))
     b += struct.pack(f"<{len(code)}f", *code) + bytes(200)
     with open(os.path.join(d, "fits", f"{n:05d}.bin"), "wb") as f:
         f.write(b)
@@ -44,7 +47,7 @@ texpr = [0.5, 0.5, 0.0, 0.2, 0.0, 0.0]
 with tempfile.TemporaryDirectory() as tmp:
     truth, test = os.path.join(tmp, "truth"), os.path.join(tmp, "test")
     for n in range(2):
-        write_fit(truth, n, ident + texpr + [0.1] * 12)
+        write_fit(truth, n, ident + texpr + [0.1] * 12, keyed=False)
     write_fit(test, 0, ident + [1.5, 0.5, -2.0, 0.7, 0.0, 0.5] + [0.6, -0.4] * 6)
     write_fit(test, 1, ident + texpr + [0.1] * 12)
     r = run(truth, test)
