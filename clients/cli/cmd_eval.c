@@ -79,9 +79,11 @@ const cli_command cli_eval_command = {
     "                    model file names, config.fit_code_prior; none\n"
     "                    when it names none)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
-    "                    the input's true expression and/or lights\n"
-    "                    (comma-separated: expr, light) and keeps them; how\n"
-    "                    much of the error is the fit getting them wrong\n"
+    "                    the input's true expression, lights and/or (pairs\n"
+    "                    of --split train only) the identity code training\n"
+    "                    learned (comma-separated: expr, light, id) and\n"
+    "                    keeps them; how much of the error is the fit\n"
+    "                    getting them wrong\n"
     "  --threads N       worker threads (default 2); results are the same\n"
     "                    for a given count, timings aside\n"
     "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
@@ -150,7 +152,7 @@ enum {
     O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_CODE_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
-/* --true-code LIST: comma-separated expr, light (each at most once). */
+/* --true-code LIST: comma-separated expr, light, id (each at most once). */
 static int parse_true_code(const char *s, unsigned *out)
 {
     unsigned bits = 0;
@@ -158,6 +160,7 @@ static int parse_true_code(const char *s, unsigned *out)
         size_t n = strcspn(s, ",");
         unsigned b = n == 4 && !strncmp(s, "expr", 4)    ? GS_SCENE_CODE_EXPR
                      : n == 5 && !strncmp(s, "light", 5) ? GS_SCENE_CODE_LIGHT
+                     : n == 2 && !strncmp(s, "id", 2)    ? GS_SCENE_CODE_ID
                                                          : 0;
         if (!b || (bits & b))
             return -1;
@@ -851,15 +854,19 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
         int oracle = 0, top = eval_pairs_identities(&ps) - 1;
         for (int k = 0; k < ev->nmethods; k++)
             oracle |= ev->methods[k] == EVAL_ORACLE;
-        if (oracle && ps.n > 0 &&
+        /* the oracle and --true-code id read the learned codes */
+        const char *learned = oracle ? "--method oracle"
+                              : ev->true_code & GS_SCENE_CODE_ID ? "--true-code id"
+                                                                 : NULL;
+        if (learned && ps.n > 0 &&
             gs_synth_seed_split(ps.p[0].identity_seed) != GS_SYNTH_TRAIN)
-            rc = cli_usage_error(cmd, "--method oracle: the pairs must be of "
+            rc = cli_usage_error(cmd, "%s: the pairs must be of "
                                       "training identities (--make-pairs FILE "
-                                      "--split train)");
-        else if (oracle && top >= mi.n_train_ids)
-            rc = cli_usage_error(cmd, "--method oracle: the pairs reach training "
+                                      "--split train)", learned);
+        else if (learned && top >= mi.n_train_ids)
+            rc = cli_usage_error(cmd, "%s: the pairs reach training "
                                       "identity %d; %s holds codes for %d",
-                                 top, o[O_MODEL].value, mi.n_train_ids);
+                                 learned, top, o[O_MODEL].value, mi.n_train_ids);
     }
     if (!rc) {
         ev->c = gs_model_ctx_create(ev->m);
@@ -998,7 +1005,7 @@ static int run_eval(int argc, char **argv)
         return cli_usage_error(cmd, "--fit-lr: want CODE[,COLOUR], each in "
                                "(0, 10]; got '%s'", o[O_FIT_LR].value);
     if (o[O_TRUE_CODE].value && parse_true_code(o[O_TRUE_CODE].value, &ev.true_code))
-        return cli_usage_error(cmd, "--true-code: want a list of expr, light; "
+        return cli_usage_error(cmd, "--true-code: want a list of expr, light, id; "
                                "got '%s'", o[O_TRUE_CODE].value);
     ev.bound_expression = o[O_BOUND_EXPR].value != NULL;
     if ((rc = cli_parse_range(cmd, "--code-prior", o[O_CODE_PRIOR].value, 0.0, 10.0,

@@ -316,16 +316,22 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
               "learned code and the target's true expression and lights, "
               "at the target's view; no fit, no fine-tuning, no colour "
               "transform (what training drew)\n", f);
-    if (info->true_code)
-        fprintf(f, "- **a diagnostic, not a served figure** (--true-code): "
-                   "each fit was given the input's true %s and kept %s\n",
-                info->true_code == GS_SCENE_CODE_EXPR    ? "expression"
-                : info->true_code == GS_SCENE_CODE_LIGHT ? "lights"
-                                                         : "expression and lights",
-                info->true_code == GS_SCENE_CODE_EXPR ||
-                        info->true_code == GS_SCENE_CODE_LIGHT
-                    ? "it"
-                    : "them");
+    if (info->true_code) {
+        /* "expression, lights and identity code", "lights", ... */
+        const char *names[3];
+        int nn = 0;
+        if (info->true_code & GS_SCENE_CODE_EXPR)
+            names[nn++] = "expression";
+        if (info->true_code & GS_SCENE_CODE_LIGHT)
+            names[nn++] = "lights";
+        if (info->true_code & GS_SCENE_CODE_ID)
+            names[nn++] = "identity code (the one training learned)";
+        fputs("- **a diagnostic, not a served figure** (--true-code): each fit "
+              "was given the input's true ", f);
+        for (int i = 0; i < nn; i++)
+            fprintf(f, "%s%s", i == 0 ? "" : i == nn - 1 ? " and " : ", ", names[i]);
+        fprintf(f, " and kept %s\n", nn == 1 ? "it" : "them");
+    }
     if (info->fits_reused)
         fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "
                    "their fit times are that run's\n", info->fits_reused);

@@ -325,15 +325,31 @@ int gs_model_scene_code(const gs_model *m, const gs_synth_scene *scene,
 {
     if (!m || !scene || !code || !fixed)
         return gs_error_set(err, GS_ERR_ARG, "scene code: NULL argument");
-    const unsigned all = GS_SCENE_CODE_EXPR | GS_SCENE_CODE_LIGHT;
+    const unsigned all = GS_SCENE_CODE_EXPR | GS_SCENE_CODE_LIGHT | GS_SCENE_CODE_ID;
     if (parts == 0 || (parts & ~all))
         return gs_error_set(err, GS_ERR_ARG,
-                            "scene code: parts 0x%x (want expression 0x1, "
-                            "lights 0x2 or both)", parts);
+                            "scene code: parts 0x%x (want a combination of "
+                            "expression 0x1, lights 0x2, identity 0x4)", parts);
     const gs_model_config *mc = &m->cfg;
+    int k = -1; /* the training identity of the scene, for GS_SCENE_CODE_ID */
+    for (int i = 0; (parts & GS_SCENE_CODE_ID) && m->p.codes && i < mc->n_train_ids; i++)
+        if (scene->identity.seed == gs_synth_split_seed(GS_SYNTH_TRAIN, (uint64_t)i)) {
+            k = i;
+            break;
+        }
+    if ((parts & GS_SCENE_CODE_ID) && k < 0)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "scene code: the scene's identity is not one of the "
+                            "model's %d training identities",
+                            m->p.codes ? mc->n_train_ids : 0);
     int D = gs_model_code_dim(mc);
     memcpy(code, m->p.code_mean, (size_t)D * sizeof(float));
     memset(fixed, 0, (size_t)D);
+    if (k >= 0) {
+        memcpy(code, m->p.codes + (size_t)k * mc->id_dim,
+               (size_t)mc->id_dim * sizeof(float));
+        memset(fixed, 1, (size_t)mc->id_dim);
+    }
     if (parts & GS_SCENE_CODE_EXPR) {
         gs_synth_expression_to_array(&scene->expr, code + mc->id_dim);
         memset(fixed + mc->id_dim, 1, GS_MODEL_EXPR_DIM);

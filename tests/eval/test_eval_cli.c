@@ -64,6 +64,28 @@ static int summary_has(const char *md, ...)
     return miss == NULL;
 }
 
+/* Column `col` of every row of `method` in CSV text, ';'-joined into out. */
+static void column_of(const char *text, const char *method, int col, char *out,
+                      size_t cap)
+{
+    *out = 0;
+    size_t ml = strlen(method);
+    for (const char *l = text; l && *l; l = strchr(l, '\n') ? strchr(l, '\n') + 1 : NULL) {
+        if (strncmp(l, method, ml) != 0 || l[ml] != ',')
+            continue;
+        const char *c = l;
+        for (int k = 0; k < col && c; k++) {
+            c = strpbrk(c, ",\n");
+            c = c && *c == ',' ? c + 1 : NULL;
+        }
+        if (!c)
+            continue;
+        size_t n = strcspn(c, ",\n"), have = strlen(out);
+        if (have + n + 2 < cap)
+            snprintf(out + have, cap - have, "%.*s;", (int)n, c);
+    }
+}
+
 static char *check_csv(const char *path)
 {
     char *text = ev_slurp(path);
@@ -178,8 +200,9 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK_EQ_INT(run(ids0), 2);
     const char *positional[] = {"eval", "extra", NULL};
     CHECK_EQ_INT(run(positional), 2);
-    /* --true-code: a list of expr and light, each once */
-    const char *bad_tc[] = {"nope", "expr,expr", "expr,", ",light", "", "Expr"};
+    /* --true-code: a list of expr, light and id, each once */
+    const char *bad_tc[] = {"nope", "expr,expr", "expr,", ",light", "", "Expr",
+                            "id,id", "ids", "identity"};
     for (size_t i = 0; i < sizeof bad_tc / sizeof bad_tc[0]; i++) {
         const char *tc[] = {"eval", "--model", model, "--pairs", pairs, "--out",
                             dir, "--true-code", bad_tc[i], NULL};
@@ -360,8 +383,44 @@ int main(int argc, char **argv)
                       "| oracle | 4 |",
                       "- oracle: the shared model with each training identity's",
                       NULL));
+    /* --true-code id: the fits are given the learned identity codes of
+     * these training faces (the model rows change, the oracle's do not)
+     * and the summary says so */
+    {
+        char iout[256], imd[300], csvt[300], csvi[300];
+        snprintf(iout, sizeof iout, "%s/runtid", dir);
+        snprintf(imd, sizeof imd, "%s/summary.md", iout);
+        snprintf(csvt, sizeof csvt, "%s/pairs.csv", tout);
+        snprintf(csvi, sizeof csvi, "%s/pairs.csv", iout);
+        const char *evid[] = {"eval", "--model", model, "--pairs", tpairs,
+                              "--out", iout, "--method", "model,oracle", "--iters", "4",
+                              "--threads", "2", "--estimator", est,
+                              "--true-code", "id,expr,light", NULL};
+        CHECK_EQ_INT(run(evid), 0);
+        CHECK(summary_has(imd, "**a diagnostic, not a served figure** (--true-code)",
+                          "true expression, lights and identity code (the one "
+                          "training learned) and kept them",
+                          "diverged fits 0, errors 0, non-finite outputs 0", NULL));
+        char *t = ev_slurp(csvt), *u = ev_slurp(csvi);
+        char mt[4096], mu[4096], ot[4096], ou[4096];
+        column_of(t, "model", 20, mt, sizeof mt);
+        column_of(u, "model", 20, mu, sizeof mu);
+        column_of(t, "oracle", 20, ot, sizeof ot);
+        column_of(u, "oracle", 20, ou, sizeof ou);
+        CHECK_MSG(*mt && strcmp(mt, mu) != 0, "--true-code id: model PSNRs %s, %s", mt, mu);
+        CHECK_MSG(*ot && strcmp(ot, ou) == 0, "--true-code id: oracle PSNRs %s, %s", ot, ou);
+        free(t);
+        free(u);
+        evid[16] = "id";
+        CHECK_EQ_INT(run(evid), 0);
+        CHECK(summary_has(imd, "true identity code (the one training learned) and kept it",
+                          NULL));
+        /* held-out pairs have no learned code */
+        evid[4] = pairs;
+        CHECK_EQ_INT(run(evid), 2);
+    }
     /* The oracle needs training pairs, of identities the model has codes
-     * for (the tiny model: 2). */
+     * for (the tiny model: 2); so does --true-code id. */
     const char *or_test[] = {"eval", "--model", model, "--pairs", pairs,
                              "--out", tout, "--method", "oracle", NULL};
     CHECK_EQ_INT(run(or_test), 2);
@@ -370,6 +429,9 @@ int main(int argc, char **argv)
     CHECK_EQ_INT(run(mkt3), 0);
     or_test[4] = tpairs;
     CHECK_EQ_INT(run(or_test), 2);
+    const char *id_test[] = {"eval", "--model", model, "--pairs", tpairs, "--out", tout,
+                             "--method", "model", "--true-code", "id", NULL};
+    CHECK_EQ_INT(run(id_test), 2);
     /* The same thread count gives the same numbers (timings aside). */
     const char *ev2[] = {"eval", "--model", model, "--pairs", pairs,
                          "--out", out2, "--method", "model,warp,identity",

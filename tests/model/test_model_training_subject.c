@@ -7,10 +7,11 @@
  * scene render differently; one of them twice, the same bytes). Refused:
  * another identity's labels, k out of range, NULL arguments, a model
  * without training codes.
- * gs_model_scene_code: the model's mean code with a scene's expression
- * and/or lights written in (the same slots as the training subject's),
- * flagged fixed; a fit from it keeps those to the bit and moves the rest;
- * bad parts, NULLs and a non-finite start are refused.
+ * gs_model_scene_code: the model's mean code with a scene's expression,
+ * lights and/or learned identity code written in (the same slots as the
+ * training subject's), flagged fixed; a fit from it keeps those to the
+ * bit and moves the rest; bad parts, the identity code of a face the
+ * model did not train on, NULLs and a non-finite start are refused.
  * gs_model_add_identities: a copy with more identities keeps every other
  * tensor and the learned codes to the bit, the new codes at their mean;
  * fewer or as many identities, or too many, are refused. */
@@ -98,36 +99,52 @@ int main(void)
         CHECK(gs_model_training_subject(m, k, &sc[k], l, NULL, &err) == GS_ERR_ARG);
     }
 
-    /* gs_model_scene_code: the mean code with the scene's expression and
-     * lights written in as a training step writes them, flagged fixed. */
-    {
-        const gs_synth_scene *scn = &sc[0];
+    /* gs_model_scene_code: the mean code with the scene's expression,
+     * lights and/or learned identity code written in as a training step
+     * writes them, flagged fixed; every combination, both identities. */
+    for (int k = 0; k < 2; k++) {
+        const gs_synth_scene *scn = &sc[k];
         gs_subject ts;
-        CHECK(gs_model_training_subject(m, 0, scn, &smp[0].labels, &ts, &err) == GS_OK);
-        const unsigned parts[3] = {GS_SCENE_CODE_EXPR, GS_SCENE_CODE_LIGHT,
-                                   GS_SCENE_CODE_EXPR | GS_SCENE_CODE_LIGHT};
-        for (int p = 0; p < 3; p++) {
+        CHECK(gs_model_training_subject(m, k, scn, &smp[k].labels, &ts, &err) == GS_OK);
+        for (unsigned parts = 1; parts <= 7; parts++) {
             float code[GS_MODEL_MAX_CODE];
             uint8_t fixed[GS_MODEL_MAX_CODE];
-            CHECK_MSG(gs_model_scene_code(m, scn, parts[p], code, fixed, &err) == GS_OK,
+            CHECK_MSG(gs_model_scene_code(m, scn, parts, code, fixed, &err) == GS_OK,
                       "%s", err.msg);
             for (int j = 0; j < D; j++) {
+                int idp = j < id;
                 int ex = j >= id && j < id + GS_MODEL_EXPR_DIM;
                 int li = j >= id + GS_MODEL_EXPR_DIM;
-                int want = (ex && (parts[p] & GS_SCENE_CODE_EXPR)) ||
-                           (li && (parts[p] & GS_SCENE_CODE_LIGHT));
-                CHECK_MSG(fixed[j] == want, "parts %u slot %d fixed %d", parts[p], j,
+                int want = (ex && (parts & GS_SCENE_CODE_EXPR)) ||
+                           (li && (parts & GS_SCENE_CODE_LIGHT)) ||
+                           (idp && (parts & GS_SCENE_CODE_ID));
+                CHECK_MSG(fixed[j] == want, "parts %u slot %d fixed %d", parts, j,
                           fixed[j]);
                 float v = want ? ts.code[j] : m->p.code_mean[j];
-                CHECK_MSG(code[j] == v, "parts %u slot %d: %g, want %g", parts[p], j,
+                CHECK_MSG(code[j] == v, "parts %u slot %d: %g, want %g", parts, j,
                           code[j], v);
             }
         }
+    }
+    {
+        const gs_synth_scene *scn = &sc[0];
         float code[GS_MODEL_MAX_CODE];
         uint8_t fixed[GS_MODEL_MAX_CODE];
         CHECK(gs_model_scene_code(m, scn, 0, code, fixed, &err) == GS_ERR_ARG);
-        CHECK(gs_model_scene_code(m, scn, 4, code, fixed, &err) == GS_ERR_ARG);
+        CHECK(gs_model_scene_code(m, scn, 8, code, fixed, &err) == GS_ERR_ARG);
         CHECK(strstr(err.msg, "parts") != NULL);
+        /* the identity code only for the model's own training identities:
+         * not a held-out face, nor a training identity past its codes */
+        gs_synth_scene other = *scn;
+        other.identity.seed = gs_synth_split_seed(GS_SYNTH_TEST, 0);
+        CHECK(gs_model_scene_code(m, &other, GS_SCENE_CODE_ID, code, fixed, &err) ==
+              GS_ERR_ARG);
+        CHECK(strstr(err.msg, "training identities") != NULL);
+        other.identity.seed = gs_synth_split_seed(GS_SYNTH_TRAIN, 2);
+        CHECK(gs_model_scene_code(m, &other, GS_SCENE_CODE_ID | GS_SCENE_CODE_EXPR,
+                                  code, fixed, &err) == GS_ERR_ARG);
+        CHECK(gs_model_scene_code(m, &other, GS_SCENE_CODE_EXPR, code, fixed, &err) ==
+              GS_OK);
         CHECK(gs_model_scene_code(NULL, scn, 1, code, fixed, &err) == GS_ERR_ARG);
         CHECK(gs_model_scene_code(m, NULL, 1, code, fixed, &err) == GS_ERR_ARG);
         CHECK(gs_model_scene_code(m, scn, 1, NULL, fixed, &err) == GS_ERR_ARG);

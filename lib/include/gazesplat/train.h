@@ -78,15 +78,18 @@ int gs_model_has_lids(const gs_model *m);
 int gs_model_add_identities(const gs_model *m, int n, gs_model **out,
                             gs_error *err);
 /* The parts of a latent code a synthetic scene gives (bits). */
-enum { GS_SCENE_CODE_EXPR = 1, GS_SCENE_CODE_LIGHT = 2 };
+enum { GS_SCENE_CODE_EXPR = 1, GS_SCENE_CODE_LIGHT = 2, GS_SCENE_CODE_ID = 4 };
 /* A code to start a fit from with some parts known (gs_fit_options's
  * code_start and code_fixed, code_dim values each): the model's mean
  * code with the scene's expression (GS_SCENE_CODE_EXPR) and/or its lights
  * in the head frame (GS_SCENE_CODE_LIGHT) written in, as a training step
- * writes them; fixed is 1 at those slots and 0 elsewhere. A diagnostic:
- * how much of what a fit gets wrong is the expression or the lights
- * (`gazesplat eval --true-code`). GS_ERR_ARG: NULL arguments, parts 0 or
- * with unknown bits. */
+ * writes them, and/or (GS_SCENE_CODE_ID) the identity code the model
+ * learned for the scene's identity, which must then be one of its
+ * training identities; fixed is 1 at those slots and 0 elsewhere. A
+ * diagnostic: how much of what a fit gets wrong is the expression, the
+ * lights or the identity (`gazesplat eval --true-code`). GS_ERR_ARG: NULL
+ * arguments, parts 0 or with unknown bits, GS_SCENE_CODE_ID for a scene
+ * whose identity is not one of the model's training identities. */
 int gs_model_scene_code(const gs_model *m, const gs_synth_scene *scene,
                         unsigned parts, float *code, uint8_t *fixed,
                         gs_error *err);
