@@ -307,6 +307,8 @@ void gsd_model_finish_load(gsd_server *s)
 #ifdef GSD_HAVE_MODEL
     if (m->info.fit_code_prior > 0)
         LOG_I("fits use the model's code prior, weight %g", m->info.fit_code_prior);
+    if (m->info.fit_code_rate > 0)
+        LOG_I("fits use the model's code rate, %g", m->info.fit_code_rate);
 #endif
     gsd_server_set_state(s, GSD_READY, detail);
     gsd_live_model_ready(s);

@@ -70,6 +70,8 @@ typedef struct ds_cli {
     int identities, threads, reuse;
     const char *model, *est, *out;
     char line[2048];          /* the command as run */
+    double fit_lr_code;       /* the code rate the fits run at (reported) */
+    int fit_lr_code_model;    /* 1: it is the model file's */
 } ds_cli;
 
 static int make_dir(const char *path)
@@ -199,10 +201,11 @@ static void md_write(FILE *f, const ds_cli *d, const gs_eval_ds_result *res,
                "finished), %d test images each, %d real images, sets of "
                "%d, %d steps of batch %d at lr %g, real images at least "
                "%.0f %% of each mixed batch, fit cap %d iterations at rates "
-               "%g (code) and %g (colour), seed %llu.\n\n",
+               "%g (code%s) and %g (colour), seed %llu.\n\n",
             d->model, d->est, n, done, o->test_images, GS_EVAL_DS_POOL,
             o->set_size, o->steps, o->batch, o->lr, 100 * o->real_fraction,
-            o->fit_iters, o->fit_lr_code, o->fit_lr_colour,
+            o->fit_iters, d->fit_lr_code, d->fit_lr_code_model ? ", the model's" : "",
+            o->fit_lr_colour,
             (unsigned long long)o->seed);
     fputs("Mean gaze angle (degrees) of the fine-tuned estimator against "
           "the true labels of each identity's test images, mean over "
@@ -302,7 +305,7 @@ static int run_loaded(const ds_cli *d, const gs_model *m,
     return rc ? rc : md;
 }
 
-static int run_checked(const ds_cli *d)
+static int run_checked(ds_cli *d)
 {
     const cli_command *cmd = &cli_eval_downstream_command;
     char fits[4200];
@@ -318,8 +321,15 @@ static int run_checked(const ds_cli *d)
         rc = cli_fail(cmd, "%s: %s", d->model, err.msg);
     else if (gs_gaze_net_load(d->est, &est, &err))
         rc = cli_fail(cmd, "%s: %s", d->est, err.msg);
-    if (!rc)
+    if (!rc) {
+        gs_model_info mi;
+        gs_model_get_info(m, &mi);
+        d->fit_lr_code_model = d->o.fit_lr_code <= 0 && mi.fit_code_rate > 0;
+        d->fit_lr_code = d->o.fit_lr_code > 0 ? d->o.fit_lr_code
+                         : mi.fit_code_rate > 0 ? mi.fit_code_rate
+                                                : GS_FIT_LR_CODE_DEFAULT;
         rc = run_loaded(d, m, est);
+    }
     gs_gaze_net_destroy(est);
     gs_model_destroy(m);
     return rc;

@@ -70,7 +70,9 @@ const cli_command cli_eval_command = {
     "  --iters N         fit iteration cap (default 200)\n"
     "  --fit-lr CODE[,COLOUR]  the fit's Adam rates for the latent code and\n"
     "                    the colour gain and bias, each in (0, 10]\n"
-    "                    (default 0.12,0.02; COLOUR defaults to CODE / 6)\n"
+    "                    (default: the code rate the model file names,\n"
+    "                    config.fit_code_rate, else 0.12, and 0.02;\n"
+    "                    COLOUR defaults to CODE / 6)\n"
     "  --bound-expression  the fit keeps the code's expression where\n"
     "                    training put it (clamped each step); default free\n"
     "  --code-prior W    the fit's prior on the code's expression and\n"
@@ -851,6 +853,11 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
             info->code_prior = mi.fit_code_prior;
             info->code_prior_model = 1;
         }
+        if (ev->lr_code == 0) { /* no --fit-lr: the model's rate, if it names one */
+            info->fit_lr_code_model = mi.fit_code_rate > 0;
+            ev->lr_code = mi.fit_code_rate > 0 ? mi.fit_code_rate : GS_FIT_LR_CODE_DEFAULT;
+            info->fit_lr_code = ev->lr_code;
+        }
         int oracle = 0, top = eval_pairs_identities(&ps) - 1;
         for (int k = 0; k < ev->nmethods; k++)
             oracle |= ev->methods[k] == EVAL_ORACLE;
@@ -998,7 +1005,7 @@ static int run_eval(int argc, char **argv)
         return cli_usage_error(cmd, "--finetune-parts, --finetune-lr and "
                                "--finetune-eye-weight go with --finetune N");
     ev.iters = (int)iters;
-    ev.lr_code = GS_FIT_LR_CODE_DEFAULT;
+    ev.lr_code = 0; /* the model's (config.fit_code_rate), resolved on loading */
     ev.lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
     if (o[O_FIT_LR].value && cli_parse_fit_lr(o[O_FIT_LR].value, &ev.lr_code,
                                           &ev.lr_colour))

@@ -1,6 +1,8 @@
 /* gazesplat model: what a model file holds, and the serving settings it
- * names (the fit's code prior) set in a copy. */
+ * names (the fit's code prior and code rate) set in a copy. */
+#include <errno.h>
 #include <inttypes.h>
+#include <stdlib.h>
 #include <stdio.h>
 #include <string.h>
 
@@ -13,7 +15,8 @@ static int run_model(int argc, char **argv);
 const cli_command cli_model_command = {
     "model",
     "show a model file's configuration; set the fit settings it names",
-    "usage: gazesplat model --model FILE [--fit-code-prior W --out OUT]\n"
+    "usage: gazesplat model --model FILE [--fit-code-prior W]\n"
+    "                       [--fit-code-rate R] [--out OUT]\n"
     "\n"
     "  --model FILE        a model file (gazesplat train); loaded and checked\n"
     "                      as the daemon loads it, then described on stdout\n"
@@ -24,12 +27,17 @@ const cli_command cli_model_command = {
     "                      read as eval's --code-prior reads it, so the model\n"
     "                      fits as `eval --code-prior W` did (docs/model.md,\n"
     "                      \"Fitting\")\n"
+    "  --fit-code-rate R   write a copy naming R as the fit's Adam rate for\n"
+    "                      the code (config.fit_code_rate, 0..10; 0: none,\n"
+    "                      the library's default 0.12), the default of every\n"
+    "                      fit made with the model, as eval's --fit-lr R\n"
+    "                      (its colour rate stays 0.02)\n"
     "  --out OUT           where the copy goes (written atomically; may be\n"
     "                      FILE itself); the parameters are the same bytes\n",
     run_model,
 };
 
-enum { O_MODEL, O_PRIOR, O_OUT, O_N };
+enum { O_MODEL, O_PRIOR, O_RATE, O_OUT, O_N };
 
 static void describe(const char *path, const gs_model *m)
 {
@@ -50,12 +58,29 @@ static void describe(const char *path, const gs_model *m)
     printf("param_bytes: %zu\n", mi.param_bytes);
     printf("param_id: %016" PRIx64 "\n", mi.param_id);
     printf("fit_code_prior: %.17g\n", mi.fit_code_prior);
+    printf("fit_code_rate: %.17g\n", mi.fit_code_rate);
+}
+
+/* --fit-code-rate R, read as a double the way eval's --fit-lr reads its
+ * code rate, so that the model fits to the bit as `eval --fit-lr R` did. */
+static int parse_rate(const cli_command *cmd, const char *v, double *out)
+{
+    if (!v)
+        return CLI_OK;
+    char *end;
+    errno = 0;
+    double r = strtod(v, &end);
+    if (errno || end == v || *end || !(r >= 0.0 && r <= 10.0))
+        return cli_usage_error(cmd, "--fit-code-rate: want a rate in [0, 10] "
+                                    "(0: the default); got '%s'", v);
+    *out = r;
+    return CLI_OK;
 }
 
 static int run_model(int argc, char **argv)
 {
     cli_opt o[O_N] = {{"--model", 1, NULL}, {"--fit-code-prior", 1, NULL},
-                      {"--out", 1, NULL}};
+                      {"--fit-code-rate", 1, NULL}, {"--out", 1, NULL}};
     const cli_command *cmd = &cli_model_command;
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
@@ -66,18 +91,22 @@ static int run_model(int argc, char **argv)
         return rc;
     if (!o[O_MODEL].value)
         return cli_usage_error(cmd, "missing --model");
-    if (!o[O_PRIOR].value != !o[O_OUT].value)
-        return cli_usage_error(cmd, "--fit-code-prior and --out go together");
-    double prior = -1.0;
+    const int set = o[O_PRIOR].value || o[O_RATE].value;
+    if (set != !!o[O_OUT].value)
+        return cli_usage_error(cmd, "--out goes with --fit-code-prior and/or "
+                                    "--fit-code-rate");
+    double prior = -1.0, rate = -1.0;
     if ((rc = cli_parse_range(cmd, "--fit-code-prior", o[O_PRIOR].value, 0.0, 10.0,
-                              "a weight in [0, 10] (0: no prior)", &prior)))
+                              "a weight in [0, 10] (0: no prior)", &prior)) ||
+        (rc = parse_rate(cmd, o[O_RATE].value, &rate)))
         return rc;
     gs_error err = {0, ""};
     gs_model *m = NULL;
     if (gs_model_load(o[O_MODEL].value, &m, &err))
         return cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
     if (o[O_OUT].value) {
-        if (gs_model_set_fit_code_prior(m, prior, &err) ||
+        if ((o[O_PRIOR].value && gs_model_set_fit_code_prior(m, prior, &err)) ||
+            (o[O_RATE].value && gs_model_set_fit_code_rate(m, rate, &err)) ||
             gs_model_write(m, o[O_OUT].value, &err)) {
             gs_model_destroy(m);
             return cli_fail(cmd, "%s: %s", o[O_OUT].value, err.msg);

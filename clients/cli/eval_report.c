@@ -245,9 +245,10 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                  info->code_prior,
                  info->code_prior_model ? "the model's" : "--code-prior");
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
-               "iterations cap %d, rates %g (code) and %g (colour)%s%s; %d "
+               "iterations cap %d, rates %g (code%s) and %g (colour)%s%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,
-            info->inputs, info->iters, info->fit_lr_code, info->fit_lr_colour,
+            info->inputs, info->iters, info->fit_lr_code,
+            info->fit_lr_code_model ? ", the model's" : "", info->fit_lr_colour,
             info->bound_expression ? ", expression kept in its training "
                                      "range (--bound-expression)"
                                    : "",

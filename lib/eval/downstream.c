@@ -67,7 +67,7 @@ void gs_eval_ds_options_default(gs_eval_ds_options *o)
     o->lr = 1e-4;
     o->real_fraction = 0.25;
     o->fit_iters = 200;
-    o->fit_lr_code = GS_FIT_LR_CODE_DEFAULT;
+    o->fit_lr_code = 0; /* the model's rate, else GS_FIT_LR_CODE_DEFAULT */
     o->fit_lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
     o->seed = 1;
 }

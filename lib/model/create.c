@@ -223,6 +223,7 @@ void gs_model_get_info(const gs_model *m, gs_model_info *info)
     info->param_id = m->id;
     info->tuned_parts = m->tuned;
     info->fit_code_prior = m->cfg.fit_code_prior;
+    info->fit_code_rate = m->cfg.fit_code_rate;
 }
 
 void gs_model_spec_default(gs_model_spec *s)
@@ -319,6 +320,16 @@ int gs_model_set_fit_code_prior(gs_model *m, double weight, gs_error *err)
                             "fit code prior %g: want [0, 10], 0 for none",
                             weight);
     m->cfg.fit_code_prior = weight;
+    return GS_OK;
+}
+
+int gs_model_set_fit_code_rate(gs_model *m, double rate, gs_error *err)
+{
+    if (!m || !gs_code_rate_ok(rate))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "fit code rate %g: want [0, 10], 0 for the "
+                            "default", rate);
+    m->cfg.fit_code_rate = rate;
     return GS_OK;
 }
 

@@ -29,7 +29,7 @@ static const cfg_field k_fields[] = {
     I(eye_rotation), I(n_train_ids), D(template_spacing_mm), D(d_n_mm),
     D(focal), OPT_I(guide_source, GS_GUIDE_SRC_BLOCK), OPT_I(n_lid0, 0),
     OPT_I(n_lid1, 0), OPT_I(supersample, 1), OPT_I(eye_direct, 0),
-    OPT_D(fit_code_prior, 0.0)};
+    OPT_D(fit_code_prior, 0.0), OPT_D(fit_code_rate, 0.0)};
 #undef I
 #undef D
 #undef OPT_I

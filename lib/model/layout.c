@@ -73,6 +73,10 @@ int gs_model_config_check(const gs_model_config *c, gs_error *err)
         return gs_error_set(err, GS_ERR_FORMAT,
                             "model config: fit_code_prior %g outside [0, 10]",
                             c->fit_code_prior);
+    if (!gs_code_rate_ok(c->fit_code_rate))
+        return gs_error_set(err, GS_ERR_FORMAT,
+                            "model config: fit_code_rate %g outside [0, 10]",
+                            c->fit_code_rate);
     if (!(c->d_n_mm > 10.0 && c->d_n_mm < 1e5) ||
         !(c->focal > 1.0 && c->focal < 1e6))
         return gs_error_set(err, GS_ERR_FORMAT,

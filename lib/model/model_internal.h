@@ -43,6 +43,10 @@ typedef struct gs_model_config {
     double fit_code_prior; /* the weight of the fit's code prior that suits
                               this model (gs_fit_options.code_prior's
                               default; 0..10; files without the key: 0) */
+    double fit_code_rate;  /* the fit's Adam rate for the code that suits
+                              this model (gs_fit_options.lr_code's default;
+                              0: GS_FIT_LR_CODE_DEFAULT, else (0, 10];
+                              files without the key: 0) */
 } gs_model_config;
 
 /* The latent code tau = [identity (id_dim) | expression (6) | light (12)].
@@ -196,6 +200,20 @@ int gs_model_config_check(const gs_model_config *c, gs_error *err);
 static inline int gs_code_prior_weight_ok(double w)
 {
     return w >= 0.0 && w <= 10.0;
+}
+/* A fit code rate a model file or gs_model_set_fit_code_rate accepts:
+ * [0, 10] (0: the library's default); NaN is not. */
+static inline int gs_code_rate_ok(double r)
+{
+    return r >= 0.0 && r <= 10.0;
+}
+/* The code rate a fit with these options runs at: the options' own, else
+ * the model's, else the library's default. */
+static inline double gs_fit_code_rate(const gs_model_config *c, double lr_code)
+{
+    return lr_code > 0 ? lr_code
+           : c->fit_code_rate > 0 ? c->fit_code_rate
+                                  : GS_FIT_LR_CODE_DEFAULT;
 }
 
 /* Creates a model with fresh parameters from the synthetic template. */

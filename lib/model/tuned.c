@@ -129,8 +129,9 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
     const int S = c->image_size, D = gs_model_code_dim(c);
     /* What gs_model_fit makes of the options (api.c): the defaults that 0
      * stands for, the model's prior weight for GS_FIT_CODE_PRIOR_MODEL,
-     * the known labels only when known. Every field of the configuration
-     * but fit_code_prior (resolved here) shapes the fit's renders. */
+     * the model's code rate for 0, the known labels only when known.
+     * Every field of the configuration but fit_code_prior and
+     * fit_code_rate (resolved here) shapes the fit's renders. */
     const uint64_t r[] = {
         gs_model_param_id(m), 1 /* key version */,
         (uint64_t)c->n_face, (uint64_t)c->n_eye_each, (uint64_t)c->feat_dim,
@@ -144,7 +145,7 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
         (uint64_t)(o.max_iters > 0 ? o.max_iters : 200),
         bits(o.time_budget_s > 0 ? o.time_budget_s : 0),
         bits(o.plateau_rel > 0 ? o.plateau_rel : 1e-3),
-        bits(o.lr_code > 0 ? o.lr_code : GS_FIT_LR_CODE_DEFAULT),
+        bits(gs_fit_code_rate(c, o.lr_code)),
         bits(o.lr_colour > 0 ? o.lr_colour : GS_FIT_LR_COLOUR_DEFAULT),
         (uint64_t)(o.bound_expression != 0),
         bits(o.code_prior == GS_FIT_CODE_PRIOR_MODEL ? c->fit_code_prior

@@ -574,6 +574,49 @@ int main(int argc, char **argv)
         CHECK(summary_has(md3, "code prior weight 0.5 (--code-prior)", NULL));
         snprintf(md3, sizeof md3, "%s/summary.md", o5);
         CHECK(summary_has(md3, "!code prior weight", NULL));
+        /* The model's code rate (gazesplat model --fit-code-rate): the
+         * fits run at it as at --fit-lr R,0.02 on the plain model, the
+         * report says whose rate it is, and --fit-lr 0.12,0.02 gives the
+         * plain model's numbers back. */
+        {
+            char rm[300], o6[300], o7[300], c6[320], c7[320], md6[320];
+            snprintf(rm, sizeof rm, "%s/tiny-rate.safetensors", dir);
+            snprintf(o6, sizeof o6, "%s/run6", dir);
+            snprintf(o7, sizeof o7, "%s/run7", dir);
+            const char *mk_rm[] = {"model", "--model", model, "--fit-code-rate",
+                                   "0.3", "--out", rm, NULL};
+            CHECK_EQ_INT(run(mk_rm), 0);
+            const char *e6[20] = {"eval", "--model", rm, "--pairs", pairs,
+                                "--out", o6, "--method", "model,warp,identity",
+                                "--iters", "4", "--threads", "2", "--estimator",
+                                est, NULL};
+            const char *e7[] = {"eval", "--model", model, "--pairs", pairs,
+                                "--out", o7, "--method", "model,warp,identity",
+                                "--iters", "4", "--threads", "2", "--estimator",
+                                est, "--fit-lr", "0.3,0.02", NULL};
+            CHECK_EQ_INT(run(e6), 0);
+            CHECK_EQ_INT(run(e7), 0);
+            snprintf(c6, sizeof c6, "%s/pairs.csv", o6);
+            snprintf(c7, sizeof c7, "%s/pairs.csv", o7);
+            char *p6 = check_csv(c6), *p7 = check_csv(c7);
+            CHECK_MSG(p6 && p7 && strcmp(p6, p7) == 0,
+                      "the model's rate differs from --fit-lr:\n%s\n---\n%s", p6, p7);
+            CHECK_MSG(p6 && a && strcmp(p6, a) != 0, "the rate changed nothing");
+            snprintf(md6, sizeof md6, "%s/summary.md", o6);
+            CHECK(summary_has(md6, "rates 0.3 (code, the model's) and 0.02 (colour)", NULL));
+            snprintf(md6, sizeof md6, "%s/summary.md", o7);
+            CHECK(summary_has(md6, "rates 0.3 (code) and 0.02 (colour)", NULL));
+            e6[15] = "--fit-lr";
+            e6[16] = "0.12,0.02";
+            e6[17] = NULL;
+            CHECK_EQ_INT(run(e6), 0);
+            free(p6);
+            p6 = check_csv(c6);
+            CHECK_MSG(p6 && a && strcmp(p6, a) == 0,
+                      "--fit-lr 0.12,0.02 differs from the plain model:\n%s", p6);
+            free(p6);
+            free(p7);
+        }
         /* Cached fits are keyed by what made them: run 3's (the model's
          * 0.5) serve the plain model at --code-prior 0.5, the same fit,
          * but not the prior model at --code-prior 0, whose fits are made

@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
-# gazesplat model: describes a model file; --fit-code-prior W --out OUT
-# writes a copy naming the fit's code prior (the same parameters, read
-# back exactly), which gazesplat fit then uses by default (a weight of 0
-# gives the plain model's subject back, byte for byte); bad values are
+# gazesplat model: describes a model file; --fit-code-prior W and/or
+# --fit-code-rate R with --out OUT write a copy naming the fit's code
+# prior and code rate (the same parameters, read back exactly), which
+# gazesplat fit then uses by default (a weight of 0, or the library's
+# own rate 0.12, gives the plain model's subject back, byte for byte); bad values are
 # usage errors (exit 2) and a missing or damaged file a failure (exit 1),
 # with nothing written either way.
 set -euo pipefail
@@ -20,6 +21,7 @@ for k in image_size feat_size supersample eye_direct lids gaussians_face gaussia
   grep -q "^$k: " m.txt || { cat m.txt; fail "no $k"; }
 done
 grep -qx "fit_code_prior: 0" m.txt || { cat m.txt; fail "a new model names a prior"; }
+grep -qx "fit_code_rate: 0" m.txt || { cat m.txt; fail "a new model names a code rate"; }
 grep -qx "train_identities: 2" m.txt || fail "identities"
 
 # The copy: only the prior differs; 0.0003 is kept as eval's --code-prior reads it.
@@ -35,6 +37,22 @@ cp p.safetensors q.safetensors
 "$G" model --model q.safetensors --fit-code-prior 1 --out q.safetensors >/dev/null
 "$G" model --model q.safetensors | grep -qx "fit_code_prior: 1" || fail "in-place write"
 "$G" model --model q.safetensors --fit-code-prior 0 --out z.safetensors >/dev/null
+
+# The code rate: kept as eval's --fit-lr reads it (a double); alone, or with the prior.
+"$G" model --model m.safetensors --fit-code-rate 0.24 --out r.safetensors > r.txt
+grep -qx "fit_code_rate: 0.23999999999999999" r.txt || { cat r.txt; fail "rate not written"; }
+diff <(grep -v "^model:\|^fit_code_rate:" m.txt) <(grep -v "^model:\|^fit_code_rate:" r.txt) ||
+  fail "the copy differs in more than the rate"
+"$G" model --model m.safetensors --fit-code-prior 1 --fit-code-rate 0.5 --out b.safetensors > b.txt
+grep -qx "fit_code_prior: 1" b.txt && grep -qx "fit_code_rate: 0.5" b.txt || { cat b.txt; fail "both"; }
+"$G" model --model m.safetensors --fit-code-rate 0.12 --out d.safetensors >/dev/null
+
+# gazesplat fit follows the model's rate: 0.24 fits otherwise, the default's 0.12 as the plain model.
+"$G" fit --model m.safetensors --image $IMG --iters 6 --out plain.bin 2>/dev/null
+"$G" fit --model r.safetensors --image $IMG --iters 6 --out rate.bin 2>/dev/null
+"$G" fit --model d.safetensors --image $IMG --iters 6 --out dflt.bin 2>/dev/null
+! cmp -s plain.bin rate.bin || fail "the model's code rate changed nothing in the fit"
+cmp plain.bin dflt.bin || fail "a model naming the default rate fits otherwise than the plain one"
 
 # gazesplat fit follows the model's prior: weight 1 fits otherwise, 0 as the plain model.
 "$G" fit --model m.safetensors --image $IMG --iters 6 --out plain.bin 2>/dev/null
@@ -55,7 +73,10 @@ expect 2 --model m.safetensors --fit-code-prior 0.1
 expect 2 --model m.safetensors --out w.safetensors
 for w in -0.1 10.5 nan inf strong ""; do
   expect 2 --model m.safetensors --fit-code-prior "$w" --out w.safetensors
+  expect 2 --model m.safetensors --fit-code-rate "$w" --out w.safetensors
 done
+expect 2 --model m.safetensors --fit-code-rate 0.2
+expect 2 --model m.safetensors --fit-code-rate 0.2x --out w.safetensors
 expect 2 --model m.safetensors stray
 expect 1 --model missing.safetensors
 expect 1 --model missing.safetensors --fit-code-prior 0.1 --out w.safetensors
@@ -65,4 +86,5 @@ grep -q "cut.safetensors" err.txt || fail "the message does not name the file"
 expect 1 --model m.safetensors --fit-code-prior 0.1 --out nodir/w.safetensors
 [ ! -e w.safetensors ] && [ ! -e nodir ] || fail "a refused command wrote a file"
 "$G" help model | grep -q "fit-code-prior" || fail "no help"
+"$G" help model | grep -q "fit-code-rate" || fail "no help for the rate"
 echo "model cli: ok"

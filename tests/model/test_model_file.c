@@ -1,7 +1,7 @@
 /* Model files: save -> load round trip (every tensor, the configuration),
  * and refusal of truncated, corrupt and inconsistent files; the optional
- * config.fit_code_prior: kept exactly, 0 when absent (older files), refused
- * outside [0, 10] or unparsable. */
+ * config.fit_code_prior and config.fit_code_rate: kept exactly, 0 when
+ * absent (older files), refused outside [0, 10] or unparsable. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -137,6 +137,70 @@ static void fit_prior_key(gs_model *m)
     CHECK(gs_model_set_fit_code_prior(m, 0, &err) == GS_OK);
 }
 
+/* Loads bytes; returns the code and the fit code rate it named (or -1). */
+static int load_rate(const uint8_t *buf, size_t len, double *rate, char *msg,
+                     size_t cap)
+{
+    gs_model *m = NULL;
+    gs_error err = {0, ""};
+    int code = gs_model_load_mem(buf, len, &m, &err);
+    *rate = -1;
+    if (code == GS_OK) {
+        gs_model_info info;
+        gs_model_get_info(m, &info);
+        *rate = info.fit_code_rate;
+        gs_model_destroy(m);
+    }
+    snprintf(msg, cap, "%s", err.msg);
+    return code;
+}
+
+static void fit_rate_key(gs_model *m)
+{
+    gs_error err = {0, ""};
+    const double r = 0.24; /* as `--fit-code-rate 0.24` reads (strtod) */
+    CHECK(m->cfg.fit_code_rate == 0);
+    CHECK(gs_model_set_fit_code_rate(m, r, &err) == GS_OK);
+    CHECK(gs_model_save(m, path, &err) == GS_OK);
+    gs_model *l = NULL;
+    CHECK_MSG(gs_model_load(path, &l, &err) == GS_OK, "%s", err.msg);
+    CHECK(l && l->cfg.fit_code_rate == r); /* every bit (%.17g) */
+    CHECK(l && memcmp(&l->cfg, &m->cfg, sizeof m->cfg) == 0);
+    gs_model_destroy(l);
+    const double bad[] = {-1.0, -1e-9, 10.5, NAN, INFINITY};
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        CHECK(gs_model_set_fit_code_rate(m, bad[k], &err) == GS_ERR_ARG);
+        CHECK(strstr(err.msg, "code rate") != NULL);
+    }
+    CHECK(gs_model_set_fit_code_rate(NULL, 0.1, &err) == GS_ERR_ARG);
+    CHECK(m->cfg.fit_code_rate == r);
+
+    struct { const char *value; int code; double rate; } cases[] = {
+        {NULL, GS_OK, 0.0},      /* a file from before the key: none */
+        {"0", GS_OK, 0.0},       {"10", GS_OK, 10.0},
+        {"0.23999999999999999", GS_OK, r},
+        {"-0.5", GS_ERR_FORMAT, -1}, {"10.5", GS_ERR_FORMAT, -1},
+        {"nan", GS_ERR_FORMAT, -1},  {"inf", GS_ERR_FORMAT, -1},
+        {"1e", GS_ERR_FORMAT, -1},   {"", GS_ERR_FORMAT, -1},
+    };
+    for (size_t k = 0; k < sizeof cases / sizeof cases[0]; k++) {
+        uint8_t *b = NULL;
+        size_t n = 0;
+        CHECK(with_meta("config.fit_code_rate", cases[k].value, &b, &n));
+        double rate = -2;
+        char msg[256] = "";
+        int code = b ? load_rate(b, n, &rate, msg, sizeof msg) : -99;
+        CHECK_MSG(code == cases[k].code && rate == cases[k].rate,
+                  "fit_code_rate '%s': code %d, rate %g",
+                  cases[k].value ? cases[k].value : "(absent)", code, rate);
+        if (cases[k].code != GS_OK)
+            CHECK_MSG(strstr(msg, "fit_code_rate") != NULL, "'%s': %s",
+                      cases[k].value, msg);
+        free(b);
+    }
+    CHECK(gs_model_set_fit_code_rate(m, 0, &err) == GS_OK);
+}
+
 int main(void)
 {
     snprintf(path, sizeof path, "test_model_file_%d.safetensors", (int)getpid());
@@ -220,6 +284,7 @@ int main(void)
     free(bad);
     free(buf);
     fit_prior_key(m);
+    fit_rate_key(m);
     unlink(path);
     gs_model_destroy(m);
     GS_TEST_END();

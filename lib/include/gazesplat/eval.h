@@ -296,9 +296,11 @@ typedef struct gs_eval_ds_options {
                               batch is real images (0.25), and never less
                               than the real images' share k / set_size */
     int fit_iters;         /* fit iteration cap (200) */
-    double fit_lr_code, fit_lr_colour; /* the fit's rates (gs_fit_options;
-                                          GS_FIT_LR_*_DEFAULT; 0 means
-                                          them too) */
+    double fit_lr_code, fit_lr_colour; /* the fit's rates (gs_fit_options:
+                                          0 (the code's default) is the
+                                          model file's code rate, else
+                                          GS_FIT_LR_CODE_DEFAULT;
+                                          GS_FIT_LR_COLOUR_DEFAULT) */
     uint64_t seed;         /* scenes, targets and batch draws (1) */
 } gs_eval_ds_options;
 void gs_eval_ds_options_default(gs_eval_ds_options *o);

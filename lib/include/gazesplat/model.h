@@ -72,6 +72,9 @@ typedef struct gs_model_info {
     unsigned tuned_parts; /* GS_FT_* parts fine-tuned since (0: none) */
     double fit_code_prior; /* the fit's code prior weight the model file
                               names (config.fit_code_prior; 0: none) */
+    double fit_code_rate;  /* the fit's code rate the model file names
+                              (config.fit_code_rate; 0: none, the fit
+                              runs at GS_FIT_LR_CODE_DEFAULT) */
 } gs_model_info;
 void gs_model_get_info(const gs_model *m, gs_model_info *info);
 
@@ -249,8 +252,10 @@ typedef struct gs_fit_options {
     const uint8_t *mask; /* image_size^2 weights 0..255 (face region), or
                             NULL for the whole image */
     /* Adam's rates for the latent code and for the colour gain and bias;
-     * 0: GS_FIT_LR_CODE_DEFAULT, GS_FIT_LR_COLOUR_DEFAULT. Each in
-     * [0, 10]. (docs/model.md, "Fitting") */
+     * 0: the rate the model file names for the code
+     * (gs_model_info.fit_code_rate) or, when it names none,
+     * GS_FIT_LR_CODE_DEFAULT; GS_FIT_LR_COLOUR_DEFAULT for the colours.
+     * Each in [0, 10]. (docs/model.md, "Fitting") */
     double lr_code, lr_colour;
     /* Parts of the code known beforehand: NULL, or code_dim values each.
      * The fit starts from code_start (NULL: the model's mean code) and
@@ -279,6 +284,10 @@ void gs_fit_options_default(gs_fit_options *o);
  * kept in the file gs_model_write writes (config.fit_code_prior).
  * GS_ERR_ARG outside [0, 10] or not finite. */
 int gs_model_set_fit_code_prior(gs_model *m, double weight, gs_error *err);
+/* Sets the fit's code rate a model names for its fits (0..10; 0: none,
+ * GS_FIT_LR_CODE_DEFAULT), kept in the file gs_model_write writes
+ * (config.fit_code_rate). GS_ERR_ARG outside [0, 10] or not finite. */
+int gs_model_set_fit_code_rate(gs_model *m, double rate, gs_error *err);
 
 typedef struct gs_fit_report {
     int iters;
