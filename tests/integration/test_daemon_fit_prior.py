@@ -1,9 +1,11 @@
-"""gazesplatd fits with the code prior its model file names
-(config.fit_code_prior, set with `gazesplat model --fit-code-prior`): a
-tiny real model served as trained, with weight 1 and with weight 0, one
-daemon each over a real socket. The weight-1 model fits and renders
-otherwise and the daemon says so at load; the weight-0 copy fits and
-renders the plain model's bytes; the model id follows the file's bytes.
+"""gazesplatd fits with the code prior and the code rate its model file
+names (config.fit_code_prior and config.fit_code_rate, set with
+`gazesplat model --fit-code-prior` and `--fit-code-rate`): a tiny real
+model served as trained, with weight 1 and with weight 0, with rate 0.5
+and with the library's own 0.12, one daemon each over a real socket.
+The weight-1 and rate-0.5 models fit and render otherwise and the daemon
+says so at load; the weight-0 and rate-0.12 copies fit and render the
+plain model's bytes; the model id follows the file's bytes.
 usage: test_daemon_fit_prior.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import os
 import subprocess
@@ -55,6 +57,21 @@ def main():
             "weight 1 fits otherwise: PSNR %.4f against %.4f" % (psnr_1, psnr_a))
     t.check(psnr_0 == psnr_a and out_0 == out_a, "weight 0 fits as the plain model: PSNR %.4f against %.4f"
             % (psnr_0, psnr_a))
+    r5 = os.path.join(work, "rate05.safetensors")
+    r12 = os.path.join(work, "rate012.safetensors")
+    subprocess.run([cli, "model", "--model", plain, "--fit-code-rate", "0.5", "--out", r5],
+                   check=True, capture_output=True)
+    subprocess.run([cli, "model", "--model", plain, "--fit-code-rate", "0.12", "--out", r12],
+                   check=True, capture_output=True)
+    psnr_r5, out_r5, _, log_r5 = serve(t, daemon, r5, img)
+    psnr_r12, out_r12, _, log_r12 = serve(t, daemon, r12, img)
+    t.check("code rate" not in log_a, "a model naming no rate: no rate in the log")
+    t.check("fits use the model's code rate, 0.5" in log_r5, "the rate is logged at load")
+    t.check(psnr_r5 != psnr_a and out_r5 != out_a,
+            "rate 0.5 fits otherwise: PSNR %.4f against %.4f" % (psnr_r5, psnr_a))
+    t.check(psnr_r12 == psnr_a and out_r12 == out_a,
+            "rate 0.12 (the library's) fits as the plain model: PSNR %.4f against %.4f"
+            % (psnr_r12, psnr_a))
     # the model id names the file's bytes: the weight-1 file is another
     # model; the weight-0 copy is the plain file itself when that was
     # written with the key (a file from before the key differs in bytes)
