@@ -31,8 +31,8 @@ import sys
 
 import numpy as np
 
-MAGIC = 0x42555347           # "GSUB", GS_SUBJECT_MAGIC
-CACHE_MAGIC = b"GSFITC2\n"   # lib/eval/fit.c: magic, key, seconds
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from fit_codes import read_code  # noqa: E402  (the one reader of fit caches)
 
 
 def fail(msg):
@@ -66,20 +66,6 @@ def load_codes(path):
     if out["codes.train"].ndim != 2 or out["codes.train"].shape[0] < 2:
         fail(f"{path}: codes.train of shape {list(out['codes.train'].shape)}")
     return out["codes.train"], out["codes.mean"]
-
-
-def read_code(path):
-    with open(path, "rb") as f:
-        b = f.read()
-    head = 24 if b[:8] == CACHE_MAGIC else 8
-    if len(b) < head + 12:
-        fail(f"{path}: too short for a fit cache file")
-    magic, _ver, dim = struct.unpack_from("<III", b, head)
-    if magic != MAGIC:
-        fail(f"{path}: not a fit cache file (magic {magic:#x})")
-    if len(b) < head + 12 + 4 * dim:
-        fail(f"{path}: code of {dim} values does not fit the file")
-    return np.array(struct.unpack_from(f"<{dim}f", b, head + 12))
 
 
 def identities(d):
@@ -129,7 +115,7 @@ def main():
         files = sorted(x for x in os.listdir(fd) if x.endswith(".bin"))
         if not files:
             fail(f"{d}: no fits")
-        codes = {int(x[:-4]): read_code(os.path.join(fd, x)) for x in files}
+        codes = {int(x[:-4]): np.array(read_code(os.path.join(fd, x))) for x in files}
         for k, c in codes.items():
             if len(c) <= id_dim:
                 fail(f"{d}: fit {k} has a code of {len(c)} values; the model's "

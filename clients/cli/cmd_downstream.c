@@ -325,9 +325,7 @@ static int run_checked(ds_cli *d)
         gs_model_info mi;
         gs_model_get_info(m, &mi);
         d->fit_lr_code_model = d->o.fit_lr_code <= 0 && mi.fit_code_rate > 0;
-        d->fit_lr_code = d->o.fit_lr_code > 0 ? d->o.fit_lr_code
-                         : mi.fit_code_rate > 0 ? mi.fit_code_rate
-                                                : GS_FIT_LR_CODE_DEFAULT;
+        d->fit_lr_code = gs_model_fit_code_rate(m, d->o.fit_lr_code);
         rc = run_loaded(d, m, est);
     }
     gs_gaze_net_destroy(est);

@@ -855,7 +855,7 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
         }
         if (ev->lr_code == 0) { /* no --fit-lr: the model's rate, if it names one */
             info->fit_lr_code_model = mi.fit_code_rate > 0;
-            ev->lr_code = mi.fit_code_rate > 0 ? mi.fit_code_rate : GS_FIT_LR_CODE_DEFAULT;
+            ev->lr_code = gs_model_fit_code_rate(ev->m, 0);
             info->fit_lr_code = ev->lr_code;
         }
         int oracle = 0, top = eval_pairs_identities(&ps) - 1;

@@ -470,7 +470,7 @@ static void fit_init(const gs_model_ctx *c, const gs_fit_options *o,
         s->lr[V_GAIN + k] = o->lr_colour > 0 ? o->lr_colour : GS_FIT_LR_COLOUR_DEFAULT;
         s->lr[V_BIAS + k] = s->lr[V_GAIN + k];
     }
-    const double lr_code = gs_fit_code_rate(&c->m->cfg, o->lr_code);
+    const double lr_code = gs_model_fit_code_rate(c->m, o->lr_code);
     for (int k = 0; k < c->D; k++)
         s->lr[V_CODE + k] = o->code_fixed && o->code_fixed[k] ? 0.0 : lr_code;
 }

@@ -333,6 +333,13 @@ int gs_model_set_fit_code_rate(gs_model *m, double rate, gs_error *err)
     return GS_OK;
 }
 
+double gs_model_fit_code_rate(const gs_model *m, double lr_code)
+{
+    return lr_code > 0 ? lr_code
+           : m->cfg.fit_code_rate > 0 ? m->cfg.fit_code_rate
+                                      : GS_FIT_LR_CODE_DEFAULT;
+}
+
 int gs_model_set_guide_source(gs_model *m, int source, gs_error *err)
 {
     if (!m || (source != GS_GUIDE_SRC_BLOCK && source != GS_GUIDE_SRC_SOURCE))

@@ -207,14 +207,7 @@ static inline int gs_code_rate_ok(double r)
 {
     return r >= 0.0 && r <= 10.0;
 }
-/* The code rate a fit with these options runs at: the options' own, else
- * the model's, else the library's default. */
-static inline double gs_fit_code_rate(const gs_model_config *c, double lr_code)
-{
-    return lr_code > 0 ? lr_code
-           : c->fit_code_rate > 0 ? c->fit_code_rate
-                                  : GS_FIT_LR_CODE_DEFAULT;
-}
+
 
 /* Creates a model with fresh parameters from the synthetic template. */
 int gs_model_create(const gs_model_config *cfg, uint64_t seed, gs_model **out,

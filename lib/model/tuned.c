@@ -145,7 +145,7 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
         (uint64_t)(o.max_iters > 0 ? o.max_iters : 200),
         bits(o.time_budget_s > 0 ? o.time_budget_s : 0),
         bits(o.plateau_rel > 0 ? o.plateau_rel : 1e-3),
-        bits(gs_fit_code_rate(c, o.lr_code)),
+        bits(gs_model_fit_code_rate(m, o.lr_code)),
         bits(o.lr_colour > 0 ? o.lr_colour : GS_FIT_LR_COLOUR_DEFAULT),
         (uint64_t)(o.bound_expression != 0),
         bits(o.code_prior == GS_FIT_CODE_PRIOR_MODEL ? c->fit_code_prior

@@ -71,18 +71,19 @@ static int with_meta(const char *key, const char *value, uint8_t **out,
     return rc == 0;
 }
 
-/* Loads bytes; returns the code and the fit prior it named (or -1). */
-static int load_prior(const uint8_t *buf, size_t len, double *prior,
-                      char *msg, size_t cap)
+/* Loads bytes; returns the code, and in *value the fit setting it named
+ * (rate 1: config.fit_code_rate, else config.fit_code_prior), or -1. */
+static int load_setting(const uint8_t *buf, size_t len, int rate, double *value,
+                        char *msg, size_t cap)
 {
     gs_model *m = NULL;
     gs_error err = {0, ""};
     int code = gs_model_load_mem(buf, len, &m, &err);
-    *prior = -1;
+    *value = -1;
     if (code == GS_OK) {
         gs_model_info info;
         gs_model_get_info(m, &info);
-        *prior = info.fit_code_prior;
+        *value = rate ? info.fit_code_rate : info.fit_code_prior;
         gs_model_destroy(m);
     }
     snprintf(msg, cap, "%s", err.msg);
@@ -125,7 +126,7 @@ static void fit_prior_key(gs_model *m)
         CHECK(with_meta("config.fit_code_prior", cases[k].value, &b, &n));
         double prior = -2;
         char msg[256] = "";
-        int code = b ? load_prior(b, n, &prior, msg, sizeof msg) : -99;
+        int code = b ? load_setting(b, n, 0, &prior, msg, sizeof msg) : -99;
         CHECK_MSG(code == cases[k].code && prior == cases[k].prior,
                   "fit_code_prior '%s': code %d, prior %g", cases[k].value ? cases[k].value : "(absent)",
                   code, prior);
@@ -135,24 +136,6 @@ static void fit_prior_key(gs_model *m)
         free(b);
     }
     CHECK(gs_model_set_fit_code_prior(m, 0, &err) == GS_OK);
-}
-
-/* Loads bytes; returns the code and the fit code rate it named (or -1). */
-static int load_rate(const uint8_t *buf, size_t len, double *rate, char *msg,
-                     size_t cap)
-{
-    gs_model *m = NULL;
-    gs_error err = {0, ""};
-    int code = gs_model_load_mem(buf, len, &m, &err);
-    *rate = -1;
-    if (code == GS_OK) {
-        gs_model_info info;
-        gs_model_get_info(m, &info);
-        *rate = info.fit_code_rate;
-        gs_model_destroy(m);
-    }
-    snprintf(msg, cap, "%s", err.msg);
-    return code;
 }
 
 static void fit_rate_key(gs_model *m)
@@ -189,7 +172,7 @@ static void fit_rate_key(gs_model *m)
         CHECK(with_meta("config.fit_code_rate", cases[k].value, &b, &n));
         double rate = -2;
         char msg[256] = "";
-        int code = b ? load_rate(b, n, &rate, msg, sizeof msg) : -99;
+        int code = b ? load_setting(b, n, 1, &rate, msg, sizeof msg) : -99;
         CHECK_MSG(code == cases[k].code && rate == cases[k].rate,
                   "fit_code_rate '%s': code %d, rate %g",
                   cases[k].value ? cases[k].value : "(absent)", code, rate);

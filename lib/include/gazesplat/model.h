@@ -288,6 +288,10 @@ int gs_model_set_fit_code_prior(gs_model *m, double weight, gs_error *err);
  * GS_FIT_LR_CODE_DEFAULT), kept in the file gs_model_write writes
  * (config.fit_code_rate). GS_ERR_ARG outside [0, 10] or not finite. */
 int gs_model_set_fit_code_rate(gs_model *m, double rate, gs_error *err);
+/* The code rate a fit of m runs at when its options ask for lr_code: that
+ * rate when > 0, else the model's (gs_model_info.fit_code_rate), else
+ * GS_FIT_LR_CODE_DEFAULT. */
+double gs_model_fit_code_rate(const gs_model *m, double lr_code);
 
 typedef struct gs_fit_report {
     int iters;
