@@ -117,6 +117,8 @@ const cli_command cli_eval_command = {
     "                    head pose: the input's eyeball pixels, turned with\n"
     "                    the eye inside its opening, weighted\n"
     "                    exp(-(turn / DEG)^2); 0..90 (default 20; 0 = off)\n"
+    "  --transfer-eye-warp-head 0|1  1: the same warp at another head pose\n"
+    "                    too (the opening the model shows there); default 0\n"
     "  --light-on-head   model and transfer methods: at a head change keep\n"
     "                    the fitted light on the head (default: the lights\n"
     "                    stay in the camera, as in the ground truth)\n"
@@ -150,7 +152,7 @@ const cli_command cli_eval_command = {
 enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
-    O_XHW, O_LOH, O_XEW, O_XWARP, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
+    O_XHW, O_LOH, O_XEW, O_XWARP, O_XWARP_HEAD, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
     O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_CODE_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
@@ -815,6 +817,7 @@ static int render_setup(evaluator *ev, eval_run_info *info)
     info->transfer_head_weight = ev->ro.transfer_head_weight;
     info->transfer_eye_weight = ev->ro.transfer_eye_weight;
     info->transfer_eye_warp_deg = ev->ro.transfer_eye_warp_deg;
+    info->transfer_eye_warp_head = ev->ro.transfer_eye_warp_head;
     info->light_on_head = ev->light_on_head;
     return CLI_OK;
 }
@@ -915,6 +918,7 @@ static int run_eval(int argc, char **argv)
         {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
         {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
         {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
+        {"--transfer-eye-warp-head", 1, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
         {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
         {"--readout-soft", 1, NULL},
@@ -988,6 +992,12 @@ static int run_eval(int argc, char **argv)
         (rc = cli_parse_range(cmd, "--transfer-eye-warp", o[O_XWARP].value, 0.0, 90.0,
                               CLI_WARP_WANT, &ev.ro.transfer_eye_warp_deg)))
         return rc;
+    if (o[O_XWARP_HEAD].value) {
+        long v;
+        if (cli_parse_long(o[O_XWARP_HEAD].value, 0, 1, &v))
+            return cli_usage_error(cmd, "--transfer-eye-warp-head: want 0 or 1");
+        ev.ro.transfer_eye_warp_head = (int)v;
+    }
     ev.light_on_head = o[O_LOH].value != NULL;
     if ((rc = cli_parse_finetune(cmd, o[O_FT].value, o[O_FT_PARTS].value, o[O_FT_LR].value, NULL,
                                  o[O_FT_OUTLINE].value, o[O_FT_MIRROR].value,

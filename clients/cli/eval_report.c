@@ -296,6 +296,10 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                    "eyeball pixels turned inside the eye opening, x "
                    "exp(-(turn / %.3g deg)^2) (--transfer-eye-warp)\n",
                 info->transfer_eye_warp_deg);
+    if (has_transfer && info->transfer_eye_warp_deg > 0 && info->transfer_eye_warp_head)
+        fprintf(f, "- transfer at another gaze and head pose: the same warp, "
+                   "inside the eye opening the model shows at the target's "
+                   "pose (--transfer-eye-warp-head 1)\n");
     else if (has_transfer)
         fprintf(f, "- transfer eyeball warp: off (--transfer-eye-warp 0)\n");
     if (info->ft_iters > 0) {

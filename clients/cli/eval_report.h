@@ -81,6 +81,7 @@ typedef struct eval_run_info {
     double transfer_head_weight; /* render option, transfer method */
     double transfer_eye_weight;  /* render option, transfer method */
     double transfer_eye_warp_deg; /* render option, transfer method */
+    int transfer_eye_warp_head;   /* render option, transfer method */
     int light_on_head;    /* --light-on-head */
     unsigned true_code;   /* --true-code: GS_SCENE_CODE_* bits (0: none) */
     int bound_expression; /* --bound-expression */

@@ -64,6 +64,9 @@ void gs_xfer_target_maps(const gs_xfer *x, const float **z, const float **a,
 /* The live subject's eye opening [S*S], 0..1 (tests read it, or overwrite
  * it to pin the opening); NULL until a warped transfer made it. */
 float *gs_xfer_eye_opening(gs_xfer *x);
+/* The same at the last head-changed target's pose (transfer_eye_warp_head);
+ * NULL until a warped transfer at another head pose made it. */
+float *gs_xfer_target_opening(gs_xfer *x);
 /* The eyeball warp's proxy iris (transfer.c): its radius over the proxy
  * eyeball's (an eye's 6 mm over 12 mm) and its plane's inset behind the
  * limbus, as a share of the eyeball's radius. */
@@ -194,6 +197,7 @@ struct gs_model_ctx {
     float xfer_head_w; /* transfer_head_weight (render options) */
     float xfer_eye_w;  /* transfer_eye_weight (render options) */
     double xfer_warp_deg; /* transfer_eye_warp_deg (render options) */
+    int xfer_warp_head;   /* transfer_eye_warp_head (render options) */
     int face_map_fs;                  /* the size fmap_face was made at */
     int last_inc;
     float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */

@@ -118,6 +118,11 @@ typedef struct xfer_subj {
     double src_er[2];              /* its proxy eyeballs' radii */
     int ap_valid;                  /* src_ap is this own view's */
     float *src_ap;                 /* [S*S] eye opening, 0..1 */
+    /* the eye opening at another head pose (the warp there): tgt_ap is
+     * for head pose tap_R, tap_t when tap_valid */
+    int tap_valid;
+    double tap_R[9], tap_t[3];
+    float *tgt_ap;                 /* [S*S] */
     /* the residual res, kept with the input it came from while the own
      * view is kept */
     int res_valid;
@@ -159,13 +164,14 @@ struct gs_xfer {
 
 static void subj_invalidate(xfer_subj *u)
 {
-    u->valid = u->res_valid = u->tgt_valid = u->ap_valid = 0;
+    u->valid = u->res_valid = u->tgt_valid = u->ap_valid = u->tap_valid = 0;
 }
 
 static void subj_free(xfer_subj *u)
 {
     float *bufs[] = {u->src_z, u->src_a, u->src_e, u->res, u->res_smooth,
-                     u->tgt_z, u->tgt_a, u->tgt_e, u->warped, u->src_ap};
+                     u->tgt_z, u->tgt_a, u->tgt_e, u->warped, u->src_ap,
+                     u->tgt_ap};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(bufs[i]);
     free(u->src8);
@@ -180,7 +186,7 @@ static int subj_alloc(xfer_subj *u, int S, int nf)
 {
     size_t px = (size_t)S * S;
     float **one[] = {&u->src_z, &u->src_a, &u->src_e, &u->tgt_z, &u->tgt_a,
-                     &u->tgt_e, &u->src_ap};
+                     &u->tgt_e, &u->src_ap, &u->tgt_ap};
     int fail = 0;
     for (size_t i = 0; i < sizeof one / sizeof one[0]; i++)
         fail |= !(*one[i] = malloc(px * sizeof(float)));
@@ -238,6 +244,11 @@ void gs_xfer_forget_target(gs_xfer *x)
 float *gs_xfer_eye_opening(gs_xfer *x)
 {
     return x && x->cur.ap_valid ? x->cur.src_ap : NULL;
+}
+
+float *gs_xfer_target_opening(gs_xfer *x)
+{
+    return x && x->cur.tap_valid ? x->cur.tgt_ap : NULL;
 }
 
 void gs_xfer_target_maps(const gs_xfer *x, const float **z, const float **a,
@@ -474,12 +485,13 @@ static float eye_weight(const double M[9], double floor_w)
     return (float)(floor_w + (1.0 - floor_w) * exp(-r * r));
 }
 
-/* Whether the eyeball warp runs: asked for, at the input's head pose, and
- * the model turns its eyes explicitly (the ablation without is measured
- * as the model it is). */
+/* Whether the eyeball warp runs: asked for, at the input's head pose (or
+ * at any, transfer_eye_warp_head), and the model turns its eyes
+ * explicitly (the ablation without is measured as the model it is). */
 static int warp_on(const gs_model_ctx *c, int same_pose)
 {
-    return c->xfer_warp_deg > 0 && same_pose && c->m->cfg.eye_rotation;
+    return c->xfer_warp_deg > 0 && (same_pose || c->xfer_warp_head) &&
+           c->m->cfg.eye_rotation;
 }
 
 static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
@@ -784,25 +796,23 @@ static double clamp_abs(double v, double lim)
     return v > lim ? lim : v < -lim ? -lim : v;
 }
 
-/* The live subject's eye opening (the header): the largest change of its
- * render over the probe gazes, mapped to 0..1. Renders, so it runs before
- * the target's render (whose Gaussians the target's maps read). */
-static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
-                       const gs_subject *s, gs_error *err)
+/* The eye opening (the header) of subject s seen at head pose R, t into
+ * ap: the largest change over the probe gazes about its own gaze against
+ * base, its render there at that gaze, mapped to 0..1. */
+static int opening_probes(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                          const gs_subject *s, const gs_view *at,
+                          const uint8_t *base, float *ap, gs_error *err)
 {
-    if (x->cur.ap_valid)
-        return GS_OK;
     static const double probe[GS_XFER_PROBES][2] = {
         {0, GS_XFER_PROBE_YAW}, {0, -GS_XFER_PROBE_YAW},
         {GS_XFER_PROBE_PITCH, 0}, {-GS_XFER_PROBE_PITCH, 0}};
     int S = x->S;
     size_t px = (size_t)S * S;
-    float *ap = x->cur.src_ap;
     memset(ap, 0, px * sizeof(float));
     for (int k = 0; k < GS_XFER_PROBES; k++) {
-        gs_view v = {clamp_abs(s->gaze_pitch + probe[k][0], GS_MODEL_MAX_GAZE_PITCH),
-                     clamp_abs(s->gaze_yaw + probe[k][1], GS_MODEL_MAX_GAZE_YAW),
-                     0, {0}, {0}, 0};
+        gs_view v = *at;
+        v.gaze_pitch = clamp_abs(s->gaze_pitch + probe[k][0], GS_MODEL_MAX_GAZE_PITCH);
+        v.gaze_yaw = clamp_abs(s->gaze_yaw + probe[k][1], GS_MODEL_MAX_GAZE_YAW);
         /* the lids held at the subject's pitch: the opening is where the
          * eyeball shows, not where the lids go */
         c->lid_hold = 1;
@@ -812,7 +822,7 @@ static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
         if (rc)
             return rc;
         for (size_t i = 0; i < px; i++) {
-            const uint8_t *a = x->probe8 + 3 * i, *b = x->cur.src8 + 3 * i;
+            const uint8_t *a = x->probe8 + 3 * i, *b = base + 3 * i;
             float d = (float)(abs(a[0] - b[0]) + abs(a[1] - b[1]) + abs(a[2] - b[2]));
             ap[i] = d > ap[i] ? d : ap[i];
         }
@@ -821,7 +831,48 @@ static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
         float w = (ap[i] - GS_XFER_AP_LO) / (GS_XFER_AP_HI - GS_XFER_AP_LO);
         ap[i] = w < 0.0f ? 0.0f : w > 1.0f ? 1.0f : w;
     }
-    x->cur.ap_valid = 1;
+    return GS_OK;
+}
+
+/* The live subject's eye opening in its own view (src_ap). Renders, so it
+ * runs before the target's render (whose Gaussians the target's maps
+ * read). */
+static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                       const gs_subject *s, gs_error *err)
+{
+    if (x->cur.ap_valid)
+        return GS_OK;
+    gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}, 0};
+    int rc = opening_probes(c, x, pool, s, &own, x->cur.src8, x->cur.src_ap, err);
+    x->cur.ap_valid = !rc;
+    return rc;
+}
+
+/* The live subject's eye opening at the target's head pose (tgt_ap; the
+ * warp at a head change), kept while the target keeps that pose: probed
+ * about the subject's own gaze, as its own view's is. Renders, so it runs
+ * before the target's render; its base render goes to tgt8, which that
+ * render then overwrites. */
+static int target_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
+                          const gs_subject *s, const gs_view *view,
+                          const double Rt[9], const double tt[3], gs_error *err)
+{
+    if (x->cur.tap_valid && !memcmp(x->cur.tap_R, Rt, sizeof x->cur.tap_R) &&
+        !memcmp(x->cur.tap_t, tt, sizeof x->cur.tap_t))
+        return GS_OK;
+    x->cur.tap_valid = 0;
+    gs_view at = {s->gaze_pitch, s->gaze_yaw, 1, {0}, {0}, view->light_on_head};
+    memcpy(at.head_R, Rt, sizeof at.head_R);
+    memcpy(at.head_t, tt, sizeof at.head_t);
+    int S = x->S;
+    int rc = gs_model_render(c, pool, s, &at, x->tgt8, 3 * (size_t)S, err);
+    if (!rc)
+        rc = opening_probes(c, x, pool, s, &at, x->tgt8, x->cur.tgt_ap, err);
+    if (rc)
+        return rc;
+    memcpy(x->cur.tap_R, Rt, sizeof x->cur.tap_R);
+    memcpy(x->cur.tap_t, tt, sizeof x->cur.tap_t);
+    x->cur.tap_valid = 1;
     return GS_OK;
 }
 
@@ -951,9 +1002,10 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
     const int *tr = x->cur.tgt_rect;
     double uw = 0, vw = 0;
     float ww = 0.0f, src[3] = {0, 0, 0};
-    if (g->warp_w > 0.0f && x->cur.src_ap[i] > 0.0f &&
+    const float *ap = g->same_pose ? x->cur.src_ap : x->cur.tgt_ap;
+    if (g->warp_w > 0.0f && ap[i] > 0.0f &&
         px >= tr[0] && px < tr[2] && py >= tr[1] && py < tr[3]) {
-        ww = x->cur.src_ap[i] * warp_source(x, g, px, py, &uw, &vw);
+        ww = ap[i] * warp_source(x, g, px, py, &uw, &vw);
         wh *= 1.0f - ww;
         we *= 1.0f - ww;
         if (ww > 0.0f)
@@ -1049,6 +1101,9 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
     int same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
                     !memcmp(ts, tt, 3 * sizeof(double));
     if (warp_on(c, same_pose) && (rc = eye_opening(c, x, pool, s, err)))
+        return rc;
+    if (warp_on(c, same_pose) && !same_pose &&
+        (rc = target_opening(c, x, pool, s, view, Rt, tt, err)))
         return rc;
     /* only the gaze changed since the kept target: the face is the same */
     int keep = x->cur.tgt_valid && !memcmp(x->cur.tgt_R, Rt, sizeof x->cur.tgt_R) &&

@@ -261,6 +261,7 @@ static void usage_errors(const char *model, const char *pairs)
         {"--transfer-eye-weight", "nan"},
         {"--transfer-eye-warp", "-1"}, {"--transfer-eye-warp", "91"},
         {"--transfer-eye-warp", "nan"}, {"--transfer-eye-warp", "wide"},
+        {"--transfer-eye-warp-head", "2"}, {"--transfer-eye-warp-head", "on"},
         {"--finetune-outline", "1"}, /* without --finetune N */
         {"--finetune-mirror", "0"},
         {"--feature-scale", "0.1"}, /* 3 of the tiny model's 32 px */
@@ -467,6 +468,14 @@ int main(int argc, char **argv)
                       "lights at another head pose: kept in the camera",
                       "smoothed skin residual x 0.5", "eyeball residual x 0.5 once",
                       "exp(-(turn / 20 deg)^2) (--transfer-eye-warp)", "!nan", NULL));
+    const char *evth[] = {"eval", "--model", model, "--pairs", pairs,
+                          "--out", out2, "--method", "transfer",
+                          "--iters", "4", "--threads", "2", "--estimator",
+                          est, "--reuse-fits", "--transfer-eye-warp-head", "1", NULL};
+    CHECK_EQ_INT(run(evth), 0);
+    CHECK(summary_has(md, "| transfer |", "non-finite outputs 0",
+                      "the same warp, inside the eye opening the model shows at the "
+                      "target's pose (--transfer-eye-warp-head 1)", "!nan", NULL));
     /* Render settings on run 2's fits: 100 % and scale 1 are the normal
      * path (same numbers); pruned, coarse and full renders stay finite. */
     const char *ev4[] = {"eval", "--model", model, "--pairs", pairs,

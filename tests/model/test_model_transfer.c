@@ -192,8 +192,9 @@ static void set_warp(gs_model_ctx *c, double deg)
  * eye rotations at the two gazes: the gaze's own (what the warp uses) or,
  * to show that the check can tell, the eye stream's with its residual. */
 typedef struct {
-    gs_camera cam;
-    double R[9], t[3];       /* head pose (both views) */
+    gs_camera cam;           /* both views' (the same head distance) */
+    double R[9], t[3];       /* the target's head pose */
+    double Ri[9], ti[3];     /* the input's */
     double c[2][3], r[2];    /* eyeballs */
     double Rs[2][9], Rt[2][9];
 } warp_ref;
@@ -282,10 +283,10 @@ static int warp_expect(const warp_ref *w, int px, int py, double q[2])
         memcpy(n, hs, sizeof n);
     for (int k = 0; k < 3; k++)
         hs[k] += w->c[eye][k];
-    gs_geom_mat3_vec(w->R, hs, X);
-    gs_geom_mat3_vec(w->R, n, nc);
+    gs_geom_mat3_vec(w->Ri, hs, X);
+    gs_geom_mat3_vec(w->Ri, n, nc);
     for (int k = 0; k < 3; k++)
-        X[k] += w->t[k];
+        X[k] += w->ti[k];
     if (nc[0] * X[0] + nc[1] * X[1] + nc[2] * X[2] >= 0)
         return -1;
     q[0] = w->cam.fx * X[0] / X[2] + w->cam.cx;
@@ -429,9 +430,12 @@ static void warp_checks(gs_model *m, const gs_subject *s, const uint8_t *in, int
     gs_model_ctx_destroy(cr);
     memcpy(w.R, s->head_R, sizeof w.R);
     memcpy(w.t, s->head_t, sizeof w.t);
+    memcpy(w.Ri, s->head_R, sizeof w.Ri);
+    memcpy(w.ti, s->head_t, sizeof w.ti);
     memcpy(we.c, w.c, sizeof w.c), memcpy(we.r, w.r, sizeof w.r);
     we.cam = w.cam;
     memcpy(we.R, w.R, sizeof w.R), memcpy(we.t, w.t, sizeof w.t);
+    memcpy(we.Ri, w.Ri, sizeof w.Ri), memcpy(we.ti, w.ti, sizeof w.ti);
     double turn = turn_deg_of(w.Rs[0], w.Rt[0]), r90 = turn / 90.0;
     warp_stats st = warp_compare(&w, o0, o1, S, exp(-r90 * r90));
     warp_stats se = warp_compare(&we, o0, o1, S, exp(-r90 * r90));
@@ -515,6 +519,190 @@ done:
         m->p.eye_rot[e].b[m->p.eye_rot[e].nl - 1][1] = kept[e];
 }
 
+
+static gs_model_ctx *warp_ctx(const gs_model *m, double deg, int head)
+{
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    gs_model_render_options o;
+    gs_model_render_options_default(&o);
+    o.transfer_eye_warp_deg = deg;
+    o.transfer_eye_warp_head = head;
+    gs_error err = {0, ""};
+    CHECK_MSG(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK, "%s", err.msg);
+    return c;
+}
+
+/* Both of the live subject's openings (own view, target's pose) set to 1. */
+static void pin_openings(gs_model_ctx *c, int S)
+{
+    float *a = gs_xfer_eye_opening(c->xfer), *b = gs_xfer_target_opening(c->xfer);
+    CHECK_MSG(a && b, "warp at a head change: an opening missing");
+    for (size_t i = 0; a && b && i < (size_t)S * S; i++)
+        a[i] = b[i] = 1.0f;
+}
+
+/* The eyeball warp at another head pose (transfer_eye_warp_head): off by
+ * default; at the input's head pose it changes nothing; at another it
+ * changes only inside the opening the model shows there, and with both
+ * openings pinned a ramp input shows each target pixel taken from where
+ * the proxy eyeball, seen from the target's camera and turned back to
+ * the input's gaze and pose, puts it; a sweep at that pose stays
+ * incremental and agrees with fresh full transfers; the option's range. */
+static void warp_head_checks(const gs_model *m, const gs_subject *s, const uint8_t *in, int S)
+{
+    size_t isz = 3 * (size_t)S * S, px = (size_t)S * S;
+    uint8_t *o0 = malloc(isz), *o1 = malloc(isz), *ramp = malloc(isz);
+    gs_model_render_options o;
+    gs_model_render_options_default(&o);
+    CHECK(o.transfer_eye_warp_head == GS_XFER_EYE_WARP_HEAD_DEFAULT &&
+          GS_XFER_EYE_WARP_HEAD_DEFAULT == 0);
+    gs_model_ctx *ch = warp_ctx(m, GS_XFER_EYE_WARP_DEG_DEFAULT, 1);
+    gs_model_ctx *c0 = warp_ctx(m, GS_XFER_EYE_WARP_DEG_DEFAULT, 0);
+    gs_view vg = own_view(s);
+    vg.gaze_pitch += 0.2;
+    vg.gaze_yaw -= 0.35;
+    gs_view vh = turned(s, 0.3, vg.gaze_pitch, vg.gaze_yaw);
+
+    /* the input's head pose: the same bytes either way */
+    transfer(ch, NULL, s, in, &vg, o1, S);
+    transfer(c0, NULL, s, in, &vg, o0, S);
+    CHECK_MSG(!memcmp(o1, o0, isz), "warp at a head change: the same pose changed");
+
+    /* another head pose: only inside the opening the model shows there */
+    transfer(ch, NULL, s, in, &vh, o1, S);
+    transfer(c0, NULL, s, in, &vh, o0, S);
+    CHECK_MSG(gs_xfer_target_opening(c0->xfer) == NULL,
+              "warp at a head change: an opening made with the option off");
+    const float *tap = gs_xfer_target_opening(ch->xfer);
+    CHECK_MSG(tap != NULL, "warp at a head change: no opening at the target's pose");
+    size_t outside = 0, open = 0;
+    int bad_ap = 0;
+    for (size_t i = 0; tap && i < px; i++) {
+        bad_ap |= !(tap[i] >= 0.0f && tap[i] <= 1.0f);
+        open += tap[i] > 0.0f;
+        for (int k = 0; k < 3; k++)
+            outside += tap[i] == 0.0f && o1[3 * i + k] != o0[3 * i + k];
+    }
+    CHECK_MSG(!bad_ap, "warp at a head change: opening outside [0, 1]");
+    CHECK_MSG(outside == 0, "warp at a head change: %zu samples changed outside the opening",
+              outside);
+    CHECK_MSG(open < px / 10, "warp at a head change: opening of %zu of %zu pixels", open, px);
+
+    /* pinned openings, ramp input (R = 2 x, G = 2 y) */
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
+            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
+        }
+    gs_model_ctx *cw = warp_ctx(m, 90.0, 1), *cn = warp_ctx(m, 90.0, 0);
+    transfer(cw, NULL, s, ramp, &vh, o1, S); /* makes both openings */
+    pin_openings(cw, S);
+    transfer(cw, NULL, s, ramp, &vh, o1, S);
+    transfer(cn, NULL, s, ramp, &vh, o0, S);
+    warp_ref w;
+    double Re[2][9], c2[2][3], r2[2];
+    gs_model_ctx *cr = gs_model_ctx_create(m);
+    gs_view vo = own_view(s);
+    render(cr, NULL, s, &vo, ramp, S);
+    eye_state(cr, vo.gaze_pitch, vo.gaze_yaw, w.Rs, Re, w.c, w.r);
+    render(cr, NULL, s, &vh, ramp, S);
+    eye_state(cr, vh.gaze_pitch, vh.gaze_yaw, w.Rt, Re, c2, r2);
+    gs_frame_camera(m, s->head_t, &w.cam);
+    float sc = (float)S / (float)cr->fs;
+    w.cam.fx *= sc, w.cam.fy *= sc;
+    w.cam.cx = w.cam.cy = 0.5f * (float)S;
+    gs_model_ctx_destroy(cr);
+    memcpy(w.R, vh.head_R, sizeof w.R);
+    memcpy(w.t, vh.head_t, sizeof w.t);
+    memcpy(w.Ri, s->head_R, sizeof w.Ri);
+    memcpy(w.ti, s->head_t, sizeof w.ti);
+    double turn = turn_deg_of(w.Rs[0], w.Rt[0]), r90 = turn / 90.0;
+    warp_stats st = warp_compare(&w, o0, o1, S, exp(-r90 * r90));
+    /* the same check with the target's pose for the input's: it must not
+     * fit (the head's turn moves the source by many pixels) */
+    warp_ref ws = w;
+    memcpy(ws.Ri, w.R, sizeof ws.Ri);
+    warp_stats ss = warp_compare(&ws, o0, o1, S, exp(-r90 * r90));
+    printf("eyeball warp at a head change (17.2 degree head turn, %.1f degree gaze turn), "
+           "pinned openings, ramp input: %zu pixels taken from where the proxy eyeball puts "
+           "them (mean error %.2f px, %.1f %% within 1 px; %.2f px if the head had not "
+           "turned); %zu pixels warped where it puts nothing; this model's own opening: %zu "
+           "px\n",
+           turn, st.n, st.err, st.n ? 100.0 * st.near / st.n : 0.0, ss.err, st.stray, open);
+    CHECK_MSG(st.n >= 40, "warp at a head change: only %zu pixels to check", st.n);
+    CHECK_MSG(st.err <= 0.5 && st.near >= 0.95 * st.n,
+              "warp at a head change: taken %.2f px from the proxy's place on average, %zu "
+              "of %zu within 1 px", st.err, st.near, st.n);
+    CHECK_MSG(ss.err > 2 * st.err + 1.0, "warp at a head change: the unturned head fits as "
+              "well (%.2f px)", ss.err);
+    CHECK_MSG(st.stray <= px / 200, "warp at a head change: %zu pixels warped where the "
+              "proxy has no eyeball", st.stray);
+
+    /* the target's opening pinned to the image's left half: changes
+     * there and nowhere else */
+    float *half = gs_xfer_target_opening(cw->xfer);
+    for (size_t i = 0; half && i < px; i++)
+        half[i] = (int)(i % (size_t)S) < S / 2 ? 1.0f : 0.0f;
+    transfer(cw, NULL, s, in, &vh, o1, S);
+    transfer(cn, NULL, s, in, &vh, o0, S);
+    size_t left = 0, right = 0;
+    for (size_t i = 0; i < isz; i++) {
+        int ch_ = o1[i] != o0[i];
+        left += ch_ && (int)((i / 3) % (size_t)S) < S / 2;
+        right += ch_ && (int)((i / 3) % (size_t)S) >= S / 2;
+    }
+    printf("eyeball warp at a head change, the target's opening pinned to the left half: "
+           "%zu samples changed there, %zu elsewhere\n", left, right);
+    CHECK_MSG(left > 0 && right == 0, "warp at a head change, half opening: %zu changed "
+              "inside, %zu outside", left, right);
+
+    /* a gaze sweep at that pose, openings pinned: incremental, and within
+     * rounding of fresh full transfers */
+    pin_openings(cw, S);
+    int worst = 0, incs = 0;
+    size_t nworst = 0;
+    for (int k = 0; k < 4; k++) {
+        gs_view v = vh;
+        v.gaze_pitch = sweep_gz[k][0] * GS_MODEL_PI / 180;
+        v.gaze_yaw = sweep_gz[k][1] * GS_MODEL_PI / 180;
+        transfer(cw, NULL, s, in, &v, o1, S);
+        incs += last_incremental(cw);
+        gs_model_ctx *f = warp_ctx(m, 90.0, 1);
+        transfer(f, NULL, s, in, &v, o0, S);
+        pin_openings(f, S);
+        gs_xfer_forget_target(f->xfer);
+        transfer(f, NULL, s, in, &v, o0, S);
+        size_t nd = 0;
+        for (size_t i = 0; i < isz; i++)
+            nd += o1[i] != o0[i];
+        int d = max_diff(o1, o0, isz);
+        worst = d > worst ? d : worst;
+        nworst = nd > nworst ? nd : nworst;
+        gs_model_ctx_destroy(f);
+    }
+    printf("eyeball warp at a head change: a sweep of 4 gazes, %d incremental, agrees with "
+           "fresh full transfers (bytes within %d on at most %zu of %zu)\n", incs, worst,
+           nworst, isz);
+    CHECK_MSG(incs == 4, "warp at a head change, sweep: %d of 4 incremental", incs);
+    CHECK_MSG(worst <= 1 && (double)nworst <= BYTE_SHARE * (double)isz,
+              "warp at a head change, sweep: incremental and full differ by %d on %zu "
+              "samples", worst, nworst);
+
+    /* the option's range */
+    gs_error err = {0, ""};
+    const int bad[2] = {-1, 2};
+    for (int k = 0; k < 2; k++) {
+        o.transfer_eye_warp_head = bad[k];
+        CHECK_MSG(gs_model_ctx_set_render_options(ch, &o, &err) == GS_ERR_ARG,
+                  "warp at a head change %d accepted", bad[k]);
+    }
+    printf("refused (warp at a head change 2): %s\n", err.msg);
+    gs_model_ctx_destroy(cw);
+    gs_model_ctx_destroy(cn);
+    gs_model_ctx_destroy(ch);
+    gs_model_ctx_destroy(c0);
+    free(o0), free(o1), free(ramp);
+}
 
 /* A gaze sweep at view v's head pose (a new one for c), each target
  * against a fresh context; outs (may be NULL) gets each step's bytes. */
@@ -847,6 +1035,7 @@ int main(void)
     printf("kept own view, resets and thread counts: same bytes\n");
     incremental(m, sub, in, noise, pool, S, "whole eyeballs");
     warp_checks(m, &sub[0], in, S);
+    warp_head_checks(m, &sub[0], in, S);
 
     /* Bad arguments. */
     memset(out, 0x5a, isz);

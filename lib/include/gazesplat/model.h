@@ -208,10 +208,18 @@ typedef struct gs_model_render_options {
      * (docs/model.md, "The eyeball warp"). Degrees, [0, 90] (default
      * GS_XFER_EYE_WARP_DEG_DEFAULT); 0 turns the warp off. */
     double transfer_eye_warp_deg;
+    /* 1: the eyeball warp also at another head pose than the input's: the
+     * input's eyeball pixels, turned with the eye, seen from the target's
+     * camera inside the eye opening the model shows at that pose, with
+     * the same falloff; the rest as at any head change (docs/model.md,
+     * "The eyeball warp at a head change"). 0: only at the input's head
+     * pose. Default GS_XFER_EYE_WARP_HEAD_DEFAULT. */
+    int transfer_eye_warp_head;
 } gs_model_render_options;
 #define GS_XFER_HEAD_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WARP_DEG_DEFAULT 20.0
+#define GS_XFER_EYE_WARP_HEAD_DEFAULT 0
 void gs_model_render_options_default(gs_model_render_options *o);
 /* Takes effect from the next render; drops the context's kept renders.
  * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */
