@@ -29,7 +29,7 @@ const cli_command cli_eval_command = {
     "usage: gazesplat eval --model M --pairs FILE --out DIR [--estimator E]\n"
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--fit-lr CODE[,COLOUR]] [--bound-expression]\n"
-    "                      [--code-prior W] [--true-code LIST]\n"
+    "                      [--code-prior W] [--id-prior W] [--true-code LIST]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -80,6 +80,9 @@ const cli_command cli_eval_command = {
     "                    W in [0, 10], 0: none (default: the weight the\n"
     "                    model file names, config.fit_code_prior; none\n"
     "                    when it names none)\n"
+    "  --id-prior W      the fit's prior on the code's identity slots (the\n"
+    "                    learned identity codes' Gaussian), weight W in\n"
+    "                    [0, 10], 0: none (default)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression, lights and/or (pairs\n"
     "                    of --split train only) the identity code training\n"
@@ -153,7 +156,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_XWARP_HEAD, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_CODE_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light, id (each at most once). */
@@ -249,6 +252,7 @@ typedef struct evaluator {
     unsigned true_code;         /* --true-code: GS_SCENE_CODE_* bits */
     int bound_expression;       /* --bound-expression */
     double code_prior;          /* --code-prior */
+    double id_prior;            /* --id-prior */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -444,6 +448,7 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     o.lr_colour = ev->lr_colour;
     o.bound_expression = ev->bound_expression;
     o.code_prior = ev->code_prior;
+    o.id_prior = ev->id_prior;
     float code[GS_MODEL_MAX_CODE];
     uint8_t fixed[GS_MODEL_MAX_CODE];
     if (ev->true_code) {
@@ -923,7 +928,7 @@ static int run_eval(int argc, char **argv)
         {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
         {"--readout-soft", 1, NULL},
         {"--true-code", 1, NULL}, {"--bound-expression", 0, NULL},
-        {"--code-prior", 1, NULL},
+        {"--code-prior", 1, NULL}, {"--id-prior", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
@@ -1026,7 +1031,9 @@ static int run_eval(int argc, char **argv)
                                "got '%s'", o[O_TRUE_CODE].value);
     ev.bound_expression = o[O_BOUND_EXPR].value != NULL;
     if ((rc = cli_parse_range(cmd, "--code-prior", o[O_CODE_PRIOR].value, 0.0, 10.0,
-                              "a weight in [0, 10] (0: no prior)", &ev.code_prior)))
+                              "a weight in [0, 10] (0: no prior)", &ev.code_prior)) ||
+        (rc = cli_parse_range(cmd, "--id-prior", o[O_ID_PRIOR].value, 0.0, 10.0,
+                              "a weight in [0, 10] (0: no prior)", &ev.id_prior)))
         return rc;
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
@@ -1062,6 +1069,7 @@ static int run_eval(int argc, char **argv)
     info.true_code = ev.true_code;
     info.bound_expression = ev.bound_expression;
     info.code_prior = ev.code_prior;
+    info.id_prior = ev.id_prior;
     info.feature_scale = 1.0;
     info.supersample = 1;
     info.ft_iters = ev.fo.iters;

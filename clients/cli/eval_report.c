@@ -239,11 +239,16 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                   int nmethods)
 {
     fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
-    char prior[64] = "";
+    char prior[128] = "";
     if (info->code_prior > 0)
         snprintf(prior, sizeof prior, ", code prior weight %g (%s)",
                  info->code_prior,
                  info->code_prior_model ? "the model's" : "--code-prior");
+    if (info->id_prior > 0) {
+        size_t at = strlen(prior);
+        snprintf(prior + at, sizeof prior - at,
+                 ", identity prior weight %g (--id-prior)", info->id_prior);
+    }
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
                "iterations cap %d, rates %g (code%s) and %g (colour)%s%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,

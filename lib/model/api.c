@@ -534,6 +534,15 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = gs_code_prior_make(c->m, &prior, err);
     if (rc)
         return rc;
+    if (!rc && !gs_code_prior_weight_ok(o.id_prior))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: identity prior weight %g: want [0, 10], 0 for "
+                          "none", o.id_prior);
+    gs_id_prior *idp = NULL;
+    if (!rc && o.id_prior > 0)
+        rc = gs_id_prior_make(c->m, &idp, err);
+    if (rc)
+        return rc;
     int iters = o.max_iters > 0 ? o.max_iters : 200;
     double plateau = o.plateau_rel > 0 ? o.plateau_rel : 1e-3;
     double R0[9];
@@ -549,6 +558,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         free(s);
         free(best);
         fit_bufs_free(&b);
+        gs_id_prior_free(idp);
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
     }
     fit_init(c, &o, s);
@@ -566,6 +576,9 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         if (use_prior)
             loss += gs_code_prior_eval(&prior, o.code_prior, s->x + V_PRIOR,
                                        gprior);
+        double gid[GS_MODEL_MAX_CODE] = {0};
+        if (idp)
+            loss += gs_id_prior_eval(idp, o.id_prior, s->x + V_CODE, gid);
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "fit diverged at iteration %d (loss %g, first "
@@ -604,6 +617,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             s->g[V_CODE + k] = fg.code[k];
         for (int k = 0; use_prior && k < GS_CODE_PRIOR_DIM; k++)
             s->g[V_PRIOR + k] += gprior[k];
+        for (int k = 0; idp && k < c->m->cfg.id_dim; k++)
+            s->g[V_CODE + k] += gid[k];
         for (int k = 0; k < s->n; k++)
             if (!isfinite(s->g[k])) {
                 rc = gs_error_set(err, GS_ERR_NONFINITE,
@@ -666,6 +681,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     free(s);
     free(best);
     fit_bufs_free(&b);
+    gs_id_prior_free(idp);
     return rc;
 }
 

@@ -235,6 +235,16 @@ int gs_code_prior_make(const struct gs_model *m, gs_code_prior *p,
  * when grad is not NULL. */
 double gs_code_prior_eval(const gs_code_prior *p, double weight,
                           const double *x, double *grad);
+/* The fit's prior on the code's identity slots (gs_fit_options.id_prior):
+ * a Gaussian with the learned identity codes' mean and covariance. */
+typedef struct gs_id_prior gs_id_prior;
+int gs_id_prior_make(const struct gs_model *m, gs_id_prior **out,
+                     gs_error *err);
+void gs_id_prior_free(gs_id_prior *p);
+/* weight / n * (x - mean)^T prec (x - mean) over x = the id_dim identity
+ * slots; adds its gradient into grad when not NULL. */
+double gs_id_prior_eval(const gs_id_prior *p, double weight, const double *x,
+                        double *grad);
 /* Turns a code's light from head pose R_s to R_v (lights fixed in the
  * camera). */
 void gs_model_light_to_view(float *code, int code_dim, const double R_s[9],

@@ -2,6 +2,7 @@
  * mean and covariance those slots have over the training sampler's scenes
  * (docs/model.md, "Fitting", the code prior). */
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "gazesplat/train.h"
@@ -14,7 +15,7 @@
 /* In-place Cholesky of the symmetric positive definite n x n matrix a
  * (lower triangle), then its inverse into inv. 0, or -1 when a is not
  * positive definite. */
-static int spd_inverse(double *a, int n, double *inv)
+static int spd_inverse(double *a, int n, double *inv, double *y)
 {
     for (int j = 0; j < n; j++) {
         double d = a[j * n + j];
@@ -33,7 +34,6 @@ static int spd_inverse(double *a, int n, double *inv)
     }
     /* inv = L^-T L^-1, column by column: solve L y = e_c, then L^T x = y */
     for (int c = 0; c < n; c++) {
-        double y[GS_CODE_PRIOR_DIM];
         for (int i = 0; i < n; i++) {
             double v = i == c ? 1.0 : 0.0;
             for (int k = 0; k < i; k++)
@@ -90,7 +90,8 @@ int gs_code_prior_make(const gs_model *m, gs_code_prior *p, gs_error *err)
      * impossible. */
     for (int i = 0; i < N; i++)
         cov[i * N + i] += 0.01 * tr / N;
-    if (spd_inverse(cov, N, p->prec))
+    double y[N];
+    if (spd_inverse(cov, N, p->prec, y))
         return gs_error_set(err, GS_ERR_STATE,
                             "code prior: the sampler's covariance is not "
                             "positive definite");
@@ -100,6 +101,95 @@ int gs_code_prior_make(const gs_model *m, gs_code_prior *p, gs_error *err)
             p->prec[i * N + j] = p->prec[j * N + i] =
                 0.5 * (p->prec[i * N + j] + p->prec[j * N + i]);
     return GS_OK;
+}
+
+/* The identity codes' Gaussian: n = id_dim, mean[n], prec[n * n]. */
+struct gs_id_prior {
+    int n;
+    double *mean, *prec;
+};
+
+void gs_id_prior_free(gs_id_prior *p)
+{
+    if (!p)
+        return;
+    free(p->mean);
+    free(p->prec);
+    free(p);
+}
+
+int gs_id_prior_make(const gs_model *m, gs_id_prior **out, gs_error *err)
+{
+    *out = NULL;
+    const int n = m->cfg.id_dim, T = m->cfg.n_train_ids;
+    if (T < 2 || !m->p.codes)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "identity prior: the model has %d training "
+                            "identities (2 or more wanted)", T);
+    gs_id_prior *p = calloc(1, sizeof *p);
+    double *cov = calloc((size_t)n * n, sizeof(double));
+    double *y = calloc((size_t)n, sizeof(double));
+    if (p) {
+        p->n = n;
+        p->mean = calloc((size_t)n, sizeof(double));
+        p->prec = calloc((size_t)n * n, sizeof(double));
+    }
+    if (!p || !cov || !y || !p->mean || !p->prec) {
+        gs_id_prior_free(p);
+        free(cov);
+        free(y);
+        return gs_error_set(err, GS_ERR_NOMEM, "identity prior: out of memory");
+    }
+    const float *codes = m->p.codes;
+    for (int t = 0; t < T; t++)
+        for (int i = 0; i < n; i++)
+            p->mean[i] += codes[(size_t)t * n + i] / (double)T;
+    double tr = 0;
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j <= i; j++) {
+            double c = 0;
+            for (int t = 0; t < T; t++)
+                c += (codes[(size_t)t * n + i] - p->mean[i]) *
+                     (codes[(size_t)t * n + j] - p->mean[j]);
+            c /= T;
+            cov[i * n + j] = cov[j * n + i] = c;
+            tr += i == j ? c : 0.0;
+        }
+    /* fewer identities than slots, or slots training left alone: a
+     * ridge of 1 % of the mean variance keeps the precision finite */
+    for (int i = 0; i < n; i++)
+        cov[i * n + i] += 0.01 * tr / n + 1e-12;
+    int bad = spd_inverse(cov, n, p->prec, y);
+    free(cov);
+    free(y);
+    if (bad) {
+        gs_id_prior_free(p);
+        return gs_error_set(err, GS_ERR_STATE,
+                            "identity prior: the learned codes' covariance is "
+                            "not positive definite");
+    }
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < i; j++)
+            p->prec[i * n + j] = p->prec[j * n + i] =
+                0.5 * (p->prec[i * n + j] + p->prec[j * n + i]);
+    *out = p;
+    return GS_OK;
+}
+
+double gs_id_prior_eval(const gs_id_prior *p, double weight, const double *x,
+                        double *grad)
+{
+    const int n = p->n;
+    double q = 0;
+    for (int i = 0; i < n; i++) {
+        double pd = 0;
+        for (int j = 0; j < n; j++)
+            pd += p->prec[i * n + j] * (x[j] - p->mean[j]);
+        q += (x[i] - p->mean[i]) * pd;
+        if (grad)
+            grad[i] += 2.0 * weight / n * pd;
+    }
+    return weight / n * q;
 }
 
 double gs_code_prior_eval(const gs_code_prior *p, double weight,

@@ -176,6 +176,10 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
         hash_part(&h, o.code_fixed, (size_t)D);
     if (o.mask)
         hash_part(&h, o.mask, (size_t)S * S);
+    if (o.id_prior != 0) { /* hashed only when set: keys without it stand */
+        uint64_t w = bits(o.id_prior);
+        hash_part(&h, &w, sizeof w);
+    }
     for (int y = 0; y < S; y++)
         hash_part(&h, rgb + (size_t)y * stride, 3 * (size_t)S);
     return hash_final(&h);

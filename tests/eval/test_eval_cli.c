@@ -273,7 +273,9 @@ static void usage_errors(const char *model, const char *pairs)
         {"--fit-lr", "0.1,0"},      {"--fit-lr", "0.1,"},
         {"--fit-lr", "0.1,0.02,1"}, {"--fit-lr", "fast"},
         {"--code-prior", "-0.001"}, {"--code-prior", "10.5"},
-        {"--code-prior", "nan"},    {"--code-prior", "strong"}};
+        {"--code-prior", "nan"},    {"--code-prior", "strong"},
+        {"--id-prior", "-0.1"},     {"--id-prior", "11"},
+        {"--id-prior", "nan"}};
     for (size_t k = 0; k < sizeof bad_render / sizeof bad_render[0]; k++) {
         const char *args[] = {"eval", "--model", model, "--pairs", pairs,
                               "--out", dir, bad_render[k][0],
@@ -476,6 +478,14 @@ int main(int argc, char **argv)
     CHECK(summary_has(md, "| transfer |", "non-finite outputs 0",
                       "the same warp, inside the eye opening the model shows at the "
                       "target's pose (--transfer-eye-warp-head 1)", "!nan", NULL));
+    /* the identity prior: fits again (other keys), named in the summary */
+    const char *evid[] = {"eval", "--model", model, "--pairs", pairs,
+                          "--out", out2, "--method", "model",
+                          "--iters", "4", "--threads", "2", "--estimator",
+                          est, "--reuse-fits", "--id-prior", "0.5", NULL};
+    CHECK_EQ_INT(run(evid), 0);
+    CHECK(summary_has(md, "identity prior weight 0.5 (--id-prior)", "!fits reused",
+                      "non-finite outputs 0", NULL));
     /* Render settings on run 2's fits: 100 % and scale 1 are the normal
      * path (same numbers); pruned, coarse and full renders stay finite. */
     const char *ev4[] = {"eval", "--model", model, "--pairs", pairs,

@@ -264,6 +264,103 @@ int main(void)
         }
     }
 
+    /* The identity prior: the learned identity codes' Gaussian (mean and
+     * covariance over codes.train, a ridge of 1 % of the mean variance).
+     * Zero at that mean; a gradient that is the loss's (central
+     * differences); over two learned codes, exactly (1 / n) / (1 + 0.01 /
+     * n) at weight 1 (their covariance is rank one: d d^T, the codes at
+     * mean +- d). A fit at weight 0 is the plain fit's bytes; at a weight
+     * it fits otherwise, and a heavy one at a fast rate ends with a lower
+     * prior term than the free fit. Refused: weights outside [0, 10] or
+     * NaN (the subject left alone), and a model of fewer than 2 training
+     * identities. */
+    {
+        gs_id_prior *ip = NULL;
+        CHECK_MSG(gs_id_prior_make(m, &ip, &err) == GS_OK, "%s", err.msg);
+        const int n = m->cfg.id_dim, T = m->cfg.n_train_ids;
+        const float *codes = m->p.codes;
+        CHECK(T == 2 && n >= 2);
+        double mean[GS_MODEL_MAX_CODE] = {0}, g[GS_MODEL_MAX_CODE] = {0};
+        for (int t = 0; t < T; t++)
+            for (int i = 0; i < n; i++)
+                mean[i] += codes[(size_t)t * n + i] / (double)T;
+        CHECK(gs_id_prior_eval(ip, 0.5, mean, g) == 0.0);
+        double x[GS_MODEL_MAX_CODE], xp[GS_MODEL_MAX_CODE], xm[GS_MODEL_MAX_CODE];
+        double spread = 0;
+        for (int i = 0; i < n; i++) {
+            double d = codes[i] - mean[i];
+            spread += d * d;
+            x[i] = mean[i] + 0.7 * d + 0.01 * sin(1.0 + i);
+        }
+        memset(g, 0, sizeof g);
+        double l0 = gs_id_prior_eval(ip, 0.5, x, g), worst = 0;
+        CHECK(l0 > 0);
+        for (int i = 0; i < n; i++) {
+            memcpy(xp, x, sizeof x);
+            memcpy(xm, x, sizeof x);
+            double h = 1e-5;
+            xp[i] += h, xm[i] -= h;
+            double fd = (gs_id_prior_eval(ip, 0.5, xp, NULL) -
+                         gs_id_prior_eval(ip, 0.5, xm, NULL)) / (2 * h);
+            worst = fmax(worst, fabs(fd - g[i]) / (1e-6 + fabs(fd)));
+        }
+        double avg = 0;
+        for (int t = 0; t < T; t++) {
+            double xc[GS_MODEL_MAX_CODE];
+            for (int i = 0; i < n; i++)
+                xc[i] = codes[(size_t)t * n + i];
+            avg += gs_id_prior_eval(ip, 1.0, xc, NULL) / T;
+        }
+        double want = (1.0 / n) / (1.0 + 0.01 / n);
+        printf("identity prior: gradient within %.2e of central differences; "
+               "the learned codes' mean term %.6f (want %.6f; their spread %.3g)\n",
+               worst, avg, want, sqrt(spread));
+        CHECK(worst < 1e-5);
+        CHECK_MSG(fabs(avg - want) < 1e-6 * want, "mean term %.9f, want %.9f", avg, want);
+        gs_id_prior_free(ip);
+
+        gs_fit_options fx = fo;
+        gs_subject s0, s1, sf, sp, keep;
+        CHECK(fo.id_prior == 0);
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL, &err) == GS_OK);
+        CHECK(memcmp(s0.code, sub.code, sizeof(float) * sub.code_dim) == 0);
+        fx.id_prior = 0.3;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s1, NULL, &err) == GS_OK);
+        CHECK(memcmp(s1.code, sub.code, sizeof(float) * sub.code_dim) != 0);
+        CHECK(gs_id_prior_make(m, &ip, &err) == GS_OK);
+        fx.lr_code = 1.0;
+        fx.id_prior = 0;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sf, NULL, &err) == GS_OK);
+        fx.id_prior = 10.0;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL, &err) == GS_OK);
+        double xf[GS_MODEL_MAX_CODE], xq[GS_MODEL_MAX_CODE];
+        for (int i = 0; i < n; i++)
+            xf[i] = sf.code[i], xq[i] = sp.code[i];
+        double qf = gs_id_prior_eval(ip, 1.0, xf, NULL), qp = gs_id_prior_eval(ip, 1.0, xq, NULL);
+        printf("fit at rate 1: identity prior term %.3f free, %.3f with the prior "
+               "(weight 10)\n", qf, qp);
+        CHECK(qp < qf);
+        gs_id_prior_free(ip);
+        const double bad[] = {-0.1, 10.5, NAN, INFINITY};
+        for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+            fx.id_prior = bad[k];
+            memset(&keep, 0x5a, sizeof keep);
+            sp = keep;
+            CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL,
+                               &err) == GS_ERR_ARG);
+            CHECK(memcmp(&sp, &keep, sizeof keep) == 0);
+            CHECK(strstr(err.msg, "identity prior") != NULL);
+        }
+        m->cfg.n_train_ids = 1; /* as a model of one training identity */
+        fx.id_prior = 0.3;
+        memset(&keep, 0x5a, sizeof keep);
+        sp = keep;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL, &err) == GS_ERR_ARG);
+        CHECK(memcmp(&sp, &keep, sizeof keep) == 0);
+        printf("refused (identity prior, one identity): %s\n", err.msg);
+        m->cfg.n_train_ids = T;
+    }
+
     /* The fit key (gs_model_fit_key) names what the fit depends on and
      * nothing else: the options as the fit reads them (0 for a default,
      * the model's prior weight resolved), the known labels, the mask, the
@@ -290,6 +387,7 @@ int main(void)
         KEY_DIFFERS(k.max_iters = 199);
         KEY_DIFFERS(k.lr_code = 0.121);
         KEY_DIFFERS(k.code_prior = 3e-4);
+        KEY_DIFFERS(k.id_prior = 3e-3);
         KEY_DIFFERS(k.bound_expression = 1);
         KEY_DIFFERS(k.known_gaze = 1);
         KEY_DIFFERS((k.known_head = 1, k.head_t[2] = 600));

@@ -283,6 +283,11 @@ typedef struct gs_fit_options {
      * (gs_model_info.fit_code_prior, 0 when it names none). Which weight
      * suits depends on the model (docs/model.md, "Fitting"). */
     double code_prior;
+    /* Weight of a Gaussian prior on the code's identity slots, with the
+     * mean and covariance of the identity codes training learned (a ridge
+     * of 1 % of their mean variance): at most about `id_prior` added to the
+     * loss for a code like the learned ones; 0 (default): none; [0, 10]. */
+    double id_prior;
 } gs_fit_options;
 #define GS_FIT_CODE_PRIOR_MODEL (-1.0)
 #define GS_FIT_LR_CODE_DEFAULT 0.12
