@@ -521,6 +521,10 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                           "fit: code prior weight %g: want [0, 10], 0 for "
                           "none, -1 for the model's",
                           o.code_prior);
+    if (!rc && !gs_code_prior_weight_ok(o.id_prior))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: identity prior weight %g: want [0, 10], 0 for "
+                          "none", o.id_prior);
     for (int k = 0; !rc && o.code_start && k < c->D; k++)
         if (!isfinite(o.code_start[k]))
             rc = gs_error_set(err, GS_ERR_ARG,
@@ -534,14 +538,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = gs_code_prior_make(c->m, &prior, err);
     if (rc)
         return rc;
-    if (!rc && !gs_code_prior_weight_ok(o.id_prior))
-        rc = gs_error_set(err, GS_ERR_ARG,
-                          "fit: identity prior weight %g: want [0, 10], 0 for "
-                          "none", o.id_prior);
-    gs_id_prior *idp = NULL;
-    if (!rc && o.id_prior > 0)
-        rc = gs_id_prior_make(c->m, &idp, err);
-    if (rc)
+    gs_id_prior *idp = NULL; /* the identity prior (weight > 0) */
+    if (o.id_prior > 0 && (rc = gs_id_prior_make(c->m, &idp, err)))
         return rc;
     int iters = o.max_iters > 0 ? o.max_iters : 200;
     double plateau = o.plateau_rel > 0 ? o.plateau_rel : 1e-3;

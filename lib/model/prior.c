@@ -124,8 +124,8 @@ int gs_id_prior_make(const gs_model *m, gs_id_prior **out, gs_error *err)
     const int n = m->cfg.id_dim, T = m->cfg.n_train_ids;
     if (T < 2 || !m->p.codes)
         return gs_error_set(err, GS_ERR_ARG,
-                            "identity prior: the model has %d training "
-                            "identities (2 or more wanted)", T);
+                            "identity prior: wants 2 or more training "
+                            "identities, the model has %d", T);
     gs_id_prior *p = calloc(1, sizeof *p);
     double *cov = calloc((size_t)n * n, sizeof(double));
     double *y = calloc((size_t)n, sizeof(double));
