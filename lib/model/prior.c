@@ -13,8 +13,8 @@
 #define PRIOR_DRAWS 4096
 
 /* In-place Cholesky of the symmetric positive definite n x n matrix a
- * (lower triangle), then its inverse into inv. 0, or -1 when a is not
- * positive definite. */
+ * (lower triangle), then its inverse into inv, exactly symmetric; y: n
+ * doubles of scratch. 0, or -1 when a is not positive definite. */
 static int spd_inverse(double *a, int n, double *inv, double *y)
 {
     for (int j = 0; j < n; j++) {
@@ -47,6 +47,10 @@ static int spd_inverse(double *a, int n, double *inv, double *y)
             inv[i * n + c] = v / a[i * n + i];
         }
     }
+    /* exactly symmetric, so that a prior's gradient is its loss's */
+    for (int i = 0; i < n; i++)
+        for (int j = 0; j < i; j++)
+            inv[i * n + j] = inv[j * n + i] = 0.5 * (inv[i * n + j] + inv[j * n + i]);
     return 0;
 }
 
@@ -95,11 +99,6 @@ int gs_code_prior_make(const gs_model *m, gs_code_prior *p, gs_error *err)
         return gs_error_set(err, GS_ERR_STATE,
                             "code prior: the sampler's covariance is not "
                             "positive definite");
-    /* exactly symmetric, so that the gradient below is the loss's */
-    for (int i = 0; i < N; i++)
-        for (int j = 0; j < i; j++)
-            p->prec[i * N + j] = p->prec[j * N + i] =
-                0.5 * (p->prec[i * N + j] + p->prec[j * N + i]);
     return GS_OK;
 }
 
@@ -168,10 +167,6 @@ int gs_id_prior_make(const gs_model *m, gs_id_prior **out, gs_error *err)
                             "identity prior: the learned codes' covariance is "
                             "not positive definite");
     }
-    for (int i = 0; i < n; i++)
-        for (int j = 0; j < i; j++)
-            p->prec[i * n + j] = p->prec[j * n + i] =
-                0.5 * (p->prec[i * n + j] + p->prec[j * n + i]);
     *out = p;
     return GS_OK;
 }
