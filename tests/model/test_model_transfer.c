@@ -168,6 +168,19 @@ static void agree(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uin
     free(ref);
 }
 
+/* The largest byte difference of a against b, and how many bytes
+ * differ, folded into the running worst of each. */
+static void tally_diff(const uint8_t *a, const uint8_t *b, size_t n, int *worst,
+                       size_t *nworst)
+{
+    size_t nd = 0;
+    for (size_t i = 0; i < n; i++)
+        nd += a[i] != b[i];
+    int d = max_diff(a, b, n);
+    *worst = d > *worst ? d : *worst;
+    *nworst = nd > *nworst ? nd : *nworst;
+}
+
 /* gaze (pitch, yaw) in degrees: small steps, the range's corners, back */
 static const double sweep_gz[][2] = {{5, -10}, {7, -9}, {-5, 10}, {30, -40}, {-30, 40},
                                      {-30, 39}, {40, 50}, {-40, -50}, {5, -10}};
@@ -481,12 +494,7 @@ static void warp_checks(gs_model *m, const gs_subject *s, const uint8_t *in, int
         gs_xfer_forget_target(f->xfer);
         transfer(f, NULL, s, in, &v, o0, S);
         CHECK_MSG(!last_incremental(f), "warp sweep: the fresh context went incremental");
-        size_t nd = 0;
-        for (size_t i = 0; i < isz; i++)
-            nd += o1[i] != o0[i];
-        int d = max_diff(o1, o0, isz);
-        worst = d > worst ? d : worst;
-        nworst = nd > nworst ? nd : nworst;
+        tally_diff(o1, o0, isz, &worst, &nworst);
         transfer(c0, NULL, s, in, &v, ramp, S); /* the same without the warp */
         for (size_t i = 0; i < isz; i++)
             warped_px += o1[i] != ramp[i];
@@ -672,12 +680,7 @@ static void warp_head_checks(const gs_model *m, const gs_subject *s, const uint8
         pin_openings(f, S);
         gs_xfer_forget_target(f->xfer);
         transfer(f, NULL, s, in, &v, o0, S);
-        size_t nd = 0;
-        for (size_t i = 0; i < isz; i++)
-            nd += o1[i] != o0[i];
-        int d = max_diff(o1, o0, isz);
-        worst = d > worst ? d : worst;
-        nworst = nd > nworst ? nd : nworst;
+        tally_diff(o1, o0, isz, &worst, &nworst);
         gs_model_ctx_destroy(f);
     }
     printf("eyeball warp at a head change: a sweep of 4 gazes, %d incremental, agrees with "
