@@ -30,6 +30,7 @@ const cli_command cli_eval_command = {
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--fit-lr CODE[,COLOUR]] [--bound-expression]\n"
     "                      [--code-prior W] [--id-prior W] [--true-code LIST]\n"
+    "                      [--true-code-start]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -89,6 +90,9 @@ const cli_command cli_eval_command = {
     "                    learned (comma-separated: expr, light, id) and\n"
     "                    keeps them; how much of the error is the fit\n"
     "                    getting them wrong\n"
+    "  --true-code-start (with --true-code) the given parts only start the\n"
+    "                    fit, which moves them as it moves the rest: whether\n"
+    "                    the image pulls the fit away from the true code\n"
     "  --threads N       worker threads (default 2); results are the same\n"
     "                    for a given count, timings aside\n"
     "  --reuse-fits      take each input's fit from DIR/fits/ (written by\n"
@@ -156,7 +160,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_XWARP_HEAD, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_READ_SOFT, O_TRUE_CODE, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_READ_SOFT, O_TRUE_CODE, O_TRUE_START, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light, id (each at most once). */
@@ -250,6 +254,7 @@ typedef struct evaluator {
     int S, iters;
     double lr_code, lr_colour;  /* --fit-lr */
     unsigned true_code;         /* --true-code: GS_SCENE_CODE_* bits */
+    int true_start;             /* --true-code-start: a start, not kept */
     int bound_expression;       /* --bound-expression */
     double code_prior;          /* --code-prior */
     double id_prior;            /* --id-prior */
@@ -457,7 +462,7 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
         if (rc)
             return rc;
         o.code_start = code;
-        o.code_fixed = fixed;
+        o.code_fixed = ev->true_start ? NULL : fixed;
     }
     char path[4200];
     snprintf(path, sizeof path, "%s/fits/%05d.bin", ev->dir, input);
@@ -927,7 +932,8 @@ static int run_eval(int argc, char **argv)
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
         {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
         {"--readout-soft", 1, NULL},
-        {"--true-code", 1, NULL}, {"--bound-expression", 0, NULL},
+        {"--true-code", 1, NULL}, {"--true-code-start", 0, NULL},
+        {"--bound-expression", 0, NULL},
         {"--code-prior", 1, NULL}, {"--id-prior", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
@@ -1029,6 +1035,10 @@ static int run_eval(int argc, char **argv)
     if (o[O_TRUE_CODE].value && parse_true_code(o[O_TRUE_CODE].value, &ev.true_code))
         return cli_usage_error(cmd, "--true-code: want a list of expr, light, id; "
                                "got '%s'", o[O_TRUE_CODE].value);
+    ev.true_start = o[O_TRUE_START].value != NULL;
+    if (ev.true_start && !ev.true_code)
+        return cli_usage_error(cmd, "--true-code-start: give --true-code LIST "
+                                    "as well (the parts that start the fit)");
     ev.bound_expression = o[O_BOUND_EXPR].value != NULL;
     if ((rc = cli_parse_range(cmd, "--code-prior", o[O_CODE_PRIOR].value, 0.0, 10.0,
                               "a weight in [0, 10] (0: no prior)", &ev.code_prior)) ||
@@ -1067,6 +1077,7 @@ static int run_eval(int argc, char **argv)
     info.fit_lr_code = ev.lr_code;
     info.fit_lr_colour = ev.lr_colour;
     info.true_code = ev.true_code;
+    info.true_start = ev.true_start;
     info.bound_expression = ev.bound_expression;
     info.code_prior = ev.code_prior;
     info.id_prior = ev.id_prior;

@@ -340,7 +340,12 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
               "was given the input's true ", f);
         for (int i = 0; i < nn; i++)
             fprintf(f, "%s%s", i == 0 ? "" : i == nn - 1 ? " and " : ", ", names[i]);
-        fprintf(f, " and kept %s\n", nn == 1 ? "it" : "them");
+        if (info->true_start)
+            fprintf(f, " as %s start, and moved %s as it moved the rest "
+                       "(--true-code-start)\n",
+                    nn == 1 ? "its" : "their", nn == 1 ? "it" : "them");
+        else
+            fprintf(f, " and kept %s\n", nn == 1 ? "it" : "them");
     }
     if (info->fits_reused)
         fprintf(f, "- %d fits reused from an earlier run (--reuse-fits): "

@@ -84,6 +84,7 @@ typedef struct eval_run_info {
     int transfer_eye_warp_head;   /* render option, transfer method */
     int light_on_head;    /* --light-on-head */
     unsigned true_code;   /* --true-code: GS_SCENE_CODE_* bits (0: none) */
+    int true_start;       /* --true-code-start: the parts start the fit only */
     int bound_expression; /* --bound-expression */
     double code_prior;    /* --code-prior, or the model's */
     int code_prior_model; /* 1: code_prior is the model file's */

@@ -412,8 +412,34 @@ int main(int argc, char **argv)
         column_of(u, "oracle", 20, ou, sizeof ou);
         CHECK_MSG(*mt && strcmp(mt, mu) != 0, "--true-code id: model PSNRs %s, %s", mt, mu);
         CHECK_MSG(*ot && strcmp(ot, ou) == 0, "--true-code id: oracle PSNRs %s, %s", ot, ou);
+        /* --true-code-start: the same codes only start the fit, which
+         * moves them: the model rows differ from the kept run's */
+        char sout[256], smd[300], csvs[300];
+        snprintf(sout, sizeof sout, "%s/runtstart", dir);
+        snprintf(smd, sizeof smd, "%s/summary.md", sout);
+        snprintf(csvs, sizeof csvs, "%s/pairs.csv", sout);
+        const char *evst[] = {"eval", "--model", model, "--pairs", tpairs,
+                              "--out", sout, "--method", "model", "--iters", "4",
+                              "--threads", "2", "--estimator", est,
+                              "--true-code", "id,expr,light", "--true-code-start",
+                              NULL};
+        CHECK_EQ_INT(run(evst), 0);
+        CHECK(summary_has(smd, "true expression, lights and identity code (the "
+                               "one training learned) as their start, and moved "
+                               "them as it moved the rest (--true-code-start)",
+                          "diverged fits 0, errors 0, non-finite outputs 0", NULL));
+        char *st = ev_slurp(csvs), ms[4096];
+        column_of(st, "model", 20, ms, sizeof ms);
+        CHECK_MSG(*ms && strcmp(ms, mu) != 0 && strcmp(ms, mt) != 0,
+                  "--true-code-start: model PSNRs %s against kept %s, plain %s",
+                  ms, mu, mt);
+        free(st);
         free(t);
         free(u);
+        /* without --true-code it has nothing to start from */
+        const char *lone[] = {"eval", "--model", model, "--pairs", tpairs,
+                              "--out", sout, "--true-code-start", NULL};
+        CHECK_EQ_INT(run(lone), 2);
         evid[16] = "id";
         CHECK_EQ_INT(run(evid), 0);
         CHECK(summary_has(imd, "true identity code (the one training learned) and kept it",
