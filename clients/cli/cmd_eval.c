@@ -30,7 +30,7 @@ const cli_command cli_eval_command = {
     "                      [--method LIST] [--limit-inputs N] [--iters N]\n"
     "                      [--fit-lr CODE[,COLOUR]] [--bound-expression]\n"
     "                      [--code-prior W] [--id-prior W] [--true-code LIST]\n"
-    "                      [--true-code-start]\n"
+    "                      [--true-code-start] [--fit-anneal N]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -84,6 +84,9 @@ const cli_command cli_eval_command = {
     "  --id-prior W      the fit's prior on the code's identity slots (the\n"
     "                    learned identity codes' Gaussian), weight W in\n"
     "                    [0, 10], 0: none (default)\n"
+    "  --fit-anneal N    at a plateau the fit halves its rates and goes on,\n"
+    "                    N times (0..8) before it stops; 0: stops at the\n"
+    "                    first plateau (default)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression, lights and/or (pairs\n"
     "                    of --split train only) the identity code training\n"
@@ -160,7 +163,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_XWARP_HEAD, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_READ_SOFT, O_TRUE_CODE, O_TRUE_START, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_READ_SOFT, O_TRUE_CODE, O_TRUE_START, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_ANNEAL, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light, id (each at most once). */
@@ -258,6 +261,7 @@ typedef struct evaluator {
     int bound_expression;       /* --bound-expression */
     double code_prior;          /* --code-prior */
     double id_prior;            /* --id-prior */
+    int anneal;                 /* --fit-anneal */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -454,6 +458,7 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     o.bound_expression = ev->bound_expression;
     o.code_prior = ev->code_prior;
     o.id_prior = ev->id_prior;
+    o.anneal = ev->anneal;
     float code[GS_MODEL_MAX_CODE];
     uint8_t fixed[GS_MODEL_MAX_CODE];
     if (ev->true_code) {
@@ -935,6 +940,7 @@ static int run_eval(int argc, char **argv)
         {"--true-code", 1, NULL}, {"--true-code-start", 0, NULL},
         {"--bound-expression", 0, NULL},
         {"--code-prior", 1, NULL}, {"--id-prior", 1, NULL},
+        {"--fit-anneal", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
@@ -1045,6 +1051,14 @@ static int run_eval(int argc, char **argv)
         (rc = cli_parse_range(cmd, "--id-prior", o[O_ID_PRIOR].value, 0.0, 10.0,
                               "a weight in [0, 10] (0: no prior)", &ev.id_prior)))
         return rc;
+    if (o[O_ANNEAL].value) {
+        long v;
+        if (cli_parse_long(o[O_ANNEAL].value, 0, GS_FIT_ANNEAL_MAX, &v))
+            return cli_usage_error(cmd, "--fit-anneal: want 0..%d halvings, "
+                                        "got '%s'", GS_FIT_ANNEAL_MAX,
+                                   o[O_ANNEAL].value);
+        ev.anneal = (int)v;
+    }
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
@@ -1081,6 +1095,7 @@ static int run_eval(int argc, char **argv)
     info.bound_expression = ev.bound_expression;
     info.code_prior = ev.code_prior;
     info.id_prior = ev.id_prior;
+    info.anneal = ev.anneal;
     info.feature_scale = 1.0;
     info.supersample = 1;
     info.ft_iters = ev.fo.iters;

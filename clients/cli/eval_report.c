@@ -239,7 +239,7 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                   int nmethods)
 {
     fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
-    char prior[128] = "";
+    char prior[256] = "";
     if (info->code_prior > 0)
         snprintf(prior, sizeof prior, ", code prior weight %g (%s)",
                  info->code_prior,
@@ -248,6 +248,12 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
         size_t at = strlen(prior);
         snprintf(prior + at, sizeof prior - at,
                  ", identity prior weight %g (--id-prior)", info->id_prior);
+    }
+    if (info->anneal > 0) {
+        size_t at = strlen(prior);
+        snprintf(prior + at, sizeof prior - at,
+                 ", rates halved at up to %d plateaus (--fit-anneal)",
+                 info->anneal);
     }
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
                "iterations cap %d, rates %g (code%s) and %g (colour)%s%s; %d "

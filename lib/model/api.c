@@ -525,6 +525,10 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = gs_error_set(err, GS_ERR_ARG,
                           "fit: identity prior weight %g: want [0, 10], 0 for "
                           "none", o.id_prior);
+    if (!rc && (o.anneal < 0 || o.anneal > GS_FIT_ANNEAL_MAX))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: anneal %d: want 0..%d halvings of the rates",
+                          o.anneal, GS_FIT_ANNEAL_MAX);
     for (int k = 0; !rc && o.code_start && k < c->D; k++)
         if (!isfinite(o.code_start[k]))
             rc = gs_error_set(err, GS_ERR_ARG,
@@ -561,7 +565,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     }
     fit_init(c, &o, s);
     double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
-    int it = 0, plateaued = 0;
+    int it = 0, plateaued = 0, halvings = 0, since = 0;
     for (; it < iters; it++) {
         gs_frame fr;
         state_to_frame(c, s, R0, &fr);
@@ -590,9 +594,17 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             *best = *s;
         }
         hist[it % 20] = loss;
-        if (it >= 20 && hist[(it + 1) % 20] - loss < plateau * loss) {
-            plateaued = 1;
-            break;
+        if (it >= 20 && it - since >= 20 &&
+            hist[(it + 1) % 20] - loss < plateau * loss) {
+            if (halvings == o.anneal) {
+                plateaued = 1;
+                break;
+            }
+            /* anneal: the steps shrink and the fit goes on from here */
+            halvings++;
+            since = it;
+            for (int k = 0; k < s->n; k++)
+                s->lr[k] *= 0.5;
         }
         if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s)
             break;
@@ -675,6 +687,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         report->loss_first = first;
         report->loss_last = best_loss;
         report->stopped_on_plateau = plateaued;
+        report->halvings = halvings;
     }
     free(s);
     free(best);

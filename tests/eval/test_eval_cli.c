@@ -208,6 +208,13 @@ static void usage_errors(const char *model, const char *pairs)
                             dir, "--true-code", bad_tc[i], NULL};
         CHECK_MSG(run(tc) == 2, "--true-code '%s' accepted", bad_tc[i]);
     }
+    /* --fit-anneal: 0..8 halvings */
+    const char *bad_an[] = {"-1", "9", "x", "1.5", ""};
+    for (size_t i = 0; i < sizeof bad_an / sizeof bad_an[0]; i++) {
+        const char *an[] = {"eval", "--model", model, "--pairs", pairs, "--out",
+                            dir, "--fit-anneal", bad_an[i], NULL};
+        CHECK_MSG(run(an) == 2, "--fit-anneal '%s' accepted", bad_an[i]);
+    }
     /* --readout-shift: only with --readout, and within [0, 8] px */
     const char *shift_alone[] = {"eval", "--model", model, "--pairs", pairs,
                                  "--out", dir, "--readout-shift", "2", NULL};

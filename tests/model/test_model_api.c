@@ -361,6 +361,39 @@ int main(void)
         m->cfg.n_train_ids = T;
     }
 
+    /* anneal: at a plateau the rates halve and the fit goes on. Up to the
+     * first plateau it is the plain fit step for step, so it ends at a loss
+     * no higher, later, having halved as often as asked; out of range is
+     * refused and leaves the subject alone. */
+    {
+        gs_fit_options fx = fo;
+        fx.max_iters = 200;
+        fx.plateau_rel = 0.05; /* a plateau soon, on the tiny model */
+        gs_subject s0, s2, keep;
+        gs_fit_report r0, r2;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, &r0, &err) == GS_OK);
+        fx.anneal = 2;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s2, &r2, &err) == GS_OK);
+        printf("anneal: plain %d iterations, loss %.5f; 2 halvings %d iterations "
+               "(%d halved), loss %.5f\n", r0.iters, r0.loss_last, r2.iters,
+               r2.halvings, r2.loss_last);
+        CHECK(r0.stopped_on_plateau && r0.halvings == 0 && r0.iters < 200);
+        CHECK(r2.stopped_on_plateau && r2.halvings == 2);
+        CHECK(r2.iters >= r0.iters + 40);
+        CHECK(r2.loss_first == r0.loss_first && r2.loss_last <= r0.loss_last);
+        CHECK(memcmp(s2.code, s0.code, sizeof(float) * s0.code_dim) != 0);
+        const int bad[] = {-1, GS_FIT_ANNEAL_MAX + 1};
+        for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+            fx.anneal = bad[k];
+            memset(&keep, 0x5a, sizeof keep);
+            s2 = keep;
+            CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s2, NULL,
+                               &err) == GS_ERR_ARG);
+            CHECK(memcmp(&s2, &keep, sizeof keep) == 0);
+            CHECK(strstr(err.msg, "anneal") != NULL);
+        }
+    }
+
     /* The fit key (gs_model_fit_key) names what the fit depends on and
      * nothing else: the options as the fit reads them (0 for a default,
      * the model's prior weight resolved), the known labels, the mask, the
@@ -388,6 +421,7 @@ int main(void)
         KEY_DIFFERS(k.lr_code = 0.121);
         KEY_DIFFERS(k.code_prior = 3e-4);
         KEY_DIFFERS(k.id_prior = 3e-3);
+        KEY_DIFFERS(k.anneal = 1);
         KEY_DIFFERS(k.bound_expression = 1);
         KEY_DIFFERS(k.known_gaze = 1);
         KEY_DIFFERS((k.known_head = 1, k.head_t[2] = 600));

@@ -288,7 +288,13 @@ typedef struct gs_fit_options {
      * of 1 % of their mean variance): at most about `id_prior` added to the
      * loss for a code like the learned ones; 0 (default): none; [0, 10]. */
     double id_prior;
+    /* Times Adam's rates are halved at a plateau before the fit stops: 0
+     * (default) stops at the first plateau, as before; each halving gives
+     * the fit 20 more iterations before the next plateau test, within
+     * max_iters and time_budget_s. [0, 8]. (docs/model.md, "Fitting") */
+    int anneal;
 } gs_fit_options;
+#define GS_FIT_ANNEAL_MAX 8
 #define GS_FIT_CODE_PRIOR_MODEL (-1.0)
 #define GS_FIT_LR_CODE_DEFAULT 0.12
 #define GS_FIT_LR_COLOUR_DEFAULT 0.02
@@ -311,6 +317,7 @@ typedef struct gs_fit_report {
     double seconds;
     double loss_first, loss_last;
     int stopped_on_plateau;
+    int halvings; /* times the rates were halved (gs_fit_options.anneal) */
 } gs_fit_report;
 
 /* Fits a subject to one normalized face image (image_size^2 RGB). A fit
