@@ -31,6 +31,7 @@ const cli_command cli_eval_command = {
     "                      [--fit-lr CODE[,COLOUR]] [--bound-expression]\n"
     "                      [--code-prior W] [--id-prior W] [--true-code LIST]\n"
     "                      [--true-code-start] [--fit-anneal N]\n"
+    "                      [--fit-mirror 0|1]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -87,6 +88,10 @@ const cli_command cli_eval_command = {
     "  --fit-anneal N    at a plateau the fit halves its rates and goes on,\n"
     "                    N times (0..8) before it stops; 0: stops at the\n"
     "                    first plateau (default)\n"
+    "  --fit-mirror 0|1  1: the fit also fits the input flipped left to\n"
+    "                    right from the mirrored pose, a second view (an\n"
+    "                    iteration costs twice as much); 0: the input alone\n"
+    "                    (default)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression, lights and/or (pairs\n"
     "                    of --split train only) the identity code training\n"
@@ -163,7 +168,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_XWARP_HEAD, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_READ_SOFT, O_TRUE_CODE, O_TRUE_START, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_ANNEAL, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_READ_SOFT, O_TRUE_CODE, O_TRUE_START, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_ANNEAL, O_FIT_MIRROR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light, id (each at most once). */
@@ -262,6 +267,7 @@ typedef struct evaluator {
     double code_prior;          /* --code-prior */
     double id_prior;            /* --id-prior */
     int anneal;                 /* --fit-anneal */
+    int fit_mirror;             /* --fit-mirror */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -459,6 +465,7 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     o.code_prior = ev->code_prior;
     o.id_prior = ev->id_prior;
     o.anneal = ev->anneal;
+    o.mirror = ev->fit_mirror;
     float code[GS_MODEL_MAX_CODE];
     uint8_t fixed[GS_MODEL_MAX_CODE];
     if (ev->true_code) {
@@ -940,7 +947,7 @@ static int run_eval(int argc, char **argv)
         {"--true-code", 1, NULL}, {"--true-code-start", 0, NULL},
         {"--bound-expression", 0, NULL},
         {"--code-prior", 1, NULL}, {"--id-prior", 1, NULL},
-        {"--fit-anneal", 1, NULL},
+        {"--fit-anneal", 1, NULL}, {"--fit-mirror", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
@@ -1059,6 +1066,13 @@ static int run_eval(int argc, char **argv)
                                    o[O_ANNEAL].value);
         ev.anneal = (int)v;
     }
+    if (o[O_FIT_MIRROR].value) {
+        long v;
+        if (cli_parse_long(o[O_FIT_MIRROR].value, 0, 1, &v))
+            return cli_usage_error(cmd, "--fit-mirror: want 0 or 1, got '%s'",
+                                   o[O_FIT_MIRROR].value);
+        ev.fit_mirror = (int)v;
+    }
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
@@ -1096,6 +1110,7 @@ static int run_eval(int argc, char **argv)
     info.code_prior = ev.code_prior;
     info.id_prior = ev.id_prior;
     info.anneal = ev.anneal;
+    info.fit_mirror = ev.fit_mirror;
     info.feature_scale = 1.0;
     info.supersample = 1;
     info.ft_iters = ev.fo.iters;

@@ -255,6 +255,11 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                  ", rates halved at up to %d plateaus (--fit-anneal)",
                  info->anneal);
     }
+    if (info->fit_mirror) {
+        size_t at = strlen(prior);
+        snprintf(prior + at, sizeof prior - at,
+                 ", with the mirrored view (--fit-mirror 1)");
+    }
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
                "iterations cap %d, rates %g (code%s) and %g (colour)%s%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,

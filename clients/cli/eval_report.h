@@ -90,6 +90,7 @@ typedef struct eval_run_info {
     int code_prior_model; /* 1: code_prior is the model file's */
     double id_prior;      /* --id-prior (0: none) */
     int anneal;           /* --fit-anneal (0: none) */
+    int fit_mirror;       /* --fit-mirror */
     int fit_lr_code_model; /* 1: fit_lr_code is the model file's */
     /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
     int ft_iters;

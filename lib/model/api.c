@@ -490,6 +490,36 @@ static float weighted_psnr(const fit_bufs *b, int S)
     return (float)(mse > 1e-12 ? -10.0 * log10(mse) : 120.0);
 }
 
+static uint8_t *mirror_image(const uint8_t *rgb, size_t stride, int S);
+static void mirror_weights(const uint8_t *mask, int S, float *w);
+
+/* The mirrored view's gradient, in the fit's variables: the view is
+ * gs_frame_mirror of the fit's frame (S = diag(-1, 1, 1): rotation S R S,
+ * so a left perturbation w becomes -S w; translation S t; the gaze's yaw
+ * and the lights' x negated), and each map is its own inverse. */
+static void add_mirrored_grad(const gs_model_ctx *c, const gs_frame_grad *fm,
+                              const double *dgain, const double *dbias,
+                              double *g)
+{
+    g[V_GAZE] += fm->gaze[0];
+    g[V_GAZE + 1] -= fm->gaze[1];
+    g[V_ROT] += fm->rot[0];
+    g[V_ROT + 1] -= fm->rot[1];
+    g[V_ROT + 2] -= fm->rot[2];
+    g[V_TRANS] -= fm->trans[0];
+    g[V_TRANS + 1] += fm->trans[1];
+    g[V_TRANS + 2] += fm->trans[2];
+    for (int k = 0; k < 3; k++) {
+        g[V_GAIN + k] += dgain[k];
+        g[V_BIAS + k] += dbias[k];
+    }
+    const int light0 = c->D - GS_MODEL_LIGHT_DIM;
+    for (int k = 0; k < c->D; k++) {
+        int lx = k >= light0 && (k - light0) % 3 == 0 && k - light0 < 9;
+        g[V_CODE + k] += lx ? -(double)fm->code[k] : (double)fm->code[k];
+    }
+}
+
 int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                  size_t stride, const gs_fit_options *opt, gs_subject *out,
                  gs_fit_report *report, gs_error *err)
@@ -525,6 +555,9 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         rc = gs_error_set(err, GS_ERR_ARG,
                           "fit: identity prior weight %g: want [0, 10], 0 for "
                           "none", o.id_prior);
+    if (!rc && o.mirror != 0 && o.mirror != 1)
+        rc = gs_error_set(err, GS_ERR_ARG, "fit: mirror %d: want 0 or 1",
+                          o.mirror);
     if (!rc && (o.anneal < 0 || o.anneal > GS_FIT_ANNEAL_MAX))
         rc = gs_error_set(err, GS_ERR_ARG,
                           "fit: anneal %d: want 0..%d halvings of the rates",
@@ -553,16 +586,25 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     else
         gs_geom_mat3_identity(R0);
 
-    fit_bufs b;
+    fit_bufs b, bm; /* bm: the mirrored view's (o.mirror) */
     memset(&b, 0, sizeof b);
+    memset(&bm, 0, sizeof bm);
     fit_state *s = calloc(1, sizeof *s), *best = calloc(1, sizeof *best);
-    if (!s || !best || fit_bufs_init(&b, c, rgb, stride, o.mask)) {
+    uint8_t *flip = o.mirror ? mirror_image(rgb, stride, c->S) : NULL;
+    if (!s || !best || fit_bufs_init(&b, c, rgb, stride, o.mask) ||
+        (o.mirror && (!flip || fit_bufs_init(&bm, c, flip, 3 * (size_t)c->S,
+                                             NULL)))) {
         free(s);
         free(best);
+        free(flip);
         fit_bufs_free(&b);
+        fit_bufs_free(&bm);
         gs_id_prior_free(idp);
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
     }
+    free(flip); /* bm holds it as floats */
+    if (o.mirror && o.mask)
+        mirror_weights(o.mask, c->S, bm.w);
     fit_init(c, &o, s);
     double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
     int it = 0, plateaued = 0, halvings = 0, since = 0;
@@ -581,6 +623,28 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         double gid[GS_MODEL_MAX_CODE] = {0};
         if (idp)
             loss += gs_id_prior_eval(idp, o.id_prior, s->x + V_CODE, gid);
+        /* The mirrored view: the input's gradient first (the context holds
+         * one forward at a time), then the mirrored view's loss and
+         * gradient, so the loss the fit tracks is the sum of both. */
+        gs_frame_grad fg, fgm;
+        double dgm[3], dbm[3];
+        if (o.mirror && isfinite(loss)) {
+            memset(&fg, 0, sizeof fg);
+            memset(&fgm, 0, sizeof fgm);
+            rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
+                                   &fg, err);
+            gs_frame frm;
+            gs_frame_mirror(&fr, c->D, &frm);
+            if (!rc)
+                rc = gs_frame_forward(c, pool, &frm, GS_STREAM_BOTH, 0, err);
+            if (!rc)
+                loss += image_loss(c, pool, &bm, s, dgm, dbm);
+            if (!rc && isfinite(loss))
+                rc = gs_frame_backward(c, pool, bm.dpred, NULL, NULL, NULL,
+                                       NULL, &fgm, err);
+            if (rc)
+                break;
+        }
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "fit diverged at iteration %d (loss %g, first "
@@ -608,12 +672,13 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         }
         if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s)
             break;
-        gs_frame_grad fg;
-        memset(&fg, 0, sizeof fg);
-        rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
-                               &fg, err);
-        if (rc)
-            break;
+        if (!o.mirror) {
+            memset(&fg, 0, sizeof fg);
+            rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
+                                   &fg, err);
+            if (rc)
+                break;
+        }
         memset(s->g, 0, sizeof s->g);
         s->g[V_GAZE] = fg.gaze[0];
         s->g[V_GAZE + 1] = fg.gaze[1];
@@ -629,6 +694,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             s->g[V_PRIOR + k] += gprior[k];
         for (int k = 0; idp && k < c->m->cfg.id_dim; k++)
             s->g[V_CODE + k] += gid[k];
+        if (o.mirror)
+            add_mirrored_grad(c, &fgm, dgm, dbm, s->g);
         for (int k = 0; k < s->n; k++)
             if (!isfinite(s->g[k])) {
                 rc = gs_error_set(err, GS_ERR_NONFINITE,
@@ -692,6 +759,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     free(s);
     free(best);
     fit_bufs_free(&b);
+    fit_bufs_free(&bm);
     gs_id_prior_free(idp);
     return rc;
 }

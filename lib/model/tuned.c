@@ -180,6 +180,10 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
         uint64_t w = bits(o.id_prior);
         hash_part(&h, &w, sizeof w);
     }
+    if (o.mirror != 0) { /* likewise */
+        uint64_t a = 0x6d6972726f720000ULL | (uint64_t)(uint32_t)o.mirror;
+        hash_part(&h, &a, sizeof a);
+    }
     if (o.anneal != 0) { /* likewise */
         uint64_t a = 0x616e6e65616c0000ULL | (uint64_t)(uint32_t)o.anneal;
         hash_part(&h, &a, sizeof a);

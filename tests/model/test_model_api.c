@@ -394,6 +394,97 @@ int main(void)
         }
     }
 
+    /* mirror: the fit also fits the input flipped, from the mirrored pose.
+     * Fitting the flipped input from the mirrored labels is the same two
+     * views the other way round, so with the pose and gaze known it gives
+     * the mirrored fit to the bit (the code's light x negated, the colours
+     * the same); with them free, the mirrored pose and gaze within
+     * rounding, which checks the mirrored view's gradient in every
+     * variable. 2 is refused. */
+    {
+        const int L0 = info.code_dim - 12; /* the lights' slots */
+        uint8_t *flip = malloc(3 * (size_t)S * S);
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++)
+                memcpy(flip + 3 * ((size_t)y * S + x),
+                       smp.rgb + (size_t)y * smp.stride + 3 * (size_t)(S - 1 - x), 3);
+        for (int known = 1; known >= 0; known--) {
+            gs_fit_options fa = fo, fb;
+            fa.max_iters = 12;
+            fa.code_prior = 0;
+            fa.mirror = 1;
+            fa.known_head = known;
+            fa.known_gaze = known;
+            fa.gaze_pitch = smp.labels.gaze_head_pitch;
+            fa.gaze_yaw = smp.labels.gaze_head_yaw;
+            fb = fa;
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    fb.head_R[3 * i + j] = (i == 0) != (j == 0) ? -fa.head_R[3 * i + j]
+                                                                : fa.head_R[3 * i + j];
+            fb.head_t[0] = -fa.head_t[0];
+            fb.gaze_yaw = -fa.gaze_yaw;
+            float start_m[GS_MODEL_MAX_CODE]; /* the mean code, mirrored */
+            for (int k = 0; k < info.code_dim; k++) {
+                int lx = k >= L0 && (k - L0) % 3 == 0 && k - L0 < 9;
+                start_m[k] = lx ? -m->p.code_mean[k] : m->p.code_mean[k];
+            }
+            fb.code_start = start_m;
+            gs_subject sa, sb;
+            gs_fit_report ra, rb;
+            CHECK_MSG(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fa, &sa, &ra, &err) == GS_OK,
+                      "%s", err.msg);
+            CHECK_MSG(gs_model_fit(c, NULL, flip, 3 * (size_t)S, &fb, &sb, &rb, &err) == GS_OK,
+                      "%s", err.msg);
+            double worst = 0;
+            int bits_same = ra.iters == rb.iters && ra.loss_last == rb.loss_last;
+            for (int k = 0; k < info.code_dim; k++) {
+                int lx = k >= L0 && (k - L0) % 3 == 0 && k - L0 < 9;
+                float want = lx ? -sa.code[k] : sa.code[k];
+                worst = fmax(worst, fabs((double)sb.code[k] - want));
+                bits_same &= memcmp(&sb.code[k], &want, sizeof want) == 0;
+            }
+            for (int k = 0; k < 3; k++) {
+                worst = fmax(worst, fabs(sb.colour_gain[k] - sa.colour_gain[k]));
+                worst = fmax(worst, fabs(sb.colour_bias[k] - sa.colour_bias[k]));
+                bits_same &= sb.colour_gain[k] == sa.colour_gain[k] &&
+                             sb.colour_bias[k] == sa.colour_bias[k];
+                for (int j = 0; j < 3; j++) {
+                    double sgn = (k == 0) != (j == 0) ? -1 : 1;
+                    worst = fmax(worst, fabs(sb.head_R[3 * k + j] - sgn * sa.head_R[3 * k + j]));
+                }
+                worst = fmax(worst, fabs(sb.head_t[k] - (k == 0 ? -1 : 1) * sa.head_t[k]) / 100);
+            }
+            worst = fmax(worst, fabs(sb.gaze_pitch - sa.gaze_pitch));
+            worst = fmax(worst, fabs(sb.gaze_yaw + sa.gaze_yaw));
+            printf("mirror (pose and gaze %s): %d iterations, loss %.5f; the flipped "
+                   "input's fit against the mirrored fit: worst %.3g%s\n",
+                   known ? "known" : "free", ra.iters, ra.loss_last, worst,
+                   bits_same ? ", the same bits" : "");
+            if (known)
+                CHECK(bits_same);
+            else
+                CHECK_MSG(worst < 1e-3, "worst %.3g", worst);
+            if (!known) { /* the pose and gaze moved: their gradients count */
+                CHECK(fabs(sa.gaze_yaw - fa.gaze_yaw) > 1e-4 ||
+                      fabs(sa.gaze_pitch - fa.gaze_pitch) > 1e-4);
+                CHECK(fabs(sa.head_t[0]) > 1e-3);
+            }
+        }
+        free(flip);
+        gs_fit_options fx = fo;
+        gs_subject s0, s1, keep;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL, &err) == GS_OK);
+        fx.mirror = 1;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s1, NULL, &err) == GS_OK);
+        CHECK(memcmp(s1.code, s0.code, sizeof(float) * s0.code_dim) != 0);
+        fx.mirror = 2;
+        memset(&keep, 0x5a, sizeof keep);
+        s1 = keep;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s1, NULL, &err) == GS_ERR_ARG);
+        CHECK(memcmp(&s1, &keep, sizeof keep) == 0 && strstr(err.msg, "mirror"));
+    }
+
     /* The fit key (gs_model_fit_key) names what the fit depends on and
      * nothing else: the options as the fit reads them (0 for a default,
      * the model's prior weight resolved), the known labels, the mask, the
@@ -422,6 +513,7 @@ int main(void)
         KEY_DIFFERS(k.code_prior = 3e-4);
         KEY_DIFFERS(k.id_prior = 3e-3);
         KEY_DIFFERS(k.anneal = 1);
+        KEY_DIFFERS(k.mirror = 1);
         KEY_DIFFERS(k.bound_expression = 1);
         KEY_DIFFERS(k.known_gaze = 1);
         KEY_DIFFERS((k.known_head = 1, k.head_t[2] = 600));

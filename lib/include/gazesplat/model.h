@@ -293,6 +293,11 @@ typedef struct gs_fit_options {
      * the fit 20 more iterations before the next plateau test, within
      * max_iters and time_budget_s. [0, 8]. (docs/model.md, "Fitting") */
     int anneal;
+    /* 1: each iteration also fits the input flipped left to right, seen
+     * from the mirrored pose (the fine-tuning's mirrored view, now for the
+     * code): a second view of a near-symmetric face; an iteration costs
+     * about twice as much. 0 (default): the input alone. */
+    int mirror;
 } gs_fit_options;
 #define GS_FIT_ANNEAL_MAX 8
 #define GS_FIT_CODE_PRIOR_MODEL (-1.0)
