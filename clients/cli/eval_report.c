@@ -252,7 +252,7 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
     if (info->anneal > 0) {
         size_t at = strlen(prior);
         snprintf(prior + at, sizeof prior - at,
-                 ", rates halved at up to %d plateaus (--fit-anneal)",
+                 ", the rates halved at a plateau up to %d times (--fit-anneal)",
                  info->anneal);
     }
     if (info->fit_mirror) {

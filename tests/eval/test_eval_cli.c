@@ -215,6 +215,13 @@ static void usage_errors(const char *model, const char *pairs)
                             dir, "--fit-anneal", bad_an[i], NULL};
         CHECK_MSG(run(an) == 2, "--fit-anneal '%s' accepted", bad_an[i]);
     }
+    /* --fit-mirror: 0 or 1 */
+    const char *bad_mi[] = {"2", "-1", "yes", ""};
+    for (size_t i = 0; i < sizeof bad_mi / sizeof bad_mi[0]; i++) {
+        const char *mi[] = {"eval", "--model", model, "--pairs", pairs, "--out",
+                            dir, "--fit-mirror", bad_mi[i], NULL};
+        CHECK_MSG(run(mi) == 2, "--fit-mirror '%s' accepted", bad_mi[i]);
+    }
     /* --readout-shift: only with --readout, and within [0, 8] px */
     const char *shift_alone[] = {"eval", "--model", model, "--pairs", pairs,
                                  "--out", dir, "--readout-shift", "2", NULL};
@@ -440,6 +447,21 @@ int main(int argc, char **argv)
         CHECK_MSG(*ms && strcmp(ms, mu) != 0 && strcmp(ms, mt) != 0,
                   "--true-code-start: model PSNRs %s against kept %s, plain %s",
                   ms, mu, mt);
+        free(st);
+        /* --fit-mirror 1 and --fit-anneal: the summary names them and the
+         * fits change */
+        const char *evmi[] = {"eval", "--model", model, "--pairs", tpairs,
+                              "--out", sout, "--method", "model", "--iters", "4",
+                              "--threads", "2", "--estimator", est,
+                              "--fit-mirror", "1", "--fit-anneal", "1", NULL};
+        CHECK_EQ_INT(run(evmi), 0);
+        CHECK(summary_has(smd, ", the rates halved at a plateau up to 1 times (--fit-anneal), "
+                               "with the mirrored view (--fit-mirror 1)",
+                          "diverged fits 0, errors 0, non-finite outputs 0", NULL));
+        st = ev_slurp(csvs);
+        column_of(st, "model", 20, ms, sizeof ms);
+        CHECK_MSG(*ms && strcmp(ms, mt) != 0, "--fit-mirror 1: model PSNRs %s, plain %s",
+                  ms, mt);
         free(st);
         free(t);
         free(u);
