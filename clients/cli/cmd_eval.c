@@ -31,7 +31,7 @@ const cli_command cli_eval_command = {
     "                      [--fit-lr CODE[,COLOUR]] [--bound-expression]\n"
     "                      [--code-prior W] [--id-prior W] [--true-code LIST]\n"
     "                      [--true-code-start] [--fit-anneal N]\n"
-    "                      [--fit-mirror 0|1]\n"
+    "                      [--fit-mirror 0|1] [--fit-eye-weight W]\n"
     "                      [--threads N] [--reuse-fits] [--save-images N]\n"
     "                      [--prune K|P%] [--feature-scale S] [--full-render]\n"
     "                      [--transfer-head-weight W] [--light-on-head]\n"
@@ -92,6 +92,9 @@ const cli_command cli_eval_command = {
     "                    right from the mirrored pose, a second view (an\n"
     "                    iteration costs twice as much); 0: the input alone\n"
     "                    (default)\n"
+    "  --fit-eye-weight W  weight of the input's eye region in the fit's\n"
+    "                    loss, 0..1 (default 1; 0: the code is fitted to\n"
+    "                    the rest of the face)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression, lights and/or (pairs\n"
     "                    of --split train only) the identity code training\n"
@@ -168,7 +171,7 @@ enum {
     O_MODEL, O_PAIRS, O_OUT, O_EST, O_METHOD, O_LIMIT, O_ITERS, O_FIT_LR, O_THREADS,
     O_REUSE, O_SAVE, O_PRUNE, O_FSCALE, O_FULL, O_FT, O_FT_PARTS, O_FT_LR, O_FT_EYE,
     O_XHW, O_LOH, O_XEW, O_XWARP, O_XWARP_HEAD, O_FT_OUTLINE, O_FT_MIRROR, O_READ, O_READ_SHIFT,
-    O_READ_SOFT, O_TRUE_CODE, O_TRUE_START, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_ANNEAL, O_FIT_MIRROR, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
+    O_READ_SOFT, O_TRUE_CODE, O_TRUE_START, O_BOUND_EXPR, O_CODE_PRIOR, O_ID_PRIOR, O_ANNEAL, O_FIT_MIRROR, O_FIT_EYE, O_MAKE, O_IDS, O_INPUTS, O_TARGETS, O_SEED, O_SPLIT, O_N
 };
 
 /* --true-code LIST: comma-separated expr, light, id (each at most once). */
@@ -268,6 +271,7 @@ typedef struct evaluator {
     double id_prior;            /* --id-prior */
     int anneal;                 /* --fit-anneal */
     int fit_mirror;             /* --fit-mirror */
+    double fit_eye_w;           /* --fit-eye-weight */
     double focal, d_n;
     int methods[EVAL_METHODS], nmethods;
     uint8_t *out, *eye, *face;  /* S*S*3, S*S, S*S */
@@ -466,6 +470,25 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     o.id_prior = ev->id_prior;
     o.anneal = ev->anneal;
     o.mirror = ev->fit_mirror;
+    uint8_t *mask = NULL; /* --fit-eye-weight: the fit's pixel weights */
+    if (ev->fit_eye_w < 1.0) {
+        size_t n = (size_t)ev->S * ev->S;
+        uint8_t *eye = malloc(n), *face = malloc(n);
+        mask = malloc(n);
+        int rr = !eye || !face || !mask
+                     ? gs_error_set(err, GS_ERR_NOMEM, "out of memory")
+                     : gs_eval_regions(in, eye, face);
+        const uint8_t w = (uint8_t)lround(255.0 * ev->fit_eye_w);
+        for (size_t i = 0; !rr && i < n; i++)
+            mask[i] = eye[i] ? w : 255;
+        free(eye);
+        free(face);
+        if (rr) {
+            free(mask);
+            return rr;
+        }
+        o.mask = mask;
+    }
     float code[GS_MODEL_MAX_CODE];
     uint8_t fixed[GS_MODEL_MAX_CODE];
     if (ev->true_code) {
@@ -483,12 +506,14 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
         int rd = gs_eval_fit_cache_read(path, key, sub, secs, NULL);
         if (rd == GS_OK) {
             ev->fits_reused++;
+            free(mask);
             return GS_OK;
         }
         if (rd == GS_ERR_STATE)
             ev->fits_stale++;
     }
     int rc = gs_eval_fit_sample_with(ev->c, ev->pool, in, &o, sub, secs, err);
+    free(mask);
     if (rc)
         return rc;
     if (gs_eval_fit_cache_write(path, key, sub, *secs, NULL))
@@ -948,6 +973,7 @@ static int run_eval(int argc, char **argv)
         {"--bound-expression", 0, NULL},
         {"--code-prior", 1, NULL}, {"--id-prior", 1, NULL},
         {"--fit-anneal", 1, NULL}, {"--fit-mirror", 1, NULL},
+        {"--fit-eye-weight", 1, NULL},
         {"--make-pairs", 1, NULL},
         {"--identities", 1, NULL}, {"--inputs", 1, NULL},
         {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
@@ -1073,6 +1099,14 @@ static int run_eval(int argc, char **argv)
                                    o[O_FIT_MIRROR].value);
         ev.fit_mirror = (int)v;
     }
+    ev.fit_eye_w = 1.0;
+    if (o[O_FIT_EYE].value) {
+        float w;
+        if (cli_parse_floats(o[O_FIT_EYE].value, &w, 1) || !(w >= 0 && w <= 1))
+            return cli_usage_error(cmd, "--fit-eye-weight: want 0..1, got '%s'",
+                                   o[O_FIT_EYE].value);
+        ev.fit_eye_w = w;
+    }
     ev.dir = o[O_OUT].value;
     ev.reuse_fits = o[O_REUSE].value != NULL;
     ev.readout = o[O_READ].value != NULL;
@@ -1111,6 +1145,7 @@ static int run_eval(int argc, char **argv)
     info.id_prior = ev.id_prior;
     info.anneal = ev.anneal;
     info.fit_mirror = ev.fit_mirror;
+    info.fit_eye_w = ev.fit_eye_w;
     info.feature_scale = 1.0;
     info.supersample = 1;
     info.ft_iters = ev.fo.iters;

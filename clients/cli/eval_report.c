@@ -260,6 +260,12 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
         snprintf(prior + at, sizeof prior - at,
                  ", with the mirrored view (--fit-mirror 1)");
     }
+    if (info->fit_eye_w < 1.0) {
+        size_t at = strlen(prior);
+        snprintf(prior + at, sizeof prior - at,
+                 ", the input's eyes weighted %g (--fit-eye-weight)",
+                 info->fit_eye_w);
+    }
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
                "iterations cap %d, rates %g (code%s) and %g (colour)%s%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,

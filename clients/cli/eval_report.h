@@ -91,6 +91,7 @@ typedef struct eval_run_info {
     double id_prior;      /* --id-prior (0: none) */
     int anneal;           /* --fit-anneal (0: none) */
     int fit_mirror;       /* --fit-mirror */
+    double fit_eye_w;     /* --fit-eye-weight (1: the whole image alike) */
     int fit_lr_code_model; /* 1: fit_lr_code is the model file's */
     /* --finetune: steps, GS_FT_* parts, rate; inputs done and their means */
     int ft_iters;

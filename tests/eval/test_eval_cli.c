@@ -222,6 +222,13 @@ static void usage_errors(const char *model, const char *pairs)
                             dir, "--fit-mirror", bad_mi[i], NULL};
         CHECK_MSG(run(mi) == 2, "--fit-mirror '%s' accepted", bad_mi[i]);
     }
+    /* --fit-eye-weight: 0..1 */
+    const char *bad_fe[] = {"-0.1", "1.5", "x", "nan", ""};
+    for (size_t i = 0; i < sizeof bad_fe / sizeof bad_fe[0]; i++) {
+        const char *fe[] = {"eval", "--model", model, "--pairs", pairs, "--out",
+                            dir, "--fit-eye-weight", bad_fe[i], NULL};
+        CHECK_MSG(run(fe) == 2, "--fit-eye-weight '%s' accepted", bad_fe[i]);
+    }
     /* --readout-shift: only with --readout, and within [0, 8] px */
     const char *shift_alone[] = {"eval", "--model", model, "--pairs", pairs,
                                  "--out", dir, "--readout-shift", "2", NULL};
@@ -448,15 +455,17 @@ int main(int argc, char **argv)
                   "--true-code-start: model PSNRs %s against kept %s, plain %s",
                   ms, mu, mt);
         free(st);
-        /* --fit-mirror 1 and --fit-anneal: the summary names them and the
-         * fits change */
+        /* --fit-mirror 1, --fit-anneal and --fit-eye-weight: the summary
+         * names them and the fits change */
         const char *evmi[] = {"eval", "--model", model, "--pairs", tpairs,
                               "--out", sout, "--method", "model", "--iters", "4",
                               "--threads", "2", "--estimator", est,
-                              "--fit-mirror", "1", "--fit-anneal", "1", NULL};
+                              "--fit-mirror", "1", "--fit-anneal", "1",
+                              "--fit-eye-weight", "0.5", NULL};
         CHECK_EQ_INT(run(evmi), 0);
         CHECK(summary_has(smd, ", the rates halved at a plateau up to 1 times (--fit-anneal), "
-                               "with the mirrored view (--fit-mirror 1)",
+                               "with the mirrored view (--fit-mirror 1), the "
+                               "input's eyes weighted 0.5 (--fit-eye-weight)",
                           "diverged fits 0, errors 0, non-finite outputs 0", NULL));
         st = ev_slurp(csvs);
         column_of(st, "model", 20, ms, sizeof ms);
