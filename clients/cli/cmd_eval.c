@@ -93,8 +93,9 @@ const cli_command cli_eval_command = {
     "                    iteration costs twice as much); 0: the input alone\n"
     "                    (default)\n"
     "  --fit-eye-weight W  weight of the input's eye region in the fit's\n"
-    "                    loss, 0..1 (default 1; 0: the code is fitted to\n"
-    "                    the rest of the face)\n"
+    "                    loss against the rest of the image, 0..16 (default\n"
+    "                    1; 0: the code is fitted to the rest of the face;\n"
+    "                    above 1 the rest is weighted 1/W)\n"
     "  --true-code LIST  a diagnostic, not a served figure: the fit is given\n"
     "                    the input's true expression, lights and/or (pairs\n"
     "                    of --split train only) the identity code training\n"
@@ -471,16 +472,18 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     o.anneal = ev->anneal;
     o.mirror = ev->fit_mirror;
     uint8_t *mask = NULL; /* --fit-eye-weight: the fit's pixel weights */
-    if (ev->fit_eye_w < 1.0) {
+    if (ev->fit_eye_w != 1.0) {
         size_t n = (size_t)ev->S * ev->S;
         uint8_t *eye = malloc(n), *face = malloc(n);
         mask = malloc(n);
         int rr = !eye || !face || !mask
                      ? gs_error_set(err, GS_ERR_NOMEM, "out of memory")
                      : gs_eval_regions(in, eye, face);
-        const uint8_t w = (uint8_t)lround(255.0 * ev->fit_eye_w);
+        const double W = ev->fit_eye_w;
+        const uint8_t we = (uint8_t)lround(255.0 * fmin(W, 1.0)),
+                      wr = (uint8_t)lround(255.0 / fmax(W, 1.0));
         for (size_t i = 0; !rr && i < n; i++)
-            mask[i] = eye[i] ? w : 255;
+            mask[i] = eye[i] ? we : wr;
         free(eye);
         free(face);
         if (rr) {
@@ -1102,8 +1105,8 @@ static int run_eval(int argc, char **argv)
     ev.fit_eye_w = 1.0;
     if (o[O_FIT_EYE].value) {
         float w;
-        if (cli_parse_floats(o[O_FIT_EYE].value, &w, 1) || !(w >= 0 && w <= 1))
-            return cli_usage_error(cmd, "--fit-eye-weight: want 0..1, got '%s'",
+        if (cli_parse_floats(o[O_FIT_EYE].value, &w, 1) || !(w >= 0 && w <= 16))
+            return cli_usage_error(cmd, "--fit-eye-weight: want 0..16, got '%s'",
                                    o[O_FIT_EYE].value);
         ev.fit_eye_w = w;
     }

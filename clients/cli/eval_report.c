@@ -260,7 +260,7 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
         snprintf(prior + at, sizeof prior - at,
                  ", with the mirrored view (--fit-mirror 1)");
     }
-    if (info->fit_eye_w < 1.0) {
+    if (info->fit_eye_w != 1.0) {
         size_t at = strlen(prior);
         snprintf(prior + at, sizeof prior - at,
                  ", the input's eyes weighted %g (--fit-eye-weight)",

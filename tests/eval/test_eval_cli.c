@@ -222,8 +222,8 @@ static void usage_errors(const char *model, const char *pairs)
                             dir, "--fit-mirror", bad_mi[i], NULL};
         CHECK_MSG(run(mi) == 2, "--fit-mirror '%s' accepted", bad_mi[i]);
     }
-    /* --fit-eye-weight: 0..1 */
-    const char *bad_fe[] = {"-0.1", "1.5", "x", "nan", ""};
+    /* --fit-eye-weight: 0..16 */
+    const char *bad_fe[] = {"-0.1", "16.5", "x", "nan", ""};
     for (size_t i = 0; i < sizeof bad_fe / sizeof bad_fe[0]; i++) {
         const char *fe[] = {"eval", "--model", model, "--pairs", pairs, "--out",
                             dir, "--fit-eye-weight", bad_fe[i], NULL};
