@@ -200,35 +200,25 @@ static void usage_errors(const char *model, const char *pairs)
     CHECK_EQ_INT(run(ids0), 2);
     const char *positional[] = {"eval", "extra", NULL};
     CHECK_EQ_INT(run(positional), 2);
-    /* --true-code: a list of expr, light and id, each once */
-    const char *bad_tc[] = {"nope", "expr,expr", "expr,", ",light", "", "Expr",
-                            "id,id", "ids", "identity"};
-    for (size_t i = 0; i < sizeof bad_tc / sizeof bad_tc[0]; i++) {
-        const char *tc[] = {"eval", "--model", model, "--pairs", pairs, "--out",
-                            dir, "--true-code", bad_tc[i], NULL};
-        CHECK_MSG(run(tc) == 2, "--true-code '%s' accepted", bad_tc[i]);
-    }
-    /* --fit-anneal: 0..8 halvings */
-    const char *bad_an[] = {"-1", "9", "x", "1.5", ""};
-    for (size_t i = 0; i < sizeof bad_an / sizeof bad_an[0]; i++) {
-        const char *an[] = {"eval", "--model", model, "--pairs", pairs, "--out",
-                            dir, "--fit-anneal", bad_an[i], NULL};
-        CHECK_MSG(run(an) == 2, "--fit-anneal '%s' accepted", bad_an[i]);
-    }
-    /* --fit-mirror: 0 or 1 */
-    const char *bad_mi[] = {"2", "-1", "yes", ""};
-    for (size_t i = 0; i < sizeof bad_mi / sizeof bad_mi[0]; i++) {
-        const char *mi[] = {"eval", "--model", model, "--pairs", pairs, "--out",
-                            dir, "--fit-mirror", bad_mi[i], NULL};
-        CHECK_MSG(run(mi) == 2, "--fit-mirror '%s' accepted", bad_mi[i]);
-    }
-    /* --fit-eye-weight: 0..16 */
-    const char *bad_fe[] = {"-0.1", "16.5", "x", "nan", ""};
-    for (size_t i = 0; i < sizeof bad_fe / sizeof bad_fe[0]; i++) {
-        const char *fe[] = {"eval", "--model", model, "--pairs", pairs, "--out",
-                            dir, "--fit-eye-weight", bad_fe[i], NULL};
-        CHECK_MSG(run(fe) == 2, "--fit-eye-weight '%s' accepted", bad_fe[i]);
-    }
+    /* Bad values of each of these exit 2. --true-code: a list of expr,
+     * light and id, each once; --fit-anneal: 0..8 halvings; --fit-mirror:
+     * 0 or 1; --fit-eye-weight: 0..16. */
+    static const struct {
+        const char *flag, *bad[10];
+    } refused[] = {
+        {"--true-code", {"nope", "expr,expr", "expr,", ",light", "", "Expr",
+                         "id,id", "ids", "identity", NULL}},
+        {"--fit-anneal", {"-1", "9", "x", "1.5", "", NULL}},
+        {"--fit-mirror", {"2", "-1", "yes", "", NULL}},
+        {"--fit-eye-weight", {"-0.1", "16.5", "x", "nan", "", NULL}},
+    };
+    for (size_t f = 0; f < sizeof refused / sizeof refused[0]; f++)
+        for (int i = 0; refused[f].bad[i]; i++) {
+            const char *a[] = {"eval", "--model", model, "--pairs", pairs, "--out",
+                               dir, refused[f].flag, refused[f].bad[i], NULL};
+            CHECK_MSG(run(a) == 2, "%s '%s' accepted", refused[f].flag,
+                      refused[f].bad[i]);
+        }
     /* --readout-shift: only with --readout, and within [0, 8] px */
     const char *shift_alone[] = {"eval", "--model", model, "--pairs", pairs,
                                  "--out", dir, "--readout-shift", "2", NULL};

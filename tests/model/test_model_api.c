@@ -13,6 +13,21 @@
 #include "gs_test.h"
 #include "model_test_util.h"
 
+/* A fit with these options is refused: GS_ERR_ARG, the subject left as it
+ * was, and the message names what was wrong. */
+static void check_fit_refused(gs_model_ctx *c, const gs_synth_sample *smp,
+                              const gs_fit_options *o, const char *what)
+{
+    gs_error err = {0, ""};
+    gs_subject keep, s;
+    memset(&keep, 0x5a, sizeof keep);
+    s = keep;
+    CHECK(gs_model_fit(c, NULL, smp->rgb, smp->stride, o, &s, NULL, &err) ==
+          GS_ERR_ARG);
+    CHECK(memcmp(&s, &keep, sizeof keep) == 0);
+    CHECK_MSG(strstr(err.msg, what) != NULL, "'%s' not in '%s'", what, err.msg);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -202,7 +217,7 @@ int main(void)
         gs_code_prior pr;
         CHECK(gs_code_prior_make(m, &pr, &err) == GS_OK);
         gs_fit_options fx = fo;
-        gs_subject s0, sp, sf, keep;
+        gs_subject s0, sp, sf;
         CHECK(fo.code_prior == GS_FIT_CODE_PRIOR_MODEL);
         CHECK(m->cfg.fit_code_prior == 0);
         fx.code_prior = 0;
@@ -255,12 +270,7 @@ int main(void)
         const double bad[] = {-0.1, -2.0, 10.5, NAN, INFINITY};
         for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
             fx.code_prior = bad[k];
-            memset(&keep, 0x5a, sizeof keep);
-            sp = keep;
-            CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL,
-                               &err) == GS_ERR_ARG);
-            CHECK(memcmp(&sp, &keep, sizeof keep) == 0);
-            CHECK(strstr(err.msg, "code prior") != NULL);
+            check_fit_refused(c, &smp, &fx, "code prior");
         }
     }
 
@@ -320,7 +330,7 @@ int main(void)
         gs_id_prior_free(ip);
 
         gs_fit_options fx = fo;
-        gs_subject s0, s1, sf, sp, keep;
+        gs_subject s0, s1, sf, sp;
         CHECK(fo.id_prior == 0);
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL, &err) == GS_OK);
         CHECK(memcmp(s0.code, sub.code, sizeof(float) * sub.code_dim) == 0);
@@ -344,20 +354,11 @@ int main(void)
         const double bad[] = {-0.1, 10.5, NAN, INFINITY};
         for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
             fx.id_prior = bad[k];
-            memset(&keep, 0x5a, sizeof keep);
-            sp = keep;
-            CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL,
-                               &err) == GS_ERR_ARG);
-            CHECK(memcmp(&sp, &keep, sizeof keep) == 0);
-            CHECK(strstr(err.msg, "identity prior") != NULL);
+            check_fit_refused(c, &smp, &fx, "identity prior");
         }
         m->cfg.n_train_ids = 1; /* as a model of one training identity */
         fx.id_prior = 0.3;
-        memset(&keep, 0x5a, sizeof keep);
-        sp = keep;
-        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &sp, NULL, &err) == GS_ERR_ARG);
-        CHECK(memcmp(&sp, &keep, sizeof keep) == 0);
-        printf("refused (identity prior, one identity): %s\n", err.msg);
+        check_fit_refused(c, &smp, &fx, "identity");
         m->cfg.n_train_ids = T;
     }
 
@@ -369,7 +370,7 @@ int main(void)
         gs_fit_options fx = fo;
         fx.max_iters = 200;
         fx.plateau_rel = 0.05; /* a plateau soon, on the tiny model */
-        gs_subject s0, s2, keep;
+        gs_subject s0, s2;
         gs_fit_report r0, r2;
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, &r0, &err) == GS_OK);
         fx.anneal = 2;
@@ -385,12 +386,7 @@ int main(void)
         const int bad[] = {-1, GS_FIT_ANNEAL_MAX + 1};
         for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
             fx.anneal = bad[k];
-            memset(&keep, 0x5a, sizeof keep);
-            s2 = keep;
-            CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s2, NULL,
-                               &err) == GS_ERR_ARG);
-            CHECK(memcmp(&s2, &keep, sizeof keep) == 0);
-            CHECK(strstr(err.msg, "anneal") != NULL);
+            check_fit_refused(c, &smp, &fx, "anneal");
         }
     }
 
@@ -473,16 +469,13 @@ int main(void)
         }
         free(flip);
         gs_fit_options fx = fo;
-        gs_subject s0, s1, keep;
+        gs_subject s0, s1;
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s0, NULL, &err) == GS_OK);
         fx.mirror = 1;
         CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s1, NULL, &err) == GS_OK);
         CHECK(memcmp(s1.code, s0.code, sizeof(float) * s0.code_dim) != 0);
         fx.mirror = 2;
-        memset(&keep, 0x5a, sizeof keep);
-        s1 = keep;
-        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fx, &s1, NULL, &err) == GS_ERR_ARG);
-        CHECK(memcmp(&s1, &keep, sizeof keep) == 0 && strstr(err.msg, "mirror"));
+        check_fit_refused(c, &smp, &fx, "mirror");
     }
 
     /* The fit key (gs_model_fit_key) names what the fit depends on and
