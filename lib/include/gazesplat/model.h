@@ -296,7 +296,9 @@ typedef struct gs_fit_options {
     /* 1: each iteration also fits the input flipped left to right, seen
      * from the mirrored pose (the fine-tuning's mirrored view, now for the
      * code): a second view of a near-symmetric face; an iteration costs
-     * about twice as much. 0 (default): the input alone. */
+     * about twice as much, and the report's losses sum both views (the
+     * subject's fit_psnr and fit_ssim are the input's). 0 (default): the
+     * input alone. */
     int mirror;
 } gs_fit_options;
 #define GS_FIT_ANNEAL_MAX 8
