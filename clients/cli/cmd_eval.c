@@ -283,7 +283,8 @@ typedef struct evaluator {
     int save_images;            /* pairs [0, save_images) as PNG */
     gs_finetune_options fo;     /* --finetune: fo.iters > 0 */
     double ft_eye_w;            /* --finetune-eye-weight */
-    uint8_t *ftmask, *fteye;    /* its loss weights, the input's eyes */
+    uint8_t *ftmask;            /* its loss weights (eye_weights) */
+    uint8_t *fitmask;           /* --fit-eye-weight: the fit's */
     gs_model *ftm;              /* the copy that is fine-tuned per input */
     gs_model_ctx *ftctx;        /* renders it */
     int ft_n;                   /* inputs fine-tuned */
@@ -452,6 +453,27 @@ static int produce(evaluator *ev, int method, const gs_subject *sub,
     return rc;
 }
 
+/* Pixel weights from the input's eye region (gs_eval_regions, into
+ * ev->eye and ev->face, which each target writes again before it reads
+ * them): the eyes weighted W against the rest of the image, and above 1
+ * the rest weighted 1/W instead. Into *mask (S*S, made on first use).
+ * --fit-eye-weight and --finetune-eye-weight. */
+static int eye_weights(evaluator *ev, const gs_synth_sample *in, double W,
+                       uint8_t **mask, gs_error *err)
+{
+    const size_t n = (size_t)ev->S * ev->S;
+    if (!*mask && !(*mask = malloc(n)))
+        return gs_error_set(err, GS_ERR_NOMEM, "out of memory");
+    int rc = gs_eval_regions(in, ev->eye, ev->face);
+    if (rc)
+        return rc;
+    const uint8_t we = (uint8_t)lround(255.0 * fmin(W, 1.0)),
+                  wr = (uint8_t)lround(255.0 / fmax(W, 1.0));
+    for (size_t i = 0; i < n; i++)
+        (*mask)[i] = ev->eye[i] ? we : wr;
+    return GS_OK;
+}
+
 /* Fits are the slow part: each successful fit is kept as DIR/fits/N.bin
  * (gs_eval_fit_cache_write), keyed by what made it (the model, the fit's
  * options and the input: gs_eval_fit_key), and --reuse-fits takes it from
@@ -471,26 +493,11 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
     o.id_prior = ev->id_prior;
     o.anneal = ev->anneal;
     o.mirror = ev->fit_mirror;
-    uint8_t *mask = NULL; /* --fit-eye-weight: the fit's pixel weights */
     if (ev->fit_eye_w != 1.0) {
-        size_t n = (size_t)ev->S * ev->S;
-        uint8_t *eye = malloc(n), *face = malloc(n);
-        mask = malloc(n);
-        int rr = !eye || !face || !mask
-                     ? gs_error_set(err, GS_ERR_NOMEM, "out of memory")
-                     : gs_eval_regions(in, eye, face);
-        const double W = ev->fit_eye_w;
-        const uint8_t we = (uint8_t)lround(255.0 * fmin(W, 1.0)),
-                      wr = (uint8_t)lround(255.0 / fmax(W, 1.0));
-        for (size_t i = 0; !rr && i < n; i++)
-            mask[i] = eye[i] ? we : wr;
-        free(eye);
-        free(face);
-        if (rr) {
-            free(mask);
-            return rr;
-        }
-        o.mask = mask;
+        int rc = eye_weights(ev, in, ev->fit_eye_w, &ev->fitmask, err);
+        if (rc)
+            return rc;
+        o.mask = ev->fitmask;
     }
     float code[GS_MODEL_MAX_CODE];
     uint8_t fixed[GS_MODEL_MAX_CODE];
@@ -509,14 +516,12 @@ static int cached_fit(evaluator *ev, int input, const gs_synth_sample *in,
         int rd = gs_eval_fit_cache_read(path, key, sub, secs, NULL);
         if (rd == GS_OK) {
             ev->fits_reused++;
-            free(mask);
             return GS_OK;
         }
         if (rd == GS_ERR_STATE)
             ev->fits_stale++;
     }
     int rc = gs_eval_fit_sample_with(ev->c, ev->pool, in, &o, sub, secs, err);
-    free(mask);
     if (rc)
         return rc;
     if (gs_eval_fit_cache_write(path, key, sub, *secs, NULL))
@@ -550,23 +555,9 @@ static int finetune_input(evaluator *ev, const gs_synth_sample *in,
     gs_finetune_report rep;
     memset(&rep, 0, sizeof rep);
     gs_finetune_options fo = ev->fo;
-    if (!rc && ev->ft_eye_w < 1.0) {
-        size_t n = (size_t)ev->S * ev->S;
-        if (!ev->ftmask)
-            ev->ftmask = malloc(n);
-        if (!ev->fteye)
-            ev->fteye = malloc(n);
-        uint8_t *face = malloc(n);
-        if (!ev->ftmask || !ev->fteye || !face)
-            rc = gs_error_set(err, GS_ERR_NOMEM, "out of memory");
-        if (!rc)
-            rc = gs_eval_regions(in, ev->fteye, face);
-        free(face);
-        uint8_t w = (uint8_t)lround(255.0 * ev->ft_eye_w);
-        for (size_t i = 0; !rc && i < n; i++)
-            ev->ftmask[i] = ev->fteye[i] ? w : 255;
+    if (!rc && ev->ft_eye_w < 1.0 &&
+        !(rc = eye_weights(ev, in, ev->ft_eye_w, &ev->ftmask, err)))
         fo.mask = ev->ftmask;
-    }
     if (!rc)
         rc = gs_model_finetune(ev->ftm, ev->pool, sub, in->rgb, in->stride,
                                &fo, &rep, err);
@@ -944,7 +935,7 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     gs_model_ctx_destroy(ev->ftctx);
     gs_model_destroy(ev->ftm);
     free(ev->ftmask);
-    free(ev->fteye);
+    free(ev->fitmask);
     gs_model_ctx_destroy(ev->c);
     gs_model_destroy(ev->pm);
     eval_estimator_free(ev->est);

@@ -1,5 +1,6 @@
 /* gazesplat eval: the per-pair CSV and the Markdown summary. */
 #include <math.h>
+#include <stdarg.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -234,6 +235,18 @@ static void method_counts(FILE *f, const eval_row *rows, int n,
     free(fits);
 }
 
+/* printf onto the end of the string in buf (n bytes), cut to fit. */
+static void append(char *buf, size_t n, const char *fmt, ...)
+    __attribute__((format(printf, 3, 4)));
+static void append(char *buf, size_t n, const char *fmt, ...)
+{
+    size_t at = strlen(buf);
+    va_list ap;
+    va_start(ap, fmt);
+    vsnprintf(buf + at, n - at, fmt, ap);
+    va_end(ap);
+}
+
 void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
                   int n, const gs_eval_pairs *ps, const int *methods,
                   int nmethods)
@@ -241,31 +254,20 @@ void eval_summary(FILE *f, const eval_run_info *info, const eval_row *rows,
     fprintf(f, "# gazesplat eval\n\n```sh\n%s\n```\n\n", info->command);
     char prior[256] = "";
     if (info->code_prior > 0)
-        snprintf(prior, sizeof prior, ", code prior weight %g (%s)",
-                 info->code_prior,
-                 info->code_prior_model ? "the model's" : "--code-prior");
-    if (info->id_prior > 0) {
-        size_t at = strlen(prior);
-        snprintf(prior + at, sizeof prior - at,
-                 ", identity prior weight %g (--id-prior)", info->id_prior);
-    }
-    if (info->anneal > 0) {
-        size_t at = strlen(prior);
-        snprintf(prior + at, sizeof prior - at,
-                 ", the rates halved at a plateau up to %d times (--fit-anneal)",
-                 info->anneal);
-    }
-    if (info->fit_mirror) {
-        size_t at = strlen(prior);
-        snprintf(prior + at, sizeof prior - at,
-                 ", with the mirrored view (--fit-mirror 1)");
-    }
-    if (info->fit_eye_w != 1.0) {
-        size_t at = strlen(prior);
-        snprintf(prior + at, sizeof prior - at,
-                 ", the input's eyes weighted %g (--fit-eye-weight)",
-                 info->fit_eye_w);
-    }
+        append(prior, sizeof prior, ", code prior weight %g (%s)",
+               info->code_prior,
+               info->code_prior_model ? "the model's" : "--code-prior");
+    if (info->id_prior > 0)
+        append(prior, sizeof prior, ", identity prior weight %g (--id-prior)",
+               info->id_prior);
+    if (info->anneal > 0)
+        append(prior, sizeof prior, ", the rates halved at a plateau up to %d "
+               "times (--fit-anneal)", info->anneal);
+    if (info->fit_mirror)
+        append(prior, sizeof prior, ", with the mirrored view (--fit-mirror 1)");
+    if (info->fit_eye_w != 1.0)
+        append(prior, sizeof prior, ", the input's eyes weighted %g "
+               "(--fit-eye-weight)", info->fit_eye_w);
     fprintf(f, "- model: `%s` (%d px); pairs: `%s`, %d inputs; fit "
                "iterations cap %d, rates %g (code%s) and %g (colour)%s%s; %d "
                "threads\n", info->model, info->image_size, info->pairs,

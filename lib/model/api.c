@@ -490,8 +490,26 @@ static float weighted_psnr(const fit_bufs *b, int S)
     return (float)(mse > 1e-12 ? -10.0 * log10(mse) : 120.0);
 }
 
-static uint8_t *mirror_image(const uint8_t *rgb, size_t stride, int S);
-static void mirror_weights(const uint8_t *mask, int S, float *w);
+/* The image flipped left to right, packed (S x S x 3); NULL when out of
+ * memory. */
+static uint8_t *mirror_image(const uint8_t *rgb, size_t stride, int S)
+{
+    uint8_t *f = malloc(3 * (size_t)S * S);
+    if (f)
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++)
+                memcpy(f + 3 * ((size_t)y * S + x),
+                       rgb + (size_t)y * stride + 3 * (size_t)(S - 1 - x), 3);
+    return f;
+}
+
+/* Pixel weights of the mirrored image from the input's mask. */
+static void mirror_weights(const uint8_t *mask, int S, float *w)
+{
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++)
+            w[(size_t)y * S + x] = mask[(size_t)y * S + (S - 1 - x)] / 255.0f;
+}
 
 /* The mirrored view's gradient, in the fit's variables: the view is
  * gs_frame_mirror of the fit's frame (S = diag(-1, 1, 1): rotation S R S,
@@ -513,11 +531,11 @@ static void add_mirrored_grad(const gs_model_ctx *c, const gs_frame_grad *fm,
         g[V_GAIN + k] += dgain[k];
         g[V_BIAS + k] += dbias[k];
     }
-    const int light0 = c->D - GS_MODEL_LIGHT_DIM;
-    for (int k = 0; k < c->D; k++) {
-        int lx = k >= light0 && (k - light0) % 3 == 0 && k - light0 < 9;
-        g[V_CODE + k] += lx ? -(double)fm->code[k] : (double)fm->code[k];
-    }
+    float code[GS_MODEL_MAX_CODE];
+    memcpy(code, fm->code, (size_t)c->D * sizeof code[0]);
+    gs_frame_mirror_code(code, c->D);
+    for (int k = 0; k < c->D; k++)
+        g[V_CODE + k] += code[k];
 }
 
 int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
@@ -924,27 +942,6 @@ static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
     ft_pack(r, r->orig, 0);
     memcpy(r->best, r->orig, r->tuned * sizeof(float));
     return GS_OK;
-}
-
-/* The image flipped left to right, packed (S x S x 3); NULL when out of
- * memory. */
-static uint8_t *mirror_image(const uint8_t *rgb, size_t stride, int S)
-{
-    uint8_t *f = malloc(3 * (size_t)S * S);
-    if (f)
-        for (int y = 0; y < S; y++)
-            for (int x = 0; x < S; x++)
-                memcpy(f + 3 * ((size_t)y * S + x),
-                       rgb + (size_t)y * stride + 3 * (size_t)(S - 1 - x), 3);
-    return f;
-}
-
-/* Pixel weights of the mirrored image from the input's mask. */
-static void mirror_weights(const uint8_t *mask, int S, float *w)
-{
-    for (int y = 0; y < S; y++)
-        for (int x = 0; x < S; x++)
-            w[(size_t)y * S + x] = mask[(size_t)y * S + (S - 1 - x)] / 255.0f;
 }
 
 /* Feature pixels within r of the outline of a coverage map [fs, fs]

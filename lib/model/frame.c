@@ -1965,10 +1965,15 @@ void gs_frame_mirror(const gs_frame *fr, int code_dim, gs_frame *out)
             m.head_R[3 * i + j] = sg[i] * fr->head_R[3 * i + j] * sg[j];
     m.head_t[0] = -fr->head_t[0];
     m.gaze[1] = -fr->gaze[1];
-    float *l = m.code + code_dim - GS_MODEL_LIGHT_DIM;
+    gs_frame_mirror_code(m.code, code_dim);
+    *out = m;
+}
+
+void gs_frame_mirror_code(float *code, int code_dim)
+{
+    float *l = code + code_dim - GS_MODEL_LIGHT_DIM;
     for (int k = 0; k < 3; k++) /* the three light directions' x */
         l[3 * k] = -l[3 * k];
-    *out = m;
 }
 
 int gs_frame_set_feature_mask(gs_model_ctx *c, const float *mask,

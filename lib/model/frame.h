@@ -251,6 +251,10 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
  * translation S t, S = diag(-1, 1, 1), with the gaze's yaw and the light
  * directions' head-frame x negated. Its own inverse. */
 void gs_frame_mirror(const gs_frame *fr, int code_dim, gs_frame *out);
+/* The code's part of gs_frame_mirror, in place: the light directions'
+ * head-frame x negated. Linear and its own inverse, so it maps a gradient
+ * over the mirrored code back to the code too. */
+void gs_frame_mirror_code(float *code, int code_dim);
 
 /* Until called again with NULL, gs_frame_backward gives the Gaussians'
  * features (colours: feat[k]) only the gradient of the feature-map pixels
