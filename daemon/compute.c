@@ -17,6 +17,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <blake2.h>
+
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
@@ -84,29 +86,28 @@ static void store_sweep_all_locked(gsd_server *s);
 static void store_restore(gsd_server *s, int kind);
 #endif
 
-/* ---- hashing: FNV-1a, 128-bit, for model ids and content keys ---------- */
+/* ---- hashing: BLAKE2b-128 (libb2), for model ids and content keys --------
+ * A subject key names a fit that any client may ask for by content, so
+ * it must not collide by accident or by design: a cryptographic hash,
+ * cut to the header's 16 bytes. */
 
 typedef struct hash128 {
-    unsigned __int128 h;
+    blake2b_state st;
 } hash128;
 
 static void hash_init(hash128 *h)
 {
-    h->h = ((unsigned __int128)0x6c62272e07bb0142ull << 64) | 0x62b821756295c58dull;
+    blake2b_init(&h->st, 16);
 }
 
 static void hash_bytes(hash128 *h, const void *data, size_t n)
 {
-    const unsigned __int128 prime = ((unsigned __int128)1 << 88) | 0x13b;
-    const unsigned char *p = data;
-    for (size_t i = 0; i < n; i++)
-        h->h = (h->h ^ p[i]) * prime;
+    blake2b_update(&h->st, data, n);
 }
 
-static void hash_out(const hash128 *h, uint8_t out[16])
+static void hash_out(hash128 *h, uint8_t out[16])
 {
-    for (int i = 0; i < 16; i++)
-        out[i] = (uint8_t)(h->h >> (8 * i));
+    blake2b_final(&h->st, out, 16);
 }
 
 /* ---- model references ------------------------------------------------------ */
@@ -452,6 +453,20 @@ static int job_stop(gsd_job *j)
     return now_ms() > j->deadline_ms ? E(ERR_DEADLINE) : 0;
 }
 
+/* The fit's and fine-tune's cancel callback (gs_fit_options.cancel):
+ * polled every iteration, so CANCEL, a closed connection, the deadline
+ * and a stopping server end a fit within one iteration. */
+static int job_cancelled(void *arg)
+{
+    return job_stop(arg) != 0;
+}
+
+/* 1 for the codes a stopped job answers with (stop_frame). */
+static int is_stop_code(int e)
+{
+    return e == E(ERR_CANCELLED) || e == E(ERR_DEADLINE) || e == E(ERR_SHUTTING_DOWN);
+}
+
 static gsd_out *stop_frame(gsd_server *s, gsd_job *j, int why)
 {
     atomic_fetch_add(why == E(ERR_DEADLINE) ? &s->ctr.deadline_exceeded : &s->ctr.cancelled, 1);
@@ -626,10 +641,6 @@ typedef struct gsd_finetune {
     double lr;          /* gs_finetune_options.lr: the request's, or the server's */
 } gsd_finetune;
 
-/* The rate fine-tuning ran at before requests could choose one (the
- * library's default): keys of subjects tuned at it are unchanged. */
-#define FINETUNE_LR_KEYLESS 1e-3
-
 static gsd_finetune finetune_of(const gsd_job *j, uint32_t steps, const char *parts,
                                 uint32_t outline, int no_mirror, double lr)
 {
@@ -640,35 +651,65 @@ static gsd_finetune finetune_of(const gsd_job *j, uint32_t steps, const char *pa
     return f;
 }
 
-/* The key a FIT (or inline REDIRECT) without one gets: a hash of the
- * pixels and of what shapes the fit (labels, iterations, fine-tuning), so
- * the same input asked the same way maps to the same subject. */
-static void content_key(const gs_io_image *img, const Gazesplat__FitRequest *r, uint32_t max_iters,
+/* What the subject key of a FIT without a chosen key covers; bump it
+ * when that changes (keys of another version never meet). */
+#define SUBJECT_KEY_VERSION 2u
+
+static void key_u32(hash128 *h, uint32_t v)
+{
+    uint8_t b[4] = {(uint8_t)v, (uint8_t)(v >> 8), (uint8_t)(v >> 16), (uint8_t)(v >> 24)};
+    hash_bytes(h, b, 4);
+}
+
+static void key_f64(hash128 *h, double v)
+{
+    uint64_t u = 0;
+    if (v != 0) /* -0 and +0 ask for the same fit */
+        memcpy(&u, &v, 8);
+    key_u32(h, (uint32_t)u);
+    key_u32(h, (uint32_t)(u >> 32));
+}
+
+/* The key a FIT (or inline REDIRECT) without one gets: BLAKE2b-128 of
+ * everything that decides the fit, in one fixed layout led by its
+ * version: the model, the input's kind (a photo fits with the landmarks'
+ * head pose and the face mask, a normalized face with neither), the
+ * normalized pixels, the mask, the known labels and head pose, the
+ * iterations and the fine-tuning. The same input asked the same way maps
+ * to the same subject; anything else to another. */
+static void content_key(const gsd_model *m, int is_photo, const gs_io_image *face, const gs_fit_options *opt,
                         const gsd_finetune *ft, uint8_t key[16])
 {
+    static const char tag[] = "gazesplatd subject";
     hash128 h;
     hash_init(&h);
-    for (int y = 0; y < img->height; y++)
-        hash_bytes(&h, img->data + (size_t)y * img->stride, (size_t)img->width * 3);
-    double labels[5] = {r && r->gaze ? r->gaze->pitch_deg : NAN, r && r->gaze ? r->gaze->yaw_deg : NAN,
-                        r && r->head ? r->head->pitch_deg : NAN, r && r->head ? r->head->yaw_deg : NAN,
-                        (double)max_iters};
-    hash_bytes(&h, labels, sizeof labels);
-    if (ft->steps) { /* a fine-tuned subject is another subject (plain keys unchanged) */
-        uint32_t v[2] = {ft->steps, ft->parts};
-        hash_bytes(&h, v, sizeof v);
-        if (ft->outline) /* keys without it unchanged */
-            hash_bytes(&h, &ft->outline, sizeof ft->outline);
-        if (ft->no_mirror) {
-            static const char tag[] = "no-mirror";
-            hash_bytes(&h, tag, sizeof tag);
-        }
-        if (ft->lr != FINETUNE_LR_KEYLESS) { /* another rate tunes another subject */
-            static const char tag[] = "lr";
-            hash_bytes(&h, tag, sizeof tag);
-            hash_bytes(&h, &ft->lr, sizeof ft->lr);
-        }
+    hash_bytes(&h, tag, sizeof tag);
+    key_u32(&h, SUBJECT_KEY_VERSION);
+    hash_bytes(&h, m->id, 32);
+    key_u32(&h, (uint32_t)is_photo);
+    key_u32(&h, (uint32_t)face->width);
+    key_u32(&h, (uint32_t)face->height);
+    for (int y = 0; y < face->height; y++)
+        hash_bytes(&h, face->data + (size_t)y * face->stride, (size_t)face->width * 3);
+    key_u32(&h, opt->mask != NULL);
+    if (opt->mask)
+        hash_bytes(&h, opt->mask, (size_t)face->width * face->height);
+    key_u32(&h, (uint32_t)opt->known_gaze);
+    if (opt->known_gaze) {
+        key_f64(&h, opt->gaze_pitch);
+        key_f64(&h, opt->gaze_yaw);
     }
+    key_u32(&h, (uint32_t)opt->known_head);
+    for (int k = 0; opt->known_head && k < 9; k++)
+        key_f64(&h, opt->head_R[k]);
+    for (int k = 0; opt->known_head && k < 3; k++)
+        key_f64(&h, opt->head_t[k]);
+    key_u32(&h, (uint32_t)opt->max_iters);
+    key_u32(&h, ft->steps);
+    key_u32(&h, ft->parts);
+    key_u32(&h, ft->outline);
+    key_u32(&h, ft->no_mirror);
+    key_f64(&h, ft->lr);
     hash_out(&h, key);
 }
 
@@ -1053,11 +1094,18 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
     fo.mirror = !ft->no_mirror;
     fo.lr = ft->lr;
     fo.mask = mask;
-    fo.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
-    if (fo.time_budget_s <= 0)
-        fo.time_budget_s = 0.001;
+    /* No time budget: a fine-tune cut short is not the subject the key
+     * names. The deadline, CANCEL and a stop end it through the callback,
+     * and nothing is kept. */
+    fo.cancel = job_cancelled;
+    fo.cancel_arg = j;
     int r = gs_model_finetune(sl->m, w->pool, subj, face->data, face->stride, &fo, rep, &err);
     gs_model_ctx_reset(sl->ctx);
+    if (r == GS_ERR_CANCELLED) {
+        int why = job_stop(j);
+        snprintf(msg, cap, "finetune stopped at step %d", rep->iters);
+        return why ? why : E(ERR_CANCELLED);
+    }
     if (r != GS_OK) {
         snprintf(msg, cap, "finetune: %s", err.msg);
         return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
@@ -1100,41 +1148,54 @@ typedef struct subject_ask {
     int keep_image, want_face;
 } subject_ask;
 
-/* Runs the fit (and fine-tune) a new subject needs and caches it. */
-static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const photo_input *p,
-                       const gs_io_image *face, subject_out *o, char *msg, size_t cap)
+/* The fit's options for a request: its labels (FIT only), the photo's
+ * landmark head pose and face mask, the iterations. The subject key is
+ * made from these (content_key), so they are built once, before both. */
+static void fit_options_of(const gsd_worker *w, const subject_ask *a, const photo_input *p, gs_fit_options *opt)
 {
-    gsd_server *s = w->srv;
     const Gazesplat__FitRequest *fr = a->fr;
-    gs_subject *subj = &o->subj;
-    gs_fit_options opt;
-    gs_fit_options_default(&opt);
+    gs_fit_options_default(opt);
     if (fr && fr->gaze) {
-        opt.known_gaze = 1;
-        opt.gaze_pitch = fr->gaze->pitch_deg * DEG;
-        opt.gaze_yaw = fr->gaze->yaw_deg * DEG;
+        opt->known_gaze = 1;
+        opt->gaze_pitch = fr->gaze->pitch_deg * DEG;
+        opt->gaze_yaw = fr->gaze->yaw_deg * DEG;
     }
     if (fr && fr->head) {
-        opt.known_head = 1;
-        head_rotation(fr->head, opt.head_R);
+        opt->known_head = 1;
+        head_rotation(fr->head, opt->head_R);
     } else if (p->is_photo) {
         /* The landmarks' head pose, rotated into the normalized camera. */
-        opt.known_head = 1;
-        gs_geom_norm_rot(&p->face.norm, p->face.pose.R, opt.head_R);
+        opt->known_head = 1;
+        gs_geom_norm_rot(&p->face.norm, p->face.pose.R, opt->head_R);
     }
-    if (opt.known_head) {
-        opt.head_t[0] = opt.head_t[1] = 0.0;
-        opt.head_t[2] = w->model->info.distance_mm; /* the face centre is on the axis */
+    if (opt->known_head) {
+        opt->head_t[0] = opt->head_t[1] = 0.0;
+        opt->head_t[2] = w->model->info.distance_mm; /* the face centre is on the axis */
     }
-    opt.mask = p->mask_n;
+    opt->mask = p->mask_n;
     if (a->max_iters)
-        opt.max_iters = (int)a->max_iters;
-    opt.time_budget_s = (double)(j->deadline_ms - now_ms()) / 1000.0;
-    if (opt.time_budget_s <= 0)
-        opt.time_budget_s = 0.001;
+        opt->max_iters = (int)a->max_iters;
+}
+
+/* Runs the fit (and fine-tune) a new subject needs and caches it. Only a
+ * whole fit is cached: one stopped by CANCEL, the deadline or a stopping
+ * server answers that and leaves no trace. */
+static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const gs_fit_options *fit_opt,
+                       const photo_input *p, const gs_io_image *face, subject_out *o, char *msg, size_t cap)
+{
+    gsd_server *s = w->srv;
+    gs_subject *subj = &o->subj;
+    gs_fit_options opt = *fit_opt;
+    opt.cancel = job_cancelled;
+    opt.cancel_arg = j;
     gs_error err;
     gs_error_clear(&err);
     int r = gs_model_fit(w->ctx, w->pool, face->data, face->stride, &opt, subj, &o->fit, &err);
+    if (r == GS_ERR_CANCELLED) {
+        int why = job_stop(j);
+        snprintf(msg, cap, "fit stopped at iteration %d", o->fit.iters);
+        return why ? why : E(ERR_CANCELLED);
+    }
     if (r != GS_OK) {
         snprintf(msg, cap, "fit: %s", err.msg);
         return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
@@ -1170,8 +1231,10 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const
     int e = input_face(w, j, img, k, p, &face, msg, cap);
     if (e)
         return e;
+    gs_fit_options opt;
+    fit_options_of(w, a, p, &opt);
     if (key_zero(j->key))
-        content_key(&face, a->fr, a->max_iters, &a->ft, j->key);
+        content_key(w->model, p->is_photo, &face, &opt, &a->ft, j->key);
     o->cached = cache_lookup(s, j->key, &o->subj, &o->tuned, &o->sum) == 0;
     if (o->cached && o->tuned && !gsd_cache_contains(s->tuned, j->key)) {
         /* Its tuned tensors were evicted: the subject cannot render, so
@@ -1179,7 +1242,7 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const
         o->cached = o->tuned = 0;
     }
     if (!o->cached)
-        e = fit_subject(w, j, a, p, &face, o, msg, cap);
+        e = fit_subject(w, j, a, &opt, p, &face, o, msg, cap);
     if (!e && a->keep_image)
         e = input_keep(s, j->key, &face, msg, cap);
     if (!e && a->want_face)
@@ -1213,7 +1276,7 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
     photo_input_free(&photo);
     if (e)
-        return gsd_error_frame(j, e, "%s", msg);
+        return is_stop_code(e) ? stop_frame(s, j, e) : gsd_error_frame(j, e, "%s", msg);
     int why = job_stop(j);
     if (why)
         return stop_frame(s, j, why);
@@ -1403,7 +1466,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {
             photo_input_free(&photo);
-            return gsd_error_frame(j, e, "%s", msg);
+            return is_stop_code(e) ? stop_frame(s, j, e) : gsd_error_frame(j, e, "%s", msg);
         }
     } else {
         char hex[33];
@@ -1435,6 +1498,8 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     gsd_out *o = rgb ? NULL : gsd_error_frame(j, E(ERR_INTERNAL), "out of memory");
     for (size_t i = 0; i < r->n_targets && !o; i++) {
         int why = job_stop(j);
+        if (!why && i > 0) /* a peer that does not read holds back its renders */
+            why = gsd_wait_output(s, j);
         if (why)
             o = stop_frame(s, j, why);
         else if ((why = render_target(w, ctx, j, r, i, &subj, so.face.data ? &so.face : NULL, &photo, &ps,

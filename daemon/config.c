@@ -39,6 +39,7 @@ static const key_def keys[] = {
     {"max_targets", T_INT, OFF(max_targets), 1, 1024, "64"},
     {"max_inflight", T_INT, OFF(max_inflight), 1, 1024, "8"},
     {"max_output_kb", T_INT, OFF(max_output_kb), 64, 4 << 20, "65536"},
+    {"output_budget_mb", T_INT, OFF(output_budget_mb), 1, 65536, "512"},
     {"max_connections", T_INT, OFF(max_connections), 1, 65536, "1024"},
     {"max_image_side", T_INT, OFF(max_image_side), 16, 16384, "4096"},
     {"max_image_mpix", T_INT, OFF(max_image_mpix), 1, 256, "16"},

@@ -42,7 +42,8 @@ struct gsd_conn {
     int closing;          /* protocol error: close once the output is flushed */
     int eof;              /* peer closed its side: finish in-flight work */
     int paused;           /* reading stopped: output over its cap */
-    int64_t opened_ms, last_ms, frame_start_ms, closing_ms;
+    int64_t opened_ms, last_ms, frame_start_ms, closing_ms; /* last_ms: last byte either way */
+    uint64_t rng;         /* per-client jitter of BUSY hints */
     gsd_job *inflight;
     int ninflight;
     gsd_conn *prev, *next;
@@ -69,7 +70,7 @@ static const struct {
     CTR(renders_incremental), CTR(model_loads),
     CTR(model_load_failures), CTR(reloads), CTR(cache_saves), CTR(cache_save_failures),
     CTR(finetunes), CTR(tuned_swaps), CTR(tuned_saves), CTR(tuned_save_failures),
-    CTR(renders_transfer), CTR(input_saves), CTR(input_save_failures),
+    CTR(renders_transfer), CTR(input_saves), CTR(input_save_failures), CTR(output_waits),
 };
 #define NCOUNTERS (sizeof counter_names / sizeof counter_names[0])
 
@@ -80,7 +81,9 @@ static void bump(atomic_ullong *c, unsigned long long n)
 
 /* ---- frames out ---------------------------------------------------------- */
 
-static gsd_out *out_pack(const gs_frame_header *h, const ProtobufCMessage *msg)
+/* Every output frame is counted in s->out_total from here to out_free,
+ * and in its job's out_bytes while o->job is set. */
+static gsd_out *out_pack(gsd_server *s, const gs_frame_header *h, const ProtobufCMessage *msg)
 {
     uint8_t *buf;
     size_t len;
@@ -91,9 +94,53 @@ static gsd_out *out_pack(const gs_frame_header *h, const ProtobufCMessage *msg)
         memset(o, 0, sizeof *o);
         o->len = len;
         memcpy(o->data, buf, len);
+        atomic_fetch_add(&s->out_total, len);
     }
     free(buf);
     return o;
+}
+
+static void out_attach(gsd_out *o, const gsd_job *job)
+{
+    o->job = (gsd_job *)job;
+    atomic_fetch_add(&o->job->out_bytes, o->len);
+}
+
+static void out_free(gsd_server *s, gsd_out *o)
+{
+    atomic_fetch_sub(&s->out_total, o->len);
+    if (o->job)
+        atomic_fetch_sub(&o->job->out_bytes, o->len);
+    free(o);
+}
+
+/* Frames of job j (all jobs: NULL) still queued on c forget it: the job
+ * is about to be freed, or cancelled with its connection. */
+static void out_detach(gsd_conn *c, const gsd_job *j)
+{
+    for (gsd_out *o = c->whead; o; o = o->next)
+        if (o->job && (!j || o->job == j))
+            o->job = NULL;
+}
+
+int gsd_wait_output(gsd_server *s, gsd_job *j)
+{
+    int counted = 0;
+    for (;;) {
+        int why = atomic_load(&j->stop);
+        if (!why && ev_now_ms() > j->deadline_ms)
+            why = E(ERR_DEADLINE);
+        if (why)
+            return why;
+        size_t mine = atomic_load(&j->out_bytes);
+        if (!atomic_load(&j->conn_paused) &&
+            (mine == 0 || atomic_load(&s->out_total) <= atomic_load(&s->out_budget)))
+            return 0;
+        if (!counted++)
+            bump(&s->ctr.output_waits, 1);
+        struct timespec ts = {0, 2 * 1000000L};
+        nanosleep(&ts, NULL);
+    }
 }
 
 gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage *msg)
@@ -104,13 +151,13 @@ gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage
     h.type = type;
     h.request_id = job->request_id;
     memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
-    gsd_out *o = out_pack(&h, msg);
+    gsd_out *o = out_pack(job->srv, &h, msg);
     if (o)
-        o->job = (gsd_job *)job;
+        out_attach(o, job);
     return o;
 }
 
-static gsd_out *error_out(const gs_frame_header *h, int code, const char *text)
+static gsd_out *error_out(gsd_server *s, const gs_frame_header *h, int code, const char *text)
 {
     Gazesplat__Error e = GAZESPLAT__ERROR__INIT;
     e.code = (Gazesplat__ErrorCode)code;
@@ -118,7 +165,7 @@ static gsd_out *error_out(const gs_frame_header *h, int code, const char *text)
     e.request_id = h->request_id;
     gs_frame_header eh = *h;
     eh.type = T(ERROR);
-    return out_pack(&eh, &e.base);
+    return out_pack(s, &eh, &e.base);
 }
 
 gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
@@ -133,9 +180,9 @@ gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     h.version = job->version;
     h.request_id = job->request_id;
     memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
-    gsd_out *o = error_out(&h, code, text);
+    gsd_out *o = error_out(job->srv, &h, code, text);
     if (o) {
-        o->job = (gsd_job *)job;
+        out_attach(o, job);
         o->final = 1;
     }
     return o;
@@ -182,7 +229,7 @@ static void reply(gsd_conn *c, const gs_frame_header *req, uint16_t type, const 
     gs_frame_header h = *req;
     h.version = c->version;
     h.type = type;
-    gsd_out *o = out_pack(&h, msg);
+    gsd_out *o = out_pack(c->srv, &h, msg);
     if (!o) {
         conn_close(c, "out of memory");
         return;
@@ -204,7 +251,7 @@ static void reply_error(gsd_conn *c, const gs_frame_header *req, int code, const
     LOG_D("%s: request %u: %s: %s", c->peer, req->request_id, gs_msg_error_name(code), text);
     gs_frame_header h = *req;
     h.version = c->version;
-    gsd_out *o = error_out(&h, code, text);
+    gsd_out *o = error_out(c->srv, &h, code, text);
     if (o)
         conn_queue(c, o);
     else
@@ -229,7 +276,7 @@ static void conn_fail(gsd_conn *c, int code, uint32_t request_id, const char *fm
     memset(&h, 0, sizeof h);
     h.request_id = request_id;
     h.version = c->version;
-    gsd_out *o = error_out(&h, code, text);
+    gsd_out *o = error_out(c->srv, &h, code, text);
     c->closing = 1;
     c->closing_ms = ev_now_ms();
     if (o)
@@ -260,10 +307,14 @@ static void conn_update_interest(gsd_conn *c)
     if (c->w.mask < 0)
         return;
     size_t cap = output_cap(c);
+    int was = c->paused;
     if (!c->paused && c->wbytes > cap)
         c->paused = 1;
     else if (c->paused && c->wbytes <= cap / 2)
         c->paused = 0;
+    if (c->paused != was) /* the connection's renders wait while it is over */
+        for (gsd_job *j = c->inflight; j; j = j->cnext)
+            atomic_store(&j->conn_paused, c->paused);
     int mask = (c->closing || c->eof || c->paused ? 0 : EV_READ) | (c->wbytes ? EV_WRITE : 0);
     ev_set(c->srv->loop, &c->w, mask);
 }
@@ -272,7 +323,7 @@ static void conn_free(gsd_conn *c)
 {
     for (gsd_out *o = c->whead, *n; o; o = n) {
         n = o->next;
-        free(o);
+        out_free(c->srv, o);
     }
     gs_frame_parser_free(&c->parser);
     free(c);
@@ -288,7 +339,9 @@ static void conn_close(gsd_conn *c, const char *why)
     close(c->w.fd);
     c->w.fd = -1;
     c->w.mask = -1;
-    /* Jobs still running lose their connection; their frames are dropped. */
+    /* Jobs still running lose their connection; their frames are dropped
+     * (the queued ones now, in conn_free, without touching the jobs). */
+    out_detach(c, NULL);
     for (gsd_job *j = c->inflight; j; j = j->cnext) {
         j->conn = NULL;
         atomic_store(&j->stop, E(ERR_CANCELLED));
@@ -339,6 +392,7 @@ static void conn_flush(gsd_conn *c)
             return;
         }
         bump(&c->srv->ctr.bytes_out, (unsigned long long)w);
+        c->last_ms = ev_now_ms();
         c->wbytes -= (size_t)w;
         budget = (size_t)w >= budget ? 0 : budget - (size_t)w;
         size_t left = (size_t)w;
@@ -354,7 +408,7 @@ static void conn_flush(gsd_conn *c)
             c->whead = o->next;
             if (!c->whead)
                 c->wtail = NULL;
-            free(o);
+            out_free(c->srv, o);
         }
     }
     if (!c->whead && (c->closing || (c->eof && !c->inflight))) {
@@ -446,7 +500,7 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
 {
     gsd_server *s = c->srv;
     bump(&s->ctr.req_stats, 1);
-    enum { EXTRA = 18 };
+    enum { EXTRA = 20 };
     Gazesplat__Counter cs[NCOUNTERS + EXTRA];
     Gazesplat__Counter *ptrs[NCOUNTERS + EXTRA];
     size_t n = 0;
@@ -475,6 +529,8 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
         {"state", (uint64_t)atomic_load(&s->state)},
         {"uptime_ms", (uint64_t)(ev_now_ms() - s->started_ms)},
         {"job_ms_avg", (uint64_t)s->job_ms_avg},
+        {"output_bytes", (uint64_t)atomic_load(&s->out_total)},
+        {"output_budget", (uint64_t)atomic_load(&s->out_budget)},
     };
     for (size_t i = 0; i < EXTRA; i++, n++) {
         gazesplat__counter__init(&cs[n]);
@@ -501,13 +557,44 @@ static void handle_cancel(gsd_conn *c, const gs_frame_header *h, const Gazesplat
         }
 }
 
-static uint32_t retry_after_ms(gsd_server *s)
+/* A job's estimated run time from what jobs of its kind cost lately. */
+static uint32_t job_estimate_ms(const gsd_server *s, uint16_t type, const ProtobufCMessage *m)
 {
-    int len, running;
-    gsd_work_lengths(s, &len, &running);
-    /* Before any job has finished there is no history: guess 100 ms. */
-    double per_job = s->job_ms_avg > 0 ? s->job_ms_avg : 100.0;
-    double ms = per_job * (len + running) / (s->work.nworkers > 0 ? s->work.nworkers : 1);
+    double ms;
+    if (type == T(SLEEP)) {
+        ms = ((const Gazesplat__Sleep *)m)->ms;
+    } else if (type == T(FIT)) {
+        ms = s->cost_fit_ms;
+    } else {
+        const Gazesplat__RedirectRequest *r = (const Gazesplat__RedirectRequest *)m;
+        ms = (r->image ? s->cost_fit_ms : 0) + s->cost_target_ms * (double)r->n_targets;
+    }
+    return ms < 1 ? 1 : ms > 3.6e6 ? 3600000u : (uint32_t)ms;
+}
+
+/* xorshift64*: the jitter of one client's BUSY hints. */
+static double conn_uniform(gsd_conn *c)
+{
+    uint64_t x = c->rng;
+    x ^= x >> 12;
+    x ^= x << 25;
+    x ^= x >> 27;
+    c->rng = x;
+    return (double)((x * 0x2545F4914F6CDD1Dull) >> 11) / 9007199254740992.0;
+}
+
+/* BUSY's retry_after_ms: a queue slot opens when the first running job
+ * ends, and the queue is through after its whole backlog (estimated per
+ * job: gsd_work_backlog) over the workers. Each refused client is told a
+ * time drawn uniformly between the two, so refused clients come back
+ * spread over the window in which slots open, not all at once. */
+static uint32_t retry_after_ms(gsd_conn *c)
+{
+    gsd_server *s = c->srv;
+    double first, total;
+    gsd_work_backlog(s, ev_now_ms(), &first, &total);
+    double all = total / (s->work.nworkers > 0 ? s->work.nworkers : 1);
+    double ms = first + (all > first ? conn_uniform(c) * (all - first) : 0);
     if (ms < 10)
         ms = 10;
     if (ms > 60000)
@@ -569,7 +656,15 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
         return -1;
     }
     j->conn = c;
+    j->srv = s;
     j->type = h->type;
+    j->est_ms = job_estimate_ms(s, h->type, m);
+    if (h->type == T(REDIRECT)) {
+        const Gazesplat__RedirectRequest *r = (const Gazesplat__RedirectRequest *)m;
+        j->targets = (uint32_t)r->n_targets;
+        j->inline_fit = r->image != NULL;
+    }
+    atomic_store(&j->conn_paused, c->paused);
     j->version = c->version;
     j->request_id = h->request_id;
     memcpy(j->key, h->key, GS_FRAME_KEY_SIZE);
@@ -584,7 +679,7 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
         Gazesplat__Busy b = GAZESPLAT__BUSY__INIT;
         int qlen, running;
         gsd_work_lengths(s, &qlen, &running);
-        b.retry_after_ms = retry_after_ms(s);
+        b.retry_after_ms = retry_after_ms(c);
         b.queue_length = (uint32_t)qlen;
         reply(c, h, T(BUSY), &b.base);
         free(j);
@@ -712,8 +807,9 @@ static void conn_read(gsd_conn *c)
             }
             return;
         }
+        c->last_ms = ev_now_ms();
         if (c->frame_start_ms == 0)
-            c->frame_start_ms = ev_now_ms();
+            c->frame_start_ms = c->last_ms;
         bump(&c->srv->ctr.bytes_in, (unsigned long long)n);
         budget = (size_t)n >= budget ? 0 : budget - (size_t)n;
         int r = gs_frame_parser_advance(&c->parser, (size_t)n);
@@ -792,6 +888,9 @@ static void on_accept(ev_loop *loop, ev_watch *w, int events)
         c->is_tcp = l->is_tcp;
         c->version = GS_PROTO_VERSION_MIN;
         c->opened_ms = c->last_ms = ev_now_ms();
+        c->rng = (c->id * 0x9E3779B97F4A7C15ull) ^ (uint64_t)c->opened_ms ^ 0xD1B54A32D192ED03ull;
+        if (!c->rng)
+            c->rng = 1;
         peer_name(fd, l->is_tcp, c->peer, sizeof c->peer);
         gs_frame_limits lim = {0};
         gs_frame_parser_init(&c->parser, &lim);
@@ -813,10 +912,30 @@ static void on_accept(ev_loop *loop, ev_watch *w, int events)
 
 /* ---- completions, ticks, signals ------------------------------------------ */
 
-static void job_finished(gsd_server *s, gsd_job *j, uint64_t ms)
+/* What a finished job teaches the BUSY estimates: the run time of a
+ * FIT, or of one target of a REDIRECT by key (inline REDIRECTs mix both
+ * and SLEEPs say their own; failures and stops teach nothing). */
+static void learn_cost(gsd_server *s, const gsd_job *j, uint64_t ms)
+{
+    double *avg = NULL, v = (double)ms;
+    if (j->type == T(FIT)) {
+        avg = &s->cost_fit_ms;
+    } else if (j->type == T(REDIRECT) && !j->inline_fit && j->targets) {
+        avg = &s->cost_target_ms;
+        v /= j->targets;
+    }
+    if (avg)
+        *avg = 0.7 * *avg + 0.3 * v;
+}
+
+static void job_finished(gsd_server *s, gsd_job *j, uint64_t ms, int ok)
 {
     gsd_conn *c = j->conn;
+    if (ok)
+        learn_cost(s, j, ms);
     if (c) {
+        out_detach(c, j);
+        c->last_ms = ev_now_ms();
         for (gsd_job **pp = &c->inflight; *pp; pp = &(*pp)->cnext)
             if (*pp == j) {
                 *pp = j->cnext;
@@ -847,14 +966,15 @@ static void on_wake(ev_loop *loop, void *ctx)
         gsd_job *j = o->job;
         int final = o->final;
         uint64_t ms = o->job_ms;
+        int ok = (o->data[6] | o->data[7] << 8) != T(ERROR);
         if (j && j->conn && j->conn->w.fd >= 0) {
             conn_queue(j->conn, o);
             conn_flush(j->conn);
         } else {
-            free(o);
+            out_free(s, o);
         }
         if (final && j)
-            job_finished(s, j, ms);
+            job_finished(s, j, ms, ok);
     }
     if (atomic_load(&s->load_done))
         gsd_model_finish_load(s);
@@ -947,6 +1067,7 @@ void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
     gsd_cache_set_budget(s->cache, (size_t)s->cfg.cache_mb << 20);
     gsd_cache_set_budget(s->tuned, (size_t)s->cfg.tuned_cache_mb << 20);
     gsd_cache_set_budget(s->inputs, (size_t)s->cfg.input_cache_mb << 20);
+    atomic_store(&s->out_budget, (size_t)s->cfg.output_budget_mb << 20);
     for (gsd_conn *c = s->conns; c; c = c->next)
         if (c->parser.state == 0 && c->parser.have == 0)
             set_limits(c);
@@ -1032,6 +1153,10 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
     pthread_mutex_init(&s->persist_mu, NULL);
     atomic_store(&s->state, GSD_LOADING);
     snprintf(s->detail, sizeof s->detail, "starting");
+    atomic_store(&s->out_budget, (size_t)cfg->output_budget_mb << 20);
+    /* Before any job has finished: a guess at each kind's cost. */
+    s->cost_fit_ms = 2000;
+    s->cost_target_ms = 20;
     s->loop = ev_create(on_wake, s);
     s->cache = gsd_cache_create((size_t)cfg->cache_mb << 20);
     /* A block can be as large as the budget (every part of a big model). */

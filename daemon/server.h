@@ -41,6 +41,7 @@ typedef struct gsd_counters {
     atomic_ullong model_loads, model_load_failures, reloads, cache_saves, cache_save_failures;
     atomic_ullong finetunes, tuned_swaps, tuned_saves, tuned_save_failures;
     atomic_ullong renders_transfer, input_saves, input_save_failures;
+    atomic_ullong output_waits; /* renders held back by unread output */
 } gsd_counters;
 
 /* A unit of compute work. */
@@ -56,6 +57,15 @@ typedef struct gsd_job {
     int64_t enqueued_ms;
     int skips;                   /* times a later job was taken first (queue lock) */
     atomic_int stop;             /* 0, or ERR_CANCELLED / ERR_DEADLINE / ERR_SHUTTING_DOWN */
+    gsd_server *srv;
+    uint32_t est_ms;             /* estimated run time, for BUSY hints (work.c) */
+    uint32_t targets;            /* REDIRECT: targets; for the per-target cost */
+    int inline_fit;              /* REDIRECT with an image: fits first */
+    /* Output pacing (gsd_wait_output): bytes of this job's frames not yet
+     * written to the peer, and whether its connection's output is over
+     * max_output_kb (set by the loop). */
+    atomic_size_t out_bytes;
+    atomic_int conn_paused;
     int max_side;                /* image limits when the job was accepted */
     size_t max_pixels;
     double finetune_lr;          /* the server's finetune_lr when the job was accepted */
@@ -83,6 +93,9 @@ typedef struct gsd_work {
     int nworkers;
     int planned;                 /* workers started (set before the first) */
     pthread_t *threads;
+    /* per worker: the running job's start and estimate (start 0: idle) */
+    int64_t run_start[64];
+    uint32_t run_est[64];
 } gsd_work;
 
 /* A loaded model with its identity; refcounted so a SIGHUP reload can swap
@@ -118,6 +131,13 @@ struct gsd_server {
     int ready_sent;           /* (loop) READY=1 sent */
     char detail[256];         /* (loop) health detail */
     double job_ms_avg;        /* (loop) moving average of job time */
+    /* (loop) moving averages of what jobs cost, for BUSY hints: a FIT, one
+     * target of a REDIRECT by key */
+    double cost_fit_ms, cost_target_ms;
+    /* Output frames alive (queued in workers' posts and connections) and
+     * the budget (output_budget_mb) over which renders wait. */
+    atomic_size_t out_total;
+    atomic_size_t out_budget;
     int64_t drain_deadline;   /* (loop) */
     int exit_code;
 
@@ -176,11 +196,22 @@ gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage
 gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 
+/* Worker side, before rendering the next image of job j: waits while j's
+ * connection has max_output_kb unsent, or the server's unsent output is
+ * over output_budget_mb while j has some of it; a client that does not
+ * read holds back its own renders, never the server's memory. Returns 0,
+ * or the job's stop reason (CANCEL, deadline, stopping). */
+int gsd_wait_output(gsd_server *s, gsd_job *j);
+
 /* ---- work.c ---- */
 int gsd_work_start(gsd_server *s, int nworkers, int depth);
 /* Queues a job; -1 when the queue is full (caller answers BUSY). */
 int gsd_work_push(gsd_server *s, gsd_job *job);
 void gsd_work_lengths(gsd_server *s, int *length, int *running);
+/* Estimated milliseconds of work now (queued jobs' est_ms plus what the
+ * running ones have left): *first until the first running job ends (a
+ * queue slot opens), *total until everything is done. */
+void gsd_work_backlog(gsd_server *s, int64_t now_ms, double *first, double *total);
 void gsd_work_set_depth(gsd_server *s, int depth);
 /* Stops and joins the workers; queued jobs are answered SHUTTING_DOWN. */
 void gsd_work_stop(gsd_server *s);

@@ -64,6 +64,8 @@ static void *worker_main(void *p)
             break; /* stopping with an empty queue */
         gsd_job *j = pop_for(w, wk);
         w->running++;
+        w->run_start[a.index] = ev_now_ms();
+        w->run_est[a.index] = j->est_ms;
         pthread_mutex_unlock(&w->mu);
         if (wk)
             gsd_worker_run(wk, j);
@@ -71,6 +73,7 @@ static void *worker_main(void *p)
             gsd_post(a.srv, gsd_error_frame(j, GAZESPLAT__ERROR_CODE__ERR_INTERNAL, "worker failed to start"));
         pthread_mutex_lock(&w->mu);
         w->running--;
+        w->run_start[a.index] = 0;
     }
     pthread_mutex_unlock(&w->mu);
     gsd_worker_destroy(wk);
@@ -128,6 +131,29 @@ void gsd_work_lengths(gsd_server *s, int *length, int *running)
     *length = w->length;
     *running = w->running;
     pthread_mutex_unlock(&w->mu);
+}
+
+void gsd_work_backlog(gsd_server *s, int64_t now, double *first, double *total)
+{
+    gsd_work *w = &s->work;
+    double f = -1, t = 0;
+    pthread_mutex_lock(&w->mu);
+    for (gsd_job *j = w->head; j; j = j->qnext)
+        t += j->est_ms;
+    for (int i = 0; i < w->nworkers && i < 64; i++) {
+        if (!w->run_start[i])
+            continue;
+        /* A job past its estimate is taken to end within a tenth more. */
+        double left = (double)w->run_est[i] - (double)(now - w->run_start[i]);
+        if (left < 0.1 * w->run_est[i])
+            left = 0.1 * w->run_est[i];
+        t += left;
+        if (f < 0 || left < f)
+            f = left;
+    }
+    pthread_mutex_unlock(&w->mu);
+    *first = f < 0 ? 0 : f;
+    *total = t;
 }
 
 void gsd_work_set_depth(gsd_server *s, int depth)

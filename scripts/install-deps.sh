@@ -11,6 +11,8 @@ PACKAGES=(
   libopenblas-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
   libusb-1.0-0-dev
+  # daemon: BLAKE2b for subject keys and model ids
+  libb2-dev
   libopencv-objdetect-dev libopencv-calib3d-dev
   # data: face cascades, the 68-point landmark model
   opencv-data libdlib-data

@@ -15,6 +15,7 @@ const char *gs_strerror(int code)
     case GS_ERR_LIMIT: return "limit exceeded";
     case GS_ERR_UNSUPPORTED: return "unsupported";
     case GS_ERR_STATE: return "wrong call order";
+    case GS_ERR_CANCELLED: return "cancelled";
     default: return "unknown error";
     }
 }

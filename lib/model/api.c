@@ -625,8 +625,13 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         mirror_weights(o.mask, c->S, bm.w);
     fit_init(c, &o, s);
     double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
-    int it = 0, plateaued = 0, halvings = 0, since = 0;
+    int it = 0, plateaued = 0, halvings = 0, since = 0, on_time = 0;
     for (; it < iters; it++) {
+        if (o.cancel && o.cancel(o.cancel_arg)) {
+            rc = gs_error_set(err, GS_ERR_CANCELLED,
+                              "fit cancelled at iteration %d", it);
+            break;
+        }
         gs_frame fr;
         state_to_frame(c, s, R0, &fr);
         rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
@@ -688,8 +693,10 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             for (int k = 0; k < s->n; k++)
                 s->lr[k] *= 0.5;
         }
-        if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s)
+        if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s) {
+            on_time = it + 1 < iters;
             break;
+        }
         if (!o.mirror) {
             memset(&fg, 0, sizeof fg);
             rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
@@ -772,6 +779,7 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         report->loss_first = first;
         report->loss_last = best_loss;
         report->stopped_on_plateau = plateaued;
+        report->stopped_on_time = on_time;
         report->halvings = halvings;
     }
     free(s);
@@ -1041,6 +1049,11 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     if (!inner || !inner_m)
         rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
     for (; !rc && it <= iters; it++) {
+        if (o.cancel && o.cancel(o.cancel_arg)) {
+            rc = gs_error_set(err, GS_ERR_CANCELLED,
+                              "finetune cancelled at step %d", it);
+            break;
+        }
         rc = gs_frame_forward(r.c, pool, &fr, GS_STREAM_BOTH, 1, err);
         if (!rc && it == 0 && masked) {
             outline_mask(r.c->alpha, r.c->fs, o.outline_px, inner);

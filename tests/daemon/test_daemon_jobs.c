@@ -61,6 +61,80 @@ static void test_busy(const daemon_proc *d)
     gs_client_close(c2);
 }
 
+/* BUSY hints follow the queued work, not a history of other jobs, and
+ * differ between refused clients: after a 1.5 s job, a queue of one
+ * 300 ms job running and two of 100 ms queued hints at most its 0.5 s;
+ * 15 refused clients are told times spread over that window. */
+static void test_busy_hints(const daemon_proc *d)
+{
+    gs_client *c = h_hello(d->sock);
+    int code;
+    uint32_t id;
+    send_sleep(c, 1, 1500, 0);
+    CHECK(h_recv(c, 5000, &code, &id, NULL) == T(SLEEP_OK));
+    send_sleep(c, 2, 300, 0);
+    h_sleep_ms(30);
+    send_sleep(c, 3, 100, 0);
+    send_sleep(c, 4, 100, 0);
+    enum { N = 15 };
+    gs_client *r[N];
+    uint32_t hint[N];
+    int busy = 0, distinct = 0;
+    uint32_t hi = 0;
+    for (int i = 0; i < N; i++) {
+        r[i] = h_hello(d->sock);
+        hint[i] = 0;
+        send_sleep(r[i], 1, 10, 0);
+        ProtobufCMessage *m = NULL;
+        if (h_recv(r[i], 3000, &code, &id, &m) == T(BUSY)) {
+            busy++;
+            hint[i] = ((Gazesplat__Busy *)m)->retry_after_ms;
+            hi = hint[i] > hi ? hint[i] : hi;
+        }
+        if (m)
+            protobuf_c_message_free_unpacked(m, NULL);
+    }
+    for (int i = 0; i < N; i++) {
+        int seen = 0;
+        for (int k = 0; k < i; k++)
+            seen |= hint[k] == hint[i];
+        distinct += !seen;
+    }
+    printf("busy hints: %d refused, %d distinct values, highest %u ms\n", busy, distinct, hi);
+    CHECK_MSG(busy == N, "%d of %d refused", busy, N);
+    CHECK_MSG(hi <= 700, "hint %u ms for about 0.5 s of queued work", hi);
+    CHECK_MSG(distinct >= 5, "only %d distinct hints among %d refused clients", distinct, N);
+    for (uint32_t want = 2; want <= 4; want++)
+        CHECK(h_recv(c, 3000, &code, &id, NULL) == T(SLEEP_OK) && id == want);
+    for (int i = 0; i < N; i++)
+        gs_client_close(r[i]);
+    gs_client_close(c);
+}
+
+/* The idle timer counts from the last byte either way: a reply that took
+ * longer than idle_timeout_ms is not followed by ERR_TIMEOUT. */
+static void test_idle_after_long_reply(void)
+{
+    daemon_proc d;
+    memset(&d, 0, sizeof d);
+    const char *args[] = {"--set", "debug_requests=yes", "--set", "idle_timeout_ms=300", NULL};
+    CHECK(daemon_start_v(&d, bin, args) == 0);
+    gs_client *c = h_hello(d.sock);
+    int code;
+    uint32_t id;
+    send_sleep(c, 1, 800, 0);
+    CHECK(h_recv(c, 3000, &code, &id, NULL) == T(SLEEP_OK));
+    h_sleep_ms(150);
+    send_sleep(c, 2, 0, 0);
+    int type = h_recv(c, 3000, &code, &id, NULL);
+    CHECK_MSG(type == T(SLEEP_OK) && id == 2, "after a long reply: type %d code %d", type, code);
+    /* Really idle: closed with ERR_TIMEOUT. */
+    type = h_recv(c, 3000, &code, &id, NULL);
+    CHECK_MSG(type == T(ERROR) && code == E(ERR_TIMEOUT), "idle: type %d code %d", type, code);
+    gs_client_close(c);
+    CHECK(daemon_stop(&d, SIGTERM, 5000) == 0);
+}
+
 static void test_cancel(const daemon_proc *d)
 {
     gs_client *c = h_hello(d->sock);
@@ -342,6 +416,7 @@ int main(int argc, char **argv)
         return 1;
     }
     test_busy(&d);
+    test_busy_hints(&d);
     test_cancel(&d);
     test_deadlines(&d);
     test_conn_limits(&d);
@@ -352,5 +427,6 @@ int main(int argc, char **argv)
         daemon_dump_log(&d);
     test_reload_and_drain(&d);
     test_tcp_token();
+    test_idle_after_long_reply();
     GS_TEST_END();
 }

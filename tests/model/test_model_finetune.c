@@ -31,6 +31,13 @@ static int tensor_same(const gs_model *a, const gs_model *b, int i)
                    a->t[i].count * sizeof(float));
 }
 
+/* A cancel callback that asks to stop at its third poll. */
+static int cancel_after(void *arg)
+{
+    int *polls = arg;
+    return ++*polls > 2;
+}
+
 /* The default parts (GS_FT_FACE | GS_FT_GEOMETRY), by tensor name. */
 static const char *const tuned_default[] = {
     "face.colour", "face.feat",    "face.xyz",      "face.log_scale", "face.quat",
@@ -246,6 +253,49 @@ int main(void)
     CHECK_MSG(rc == GS_ERR_NONFINITE, "rc %d: %s", rc, err.msg);
     CHECK(!memcmp(ft->params, poisoned, m->nparams * sizeof(float)));
     CHECK(gs_model_copy_params(ft, m, &err) == GS_OK);
+
+    /* Cancelled after two polls: GS_ERR_CANCELLED, parameters as before
+     * the call; a fit cancelled likewise leaves its subject untouched. */
+    {
+        int polls = 0;
+        gs_finetune_options oc = o;
+        oc.parts = GS_FT_DEFAULT;
+        oc.iters = 10;
+        oc.cancel = cancel_after;
+        oc.cancel_arg = &polls;
+        rc = gs_model_finetune(ft, NULL, &sub, smp.rgb, smp.stride, &oc, &rep, &err);
+        CHECK_MSG(rc == GS_ERR_CANCELLED, "rc %d: %s", rc, err.msg);
+        CHECK(strstr(err.msg, "cancelled") != NULL);
+        CHECK_EQ_INT(polls, 3);
+        CHECK(!memcmp(ft->params, m->params, m->nparams * sizeof(float)));
+        gs_fit_options fo;
+        gs_fit_options_default(&fo);
+        fo.max_iters = 10;
+        fo.cancel = cancel_after;
+        fo.cancel_arg = &polls;
+        polls = 0;
+        gs_subject keep = sub, out = sub;
+        gs_fit_report frep;
+        rc = gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &out, &frep, &err);
+        CHECK_MSG(rc == GS_ERR_CANCELLED, "rc %d: %s", rc, err.msg);
+        CHECK_EQ_INT(frep.iters, 2);
+        CHECK(!memcmp(&out, &keep, sizeof out));
+        /* Never cancelled: the same subject as a fit without the callback
+         * (the callback is not an input of the fit). */
+        polls = -1000000;
+        gs_subject a, b;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &a, NULL, &err) == GS_OK);
+        fo.cancel = NULL;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &b, NULL, &err) == GS_OK);
+        CHECK(!memcmp(&a, &b, sizeof a));
+        /* A time budget that ends the fit early is reported as such. */
+        fo.time_budget_s = 1e-9;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &a, &frep, &err) == GS_OK);
+        CHECK(frep.stopped_on_time == 1 && frep.iters == 0);
+        fo.time_budget_s = 0;
+        CHECK(gs_model_fit(c, NULL, smp.rgb, smp.stride, &fo, &a, &frep, &err) == GS_OK);
+        CHECK(frep.stopped_on_time == 0);
+    }
 
     /* Bad input. */
     gs_finetune_options bad = o;

@@ -19,7 +19,8 @@ typedef enum gs_status {
     GS_ERR_FORMAT = -5,      /* malformed or truncated data */
     GS_ERR_LIMIT = -6,       /* a size limit would be exceeded */
     GS_ERR_UNSUPPORTED = -7, /* valid but not supported */
-    GS_ERR_STATE = -8        /* calls in the wrong order */
+    GS_ERR_STATE = -8,       /* calls in the wrong order */
+    GS_ERR_CANCELLED = -9    /* the caller's cancel callback asked to stop */
 } gs_status;
 
 typedef struct gs_error {

@@ -300,6 +300,11 @@ typedef struct gs_fit_options {
      * subject's fit_psnr and fit_ssim are the input's). 0 (default): the
      * input alone. */
     int mirror;
+    /* Polled once per iteration (a fraction of a second at the served
+     * sizes): a nonzero return ends the fit with GS_ERR_CANCELLED and
+     * *out untouched. NULL: never. Not part of gs_model_fit_key. */
+    int (*cancel)(void *arg);
+    void *cancel_arg;
 } gs_fit_options;
 #define GS_FIT_ANNEAL_MAX 8
 #define GS_FIT_CODE_PRIOR_MODEL (-1.0)
@@ -324,6 +329,8 @@ typedef struct gs_fit_report {
     double seconds;
     double loss_first, loss_last;
     int stopped_on_plateau;
+    int stopped_on_time; /* time_budget_s ended it before max_iters and
+                            before a plateau: the result is a partial fit */
     int halvings; /* times the rates were halved (gs_fit_options.anneal) */
 } gs_fit_report;
 
@@ -397,6 +404,11 @@ typedef struct gs_finetune_options {
                              face is close to symmetric: the side the input
                              hides gets the other side's look); 0: the input
                              alone. Doubles the cost of a step */
+    /* Polled once per step: a nonzero return ends the call with
+     * GS_ERR_CANCELLED and m restored to its parameters before the call.
+     * NULL: never. */
+    int (*cancel)(void *arg);
+    void *cancel_arg;
 } gs_finetune_options;
 void gs_finetune_options_default(gs_finetune_options *o);
 
