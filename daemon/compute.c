@@ -363,6 +363,15 @@ int gsd_cache_persist(gsd_server *s)
 
 /* ---- workers --------------------------------------------------------------- */
 
+int gsd_pool_threads(const gsd_config *cfg)
+{
+    if (cfg->threads > 0)
+        return cfg->threads;
+    long cpus = sysconf(_SC_NPROCESSORS_ONLN);
+    int threads = (int)(cpus > 0 ? cpus : 1) / cfg->workers;
+    return threads < 1 ? 1 : threads;
+}
+
 gsd_worker *gsd_worker_create(gsd_server *s, int index)
 {
     gsd_worker *w = calloc(1, sizeof *w);
@@ -370,13 +379,7 @@ gsd_worker *gsd_worker_create(gsd_server *s, int index)
         return NULL;
     w->srv = s;
     w->index = index;
-    int threads = s->cfg.threads;
-    if (threads <= 0) {
-        long cpus = sysconf(_SC_NPROCESSORS_ONLN);
-        threads = (int)(cpus > 0 ? cpus : 1) / s->cfg.workers;
-        if (threads < 1)
-            threads = 1;
-    }
+    int threads = gsd_pool_threads(&s->cfg);
     w->pool = threads > 1 ? gs_pool_create(threads) : NULL;
     w->recent_cap = s->cfg.sweep_subjects < 1 ? 1
                     : s->cfg.sweep_subjects > GSD_RECENT_MAX ? GSD_RECENT_MAX

@@ -21,6 +21,7 @@
 #include <sys/un.h>
 #include <unistd.h>
 
+#include "gazesplat/nn.h"
 #include "log.h"
 
 #define TICK_MS 50
@@ -500,7 +501,7 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
 {
     gsd_server *s = c->srv;
     bump(&s->ctr.req_stats, 1);
-    enum { EXTRA = 20 };
+    enum { EXTRA = 22 };
     Gazesplat__Counter cs[NCOUNTERS + EXTRA];
     Gazesplat__Counter *ptrs[NCOUNTERS + EXTRA];
     size_t n = 0;
@@ -531,6 +532,8 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
         {"job_ms_avg", (uint64_t)s->job_ms_avg},
         {"output_bytes", (uint64_t)atomic_load(&s->out_total)},
         {"output_budget", (uint64_t)atomic_load(&s->out_budget)},
+        {"pool_threads", (uint64_t)gsd_pool_threads(&s->cfg)},
+        {"blas_threads", (uint64_t)gs_nn_blas_threads()},
     };
     for (size_t i = 0; i < EXTRA; i++, n++) {
         gazesplat__counter__init(&cs[n]);

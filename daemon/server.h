@@ -220,6 +220,8 @@ void gsd_work_stop(gsd_server *s);
 /* Per-worker state (model context, thread pool). */
 typedef struct gsd_worker gsd_worker;
 gsd_worker *gsd_worker_create(gsd_server *s, int index);
+/* Threads of each worker's pool: `threads`, or the CPUs over the workers. */
+int gsd_pool_threads(const gsd_config *cfg);
 void gsd_worker_destroy(gsd_worker *w);
 /* Runs a job, posting its frames; the last one is final. */
 void gsd_worker_run(gsd_worker *w, gsd_job *job);

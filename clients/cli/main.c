@@ -63,6 +63,9 @@ int main(int argc, char **argv)
 {
     /* May run the program again with OpenBLAS's AVX kernels selected (nn.h). */
     gs_nn_blas_select_kernels(argv);
+    /* One OpenBLAS thread for every command (nn.h): they parallelise with
+     * gs_pool, and OpenBLAS's own threads would fight the pool. */
+    gs_nn_blas_set_threads(1);
     if (argc < 2) {
         overview(stderr);
         return CLI_USAGE;
