@@ -20,7 +20,9 @@
 #include "gs_msg.h"
 #include "sd.h"
 
+#ifndef GSD_VERSION /* the project's version (CMakeLists.txt) */
 #define GSD_VERSION "0.1.0"
+#endif
 
 typedef struct gsd_server gsd_server;
 typedef struct gsd_conn gsd_conn;

@@ -30,7 +30,8 @@ const cli_command cli_client_command = {
     "\n"
     "Options:\n"
     "  --addr ADDR          unix:PATH, tcp:HOST:PORT or PATH (default\n"
-    "                       $GAZESPLAT_ADDR, else /run/gazesplatd/gazesplatd.sock)\n"
+    "                       $GAZESPLAT_ADDR, else /run/gazesplat/gazesplatd.sock, the\n"
+    "                       socket of the shipped units)\n"
     "  --token TOKEN        shared secret for TCP (default $GAZESPLAT_TOKEN)\n"
     "  --timeout-ms N       wait this long for each reply (default 120000)\n"
     "  --image FILE         a normalized face image (PNG or JPEG)\n"
@@ -536,7 +537,7 @@ static int run_client(int argc, char **argv)
         return cli_usage_error(cmd, "--timeout-ms wants 1..86400000");
     const char *addr = o[O_ADDR].value ? o[O_ADDR].value : getenv("GAZESPLAT_ADDR");
     if (!addr)
-        addr = "/run/gazesplatd/gazesplatd.sock";
+        addr = "/run/gazesplat/gazesplatd.sock"; /* systemd/gazesplatd.socket */
     const char *token = o[O_TOKEN].value ? o[O_TOKEN].value : getenv("GAZESPLAT_TOKEN");
     gs_client *c;
     gs_error err;

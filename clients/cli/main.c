@@ -28,7 +28,8 @@ static const cli_command *const commands[] = {
 static void overview(FILE *f)
 {
     fputs("usage: gazesplat COMMAND [OPTIONS]\n"
-          "       gazesplat help COMMAND\n\n"
+          "       gazesplat help COMMAND\n"
+          "       gazesplat --version\n\n"
           "Commands:\n", f);
     for (int i = 0; i < NCOMMANDS; i++)
         fprintf(f, "  %-8s %s\n", commands[i]->name, commands[i]->summary);
@@ -69,6 +70,10 @@ int main(int argc, char **argv)
     if (argc < 2) {
         overview(stderr);
         return CLI_USAGE;
+    }
+    if (strcmp(argv[1], "--version") == 0 || strcmp(argv[1], "version") == 0) {
+        printf("gazesplat %s\n", GS_VERSION);
+        return CLI_OK;
     }
     if (strcmp(argv[1], "--help") == 0 || strcmp(argv[1], "-h") == 0) {
         overview(stdout);
