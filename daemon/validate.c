@@ -125,8 +125,8 @@ static int check_target(const Gazesplat__Angles *gaze, const Gazesplat__Angles *
         snprintf(msg, cap, "%s%s", what, err.msg);
         return E(ERR_INVALID_ARGUMENT);
     }
-#else
-    (void)gaze, (void)head, (void)what, (void)msg, (void)cap; /* no model: FIT and REDIRECT refused */
+#else /* built without the model: nothing renders, FIT and REDIRECT are refused */
+    (void)gaze, (void)head, (void)what, (void)msg, (void)cap;
 #endif
     return 0;
 }
