@@ -109,27 +109,27 @@ int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg,
     }
 }
 
-static int check_angles(const Gazesplat__Angles *a, double max_pitch, double max_yaw,
+/* A target's gaze and head (either NULL when absent) against the target
+ * table (gazesplat/model.h, inclusive limits): what names the target in
+ * the message. The renderer checks the same table, so a target passed
+ * here is never refused once its job has started. */
+static int check_target(const Gazesplat__Angles *gaze, const Gazesplat__Angles *head,
                         const char *what, char *msg, size_t cap)
 {
-    if (!a)
-        return 0;
-    if (!isfinite(a->pitch_deg) || !isfinite(a->yaw_deg)) {
-        snprintf(msg, cap, "%s angle not finite", what);
+#ifdef GSD_HAVE_MODEL
+    double g[2] = {gaze ? gaze->pitch_deg : 0, gaze ? gaze->yaw_deg : 0};
+    double h[2] = {head ? head->pitch_deg : 0, head ? head->yaw_deg : 0};
+    gs_error err;
+    gs_error_clear(&err);
+    if (gs_model_check_target(gaze ? g : NULL, head ? h : NULL, &err) != GS_OK) {
+        snprintf(msg, cap, "%s%s", what, err.msg);
         return E(ERR_INVALID_ARGUMENT);
     }
-    if (fabs(a->pitch_deg) > max_pitch || fabs(a->yaw_deg) > max_yaw) {
-        snprintf(msg, cap, "%s (%g, %g) deg outside +-%g pitch, +-%g yaw", what, a->pitch_deg,
-                 a->yaw_deg, max_pitch, max_yaw);
-        return E(ERR_INVALID_ARGUMENT);
-    }
+#else /* built without the model: nothing renders, FIT and REDIRECT are refused */
+    (void)gaze, (void)head, (void)what, (void)msg, (void)cap;
+#endif
     return 0;
 }
-
-/* Documented input ranges, degrees (gazesplat/model.h). */
-#define MAX_GAZE_PITCH_DEG 50.0
-#define MAX_GAZE_YAW_DEG 60.0
-#define MAX_HEAD_DEG 70.0
 
 int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap)
 {
@@ -202,8 +202,7 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
         return E(ERR_INVALID_ARGUMENT);
     }
     if ((e = gsd_check_image(s, r->image, msg, cap)) != 0 ||
-        (e = check_angles(r->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, "gaze", msg, cap)) != 0 ||
-        (e = check_angles(r->head, MAX_HEAD_DEG, MAX_HEAD_DEG, "head", msg, cap)) != 0)
+        (e = check_target(r->gaze, r->head, "FIT label: ", msg, cap)) != 0)
         return e;
     if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
         return e;
@@ -233,17 +232,15 @@ int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
         snprintf(msg, cap, "%zu targets, want 1..%d", r->n_targets, s->cfg.max_targets);
         return E(ERR_INVALID_ARGUMENT);
     }
+    /* Every target, before the job is queued. */
     for (size_t i = 0; i < r->n_targets; i++) {
         char what[48];
         if (!r->targets[i]->gaze) {
             snprintf(msg, cap, "target %zu has no gaze", i);
             return E(ERR_INVALID_ARGUMENT);
         }
-        snprintf(what, sizeof what, "target %zu gaze", i);
-        if ((e = check_angles(r->targets[i]->gaze, MAX_GAZE_PITCH_DEG, MAX_GAZE_YAW_DEG, what, msg, cap)))
-            return e;
-        snprintf(what, sizeof what, "target %zu head", i);
-        if ((e = check_angles(r->targets[i]->head, MAX_HEAD_DEG, MAX_HEAD_DEG, what, msg, cap)))
+        snprintf(what, sizeof what, "target %zu: ", i);
+        if ((e = check_target(r->targets[i]->gaze, r->targets[i]->head, what, msg, cap)))
             return e;
     }
     if (r->image && (e = gsd_check_image(s, r->image, msg, cap)) != 0)

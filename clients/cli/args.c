@@ -107,6 +107,56 @@ int cli_parse_floats(const char *s, float *out, int n)
     return *s == '\0' ? 0 : -1;
 }
 
+/* One decimal number of the len bytes at s: digits, sign, point and
+ * exponent only (no blanks, hex, nan or inf), all of it, finite. */
+static int parse_decimal(const char *s, size_t len, double *out)
+{
+    char buf[64], *e;
+    if (len == 0 || len >= sizeof buf || strspn(s, "0123456789+-.eE") < len)
+        return -1;
+    memcpy(buf, s, len);
+    buf[len] = '\0';
+    errno = 0;
+    double v = strtod(buf, &e);
+    if (e != buf + len || !isfinite(v))
+        return -1;
+    *out = v;
+    return 0;
+}
+
+int cli_parse_angles(const cli_command *cmd, const char *flag, const char *s, int list, int head,
+                     double (*out)[2], int max, int *n)
+{
+    const char *want = list ? "\"P,Y;P,Y;...\" degrees" : "P,Y degrees";
+    *n = 0;
+    if (!s || !*s)
+        return cli_usage_error(cmd, "%s: empty; want %s", flag, want);
+    for (;;) {
+        size_t len = list ? strcspn(s, ";") : strlen(s);
+        size_t comma = strcspn(s, ",");
+        if (*n == max)
+            return cli_usage_error(cmd, "%s: more than %d targets", flag, max);
+        if (len == 0)
+            return cli_usage_error(cmd, "%s: empty item %d; want %s", flag, *n, want);
+        double *v = out[*n];
+        if (comma >= len || parse_decimal(s, comma, &v[0]) ||
+            parse_decimal(s + comma + 1, len - comma - 1, &v[1]))
+            return cli_usage_error(cmd, "%s: bad item %d '%.*s': want %s, finite decimal numbers",
+                                   flag, *n, (int)(len < 64 ? len : 64), s, want);
+        gs_error err = {0, ""};
+        if (gs_model_check_target(head ? NULL : v, head ? v : NULL, &err) != GS_OK)
+            return list ? cli_usage_error(cmd, "%s: item %d: %s", flag, *n, err.msg)
+                        : cli_usage_error(cmd, "%s: %s", flag, err.msg);
+        ++*n;
+        s += len;
+        if (!*s)
+            return CLI_OK;
+        s++; /* past the ';': an item must follow */
+        if (!*s)
+            return cli_usage_error(cmd, "%s: empty item %d; want %s", flag, *n, want);
+    }
+}
+
 int cli_parse_long(const char *s, long lo, long hi, long *out)
 {
     char *e;

@@ -61,6 +61,17 @@ int cli_fail(const cli_command *cmd, const char *fmt, ...)
 /* Exactly n comma-separated finite floats. Returns 0 or -1. */
 int cli_parse_floats(const char *s, float *out, int n);
 
+/* Target angles, degrees: one "P,Y" (list 0) or "P,Y;P,Y;..." (list 1,
+ * 1..max pairs) into out[0..*n-1], each pair a gaze (head 0) or a head
+ * pose (head 1) checked against the target table (gazesplat/model.h,
+ * inclusive ranges) before any work. Each number is a plain decimal
+ * (digits, sign, point, exponent). Refused, as a usage error naming flag:
+ * an empty list or item, a missing or extra number, trailing junk, NaN,
+ * Inf, overflow, a value outside its range (the message names the field
+ * and the range). Returns CLI_OK or CLI_USAGE (reported). */
+int cli_parse_angles(const cli_command *cmd, const char *flag, const char *s, int list, int head,
+                     double (*out)[2], int max, int *n);
+
 /* A decimal integer in [lo, hi]. Returns 0 or -1. */
 int cli_parse_long(const char *s, long lo, long hi, long *out);
 

@@ -37,8 +37,9 @@ const cli_command cli_client_command = {
     "  --image FILE         a normalized face image (PNG or JPEG)\n"
     "  --photo              the image is a photo: the server finds and normalizes\n"
     "                       the face\n"
-    "  --gaze P,Y           fit: known gaze of the image, degrees\n"
-    "  --head P,Y           fit: known head pose, degrees\n"
+    "  --gaze P,Y           fit: known gaze of the image, degrees (pitch in [-50, 50],\n"
+    "                       yaw in [-60, 60], inclusive)\n"
+    "  --head P,Y           fit: known head pose, degrees (each in [-70, 70])\n"
     "  --key HEX            fit: the subject key to use (32 hex digits)\n"
     "  --max-iters N        fit (and redirect of an --image): iteration limit\n"
     "  --finetune N         fit (and redirect of an --image): then fine-tune a copy\n"
@@ -58,8 +59,8 @@ const cli_command cli_client_command = {
     "  --transfer           redirect: detail transfer (keep the input's own detail;\n"
     "                       by --subject it needs a fit with --keep-image)\n"
     "  --subject HEX        redirect: a fitted subject key\n"
-    "  --gaze-deg LIST      redirect: targets 'P,Y;P,Y;...', degrees\n"
-    "  --head-deg LIST      redirect: head poses, one per target\n"
+    "  --gaze-deg LIST      redirect: targets 'P,Y;P,Y;...', degrees (ranges as --gaze)\n"
+    "  --head-deg LIST      redirect: head poses, one per target (as --head)\n"
     "  --format F           redirect: png (default), jpeg or raw\n"
     "  --paste-back         redirect: paste the result back into the --photo\n"
     "  --out DIR            redirect: writes DIR/target_NNN.png (or .jpg, .rgb)\n"
@@ -120,43 +121,53 @@ static int print_busy(const gs_client_frame *f)
     return CLI_FAIL;
 }
 
-static int parse_pair(const char *s, Gazesplat__Angles *a)
+/* --gaze, --head (one pair) or --gaze-deg, --head-deg (lists) into a
+ * malloc'd array of *n angles, each checked against the target table
+ * (cli_parse_angles). Returns CLI_OK, CLI_USAGE (reported) or CLI_FAIL. */
+static int parse_angles(const char *flag, const char *s, int list, int head, Gazesplat__Angles **out,
+                        int *n)
 {
-    float v[2];
-    if (cli_parse_floats(s, v, 2) != 0)
-        return -1;
-    a->pitch_deg = v[0];
-    a->yaw_deg = v[1];
-    return 0;
+    const cli_command *cmd = &cli_client_command;
+    enum { MAXT = 4096 }; /* the server refuses more than its max_targets */
+    double(*v)[2] = malloc(MAXT * sizeof *v);
+    *out = NULL;
+    if (!v)
+        return cli_fail(cmd, "out of memory");
+    int rc = cli_parse_angles(cmd, flag, s, list, head, v, list ? MAXT : 1, n);
+    Gazesplat__Angles *a = rc == CLI_OK ? calloc((size_t)*n, sizeof *a) : NULL;
+    if (rc == CLI_OK && !a)
+        rc = cli_fail(cmd, "out of memory");
+    for (int k = 0; rc == CLI_OK && k < *n; k++) {
+        gazesplat__angles__init(&a[k]);
+        a[k].pitch_deg = v[k][0];
+        a[k].yaw_deg = v[k][1];
+    }
+    free(v);
+    *out = a;
+    return rc;
 }
 
-/* "P,Y;P,Y" into a malloc'd array; returns the count or -1. */
-static int parse_list(const char *s, Gazesplat__Angles **out)
+/* Every angle option given, checked before connecting: a bad target is a
+ * usage error whether or not a server is there. */
+static int check_angle_opts(const cli_opt *o)
 {
-    int n = 1;
-    for (const char *p = s; *p; p++)
-        n += *p == ';';
-    Gazesplat__Angles *a = calloc((size_t)n, sizeof *a);
-    char *copy = strdup(s);
-    if (!a || !copy) {
+    static const struct {
+        int opt, list, head;
+        const char *flag;
+    } k[] = {{O_GAZE, 0, 0, "--gaze"},
+             {O_HEAD, 0, 1, "--head"},
+             {O_GAZES, 1, 0, "--gaze-deg"},
+             {O_HEADS, 1, 1, "--head-deg"}};
+    for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
+        Gazesplat__Angles *a = NULL;
+        int n, rc = o[k[i].opt].value
+                        ? parse_angles(k[i].flag, o[k[i].opt].value, k[i].list, k[i].head, &a, &n)
+                        : CLI_OK;
         free(a);
-        free(copy);
-        return -1;
+        if (rc != CLI_OK)
+            return rc;
     }
-    char *save = NULL, *tok = strtok_r(copy, ";", &save);
-    int k = 0;
-    for (; tok && k < n; tok = strtok_r(NULL, ";", &save), k++) {
-        gazesplat__angles__init(&a[k]);
-        if (parse_pair(tok, &a[k]) != 0)
-            break;
-    }
-    free(copy);
-    if (k != n || tok) {
-        free(a);
-        return -1;
-    }
-    *out = a;
-    return n;
+    return CLI_OK;
 }
 
 static int do_health(gs_client *c, int timeout)
@@ -325,12 +336,18 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         return cli_usage_error(cmd, "fit needs --image");
     Gazesplat__FitRequest req = GAZESPLAT__FIT_REQUEST__INIT;
     Gazesplat__Image img = GAZESPLAT__IMAGE__INIT;
-    Gazesplat__Angles gaze = GAZESPLAT__ANGLES__INIT, head = GAZESPLAT__ANGLES__INIT;
+    Gazesplat__Angles gaze = GAZESPLAT__ANGLES__INIT, head = GAZESPLAT__ANGLES__INIT, *a = NULL;
     uint8_t key[GS_FRAME_KEY_SIZE] = {0}, *data = NULL;
-    if (o[O_GAZE].value && parse_pair(o[O_GAZE].value, &gaze) != 0)
-        return cli_usage_error(cmd, "--gaze wants P,Y");
-    if (o[O_HEAD].value && parse_pair(o[O_HEAD].value, &head) != 0)
-        return cli_usage_error(cmd, "--head wants P,Y");
+    int n, rc;
+    for (int k = 0; k < 2; k++) { /* the labels, checked before anything is sent */
+        const char *v = o[k ? O_HEAD : O_GAZE].value;
+        if (v && (rc = parse_angles(k ? "--head" : "--gaze", v, 0, k, &a, &n)) != CLI_OK)
+            return rc;
+        if (v)
+            *(k ? &head : &gaze) = a[0];
+        free(a);
+        a = NULL;
+    }
     if (o[O_KEY].value && gs_frame_key_parse(o[O_KEY].value, key) != 0)
         return cli_usage_error(cmd, "--key wants 32 hex digits");
     long iters = 0, deadline = 0;
@@ -338,8 +355,8 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         return cli_usage_error(cmd, "--max-iters wants 1..100000");
     if (o[O_DEADLINE].value && cli_parse_long(o[O_DEADLINE].value, 1, 3600000, &deadline) != 0)
         return cli_usage_error(cmd, "--deadline-ms wants 1..3600000");
-    int rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts,
-                           &req.finetune_outline_px, &req.finetune_no_mirror, &req.finetune_lr);
+    rc = finetune_opts(cmd, o, &req.finetune_steps, &req.finetune_parts,
+                       &req.finetune_outline_px, &req.finetune_no_mirror, &req.finetune_lr);
     if (rc != CLI_OK)
         return rc;
     rc = load_image(cmd, o, &img, &data);
@@ -427,17 +444,20 @@ static int do_redirect(gs_client *c, const cli_opt *o, int timeout)
     if (o[O_SUBJECT].value && gs_frame_key_parse(o[O_SUBJECT].value, key) != 0)
         return cli_usage_error(cmd, "--subject wants 32 hex digits");
     Gazesplat__Angles *gazes = NULL, *heads = NULL;
-    int n = parse_list(o[O_GAZES].value, &gazes);
-    if (n < 0)
-        return cli_usage_error(cmd, "--gaze-deg wants 'P,Y;P,Y;...'");
-    int nh = o[O_HEADS].value ? parse_list(o[O_HEADS].value, &heads) : 0;
+    int n = 0, nh = 0;
+    int rc = parse_angles("--gaze-deg", o[O_GAZES].value, 1, 0, &gazes, &n);
+    if (rc == CLI_OK && o[O_HEADS].value)
+        rc = parse_angles("--head-deg", o[O_HEADS].value, 1, 1, &heads, &nh);
+    if (rc != CLI_OK) {
+        free(gazes);
+        return rc;
+    }
     int fmt = GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
     const char *fs = o[O_FORMAT].value;
     if (fs && !strcmp(fs, "jpeg"))
         fmt = GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG;
     else if (fs && !strcmp(fs, "raw"))
         fmt = GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8;
-    int rc = CLI_OK;
     if (o[O_HEADS].value && nh != n)
         rc = cli_usage_error(cmd, "--head-deg needs one pose per target (%d)", n);
     else if (fs && strcmp(fs, "png") && strcmp(fs, "jpeg") && strcmp(fs, "raw"))
@@ -539,6 +559,8 @@ static int run_client(int argc, char **argv)
     if (!addr)
         addr = "/run/gazesplat/gazesplatd.sock"; /* systemd/gazesplatd.socket */
     const char *token = o[O_TOKEN].value ? o[O_TOKEN].value : getenv("GAZESPLAT_TOKEN");
+    if ((r = check_angle_opts(o)) != CLI_OK)
+        return r;
     gs_client *c;
     gs_error err;
     if (gs_client_connect(addr, (int)timeout, &c, &err) != GS_OK)

@@ -32,7 +32,8 @@ const cli_command cli_fit_command = {
     "                   model's normalized camera (docs/model.md)\n"
     "  --mask FILE      optional grey image: weight of each pixel (face\n"
     "                   region), same size\n"
-    "  --gaze-deg P,Y   the image's gaze (head frame, degrees) if known;\n"
+    "  --gaze-deg P,Y   the image's gaze (head frame, degrees; pitch in\n"
+    "                   [-50, 50], yaw in [-60, 60], inclusive) if known;\n"
     "                   otherwise it is estimated with the fit\n"
     "  --iters N        iteration cap (200); --time S: time budget\n"
     "  --finetune N     then fine-tune a copy of the model on the image for N\n"
@@ -81,7 +82,8 @@ const cli_command cli_redirect_command = {
     "                   back into the photo's eye regions (full-size output;\n"
     "                   --out-norm also writes the normalized crops)\n"
     "  --gaze-deg LIST  targets, head frame, degrees (pitch > 0 looks up,\n"
-    "                   yaw > 0 toward image-left), separated by ';'\n"
+    "                   yaw > 0 toward image-left), separated by ';';\n"
+    "                   pitch in [-50, 50], yaw in [-60, 60], inclusive\n"
     "  --subject S.bin  a subject from gazesplat fit; one written with\n"
     "                   --finetune renders with its tuned tensors\n"
     "  --iters N        fit iteration cap (200)\n"
@@ -93,7 +95,8 @@ const cli_command cli_redirect_command = {
     "                   turn with the gaze). Needs the input: --image, or\n"
     "                   --subject with --image naming the face it was\n"
     "                   fitted to\n"
-    "  --head-deg P,Y   render with this head pose instead of the subject's;\n"
+    "  --head-deg P,Y   render with this head pose instead of the subject's\n"
+    "                   (pitch and yaw in [-70, 70], inclusive);\n"
     "                   the lights stay where they are in the camera, so\n"
     "                   the shading changes as the head turns\n"
     "  --light-on-head  (with --head-deg) keep the fitted light on the head\n"
@@ -157,7 +160,7 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
 /* Fits the image; with ft->iters > 0 also fine-tunes a copy of m on it
  * (*tuned, NULL otherwise). */
 static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
-                     const char *image, const char *mask, const char *gaze,
+                     const char *image, const char *mask, const double *gaze,
                      long iters, double budget, const gs_finetune_options *ft,
                      gs_subject *sub, gs_model **tuned)
 {
@@ -193,13 +196,10 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
     o.max_iters = (int)iters;
     o.time_budget_s = budget;
     o.mask = w;
-    float g[2];
-    if (!rc && gaze) {
-        if (cli_parse_floats(gaze, g, 2))
-            rc = cli_usage_error(cmd, "--gaze-deg: want P,Y");
+    if (gaze) { /* degrees, checked by the caller */
         o.known_gaze = 1;
-        o.gaze_pitch = g[0] * DEG;
-        o.gaze_yaw = g[1] * DEG;
+        o.gaze_pitch = gaze[0] * DEG;
+        o.gaze_yaw = gaze[1] * DEG;
     }
     if (!rc) {
         gs_model_ctx *c = gs_model_ctx_create(m);
@@ -264,13 +264,17 @@ static int run_fit(int argc, char **argv)
     if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, o[10].value,
                                  o[11].value, o[12].value, &ft)))
         return rc;
+    double gaze[1][2];
+    int ng = 0;
+    if (o[3].value && (rc = cli_parse_angles(cmd, "--gaze-deg", o[3].value, 0, 0, gaze, 1, &ng)))
+        return rc;
     gs_model *m = NULL;
     if ((rc = load_model(cmd, o[0].value, &m)))
         return rc;
     gs_pool *pool = gs_pool_create(2);
     gs_subject sub;
     gs_model *tuned = NULL;
-    rc = fit_image(cmd, m, pool, o[1].value, o[2].value, o[3].value, iters,
+    rc = fit_image(cmd, m, pool, o[1].value, o[2].value, o[3].value ? gaze[0] : NULL, iters,
                    budget, &ft, &sub, &tuned);
     uint8_t *blk = NULL;
     size_t blen = 0;
@@ -520,32 +524,18 @@ static int run_redirect(int argc, char **argv)
         (rc = cli_parse_range(cmd, "--transfer-eye-warp", o[19].value, 0.0, 90.0,
                               CLI_WARP_WANT, &warp_deg)))
         return rc;
-    /* Parse every target before any work. */
+    /* Parse and check every target (the target table, gazesplat/model.h)
+     * before any work. */
     enum { MAXT = 256 };
-    double tg[MAXT][2];
-    int nt = 0;
-    const char *s = o[3].value;
-    while (*s) {
-        char item[64];
-        size_t len = strcspn(s, ";");
-        float v[2];
-        if (len == 0 || len >= sizeof item || nt == MAXT)
-            return cli_usage_error(cmd, "--gaze-deg: want \"P,Y;P,Y\" (<= %d)",
-                                   MAXT);
-        memcpy(item, s, len);
-        item[len] = 0;
-        if (cli_parse_floats(item, v, 2))
-            return cli_usage_error(cmd, "--gaze-deg: bad target '%s'", item);
-        tg[nt][0] = v[0] * DEG;
-        tg[nt][1] = v[1] * DEG;
-        nt++;
-        s += len;
-        if (*s == ';')
-            s++;
+    double tg[MAXT][2], head[1][2] = {{0, 0}};
+    int nt = 0, nh = 0;
+    if ((rc = cli_parse_angles(cmd, "--gaze-deg", o[3].value, 1, 0, tg, MAXT, &nt)) ||
+        (o[5].value && (rc = cli_parse_angles(cmd, "--head-deg", o[5].value, 0, 1, head, 1, &nh))))
+        return rc;
+    for (int k = 0; k < nt; k++) {
+        tg[k][0] *= DEG;
+        tg[k][1] *= DEG;
     }
-    float head[2] = {0, 0};
-    if (o[5].value && cli_parse_floats(o[5].value, head, 2))
-        return cli_usage_error(cmd, "--head-deg: want P,Y");
     gs_finetune_options ft;
     if ((rc = cli_parse_finetune(cmd, o[9].value, o[10].value, o[11].value, o[12].value,
                                  o[17].value, o[18].value, &ft)))
@@ -637,7 +627,7 @@ static int run_redirect(int argc, char **argv)
             v.use_head = 1;
             v.light_on_head = o[14].value != NULL;
             /* Head angles as geom.h defines them (z-axis of R). */
-            gs_geom_rot_from_pitchyaw(head[0] * DEG, head[1] * DEG, 0,
+            gs_geom_rot_from_pitchyaw(head[0][0] * DEG, head[0][1] * DEG, 0,
                                       v.head_R);
             memcpy(v.head_t, sub.head_t, sizeof v.head_t);
         }

@@ -157,27 +157,26 @@ static int check_pose(const double R[9], const double t[3], gs_error *err)
      * the camera's +z, and its angles are those of -z. */
     double z[3] = {-R[2], -R[5], -R[8]};
     gs_geom_vec_to_pitchyaw(z, &p, &y);
-    if (fabs(p) > GS_MODEL_MAX_HEAD_ANGLE || fabs(y) > GS_MODEL_MAX_HEAD_ANGLE)
-        return gs_error_set(err, GS_ERR_ARG,
-                            "head pitch %.1f / yaw %.1f deg outside +-%.0f",
-                            p * 180 / GS_MODEL_PI, y * 180 / GS_MODEL_PI,
-                            GS_MODEL_MAX_HEAD_ANGLE * 180 / GS_MODEL_PI);
-    return GS_OK;
+    /* Degrees for the target table, with its slack for the rounding of
+     * the angles re-derived from R (model_internal.h). */
+    const double slack = GS_MODEL_RANGE_SLACK_DEG;
+    rc = gs_model_check_range_slack(GS_TARGET_HEAD_PITCH,
+                                    p / GS_MODEL_DEG_TO_RAD, slack, err);
+    if (!rc)
+        rc = gs_model_check_range_slack(GS_TARGET_HEAD_YAW,
+                                        y / GS_MODEL_DEG_TO_RAD, slack, err);
+    return rc;
 }
 
 static int check_gaze(double pitch, double yaw, gs_error *err)
 {
-    if (!isfinite(pitch) || !isfinite(yaw))
-        return gs_error_set(err, GS_ERR_NONFINITE, "gaze not finite");
-    if (fabs(pitch) > GS_MODEL_MAX_GAZE_PITCH ||
-        fabs(yaw) > GS_MODEL_MAX_GAZE_YAW)
-        return gs_error_set(err, GS_ERR_ARG,
-                            "gaze pitch %.1f / yaw %.1f deg outside +-%.0f / "
-                            "+-%.0f",
-                            pitch * 180 / GS_MODEL_PI, yaw * 180 / GS_MODEL_PI,
-                            GS_MODEL_MAX_GAZE_PITCH * 180 / GS_MODEL_PI,
-                            GS_MODEL_MAX_GAZE_YAW * 180 / GS_MODEL_PI);
-    return GS_OK;
+    const double slack = GS_MODEL_RANGE_SLACK_DEG;
+    int rc = gs_model_check_range_slack(GS_TARGET_GAZE_PITCH,
+                                        pitch / GS_MODEL_DEG_TO_RAD, slack, err);
+    if (!rc)
+        rc = gs_model_check_range_slack(GS_TARGET_GAZE_YAW,
+                                        yaw / GS_MODEL_DEG_TO_RAD, slack, err);
+    return rc;
 }
 
 static int check_subject(const gs_model *m, const gs_subject *s,

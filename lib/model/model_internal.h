@@ -61,6 +61,19 @@ typedef struct gs_model_config {
  * it when gs_fit_options.bound_expression is set. */
 static const float gs_model_expr_lo[GS_MODEL_EXPR_DIM] = {0, 0, -1, 0, 0, -1};
 static const float gs_model_expr_hi[GS_MODEL_EXPR_DIM] = {1, 1, 1, 0.7f, 1, 1};
+/* The library's own checks of a view or a fit's labels (api.c) see a gaze
+ * in radians and a head pose as a rotation, and convert them back to
+ * degrees for the target table: deg -> rad -> deg, and the head's angles
+ * re-derived from R = Ry(yaw) Rx(-pitch) by asin / atan2, each round by a
+ * few ulps (about 1e-13 deg at 70 deg), so exactly +-70 requested may come
+ * back as 70.0000000000001. They allow GS_MODEL_RANGE_SLACK_DEG past each
+ * limit: far above that rounding, far below any angle that matters, so a
+ * target the table accepted (with no slack, as the daemon and the CLI
+ * check the degrees they were given) can never be refused here. */
+#define GS_MODEL_RANGE_SLACK_DEG 1e-9
+int gs_model_check_range_slack(gs_target_field f, double v, double slack,
+                               gs_error *err);
+
 static inline int gs_model_code_dim(const gs_model_config *c)
 {
     return c->id_dim + GS_MODEL_EXPR_DIM + GS_MODEL_LIGHT_DIM;

@@ -99,9 +99,46 @@ static void test_options(void)
         CHECK_MSG(parse(nbad[i], bad[i], o, 3) == CLI_USAGE, "case %zu accepted", i);
 }
 
+/* Target lists: strict numbers, then the target table (inclusive). Each
+ * refusal prints its message and the usage to stderr. */
+static void test_angles(void)
+{
+    const cli_command *cmd = &cli_render_command;
+    double v[8][2];
+    int n = -1;
+    static const char *const bad_list[] = {
+        "",          ";",          "0,0;",        ";0,0",       "0,0;;1,1",  "0",
+        "0,",        ",0",         "0,0,0",       "0,0x",       " 0,0",      "0 ,0",
+        "0,0 ",      "nan,0",      "0,inf",       "-inf,0",     "1e400,0",   "0x10,0",
+        "200,0",     "1e30,1e30",  "50.000000001,0", "0,-60.000000001", "0,0;0,0;0,0;0,0;0,0;0,61",
+        "1,1;2,2;3,3;4,4;5,5;6,6;7,7;8,8;9,9", /* more than 8 */
+    };
+    for (size_t i = 0; i < sizeof bad_list / sizeof bad_list[0]; i++)
+        CHECK_MSG(cli_parse_angles(cmd, "--gaze-deg", bad_list[i], 1, 0, v, 8, &n) == CLI_USAGE,
+                  "gaze list '%s' accepted", bad_list[i]);
+    CHECK(cli_parse_angles(cmd, "--gaze-deg", NULL, 1, 0, v, 8, &n) == CLI_USAGE);
+    /* The limits themselves, and one list of several. */
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--gaze-deg", "50,60;-50,-60;+0.5,-1e-3;0,0", 1, 0, v, 8, &n),
+                 CLI_OK);
+    CHECK(n == 4 && v[0][0] == 50 && v[0][1] == 60 && v[1][0] == -50 && v[1][1] == -60 &&
+          v[2][0] == 0.5 && v[2][1] == -1e-3);
+    /* One pair: a list is junk; a head's range is +-70. */
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--head-deg", "70,-70", 0, 1, v, 1, &n), CLI_OK);
+    CHECK(n == 1 && v[0][0] == 70 && v[0][1] == -70);
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--head-deg", "0,0;0,0", 0, 1, v, 1, &n), CLI_USAGE);
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--head-deg", "70.000000001,0", 0, 1, v, 1, &n), CLI_USAGE);
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--head-deg", "1e30,1e30", 0, 1, v, 1, &n), CLI_USAGE);
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--head-deg", "", 0, 1, v, 1, &n), CLI_USAGE);
+    /* 70 is a head's limit, not a gaze's. */
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--gaze-deg", "0,70", 0, 0, v, 1, &n), CLI_USAGE);
+    CHECK_EQ_INT(cli_parse_angles(cmd, "--head-deg", "0,70;-70,0", 1, 1, v, 8, &n), CLI_OK);
+    CHECK(n == 2);
+}
+
 int main(void)
 {
     test_floats();
+    test_angles();
     test_size_and_long();
     test_rate();
     test_options();

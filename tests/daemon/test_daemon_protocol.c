@@ -297,6 +297,25 @@ static size_t b_redir_bomb(uint8_t *b) { return redirect_with(b, 1, 0, 0, NULL, 
 static size_t b_redir_mode(uint8_t *b) { return redirect_with(b, 1, 0, 0, subject, t_mode); }
 static size_t b_redir_nan_head(uint8_t *b) { return redirect_with(b, 3, 5, 0, subject, t_nan_head); }
 static size_t b_redir_nomodel(uint8_t *b) { return redirect_with(b, 2, 10, 0, subject, NULL); }
+/* The target table's limits are inclusive: a head of exactly (70, -70)
+ * and a gaze of exactly (50, 60) on every target pass validation (the
+ * model-less server then answers ERR_NO_MODEL); 70.0000001 on the 6th
+ * target is refused up front. */
+static void t_heads(Gazesplat__RedirectRequest *m, double last_yaw)
+{
+    static Gazesplat__Angles head[6];
+    for (size_t i = 0; i < m->n_targets && i < 6; i++) {
+        gazesplat__angles__init(&head[i]);
+        head[i].pitch_deg = i % 2 ? -70 : 70;
+        head[i].yaw_deg = i + 1 == m->n_targets ? last_yaw : -70;
+        m->targets[i]->gaze->yaw_deg = i % 2 ? -60 : 60;
+        m->targets[i]->head = &head[i];
+    }
+}
+static void t_heads_at_limit(Gazesplat__RedirectRequest *m) { t_heads(m, 70); }
+static void t_heads_past_limit(Gazesplat__RedirectRequest *m) { t_heads(m, 70.0000001); }
+static size_t b_redir_limits(uint8_t *b) { return redirect_with(b, 6, 50, 0, subject, t_heads_at_limit); }
+static size_t b_redir_past(uint8_t *b) { return redirect_with(b, 6, -50, 0, subject, t_heads_past_limit); }
 static size_t b_sleep_long(uint8_t *b)
 {
     Gazesplat__Sleep m = GAZESPLAT__SLEEP__INIT;
@@ -384,6 +403,8 @@ static const mcase cases[] = {
     {"REDIRECT unknown output mode", 0, b_redir_mode, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT NaN head pose", 0, b_redir_nan_head, E(ERR_INVALID_ARGUMENT), 0},
     {"REDIRECT without a model", 0, b_redir_nomodel, E(ERR_NO_MODEL), 0},
+    {"REDIRECT at the inclusive limits (no model)", 0, b_redir_limits, E(ERR_NO_MODEL), 0},
+    {"REDIRECT 6th head yaw 70.0000001", 0, b_redir_past, E(ERR_INVALID_ARGUMENT), 0},
     {"SLEEP 600 s", 0, b_sleep_long, E(ERR_INVALID_ARGUMENT), 0},
 };
 

@@ -44,7 +44,7 @@ typedef struct stream_case {
     uint64_t seed;
 } stream_case;
 
-/* Gaze limits 0.8727 / 1.0472 rad (model.h); head pitch/yaw limit 1.2217. */
+/* Gaze limits 50 / 60 deg (0.8727 / 1.0472 rad, model.h); head pitch/yaw 70 (1.2217). */
 static const stream_case g_cases[] = {
     {"two_stream", 1, 1, 0, {0.4, -0.7, 0.15}, {0.85, -1.02}, 21},
     {"two_stream_far", 1, 1, 0, {-0.6, 1.15, -0.25}, {-0.86, 1.04}, 22},

@@ -35,10 +35,56 @@ extern "C" {
 #define GS_MODEL_FORMAT_VERSION 1
 #define GS_MODEL_MAX_CODE 256
 
-/* Documented ranges of the inputs, radians. Outside them: GS_ERR_ARG. */
-#define GS_MODEL_MAX_GAZE_PITCH 0.8727 /* 50 deg */
-#define GS_MODEL_MAX_GAZE_YAW 1.0472   /* 60 deg */
-#define GS_MODEL_MAX_HEAD_ANGLE 1.2217 /* 70 deg, pitch and yaw */
+/* ---- the target ranges ----
+ * The documented range of every field of a render or fit target (gaze in
+ * the head frame, head pose in the normalized camera), degrees, defined
+ * here once. Each is inclusive at both ends: v is in range when
+ * lo <= v <= hi, so exactly +-limit is accepted and anything beyond it
+ * (by any amount) or non-finite is refused. The daemon's request
+ * validation, the gazesplat CLI and this library's own render and fit
+ * checks all go through gs_model_check_target / gs_model_check_range, so a
+ * target accepted up front is never refused later. A target has no head
+ * roll or translation: the head keeps the subject's distance and turns
+ * without roll. */
+#define GS_MODEL_MAX_GAZE_PITCH_DEG 50.0
+#define GS_MODEL_MAX_GAZE_YAW_DEG 60.0
+#define GS_MODEL_MAX_HEAD_PITCH_DEG 70.0
+#define GS_MODEL_MAX_HEAD_YAW_DEG 70.0
+
+/* The same limits in radians, for the fit's clamps (checks take degrees). */
+#define GS_MODEL_DEG_TO_RAD (3.14159265358979323846 / 180.0)
+#define GS_MODEL_MAX_GAZE_PITCH (GS_MODEL_MAX_GAZE_PITCH_DEG * GS_MODEL_DEG_TO_RAD)
+#define GS_MODEL_MAX_GAZE_YAW (GS_MODEL_MAX_GAZE_YAW_DEG * GS_MODEL_DEG_TO_RAD)
+#define GS_MODEL_MAX_HEAD_ANGLE (GS_MODEL_MAX_HEAD_PITCH_DEG * GS_MODEL_DEG_TO_RAD)
+
+typedef enum gs_target_field {
+    GS_TARGET_GAZE_PITCH,
+    GS_TARGET_GAZE_YAW,
+    GS_TARGET_HEAD_PITCH,
+    GS_TARGET_HEAD_YAW,
+    GS_TARGET_NFIELDS
+} gs_target_field;
+
+/* One row of the table: "gaze pitch", -50, 50, "deg" and so on. */
+typedef struct gs_target_range {
+    const char *name;
+    double lo, hi; /* inclusive */
+    const char *unit;
+} gs_target_range;
+
+/* The table, indexed by gs_target_field. */
+extern const gs_target_range gs_target_ranges[GS_TARGET_NFIELDS];
+
+/* Checks one field's value (degrees) against its row: GS_OK, GS_ERR_ARG
+ * outside the range, GS_ERR_NONFINITE for NaN or Inf; the message names
+ * the field, the value and the inclusive range, e.g. "gaze pitch 200 deg
+ * outside [-50, 50] deg (inclusive)". */
+int gs_model_check_range(gs_target_field f, double v, gs_error *err);
+
+/* Checks a target: gaze_deg = {pitch, yaw} and head_deg = {pitch, yaw},
+ * degrees, either NULL when absent. Every field given is checked (in the
+ * table's order); returns as gs_model_check_range. */
+int gs_model_check_target(const double gaze_deg[2], const double head_deg[2], gs_error *err);
 
 typedef struct gs_model gs_model;
 typedef struct gs_model_ctx gs_model_ctx;
