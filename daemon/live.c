@@ -190,19 +190,24 @@ static void fill_policy(const gs_cap_policy_config *c, Gazesplat__LivePolicy *p)
 int gsd_live_policy(gsd_server *s, const Gazesplat__LivePolicyRequest *r, Gazesplat__LivePolicy *out,
                     char *msg, size_t cap)
 {
+    /* Field validation before server state (PROTOCOL.md's check order):
+     * every setting must name a key and parse, live pipeline or not. The
+     * result's range depends on the policy in force, so it is checked
+     * after ERR_LIVE_OFF. */
     gsd_live *l = s->live;
-    if (!l) {
-        snprintf(msg, cap, "this server hosts no live pipeline (live.device is not set)");
-        return E(ERR_LIVE_OFF);
-    }
-    gs_cap_policy_config c;
-    gs_cap_policy_get(l->policy, &c);
+    gs_cap_policy_config c = gs_cap_policy_config_default();
+    if (l)
+        gs_cap_policy_get(l->policy, &c);
     gs_error e = {0};
     for (size_t i = 0; i < r->n_set; i++)
         if (gs_cap_policy_config_set(&c, r->set[i]->key, r->set[i]->value, &e) != GS_OK) {
             snprintf(msg, cap, "%s", e.msg);
             return E(ERR_INVALID_ARGUMENT);
         }
+    if (!l) {
+        snprintf(msg, cap, "this server hosts no live pipeline (live.device is not set)");
+        return E(ERR_LIVE_OFF);
+    }
     if (r->n_set && gs_cap_policy_set(l->policy, &c, &e) != GS_OK) {
         snprintf(msg, cap, "%s", e.msg);
         return E(ERR_INVALID_ARGUMENT);

@@ -156,9 +156,10 @@ int main(int argc, char **argv)
     }
     srv.app = &a;
     srv.on_sighup = on_sighup;
-    LOG_I("gazesplatd %s: %d workers x %d pool threads, OpenBLAS %d thread(s) (%s), queue %d, state %s",
+    LOG_I("gazesplatd %s: %d workers x %d pool threads, OpenBLAS %d thread(s) (%s), queue %d, "
+          "max_connections %d, state %s",
           GSD_VERSION, cfg.workers, gsd_pool_threads(&cfg), gs_nn_blas_threads(), gs_nn_blas_core(),
-          cfg.queue_depth, srv.state_dir[0] ? srv.state_dir : "(none)");
+          cfg.queue_depth, srv.cfg.max_connections, srv.state_dir[0] ? srv.state_dir : "(none)");
     r = gsd_server_run(&srv);
     gsd_server_free(&srv);
     LOG_I("stopped");

@@ -15,6 +15,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/uio.h>
@@ -28,6 +29,9 @@
 #define READ_BUDGET (1u << 20)   /* bytes read from one peer per event */
 #define WRITE_BUDGET (4u << 20)  /* bytes written to one peer per event */
 #define MIN_BODY_RATE 65536      /* bytes/s a frame body must sustain */
+#define FD_MARGIN 64             /* open files besides connections: listeners, epoll, wake-up,
+                                  * signal pipe, state files, model and face files, live devices */
+#define CLIENT_NAME_MAX 64       /* Hello.client_name, bytes */
 
 struct gsd_conn {
     ev_watch w;
@@ -185,6 +189,8 @@ gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     if (o) {
         out_attach(o, job);
         o->final = 1;
+        /* Cancellations and deadlines have counters of their own. */
+        o->request_error = code != E(ERR_CANCELLED) && code != E(ERR_DEADLINE);
     }
     return o;
 }
@@ -221,6 +227,8 @@ static void conn_queue(gsd_conn *c, gsd_out *o)
     c->wtail = o;
     c->wbytes += o->len;
     bump(&c->srv->ctr.frames_out, 1);
+    if (o->request_error) /* a worker's ERROR ending a request; reply_error counts its own */
+        bump(&c->srv->ctr.request_errors, 1);
     conn_update_interest(c);
 }
 
@@ -439,20 +447,37 @@ static void handle_hello(gsd_conn *c, const gs_frame_header *h, const Gazesplat_
         conn_fail(c, E(ERR_HELLO_REQUIRED), h->request_id, "second HELLO");
         return;
     }
-    uint32_t lo = m->min_version ? m->min_version : 1, hi = m->max_version;
+    /* An absent bound is 0: min_version 0 means 1, max_version 0 no upper
+     * bound, so an empty HELLO gets the server's highest version. */
+    uint32_t lo = m->min_version ? m->min_version : 1;
+    uint32_t hi = m->max_version ? m->max_version : UINT32_MAX;
     uint32_t v = hi < GS_PROTO_VERSION_MAX ? hi : GS_PROTO_VERSION_MAX;
     if (hi < lo || v < lo || v < GS_PROTO_VERSION_MIN) {
-        conn_fail(c, E(ERR_BAD_VERSION), h->request_id, "client speaks %u..%u, server %d..%d", lo, hi,
+        char his[16] = "any";
+        if (m->max_version)
+            snprintf(his, sizeof his, "%u", hi);
+        conn_fail(c, E(ERR_BAD_VERSION), h->request_id, "client speaks %u..%s, server %d..%d", lo, his,
                   GS_PROTO_VERSION_MIN, GS_PROTO_VERSION_MAX);
+        return;
+    }
+    /* protobuf-c does not check that a string is UTF-8; proto3 says it
+     * must be, so a name that is not makes the HELLO malformed. */
+    size_t name_len = strlen(m->client_name);
+    if (name_len > CLIENT_NAME_MAX) {
+        conn_fail(c, E(ERR_INVALID_ARGUMENT), h->request_id, "client_name is %zu bytes, over %d",
+                  name_len, CLIENT_NAME_MAX);
+        return;
+    }
+    if (!gsd_utf8_valid(m->client_name, name_len)) {
+        conn_fail(c, E(ERR_MALFORMED), h->request_id, "client_name is not valid UTF-8");
         return;
     }
     if (c->is_tcp && s->cfg.token[0] && !token_equal(m->token.data, m->token.len, s->cfg.token)) {
         conn_fail(c, E(ERR_AUTH), h->request_id, "token missing or wrong");
         return;
     }
-    char name[80];
-    gsd_log_escape(m->client_name, strlen(m->client_name) < 64 ? strlen(m->client_name) : 64, name,
-                   sizeof name);
+    char name[4 * CLIENT_NAME_MAX + 1];
+    gsd_log_escape(m->client_name, name_len, name, sizeof name);
     LOG_D("%s: HELLO from '%s', version %u", c->peer, name, v);
     c->hello_done = 1;
     c->version = (uint16_t)v;
@@ -501,7 +526,7 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
 {
     gsd_server *s = c->srv;
     bump(&s->ctr.req_stats, 1);
-    enum { EXTRA = 22 };
+    enum { EXTRA = 23 };
     Gazesplat__Counter cs[NCOUNTERS + EXTRA];
     Gazesplat__Counter *ptrs[NCOUNTERS + EXTRA];
     size_t n = 0;
@@ -534,6 +559,7 @@ static void handle_stats(gsd_conn *c, const gs_frame_header *h)
         {"output_budget", (uint64_t)atomic_load(&s->out_budget)},
         {"pool_threads", (uint64_t)gsd_pool_threads(&s->cfg)},
         {"blas_threads", (uint64_t)gs_nn_blas_threads()},
+        {"max_connections", (uint64_t)s->cfg.max_connections}, /* in force: fits the fd limit */
     };
     for (size_t i = 0; i < EXTRA; i++, n++) {
         gazesplat__counter__init(&cs[n]);
@@ -738,11 +764,19 @@ static void dispatch(gsd_conn *c)
     }
     ProtobufCMessage *m = gs_msg_unpack(h.type, payload, h.payload_len);
     if (!m) {
-        if (h.type == T(HELLO))
+        if (h.type == T(HELLO)) {
             conn_fail(c, E(ERR_MALFORMED), h.request_id, "HELLO payload is not a Hello message");
-        else
+        } else if (h.type == T(CANCEL)) {
+            /* CANCEL is never answered, not even a malformed one: its frame's
+             * request_id is not used and may be the very request it meant
+             * to cancel, whose end an ERROR would then seem to be. */
+            bump(&s->ctr.req_cancel, 1);
+            bump(&s->ctr.request_errors, 1);
+            LOG_D("%s: %u-byte payload is not a valid CANCEL message; ignored", c->peer, h.payload_len);
+        } else {
             reply_error(c, &h, E(ERR_MALFORMED), "%u-byte payload is not a valid %s message",
                         h.payload_len, gs_msg_type_name(h.type));
+        }
         return;
     }
     if (frame_is_job(h.type)) {
@@ -864,6 +898,32 @@ static void peer_name(int fd, int is_tcp, char *out, size_t cap)
         snprintf(out, cap, "fd%d", fd);
 }
 
+/* A connection refused at accept: one ERROR frame (request id 0) written
+ * without waiting, then the close. A fresh socket's buffer takes the
+ * frame; input already there is read away first, so that a TCP close does
+ * not turn into a reset that could discard the ERROR at the peer. */
+static void refuse_conn(gsd_server *s, int fd, int code, const char *text)
+{
+    gs_frame_header h;
+    memset(&h, 0, sizeof h);
+    h.version = GS_PROTO_VERSION_MIN;
+    gsd_out *o = error_out(s, &h, code, text);
+    if (o) {
+        ssize_t w = send(fd, o->data, o->len, MSG_NOSIGNAL | MSG_DONTWAIT);
+        if (w > 0)
+            bump(&s->ctr.bytes_out, (unsigned long long)w);
+        if (w == (ssize_t)o->len)
+            bump(&s->ctr.frames_out, 1);
+        out_free(s, o);
+    }
+    char junk[512];
+    for (int i = 0; i < 8 && recv(fd, junk, sizeof junk, MSG_DONTWAIT) > 0; i++)
+        ;
+    LOG_D("connection refused: %s", text);
+    bump(&s->ctr.conn_rejected, 1);
+    close(fd);
+}
+
 static void on_accept(ev_loop *loop, ev_watch *w, int events)
 {
     (void)events;
@@ -876,9 +936,15 @@ static void on_accept(ev_loop *loop, ev_watch *w, int events)
                 LOG_W("accept: %s", strerror(errno));
             return;
         }
-        if (s->nconns >= s->cfg.max_connections || atomic_load(&s->state) == GSD_DRAINING) {
-            bump(&s->ctr.conn_rejected, 1);
-            close(fd);
+        if (atomic_load(&s->state) == GSD_DRAINING) {
+            refuse_conn(s, fd, E(ERR_SHUTTING_DOWN), "server is shutting down");
+            continue;
+        }
+        if (s->nconns >= s->cfg.max_connections) {
+            char text[96];
+            snprintf(text, sizeof text, "too many connections (max_connections %d); retry later",
+                     s->cfg.max_connections);
+            refuse_conn(s, fd, E(ERR_TOO_MANY_CONNECTIONS), text);
             continue;
         }
         gsd_conn *c = calloc(1, sizeof *c);
@@ -1044,6 +1110,74 @@ static void on_tick(ev_loop *loop, void *ctx)
     }
 }
 
+/* Open files: max_connections plus FD_MARGIN must fit RLIMIT_NOFILE. The
+ * soft limit (often 1024, the default max_connections) is raised toward
+ * the hard one; when even that is too low, max_connections is lowered to
+ * what fits, so a full server refuses connections with an ERROR instead of
+ * failing accept() with EMFILE. */
+static void fit_fd_limit(gsd_server *s)
+{
+    struct rlimit rl;
+    if (getrlimit(RLIMIT_NOFILE, &rl) != 0) {
+        LOG_W("getrlimit(RLIMIT_NOFILE): %s; max_connections %d unchecked", strerror(errno),
+              s->cfg.max_connections);
+        return;
+    }
+    rlim_t need = (rlim_t)s->cfg.max_connections + FD_MARGIN;
+    if (rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < need) {
+        struct rlimit nr = rl;
+        nr.rlim_cur = rl.rlim_max != RLIM_INFINITY && rl.rlim_max < need ? rl.rlim_max : need;
+        if (nr.rlim_cur > rl.rlim_cur && setrlimit(RLIMIT_NOFILE, &nr) == 0) {
+            LOG_I("open files limit raised from %llu to %llu", (unsigned long long)rl.rlim_cur,
+                  (unsigned long long)nr.rlim_cur);
+            rl.rlim_cur = nr.rlim_cur;
+        } else if (nr.rlim_cur > rl.rlim_cur) {
+            LOG_W("cannot raise the open files limit to %llu: %s", (unsigned long long)nr.rlim_cur,
+                  strerror(errno));
+        }
+    }
+    if (rl.rlim_cur != RLIM_INFINITY && rl.rlim_cur < need) {
+        int fit = rl.rlim_cur > FD_MARGIN ? (int)(rl.rlim_cur - FD_MARGIN) : 1;
+        LOG_W("max_connections %d needs %llu open files but the limit is %llu (hard %llu): "
+              "max_connections %d in force; raise LimitNOFILE= or ulimit -n",
+              s->cfg.max_connections, (unsigned long long)need, (unsigned long long)rl.rlim_cur,
+              (unsigned long long)rl.rlim_max, fit);
+        s->cfg.max_connections = fit;
+    }
+}
+
+/* The state directory is checked at start, so that a typo is an error
+ * then and not failed saves after the first fit. A missing directory
+ * whose parent exists is created (0700, as systemd's StateDirectory=
+ * would); one that cannot be created, a non-directory or a directory this
+ * process cannot write is refused. */
+static int check_state_dir(const char *dir, char *msg, size_t cap)
+{
+    struct stat st;
+    if (stat(dir, &st) != 0) {
+        if (errno != ENOENT) {
+            snprintf(msg, cap, "state_dir %s: %s", dir, strerror(errno));
+            return -1;
+        }
+        if (mkdir(dir, 0700) != 0) {
+            snprintf(msg, cap, "state_dir %s does not exist and cannot be created (%s; its parent "
+                     "must exist)", dir, strerror(errno));
+            return -1;
+        }
+        LOG_I("state_dir %s created", dir);
+        return 0;
+    }
+    if (!S_ISDIR(st.st_mode)) {
+        snprintf(msg, cap, "state_dir %s is not a directory", dir);
+        return -1;
+    }
+    if (access(dir, W_OK | X_OK) != 0) {
+        snprintf(msg, cap, "state_dir %s is not writable: %s", dir, strerror(errno));
+        return -1;
+    }
+    return 0;
+}
+
 void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
 {
     gsd_config old = s->cfg;
@@ -1056,6 +1190,7 @@ void gsd_server_reconfigure(gsd_server *s, const gsd_config *cfg)
     s->cfg.workers = old.workers;
     s->cfg.threads = old.threads;
     s->cfg.tuned_subjects = old.tuned_subjects;
+    fit_fd_limit(s);
     if (strcmp(old.socket, cfg->socket) || strcmp(old.tcp, cfg->tcp) || old.workers != cfg->workers ||
         old.threads != cfg->threads || strcmp(old.state_dir, cfg->state_dir) ||
         old.tuned_subjects != cfg->tuned_subjects)
@@ -1175,6 +1310,9 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
         snprintf(s->state_dir, sizeof s->state_dir, "%s", cfg->state_dir);
     else if (sd && *sd)
         snprintf(s->state_dir, sizeof s->state_dir, "%.*s", (int)strcspn(sd, ":"), sd);
+    if (s->state_dir[0] && check_state_dir(s->state_dir, msg, cap) != 0)
+        return -1;
+    fit_fd_limit(s);
     int pfd[2];
     if (pipe2(pfd, O_NONBLOCK | O_CLOEXEC) != 0 ||
         ev_add(s->loop, &s->sig_watch, pfd[0], EV_READ, on_signal, s) != 0 || install_signals(pfd[1]) != 0) {

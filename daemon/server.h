@@ -80,6 +80,7 @@ typedef struct gsd_out {
     gsd_job *job;   /* the job it belongs to, or NULL */
     int final;      /* last frame of job: the loop frees the job */
     uint64_t job_ms; /* final only: run time, for retry-after estimates */
+    int request_error; /* an ERROR ending a request: counted in request_errors when queued */
     size_t len;
     uint8_t data[];
 } gsd_out;
@@ -269,6 +270,9 @@ int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg,
  * by the data's own signature whatever the declared format: 0, or -1 when
  * there is no such header (the decoder then says what is wrong). */
 int gsd_image_probe(const uint8_t *p, size_t n, uint32_t *w, uint32_t *h);
+/* 1 when s[0..n) is strict UTF-8: no overlong forms, surrogates or code
+ * points over U+10FFFF. */
+int gsd_utf8_valid(const char *s, size_t n);
 int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap);
 int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap);
 int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,

@@ -56,6 +56,53 @@ int gsd_image_probe(const uint8_t *p, size_t n, uint32_t *w, uint32_t *h)
     return -1;
 }
 
+int gsd_utf8_valid(const char *str, size_t n)
+{
+    const uint8_t *p = (const uint8_t *)str;
+    size_t i = 0;
+    while (i < n) {
+        uint8_t b = p[i];
+        if (b < 0x80) {
+            i++;
+            continue;
+        }
+        /* Lead byte: length and the least code point of that length
+         * (less is an overlong form). C0, C1 and F5..FF never lead. */
+        size_t len;
+        uint32_t cp, min;
+        if (b >= 0xC2 && b <= 0xDF) {
+            len = 2, cp = b & 0x1F, min = 0x80;
+        } else if (b >= 0xE0 && b <= 0xEF) {
+            len = 3, cp = b & 0x0F, min = 0x800;
+        } else if (b >= 0xF0 && b <= 0xF4) {
+            len = 4, cp = b & 0x07, min = 0x10000;
+        } else {
+            return 0;
+        }
+        if (n - i < len)
+            return 0;
+        for (size_t k = 1; k < len; k++) {
+            if ((p[i + k] & 0xC0) != 0x80)
+                return 0;
+            cp = cp << 6 | (p[i + k] & 0x3F);
+        }
+        if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF))
+            return 0;
+        i += len;
+    }
+    return 1;
+}
+
+static int has_png_signature(const uint8_t *p, size_t n)
+{
+    return n >= 8 && memcmp(p, "\x89PNG\r\n\x1a\n", 8) == 0;
+}
+
+static int has_jpeg_signature(const uint8_t *p, size_t n)
+{
+    return n >= 3 && p[0] == 0xFF && p[1] == 0xD8 && p[2] == 0xFF;
+}
+
 int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg, size_t cap)
 {
     /* Until the face models are loaded (state 0) the server-state check
@@ -67,6 +114,17 @@ int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg,
     }
     if (img->kind != GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE && img->kind != GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
         snprintf(msg, cap, "unknown image kind %d", (int)img->kind);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    /* An unknown enum value is a field out of range; ERR_BAD_IMAGE is for
+     * data that does not decode as the format named. */
+    if (img->format != GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG &&
+        img->format != GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG &&
+        img->format != GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
+        if (img->format == GAZESPLAT__IMAGE_FORMAT__FORMAT_NONE)
+            snprintf(msg, cap, "image format not given (FORMAT_NONE); want PNG, JPEG or RAW_RGB8");
+        else
+            snprintf(msg, cap, "unknown image format %d; want PNG, JPEG or RAW_RGB8", (int)img->format);
         return E(ERR_INVALID_ARGUMENT);
     }
     if (img->data.len == 0) {
@@ -86,6 +144,16 @@ int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg,
                      side, mpix);
             return E(ERR_IMAGE_TOO_LARGE);
         }
+        /* The format named must be the data's: PNG bytes labelled JPEG (or
+         * the reverse) are refused, not decoded as what they turn out to be. */
+        int png = has_png_signature(img->data.data, img->data.len);
+        int jpeg = has_jpeg_signature(img->data.data, img->data.len);
+        int want_png = img->format == GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+        if (want_png ? !png : !jpeg) {
+            snprintf(msg, cap, "format says %s but the data %s", want_png ? "PNG" : "JPEG",
+                     png ? "is PNG" : jpeg ? "is JPEG" : "has neither signature");
+            return E(ERR_BAD_IMAGE);
+        }
         return 0;
     }
     case GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8:
@@ -103,9 +171,8 @@ int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg,
             return E(ERR_BAD_IMAGE);
         }
         return 0;
-    default:
-        snprintf(msg, cap, "unknown image format %d", (int)img->format);
-        return E(ERR_BAD_IMAGE);
+    default: /* refused above */
+        return E(ERR_INVALID_ARGUMENT);
     }
 }
 

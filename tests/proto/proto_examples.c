@@ -59,7 +59,9 @@ int main(void)
     ok.server = "gazesplatd 0.1.0";
     ok.limits = &lim;
     ok.image_size = 256;
-    dump("hello_ok", "HELLO_OK: version 1, default limits, 256 px model", T(HELLO_OK), 0, NULL, &ok.base);
+    ok.photo_input = 1; /* the default photo_input = yes, face models loaded */
+    dump("hello_ok", "HELLO_OK: version 1, default limits, 256 px model, photo input available",
+         T(HELLO_OK), 0, NULL, &ok.base);
 
     dump("health", "HEALTH, request id 1, empty payload", T(HEALTH), 1, NULL, NULL);
 
@@ -101,7 +103,7 @@ int main(void)
 
     Gazesplat__Error err = GAZESPLAT__ERROR__INIT;
     err.code = GAZESPLAT__ERROR_CODE__ERR_UNKNOWN_SUBJECT;
-    err.message = "no subject";
+    err.message = "no subject 3f1c9a075e2281d46b10ee45930a7c28 (never fitted or evicted)"; /* compute.c */
     err.request_id = 7;
     dump("error", "ERROR ERR_UNKNOWN_SUBJECT (18) for request 7", T(ERROR), 7, key, &err.base);
 
