@@ -13,6 +13,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/resource.h>
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -30,6 +31,7 @@ typedef struct daemon_proc {
     char dir[64];
     char sock[128];
     char log[128];
+    long nofile; /* > 0: the daemon's RLIMIT_NOFILE, soft and hard */
 } daemon_proc;
 
 static long long h_now_ms(void)
@@ -81,6 +83,10 @@ static int daemon_start_v(daemon_proc *d, const char *bin, const char *const *ar
     if (d->pid == 0) {
         int fd = open(d->log, O_WRONLY | O_CREAT | O_APPEND, 0600);
         dup2(fd, 2);
+        if (d->nofile > 0) {
+            struct rlimit rl = {(rlim_t)d->nofile, (rlim_t)d->nofile};
+            setrlimit(RLIMIT_NOFILE, &rl);
+        }
         execv(bin, (char *const *)argv);
         _exit(127);
     }

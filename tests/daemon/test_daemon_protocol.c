@@ -1,14 +1,17 @@
 /* The real gazesplatd over a real Unix socket: HELLO and version
  * negotiation, limits before and after HELLO, and a malformed-frame suite
  * in which every case gets its ERROR code (and a close when the error is
- * a protocol error) and the server still answers other clients.
- * usage: test_daemon_protocol PATH_TO_GAZESPLATD */
+ * a protocol error) and the server still answers other clients; then the
+ * start-up checks (state directory, open-files limit, max_connections)
+ * and, with a model, PROTOCOL.md's HELLO_OK and ERROR examples against the
+ * frames the daemon really sends.
+ * usage: test_daemon_protocol PATH_TO_GAZESPLATD [PROTOCOL.md MODEL] */
 #define _GNU_SOURCE
 #include <math.h>
 
 #include "daemon_harness.h"
 
-static const char *bin;
+static const char *bin, *protocol_md, *model_path;
 static daemon_proc d;
 
 static size_t pack(uint8_t *buf, uint16_t type, uint32_t id, const uint8_t *key, const ProtobufCMessage *m)
@@ -69,6 +72,38 @@ static size_t hello_v(uint8_t *b, uint32_t lo, uint32_t hi)
 }
 static size_t b_hello_empty(uint8_t *b) { return h_frame(b, 1, T(HELLO), 0, 1); }
 static size_t b_hello_inverted(uint8_t *b) { return hello_v(b, 3, 1); }
+static size_t b_hello_min2_nomax(uint8_t *b) { return hello_v(b, 2, 0); }
+static size_t hello_named(uint8_t *b, const char *name)
+{
+    Gazesplat__Hello m = GAZESPLAT__HELLO__INIT;
+    m.min_version = 1;
+    m.max_version = 1;
+    m.client_name = (char *)name;
+    return pack(b, T(HELLO), 1, NULL, &m.base);
+}
+static size_t b_name_long(uint8_t *b)
+{
+    char name[66];
+    memset(name, 'n', 65);
+    name[65] = 0;
+    return hello_named(b, name);
+}
+/* 33 two-byte characters: 66 bytes, though 33 characters. */
+static size_t b_name_long_utf8(uint8_t *b)
+{
+    char name[67] = "";
+    for (int i = 0; i < 33; i++)
+        strcat(name, "\xc3\xa9");
+    return hello_named(b, name);
+}
+static size_t b_name_overlong(uint8_t *b) { return hello_named(b, "a\xc0\xaf" "b"); } /* '/' in 2 bytes */
+static size_t b_name_overlong3(uint8_t *b) { return hello_named(b, "\xe0\x80\xaf"); }  /* and in 3 */
+static size_t b_name_surrogate(uint8_t *b) { return hello_named(b, "x\xed\xa0\x80"); } /* U+D800 */
+static size_t b_name_too_high(uint8_t *b) { return hello_named(b, "\xf4\x90\x80\x80"); } /* U+110000 */
+static size_t b_name_f5(uint8_t *b) { return hello_named(b, "\xf5\x80\x80\x80"); }
+static size_t b_name_truncated(uint8_t *b) { return hello_named(b, "py\xe2\x82"); }
+static size_t b_name_lone_cont(uint8_t *b) { return hello_named(b, "\x80py"); }
+static size_t b_name_latin1(uint8_t *b) { return hello_named(b, "caf\xe9"); }
 static size_t b_hello_future(uint8_t *b) { return hello_v(b, 2, 5); }
 /* After HELLO. */
 static size_t b_post_big(uint8_t *b) { return h_frame(b, 1, T(FIT), (1u << 20) + 1, 1); }
@@ -90,7 +125,6 @@ static size_t b_redirect_garbage(uint8_t *b) { return garbage(b, T(REDIRECT), "\
 static size_t b_fit_wiretype(uint8_t *b) { return garbage(b, T(FIT), "\x08\x05", 2); }
 /* A length-delimited field claiming more bytes than the payload holds. */
 static size_t b_fit_truncated(uint8_t *b) { return garbage(b, T(FIT), "\x0a\x40\x08\x01", 4); }
-static size_t b_cancel_garbage(uint8_t *b) { return garbage(b, T(CANCEL), "\x08", 1); }
 static size_t b_stats_garbage(uint8_t *b) { return garbage(b, T(STATS), "\x0b", 1); }
 
 static uint8_t pixels[64 * 64 * 3];
@@ -160,6 +194,62 @@ static size_t b_fit_format(uint8_t *b)
     Gazesplat__Image i = raw_image(8, 8, 24, 192);
     i.format = (Gazesplat__ImageFormat)7;
     return fit_with(b, &i, NULL, NULL, 0);
+}
+static size_t b_fit_format_none(uint8_t *b)
+{
+    Gazesplat__Image i = raw_image(8, 8, 24, 192);
+    i.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_NONE;
+    return fit_with(b, &i, NULL, NULL, 0);
+}
+/* A small PNG (signature and IHDR of 8x8) labelled JPEG, and the reverse. */
+static uint8_t small_png[33] = {0x89, 'P', 'N', 'G', '\r', '\n', 0x1a, '\n', 0, 0, 0, 13,
+                                'I', 'H', 'D', 'R', 0, 0, 0, 8, 0, 0, 0, 8, 8, 2};
+static uint8_t small_jpeg[] = {0xff, 0xd8, 0xff, 0xe0, 0, 6, 'J', 'F', 'I', 'F', 0xff, 0xd9};
+static size_t b_png_as_jpeg(uint8_t *b)
+{
+    Gazesplat__Image i = GAZESPLAT__IMAGE__INIT;
+    i.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG;
+    i.data.data = small_png;
+    i.data.len = sizeof small_png;
+    return fit_with(b, &i, NULL, NULL, 0);
+}
+static size_t b_jpeg_as_png_small(uint8_t *b)
+{
+    Gazesplat__Image i = GAZESPLAT__IMAGE__INIT;
+    i.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+    i.data.data = small_jpeg;
+    i.data.len = sizeof small_jpeg;
+    return fit_with(b, &i, NULL, NULL, 0);
+}
+static size_t b_text_as_png(uint8_t *b)
+{
+    static uint8_t text[] = "not an image at all";
+    Gazesplat__Image i = GAZESPLAT__IMAGE__INIT;
+    i.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
+    i.data.data = text;
+    i.data.len = sizeof text - 1;
+    return fit_with(b, &i, NULL, NULL, 0);
+}
+/* LIVE_POLICY to a server without a live pipeline. */
+static size_t live_set(uint8_t *b, const char *key, const char *value)
+{
+    Gazesplat__LiveSetting st = GAZESPLAT__LIVE_SETTING__INIT, *sets[1] = {&st};
+    st.key = (char *)key;
+    st.value = (char *)value;
+    Gazesplat__LivePolicyRequest m = GAZESPLAT__LIVE_POLICY_REQUEST__INIT;
+    m.n_set = 1;
+    m.set = sets;
+    return pack(b, T(LIVE_POLICY), 9, NULL, &m.base);
+}
+static size_t b_live_unknown(uint8_t *b) { return live_set(b, "brightness", "1"); }
+static size_t b_live_unparsable(uint8_t *b) { return live_set(b, "strength", "lots"); }
+static size_t b_live_nan(uint8_t *b) { return live_set(b, "smooth_s", "nan"); }
+static size_t b_live_good(uint8_t *b) { return live_set(b, "strength", "0.5"); }
+static size_t b_live_range(uint8_t *b) { return live_set(b, "strength", "7"); }
+static size_t b_live_read(uint8_t *b)
+{
+    Gazesplat__LivePolicyRequest m = GAZESPLAT__LIVE_POLICY_REQUEST__INIT;
+    return pack(b, T(LIVE_POLICY), 9, NULL, &m.base);
 }
 static size_t b_fit_empty(uint8_t *b)
 {
@@ -350,8 +440,18 @@ static const mcase cases[] = {
     {"FIT before HELLO", 1, b_pre_fit, E(ERR_HELLO_REQUIRED), 1},
     {"CANCEL before HELLO", 1, b_pre_cancel, E(ERR_HELLO_REQUIRED), 1},
     {"garbage HELLO", 1, b_hello_garbage, E(ERR_MALFORMED), 1},
-    {"empty HELLO (max_version 0)", 1, b_hello_empty, E(ERR_BAD_VERSION), 1},
     {"HELLO min > max", 1, b_hello_inverted, E(ERR_BAD_VERSION), 1},
+    {"HELLO min 2, no max", 1, b_hello_min2_nomax, E(ERR_BAD_VERSION), 1},
+    {"HELLO client_name 65 bytes", 1, b_name_long, E(ERR_INVALID_ARGUMENT), 1},
+    {"HELLO client_name 33 characters in 66 bytes", 1, b_name_long_utf8, E(ERR_INVALID_ARGUMENT), 1},
+    {"HELLO client_name overlong 2-byte", 1, b_name_overlong, E(ERR_MALFORMED), 1},
+    {"HELLO client_name overlong 3-byte", 1, b_name_overlong3, E(ERR_MALFORMED), 1},
+    {"HELLO client_name surrogate", 1, b_name_surrogate, E(ERR_MALFORMED), 1},
+    {"HELLO client_name over U+10FFFF", 1, b_name_too_high, E(ERR_MALFORMED), 1},
+    {"HELLO client_name lead byte F5", 1, b_name_f5, E(ERR_MALFORMED), 1},
+    {"HELLO client_name truncated sequence", 1, b_name_truncated, E(ERR_MALFORMED), 1},
+    {"HELLO client_name lone continuation byte", 1, b_name_lone_cont, E(ERR_MALFORMED), 1},
+    {"HELLO client_name Latin-1", 1, b_name_latin1, E(ERR_MALFORMED), 1},
     {"HELLO versions 2..5 only", 1, b_hello_future, E(ERR_BAD_VERSION), 1},
     {"payload over max_payload", 0, b_post_big, E(ERR_TOO_LARGE), 1},
     {"payload 4 GiB after HELLO", 0, b_post_huge, E(ERR_TOO_LARGE), 1},
@@ -364,7 +464,6 @@ static const mcase cases[] = {
     {"garbage REDIRECT", 0, b_redirect_garbage, E(ERR_MALFORMED), 0},
     {"FIT wrong wire type", 0, b_fit_wiretype, E(ERR_MALFORMED), 0},
     {"FIT truncated field", 0, b_fit_truncated, E(ERR_MALFORMED), 0},
-    {"CANCEL truncated varint", 0, b_cancel_garbage, E(ERR_MALFORMED), 0},
     {"STATS bad tag", 0, b_stats_garbage, E(ERR_MALFORMED), 0},
     {"FIT without image", 0, b_fit_noimage, E(ERR_INVALID_ARGUMENT), 0},
     {"FIT NaN gaze", 0, b_fit_nan, E(ERR_INVALID_ARGUMENT), 0},
@@ -377,7 +476,11 @@ static const mcase cases[] = {
     {"FIT raw width 0", 0, b_fit_zero_w, E(ERR_BAD_IMAGE), 0},
     {"FIT raw 100000^2", 0, b_fit_giant, E(ERR_IMAGE_TOO_LARGE), 0},
     {"FIT raw over max_image_mpix", 0, b_fit_mpix, E(ERR_IMAGE_TOO_LARGE), 0},
-    {"FIT unknown format", 0, b_fit_format, E(ERR_BAD_IMAGE), 0},
+    {"FIT unknown format", 0, b_fit_format, E(ERR_INVALID_ARGUMENT), 0},
+    {"FIT format NONE", 0, b_fit_format_none, E(ERR_INVALID_ARGUMENT), 0},
+    {"FIT PNG bytes labelled JPEG", 0, b_png_as_jpeg, E(ERR_BAD_IMAGE), 0},
+    {"FIT JPEG bytes labelled PNG", 0, b_jpeg_as_png_small, E(ERR_BAD_IMAGE), 0},
+    {"FIT text labelled PNG", 0, b_text_as_png, E(ERR_BAD_IMAGE), 0},
     {"FIT empty PNG", 0, b_fit_empty, E(ERR_BAD_IMAGE), 0},
     {"FIT PNG header 100000^2 (decompression bomb)", 0, b_png_bomb, E(ERR_IMAGE_TOO_LARGE), 0},
     {"FIT PNG header 4096^2 over max_image_mpix", 0, b_png_mpix, E(ERR_IMAGE_TOO_LARGE), 0},
@@ -406,6 +509,12 @@ static const mcase cases[] = {
     {"REDIRECT at the inclusive limits (no model)", 0, b_redir_limits, E(ERR_NO_MODEL), 0},
     {"REDIRECT 6th head yaw 70.0000001", 0, b_redir_past, E(ERR_INVALID_ARGUMENT), 0},
     {"SLEEP 600 s", 0, b_sleep_long, E(ERR_INVALID_ARGUMENT), 0},
+    {"LIVE_POLICY unknown key, no live pipeline", 0, b_live_unknown, E(ERR_INVALID_ARGUMENT), 0},
+    {"LIVE_POLICY unparsable value, no live pipeline", 0, b_live_unparsable, E(ERR_INVALID_ARGUMENT), 0},
+    {"LIVE_POLICY NaN value, no live pipeline", 0, b_live_nan, E(ERR_INVALID_ARGUMENT), 0},
+    {"LIVE_POLICY good setting, no live pipeline", 0, b_live_good, E(ERR_LIVE_OFF), 0},
+    {"LIVE_POLICY out of range, no live pipeline", 0, b_live_range, E(ERR_LIVE_OFF), 0},
+    {"LIVE_POLICY read, no live pipeline", 0, b_live_read, E(ERR_LIVE_OFF), 0},
 };
 
 static void run_case(const mcase *mc)
@@ -574,13 +683,343 @@ static void test_stats(void)
     gs_client_close(c);
 }
 
+/* HELLO without bounds: an empty HELLO (every field 0) is valid and gets
+ * the server's highest version; names up to 64 bytes of UTF-8 pass. */
+static void test_hello_defaults(void)
+{
+    static const char *const names[] = {
+        "",
+        "nnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnnn", /* 64 bytes */
+        "caf\xc3\xa9 \xe2\x9c\x93 \xf0\x9f\x98\x80 \xf4\x8f\xbf\xbf \xef\xbf\xbf", /* up to U+10FFFF */
+    };
+    uint8_t buf[256];
+    int code;
+    Gazesplat__HelloOk *ok = NULL;
+    gs_client *c = h_connect(d.sock);
+    CHECK(c && gs_client_send_raw(c, buf, b_hello_empty(buf), NULL) == GS_OK);
+    int type = h_recv(c, 3000, &code, NULL, (ProtobufCMessage **)&ok);
+    CHECK_MSG(type == T(HELLO_OK) && ok->version == 1, "empty HELLO: frame type %d code %s", type,
+              gs_msg_error_name(code));
+    if (type >= 0)
+        protobuf_c_message_free_unpacked(&ok->base, NULL);
+    CHECK(h_health_on(c, 2));
+    gs_client_close(c);
+    for (size_t i = 0; i < sizeof names / sizeof names[0]; i++) {
+        c = h_connect(d.sock);
+        CHECK(c && gs_client_send_raw(c, buf, hello_named(buf, names[i]), NULL) == GS_OK);
+        type = h_recv(c, 3000, &code, NULL, NULL);
+        CHECK_MSG(type == T(HELLO_OK), "client_name %zu (%zu bytes): frame type %d code %s", i,
+                  strlen(names[i]), type, gs_msg_error_name(code));
+        gs_client_close(c);
+    }
+}
+
+/* CANCEL is never answered, not even a malformed one: the next frame on
+ * the connection is the reply to the request after it. */
+static void test_cancel_silent(void)
+{
+    uint8_t buf[128];
+    gs_client *c = h_hello(d.sock);
+    size_t n = garbage(buf, T(CANCEL), "\x08", 1); /* truncated varint, frame id 9 */
+    n += h_frame(buf + n, 1, T(HEALTH), 0, 10);
+    CHECK(c && gs_client_send_raw(c, buf, n, NULL) == GS_OK);
+    int code;
+    uint32_t id = 0;
+    int type = h_recv(c, 3000, &code, &id, NULL);
+    CHECK_MSG(type == T(HEALTH_OK) && id == 10, "after a malformed CANCEL: frame type %d id %u code %s",
+              type, id, gs_msg_error_name(code));
+    gs_client_close(c);
+}
+
+static unsigned long long stat_of(gs_client *c, const char *name)
+{
+    Gazesplat__StatsRequest req = GAZESPLAT__STATS_REQUEST__INIT;
+    gs_client_frame f;
+    gs_error err;
+    unsigned long long v = ~0ull;
+    if (gs_client_call(c, T(STATS), NULL, 77, &req.base, 3000, &f, &err) != GS_OK)
+        return v;
+    if (f.header.type == T(STATS_OK)) {
+        Gazesplat__Stats *s = (Gazesplat__Stats *)f.msg;
+        for (size_t i = 0; i < s->n_counters; i++)
+            if (!strcmp(s->counters[i]->name, name))
+                v = s->counters[i]->value;
+    }
+    gs_client_frame_free(&f);
+    return v;
+}
+
+static int log_has(const daemon_proc *p, const char *text)
+{
+    FILE *f = fopen(p->log, "r");
+    char line[2048];
+    int found = 0;
+    while (f && !found && fgets(line, sizeof line, f))
+        found = strstr(line, text) != NULL;
+    if (f)
+        fclose(f);
+    return found;
+}
+
+/* An open-files limit of 72 leaves room for 72 - 64 = 8 connections: the
+ * default max_connections 1024 is lowered to that with a warning, and the
+ * ninth connection gets ERROR ERR_TOO_MANY_CONNECTIONS before the close. */
+static void test_connection_limit(void)
+{
+    daemon_proc e;
+    memset(&e, 0, sizeof e);
+    e.nofile = 72;
+    const char *args[] = {"--set", "photo_input=no", "--log-level", "debug", NULL};
+    if (daemon_start_v(&e, bin, args) != 0) {
+        CHECK_MSG(0, "gazesplatd with RLIMIT_NOFILE 72 did not start");
+        daemon_dump_log(&e);
+        return;
+    }
+    enum { CAP = 8 };
+    gs_client *cs[CAP] = {0};
+    for (int i = 0; i < CAP; i++)
+        cs[i] = h_hello(e.sock);
+    CHECK_MSG(cs[CAP - 1] != NULL, "connection %d of %d refused", CAP, CAP);
+    unsigned long long maxc = cs[0] ? stat_of(cs[0], "max_connections") : 0;
+    CHECK_MSG(maxc == CAP, "STATS max_connections %llu, want %d", maxc, CAP);
+    CHECK_MSG(log_has(&e, "max_connections 8 in force"), "no warning about the lowered max_connections");
+    gs_client *extra = h_connect(e.sock);
+    int code = 0;
+    uint32_t id = 1;
+    int type = extra ? h_recv(extra, 3000, &code, &id, NULL) : -1;
+    CHECK_MSG(type == T(ERROR) && code == E(ERR_TOO_MANY_CONNECTIONS) && id == 0,
+              "connection over max_connections: frame type %d code %s id %u", type,
+              gs_msg_error_name(code), id);
+    CHECK(extra && h_closed(extra, 2000));
+    gs_client_close(extra);
+    gs_client_close(cs[CAP - 1]);
+    cs[CAP - 1] = NULL;
+    h_sleep_ms(100); /* the server sees the close */
+    CHECK_MSG(h_server_answers(e.sock), "no connection after one closed");
+    unsigned long long rej = cs[0] ? stat_of(cs[0], "conn_rejected") : 0;
+    CHECK_MSG(rej == 1, "conn_rejected %llu, want 1", rej);
+    for (int i = 0; i < CAP; i++)
+        gs_client_close(cs[i]);
+    int st = daemon_stop(&e, SIGTERM, 10000);
+    CHECK_MSG(st == 0, "exit status %d", st);
+    if (gs_test_failures)
+        daemon_dump_log(&e);
+}
+
+/* Runs the daemon with args and waits up to 5 s for it to exit: its exit
+ * status, or -1 when it is still running (it is then stopped). */
+static int run_to_exit(const char *dir, const char *const *args, char *log, size_t cap)
+{
+    char sock[128], logpath[128];
+    snprintf(sock, sizeof sock, "%s/x.sock", dir);
+    snprintf(logpath, sizeof logpath, "%s/xlog", dir);
+    unlink(logpath);
+    const char *argv[16];
+    int n = 0;
+    argv[n++] = bin;
+    argv[n++] = "--socket";
+    argv[n++] = sock;
+    for (int i = 0; args[i] && n < 15; i++)
+        argv[n++] = args[i];
+    argv[n] = NULL;
+    pid_t pid = fork();
+    if (pid == 0) {
+        int fd = open(logpath, O_WRONLY | O_CREAT | O_TRUNC, 0600);
+        dup2(fd, 2);
+        execv(bin, (char *const *)argv);
+        _exit(127);
+    }
+    int st, r = -1;
+    for (int i = 0; i < 500; i++) {
+        if (waitpid(pid, &st, WNOHANG) == pid) {
+            r = WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
+            break;
+        }
+        h_sleep_ms(10);
+    }
+    if (r < 0) {
+        kill(pid, SIGTERM);
+        waitpid(pid, &st, 0);
+    }
+    log[0] = 0;
+    FILE *f = fopen(logpath, "r");
+    if (f) {
+        size_t got = fread(log, 1, cap - 1, f);
+        log[got] = 0;
+        fclose(f);
+    }
+    return r;
+}
+
+/* An unusable state directory stops the start with status 1 and says why;
+ * a missing one whose parent exists is created. */
+static void test_state_dir(void)
+{
+    char dir[64] = "/tmp/gsd_state_XXXXXX", path[128], log[4096];
+    CHECK(mkdtemp(dir) != NULL);
+    static const struct {
+        const char *sub, *says;
+    } bad[] = {
+        {"no/such/parent", "cannot be created"},
+        {"file", "not a directory"},
+        {"ro", "not writable"},
+    };
+    snprintf(path, sizeof path, "%s/file", dir);
+    FILE *f = fopen(path, "w");
+    if (f)
+        fclose(f);
+    snprintf(path, sizeof path, "%s/ro", dir);
+    mkdir(path, 0500);
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        if (!strcmp(bad[i].sub, "ro") && geteuid() == 0) {
+            printf("state_dir not writable: skipped (root writes anywhere)\n");
+            continue;
+        }
+        snprintf(path, sizeof path, "%s/%s", dir, bad[i].sub);
+        const char *args[] = {"--state-dir", path, "--set", "photo_input=no", NULL};
+        int st = run_to_exit(dir, args, log, sizeof log);
+        CHECK_MSG(st == 1 && strstr(log, bad[i].says) && strstr(log, path),
+                  "state_dir %s: exit status %d, log: %s", bad[i].sub, st, log);
+    }
+    /* A missing directory in an existing one is created and the daemon runs. */
+    daemon_proc e;
+    memset(&e, 0, sizeof e);
+    snprintf(e.dir, sizeof e.dir, "%s", dir);
+    snprintf(path, sizeof path, "%s/new", dir);
+    const char *args[] = {"--state-dir", path, "--set", "photo_input=no", NULL};
+    CHECK_MSG(daemon_start_v(&e, bin, args) == 0, "did not start with a state_dir to create");
+    struct stat sb;
+    CHECK_MSG(stat(path, &sb) == 0 && S_ISDIR(sb.st_mode), "state_dir %s not created", path);
+    CHECK(daemon_stop(&e, SIGTERM, 10000) == 0);
+    static const char *const files[] = {"file", "xlog", "log"}, *const dirs[] = {"new", "ro", ""};
+    for (size_t i = 0; i < sizeof files / sizeof files[0]; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, files[i]);
+        unlink(path);
+    }
+    for (size_t i = 0; i < sizeof dirs / sizeof dirs[0]; i++) {
+        snprintf(path, sizeof path, "%s/%s", dir, dirs[i]);
+        rmdir(path);
+    }
+}
+
+/* The hex block after the line starting with `caption` in PROTOCOL.md. */
+static size_t doc_example(const char *caption, uint8_t *out, size_t cap)
+{
+    FILE *f = fopen(protocol_md, "r");
+    char line[512];
+    int state = 0; /* 0 looking for the caption, 1 for the block, 2 in it */
+    size_t n = 0;
+    while (f && fgets(line, sizeof line, f)) {
+        if (state == 0 && !strncmp(line, caption, strlen(caption)))
+            state = 1;
+        else if (state == 1 && !strncmp(line, "```hex", 6))
+            state = 2;
+        else if (state == 2 && !strncmp(line, "```", 3))
+            break;
+        else if (state == 2)
+            for (char *p = line + 4, *end; n < cap; p = end) {
+                unsigned long v = strtoul(p, &end, 16);
+                if (end == p)
+                    break;
+                out[n++] = (uint8_t)v;
+            }
+    }
+    if (f)
+        fclose(f);
+    return state == 2 ? n : 0;
+}
+
+/* The frame as the daemon packed it (protobuf-c packs canonically). */
+static size_t frame_bytes(const gs_client_frame *f, uint8_t *out, size_t cap)
+{
+    uint8_t *buf;
+    size_t len;
+    if (gs_msg_pack(&f->header, f->msg, 1u << 20, &buf, &len) != 0 || len > cap)
+        return 0;
+    memcpy(out, buf, len);
+    free(buf);
+    return len;
+}
+
+/* With a model: PROTOCOL.md's HELLO sent as printed gets its HELLO_OK
+ * byte for byte (default limits, 256 px, photo input), its REDIRECT of an
+ * unknown subject gets its ERROR byte for byte, and that worker-side ERROR
+ * counts in request_errors. */
+static void test_doc_examples(void)
+{
+    if (!protocol_md || !model_path || access(model_path, R_OK) != 0) {
+        printf("PROTOCOL.md examples against the daemon: skipped (no model)\n");
+        return;
+    }
+    daemon_proc e;
+    memset(&e, 0, sizeof e);
+    const char *args[] = {"--model", model_path, NULL};
+    if (daemon_start_v(&e, bin, args) != 0) {
+        CHECK_MSG(0, "gazesplatd with %s did not start", model_path);
+        daemon_dump_log(&e);
+        return;
+    }
+    /* Wait for the model and the face models (HELLO_OK says photo_input). */
+    gs_client *c = h_hello(e.sock);
+    int ready = 0;
+    for (int i = 0; c && i < 1200 && !ready; i++) {
+        Gazesplat__HealthRequest hr = GAZESPLAT__HEALTH_REQUEST__INIT;
+        gs_client_frame f;
+        gs_error err;
+        if (gs_client_call(c, T(HEALTH), NULL, 1, &hr.base, 3000, &f, &err) != GS_OK)
+            break;
+        Gazesplat__Health *h = (Gazesplat__Health *)f.msg;
+        ready = f.header.type == T(HEALTH_OK) && h->state != GAZESPLAT__HEALTH__STATE__LOADING &&
+                (h->photo_input || h->photo_detail[0] != 'f'); /* "face models not loaded yet" */
+        gs_client_frame_free(&f);
+        if (!ready)
+            h_sleep_ms(50);
+    }
+    gs_client_close(c);
+    CHECK_MSG(ready, "model not loaded within 60 s");
+    static uint8_t want[4096], got[4096], req[4096];
+    gs_client_frame f;
+    gs_error err;
+    size_t nreq = doc_example("HELLO, versions 1..1", req, sizeof req);
+    size_t nwant = doc_example("HELLO_OK", want, sizeof want);
+    CHECK_MSG(nreq > 32 && nwant > 32, "PROTOCOL.md: HELLO or HELLO_OK example not found");
+    c = h_connect(e.sock);
+    size_t ngot = 0;
+    if (c && gs_client_send_raw(c, req, nreq, &err) == GS_OK && gs_client_recv(c, 3000, &f, &err) == GS_OK) {
+        ngot = frame_bytes(&f, got, sizeof got);
+        gs_client_frame_free(&f);
+    }
+    CHECK_MSG(ngot == nwant && memcmp(got, want, ngot) == 0,
+              "HELLO_OK: the daemon sent %zu bytes, PROTOCOL.md shows %zu (or they differ)", ngot, nwant);
+    nreq = doc_example("REDIRECT of subject 3f1c9a07", req, sizeof req);
+    nwant = doc_example("ERROR ERR_UNKNOWN_SUBJECT (18) for request 7", want, sizeof want);
+    CHECK_MSG(nreq > 32 && nwant > 32, "PROTOCOL.md: REDIRECT or ERROR example not found");
+    ngot = 0;
+    if (c && gs_client_send_raw(c, req, nreq, &err) == GS_OK && gs_client_recv(c, 10000, &f, &err) == GS_OK) {
+        ngot = frame_bytes(&f, got, sizeof got);
+        if (f.header.type == T(ERROR))
+            printf("daemon: %s\n", ((Gazesplat__Error *)f.msg)->message);
+        gs_client_frame_free(&f);
+    }
+    CHECK_MSG(ngot == nwant && memcmp(got, want, ngot) == 0,
+              "ERROR: the daemon sent %zu bytes, PROTOCOL.md shows %zu (or they differ)", ngot, nwant);
+    unsigned long long rerr = c ? stat_of(c, "request_errors") : 0;
+    CHECK_MSG(rerr == 1, "request_errors %llu after one worker-side ERROR, want 1", rerr);
+    gs_client_close(c);
+    CHECK(daemon_stop(&e, SIGTERM, 10000) == 0);
+    if (gs_test_failures)
+        daemon_dump_log(&e);
+}
+
 int main(int argc, char **argv)
 {
-    if (argc != 2) {
-        fprintf(stderr, "usage: %s GAZESPLATD\n", argv[0]);
+    if (argc != 2 && argc != 4) {
+        fprintf(stderr, "usage: %s GAZESPLATD [PROTOCOL.md MODEL]\n", argv[0]);
         return 2;
     }
     bin = argv[1];
+    protocol_md = argc == 4 ? argv[2] : NULL;
+    model_path = argc == 4 ? argv[3] : NULL;
     signal(SIGPIPE, SIG_IGN);
     const char *args[] = {"--set", "max_payload=1048576", "--set", "header_timeout_ms=500",
                           "--set", "idle_timeout_ms=1500", "--set", "debug_requests=yes",
@@ -593,7 +1032,9 @@ int main(int argc, char **argv)
         return 1;
     }
     test_hello();
+    test_hello_defaults();
     test_split_hello();
+    test_cancel_silent();
     size_t ncases = sizeof cases / sizeof cases[0];
     for (size_t i = 0; i < ncases; i++)
         run_case(&cases[i]);
@@ -605,5 +1046,8 @@ int main(int argc, char **argv)
     CHECK_MSG(st == 0, "gazesplatd exit status %d after SIGTERM", st);
     if (gs_test_failures)
         daemon_dump_log(&d);
+    test_connection_limit();
+    test_state_dir();
+    test_doc_examples();
     GS_TEST_END();
 }
