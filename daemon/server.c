@@ -460,14 +460,14 @@ static void handle_hello(gsd_conn *c, const gs_frame_header *h, const Gazesplat_
                   GS_PROTO_VERSION_MIN, GS_PROTO_VERSION_MAX);
         return;
     }
-    /* protobuf-c does not check that a string is UTF-8; proto3 says it
-     * must be, so a name that is not makes the HELLO malformed. */
     size_t name_len = strlen(m->client_name);
     if (name_len > CLIENT_NAME_MAX) {
         conn_fail(c, E(ERR_INVALID_ARGUMENT), h->request_id, "client_name is %zu bytes, over %d",
                   name_len, CLIENT_NAME_MAX);
         return;
     }
+    /* protobuf-c does not check that a string is UTF-8; proto3 says it
+     * must be, so a name that is not makes the HELLO malformed. */
     if (!gsd_utf8_valid(m->client_name, name_len)) {
         conn_fail(c, E(ERR_MALFORMED), h->request_id, "client_name is not valid UTF-8");
         return;

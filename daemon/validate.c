@@ -68,17 +68,13 @@ int gsd_utf8_valid(const char *str, size_t n)
         }
         /* Lead byte: length and the least code point of that length
          * (less is an overlong form). C0, C1 and F5..FF never lead. */
-        size_t len;
-        uint32_t cp, min;
-        if (b >= 0xC2 && b <= 0xDF) {
-            len = 2, cp = b & 0x1F, min = 0x80;
-        } else if (b >= 0xE0 && b <= 0xEF) {
-            len = 3, cp = b & 0x0F, min = 0x800;
-        } else if (b >= 0xF0 && b <= 0xF4) {
-            len = 4, cp = b & 0x07, min = 0x10000;
-        } else {
+        size_t len = b >= 0xC2 && b <= 0xDF ? 2 : b >= 0xE0 && b <= 0xEF ? 3
+                   : b >= 0xF0 && b <= 0xF4 ? 4 : 0;
+        if (len == 0)
             return 0;
-        }
+        static const uint32_t lead_mask[5] = {0, 0, 0x1F, 0x0F, 0x07};
+        static const uint32_t least[5] = {0, 0, 0x80, 0x800, 0x10000};
+        uint32_t cp = b & lead_mask[len];
         if (n - i < len)
             return 0;
         for (size_t k = 1; k < len; k++) {
@@ -86,7 +82,7 @@ int gsd_utf8_valid(const char *str, size_t n)
                 return 0;
             cp = cp << 6 | (p[i + k] & 0x3F);
         }
-        if (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF))
+        if (cp < least[len] || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF))
             return 0;
         i += len;
     }
