@@ -3,7 +3,8 @@
  * HELLO) and the chunk size the stream is fed in; every complete frame's
  * payload is unpacked as the message its type names, and the image of a
  * FIT or REDIRECT goes through the daemon's header probe (the PNG/JPEG
- * size check that refuses decompression bombs on the loop thread). */
+ * size check that refuses decompression bombs on the loop thread); the
+ * input and each HELLO's client_name go through the UTF-8 check. */
 #include <stddef.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -33,6 +34,10 @@ static void probe_request(uint16_t type, const ProtobufCMessage *m)
         probe(((const Gazesplat__FitRequest *)m)->image);
     else if (type == GAZESPLAT__FRAME_TYPE__FRAME_REDIRECT)
         probe(((const Gazesplat__RedirectRequest *)m)->image);
+    else if (type == GAZESPLAT__FRAME_TYPE__FRAME_HELLO) {
+        const char *name = ((const Gazesplat__Hello *)m)->client_name;
+        (void)gsd_utf8_valid(name, strlen(name));
+    }
 }
 
 static int any_type(uint16_t t)
@@ -47,6 +52,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size)
     uint8_t mode = data[0];
     data++;
     size--;
+    (void)gsd_utf8_valid((const char *)data, size); /* the HELLO name check, on any bytes */
     gs_frame_limits lim = {mode & 1 ? GS_FRAME_MAX_PAYLOAD_PREHELLO : 1u << 20, 1, 1,
                            mode & 2 ? any_type : request_type};
     size_t chunk = (size_t)(mode >> 2) + 1;
