@@ -943,8 +943,8 @@ static size_t frame_bytes(const gs_client_frame *f, uint8_t *out, size_t cap)
 
 /* With a model: PROTOCOL.md's HELLO sent as printed gets its HELLO_OK
  * byte for byte (default limits, 256 px, photo input), its REDIRECT of an
- * unknown subject gets its ERROR byte for byte, and that worker-side ERROR
- * counts in request_errors. */
+ * unknown subject gets its ERROR byte for byte, that worker-side ERROR
+ * counts in request_errors, and a cached FIT says iters 0. */
 static void test_doc_examples(void)
 {
     if (!protocol_md || !model_path || access(model_path, R_OK) != 0) {
@@ -1005,6 +1005,36 @@ static void test_doc_examples(void)
               "ERROR: the daemon sent %zu bytes, PROTOCOL.md shows %zu (or they differ)", ngot, nwant);
     unsigned long long rerr = c ? stat_of(c, "request_errors") : 0;
     CHECK_MSG(rerr == 1, "request_errors %llu after one worker-side ERROR, want 1", rerr);
+    /* A FIT of a known key is cached: the subject's fit quality, iters 0
+     * (this request ran no fit). */
+    static uint8_t face[256 * 256 * 3];
+    memset(face, 128, sizeof face);
+    Gazesplat__Image img = GAZESPLAT__IMAGE__INIT;
+    img.format = GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8;
+    img.width = img.height = 256;
+    img.stride = 768;
+    img.data.data = face;
+    img.data.len = sizeof face;
+    Gazesplat__FitRequest fr = GAZESPLAT__FIT_REQUEST__INIT;
+    fr.image = &img;
+    fr.max_iters = 2;
+    Gazesplat__FitResult res[2];
+    int got_fit = 0;
+    for (int i = 0; c && i < 2; i++) {
+        if (gs_client_call(c, T(FIT), NULL, 20 + (uint32_t)i, &fr.base, 60000, &f, &err) != GS_OK)
+            break;
+        if (f.header.type == T(FIT_OK)) {
+            res[i] = *(Gazesplat__FitResult *)f.msg;
+            got_fit++;
+        }
+        gs_client_frame_free(&f);
+    }
+    CHECK_MSG(got_fit == 2, "%d of 2 FITs answered FIT_OK", got_fit);
+    if (got_fit == 2)
+        CHECK_MSG(!res[0].cached && res[0].iters > 0 && res[1].cached && res[1].iters == 0 &&
+                      res[1].psnr == res[0].psnr,
+                  "FIT then cached FIT: cached %d/%d iters %u/%u psnr %g/%g", res[0].cached,
+                  res[1].cached, res[0].iters, res[1].iters, res[0].psnr, res[1].psnr);
     gs_client_close(c);
     CHECK(daemon_stop(&e, SIGTERM, 10000) == 0);
     if (gs_test_failures)
