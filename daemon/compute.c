@@ -1285,6 +1285,9 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
         return stop_frame(s, j, why);
     if (so.cached)
         atomic_fetch_add(&s->ctr.fits_cached, 1);
+    j->iters = so.fit.iters;
+    j->ft_steps = so.ft_ran ? so.ft.iters : 0;
+    j->cached = so.cached;
     /* After the reply (gsd_worker_run) the subject is rendered once, so
      * that its first REDIRECT here is incremental; a cached fine-tuned
      * subject first needs its block in the clone. */
@@ -1353,6 +1356,7 @@ static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReques
         return E(ERR_INTERNAL);
     }
     gsd_post(w->srv, o);
+    j->images++;
     atomic_fetch_add(&w->srv->ctr.images_out, 1);
     return 0;
 }
@@ -1471,6 +1475,9 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
             photo_input_free(&photo);
             return is_stop_code(e) ? stop_frame(s, j, e) : gsd_error_frame(j, e, "%s", msg);
         }
+        j->iters = so.fit.iters;
+        j->ft_steps = so.ft_ran ? so.ft.iters : 0;
+        j->cached = so.cached;
     } else {
         char hex[33];
         gs_frame_key_hex(j->key, hex);

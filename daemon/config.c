@@ -27,6 +27,7 @@ static const key_def keys[] = {
     {"socket_mode", T_OCT, OFF(socket_mode), 0, 0777, "0660"},
     {"tcp", T_STR, OFF(tcp), 0, 0, ""},
     {"tcp_allow_remote", T_BOOL, OFF(tcp_allow_remote), 0, 1, "no"},
+    {"metrics", T_STR, OFF(metrics), 0, 0, ""},
     {"token", T_STR, OFF(token), 0, 0, ""},
     {"token_file", T_STR, OFF(token_file), 0, 0, ""},
     {"model", T_STR, OFF(model), 0, 0, ""},

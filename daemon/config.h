@@ -27,6 +27,7 @@ typedef struct gsd_config {
     int sweep_subjects;           /* renders kept per worker for gaze sweeps */
     int max_payload, max_targets, max_inflight, max_output_kb, max_connections;
     int output_budget_mb;         /* unsent output of all connections */
+    char metrics[GSD_STR_MAX];    /* Prometheus endpoint: HOST:PORT or unix:PATH; "" = none */
     int max_image_side, max_image_mpix;
     int header_timeout_ms, idle_timeout_ms, request_timeout_ms, max_deadline_ms;
     int drain_timeout_ms;

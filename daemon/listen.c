@@ -48,8 +48,9 @@ static void default_socket_path(char *out, size_t cap)
     }
 }
 
-/* Binds the Unix socket; a stale socket file nobody listens on is replaced. */
-static int bind_unix(gsd_server *s, const char *path, char *msg, size_t cap)
+/* A listening Unix socket at path with file mode `mode`; a stale socket
+ * file nobody listens on is replaced. The fd, or -1 with msg. */
+static int open_unix(const char *path, int mode, char *msg, size_t cap)
 {
     struct sockaddr_un sa;
     memset(&sa, 0, sizeof sa);
@@ -81,11 +82,20 @@ static int bind_unix(gsd_server *s, const char *path, char *msg, size_t cap)
     mode_t old = umask(0777);
     int r = bind(fd, (struct sockaddr *)&sa, sizeof sa);
     umask(old);
-    if (r != 0 || chmod(path, (mode_t)s->cfg.socket_mode) != 0 || listen(fd, 128) != 0) {
+    if (r != 0 || chmod(path, (mode_t)mode) != 0 || listen(fd, 128) != 0) {
         snprintf(msg, cap, "bind %s: %s", path, strerror(errno));
         close(fd);
         return -1;
     }
+    return fd;
+}
+
+/* Binds the daemon's Unix socket. */
+static int bind_unix(gsd_server *s, const char *path, char *msg, size_t cap)
+{
+    int fd = open_unix(path, s->cfg.socket_mode, msg, cap);
+    if (fd < 0)
+        return -1;
     if (add_listener(s, fd, 0, 1, path) != 0) {
         snprintf(msg, cap, "epoll: %s", strerror(errno));
         close(fd);
@@ -104,7 +114,9 @@ static int is_loopback(const struct sockaddr *sa)
     return 0;
 }
 
-static int bind_tcp(gsd_server *s, const char *hostport, char *msg, size_t cap)
+/* A listening TCP socket on HOST:PORT, loopback unless allow_remote. The
+ * fd, or -1 with msg; *remote: the address is not loopback. */
+static int open_tcp(const char *hostport, int allow_remote, int *remote, char *msg, size_t cap)
 {
     char host[256];
     const char *colon = strrchr(hostport, ':');
@@ -126,29 +138,50 @@ static int bind_tcp(gsd_server *s, const char *hostport, char *msg, size_t cap)
         snprintf(msg, cap, "tcp %s: %s", hostport, gai_strerror(gr));
         return -1;
     }
-    int rc = -1;
-    if (!is_loopback(res->ai_addr) && !s->cfg.tcp_allow_remote) {
+    int fd = -1;
+    *remote = !is_loopback(res->ai_addr);
+    if (*remote && !allow_remote) {
         snprintf(msg, cap, "tcp %s is not a loopback address; set tcp_allow_remote = yes "
                  "(and a token) to listen on it", hostport);
     } else {
-        int fd = socket(res->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
+        fd = socket(res->ai_family, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
         int one = 1;
         if (fd >= 0)
             setsockopt(fd, SOL_SOCKET, SO_REUSEADDR, &one, sizeof one);
-        if (fd < 0 || bind(fd, res->ai_addr, res->ai_addrlen) != 0 || listen(fd, 128) != 0 ||
-            add_listener(s, fd, 1, 0, NULL) != 0) {
+        if (fd < 0 || bind(fd, res->ai_addr, res->ai_addrlen) != 0 || listen(fd, 128) != 0) {
             snprintf(msg, cap, "tcp %s: %s", hostport, strerror(errno));
             if (fd >= 0)
                 close(fd);
-        } else {
-            rc = 0;
-            if (!is_loopback(res->ai_addr) && !s->cfg.token[0])
-                LOG_W("tcp %s reachable from other hosts without a token", hostport);
-            LOG_I("listening on tcp:%s%s", hostport, s->cfg.token[0] ? " (token required)" : "");
+            fd = -1;
         }
     }
     freeaddrinfo(res);
-    return rc;
+    return fd;
+}
+
+static int bind_tcp(gsd_server *s, const char *hostport, char *msg, size_t cap)
+{
+    int remote = 0;
+    int fd = open_tcp(hostport, s->cfg.tcp_allow_remote, &remote, msg, cap);
+    if (fd < 0)
+        return -1;
+    if (add_listener(s, fd, 1, 0, NULL) != 0) {
+        snprintf(msg, cap, "tcp %s: %s", hostport, strerror(errno));
+        close(fd);
+        return -1;
+    }
+    if (remote && !s->cfg.token[0])
+        LOG_W("tcp %s reachable from other hosts without a token", hostport);
+    LOG_I("listening on tcp:%s%s", hostport, s->cfg.token[0] ? " (token required)" : "");
+    return 0;
+}
+
+int gsd_listen_open(const char *addr, int mode, int allow_remote, char *msg, size_t cap)
+{
+    int remote = 0;
+    if (!strncmp(addr, "unix:", 5))
+        return open_unix(addr + 5, mode, msg, cap);
+    return open_tcp(addr, allow_remote, &remote, msg, cap);
 }
 
 int gsd_listen_setup(gsd_server *s, char *msg, size_t cap)

@@ -186,6 +186,7 @@ gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     h.request_id = job->request_id;
     memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
     gsd_out *o = error_out(job->srv, &h, code, text);
+    ((gsd_job *)job)->result = code; /* for its log line */
     if (o) {
         out_attach(o, job);
         o->final = 1;
@@ -522,52 +523,55 @@ static void handle_health(gsd_conn *c, const gs_frame_header *h)
     reply(c, h, T(HEALTH_OK), &m.base);
 }
 
-static void handle_stats(gsd_conn *c, const gs_frame_header *h)
+size_t gsd_stats_collect(gsd_server *s, gsd_stat *out, size_t cap)
 {
-    gsd_server *s = c->srv;
-    bump(&s->ctr.req_stats, 1);
-    enum { EXTRA = 23 };
-    Gazesplat__Counter cs[NCOUNTERS + EXTRA];
-    Gazesplat__Counter *ptrs[NCOUNTERS + EXTRA];
     size_t n = 0;
-    for (size_t i = 0; i < NCOUNTERS; i++, n++) {
-        gazesplat__counter__init(&cs[n]);
-        cs[n].name = (char *)counter_names[i].name;
-        cs[n].value = atomic_load((atomic_ullong *)((char *)&s->ctr + counter_names[i].off));
-    }
+    for (size_t i = 0; i < NCOUNTERS && n < cap; i++, n++)
+        out[n] = (gsd_stat){counter_names[i].name,
+                            atomic_load((atomic_ullong *)((char *)&s->ctr + counter_names[i].off)), 0};
     int qlen, running;
     gsd_work_lengths(s, &qlen, &running);
     gsd_cache_stats cst, tst, ist;
     gsd_cache_stats_get(s->cache, &cst);
     gsd_cache_stats_get(s->tuned, &tst);
     gsd_cache_stats_get(s->inputs, &ist);
-    const struct {
-        const char *name;
-        uint64_t v;
-    } extra[EXTRA] = {
-        {"connections_open", (uint64_t)s->nconns}, {"queue_length", (uint64_t)qlen},
-        {"jobs_running", (uint64_t)running}, {"cache_entries", cst.entries},
-        {"cache_bytes", cst.bytes}, {"cache_budget", cst.budget}, {"cache_hits", cst.hits},
-        {"cache_misses", cst.misses}, {"cache_evictions", cst.evictions},
-        {"tuned_entries", tst.entries}, {"tuned_bytes", tst.bytes},
-        {"tuned_evictions", tst.evictions}, {"input_entries", ist.entries},
-        {"input_bytes", ist.bytes}, {"input_evictions", ist.evictions},
-        {"state", (uint64_t)atomic_load(&s->state)},
-        {"uptime_ms", (uint64_t)(ev_now_ms() - s->started_ms)},
-        {"job_ms_avg", (uint64_t)s->job_ms_avg},
-        {"output_bytes", (uint64_t)atomic_load(&s->out_total)},
-        {"output_budget", (uint64_t)atomic_load(&s->out_budget)},
-        {"pool_threads", (uint64_t)gsd_pool_threads(&s->cfg)},
-        {"blas_threads", (uint64_t)gs_nn_blas_threads()},
-        {"max_connections", (uint64_t)s->cfg.max_connections}, /* in force: fits the fd limit */
+    /* gauge 1: a level now; 0: a count that only grows */
+    const gsd_stat extra[] = {
+        {"connections_open", (uint64_t)s->nconns, 1}, {"queue_length", (uint64_t)qlen, 1},
+        {"jobs_running", (uint64_t)running, 1}, {"cache_entries", cst.entries, 1},
+        {"cache_bytes", cst.bytes, 1}, {"cache_budget", cst.budget, 1}, {"cache_hits", cst.hits, 0},
+        {"cache_misses", cst.misses, 0}, {"cache_evictions", cst.evictions, 0},
+        {"tuned_entries", tst.entries, 1}, {"tuned_bytes", tst.bytes, 1},
+        {"tuned_evictions", tst.evictions, 0}, {"input_entries", ist.entries, 1},
+        {"input_bytes", ist.bytes, 1}, {"input_evictions", ist.evictions, 0},
+        {"state", (uint64_t)atomic_load(&s->state), 1},
+        {"uptime_ms", (uint64_t)(ev_now_ms() - s->started_ms), 1},
+        {"job_ms_avg", (uint64_t)s->job_ms_avg, 1},
+        {"output_bytes", (uint64_t)atomic_load(&s->out_total), 1},
+        {"output_budget", (uint64_t)atomic_load(&s->out_budget), 1},
+        {"pool_threads", (uint64_t)gsd_pool_threads(&s->cfg), 1},
+        {"blas_threads", (uint64_t)gs_nn_blas_threads(), 1},
+        {"max_connections", (uint64_t)s->cfg.max_connections, 1}, /* in force: fits the fd limit */
     };
-    for (size_t i = 0; i < EXTRA; i++, n++) {
-        gazesplat__counter__init(&cs[n]);
-        cs[n].name = (char *)extra[i].name;
-        cs[n].value = extra[i].v;
-    }
-    for (size_t i = 0; i < n; i++)
+    for (size_t i = 0; i < sizeof extra / sizeof extra[0] && n < cap; i++, n++)
+        out[n] = extra[i];
+    return n;
+}
+
+static void handle_stats(gsd_conn *c, const gs_frame_header *h)
+{
+    gsd_server *s = c->srv;
+    bump(&s->ctr.req_stats, 1);
+    gsd_stat st[GSD_STATS_MAX];
+    size_t n = gsd_stats_collect(s, st, GSD_STATS_MAX);
+    Gazesplat__Counter cs[GSD_STATS_MAX];
+    Gazesplat__Counter *ptrs[GSD_STATS_MAX];
+    for (size_t i = 0; i < n; i++) {
+        gazesplat__counter__init(&cs[i]);
+        cs[i].name = (char *)st[i].name;
+        cs[i].value = st[i].value;
         ptrs[i] = &cs[i];
+    }
     Gazesplat__Stats m = GAZESPLAT__STATS__INIT;
     m.n_counters = n;
     m.counters = ptrs;
@@ -676,6 +680,8 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
         snprintf(msg, sizeof msg, "%d requests in flight (max_inflight)", c->ninflight);
     }
     if (e) {
+        LOG_I("%s: %s %u refused: %s: %s", c->peer, gs_msg_type_name(h->type), h->request_id,
+              gs_msg_error_name(e), msg);
         reply_error(c, h, e, "%s", msg);
         return -1;
     }
@@ -686,6 +692,7 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
     }
     j->conn = c;
     j->srv = s;
+    snprintf(j->peer, sizeof j->peer, "%s", c->peer);
     j->type = h->type;
     j->est_ms = job_estimate_ms(s, h->type, m);
     if (h->type == T(REDIRECT)) {
@@ -710,6 +717,8 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
         gsd_work_lengths(s, &qlen, &running);
         b.retry_after_ms = retry_after_ms(c);
         b.queue_length = (uint32_t)qlen;
+        LOG_I("%s: %s %u refused: BUSY (%d queued), retry after %u ms", c->peer,
+              gs_msg_type_name(h->type), h->request_id, qlen, b.retry_after_ms);
         reply(c, h, T(BUSY), &b.base);
         free(j);
         return -1;
@@ -997,11 +1006,33 @@ static void learn_cost(gsd_server *s, const gsd_job *j, uint64_t ms)
         *avg = 0.7 * *avg + 0.3 * v;
 }
 
+/* One info line per compute request: who, what, which subject, how it
+ * ended, how long it took from queueing, and the work it did. */
+static void log_request(const gsd_job *j, int64_t total_ms)
+{
+    char hex[33], work[96] = "";
+    gs_frame_key_hex(j->key, hex);
+    if (j->type == T(FIT) || (j->type == T(REDIRECT) && j->inline_fit))
+        snprintf(work, sizeof work, "%s%d iterations, %d fine-tuning steps", j->cached ? "cached, " : "",
+                 j->iters, j->ft_steps);
+    if (j->type == T(REDIRECT))
+        snprintf(work + strlen(work), sizeof work - strlen(work), "%s%d of %u images", work[0] ? ", " : "",
+                 j->images, j->targets);
+    LOG_I("%s: %s %u subject %.16s: %s in %lld ms%s%s", j->peer, gs_msg_type_name(j->type), j->request_id,
+          hex, j->result ? gs_msg_error_name(j->result) : "ok", (long long)total_ms, work[0] ? ", " : "",
+          work);
+}
+
 static void job_finished(gsd_server *s, gsd_job *j, uint64_t ms, int ok)
 {
     gsd_conn *c = j->conn;
+    int64_t total = ev_now_ms() - j->enqueued_ms;
     if (ok)
         learn_cost(s, j, ms);
+    log_request(j, total);
+    gsd_metrics_observe(s, j->type == T(FIT) ? GSD_REQ_FIT : j->type == T(REDIRECT) ? GSD_REQ_REDIRECT
+                                                                                     : GSD_REQ_SLEEP,
+                        (double)total / 1000.0);
     if (c) {
         out_detach(c, j);
         c->last_ms = ev_now_ms();
@@ -1094,6 +1125,7 @@ static void on_tick(ev_loop *loop, void *ctx)
     gsd_server *s = ctx;
     int64_t now = ev_now_ms();
     conn_timeouts(s, now);
+    gsd_metrics_tick(s, now);
     if (s->watchdog_usec && now >= s->next_watchdog) {
         gsd_notify("WATCHDOG=1");
         s->next_watchdog = now + (int64_t)(s->watchdog_usec / 2000);
@@ -1283,6 +1315,7 @@ static void on_signal(ev_loop *loop, ev_watch *w, int events)
 int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
 {
     memset(s, 0, sizeof *s);
+    s->metrics_w.fd = -1;
     s->cfg = *cfg;
     s->started_ms = ev_now_ms();
     s->exit_code = 0;
@@ -1321,7 +1354,7 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
     }
     s->sig_wr = pfd[1];
     s->on_accept = on_accept;
-    if (gsd_listen_setup(s, msg, cap) != 0)
+    if (gsd_listen_setup(s, msg, cap) != 0 || gsd_metrics_setup(s, msg, cap) != 0)
         return -1;
     if (gsd_work_start(s, cfg->workers, cfg->queue_depth) != 0) {
         snprintf(msg, cap, "cannot start %d workers", cfg->workers);
@@ -1350,6 +1383,7 @@ int gsd_server_run(gsd_server *s)
 void gsd_server_free(gsd_server *s)
 {
     gsd_listen_close(s);
+    gsd_metrics_close(s);
     /* Running jobs end at their next check; the queue is answered. */
     for (gsd_conn *c = s->conns; c; c = c->next)
         for (gsd_job *j = c->inflight; j; j = j->cnext)

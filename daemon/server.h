@@ -68,6 +68,12 @@ typedef struct gsd_job {
      * max_output_kb (set by the loop). */
     atomic_size_t out_bytes;
     atomic_int conn_paused;
+    /* For the request's log line (set by the worker before its final
+     * frame; read by the loop after it): the result (0 or an ErrorCode),
+     * fit iterations, fine-tuning steps, images sent, answered from the
+     * cache; and who asked. */
+    int result, iters, ft_steps, images, cached;
+    char peer[64];
     int max_side;                /* image limits when the job was accepted */
     size_t max_pixels;
     double finetune_lr;          /* the server's finetune_lr when the job was accepted */
@@ -113,6 +119,23 @@ typedef struct gsd_listener {
     int owned;        /* we bound it: unlink the path at exit */
     char path[108];
 } gsd_listener;
+
+/* One figure of STATS (and of the metrics endpoint). */
+typedef struct gsd_stat {
+    const char *name;
+    uint64_t value;
+    int gauge; /* 1: a level now; 0: a count that only grows */
+} gsd_stat;
+#define GSD_STATS_MAX 96
+
+/* Request types the latency histograms keep (metrics.c). */
+enum { GSD_REQ_FIT, GSD_REQ_REDIRECT, GSD_REQ_SLEEP, GSD_REQ_KINDS };
+#define GSD_HIST_BUCKETS 14
+typedef struct gsd_hist {
+    uint64_t bucket[GSD_HIST_BUCKETS]; /* counts at or under each bound (not cumulative) */
+    uint64_t count;
+    double sum_s;
+} gsd_hist;
 
 struct gsd_server {
     gsd_config cfg;           /* (loop) current configuration */
@@ -174,6 +197,13 @@ struct gsd_server {
 
     gsd_live *live;           /* the hosted live pipeline (live.c), or NULL */
 
+    /* metrics endpoint (metrics.c; loop thread) */
+    ev_watch metrics_w;
+    struct gsd_mconn *mconns;
+    int nmconns;
+    char metrics_path[GSD_STR_MAX]; /* unix: the socket file to unlink */
+    gsd_hist hist[GSD_REQ_KINDS];
+
     void (*on_sighup)(gsd_server *s); /* set by main: re-reads the config */
     ev_fn on_accept;          /* listeners' callback (server.c) */
     void *app;
@@ -182,6 +212,8 @@ struct gsd_server {
 };
 
 /* ---- server.c ---- */
+/* Every STATS figure into out (at most cap); returns how many. */
+size_t gsd_stats_collect(gsd_server *s, gsd_stat *out, size_t cap);
 int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap);
 int gsd_server_run(gsd_server *s);
 void gsd_server_free(gsd_server *s);
@@ -278,8 +310,19 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
 int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
                        const Gazesplat__RedirectRequest *r, char *msg, size_t cap);
 
+/* ---- metrics.c: the Prometheus endpoint (config `metrics`) ---- */
+int gsd_metrics_setup(gsd_server *s, char *msg, size_t cap);
+void gsd_metrics_close(gsd_server *s);
+/* Closes scrapes older than header_timeout_ms (loop tick). */
+void gsd_metrics_tick(gsd_server *s, int64_t now);
+/* A finished compute request of kind GSD_REQ_* that took `seconds`. */
+void gsd_metrics_observe(gsd_server *s, int kind, double seconds);
+
 /* ---- listen.c ---- */
 int gsd_listen_setup(gsd_server *s, char *msg, size_t cap);
+/* A listening socket for addr, "unix:PATH" (file mode `mode`) or
+ * "HOST:PORT" (loopback unless allow_remote): the fd, or -1 with msg. */
+int gsd_listen_open(const char *addr, int mode, int allow_remote, char *msg, size_t cap);
 /* Closes the listeners; unlinks only sockets this process bound. */
 void gsd_listen_close(gsd_server *s);
 

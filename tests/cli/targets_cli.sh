@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # gazesplat's target checks on a tiny real model (issue 49): a target
-# outside the model's table is refused before any work (no fit: well
-# under a second, exit 2, the message names the field and the inclusive
-# range); an empty, malformed or overflowing list likewise; targets at
-# exactly the limits render (the renderer agrees with the table).
+# outside the model's table is refused before any work (exit 2, the message
+# names the field and the inclusive range, even with a model file that does
+# not exist: nothing was loaded or fitted); an empty, malformed or
+# overflowing list likewise; targets at exactly the limits render (the
+# renderer agrees with the table).
 set -euo pipefail
 G=$1
 T=$(mktemp -d); trap 'rm -rf "$T"' EXIT
@@ -12,22 +13,20 @@ cd "$T"
 "$G" synth --out ds --count 1 --seed-split test --identities 1 --size 128 --no-masks >/dev/null 2>&1
 IMG=ds/images/00000000.png
 fail() { echo "FAIL: $*"; exit 1; }
-now() { date +%s%N; }
 
-# refused WANT ARGS...: exit 2 within 1 s, stderr has WANT, nothing written.
+# refused WANT ARGS...: exit 2, stderr has WANT, nothing written.
 refused() {
   local want=$1; shift
-  local t0 st=0; t0=$(now)
+  local st=0
   "$G" "$@" >out.txt 2>err.txt || st=$?
-  local ms=$(( ($(now) - t0) / 1000000 ))
   [ "$st" -eq 2 ] || { cat err.txt; fail "$* exited $st, want 2"; }
-  [ "$ms" -lt 1000 ] || fail "$* took $ms ms: refused after work"
   grep -qF -- "$want" err.txt || { cat err.txt; fail "$*: no '$want'"; }
   ! grep -q "fit [0-9]* iterations" err.txt || fail "$*: fitted before refusing"
   [ ! -e o ] || fail "$*: wrote o/"
 }
 
-R=(redirect --model m.safetensors --image $IMG --out o)
+# No such model file: a check after the model load would fail on it first.
+R=(redirect --model missing.safetensors --image $IMG --out o)
 refused "--gaze-deg: item 0: gaze pitch 200 deg outside [-50, 50] deg (inclusive)" "${R[@]}" --gaze-deg 200,0
 refused "--gaze-deg: item 5: gaze yaw 60.0000001 deg outside [-60, 60] deg (inclusive)" \
   "${R[@]}" --gaze-deg "0,0;1,1;2,2;3,3;4,4;0,60.0000001"
@@ -42,7 +41,7 @@ refused "--head-deg: head pitch 1e+30 deg outside [-70, 70] deg (inclusive)" \
 refused "--head-deg: head yaw -70.000000001 deg outside [-70, 70]" \
   "${R[@]}" --gaze-deg 0,0 --head-deg 0,-70.000000001
 refused "--gaze-deg: gaze pitch -50.5 deg outside [-50, 50]" \
-  fit --model m.safetensors --image $IMG --gaze-deg -50.5,0 --out s.bin
+  fit --model missing.safetensors --image $IMG --gaze-deg -50.5,0 --out s.bin
 [ ! -e s.bin ] || fail "fit wrote s.bin"
 # The daemon client refuses before connecting (no server at this address).
 refused "--head-deg: item 1: head pitch 70.5 deg outside [-70, 70]" client redirect \

@@ -117,19 +117,19 @@ static void test_idle_after_long_reply(void)
 {
     daemon_proc d;
     memset(&d, 0, sizeof d);
-    const char *args[] = {"--set", "debug_requests=yes", "--set", "idle_timeout_ms=300", NULL};
+    const char *args[] = {"--set", "debug_requests=yes", "--set", "idle_timeout_ms=1000", NULL};
     CHECK(daemon_start_v(&d, bin, args) == 0);
     gs_client *c = h_hello(d.sock);
     int code;
     uint32_t id;
-    send_sleep(c, 1, 800, 0);
-    CHECK(h_recv(c, 3000, &code, &id, NULL) == T(SLEEP_OK));
-    h_sleep_ms(150);
+    send_sleep(c, 1, 1500, 0);
+    CHECK(h_recv(c, 5000, &code, &id, NULL) == T(SLEEP_OK));
+    h_sleep_ms(200);
     send_sleep(c, 2, 0, 0);
     int type = h_recv(c, 3000, &code, &id, NULL);
     CHECK_MSG(type == T(SLEEP_OK) && id == 2, "after a long reply: type %d code %d", type, code);
     /* Really idle: closed with ERR_TIMEOUT. */
-    type = h_recv(c, 3000, &code, &id, NULL);
+    type = h_recv(c, 5000, &code, &id, NULL);
     CHECK_MSG(type == T(ERROR) && code == E(ERR_TIMEOUT), "idle: type %d code %d", type, code);
     gs_client_close(c);
     CHECK(daemon_stop(&d, SIGTERM, 5000) == 0);
