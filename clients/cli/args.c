@@ -10,6 +10,7 @@
 #include <string.h>
 #include <sys/stat.h>
 #include <time.h>
+#include <unistd.h>
 
 #include "cli.h"
 #include "gazesplat/model.h"
@@ -249,6 +250,39 @@ double cli_now_s(void)
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+void cli_progress_start(cli_progress_t *p)
+{
+    p->tty = isatty(STDERR_FILENO);
+    p->drawn = 0;
+    p->start = cli_now_s();
+    p->last = -1e9;
+}
+
+void cli_progress(cli_progress_t *p, int force, const char *fmt, ...)
+{
+    double now = cli_now_s();
+    if (!force && now - p->last < (p->tty ? 0.1 : 10.0))
+        return;
+    p->last = now;
+    va_list ap;
+    va_start(ap, fmt);
+    if (p->tty)
+        fputs("\r\033[K", stderr); /* back to the line's start, and clear it */
+    vfprintf(stderr, fmt, ap);
+    if (!p->tty)
+        fputc('\n', stderr);
+    va_end(ap);
+    fflush(stderr);
+    p->drawn = 1;
+}
+
+void cli_progress_done(cli_progress_t *p)
+{
+    if (p->tty && p->drawn) /* the line goes: what follows reports the result */
+        fputs("\r\033[K", stderr);
+    p->drawn = 0;
 }
 
 int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len)

@@ -111,6 +111,20 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
 /* CLOCK_MONOTONIC in seconds. */
 double cli_now_s(void);
 
+/* Progress on stderr. On a terminal one line is rewritten in place (as
+ * often as it is called, at most 10 times a second); anywhere else (a log
+ * file, a pipe, journald) each report is a line of its own, at most one
+ * every 10 s, and never a carriage return; `force` reports now whatever
+ * the rate. cli_progress_done ends it: on a terminal the line is cleared
+ * for what reports the result. */
+typedef struct cli_progress_t {
+    int tty, drawn;
+    double last, start;
+} cli_progress_t;
+void cli_progress_start(cli_progress_t *p);
+void cli_progress(cli_progress_t *p, int force, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
+void cli_progress_done(cli_progress_t *p);
+
 /* Reads a regular file of 1..max bytes whole into *out (malloc'd).
  * Returns 0, or -1 (missing, empty, too large, unreadable; *out NULL). */
 int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len);

@@ -765,17 +765,18 @@ static int evaluate(evaluator *ev, const cli_opt *o, const gs_eval_pairs *ps,
     int rc = CLI_OK;
     if (!ev->rows || !ev->out || !ev->eye || !ev->face)
         rc = cli_fail(cmd, "out of memory");
-    double t0 = cli_now_s();
+    cli_progress_t prog;
+    cli_progress_start(&prog);
     for (int i = 0, done = 0; !rc && i < npairs; done++) {
         int j = i;
         while (j < npairs && ps->p[j].input == ps->p[i].input)
             j++;
         eval_input(ev, ps, i, j, csv);
         i = j;
-        fprintf(stderr, "\rgazesplat eval: input %d/%d, %.0f s", done + 1,
-                info->inputs, cli_now_s() - t0);
+        cli_progress(&prog, j == npairs, "gazesplat eval: input %d/%d, %.0f s", done + 1, info->inputs,
+                     cli_now_s() - prog.start);
     }
-    fputc('\n', stderr);
+    cli_progress_done(&prog);
     if (fclose(csv) && !rc)
         rc = cli_fail(cmd, "cannot write %s", path);
     snprintf(path, sizeof path, "%s/summary.md", o[O_OUT].value);

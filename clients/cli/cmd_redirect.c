@@ -127,6 +127,34 @@ static int load_model(const cli_command *cmd, const char *path, gs_model **m)
     return CLI_OK;
 }
 
+/* Progress of a fit or a fine-tune: the library polls its cancel
+ * callback once per iteration; this one never cancels, it counts and
+ * reports (cli_progress: in place on a terminal, a line every 10 s
+ * elsewhere). */
+typedef struct iter_progress {
+    cli_progress_t p;
+    const char *cmd, *what;
+    int n, total;
+} iter_progress;
+
+static int report_iteration(void *arg)
+{
+    iter_progress *ip = arg;
+    ip->n++;
+    cli_progress(&ip->p, 0, "gazesplat %s: %s, iteration %d of at most %d, %.1f s", ip->cmd, ip->what,
+                 ip->n, ip->total, cli_now_s() - ip->p.start);
+    return 0;
+}
+
+static void iter_progress_start(iter_progress *ip, const char *cmd, const char *what, int total)
+{
+    cli_progress_start(&ip->p);
+    ip->cmd = cmd;
+    ip->what = what;
+    ip->n = 0;
+    ip->total = total;
+}
+
 /* After a fit: a copy of m fine-tuned on the fitted image (ft->iters
  * steps), reported on stderr. */
 static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
@@ -141,7 +169,13 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
     char parts[64];
     if (gs_model_clone(m, tuned, &err))
         return cli_fail(cmd, "finetune: %s", err.msg);
-    if (gs_model_finetune(*tuned, pool, sub, rgb, stride, &fo, &r, &err)) {
+    iter_progress ip;
+    iter_progress_start(&ip, cmd->name, "fine-tuning", fo.iters > 0 ? fo.iters : 50);
+    fo.cancel = report_iteration;
+    fo.cancel_arg = &ip;
+    int frc = gs_model_finetune(*tuned, pool, sub, rgb, stride, &fo, &r, &err);
+    cli_progress_done(&ip.p);
+    if (frc) {
         gs_model_destroy(*tuned);
         *tuned = NULL;
         return cli_fail(cmd, "finetune: %s", err.msg);
@@ -201,13 +235,18 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
         o.gaze_pitch = gaze[0] * DEG;
         o.gaze_yaw = gaze[1] * DEG;
     }
+    iter_progress ip;
+    iter_progress_start(&ip, cmd->name, "fit", o.max_iters > 0 ? o.max_iters : 200);
+    o.cancel = report_iteration;
+    o.cancel_arg = &ip;
     if (!rc) {
         gs_model_ctx *c = gs_model_ctx_create(m);
         gs_fit_report r;
+        int frc = c ? gs_model_fit(c, pool, img.data, img.stride, &o, sub, &r, &err) : GS_ERR_NOMEM;
+        cli_progress_done(&ip.p);
         if (!c)
             rc = cli_fail(cmd, "out of memory");
-        else if (gs_model_fit(c, pool, img.data, img.stride, &o, sub, &r,
-                              &err))
+        else if (frc)
             rc = cli_fail(cmd, "fit: %s", err.msg);
         else
             fprintf(stderr,

@@ -56,12 +56,12 @@ enum {
 
 static void progress(void *ctx, uint64_t done, uint64_t total)
 {
-    (void)ctx;
-    if (done == total || done % 100 == 0)
-        fprintf(stderr, "\rgazesplat synth: %llu/%llu", (unsigned long long)done,
-                (unsigned long long)total);
+    cli_progress_t *p = ctx;
+    double el = cli_now_s() - p->start;
+    cli_progress(p, done == total, "gazesplat synth: %llu/%llu images, %.0f s", (unsigned long long)done,
+                 (unsigned long long)total, el);
     if (done == total)
-        fputc('\n', stderr);
+        cli_progress_done(p);
 }
 
 static void put_f32(FILE *f, float v)
@@ -257,8 +257,10 @@ static int run_synth(int argc, char **argv)
     if (!pool)
         return cli_fail(&cli_synth_command, "cannot start threads");
     if (o[O_OUT].value) {
+        cli_progress_t prog;
+        cli_progress_start(&prog);
         gs_synth_dataset_opts d = {(uint64_t)first, (uint64_t)count,
-                                   !o[O_NOMASKS].value, progress, NULL};
+                                   !o[O_NOMASKS].value, progress, &prog};
         gs_error err = {0, ""};
         if (gs_synth_dataset_write(o[O_OUT].value, &c, &d, pool, &err) != GS_OK)
             rc = cli_fail(&cli_synth_command, "%s", err.msg);
