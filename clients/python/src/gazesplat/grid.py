@@ -24,7 +24,8 @@ from PIL import Image, ImageDraw, ImageFont
 from .client import Client
 from .errors import Busy, GazesplatError
 
-__all__ = ["grid_size", "cell_origin", "compose", "redirect_grid", "wait_ready", "main", "cli"]
+__all__ = ["grid_size", "cell_origin", "compose", "redirect_grid", "wait_ready", "parse_angles", "main", "cli",
+           "LABEL_W", "LABEL_H", "GAP", "BACKGROUND", "INK"]
 
 # Layout: a LABEL_W-wide column of pitch labels on the left, a LABEL_H-high
 # row of yaw labels on top, then rows x cols cells of CELL x CELL pixels
