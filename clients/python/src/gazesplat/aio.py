@@ -37,7 +37,6 @@ from .protocol import (HEADER, VERSION_MAX, VERSION_MIN, ZERO_KEY, AnglePair, Fr
 __all__ = ["AsyncClient", "connect"]
 
 FT = pb.FrameType
-_FINAL = (FT.FRAME_DONE, FT.FRAME_ERROR, FT.FRAME_BUSY)
 _CLOSED = object()  # queued to waiters when the connection ends
 
 
@@ -137,7 +136,7 @@ class AsyncClient:
                         raise reply_error(f) or ProtocolError("connection error")
                     raise ProtocolError("frame %s for request %d, which is not in flight"
                                         % (FT.Name(f.type), rid))
-                final = f.type in _FINAL
+                final = f.type != FT.FRAME_IMAGE  # a request's every other reply is its last
                 if not req.abandoned:
                     req.queue.put_nowait(f)
                 if final:
