@@ -240,10 +240,18 @@ class Client:
         self._settle()
         rid = self.new_id()
         self.send(FT.FRAME_REDIRECT, req, rid, subject or ZERO_KEY)
-        self._open, self._cancelled = rid, False
-        return self._images(rid)
+        return self.images(rid)
 
-    def _images(self, rid: int) -> Generator[Any, None, None]:
+    def images(self, rid: int) -> Generator[Any, None, None]:
+        """The ImageResults of REDIRECT request rid, sent with send(): as
+        redirect()'s generator (the request counts as open from now on)."""
+        self._settle()
+        self._open, self._cancelled = rid, False
+        return self._stream(rid)
+
+    _images = images  # the name older scripts use
+
+    def _stream(self, rid: int) -> Generator[Any, None, None]:
         try:
             while True:
                 if self._open != rid:
