@@ -178,6 +178,54 @@ def test_early_stop():
           "early stop: CANCEL, drained, next request answered: %s" % seen)
 
 
+def test_aio():
+    """AsyncClient against a scripted server: a reply later than the
+    timeout raises TimeoutError and cancels that request (its late frames
+    are dropped), a REDIRECT left early is cancelled and drained, and the
+    connection answers the next requests."""
+    import asyncio
+    import contextlib
+    from gazesplat.aio import AsyncClient
+    seen = []
+
+    def script(conn, read):
+        ftype, slow, _ = read()                  # HEALTH: answered too late
+        f, _, cancel = read()                    # its CANCEL
+        seen.append((f, cancel.request_id == slow))
+        conn.sendall(P.pack_frame(FT.FRAME_HEALTH_OK, pb.Health(), slow))
+        ftype, rid, _ = read()                   # REDIRECT
+        conn.sendall(P.pack_frame(FT.FRAME_IMAGE, pb.ImageResult(index=0), rid))
+        f, _, cancel = read()
+        seen.append((f, cancel.request_id == rid))
+        conn.sendall(P.pack_frame(FT.FRAME_IMAGE, pb.ImageResult(index=1), rid))
+        conn.sendall(P.pack_frame(FT.FRAME_ERROR, pb.Error(code=pb.ERR_CANCELLED, request_id=rid), rid))
+        ftype, rid, _ = read()
+        conn.sendall(P.pack_frame(FT.FRAME_HEALTH_OK, pb.Health(state=pb.Health.READY), rid))
+
+    async def client(path):
+        async with AsyncClient("unix:" + path, timeout=0.3) as c:
+            try:
+                await c.health()
+                check(False, "aio: no timeout")
+            except asyncio.TimeoutError:
+                pass
+            c.timeout = 10
+            async with contextlib.aclosing(c.redirect([(0, 0)] * 3, subject=b"k" * 16)) as it:
+                async for r in it:
+                    check(r.index == 0, "aio: first image")
+                    break
+            check(not c._pending, "aio: nothing in flight after the early exit: %s" % list(c._pending))
+            h = await c.health()
+            return h.state
+
+    path = os.path.join(tempfile.mkdtemp(prefix="gs_units_"), "s")
+    th = scripted_server(path, script)
+    state = asyncio.run(client(path))
+    th.join(10)
+    check(seen == [(FT.FRAME_CANCEL, True)] * 2 and state == pb.Health.READY,
+          "aio: timeout and early exit cancel; the next request is answered: %s %s" % (seen, state))
+
+
 def test_unbuilt(src):
     """The source tree alone (no generated messages): a clear ImportError."""
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
@@ -192,6 +240,7 @@ def main():
     test_protocol()
     test_geometry()
     test_early_stop()
+    test_aio()
     test_unbuilt(sys.argv[1])
     print("%d checks, %d failed" % (count, failures))
     return 1 if failures else 0
