@@ -26,6 +26,7 @@ except ImportError as _e:
                       "messages are generated from proto/gazesplat.proto by protoc when the package "
                       "is built: pip install clients/python, or use the CMake build's python/ "
                       "directory") from _e
+from .aio import AsyncClient
 from .client import Client
 from .errors import Busy, GazesplatError, ProtocolError
 from .protocol import image_array, pack_frame
@@ -35,5 +36,5 @@ try:
 except ImportError:  # a source tree that was never built
     __version__ = "0+unknown"
 
-__all__ = ["Client", "GazesplatError", "Busy", "ProtocolError", "image_array", "pack_frame", "pb",
+__all__ = ["Client", "AsyncClient", "GazesplatError", "Busy", "ProtocolError", "image_array", "pack_frame", "pb",
            "__version__"]

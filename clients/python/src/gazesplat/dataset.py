@@ -112,8 +112,10 @@ class RedirectedGazeDataset(torch.utils.data.IterableDataset):  # type: ignore[m
             raise ValueError("no sources")
         if batch < 1 or targets_per_source < 1 or epochs < 1:
             raise ValueError("batch, targets_per_source and epochs must be >= 1")
-        if not callable(gaze_targets) and not list(gaze_targets):
-            raise ValueError("no gaze targets")
+        if not callable(gaze_targets):
+            gaze_targets = [(float(g[0]), float(g[1])) for g in gaze_targets]
+            if not gaze_targets:
+                raise ValueError("no gaze targets")
         if deadline_ms < 0:
             raise ValueError("deadline_ms must be >= 0")
         self.gaze_targets = gaze_targets
@@ -138,7 +140,7 @@ class RedirectedGazeDataset(torch.utils.data.IterableDataset):  # type: ignore[m
         self.epoch = int(epoch)
 
     def __len__(self) -> int:
-        per = self.targets_per_source if callable(self.gaze_targets) else len(list(self.gaze_targets))
+        per = self.targets_per_source if callable(self.gaze_targets) else len(self.gaze_targets)
         return self.epochs * len(self.sources) * per
 
     def _targets(self, rng: random.Random) -> Tuple[List[AnglePair], Optional[List[AnglePair]]]:
