@@ -25,7 +25,7 @@ for _ in $(seq 300); do
   sleep 0.1
 done
 echo "gazesplatd (pid $pid, log $OUT/gazesplatd.log): fitting the photo, then 9 renders"
-GAZESPLAT_PB2_DIR=build/python /usr/bin/python3 clients/python/gazesplat_grid.py \
+PYTHONPATH=build/python /usr/bin/python3 -m gazesplat.grid \
   --addr "unix:$OUT/gazesplatd.sock" --image samples/astronaut.jpg --out "$OUT/gaze-grid.png" \
   --pitch 20,0,-20 --yaw 25,0,-25 --max-iters "${GS_DEMO_ITERS:-100}" --deadline-ms 900000
 kill -TERM $pid && wait $pid || true

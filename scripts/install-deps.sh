@@ -24,6 +24,9 @@ PACKAGES=(
   dpkg-dev file
   # the Python grid client (scripts/demo.sh): PNG reading and writing
   python3-pil
+  # the Python package (clients/python): a venv to pip-install it into
+  # without network, the build backend, and its type check
+  python3-venv python3-setuptools python3-wheel mypy
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev

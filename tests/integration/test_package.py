@@ -11,7 +11,9 @@
     Python client imports its generated messages; the extracted daemon
     loads the shipped model with the installed configuration and answers
     HEALTH READY; systemd-analyze verify prints nothing for the extracted
-    units (ExecStart pointed into the temporary root); systemd-sysusers
+    units (ExecStart pointed into the temporary root); the Python package
+    imports from the extracted dist-packages (its generated messages, py.typed
+    and metadata beside it) and its gazesplat-grid script runs; systemd-sysusers
     --root on the temporary root creates the gazesplat group from the
     packaged sysusers.d file.
 usage: test_package.py BUILD_DIR INSTALL_PREFIX"""
@@ -37,10 +39,17 @@ FHS = [
     "usr/lib/sysusers.d/gazesplat.conf",
     "usr/share/gazesplat/models/gazegaussian-cpu.safetensors",
     "usr/share/gazesplat/models/README.md",
-    "usr/share/gazesplat/python/gazesplat_client.py",
-    "usr/share/gazesplat/python/gazesplat_pb2.py",
-    "usr/share/gazesplat/python/gazesplat_grid.py",
-    "usr/share/gazesplat/python/gazesplat_dataset.py",
+    "usr/bin/gazesplat-grid",
+    "usr/lib/python3/dist-packages/gazesplat/__init__.py",
+    "usr/lib/python3/dist-packages/gazesplat/client.py",
+    "usr/lib/python3/dist-packages/gazesplat/aio.py",
+    "usr/lib/python3/dist-packages/gazesplat/dataset.py",
+    "usr/lib/python3/dist-packages/gazesplat/grid.py",
+    "usr/lib/python3/dist-packages/gazesplat/gazesplat_pb2.py",
+    "usr/lib/python3/dist-packages/gazesplat/gazesplat_pb2.pyi",
+    "usr/lib/python3/dist-packages/gazesplat/py.typed",
+    "usr/lib/python3/dist-packages/gazesplat-%s.egg-info/PKG-INFO",
+    "usr/share/doc/gazesplat/python/train_gaze_estimator.py",
     "usr/share/gazesplat/samples/astronaut.jpg",
     "usr/share/doc/gazesplat/README.md",
     "usr/share/doc/gazesplat/PROTOCOL.md",
@@ -104,7 +113,7 @@ def check_scripts(t, ctrl):
                 "postinst does not create the group")
 
 
-def check_contents(t, deb, prefix, conffiles):
+def check_contents(t, deb, prefix, conffiles, version):
     r = run(["dpkg-deb", "-c", deb])
     t.check(r.returncode == 0, "dpkg-deb -c: %s" % r.stderr)
     listed = {line.split()[-1].lstrip("./") for line in r.stdout.splitlines() if line.split()}
@@ -112,7 +121,10 @@ def check_contents(t, deb, prefix, conffiles):
         print("NOTE: build configured with prefix %s: FHS paths checked only for /usr" % prefix)
         return listed
     for p in FHS:
+        p = p % version if "%s" in p else p
         t.check(p in listed, "package lacks /%s" % p)
+    stale = [p for p in listed if p.startswith("usr/share/gazesplat/python") or "__pycache__" in p]
+    t.check(not stale, "stale or compiled Python files: %s" % stale)
     t.check(conffiles == ["/etc/gazesplat/gazesplatd.conf"], "conffiles %s" % conffiles)
     stray = [p for p in listed if p and not p.endswith("/")
              and not p.startswith(("usr/bin/", "usr/sbin/", "usr/lib/", "usr/share/", "etc/gazesplat/"))]
@@ -150,21 +162,42 @@ def check_extracted(t, deb, root, prefix, version, tmp):
     return sbin, root + model.group(1) if model else None, unit_dir
 
 
-def check_python(t, root, prefix):
-    pydir = os.path.join(root, prefix.lstrip("/"), "share/gazesplat/python")
-    env = dict(os.environ)
-    env.pop("GAZESPLAT_PB2_DIR", None)
-    r = run([sys.executable, "-c", "import sys; sys.path.insert(0, %r); import gazesplat_client as g; "
-             "print(g.pb.__file__)" % pydir], env=env)
-    t.check(r.returncode == 0 and r.stdout.strip().startswith(pydir),
-            "installed Python client: rc %d %s %s" % (r.returncode, r.stdout, r.stderr[-500:]))
+def python_env(pydir):
+    """The environment of a python3 whose dist-packages is the extracted one."""
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("PYTHON", "GAZESPLAT_"))}
+    env["PYTHONPATH"] = pydir
+    return env
+
+
+def check_python(t, root, prefix, version):
+    """`python3 -c "import gazesplat"` with the extracted dist-packages (the
+    host's python3 reads /usr/lib/python3/dist-packages; here PYTHONPATH
+    points at the copy in the root), and the packaged console script."""
+    pydir = os.path.join(root, prefix.lstrip("/"), "lib/python3/dist-packages")
+    env = python_env(pydir)
+    r = run([sys.executable, "-c", "import importlib.metadata as m, gazesplat, gazesplat.aio, gazesplat.grid; "
+             "print(gazesplat.pb.__file__); print(gazesplat.__version__, m.version('gazesplat'))"],
+            env=env, cwd=root)
+    lines = r.stdout.split("\n")
+    t.check(r.returncode == 0 and lines[0].startswith(os.path.join(pydir, "gazesplat", "")) and
+            lines[1] == "%s %s" % (version, version),
+            "import gazesplat from the package: rc %d %s %s" % (r.returncode, r.stdout, r.stderr[-800:]))
+    r = run([sys.executable, "-c", "import gazesplat.dataset"], env=env, cwd=root)
+    t.check(r.returncode == 0, "import gazesplat.dataset (python3-torch): %s" % r.stderr[-800:])
+    script = os.path.join(root, prefix.lstrip("/"), "bin", "gazesplat-grid")
+    first = open(script).readline().strip() if os.path.exists(script) else ""
+    t.check(first == "#!/usr/bin/python3" and os.access(script, os.X_OK), "gazesplat-grid: %r" % first)
+    r = run([sys.executable, script, "--help"], env=env, cwd=root)
+    t.check(r.returncode == 0 and "usage: gazesplat-grid" in r.stdout,
+            "gazesplat-grid --help: rc %d %s" % (r.returncode, r.stderr[-800:]))
     return pydir
 
 
 def check_daemon(t, sbin, conf, model, pydir):
-    """The extracted daemon with the installed configuration and model."""
+    """The extracted daemon with the installed configuration and model,
+    asked by the extracted Python package."""
     sys.path.insert(0, pydir)
-    import gazesplat_client as gc
+    import gazesplat as gc
     d = Daemon(sbin, ["-c", conf, "--model", model, "--state-dir", tempfile.mkdtemp(prefix="gsd_pkg_"),
                       "--set", "photo_input=no"]).start()
     try:
@@ -226,10 +259,10 @@ def main():
             return t.status()
         version, conffiles, ctrl = check_control(t, deb, tmp)
         check_scripts(t, ctrl)
-        check_contents(t, deb, prefix, conffiles)
+        check_contents(t, deb, prefix, conffiles, version)
         root = os.path.join(tmp, "root")
         sbin, model, unit_dir = check_extracted(t, deb, root, prefix, version, tmp)
-        pydir = check_python(t, root, prefix)
+        pydir = check_python(t, root, prefix, version)
         exe, conf = unit_paths(root, unit_dir)
         if model and conf:
             check_daemon(t, sbin, root + conf, model, pydir)

@@ -1,8 +1,9 @@
 """Checks that proto/PROTOCOL.md carries every frame printed by
 gs_proto_examples verbatim, that each frame decodes in Python with
-struct and (when available) the generated gazesplat_pb2, and that its
+struct and (when available) the generated gazesplat.gazesplat_pb2, and that its
 appendix reproduces proto/gazesplat.proto byte for byte.
-usage: check_examples.py EXAMPLES_TOOL PROTOCOL.md [PB2_DIR]"""
+usage: check_examples.py EXAMPLES_TOOL PROTOCOL.md [PYTHON_DIR]
+(PYTHON_DIR: the build tree's python/, which holds the package gazesplat)"""
 import os
 import re
 import struct
@@ -39,9 +40,9 @@ def main():
               file=sys.stderr)
         failures += 1
     pb2 = sys.argv[3] if len(sys.argv) > 3 else None
-    if pb2 and os.path.exists(os.path.join(pb2, "gazesplat_pb2.py")):
+    if pb2 and os.path.exists(os.path.join(pb2, "gazesplat", "gazesplat_pb2.py")):
         sys.path.insert(0, pb2)
-        import gazesplat_pb2 as pb
+        from gazesplat import gazesplat_pb2 as pb
         classes = {1: pb.Hello, 2: pb.HelloOk, 3: pb.HealthRequest, 7: pb.FitRequest,
                    9: pb.RedirectRequest, 11: pb.Done, 12: pb.Cancel, 13: pb.Error, 14: pb.Busy,
                    15: pb.LivePolicyRequest}

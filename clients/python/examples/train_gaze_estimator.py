@@ -1,19 +1,26 @@
 """Trains a small gaze estimator for a few steps on samples streamed from
 gazesplatd (RedirectedGazeDataset): random gaze targets in +-25 deg pitch,
-+-35 deg yaw for each source face; L1 loss on (pitch, yaw) in radians.
++-35 deg yaw for each source face, new ones each epoch (set_epoch); L1 loss
+on (pitch, yaw) in radians. Needs the package gazesplat with its extra
+[torch] (pip install 'clients/python[torch]', or the Debian package with
+python3-torch).
 
     python3 train_gaze_estimator.py --addr unix:/run/gazesplat/gazesplatd.sock \
         --steps 200 face0.png face1.png ...
 """
 import argparse
+import itertools
 import os
 import sys
 import time
 
 import torch
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
-from gazesplat_dataset import RedirectedGazeDataset  # noqa: E402
+try:
+    from gazesplat.dataset import RedirectedGazeDataset
+except ImportError:  # run from the source tree: the compatibility modules find the build's package
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+    from gazesplat_dataset import RedirectedGazeDataset
 
 
 class SmallGazeNet(torch.nn.Module):
@@ -32,6 +39,13 @@ class SmallGazeNet(torch.nn.Module):
         return self.head(self.features(x).mean(dim=(2, 3)))
 
 
+def epochs(ds, loader):
+    """The loader's batches, epoch after epoch, each with its own targets."""
+    for epoch in itertools.count():
+        ds.set_epoch(epoch)
+        yield from loader
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("images", nargs="+", help="normalized face images (PNG/JPEG)")
@@ -48,13 +62,12 @@ def main(argv=None):
         return (rng.uniform(-25, 25), rng.uniform(-35, 35))
 
     ds = RedirectedGazeDataset(a.images, gaze_targets=draw, targets_per_source=a.batch, addr=a.addr,
-                               fit_iters=a.fit_iters, batch=a.batch, seed=a.seed,
-                               epochs=1 + a.steps * a.batch // max(1, len(a.images) * a.batch))
+                               fit_iters=a.fit_iters, batch=a.batch, seed=a.seed)
     loader = torch.utils.data.DataLoader(ds, batch_size=a.batch)
     net = SmallGazeNet()
     opt = torch.optim.Adam(net.parameters(), lr=a.lr)
     t0, losses = time.time(), []
-    for step, batch in enumerate(loader):
+    for step, batch in enumerate(epochs(ds, loader)):
         if step >= a.steps:
             break
         pred = net(batch["image"])
