@@ -45,6 +45,10 @@ install(FILES ${gs_stage}/gazesplatd.service ${PROJECT_SOURCE_DIR}/systemd/gazes
   DESTINATION ${GS_SYSTEMD_UNITDIR})
 install(FILES ${PROJECT_SOURCE_DIR}/systemd/gazesplat.sysusers
   DESTINATION ${GS_SYSUSERSDIR} RENAME gazesplat.conf)
+install(FILES ${PROJECT_SOURCE_DIR}/systemd/gazesplat-v4l2loopback.modprobe.conf
+  DESTINATION lib/modprobe.d RENAME gazesplat-v4l2loopback.conf)
+install(FILES ${PROJECT_SOURCE_DIR}/systemd/gazesplat-v4l2loopback.modules-load.conf
+  DESTINATION ${CMAKE_INSTALL_DOCDIR}/examples)
 install(FILES ${PROJECT_SOURCE_DIR}/models/${GS_DEFAULT_MODEL} ${PROJECT_SOURCE_DIR}/models/README.md
   DESTINATION ${CMAKE_INSTALL_DATADIR}/gazesplat/models)
 install(FILES ${PROJECT_SOURCE_DIR}/samples/astronaut.jpg ${PROJECT_SOURCE_DIR}/samples/README.md

@@ -20,6 +20,7 @@
 #include <sys/stat.h>
 #include <sys/uio.h>
 #include <sys/un.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "gazesplat/nn.h"
@@ -1295,7 +1296,12 @@ static void on_signal(ev_loop *loop, ev_watch *w, int events)
     while (read(w->fd, &sig, 1) == 1) {
         if (sig == SIGHUP) {
             LOG_I("SIGHUP: reloading configuration and model");
-            gsd_notify("RELOADING=1");
+            /* MONOTONIC_USEC: systemd 253's Type=notify-reload wants it with
+             * RELOADING=1; older managers ignore it. */
+            struct timespec ts;
+            clock_gettime(CLOCK_MONOTONIC, &ts);
+            gsd_notifyf("RELOADING=1\nMONOTONIC_USEC=%llu",
+                        (unsigned long long)ts.tv_sec * 1000000ull + (unsigned long long)ts.tv_nsec / 1000u);
             if (s->on_sighup)
                 s->on_sighup(s);
             if (atomic_load(&s->state) != GSD_DRAINING)
