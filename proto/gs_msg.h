@@ -6,6 +6,7 @@
 #define GS_MSG_H
 
 #include <stddef.h>
+#include <stdio.h>
 #include <stdint.h>
 
 #include "gazesplat.pb-c.h"
@@ -37,6 +38,15 @@ int gs_msg_pack(const gs_frame_header *h, const ProtobufCMessage *msg, size_t ma
 /* Unpacks the payload of a frame as the message its type names. NULL when
  * the bytes are not a valid message (free with protobuf_c_message_free_unpacked). */
 ProtobufCMessage *gs_msg_unpack(uint16_t type, const uint8_t *payload, size_t len);
+
+/* Writes msg as one JSON object (no newline): the proto3 JSON mapping
+ * with the proto's field names, except that bytes are lowercase hex (keys
+ * are hex everywhere in gazesplat) and every field is written, defaults
+ * included, so scripts find each key. Enums by name, 64-bit integers as
+ * numbers, non-finite floats as null. Returns 0, or -1 on a write error. */
+int gs_msg_write_json(FILE *f, const ProtobufCMessage *msg);
+/* s (NULL: "") as a JSON string, quotes and escapes included. */
+void gs_msg_write_json_string(FILE *f, const char *s);
 
 #ifdef __cplusplus
 }

@@ -56,6 +56,10 @@ const cli_command cli_client_command = {
     "                       server's finetune_lr, 0.004 unless configured)\n"
     "  --keep-image         fit: the server keeps the input with the subject, for\n"
     "                       redirect --transfer by key\n"
+    "  --json               print each reply as one JSON object per line (the\n"
+    "                       protocol's field names; keys as hex); redirect prints\n"
+    "                       one line per image ({\"index\", \"path\", \"target\"}) and a\n"
+    "                       last {\"done\": {...}}; errors stay text on stderr\n"
     "  --transfer           redirect: detail transfer (keep the input's own detail;\n"
     "                       by --subject it needs a fit with --keep-image)\n"
     "  --subject HEX        redirect: a fitted subject key\n"
@@ -73,8 +77,18 @@ const cli_command cli_client_command = {
 enum {
     O_ADDR, O_TOKEN, O_TIMEOUT, O_IMAGE, O_PHOTO, O_GAZE, O_HEAD, O_KEY, O_ITERS, O_SUBJECT,
     O_GAZES, O_HEADS, O_FORMAT, O_OUT, O_DEADLINE, O_PASTE, O_REFIT, O_FT, O_FT_PARTS, O_KEEP,
-    O_TRANSFER, O_FT_OUTLINE, O_FT_MIRROR, O_FT_LR, O_N
+    O_TRANSFER, O_FT_OUTLINE, O_FT_MIRROR, O_FT_LR, O_JSON, O_N
 };
+
+/* --json: each reply printed as one JSON object (gs_msg_write_json);
+ * program state, set once by run_client. */
+static int json_out;
+
+static void print_json(const ProtobufCMessage *m)
+{
+    gs_msg_write_json(stdout, m);
+    putchar('\n');
+}
 
 /* --finetune N [--finetune-parts L] [--finetune-outline PX]
  * [--finetune-mirror B] [--finetune-lr X]: 0 or CLI_USAGE (reported). */
@@ -183,7 +197,10 @@ static int do_health(gs_client *c, int timeout)
     int rc = CLI_OK;
     if (f.header.type == T(HEALTH_OK)) {
         const Gazesplat__Health *h = (const Gazesplat__Health *)f.msg;
-        printf("state %s\ndetail %s\nqueue %u/%u\nworkers %u\nimage_size %u\nmodel_id %s\n",
+        if (json_out)
+            print_json(f.msg);
+        else
+            printf("state %s\ndetail %s\nqueue %u/%u\nworkers %u\nimage_size %u\nmodel_id %s\n",
                h->state < 4 ? states[h->state] : "?", h->detail, h->queue_length, h->queue_depth,
                h->workers, h->image_size, h->model_id);
         rc = h->state == GAZESPLAT__HEALTH__STATE__READY ? CLI_OK : CLI_FAIL;
@@ -206,8 +223,13 @@ static int do_stats(gs_client *c, int timeout)
     int rc = CLI_OK;
     if (f.header.type == T(STATS_OK)) {
         const Gazesplat__Stats *s = (const Gazesplat__Stats *)f.msg;
+        if (json_out) /* one flat object: {"fits": 3, ...} */
+            putchar('{');
         for (size_t i = 0; i < s->n_counters; i++)
-            printf("%s %llu\n", s->counters[i]->name, (unsigned long long)s->counters[i]->value);
+            printf(json_out ? "%s\"%s\":%llu" : "%.0s%s %llu\n", json_out && i ? "," : "", s->counters[i]->name,
+                   (unsigned long long)s->counters[i]->value);
+        if (json_out)
+            puts("}");
     } else {
         rc = f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
     }
@@ -270,7 +292,9 @@ static int do_live_policy(gs_client *c, const char **sets, int nsets, int refit,
     if (gs_client_call(c, T(LIVE_POLICY), NULL, 1, &req.base, timeout, &f, &err) != GS_OK)
         return cli_fail(cmd, "%s", err.msg);
     int rc = CLI_OK;
-    if (f.header.type == T(LIVE_POLICY_OK))
+    if (f.header.type == T(LIVE_POLICY_OK) && json_out)
+        print_json(f.msg);
+    else if (f.header.type == T(LIVE_POLICY_OK))
         print_policy((const Gazesplat__LivePolicy *)f.msg, "");
     else
         rc = f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;
@@ -292,6 +316,11 @@ static int do_live_status(gs_client *c, int timeout)
         return rc;
     }
     const Gazesplat__LiveStatus *m = (const Gazesplat__LiveStatus *)f.msg;
+    if (json_out) {
+        print_json(f.msg);
+        gs_client_frame_free(&f);
+        return CLI_OK;
+    }
     printf("running %s\ndevice %s\noutput %s\nstreaming %s\nframes_in %llu\nframes_out %llu\n"
            "placeholders %llu\nreopens %llu\nlatency_ms %.1f/%.1f\nface %s\nsubject_ready %s\n"
            "fitting %s\nfits %llu\nrefits %llu\nrenders %llu\nweight %.3f\n",
@@ -378,6 +407,11 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         const Gazesplat__FitResult *m = (const Gazesplat__FitResult *)f.msg;
         char hex[33];
         gs_frame_key_hex(f.header.key, hex);
+        if (json_out) {
+            print_json(f.msg);
+            gs_client_frame_free(&f);
+            return CLI_OK;
+        }
         printf("subject %s\ngaze_deg %.3f,%.3f\nhead_deg %.3f,%.3f\npsnr %.2f\nssim %.4f\niters %u\n"
                "seconds %.3f\ncached %s\nfinetuned %s\nimage_kept %s\n", hex,
                m->gaze ? m->gaze->pitch_deg : 0.0, m->gaze ? m->gaze->yaw_deg : 0.0,
@@ -406,8 +440,18 @@ static int write_result(const char *dir, const Gazesplat__ImageResult *m)
     int ok = f && fwrite(img->data.data, 1, img->data.len, f) == img->data.len;
     if (f && fclose(f) != 0)
         ok = 0;
-    if (ok)
+    if (ok && json_out) {
+        printf("{\"index\":%u,\"path\":", m->index);
+        gs_msg_write_json_string(stdout, path);
+        fputs(",\"target\":", stdout);
+        if (m->target)
+            gs_msg_write_json(stdout, &m->target->base);
+        else
+            fputs("null", stdout);
+        puts("}");
+    } else if (ok) {
         printf("%s\n", path);
+    }
     return ok ? 0 : -1;
 }
 
@@ -425,8 +469,14 @@ static int receive_images(gs_client *c, const char *out, int timeout)
         int rc = -1;
         if (type == T(IMAGE))
             rc = write_result(out, (const Gazesplat__ImageResult *)f.msg) == 0 ? -1 : CLI_FAIL;
-        else if (type == T(DONE))
+        else if (type == T(DONE)) {
             rc = CLI_OK;
+            if (json_out) {
+                fputs("{\"done\":", stdout);
+                gs_msg_write_json(stdout, f.msg);
+                fputs("}\n", stdout);
+            }
+        }
         else
             rc = type == T(BUSY) ? print_busy(&f) : type == T(ERROR) ? print_error(&f) : CLI_FAIL;
         gs_client_frame_free(&f);
@@ -523,7 +573,7 @@ static int run_client(int argc, char **argv)
         {"--paste-back", 0, NULL}, {"--refit", 0, NULL}, {"--finetune", 1, NULL},
         {"--finetune-parts", 1, NULL}, {"--keep-image", 0, NULL}, {"--transfer", 0, NULL},
         {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
-        {"--finetune-lr", 1, NULL},
+        {"--finetune-lr", 1, NULL}, {"--json", 0, NULL},
     };
     /* --set may repeat: take every one out before the common parser. */
     const char *sets[MAX_SETS];
@@ -539,6 +589,7 @@ static int run_client(int argc, char **argv)
     }
     argc = kept;
     int r = cli_parse(cmd, argc - 1, argv + 1, o, O_N);
+    json_out = o[O_JSON].value != NULL;
     if (r == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -570,7 +621,9 @@ static int run_client(int argc, char **argv)
         gs_client_close(c);
         return cli_fail(cmd, "HELLO: %s", err.msg);
     }
-    if (!strcmp(action, "hello")) {
+    if (!strcmp(action, "hello") && json_out) {
+        print_json(&ok->base);
+    } else if (!strcmp(action, "hello")) {
         const Gazesplat__Limits *l = ok->limits;
         printf("version %u\nserver %s\nimage_size %u\n", ok->version, ok->server, ok->image_size);
         if (l)

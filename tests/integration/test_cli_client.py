@@ -3,6 +3,7 @@ daemon with a tiny real model: hello, health, stats, fit, redirect to
 files; exit statuses (0 ok, 1 server error, 2 usage); --check-config and
 configuration errors.
 usage: test_cli_client.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
+import json
 import os
 import subprocess
 import sys
@@ -125,6 +126,28 @@ def main():
                     "--finetune-lr %s is a usage error: %d %s" % (bad, r.returncode, r.stderr))
         r = run(cli, "client", "fit", addr, "--image", face, "--finetune-lr", "0.01")
         t.check(r.returncode == 2, "--finetune-lr alone is a usage error: %d" % r.returncode)
+        # --json: one object per reply (the protocol's field names, keys as hex).
+        r = run(cli, "client", "health", addr, "--json")
+        h = json.loads(r.stdout) if r.returncode == 0 else {}
+        t.check(h.get("state") == "READY" and h.get("image_size") == 128, "health --json: %s" % r.stdout)
+        r = run(cli, "client", "stats", addr, "--json")
+        st = json.loads(r.stdout) if r.returncode == 0 else {}
+        t.check(st.get("images_out", 0) >= 4 and st.get("finetunes", 0) >= 1 and st.get("fits", 0) >= 1,
+                "stats --json: %s" % r.stdout[:200])
+        r = run(cli, "client", "fit", addr, "--image", face, "--max-iters", "3", "--gaze", "5,-5", "--json")
+        fj = json.loads(r.stdout) if r.returncode == 0 else {}
+        t.check(key and fj.get("subject_key") == key[0] and fj.get("cached") is True and
+                fj.get("gaze") == {"pitch_deg": 5, "yaw_deg": -5}, "fit --json: %s" % r.stdout)
+        jout = os.path.join(work, "cli_out_json")
+        r = run(cli, "client", "redirect", addr, "--subject", key[0] if key else "0" * 32,
+                "--gaze-deg", "0,0;10,-20", "--out", jout, "--json")
+        lines = [json.loads(ln) for ln in r.stdout.splitlines()] if r.returncode == 0 else []
+        t.check(len(lines) == 3 and [x.get("index") for x in lines[:2]] == [0, 1] and
+                lines[1]["target"]["gaze"] == {"pitch_deg": 10, "yaw_deg": -20} and
+                os.path.exists(lines[0]["path"]) and lines[2]["done"]["count"] == 2,
+                "redirect --json: %s" % r.stdout)
+        r = run(cli, "client", "hello", addr, "--json")
+        t.check(r.returncode == 0 and json.loads(r.stdout)["limits"]["max_targets"] == 64, "hello --json")
         r = run(cli, "client", "frobnicate", addr)
         t.check(r.returncode == 2, "unknown action: %d" % r.returncode)
         r = run(cli, "client", "health", "--addr=" + os.path.join(work, "nope.sock"))

@@ -1,4 +1,6 @@
+#define _GNU_SOURCE /* fmemopen */
 /* Frame header codec, incremental parser and message packing. */
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -213,8 +215,40 @@ static void test_keys(void)
     CHECK(gs_frame_key_parse("zz112233445566778899aabbccddeeff", k2) == -1);
 }
 
+/* gs_msg_write_json: every field, escapes, enums by name, bytes as hex,
+ * non-finite floats as null, shortest round-trip numbers. */
+static void test_json(void)
+{
+    char buf[1024];
+    FILE *f = fmemopen(buf, sizeof buf, "w");
+    Gazesplat__Health h = GAZESPLAT__HEALTH__INIT;
+    h.state = GAZESPLAT__HEALTH__STATE__READY;
+    h.detail = "a \"q\"\\ \n\x01 \xc3\xa9";
+    h.queue_length = 3;
+    h.model_id = "";
+    gs_msg_write_json(f, &h.base);
+    fputc('\n', f);
+    Gazesplat__FitResult r = GAZESPLAT__FIT_RESULT__INIT;
+    uint8_t key[2] = {0xab, 0x01};
+    r.subject_key.data = key;
+    r.subject_key.len = 2;
+    r.psnr = 0.1f;
+    r.seconds = 0.331;
+    r.ssim = INFINITY;
+    gs_msg_write_json(f, &r.base);
+    fclose(f);
+    CHECK_MSG(!strncmp(buf, "{\"state\":\"READY\",\"detail\":\"a \\\"q\\\"\\\\ \\n\\u0001 \xc3\xa9\",", 45),
+              "%s", buf);
+    CHECK_MSG(strstr(buf, "\"queue_length\":3,") && strstr(buf, "\"model_id\":\"\""), "%s", buf);
+    CHECK_MSG(strstr(buf, "\"subject_key\":\"ab01\"") && strstr(buf, "\"gaze\":null") &&
+                  strstr(buf, "\"psnr\":0.1,") && strstr(buf, "\"seconds\":0.331,") &&
+                  strstr(buf, "\"ssim\":null") && strstr(buf, "\"cached\":false"),
+              "%s", buf);
+}
+
 int main(void)
 {
+    test_json();
     test_header_layout();
     test_parser_chunks();
     test_parser_errors();
