@@ -1,0 +1,355 @@
+"""`gazesplat augment` end to end with a tiny real model (trained at test
+time, cached in the build tree) and `gazesplat synth` faces.
+
+usage: test_augment.py GAZESPLAT_CLI WORKDIR MODE
+  MODE errors  usage and input errors: exit statuses 2 and 1, messages that
+               name the file and line or row, nothing done lost (bad labels,
+               NaN, HDF5 of the wrong shape or type, an unreadable image, a
+               full disk, shard out of range), help, the TTY progress line
+  MODE resume  the HDF5 read by h5py (ETH-XGaze names, shapes, dtypes);
+               HDF5 in; shards against the whole run; kill -9 at several
+               moments and rerun: the same bytes as an uninterrupted run"""
+import json
+import os
+import pty
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "integration"))
+from model_fixture import tiny_model  # noqa: E402
+
+FAILS = []
+COUNT = [0]
+
+
+def check(cond, what):
+    COUNT[0] += 1
+    if not cond:
+        FAILS.append(what)
+        print("CHECK failed:", what, flush=True)
+    return cond
+
+
+def run(*args, env=None):
+    e = dict(os.environ)
+    e.update(env or {})
+    return subprocess.run([str(a) for a in args], capture_output=True, text=True, timeout=300,
+                          env=e)
+
+
+def synth_faces(cli, work, count):
+    out = os.path.join(work, "aug_faces%d" % count)
+    if not os.path.exists(os.path.join(out, "labels.jsonl")):
+        subprocess.run([cli, "synth", "--out", out, "--count", str(count), "--size", "128",
+                        "--seed-split", "test", "--identities", str(count), "--no-masks"],
+                       check=True, capture_output=True)
+    return out
+
+
+def labels_csv(faces_dir, path, rows=None, header=None):
+    """A labels CSV from synth's labels.jsonl (degrees, normalized camera)."""
+    deg = 57.29577951308232
+    lines = [header or "file,gaze_pitch_deg,gaze_yaw_deg,head_pitch_deg,head_yaw_deg,subject"]
+    with open(os.path.join(faces_dir, "labels.jsonl")) as f:
+        for ln in f:
+            j = json.loads(ln)
+            lines.append("%s,%.4f,%.4f,%.4f,%.4f,id%d" % (
+                os.path.basename(j["image"]), j["gaze_cam_pitch_rad"] * deg,
+                j["gaze_cam_yaw_rad"] * deg, j["head_pitch_rad"] * deg, j["head_yaw_rad"] * deg,
+                j["identity_seed"] % 1000))
+    if rows:
+        lines += rows
+    with open(path, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    return path
+
+
+def tree_bytes(d):
+    """Every file under d except the state directories, as bytes."""
+    out = {}
+    for root, dirs, files in os.walk(d):
+        dirs[:] = [x for x in dirs if not x.startswith(".augment")]
+        for n in files:
+            p = os.path.join(root, n)
+            out[os.path.relpath(p, d)] = open(p, "rb").read()
+    return out
+
+
+def errors(cli, work):
+    model = tiny_model(cli, work, seed=1)
+    faces = synth_faces(cli, work, 3)
+    imgs = os.path.join(faces, "images")
+    out = os.path.join(work, "aug_err")
+    shutil.rmtree(out, ignore_errors=True)
+    base = [cli, "augment", "--model", model, "--input", imgs, "--iters", "5"]
+    grid = ["--grid", "-10:10:10,0:0:1"]
+
+    r = run(cli, "help", "augment")
+    check(r.returncode == 0 and r.stdout.startswith("usage: gazesplat augment"), "help augment")
+    r = run(*base, "--out", out)
+    check(r.returncode == 2 and "one of --grid" in r.stderr, "no targets: %d %s" % (r.returncode, r.stderr))
+    r = run(*base, "--out", out, *grid, "--shard", "3/3")
+    check(r.returncode == 2 and "out of range" in r.stderr, "shard 3/3: %d %s" % (r.returncode, r.stderr))
+    r = run(*base, "--out", out, *grid, "--shard", "1/0")
+    check(r.returncode == 2, "shard 1/0: %d" % r.returncode)
+    r = run(*base, "--out", out, "--gaze-deg", "70,0")
+    check(r.returncode == 2 and "range" in r.stderr, "gaze out of range: %s" % r.stderr)
+    r = run(*base, "--out", out, "--uniform", "-10,10,-10,10")
+    check(r.returncode == 2 and "--per-image" in r.stderr, "uniform without per-image")
+    r = run(*base, "--out", out, *grid, "--head-deg", "80,0")
+    check(r.returncode == 2 and "range" in r.stderr, "head out of range: %s" % r.stderr)
+
+    # Labels: unknown (mislabelled) column, missing key column, NaN, an
+    # unknown file, half a pair, a malformed JSONL line.
+    lab = os.path.join(work, "aug_labels_bad.csv")
+    labels_csv(faces, lab, header="file,pitch,gaze_yaw_deg,head_pitch_deg,head_yaw_deg,subject")
+    r = run(*base, "--out", out, *grid, "--labels", lab)
+    check(r.returncode == 1 and lab in r.stderr and "unknown column 'pitch'" in r.stderr,
+          "mislabelled column: %s" % r.stderr)
+    with open(lab, "w") as f:
+        f.write("name,gaze_pitch_deg,gaze_yaw_deg\n00000000.png,1,2\n")
+    r = run(*base, "--out", out, *grid, "--labels", lab)
+    check(r.returncode == 1 and "unknown column 'name'" in r.stderr, "no file column: %s" % r.stderr)
+    with open(lab, "w") as f:
+        f.write("file,gaze_pitch_deg,gaze_yaw_deg\n00000000.png,1,2\n00000001.png,nan,2\n")
+    r = run(*base, "--out", out, *grid, "--labels", lab)
+    check(r.returncode == 1 and lab + " line 3" in r.stderr and "nan" in r.stderr,
+          "NaN label: %s" % r.stderr)
+    with open(lab, "w") as f:
+        f.write("file,gaze_pitch_deg,gaze_yaw_deg\n00000000.png,1,2\nmissing.png,1,2\n")
+    r = run(*base, "--out", out, *grid, "--labels", lab)
+    check(r.returncode == 1 and "line 3" in r.stderr and "no image 'missing.png'" in r.stderr,
+          "unknown file: %s" % r.stderr)
+    with open(lab, "w") as f:
+        f.write("file,gaze_pitch_deg,gaze_yaw_deg\n00000000.png,1,\n")
+    r = run(*base, "--out", out, *grid, "--labels", lab)
+    check(r.returncode == 1 and "line 2" in r.stderr and "without" in r.stderr,
+          "half a pair: %s" % r.stderr)
+    labj = os.path.join(work, "aug_labels_bad.jsonl")
+    with open(labj, "w") as f:
+        f.write('{"file": "00000000.png", "gaze_pitch_deg": 1, "gaze_yaw_deg": 2}\n'
+                '{"file": "00000001.png", "gaze_pitch_deg": [1]}\n')
+    r = run(*base, "--out", out, *grid, "--labels", labj)
+    check(r.returncode == 1 and labj + ": line 2" in r.stderr, "bad JSONL: %s" % r.stderr)
+    check(not os.path.exists(out), "nothing written on label errors")
+
+    # HDF5 of the wrong shape, dtype, label shape; NaN in a label.
+    import h5py
+    import numpy as np
+    h5 = os.path.join(work, "aug_bad.h5")
+    cases = [
+        ({"face_patch": np.zeros((2, 128, 128), np.uint8)}, "rank 3"),
+        ({"face_patch": np.zeros((2, 128, 128, 4), np.uint8)}, "not 3 channels"),
+        ({"face_patch": np.zeros((2, 128, 128, 3), np.float32)}, "not uint8"),
+        ({"face_patch": np.zeros((2, 128, 128, 3), np.uint8),
+          "face_gaze": np.zeros((3, 2), np.float32)}, "face_gaze has shape"),
+        ({"face_patch": np.zeros((2, 128, 128, 3), np.uint8),
+          "face_head_pose": np.zeros((2, 2), np.int32)}, "face_head_pose is not of a float type"),
+        ({"face_gaze": np.zeros((2, 2), np.float32)}, "no dataset face_patch"),
+        ({"face_patch": np.zeros((2, 128, 128, 3), np.uint8),
+          "face_gaze": np.array([[0, 0], [np.nan, 0]], np.float32)}, "face_gaze row 1"),
+    ]
+    for data, want in cases:
+        with h5py.File(h5, "w") as f:
+            for k, v in data.items():
+                f[k] = v
+        r = run(cli, "augment", "--model", model, "--input", h5, "--out", out, *grid)
+        check(r.returncode == 1 and want in r.stderr and h5 in r.stderr,
+              "HDF5 %s: %d %s" % (want, r.returncode, r.stderr))
+    with open(h5, "wb") as f:
+        f.write(b"not hdf5 at all")
+    r = run(cli, "augment", "--model", model, "--input", h5, "--out", out, *grid)
+    check(r.returncode == 1 and "cannot open as HDF5" in r.stderr, "not HDF5: %s" % r.stderr)
+    check(not os.path.exists(out), "nothing written on HDF5 errors")
+
+    # An unreadable image after two good ones: exit 1 naming it, the two
+    # kept; fixed, the rerun does only the rest.
+    src = os.path.join(work, "aug_src_bad")
+    shutil.rmtree(src, ignore_errors=True)
+    shutil.copytree(imgs, src)
+    bad = os.path.join(src, "00000002.png")
+    good = open(bad, "rb").read()
+    with open(bad, "wb") as f:
+        f.write(b"\x89PNG\r\n\x1a\n" + b"\0" * 40)
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5")
+    check(r.returncode == 1 and bad in r.stderr, "bad image: %d %s" % (r.returncode, r.stderr))
+    man = open(os.path.join(out, ".augment", "manifest")).read().splitlines()
+    check(man[1:] == ["done 0", "done 1"], "manifest keeps the good two: %s" % man)
+    with open(bad, "wb") as f:
+        f.write(good)
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5")
+    check(r.returncode == 0 and "resuming: 2 of 3" in r.stderr and "1/3" not in r.stderr,
+          "rerun after the fix: %d %s" % (r.returncode, r.stderr))
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5")
+    check(r.returncode == 0 and "already complete" in r.stdout, "third run: %s" % r.stdout)
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "6")
+    check(r.returncode == 1 and "another augment run" in r.stderr, "other options: %s" % r.stderr)
+    ref = tree_bytes(out)
+
+    # A full disk: the hook, then (when this host lets us mount one) a real
+    # tiny tmpfs. Exit 1 naming the file; resumed, the same bytes.
+    out2 = os.path.join(work, "aug_enospc")
+    shutil.rmtree(out2, ignore_errors=True)
+    args = [cli, "augment", "--model", model, "--input", src, "--out", out2, *grid, "--iters", "5"]
+    r = run(*args, env={"GAZESPLAT_AUGMENT_ENOSPC_AFTER": "5"})
+    check(r.returncode == 1 and "No space left on device" in r.stderr and out2 in r.stderr,
+          "ENOSPC hook: %d %s" % (r.returncode, r.stderr))
+    r = run(*args)
+    check(r.returncode == 0 and tree_bytes(out2) == ref, "after ENOSPC: the same bytes")
+    mnt = os.path.join(work, "aug_tmpfs")
+    os.makedirs(mnt, exist_ok=True)
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=250k", "tmpfs", mnt],
+                      capture_output=True).returncode == 0:
+        try:
+            r = run(cli, "augment", "--model", model, "--input", src, "--out",
+                    os.path.join(mnt, "o"), *grid, "--iters", "5")
+            check(r.returncode == 1 and "No space left on device" in r.stderr,
+                  "tmpfs full: %d %s" % (r.returncode, r.stderr))
+            man = open(os.path.join(mnt, "o", ".augment", "manifest")).read().splitlines()
+            check(len(man) >= 2 and man[1] == "done 0", "tmpfs: done sources kept: %s" % man)
+        finally:
+            subprocess.run(["umount", mnt])
+    else:
+        print("no tmpfs (not allowed to mount here): the hook alone")
+
+    # Progress: a terminal gets the \r line with an ETA; a pipe gets none.
+    out3 = os.path.join(work, "aug_tty")
+    shutil.rmtree(out3, ignore_errors=True)
+    pid, fd = pty.fork()
+    if pid == 0:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
+        os.execv(cli, [cli, "augment", "--model", model, "--input", imgs, "--out", out3, *grid,
+                       "--iters", "3", "--format", "png"])
+    buf = b""
+    while True:
+        try:
+            chunk = os.read(fd, 4096)
+        except OSError:
+            break
+        if not chunk:
+            break
+        buf += chunk
+    _, st = os.waitpid(pid, 0)
+    check(os.WEXITSTATUS(st) == 0 and b"\r" in buf and b"ETA" in buf, "tty progress: %r" % buf[:200])
+    check(b"\r" not in r.stderr.encode() and "\r" not in run(*args).stderr, "no \\r to a pipe")
+
+
+def resume(cli, work):
+    import h5py
+    import numpy as np
+    model = tiny_model(cli, work, seed=1)
+    faces = synth_faces(cli, work, 6)
+    imgs = os.path.join(faces, "images")
+    lab = labels_csv(faces, os.path.join(work, "aug_labels.csv"))
+    common = ["--model", model, "--input", imgs, "--labels", lab, "--uniform", "-20,20,-30,30",
+              "--per-image", "3", "--head-uniform", "-10,10,-15,15", "--iters", "12", "--seed", "7"]
+    ref_dir = os.path.join(work, "aug_ref")
+    shutil.rmtree(ref_dir, ignore_errors=True)
+    t0 = time.time()
+    r = run(cli, "augment", *common, "--out", ref_dir)
+    full_s = time.time() - t0
+    check(r.returncode == 0 and "18 images from 6 sources" in r.stdout, "reference: %s %s" % (r.stdout, r.stderr))
+    ref = tree_bytes(ref_dir)
+    check(sorted(ref) == sorted(["augment.h5", "labels.jsonl"] + ["images/%08d.png" % i for i in range(18)]),
+          "files: %s" % sorted(ref))
+
+    # The HDF5 as ETH-XGaze's tools read it; rows match labels.jsonl.
+    with h5py.File(os.path.join(ref_dir, "augment.h5"), "r") as f:
+        check(sorted(f.keys()) == ["face_gaze", "face_head_pose", "face_patch"], "keys %s" % list(f))
+        check(f["face_patch"].shape == (18, 128, 128, 3) and f["face_patch"].dtype == np.uint8,
+              "face_patch %s %s" % (f["face_patch"].shape, f["face_patch"].dtype))
+        for k in ("face_gaze", "face_head_pose"):
+            check(f[k].shape == (18, 2) and f[k].dtype == np.float32, "%s %s %s" % (k, f[k].shape, f[k].dtype))
+        gaze, head, patch = f["face_gaze"][:], f["face_head_pose"][:], f["face_patch"][:]
+    lines = [json.loads(x) for x in open(os.path.join(ref_dir, "labels.jsonl"))]
+    check(len(lines) == 18 and [x["h5_row"] for x in lines] == list(range(18)), "h5_row")
+    check(all(abs(gaze[i, 0] - x["gaze_cam_pitch_rad"]) < 1e-6 and abs(gaze[i, 1] - x["gaze_cam_yaw_rad"]) < 1e-6
+              and abs(head[i, 0] - x["head_pitch_rad"]) < 1e-6 for i, x in enumerate(lines)),
+          "face_gaze = gaze_cam, face_head_pose = head angles")
+    check(all(x["subject"] and x["subject"].startswith("id") and x["quality"] is None
+              and x["source_gaze_cam_pitch_rad"] is not None and x["head_changed"] for x in lines),
+          "subject, quality null, source labels, head changed")
+    check(all(abs(x["gaze_head_pitch_rad"]) <= 20 / 57.29 and abs(x["gaze_head_yaw_rad"]) <= 30 / 57.29
+              for x in lines), "targets inside --uniform")
+    from PIL import Image
+    png = np.asarray(Image.open(os.path.join(ref_dir, "images", "00000004.png")).convert("RGB"))
+    check(np.array_equal(png[..., ::-1], patch[4]), "face_patch is BGR of the PNG")
+
+    # Shards: the union of 0/2 and 1/2 is the whole run, line for line.
+    sh = os.path.join(work, "aug_shards")
+    shutil.rmtree(sh, ignore_errors=True)
+    for i in range(2):
+        r = run(cli, "augment", *common, "--out", sh, "--shard", "%d/2" % i)
+        check(r.returncode == 0, "shard %d: %s" % (i, r.stderr))
+    got = {}
+    for i in range(2):
+        for ln in open(os.path.join(sh, "labels-%d-of-2.jsonl" % i)):
+            j = json.loads(ln)
+            j.pop("h5_row")
+            got[j["index"]] = j
+    want = {}
+    for x in lines:
+        x = dict(x)
+        x.pop("h5_row")
+        want[x["index"]] = x
+    check(got == want, "shards give the whole run's samples")
+    check(all(open(os.path.join(sh, "images", n), "rb").read() == ref["images/" + n]
+              for n in os.listdir(os.path.join(sh, "images"))), "shard images = whole run's")
+
+    # HDF5 in: the reference's rows, fitted again; labels as sources.
+    h5o = os.path.join(work, "aug_h5in")
+    shutil.rmtree(h5o, ignore_errors=True)
+    r = run(cli, "augment", "--model", model, "--input", os.path.join(ref_dir, "augment.h5"),
+            "--out", h5o, "--gaze-deg", "0,0", "--iters", "30", "--format", "h5", "--fit-labels")
+    check(r.returncode == 0, "HDF5 input: %s" % r.stderr)
+    l2 = [json.loads(x) for x in open(os.path.join(h5o, "labels.jsonl"))]
+    check(len(l2) == 18 and l2[3]["source_row"] == 3 and l2[3]["source"] == "augment.h5"
+          and abs(l2[3]["source_gaze_cam_pitch_rad"] - float(gaze[3, 0])) < 1e-6
+          and l2[3]["subject"] == "augment", "HDF5 sources: %s" % (l2[3] if l2 else None))
+    # A render refitted through the BGR file: the fit sees the right colours.
+    check(np.median([x["fit_psnr"] for x in l2]) > 25, "HDF5 refit PSNR %s" % [x["fit_psnr"] for x in l2])
+
+    # kill -9 at several moments, rerun each time: the same bytes.
+    kd = os.path.join(work, "aug_killed")
+    shutil.rmtree(kd, ignore_errors=True)
+    kills = 0
+    # Fractions of the uninterrupted run's time from each start: early
+    # (model load, first fit), mid-source, and late (assembly) kills.
+    fracs = [0.02, 0.15, 0.3, 0.1, 0.45, 0.2, 0.6, 0.05, 0.8, 0.95]
+    for k in range(40):
+        p = subprocess.Popen([cli, "augment", *common, "--out", kd], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL)
+        d = fracs[k % len(fracs)] * max(full_s, 0.5)
+        try:
+            p.wait(timeout=d)
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGKILL)
+            p.wait()
+            kills += 1
+            continue
+        break
+    check(p.returncode == 0, "finished after %d kills: rc %s" % (kills, p.returncode))
+    check(kills >= 2, "killed %d times" % kills)
+    r = run(cli, "augment", *common, "--out", kd)
+    check(r.returncode == 0, "rerun after finishing")
+    got = tree_bytes(kd)
+    check(got == ref, "killed run's bytes = uninterrupted run's (%s)" %
+          [n for n in set(got) | set(ref) if got.get(n) != ref.get(n)][:5])
+    check(not [n for n in os.listdir(kd) if n.endswith(".tmp")], "no .tmp left")
+    print("killed %d times; uninterrupted run %.1f s" % (kills, full_s))
+
+
+def main():
+    cli, work, mode = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2]), sys.argv[3]
+    os.makedirs(work, exist_ok=True)
+    {"errors": errors, "resume": resume}[mode](cli, work)
+    print("%d checks, %d failed" % (COUNT[0], len(FAILS)))
+    return 1 if FAILS else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
