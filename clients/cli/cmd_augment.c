@@ -45,8 +45,9 @@ const cli_command cli_augment_command = {
     "                          | --uniform P0,P1,Y0,Y1 --per-image N | --targets FILE)\n"
     "                         [--head-deg \"P,Y;P,Y\" | --head-uniform P0,P1,Y0,Y1]\n"
     "                         [--labels FILE] [--format png|h5|both] [--shard I/N]\n"
-    "                         [--seed N] [--iters N] [--finetune N [--finetune-lr X]]\n"
-    "                         [--transfer] [--fit-labels] [--h5-rgb] [--threads N]\n"
+    "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
+    "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
+    "                         [--threads N]\n"
     "\n"
     "Inputs (--input):\n"
     "  DIR              its .png/.jpg/.jpeg files in byte order of name: a file\n"
@@ -84,6 +85,9 @@ const cli_command cli_augment_command = {
     "                   (ETH-XGaze layout, face_patch BGR); both (default).\n"
     "                   DIR/labels.jsonl always: one line per image (fields:\n"
     "                   docs/augment.md), in the HDF5's row order\n"
+    "  --size S         output patches of S x S px (16..1024), resized\n"
+    "                   (bilinear) from the model's renders (default: the\n"
+    "                   model's size; e.g. 224 for ETH-XGaze's patch size)\n"
     "  --shard I/N      only sources k with k mod N = I (0 <= I < N); files\n"
     "                   named labels-I-of-N.jsonl and augment-I-of-N.h5;\n"
     "                   image names and targets as in the unsharded run\n"
@@ -91,9 +95,12 @@ const cli_command cli_augment_command = {
     "  parts; run the same command again after a crash or kill and it\n"
     "  continues where it stopped, ending with the same bytes.\n"
     "\n"
-    "Fit (as gazesplat redirect): --iters N (200), --finetune N (0: none),\n"
-    "--finetune-lr X (0.001), --transfer (detail transfer), --seed N (0),\n"
-    "--threads N (2).\n",
+    "Fit and render: the daemon's served setting by default, through the\n"
+    "library calls gazesplat redirect makes: the fit to its plateau, at most\n"
+    "--iters N (200); --finetune N steps (15; 0: none) at --finetune-lr X\n"
+    "(0.004) with the mirrored view; detail transfer with the eyeball warp\n"
+    "(--no-transfer: the model's render alone). --seed N (0): --uniform's\n"
+    "and --head-uniform's draws. --threads N (2): the same bytes for any N.\n",
     run_augment,
 };
 
@@ -104,7 +111,7 @@ const cli_command cli_augment_command = {
 enum {
     O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
     O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
-    O_THREADS, O_N
+    O_THREADS, O_SIZE, O_N
 };
 
 typedef struct target {
@@ -144,6 +151,7 @@ typedef struct job {
     gs_face_shape_model *sp;
     uint64_t fingerprint;
     long write_budget; /* test hook: writes left before ENOSPC (-1: off) */
+    int out_size;      /* output patches, px (--size; default the model's) */
 } job;
 
 /* ---- small helpers ---- */
@@ -465,6 +473,7 @@ static int list_dir(job *j)
 static source *find_source(job *j, const char *name)
 {
     source key;
+    memset(&key, 0, sizeof key);
     key.name = (char *)name;
     return bsearch(&key, j->src, j->nsrc, sizeof *j->src, cmp_name);
 }
@@ -973,7 +982,7 @@ static void image_path(const job *j, size_t index, char *out, size_t cap, int re
 static int parts_present(const job *j, size_t k)
 {
     const source *s = &j->src[k];
-    size_t S = (size_t)j->info.image_size;
+    size_t S = (size_t)j->out_size;
     char p[4300];
     part_path(j, k, "jsonl", p, sizeof p);
     if (!file_size_is(p, -1))
@@ -1133,7 +1142,7 @@ static void sample_json(const job *j, size_t k, size_t t, const fitted *fi, cons
     jput(b, ",\"source_kind\":\"%s\"", j->is_h5 ? "hdf5" : fi->photo ? "photo" : "normalized");
     jput(b, ",\"target_index\":%zu", t);
     jstr(b, "subject", s->subject);
-    jput(b, ",\"width\":%d,\"height\":%d", j->info.image_size, j->info.image_size);
+    jput(b, ",\"width\":%d,\"height\":%d", j->out_size, j->out_size);
     jarr(b, "gaze_head", gh, 3);
     jnum(b, "gaze_head_pitch_rad", tg->gp);
     jnum(b, "gaze_head_yaw_rad", tg->gy);
@@ -1182,8 +1191,8 @@ static int do_source(job *j, size_t k, double *psnr_out)
 {
     const cli_command *cmd = j->cmd;
     source *s = &j->src[k];
-    int S = j->info.image_size;
-    size_t img_bytes = (size_t)S * S * 3;
+    int S = j->info.image_size, So = j->out_size;
+    size_t img_bytes = (size_t)So * So * 3;
     char what[4400];
     src_label(j, k, what, sizeof what);
     gs_error err = {0, ""};
@@ -1258,11 +1267,13 @@ static int do_source(job *j, size_t k, double *psnr_out)
      * face_gaze and face_head_pose as float32 LE. */
     size_t rec = img_bytes + 16;
     blob = malloc(s->nt * rec + 1);
-    if (!blob) {
+    uint8_t *render = So != S ? malloc((size_t)S * S * 3) : NULL;
+    if (!blob || (So != S && !render)) {
+        free(render);
         rc = cli_fail(cmd, "out of memory");
         goto done;
     }
-    gs_io_image out = {S, S, (size_t)S * 3, NULL};
+    gs_io_image out = {So, So, (size_t)So * 3, NULL};
     for (size_t t = 0; t < s->nt && !rc; t++) {
         const target *tg = &j->tg[s->t0 + t];
         gs_view v;
@@ -1278,15 +1289,17 @@ static int do_source(job *j, size_t k, double *psnr_out)
             memcpy(v.head_t, fi.sub.head_t, sizeof v.head_t);
             memcpy(R, v.head_R, sizeof R);
         }
-        uint8_t *px = blob + t * rec;
+        uint8_t *px = blob + t * rec, *dst = render ? render : px;
         out.data = px;
         int r = j->transfer ? gs_model_render_transfer(c, j->pool, &fi.sub, face.data, face.stride,
-                                                       &v, px, out.stride, &err)
-                            : gs_model_render(c, j->pool, &fi.sub, &v, px, out.stride, &err);
+                                                       &v, dst, (size_t)S * 3, &err)
+                            : gs_model_render(c, j->pool, &fi.sub, &v, dst, (size_t)S * 3, &err);
         if (r) {
             rc = cli_fail(cmd, "%s: target %zu: %s", what, t, err.msg);
             break;
         }
+        if (render)
+            resize_rgb(render, S, px, So);
         double gc[2], hd[2];
         sample_json(j, k, t, &fi, R, ht, tg, gc, hd, &jb);
         if (j->want_png) {
@@ -1302,7 +1315,7 @@ static int do_source(job *j, size_t k, double *psnr_out)
                 rc = cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
             free(png);
         }
-        for (size_t i = 0; i < (size_t)S * S; i++) { /* RGB -> BGR in place */
+        for (size_t i = 0; i < (size_t)So * So; i++) { /* RGB -> BGR in place */
             uint8_t b = px[3 * i];
             px[3 * i] = px[3 * i + 2];
             px[3 * i + 2] = b;
@@ -1312,6 +1325,7 @@ static int do_source(job *j, size_t k, double *psnr_out)
         put_f32le(px + img_bytes + 8, (float)hd[0]);
         put_f32le(px + img_bytes + 12, (float)hd[1]);
     }
+    free(render);
     if (!rc && jb.oom)
         rc = cli_fail(cmd, "out of memory");
     char path[4300];
@@ -1349,7 +1363,7 @@ done:
 static int assemble(job *j, size_t *rows_out)
 {
     const cli_command *cmd = j->cmd;
-    size_t S = (size_t)j->info.image_size, img_bytes = S * S * 3, rec = img_bytes + 16;
+    size_t S = (size_t)j->out_size, img_bytes = S * S * 3, rec = img_bytes + 16;
     size_t rows = 0;
     for (size_t k = (size_t)j->shard_i; k < j->nsrc; k += (size_t)j->shard_n)
         rows += j->src[k].nt;
@@ -1520,8 +1534,9 @@ static int run_augment(int argc, char **argv)
         {"--per-image", 1, NULL}, {"--targets", 1, NULL},    {"--head-deg", 1, NULL},
         {"--head-uniform", 1, NULL}, {"--labels", 1, NULL},  {"--format", 1, NULL},
         {"--shard", 1, NULL},   {"--seed", 1, NULL},         {"--iters", 1, NULL},
-        {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--transfer", 0, NULL},
-        {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL}};
+        {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
+        {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
+        {"--size", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -1566,18 +1581,30 @@ static int run_augment(int argc, char **argv)
             return cli_usage_error(cmd, "--shard %s: index %ld out of range (0..%ld)",
                                    o[O_SHARD].value, j.shard_i, j.shard_n - 1);
     }
-    long seed = 0, threads = 2;
+    long seed = 0, threads = 2, size = 0;
     j.iters = 200;
     if (o[O_SEED].value && cli_parse_long(o[O_SEED].value, 0, 4294967295L, &seed))
         return cli_usage_error(cmd, "--seed: want 0..4294967295; got '%s'", o[O_SEED].value);
     if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &j.iters))
         return cli_usage_error(cmd, "--iters: want 1..100000; got '%s'", o[O_ITERS].value);
+    if (o[O_SIZE].value && cli_parse_long(o[O_SIZE].value, 16, 1024, &size))
+        return cli_usage_error(cmd, "--size: want 16..1024 px; got '%s'", o[O_SIZE].value);
     if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256, &threads))
         return cli_usage_error(cmd, "--threads: want 1..256; got '%s'", o[O_THREADS].value);
-    if ((rc = cli_parse_finetune(cmd, o[O_FT].value, NULL, o[O_FTLR].value, NULL, NULL, NULL,
-                                 &j.ft)))
+    /* The served setting (daemon/README.md, bench/eval/README.md): the fit
+     * to its plateau (at most 200 iterations), 15 fine-tuning steps at
+     * 0.004 with the mirrored view, detail transfer with the eyeball warp. */
+    const char *ftn = o[O_FT].value ? o[O_FT].value : "15";
+    if (strcmp(ftn, "0") == 0) {
+        if (o[O_FTLR].value)
+            return cli_usage_error(cmd, "--finetune-lr goes with --finetune N > 0");
+        gs_finetune_options_default(&j.ft);
+        j.ft.iters = 0;
+    } else if ((rc = cli_parse_finetune(cmd, ftn, NULL,
+                                        o[O_FTLR].value ? o[O_FTLR].value : "0.004", NULL, NULL,
+                                        NULL, &j.ft)))
         return rc;
-    j.transfer = o[O_TRANSFER].value != NULL;
+    j.transfer = o[O_TRANSFER].value == NULL;
     j.fit_labels = o[O_FITLAB].value != NULL;
     j.h5_rgb = o[O_RGB].value != NULL;
     const char *hook = getenv("GAZESPLAT_AUGMENT_ENOSPC_AFTER");
@@ -1627,6 +1654,7 @@ static int run_augment(int argc, char **argv)
         goto out;
     }
     gs_model_get_info(j.model, &j.info);
+    j.out_size = size ? (int)size : j.info.image_size;
     j.pool = gs_pool_create((int)threads);
     if (!j.pool) {
         rc = cli_fail(cmd, "out of memory");

@@ -85,7 +85,7 @@ def errors(cli, work):
     imgs = os.path.join(faces, "images")
     out = os.path.join(work, "aug_err")
     shutil.rmtree(out, ignore_errors=True)
-    base = [cli, "augment", "--model", model, "--input", imgs, "--iters", "5"]
+    base = [cli, "augment", "--model", model, "--input", imgs, "--iters", "5", "--finetune", "0"]
     grid = ["--grid", "-10:10:10,0:0:1"]
 
     r = run(cli, "help", "augment")
@@ -175,18 +175,18 @@ def errors(cli, work):
     good = open(bad, "rb").read()
     with open(bad, "wb") as f:
         f.write(b"\x89PNG\r\n\x1a\n" + b"\0" * 40)
-    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5")
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5", "--finetune", "0")
     check(r.returncode == 1 and bad in r.stderr, "bad image: %d %s" % (r.returncode, r.stderr))
     man = open(os.path.join(out, ".augment", "manifest")).read().splitlines()
     check(man[1:] == ["done 0", "done 1"], "manifest keeps the good two: %s" % man)
     with open(bad, "wb") as f:
         f.write(good)
-    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5")
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5", "--finetune", "0")
     check(r.returncode == 0 and "resuming: 2 of 3" in r.stderr and "1/3" not in r.stderr,
           "rerun after the fix: %d %s" % (r.returncode, r.stderr))
-    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5")
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "5", "--finetune", "0")
     check(r.returncode == 0 and "already complete" in r.stdout, "third run: %s" % r.stdout)
-    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "6")
+    r = run(cli, "augment", "--model", model, "--input", src, "--out", out, *grid, "--iters", "6", "--finetune", "0")
     check(r.returncode == 1 and "another augment run" in r.stderr, "other options: %s" % r.stderr)
     ref = tree_bytes(out)
 
@@ -194,7 +194,8 @@ def errors(cli, work):
     # tiny tmpfs. Exit 1 naming the file; resumed, the same bytes.
     out2 = os.path.join(work, "aug_enospc")
     shutil.rmtree(out2, ignore_errors=True)
-    args = [cli, "augment", "--model", model, "--input", src, "--out", out2, *grid, "--iters", "5"]
+    args = [cli, "augment", "--model", model, "--input", src, "--out", out2, *grid, "--iters", "5",
+            "--finetune", "0"]
     r = run(*args, env={"GAZESPLAT_AUGMENT_ENOSPC_AFTER": "5"})
     check(r.returncode == 1 and "No space left on device" in r.stderr and out2 in r.stderr,
           "ENOSPC hook: %d %s" % (r.returncode, r.stderr))
@@ -206,7 +207,7 @@ def errors(cli, work):
                       capture_output=True).returncode == 0:
         try:
             r = run(cli, "augment", "--model", model, "--input", src, "--out",
-                    os.path.join(mnt, "o"), *grid, "--iters", "5")
+                    os.path.join(mnt, "o"), *grid, "--iters", "5", "--finetune", "0")
             check(r.returncode == 1 and "No space left on device" in r.stderr,
                   "tmpfs full: %d %s" % (r.returncode, r.stderr))
             man = open(os.path.join(mnt, "o", ".augment", "manifest")).read().splitlines()
@@ -216,6 +217,24 @@ def errors(cli, work):
     else:
         print("no tmpfs (not allowed to mount here): the hook alone")
 
+    # The served setting (the defaults: fine-tuning and detail transfer) on
+    # one face, twice: the same bytes; fine-tuned, so finetune_psnr is set.
+    one = os.path.join(work, "aug_one")
+    shutil.rmtree(one, ignore_errors=True)
+    os.makedirs(one)
+    shutil.copy(os.path.join(imgs, "00000000.png"), one)
+    outs = []
+    for k in range(2):
+        o = os.path.join(work, "aug_served%d" % k)
+        shutil.rmtree(o, ignore_errors=True)
+        r = run(cli, "augment", "--model", model, "--input", one, "--out", o, "--gaze-deg", "0,0;10,-10",
+                "--iters", "8", "--finetune", "4")
+        check(r.returncode == 0, "served setting: %s" % r.stderr)
+        outs.append(tree_bytes(o))
+    check(outs[0] == outs[1] and len(outs[0]) == 4, "served setting: the same bytes twice")
+    ln = json.loads(outs[0]["labels.jsonl"].decode().splitlines()[0])
+    check(ln["finetune_psnr"] is not None and ln["fit_psnr"] is not None, "finetune_psnr %s" % ln)
+
     # Progress: a terminal gets the \r line with an ETA; a pipe gets none.
     out3 = os.path.join(work, "aug_tty")
     shutil.rmtree(out3, ignore_errors=True)
@@ -223,7 +242,7 @@ def errors(cli, work):
     if pid == 0:
         os.dup2(os.open(os.devnull, os.O_WRONLY), 1)
         os.execv(cli, [cli, "augment", "--model", model, "--input", imgs, "--out", out3, *grid,
-                       "--iters", "3", "--format", "png"])
+                       "--iters", "3", "--finetune", "0", "--format", "png"])
     buf = b""
     while True:
         try:
@@ -246,7 +265,8 @@ def resume(cli, work):
     imgs = os.path.join(faces, "images")
     lab = labels_csv(faces, os.path.join(work, "aug_labels.csv"))
     common = ["--model", model, "--input", imgs, "--labels", lab, "--uniform", "-20,20,-30,30",
-              "--per-image", "3", "--head-uniform", "-10,10,-15,15", "--iters", "12", "--seed", "7"]
+              "--per-image", "3", "--head-uniform", "-10,10,-15,15", "--iters", "12", "--seed", "7",
+              "--finetune", "0"]
     ref_dir = os.path.join(work, "aug_ref")
     shutil.rmtree(ref_dir, ignore_errors=True)
     t0 = time.time()
@@ -304,7 +324,8 @@ def resume(cli, work):
     h5o = os.path.join(work, "aug_h5in")
     shutil.rmtree(h5o, ignore_errors=True)
     r = run(cli, "augment", "--model", model, "--input", os.path.join(ref_dir, "augment.h5"),
-            "--out", h5o, "--gaze-deg", "0,0", "--iters", "30", "--format", "h5", "--fit-labels")
+            "--out", h5o, "--gaze-deg", "0,0", "--iters", "30", "--format", "h5", "--fit-labels",
+            "--finetune", "0")
     check(r.returncode == 0, "HDF5 input: %s" % r.stderr)
     l2 = [json.loads(x) for x in open(os.path.join(h5o, "labels.jsonl"))]
     check(len(l2) == 18 and l2[3]["source_row"] == 3 and l2[3]["source"] == "augment.h5"
