@@ -57,7 +57,7 @@ for size in 224 256; do
     n=$(echo "$line" | sed -n 's/.*: \([0-9]*\) images from.*/\1/p')
     s=$(echo "$line" | sed -n 's/.* in \([0-9.]*\) s$/\1/p')
     awk -v size="$size" -v t="$t" -v n="$n" -v s="$s" -v f="$FACES" -v w="$(echo "$end - $start" | bc)" \
-      'BEGIN { printf "| %d² | %d | %d | %.1f | %.2f | %.1f | %.1f |\n", size, t, n, s, n / s, s / f, w }'
+      'BEGIN { printf "| %d² | %d | %d | %.1f | %.3f | %.1f | %.1f |\n", size, t, n, s, n / s, s / f, w }'
     if [ "$RUNS" -gt 1 ] && command -v farm-bench >/dev/null 2>&1; then
       # shellcheck disable=SC2086
       farm-bench -n "$RUNS" --warmup 0 --timeout 3600 -- sh -c "rm -rf '$out'; exec '$G' augment \

@@ -25,6 +25,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "augment_remote.h"
 #include "augment_table.h"
 #include "cli.h"
 #include "photo_prep.h"
@@ -40,7 +41,8 @@ static int run_augment(int argc, char **argv);
 const cli_command cli_augment_command = {
     "augment",
     "augment a gaze dataset offline: fit each face, render it at new gazes (PNG/JSONL, HDF5)",
-    "usage: gazesplat augment --model M --input DIR|FILE.h5 --out DIR\n"
+    "usage: gazesplat augment (--model M | --addr ADDR [--token T])\n"
+    "                         --input DIR|FILE.h5 --out DIR\n"
     "                         (--grid P0:P1:STEP,Y0:Y1:STEP | --gaze-deg \"P,Y;P,Y\"\n"
     "                          | --uniform P0,P1,Y0,Y1 --per-image N | --targets FILE)\n"
     "                         [--head-deg \"P,Y;P,Y\" | --head-uniform P0,P1,Y0,Y1]\n"
@@ -48,6 +50,11 @@ const cli_command cli_augment_command = {
     "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
     "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
     "                         [--threads N]\n"
+    "\n"
+    "  --model M        fit and render in this process with model file M\n"
+    "  --addr ADDR      or through gazesplatd at ADDR (unix:PATH, tcp:HOST:PORT or\n"
+    "                   a socket path; --token T or $GAZESPLAT_TOKEN): FIT, then\n"
+    "                   REDIRECT by the subject's key, the same options sent\n"
     "\n"
     "Inputs (--input):\n"
     "  DIR              its .png/.jpg/.jpeg files in byte order of name: a file\n"
@@ -111,7 +118,7 @@ const cli_command cli_augment_command = {
 enum {
     O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
     O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
-    O_THREADS, O_SIZE, O_N
+    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_N
 };
 
 typedef struct target {
@@ -152,6 +159,7 @@ typedef struct job {
     uint64_t fingerprint;
     long write_budget; /* test hook: writes left before ENOSPC (-1: off) */
     int out_size;      /* output patches, px (--size; default the model's) */
+    gs_client *remote; /* --addr: fits and renders through gazesplatd */
 } job;
 
 /* ---- small helpers ---- */
@@ -1186,6 +1194,119 @@ static float get_f32le(const uint8_t *p)
     return v;
 }
 
+/* --addr: source k's FIT and REDIRECT through the daemon. Photos go as
+ * they are (the server detects and normalizes them as redirect does);
+ * normalized faces and HDF5 rows as PNGs of the normalized face. The
+ * renders land in *renders (nt x S x S x 3 RGB). */
+static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, const char *what)
+{
+    const cli_command *cmd = j->cmd;
+    source *s = &j->src[k];
+    int S = j->info.image_size;
+    gs_error err = {0, ""};
+    uint8_t *bytes = NULL;
+    void *enc = NULL;
+    size_t len = 0;
+    int rc = CLI_OK;
+    aug_remote_fit in;
+    memset(&in, 0, sizeof in);
+    if (j->is_h5) {
+        gs_io_image face = {0};
+        cli_photo_face pf = {0};
+        int photo = 0;
+        if (load_face(j, k, &face, &pf, &photo, &err) ||
+            gs_io_image_encode(&face, GS_IO_PNG, 0, &enc, &len, &err))
+            rc = cli_fail(cmd, "%s: %s", what, err.msg);
+        gs_io_image_free(&face);
+        in.image = enc;
+    } else {
+        char path[4300];
+        gs_io_image img = {0};
+        snprintf(path, sizeof path, "%s/%s", j->input, s->name);
+        if (gs_io_image_read(path, NULL, &img, &err))
+            rc = cli_fail(cmd, "%s: %s", what, err.msg);
+        else if (cli_read_file(path, (size_t)256 << 20, &bytes, &len))
+            rc = cli_fail(cmd, "%s: cannot read", what);
+        fi->photo = !rc && !(img.width == S && img.height == S);
+        gs_io_image_free(&img);
+        in.image = bytes;
+    }
+    in.len = len;
+    in.photo = fi->photo;
+    in.iters = (int)j->iters;
+    in.ft_steps = j->ft.iters;
+    in.ft_lr = j->ft.lr;
+    in.keep_image = j->transfer;
+    if (!fi->photo && j->fit_labels && s->has_head) {
+        in.known_head = 1;
+        in.head_deg[0] = s->head[0] / DEG;
+        in.head_deg[1] = s->head[1] / DEG;
+    }
+    if (!fi->photo && j->fit_labels && s->has_gaze) {
+        double R[9], g[3], gh[3], p, y;
+        if (s->has_head)
+            gs_geom_rot_from_pitchyaw(s->head[0], s->head[1], 0, R);
+        else
+            gs_geom_mat3_identity(R);
+        gs_geom_pitchyaw_to_vec(s->gaze[0], s->gaze[1], g);
+        gs_geom_mat3_tvec(R, g, gh);
+        gs_geom_vec_to_pitchyaw(gh, &p, &y);
+        in.known_gaze = 1;
+        in.gaze_deg[0] = p / DEG;
+        in.gaze_deg[1] = y / DEG;
+    }
+    aug_remote_subject rs;
+    char msg[600];
+    aug_remote_target *tg = rc ? NULL : calloc(s->nt + 1, sizeof *tg);
+    *renders = rc ? NULL : malloc((size_t)S * S * 3 * (s->nt + 1));
+    if (!rc && (!tg || !*renders))
+        rc = cli_fail(cmd, "out of memory");
+    if (!rc && aug_remote_fit_one(j->remote, &in, &rs, msg, sizeof msg))
+        rc = cli_fail(cmd, "%s: %s", what, msg);
+    /* The FIT's report, kept until the source is done: a rerun after a
+     * kill finds the subject in the server's cache, whose FIT_OK cannot
+     * say what the fine-tuning reached; the first run's report can. */
+    char fitp[4300];
+    part_path(j, k, "fit", fitp, sizeof fitp);
+    if (!rc && rs.cached) {
+        uint8_t *b = NULL;
+        size_t bl = 0;
+        aug_remote_subject was;
+        if (cli_read_file(fitp, sizeof was, &b, &bl) == 0 && bl == sizeof was) {
+            memcpy(&was, b, sizeof was);
+            if (memcmp(was.key, rs.key, sizeof rs.key) == 0)
+                rs.ft_psnr = was.ft_psnr;
+        }
+        free(b);
+    } else if (!rc && commit_file(j, fitp, &rs, sizeof rs))
+        rc = cli_fail(cmd, "%s: cannot write (%s)", fitp, strerror(errno));
+    for (size_t t = 0; !rc && t < s->nt; t++) {
+        const target *x = &j->tg[s->t0 + t];
+        tg[t].gaze_deg[0] = x->gp / DEG;
+        tg[t].gaze_deg[1] = x->gy / DEG;
+        tg[t].use_head = x->use_head;
+        tg[t].head_deg[0] = x->hp / DEG;
+        tg[t].head_deg[1] = x->hy / DEG;
+    }
+    if (!rc && aug_remote_render(j->remote, &rs, tg, s->nt, j->transfer, S, *renders,
+                                 (size_t)S * S * 3, msg, sizeof msg))
+        rc = cli_fail(cmd, "%s: %s", what, msg);
+    if (!rc) {
+        /* The subject as FIT_OK tells it: head angles (roll 0), gaze. */
+        gs_geom_rot_from_pitchyaw(rs.head_deg[0] * DEG, rs.head_deg[1] * DEG, 0, fi->sub.head_R);
+        fi->sub.head_t[0] = fi->sub.head_t[1] = fi->sub.head_t[2] = NAN;
+        fi->sub.gaze_pitch = rs.gaze_deg[0] * DEG;
+        fi->sub.gaze_yaw = rs.gaze_deg[1] * DEG;
+        fi->sub.fit_psnr = (float)rs.psnr;
+        fi->sub.fit_ssim = (float)rs.ssim;
+        fi->ft_psnr = rs.ft_psnr;
+    }
+    free(tg);
+    free(bytes);
+    free(enc);
+    return rc;
+}
+
 /* Fit, fine-tune, render and commit source k. */
 static int do_source(job *j, size_t k, double *psnr_out)
 {
@@ -1204,8 +1325,13 @@ static int do_source(job *j, size_t k, double *psnr_out)
     int rc = CLI_OK;
     gs_model_ctx *c = NULL;
     gs_model *tuned = NULL;
-    uint8_t *blob = NULL;
+    uint8_t *blob = NULL, *remote = NULL;
     jbuf jb = {0};
+    if (j->remote) {
+        if ((rc = remote_source(j, k, &fi, &remote, what)))
+            goto done;
+        goto render;
+    }
     if (load_face(j, k, &face, &pf, &fi.photo, &err)) {
         rc = cli_fail(cmd, "%s: %s", what, err.msg);
         goto done;
@@ -1262,6 +1388,7 @@ static int do_source(job *j, size_t k, double *psnr_out)
             goto done;
         }
     }
+render:
     *psnr_out = fi.sub.fit_psnr;
     /* Blob: per target the RGB patch as BGR (face_patch's order), then
      * face_gaze and face_head_pose as float32 LE. */
@@ -1291,9 +1418,14 @@ static int do_source(job *j, size_t k, double *psnr_out)
         }
         uint8_t *px = blob + t * rec, *dst = render ? render : px;
         out.data = px;
-        int r = j->transfer ? gs_model_render_transfer(c, j->pool, &fi.sub, face.data, face.stride,
-                                                       &v, dst, (size_t)S * 3, &err)
-                            : gs_model_render(c, j->pool, &fi.sub, &v, dst, (size_t)S * 3, &err);
+        int r = 0;
+        if (remote)
+            memcpy(dst, remote + t * (size_t)S * S * 3, (size_t)S * S * 3);
+        else if (j->transfer)
+            r = gs_model_render_transfer(c, j->pool, &fi.sub, face.data, face.stride, &v, dst,
+                                         (size_t)S * 3, &err);
+        else
+            r = gs_model_render(c, j->pool, &fi.sub, &v, dst, (size_t)S * 3, &err);
         if (r) {
             rc = cli_fail(cmd, "%s: target %zu: %s", what, t, err.msg);
             break;
@@ -1351,6 +1483,7 @@ static int do_source(job *j, size_t k, double *psnr_out)
 done:
     free(jb.p);
     free(blob);
+    free(remote);
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);
     cli_photo_face_free(&pf);
@@ -1478,6 +1611,8 @@ static void remove_parts(job *j)
         unlink(path);
         part_path(j, k, "jsonl", path, sizeof path);
         unlink(path);
+        part_path(j, k, "fit", path, sizeof path);
+        unlink(path);
     }
 }
 
@@ -1523,6 +1658,7 @@ static void job_free(job *j)
     gs_face_shape_model_free(j->sp);
     gs_pool_destroy(j->pool);
     gs_model_destroy(j->model);
+    aug_remote_close(j->remote);
 }
 
 static int run_augment(int argc, char **argv)
@@ -1536,7 +1672,7 @@ static int run_augment(int argc, char **argv)
         {"--shard", 1, NULL},   {"--seed", 1, NULL},         {"--iters", 1, NULL},
         {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
         {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
-        {"--size", 1, NULL}};
+        {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -1548,8 +1684,13 @@ static int run_augment(int argc, char **argv)
     memset(&j, 0, sizeof j);
     j.cmd = cmd;
     j.write_budget = -1;
-    if (!o[O_MODEL].value || !o[O_INPUT].value || !o[O_OUT].value)
-        return cli_usage_error(cmd, "--model, --input and --out are needed");
+    if ((!o[O_MODEL].value == !o[O_ADDR].value) || !o[O_INPUT].value || !o[O_OUT].value)
+        return cli_usage_error(cmd, "--input, --out and one of --model (in process) and --addr "
+                               "(through gazesplatd) are needed");
+    if (o[O_TOKEN].value && !o[O_ADDR].value)
+        return cli_usage_error(cmd, "--token goes with --addr");
+    if (o[O_ADDR].value && o[O_THREADS].value)
+        return cli_usage_error(cmd, "--threads is the server's with --addr");
     j.input = o[O_INPUT].value;
     j.out = o[O_OUT].value;
     j.want_png = j.want_h5 = 1;
@@ -1639,7 +1780,8 @@ static int run_augment(int argc, char **argv)
             fp = fnv_str(fp, o[i].name);
             fp = fnv_str(fp, o[i].value);
         }
-    fp = hash_file(fp, o[O_MODEL].value);
+    if (o[O_MODEL].value)
+        fp = hash_file(fp, o[O_MODEL].value);
     if (j.is_h5)
         fp = fnv(fp, &st.st_size, sizeof st.st_size);
     for (size_t i = 0; i < j.nsrc; i++)
@@ -1649,11 +1791,25 @@ static int run_augment(int argc, char **argv)
 
     gs_error err = {0, ""};
     gs_nn_blas_set_threads(1);
-    if (gs_model_load(o[O_MODEL].value, &j.model, &err)) {
+    if (o[O_ADDR].value) {
+        char server[256], msg[600];
+        int srv_size = 0;
+        const char *token = o[O_TOKEN].value ? o[O_TOKEN].value : getenv("GAZESPLAT_TOKEN");
+        if (aug_remote_connect(o[O_ADDR].value, token, &j.remote, &srv_size, server, sizeof server,
+                               msg, sizeof msg)) {
+            rc = cli_fail(cmd, "%s", msg);
+            goto out;
+        }
+        /* The server's model is in the fingerprint as far as HELLO tells it. */
+        j.fingerprint = fnv_str(fnv(j.fingerprint, &srv_size, sizeof srv_size), server);
+        memset(&j.info, 0, sizeof j.info);
+        j.info.image_size = srv_size;
+        j.info.distance_mm = NAN;
+    } else if (gs_model_load(o[O_MODEL].value, &j.model, &err)) {
         rc = cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
         goto out;
-    }
-    gs_model_get_info(j.model, &j.info);
+    } else
+        gs_model_get_info(j.model, &j.info);
     j.out_size = size ? (int)size : j.info.image_size;
     j.pool = gs_pool_create((int)threads);
     if (!j.pool) {

@@ -8,7 +8,10 @@ usage: test_augment.py GAZESPLAT_CLI WORKDIR MODE
                full disk, shard out of range), help, the TTY progress line
   MODE resume  the HDF5 read by h5py (ETH-XGaze names, shapes, dtypes);
                HDF5 in; shards against the whole run; kill -9 at several
-               moments and rerun: the same bytes as an uninterrupted run"""
+               moments and rerun: the same bytes as an uninterrupted run
+  MODE addr GAZESPLATD  the same through the daemon (--addr): its renders
+               are the in-process renders byte for byte, killed and rerun
+               too; an unreachable address"""
 import json
 import os
 import pty
@@ -382,10 +385,79 @@ def resume(cli, work):
     print("killed %d times; uninterrupted run %.1f s" % (kills, full_s))
 
 
+def addr(cli, work):
+    from daemon_util import Daemon
+    daemon = os.path.abspath(sys.argv[4])
+    model = tiny_model(cli, work, seed=1)
+    faces = synth_faces(cli, work, 3)
+    imgs = os.path.join(faces, "images")
+    # The served setting, small: fine-tuning, transfer (the kept input), a
+    # head change.
+    opts = ["--input", imgs, "--gaze-deg", "0,0;10,-10", "--head-deg", "0,0;5,10", "--iters", "10",
+            "--finetune", "3"]
+    local = os.path.join(work, "aug_local")
+    shutil.rmtree(local, ignore_errors=True)
+    r = run(cli, "augment", "--model", model, *opts, "--out", local)
+    check(r.returncode == 0, "in process: %s" % r.stderr)
+    ref = tree_bytes(local)
+    r = run(cli, "augment", "--addr", os.path.join(work, "no-such.sock"), *opts, "--out",
+            os.path.join(work, "aug_nodaemon"))
+    check(r.returncode == 1 and "no-such.sock" in r.stderr, "unreachable: %d %s" % (r.returncode, r.stderr))
+    def start(name):
+        # A fresh state directory: no subject known from an earlier run.
+        state = os.path.join(work, name)
+        shutil.rmtree(state, ignore_errors=True)
+        os.makedirs(state)
+        return Daemon(daemon, ["--model", model, "--state-dir", state, "--set", "photo_input=no"]).start()
+
+    out = os.path.join(work, "aug_remote")
+    shutil.rmtree(out, ignore_errors=True)
+    d = start("aug_state1")
+    try:
+        args = [cli, "augment", "--addr", d.sock, *opts, "--out", out]
+        t0 = time.time()
+        r = run(*args)
+        full_s = time.time() - t0
+        check(r.returncode == 0, "--addr: %s" % r.stderr)
+    finally:
+        d.stop()
+    got = tree_bytes(out)
+    check(sorted(got) == sorted(ref), "files %s" % sorted(got))
+    check(all(got[n] == ref[n] for n in ref if n.startswith("images/")),
+          "the daemon's renders = the in-process renders")
+    lines = [json.loads(x) for x in got.get("labels.jsonl", b"").decode().splitlines()]
+    check(len(lines) == 12 and all(x["head_t_mm"] == [None, None, None] and x["fit_psnr"] > 0
+                                   and x["finetune_psnr"] for x in lines), "labels over --addr")
+    # Killed and rerun through a daemon that starts afresh: the bytes of
+    # the uninterrupted run (the server's cache answers the rerun's FITs,
+    # the kept FIT reports fill in what it cannot say).
+    out2 = os.path.join(work, "aug_remote_killed")
+    shutil.rmtree(out2, ignore_errors=True)
+    d = start("aug_state2")
+    try:
+        args = [cli, "augment", "--addr", d.sock, *opts, "--out", out2]
+        kills = 0
+        for frac in (0.3, 0.6, 5.0):
+            p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            try:
+                p.wait(timeout=frac * full_s)
+            except subprocess.TimeoutExpired:
+                p.send_signal(signal.SIGKILL)
+                p.wait()
+                kills += 1
+                continue
+            break
+    finally:
+        d.stop()
+    again = tree_bytes(out2)
+    check(p.returncode == 0 and kills >= 1 and again == got, "--addr killed %d times: same bytes (%s)" % (
+        kills, [n for n in set(got) | set(again) if got.get(n) != again.get(n)][:4]))
+
+
 def main():
     cli, work, mode = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2]), sys.argv[3]
     os.makedirs(work, exist_ok=True)
-    {"errors": errors, "resume": resume}[mode](cli, work)
+    {"errors": errors, "resume": resume, "addr": addr}[mode](cli, work)
     print("%d checks, %d failed" % (COUNT[0], len(FAILS)))
     return 1 if FAILS else 0
 
