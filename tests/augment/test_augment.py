@@ -199,11 +199,20 @@ def errors(cli, work):
     shutil.rmtree(out2, ignore_errors=True)
     args = [cli, "augment", "--model", model, "--input", src, "--out", out2, *grid, "--iters", "5",
             "--finetune", "0"]
-    r = run(*args, env={"GAZESPLAT_AUGMENT_ENOSPC_AFTER": "5"})
+    r = run(*args, env={"GAZESPLAT_AUGMENT_ENOSPC_AFTER": "8"})
     check(r.returncode == 1 and "No space left on device" in r.stderr and out2 in r.stderr,
           "ENOSPC hook: %d %s" % (r.returncode, r.stderr))
+    # A torn last manifest line (killed mid-append) is cut; a listed source
+    # whose parts are gone is made again.
+    man_path = os.path.join(out2, ".augment", "manifest")
+    man = open(man_path).read()
+    check(man.endswith("done 0\n"), "ENOSPC: source 0 done: %r" % man)
+    with open(man_path, "a") as f:
+        f.write("done 1")
+    os.unlink(os.path.join(out2, ".augment", "00000000.jsonl"))
     r = run(*args)
-    check(r.returncode == 0 and tree_bytes(out2) == ref, "after ENOSPC: the same bytes")
+    check(r.returncode == 0 and "resuming" not in r.stderr and tree_bytes(out2) == ref,
+          "after ENOSPC, a torn line and a lost part: the same bytes (%s)" % r.stderr)
     mnt = os.path.join(work, "aug_tmpfs")
     os.makedirs(mnt, exist_ok=True)
     if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=250k", "tmpfs", mnt],
@@ -219,6 +228,47 @@ def errors(cli, work):
             subprocess.run(["umount", mnt])
     else:
         print("no tmpfs (not allowed to mount here): the hook alone")
+
+    # A targets file: per-source rows, a bad row named.
+    tf = os.path.join(work, "aug_targets.csv")
+    with open(tf, "w") as f:
+        f.write("file,gaze_pitch_deg,gaze_yaw_deg,head_pitch_deg,head_yaw_deg\n"
+                "00000001.png,5,5,,\n00000000.png,-5,10,10,0\n00000001.png,0,-20,,\n")
+    to = os.path.join(work, "aug_targets_out")
+    shutil.rmtree(to, ignore_errors=True)
+    r = run(*base, "--out", to, "--targets", tf, "--format", "png")
+    lines = [json.loads(x) for x in open(os.path.join(to, "labels.jsonl"))] if r.returncode == 0 else []
+    check([(x["source"], x["index"], x["target_index"], round(x["gaze_head_yaw_rad"] * 57.29578),
+            x["head_changed"]) for x in lines] ==
+          [("00000000.png", 0, 0, 10, True), ("00000001.png", 1, 0, 5, False),
+           ("00000001.png", 2, 1, -20, False)], "targets file: %s %s" % (r.stderr, lines))
+    with open(tf, "a") as f:
+        f.write("00000002.png,60,0,,\n")
+    r = run(*base, "--out", os.path.join(work, "aug_targets_bad"), "--targets", tf)
+    check(r.returncode == 1 and tf + " line 5" in r.stderr and "range" in r.stderr,
+          "targets file out of range: %s" % r.stderr)
+
+    # A photo: its normalized face and fit are redirect's, so augment's
+    # patch is redirect's --out-norm crop byte for byte.
+    photo = os.path.join(HERE, "..", "..", "samples", "astronaut.jpg")
+    if os.path.exists(photo):
+        pd = os.path.join(work, "aug_photo")
+        shutil.rmtree(pd, ignore_errors=True)
+        os.makedirs(pd)
+        shutil.copy(photo, pd)
+        po, ro = os.path.join(work, "aug_photo_out"), os.path.join(work, "aug_photo_redirect")
+        for d in (po, ro):
+            shutil.rmtree(d, ignore_errors=True)
+        r = run(cli, "augment", "--model", model, "--input", pd, "--out", po, "--gaze-deg", "10,-20",
+                "--iters", "6", "--finetune", "0", "--no-transfer", "--format", "png")
+        r2 = run(cli, "redirect", "--model", model, "--image", photo, "--gaze-deg", "10,-20",
+                 "--iters", "6", "--out", ro, "--out-norm")
+        ok = r.returncode == 0 and r2.returncode == 0
+        check(ok and open(os.path.join(po, "images", "00000000.png"), "rb").read() ==
+              open(os.path.join(ro, "norm_000.png"), "rb").read(),
+              "photo: augment = redirect's normalized crop (%s %s)" % (r.stderr[-300:], r2.stderr[-300:]))
+        line = json.loads(open(os.path.join(po, "labels.jsonl")).readline()) if ok else {}
+        check(line.get("source_kind") == "photo", "photo source_kind")
 
     # The served setting (the defaults: fine-tuning and detail transfer) on
     # one face, twice: the same bytes; fine-tuned, so finetune_psnr is set.
