@@ -98,16 +98,20 @@ const cli_command cli_augment_command = {
     "  --shard I/N      only sources k with k mod N = I (0 <= I < N); files\n"
     "                   named labels-I-of-N.jsonl and augment-I-of-N.h5;\n"
     "                   image names and targets as in the unsharded run\n"
-    "  Resumable: DIR/.augment-I-of-N holds the manifest and the per-source\n"
-    "  parts; run the same command again after a crash or kill and it\n"
-    "  continues where it stopped, ending with the same bytes.\n"
+    "  Resumable: DIR/.augment (.augment-I-of-N with --shard) holds the\n"
+    "  manifest and the per-source parts; run the same command again after\n"
+    "  a crash, a kill or a full disk and it continues where it stopped,\n"
+    "  ending with the bytes an uninterrupted run writes.\n"
     "\n"
     "Fit and render: the daemon's served setting by default, through the\n"
     "library calls gazesplat redirect makes: the fit to its plateau, at most\n"
     "--iters N (200); --finetune N steps (15; 0: none) at --finetune-lr X\n"
     "(0.004) with the mirrored view; detail transfer with the eyeball warp\n"
     "(--no-transfer: the model's render alone). --seed N (0): --uniform's\n"
-    "and --head-uniform's draws. --threads N (2): the same bytes for any N.\n",
+    "and --head-uniform's draws. --threads N (2): the same bytes for any N.\n"
+    "\n"
+    "Exit status: 0 done, 1 a failure (named with its file and line or row;\n"
+    "the sources done are kept), 2 bad usage.\n",
     run_augment,
 };
 
