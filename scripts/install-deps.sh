@@ -11,6 +11,8 @@ PACKAGES=(
   libopenblas-dev
   libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
   libusb-1.0-0-dev
+  # augment: ETH-XGaze-style HDF5 files (lib/io/hdf5.c); h5py reads them in tests
+  libhdf5-dev python3-h5py
   # daemon: BLAKE2b for subject keys and model ids
   libb2-dev
   libopencv-objdetect-dev libopencv-calib3d-dev

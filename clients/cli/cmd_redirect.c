@@ -8,6 +8,7 @@
 #include <sys/stat.h>
 
 #include "cli.h"
+#include "photo_prep.h"
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
@@ -411,50 +412,33 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
     gs_model_get_info(m, &info);
     int S = info.image_size;
     gs_error err = {0, ""};
-    gs_io_image photo = {0}, norm = {0}, face = {S, S, 3 * (size_t)S, NULL};
+    gs_io_image photo = {0}, face = {S, S, 3 * (size_t)S, NULL};
     gs_face_detector *det = NULL;
     gs_face_shape_model *sp = NULL;
-    uint8_t *mask_n = NULL, *mask_p = NULL;
+    cli_photo_face pf = {0};
+    uint8_t *mask_p = NULL;
     gs_model_ctx *c = NULL;
     int rc = CLI_OK;
-    gs_face_opts fo;
-    gs_face_opts_default(&fo);
-    fo.index = index;
-    /* The model was trained on synthetic heads, whose labels use the
-     * synthetic head frame: solve the pose against the mean synthetic head
-     * so the normalization and the head angles are in that frame. */
-    fo.pose_model = GS_FACE_POSE_SYNTH;
-    fo.norm_size = S;
-    fo.norm_distance_mm = info.distance_mm;
-    fo.norm_focal = info.focal;
-    gs_face_result res;
     if (gs_io_image_read(path, NULL, &photo, &err) ||
         gs_face_detector_load(NULL, &det, &err) ||
         gs_face_shape_model_load(NULL, &sp, &err) ||
-        gs_face_analyze(det, sp, &photo, &fo, &res, &err) ||
-        gs_face_normalize_image(&photo, &res.norm, &norm, &err)) {
+        cli_photo_normalize(det, sp, &photo, index, &info, &pf, &err)) {
         rc = cli_fail(cmd, "%s: %s", path, err.msg);
         goto done;
     }
-    mask_n = malloc((size_t)S * S);
+    const gs_face_result res = pf.res;
+    const gs_io_image norm = pf.norm;
     mask_p = malloc((size_t)photo.width * photo.height);
     face.data = malloc(face.stride * (size_t)S);
     c = gs_model_ctx_create(m);
-    if (!mask_n || !mask_p || !face.data || !c) {
+    if (!mask_p || !face.data || !c) {
         rc = cli_fail(cmd, "out of memory");
         goto done;
     }
-    gs_face_mask((const double(*)[2])res.uv_n, GS_FACE_MASK_FACE, 0, 4, S, S,
-                 mask_n, NULL);
     gs_face_mask((const double(*)[2])res.uv, GS_FACE_MASK_EYES, 2, 6,
                  photo.width, photo.height, mask_p, NULL);
     gs_fit_options o;
-    gs_fit_options_default(&o);
-    o.mask = mask_n;
-    o.max_iters = iters;
-    o.known_head = 1;
-    gs_geom_norm_rot(&res.norm, res.pose.R, o.head_R);
-    o.head_t[2] = gs_geom_vec3_norm(res.pose.t);
+    cli_photo_fit_options(&pf, iters, &o);
     gs_subject sub;
     gs_fit_report r;
     if (gs_model_fit(c, pool, norm.data, norm.stride, &o, &sub, &r, &err)) {
@@ -466,7 +450,7 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
             index, res.n_faces, res.head_pitch_n / DEG, res.head_yaw_n / DEG,
             r.iters, sub.fit_psnr, sub.gaze_pitch / DEG, sub.gaze_yaw / DEG);
     if (ft->iters > 0) { /* render with the tuned copy from here on */
-        if ((rc = finetune_copy(cmd, m, pool, &sub, norm.data, norm.stride, mask_n, ft,
+        if ((rc = finetune_copy(cmd, m, pool, &sub, norm.data, norm.stride, pf.mask_n, ft,
                                 &tuned)))
             goto done;
         gs_model_ctx_destroy(c);
@@ -510,9 +494,8 @@ done:
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);
     free(face.data);
-    free(mask_n);
     free(mask_p);
-    gs_io_image_free(&norm);
+    cli_photo_face_free(&pf);
     gs_io_image_free(&photo);
     gs_face_detector_free(det);
     gs_face_shape_model_free(sp);

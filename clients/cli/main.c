@@ -15,6 +15,7 @@ static const cli_command *const commands[] = {
     &cli_train_command,
     &cli_fit_command,
     &cli_redirect_command,
+    &cli_augment_command,
     &cli_live_command,
     &cli_train_estimator_command,
     &cli_estimate_command,

@@ -1,0 +1,1920 @@
+/* gazesplat augment: a gaze dataset made larger offline. Each source face
+ * (a photo, a normalized face, or a row of an ETH-XGaze-style HDF5 file) is
+ * fitted as gazesplat redirect fits it (photo_prep.h, the same library
+ * calls and defaults), optionally fine-tuned, and rendered at targets from
+ * a grid, a list, a seeded distribution or a file. Outputs: PNGs and
+ * labels.jsonl, and/or an ETH-XGaze-style HDF5 file.
+ *
+ * Crash safety (docs/augment.md): each source's outputs are written to
+ * temporary names, fsync'd and renamed, then the source is appended to the
+ * manifest and fsync'd. The final labels file and HDF5 are assembled only
+ * when every source of the shard is done, from the per-source parts, in
+ * source order, so a run killed at any moment and run again ends with the
+ * bytes an uninterrupted run writes. */
+#define _POSIX_C_SOURCE 200809L
+#include <dirent.h>
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <stdarg.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <strings.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "augment_remote.h"
+#include "augment_table.h"
+#include "cli.h"
+#include "photo_prep.h"
+#include "gazesplat/face.h"
+#include "gazesplat/geom.h"
+#include "gazesplat/image_io.h"
+#include "gazesplat/model.h"
+#include "gazesplat/nn.h"
+#include "gazesplat/xgaze_h5.h"
+
+static int run_augment(int argc, char **argv);
+
+const cli_command cli_augment_command = {
+    "augment",
+    "augment a gaze dataset offline: fit each face, render it at new gazes (PNG/JSONL, HDF5)",
+    "usage: gazesplat augment (--model M | --addr ADDR [--token T])\n"
+    "                         --input DIR|FILE.h5 --out DIR\n"
+    "                         (--grid P0:P1:STEP,Y0:Y1:STEP | --gaze-deg \"P,Y;P,Y\"\n"
+    "                          | --uniform P0,P1,Y0,Y1 --per-image N | --targets FILE)\n"
+    "                         [--head-deg \"P,Y;P,Y\" | --head-uniform P0,P1,Y0,Y1]\n"
+    "                         [--labels FILE] [--format png|h5|both] [--shard I/N]\n"
+    "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
+    "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
+    "                         [--threads N]\n"
+    "\n"
+    "  --model M        fit and render in this process with model file M\n"
+    "  --addr ADDR      or through gazesplatd at ADDR (unix:PATH, tcp:HOST:PORT or\n"
+    "                   a socket path; --token T or $GAZESPLAT_TOKEN): FIT, then\n"
+    "                   REDIRECT by the subject's key, the same options sent\n"
+    "\n"
+    "Inputs (--input):\n"
+    "  DIR              its .png/.jpg/.jpeg files in byte order of name: a file\n"
+    "                   of the model's size is a normalized face, any other a\n"
+    "                   photo (its largest face is detected and normalized as\n"
+    "                   gazesplat redirect does)\n"
+    "  FILE.h5          ETH-XGaze layout: face_patch N x H x W x 3 uint8 (BGR,\n"
+    "                   as ETH-XGaze stores it; --h5-rgb: RGB), optional\n"
+    "                   face_gaze and face_head_pose N x 2 (radians); patches\n"
+    "                   of another size are resized to the model's\n"
+    "  --labels FILE    (DIR) CSV with a header row, or JSON Lines: file (the\n"
+    "                   image's name in DIR), and any of gaze_pitch_deg,\n"
+    "                   gaze_yaw_deg, head_pitch_deg, head_yaw_deg (normalized\n"
+    "                   camera frame, as ETH-XGaze's labels), subject\n"
+    "  --fit-labels     normalized faces: fit with the labelled gaze and head\n"
+    "                   pose as known (default: estimated; labels are copied)\n"
+    "\n"
+    "Targets (gaze in the head frame, degrees; pitch > 0 up, yaw > 0 toward\n"
+    "image-left; the model's range: |pitch| <= 50, |yaw| <= 60):\n"
+    "  --grid P0:P1:STEP,Y0:Y1:STEP  every pitch x yaw of the grid, ends included\n"
+    "  --gaze-deg LIST  the same list for every image, ';'-separated\n"
+    "  --uniform P0,P1,Y0,Y1 --per-image N  N draws per image, uniform in the\n"
+    "                   box; image k's draws come from (--seed, k) alone, so\n"
+    "                   they do not depend on --shard\n"
+    "  --targets FILE   CSV or JSON Lines: file (DIR) or row (HDF5),\n"
+    "                   gaze_pitch_deg, gaze_yaw_deg[, head_pitch_deg,\n"
+    "                   head_yaw_deg]; one line per target\n"
+    "  --head-deg LIST  also change the head pose (normalized camera, |angle|\n"
+    "                   <= 70): every gaze target at each of these poses\n"
+    "  --head-uniform P0,P1,Y0,Y1  a head pose drawn per target\n"
+    "                   (default: the fitted head pose)\n"
+    "\n"
+    "Outputs (--out DIR, created if needed):\n"
+    "  --format F       png: DIR/images/NNNNNNNN.png; h5: DIR/augment.h5\n"
+    "                   (ETH-XGaze layout, face_patch BGR); both (default).\n"
+    "                   DIR/labels.jsonl always: one line per image (fields:\n"
+    "                   docs/augment.md), in the HDF5's row order\n"
+    "  --size S         output patches of S x S px (16..1024), resized\n"
+    "                   (bilinear) from the model's renders (default: the\n"
+    "                   model's size; e.g. 224 for ETH-XGaze's patch size)\n"
+    "  --shard I/N      only sources k with k mod N = I (0 <= I < N); files\n"
+    "                   named labels-I-of-N.jsonl and augment-I-of-N.h5;\n"
+    "                   image names and targets as in the unsharded run\n"
+    "  Resumable: DIR/.augment (.augment-I-of-N with --shard) holds the\n"
+    "  manifest and the per-source parts; run the same command again after\n"
+    "  a crash, a kill or a full disk and it continues where it stopped,\n"
+    "  ending with the bytes an uninterrupted run writes.\n"
+    "\n"
+    "Fit and render: the daemon's served setting by default, through the\n"
+    "library calls gazesplat redirect makes: the fit to its plateau, at most\n"
+    "--iters N (200); --finetune N steps (15; 0: none) at --finetune-lr X\n"
+    "(0.004) with the mirrored view; detail transfer with the eyeball warp\n"
+    "(--no-transfer: the model's render alone). --seed N (0): --uniform's\n"
+    "and --head-uniform's draws. --threads N (2): the same bytes for any N.\n"
+    "\n"
+    "Exit status: 0 done, 1 a failure (named with its file and line or row;\n"
+    "the sources done are kept), 2 bad usage.\n",
+    run_augment,
+};
+
+#define DEG (3.14159265358979323846 / 180.0)
+#define MAX_SOURCES 10000000
+#define MAX_TARGETS_PER_SOURCE 4096
+
+enum {
+    O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
+    O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
+    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_N
+};
+
+typedef struct target {
+    double gp, gy;   /* gaze, head frame, radians */
+    int use_head;
+    double hp, hy;   /* head angles, normalized camera, radians */
+} target;
+
+typedef struct source {
+    char *name;       /* file name in DIR; NULL for HDF5 rows */
+    size_t row;       /* HDF5 row */
+    char *subject;    /* NULL: none */
+    int has_gaze, has_head;
+    double gaze[2], head[2]; /* labels, radians, normalized camera */
+    size_t t0, nt;    /* targets[t0 .. t0 + nt) */
+    size_t first;     /* global index of its first sample */
+} source;
+
+typedef struct job {
+    const cli_command *cmd;
+    const char *input, *out;
+    int is_h5, h5_rgb, fit_labels, transfer, want_png, want_h5;
+    long iters, shard_i, shard_n;
+    gs_finetune_options ft;
+    source *src;
+    size_t nsrc;
+    target *tg;
+    size_t ntg;
+    char h5_name[512]; /* basename of the HDF5 input */
+    char state[4000], manifest[4100], labels_path[4100], h5_path[4100];
+    gs_model *model;
+    gs_model_info info;
+    gs_pool *pool;
+    gs_h5_reader *h5;
+    gs_h5_info h5i;
+    gs_face_detector *det;
+    gs_face_shape_model *sp;
+    uint64_t fingerprint;
+    long write_budget; /* test hook: writes left before ENOSPC (-1: off) */
+    int out_size;      /* output patches, px (--size; default the model's) */
+    gs_client *remote; /* --addr: fits and renders through gazesplatd */
+} job;
+
+/* ---- small helpers ---- */
+
+static uint64_t fnv(uint64_t h, const void *p, size_t n)
+{
+    const unsigned char *b = p;
+    for (size_t i = 0; i < n; i++) {
+        h ^= b[i];
+        h *= 1099511628211ull;
+    }
+    return h;
+}
+
+static uint64_t fnv_str(uint64_t h, const char *s)
+{
+    return fnv(h, s ? s : "\x01", s ? strlen(s) + 1 : 1);
+}
+
+static uint64_t splitmix(uint64_t *x)
+{
+    uint64_t z = (*x += 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+static double uniform(uint64_t *x, double lo, double hi)
+{
+    double u = (double)(splitmix(x) >> 11) * (1.0 / 9007199254740992.0);
+    return lo + (hi - lo) * u;
+}
+
+/* A finite decimal number, the whole string. */
+static int parse_num(const char *s, double *out)
+{
+    char *e;
+    if (!s || !*s)
+        return -1;
+    errno = 0;
+    double v = strtod(s, &e);
+    if (errno == ERANGE || *e != '\0' || !isfinite(v))
+        return -1;
+    *out = v;
+    return 0;
+}
+
+static int gaze_in_range(double p, double y)
+{
+    return fabs(p) <= GS_MODEL_MAX_GAZE_PITCH + 1e-9 && fabs(y) <= GS_MODEL_MAX_GAZE_YAW + 1e-9;
+}
+
+static int head_in_range(double p, double y)
+{
+    return fabs(p) <= GS_MODEL_MAX_HEAD_ANGLE + 1e-9 && fabs(y) <= GS_MODEL_MAX_HEAD_ANGLE + 1e-9;
+}
+
+/* "P,Y;P,Y" in degrees into a malloc'd list (radians). */
+static int parse_pairs(const char *s, double (**out)[2], size_t *n)
+{
+    *out = NULL;
+    *n = 0;
+    size_t cap = 0;
+    while (*s) {
+        char item[64];
+        size_t len = strcspn(s, ";");
+        float v[2];
+        if (len == 0 || len >= sizeof item || *n == MAX_TARGETS_PER_SOURCE)
+            goto bad;
+        memcpy(item, s, len);
+        item[len] = 0;
+        if (cli_parse_floats(item, v, 2))
+            goto bad;
+        if (*n == cap) {
+            cap = cap ? 2 * cap : 16;
+            double(*g)[2] = realloc(*out, cap * sizeof *g);
+            if (!g)
+                goto bad;
+            *out = g;
+        }
+        (*out)[*n][0] = v[0] * DEG;
+        (*out)[*n][1] = v[1] * DEG;
+        (*n)++;
+        s += len;
+        if (*s == ';')
+            s++;
+    }
+    if (*n)
+        return 0;
+bad:
+    free(*out);
+    *out = NULL;
+    return -1;
+}
+
+/* "A:B:STEP" (degrees): its values A, A + STEP, ... <= B. */
+static int parse_range(const char *s, double *lo, double *hi, double *step)
+{
+    char buf[128];
+    if (strlen(s) >= sizeof buf)
+        return -1;
+    strcpy(buf, s);
+    char *a = buf, *b = strchr(a, ':');
+    if (!b)
+        return -1;
+    *b++ = 0;
+    char *c = strchr(b, ':');
+    if (!c)
+        return -1;
+    *c++ = 0;
+    if (parse_num(a, lo) || parse_num(b, hi) || parse_num(c, step) || !(*step > 0) || *hi < *lo)
+        return -1;
+    return (*hi - *lo) / *step > MAX_TARGETS_PER_SOURCE ? -1 : 0;
+}
+
+static int grid_values(double lo, double hi, double step, double *v)
+{
+    int n = 0;
+    for (int i = 0;; i++) {
+        double x = lo + i * step;
+        if (x > hi + 1e-9 * (1 + fabs(hi)))
+            break;
+        v[n++] = x * DEG;
+    }
+    return n;
+}
+
+/* ---- files: every write goes through here ---- */
+
+static int fsync_path(const char *path)
+{
+    int fd = open(path, O_RDONLY);
+    if (fd < 0)
+        return -1;
+    int r = fsync(fd);
+    close(fd);
+    return r;
+}
+
+/* Writes data to path via path.tmp: write, fsync, rename. The test hook
+ * GAZESPLAT_AUGMENT_ENOSPC_AFTER=K makes the write after the first K fail
+ * as a full disk does. errno says why on failure. */
+static int commit_file(job *j, const char *path, const void *data, size_t len)
+{
+    char tmp[4200];
+    snprintf(tmp, sizeof tmp, "%s.tmp", path);
+    if (j->write_budget == 0) {
+        errno = ENOSPC;
+        return -1;
+    }
+    if (j->write_budget > 0)
+        j->write_budget--;
+    int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
+    if (fd < 0)
+        return -1;
+    const char *p = data;
+    size_t left = len;
+    while (left) {
+        ssize_t w = write(fd, p, left);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w <= 0) {
+            int e = w < 0 ? errno : ENOSPC;
+            close(fd);
+            unlink(tmp);
+            errno = e;
+            return -1;
+        }
+        p += w;
+        left -= (size_t)w;
+    }
+    if (fsync(fd) || close(fd)) {
+        int e = errno;
+        unlink(tmp);
+        errno = e;
+        return -1;
+    }
+    if (rename(tmp, path)) {
+        int e = errno;
+        unlink(tmp);
+        errno = e;
+        return -1;
+    }
+    return 0;
+}
+
+static int make_dir(const char *path)
+{
+    struct stat st;
+    return mkdir(path, 0777) == 0 || (stat(path, &st) == 0 && S_ISDIR(st.st_mode)) ? 0 : -1;
+}
+
+static int file_size_is(const char *path, long long want)
+{
+    struct stat st;
+    return stat(path, &st) == 0 && S_ISREG(st.st_mode) && (want < 0 || st.st_size == want);
+}
+
+/* ---- JSON output ---- */
+
+typedef struct jbuf {
+    char *p;
+    size_t len, cap;
+    int oom;
+} jbuf;
+
+static void jput(jbuf *b, const char *fmt, ...) __attribute__((format(printf, 2, 3)));
+static void jput(jbuf *b, const char *fmt, ...)
+{
+    for (;;) {
+        va_list ap;
+        va_start(ap, fmt);
+        size_t room = b->cap - b->len;
+        int n = vsnprintf(b->p ? b->p + b->len : NULL, b->p ? room : 0, fmt, ap);
+        va_end(ap);
+        if (n < 0)
+            return;
+        if (b->p && (size_t)n < room) {
+            b->len += (size_t)n;
+            return;
+        }
+        size_t cap = (b->cap + (size_t)n + 1) * 2;
+        char *q = realloc(b->p, cap);
+        if (!q) {
+            b->oom = 1;
+            return;
+        }
+        b->p = q;
+        b->cap = cap;
+    }
+}
+
+static void jnum(jbuf *b, const char *key, double v)
+{
+    if (isfinite(v))
+        jput(b, ",\"%s\":%.10g", key, v);
+    else
+        jput(b, ",\"%s\":null", key);
+}
+
+static void jstr(jbuf *b, const char *key, const char *s)
+{
+    if (!s) {
+        jput(b, ",\"%s\":null", key);
+        return;
+    }
+    jput(b, ",\"%s\":\"", key);
+    for (; *s; s++) {
+        unsigned char c = (unsigned char)*s;
+        if (c == '"' || c == '\\')
+            jput(b, "\\%c", c);
+        else if (c < 0x20)
+            jput(b, "\\u%04x", c);
+        else
+            jput(b, "%c", c);
+    }
+    jput(b, "\"");
+}
+
+static void jarr(jbuf *b, const char *key, const double *v, int n)
+{
+    jput(b, ",\"%s\":[", key);
+    for (int i = 0; i < n; i++)
+        jput(b, isfinite(v[i]) ? "%s%.10g" : "%snull", i ? "," : "", v[i]);
+    jput(b, "]");
+}
+
+/* ---- sources and targets ---- */
+
+static int has_image_ext(const char *n)
+{
+    const char *d = strrchr(n, '.');
+    return d && (!strcasecmp(d, ".png") || !strcasecmp(d, ".jpg") || !strcasecmp(d, ".jpeg"));
+}
+
+static int cmp_name(const void *a, const void *b)
+{
+    return strcmp(((const source *)a)->name, ((const source *)b)->name);
+}
+
+static int list_dir(job *j)
+{
+    DIR *d = opendir(j->input);
+    if (!d)
+        return cli_fail(j->cmd, "%s: cannot open (%s)", j->input, strerror(errno));
+    size_t cap = 0;
+    struct dirent *e;
+    int rc = CLI_OK;
+    while ((e = readdir(d)) && !rc) {
+        if (e->d_name[0] == '.' || !has_image_ext(e->d_name))
+            continue;
+        if (j->nsrc == MAX_SOURCES) {
+            rc = cli_fail(j->cmd, "%s: over %d images", j->input, MAX_SOURCES);
+            break;
+        }
+        if (j->nsrc == cap) {
+            cap = cap ? 2 * cap : 64;
+            source *s = realloc(j->src, cap * sizeof *s);
+            if (!s) {
+                rc = cli_fail(j->cmd, "out of memory");
+                break;
+            }
+            j->src = s;
+        }
+        memset(&j->src[j->nsrc], 0, sizeof *j->src);
+        if (!(j->src[j->nsrc].name = strdup(e->d_name)))
+            rc = cli_fail(j->cmd, "out of memory");
+        else
+            j->nsrc++;
+    }
+    closedir(d);
+    if (!rc && j->nsrc == 0)
+        rc = cli_fail(j->cmd, "%s: no .png, .jpg or .jpeg files", j->input);
+    if (!rc)
+        qsort(j->src, j->nsrc, sizeof *j->src, cmp_name);
+    return rc;
+}
+
+static source *find_source(job *j, const char *name)
+{
+    source key;
+    memset(&key, 0, sizeof key);
+    key.name = (char *)name;
+    return bsearch(&key, j->src, j->nsrc, sizeof *j->src, cmp_name);
+}
+
+/* A pair of angle columns of row r: both empty (0), both finite numbers
+ * (1), or an error (-1, reported). */
+static int angle_pair(job *j, const char *path, const aug_table *t, size_t r, int ca, int cb,
+                      double lim_a, double lim_b, double out[2])
+{
+    const char *a = ca >= 0 ? t->cells[r][ca] : NULL, *b = cb >= 0 ? t->cells[r][cb] : NULL;
+    if (!a && !b)
+        return 0;
+    const char *na = ca >= 0 ? t->cols[ca] : "?", *nb = cb >= 0 ? t->cols[cb] : "?";
+    if (!a || !b) {
+        cli_fail(j->cmd, "%s line %zu: %s without %s", path, t->line[r], a ? na : nb,
+                 a ? nb : na);
+        return -1;
+    }
+    if (parse_num(a, &out[0]) || parse_num(b, &out[1])) {
+        cli_fail(j->cmd, "%s line %zu: %s '%s', %s '%s': want finite numbers (degrees)", path,
+                 t->line[r], na, a, nb, b);
+        return -1;
+    }
+    if (fabs(out[0]) > lim_a / DEG + 1e-9 || fabs(out[1]) > lim_b / DEG + 1e-9) {
+        cli_fail(j->cmd, "%s line %zu: %s, %s = %g, %g outside the model's range (|%g|, |%g| deg)",
+                 path, t->line[r], na, nb, out[0], out[1], lim_a / DEG, lim_b / DEG);
+        return -1;
+    }
+    out[0] *= DEG;
+    out[1] *= DEG;
+    return 1;
+}
+
+/* Only the named columns; a missing key column is an error. */
+static int check_columns(job *j, const char *path, const aug_table *t, const char *const *ok,
+                         const char *key)
+{
+    for (int c = 0; c < t->ncols; c++) {
+        int k = 0;
+        while (ok[k] && strcmp(ok[k], t->cols[c]))
+            k++;
+        if (!ok[k]) {
+            char list[512] = "";
+            for (k = 0; ok[k]; k++)
+                snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", k ? ", " : "",
+                         ok[k]);
+            return cli_fail(j->cmd, "%s: unknown column '%s' (the columns: %s)", path, t->cols[c],
+                            list);
+        }
+    }
+    if (aug_table_col(t, key) < 0)
+        return cli_fail(j->cmd, "%s: no column '%s'", path, key);
+    return CLI_OK;
+}
+
+/* The source a table row names: column file (DIR) or row (HDF5). */
+static source *row_source(job *j, const char *path, const aug_table *t, size_t r, int ckey)
+{
+    const char *v = t->cells[r][ckey];
+    if (!v) {
+        cli_fail(j->cmd, "%s line %zu: empty %s", path, t->line[r], t->cols[ckey]);
+        return NULL;
+    }
+    if (j->is_h5) {
+        long row;
+        if (cli_parse_long(v, 0, (long)j->nsrc - 1, &row)) {
+            cli_fail(j->cmd, "%s line %zu: row '%s': want 0..%zu (%s's rows)", path, t->line[r], v,
+                     j->nsrc - 1, j->input);
+            return NULL;
+        }
+        return &j->src[row];
+    }
+    source *s = find_source(j, v);
+    if (!s)
+        cli_fail(j->cmd, "%s line %zu: no image '%s' in %s", path, t->line[r], v, j->input);
+    return s;
+}
+
+static int read_labels(job *j, const char *path, uint64_t *fp)
+{
+    static const char *const ok[] = {"file", "gaze_pitch_deg", "gaze_yaw_deg", "head_pitch_deg",
+                                     "head_yaw_deg", "subject", NULL};
+    aug_table t;
+    char msg[300];
+    if (aug_table_read(path, &t, msg, sizeof msg))
+        return cli_fail(j->cmd, "%s: %s", path, msg);
+    int rc = check_columns(j, path, &t, ok, "file");
+    int cf = aug_table_col(&t, "file"), cgp = aug_table_col(&t, "gaze_pitch_deg"),
+        cgy = aug_table_col(&t, "gaze_yaw_deg"), chp = aug_table_col(&t, "head_pitch_deg"),
+        chy = aug_table_col(&t, "head_yaw_deg"), cs = aug_table_col(&t, "subject");
+    if (!rc && ((cgp >= 0) != (cgy >= 0) || (chp >= 0) != (chy >= 0)))
+        rc = cli_fail(j->cmd, "%s: pitch and yaw columns come in pairs (gaze_pitch_deg with "
+                      "gaze_yaw_deg, head_pitch_deg with head_yaw_deg)", path);
+    unsigned char *seen = rc ? NULL : calloc(j->nsrc, 1);
+    if (!rc && !seen)
+        rc = cli_fail(j->cmd, "out of memory");
+    for (size_t r = 0; !rc && r < t.nrows; r++) {
+        source *s = row_source(j, path, &t, r, cf);
+        if (!s) {
+            rc = CLI_FAIL;
+            break;
+        }
+        if (seen[s - j->src]++) {
+            rc = cli_fail(j->cmd, "%s line %zu: a second row for '%s'", path, t.line[r], s->name);
+            break;
+        }
+        int g = angle_pair(j, path, &t, r, cgp, cgy, 1e9, 1e9, s->gaze);
+        int h = g < 0 ? -1 : angle_pair(j, path, &t, r, chp, chy, 1e9, 1e9, s->head);
+        if (g < 0 || h < 0) {
+            rc = CLI_FAIL;
+            break;
+        }
+        s->has_gaze = g;
+        s->has_head = h;
+        if (cs >= 0 && t.cells[r][cs] && !(s->subject = strdup(t.cells[r][cs])))
+            rc = cli_fail(j->cmd, "out of memory");
+    }
+    for (size_t i = 0; !rc && i < j->nsrc; i++) {
+        source *s = &j->src[i];
+        *fp = fnv_str(*fp, s->subject);
+        *fp = fnv(*fp, &s->has_gaze, sizeof s->has_gaze);
+        *fp = fnv(*fp, &s->has_head, sizeof s->has_head);
+        *fp = fnv(*fp, s->gaze, sizeof s->gaze);
+        *fp = fnv(*fp, s->head, sizeof s->head);
+    }
+    free(seen);
+    aug_table_free(&t);
+    return rc;
+}
+
+/* The HDF5 file's rows as sources, their labels checked here, up front. */
+static int open_h5(job *j)
+{
+    gs_error err = {0, ""};
+    if (gs_h5_open(j->input, &j->h5, &j->h5i, &err))
+        return cli_fail(j->cmd, "%s", err.msg);
+    if (j->h5i.rows == 0)
+        return cli_fail(j->cmd, "%s: face_patch has no rows", j->input);
+    if (j->h5i.height != j->h5i.width)
+        return cli_fail(j->cmd, "%s: face_patch is %d x %d; want square patches", j->input,
+                        j->h5i.height, j->h5i.width);
+    if (j->h5i.rows > MAX_SOURCES)
+        return cli_fail(j->cmd, "%s: over %d rows", j->input, MAX_SOURCES);
+    j->nsrc = j->h5i.rows;
+    if (!(j->src = calloc(j->nsrc, sizeof *j->src)))
+        return cli_fail(j->cmd, "out of memory");
+    const char *base = strrchr(j->input, '/');
+    snprintf(j->h5_name, sizeof j->h5_name, "%s", base ? base + 1 : j->input);
+    char stem[512];
+    snprintf(stem, sizeof stem, "%s", j->h5_name);
+    char *dot = strrchr(stem, '.');
+    if (dot && dot != stem)
+        *dot = 0;
+    for (size_t i = 0; i < j->nsrc; i++) {
+        source *s = &j->src[i];
+        float g[2], h[2];
+        s->row = i;
+        if (gs_h5_read_row(j->h5, i, NULL, g, h, &err))
+            return cli_fail(j->cmd, "%s: %s", j->input, err.msg);
+        if ((s->has_gaze = j->h5i.has_gaze)) {
+            s->gaze[0] = g[0];
+            s->gaze[1] = g[1];
+        }
+        if ((s->has_head = j->h5i.has_head)) {
+            s->head[0] = h[0];
+            s->head[1] = h[1];
+        }
+        if (!(s->subject = strdup(stem)))
+            return cli_fail(j->cmd, "out of memory");
+    }
+    return CLI_OK;
+}
+
+static int push_target(job *j, size_t *cap, const target *t)
+{
+    if (j->ntg == *cap) {
+        *cap = *cap ? 2 * *cap : 256;
+        target *g = realloc(j->tg, *cap * sizeof *g);
+        if (!g)
+            return -1;
+        j->tg = g;
+    }
+    j->tg[j->ntg++] = *t;
+    return 0;
+}
+
+static int read_targets(job *j, const char *path, size_t *cap)
+{
+    static const char *const ok_dir[] = {"file", "gaze_pitch_deg", "gaze_yaw_deg",
+                                         "head_pitch_deg", "head_yaw_deg", NULL};
+    static const char *const ok_h5[] = {"row", "gaze_pitch_deg", "gaze_yaw_deg", "head_pitch_deg",
+                                        "head_yaw_deg", NULL};
+    aug_table t;
+    char msg[300];
+    if (aug_table_read(path, &t, msg, sizeof msg))
+        return cli_fail(j->cmd, "%s: %s", path, msg);
+    const char *key = j->is_h5 ? "row" : "file";
+    int rc = check_columns(j, path, &t, j->is_h5 ? ok_h5 : ok_dir, key);
+    int ck = aug_table_col(&t, key), cgp = aug_table_col(&t, "gaze_pitch_deg"),
+        cgy = aug_table_col(&t, "gaze_yaw_deg"), chp = aug_table_col(&t, "head_pitch_deg"),
+        chy = aug_table_col(&t, "head_yaw_deg");
+    if (!rc && (cgp < 0 || cgy < 0))
+        rc = cli_fail(j->cmd, "%s: no column gaze_pitch_deg / gaze_yaw_deg", path);
+    /* Rows grouped by source, in file order within each. */
+    size_t *cnt = rc ? NULL : calloc(j->nsrc + 1, sizeof *cnt);
+    target *rows = rc ? NULL : calloc(t.nrows + 1, sizeof *rows);
+    size_t *owner = rc ? NULL : calloc(t.nrows + 1, sizeof *owner);
+    if (!rc && (!cnt || !rows || !owner))
+        rc = cli_fail(j->cmd, "out of memory");
+    for (size_t r = 0; !rc && r < t.nrows; r++) {
+        source *s = row_source(j, path, &t, r, ck);
+        if (!s) {
+            rc = CLI_FAIL;
+            break;
+        }
+        double g[2], h[2];
+        int hg = angle_pair(j, path, &t, r, cgp, cgy, GS_MODEL_MAX_GAZE_PITCH,
+                            GS_MODEL_MAX_GAZE_YAW, g);
+        int hh = hg < 0 ? -1
+                        : angle_pair(j, path, &t, r, chp, chy, GS_MODEL_MAX_HEAD_ANGLE,
+                                     GS_MODEL_MAX_HEAD_ANGLE, h);
+        if (hg == 0)
+            rc = cli_fail(j->cmd, "%s line %zu: no gaze_pitch_deg / gaze_yaw_deg", path,
+                          t.line[r]);
+        else if (hg < 0 || hh < 0)
+            rc = CLI_FAIL;
+        else if (++cnt[s - j->src] > MAX_TARGETS_PER_SOURCE)
+            rc = cli_fail(j->cmd, "%s line %zu: over %d targets for one source", path, t.line[r],
+                          MAX_TARGETS_PER_SOURCE);
+        if (rc)
+            break;
+        target tg = {g[0], g[1], hh == 1, hh == 1 ? h[0] : 0, hh == 1 ? h[1] : 0};
+        rows[r] = tg;
+        owner[r] = (size_t)(s - j->src);
+    }
+    for (size_t k = 0; !rc && k < j->nsrc; k++) {
+        j->src[k].t0 = j->ntg;
+        for (size_t r = 0; r < t.nrows && !rc; r++)
+            if (owner[r] == k && push_target(j, cap, &rows[r]))
+                rc = cli_fail(j->cmd, "out of memory");
+        j->src[k].nt = j->ntg - j->src[k].t0;
+    }
+    free(cnt);
+    free(rows);
+    free(owner);
+    aug_table_free(&t);
+    return rc;
+}
+
+/* Targets of every source (all shards: the global sample numbers). */
+static int make_targets(job *j, const cli_opt *o, uint64_t seed)
+{
+    const cli_command *cmd = j->cmd;
+    size_t cap = 0;
+    int nspec = !!o[O_GRID].value + !!o[O_GAZE].value + !!o[O_UNIFORM].value + !!o[O_TARGETS].value;
+    if (nspec != 1)
+        return cli_usage_error(cmd, "one of --grid, --gaze-deg, --uniform and --targets");
+    if (!!o[O_UNIFORM].value != !!o[O_PER].value)
+        return cli_usage_error(cmd, "--uniform and --per-image go together");
+    if (o[O_HEAD].value && o[O_HEADU].value)
+        return cli_usage_error(cmd, "--head-deg or --head-uniform, not both");
+    /* Head poses */
+    double(*heads)[2] = NULL;
+    size_t nh = 0;
+    if (o[O_HEAD].value) {
+        if (parse_pairs(o[O_HEAD].value, &heads, &nh))
+            return cli_usage_error(cmd, "--head-deg: want \"P,Y;P,Y\" (degrees, <= %d)",
+                                   MAX_TARGETS_PER_SOURCE);
+        for (size_t i = 0; i < nh; i++)
+            if (!head_in_range(heads[i][0], heads[i][1])) {
+                free(heads);
+                return cli_usage_error(cmd, "--head-deg: %g,%g outside the model's range (|70| "
+                                       "deg)", heads[i][0] / DEG, heads[i][1] / DEG);
+            }
+    }
+    float hu[4] = {0, 0, 0, 0};
+    if (o[O_HEADU].value &&
+        (cli_parse_floats(o[O_HEADU].value, hu, 4) || hu[1] < hu[0] || hu[3] < hu[2] ||
+         !head_in_range(hu[0] * DEG, hu[2] * DEG) || !head_in_range(hu[1] * DEG, hu[3] * DEG)))
+        return cli_usage_error(cmd, "--head-uniform: want P0,P1,Y0,Y1 (degrees, P0 <= P1, Y0 <= "
+                               "Y1, within +-70)");
+    int rc = CLI_OK;
+    double(*gz)[2] = NULL;
+    size_t ng = 0;
+    long per = 0;
+    float un[4] = {0, 0, 0, 0};
+    if (o[O_GRID].value) {
+        const char *s = o[O_GRID].value, *comma = strchr(s, ',');
+        char a[128];
+        double p0, p1, ps, y0, y1, ys;
+        if (!comma || (size_t)(comma - s) >= sizeof a) {
+            rc = cli_usage_error(cmd, "--grid: want P0:P1:STEP,Y0:Y1:STEP (degrees)");
+            goto done;
+        }
+        memcpy(a, s, (size_t)(comma - s));
+        a[comma - s] = 0;
+        if (parse_range(a, &p0, &p1, &ps) || parse_range(comma + 1, &y0, &y1, &ys)) {
+            rc = cli_usage_error(cmd, "--grid: want P0:P1:STEP,Y0:Y1:STEP (degrees, lo <= hi, "
+                                 "STEP > 0, <= %d values each)", MAX_TARGETS_PER_SOURCE);
+            goto done;
+        }
+        static double pv[MAX_TARGETS_PER_SOURCE + 2], yv[MAX_TARGETS_PER_SOURCE + 2];
+        int np = grid_values(p0, p1, ps, pv), ny = grid_values(y0, y1, ys, yv);
+        if ((size_t)np * (size_t)ny > MAX_TARGETS_PER_SOURCE) {
+            rc = cli_usage_error(cmd, "--grid: %d x %d targets; at most %d", np, ny,
+                                 MAX_TARGETS_PER_SOURCE);
+            goto done;
+        }
+        if (!(gz = malloc((size_t)np * ny * sizeof *gz))) {
+            rc = cli_fail(cmd, "out of memory");
+            goto done;
+        }
+        for (int a1 = 0; a1 < np; a1++)
+            for (int b1 = 0; b1 < ny; b1++) {
+                gz[ng][0] = pv[a1];
+                gz[ng][1] = yv[b1];
+                ng++;
+            }
+    } else if (o[O_GAZE].value) {
+        if (parse_pairs(o[O_GAZE].value, &gz, &ng)) {
+            rc = cli_usage_error(cmd, "--gaze-deg: want \"P,Y;P,Y\" (degrees, <= %d)",
+                                 MAX_TARGETS_PER_SOURCE);
+            goto done;
+        }
+    } else if (o[O_UNIFORM].value) {
+        if (cli_parse_floats(o[O_UNIFORM].value, un, 4) || un[1] < un[0] || un[3] < un[2]) {
+            rc = cli_usage_error(cmd, "--uniform: want P0,P1,Y0,Y1 (degrees, P0 <= P1, Y0 <= Y1)");
+            goto done;
+        }
+        if (cli_parse_long(o[O_PER].value, 1, MAX_TARGETS_PER_SOURCE, &per)) {
+            rc = cli_usage_error(cmd, "--per-image: want 1..%d", MAX_TARGETS_PER_SOURCE);
+            goto done;
+        }
+        if (!gaze_in_range(un[0] * DEG, un[2] * DEG) || !gaze_in_range(un[1] * DEG, un[3] * DEG)) {
+            rc = cli_usage_error(cmd, "--uniform: %s outside the model's range (|pitch| <= 50, "
+                                 "|yaw| <= 60 deg)", o[O_UNIFORM].value);
+            goto done;
+        }
+    }
+    for (size_t i = 0; i < ng; i++)
+        if (!gaze_in_range(gz[i][0], gz[i][1])) {
+            rc = cli_usage_error(cmd, "%s: target %g,%g outside the model's range (|pitch| <= 50, "
+                                 "|yaw| <= 60 deg)", o[O_GRID].value ? "--grid" : "--gaze-deg",
+                                 gz[i][0] / DEG, gz[i][1] / DEG);
+            goto done;
+        }
+    if (ng * (nh ? nh : 1) > MAX_TARGETS_PER_SOURCE || (size_t)per * (nh ? nh : 1) > MAX_TARGETS_PER_SOURCE) {
+        rc = cli_usage_error(cmd, "over %d targets per image", MAX_TARGETS_PER_SOURCE);
+        goto done;
+    }
+    if (o[O_TARGETS].value) {
+        if (nh) {
+            rc = cli_usage_error(cmd, "--targets: give head poses in the file "
+                                 "(head_pitch_deg, head_yaw_deg), not --head-deg");
+            goto done;
+        }
+        if ((rc = read_targets(j, o[O_TARGETS].value, &cap)))
+            goto done;
+    }
+    for (size_t k = 0; !o[O_TARGETS].value && k < j->nsrc; k++) {
+        source *s = &j->src[k];
+        s->t0 = j->ntg;
+        uint64_t st = seed * 0x100000001B3ull ^ (uint64_t)k;
+        splitmix(&st);
+        size_t n = per ? (size_t)per : ng;
+        for (size_t h = 0; h < (nh ? nh : 1) && !rc; h++)
+            for (size_t i = 0; i < n; i++) {
+                target t = {0};
+                if (per) {
+                    t.gp = uniform(&st, un[0] * DEG, un[1] * DEG);
+                    t.gy = uniform(&st, un[2] * DEG, un[3] * DEG);
+                } else {
+                    t.gp = gz[i][0];
+                    t.gy = gz[i][1];
+                }
+                if (nh) {
+                    t.use_head = 1;
+                    t.hp = heads[h][0];
+                    t.hy = heads[h][1];
+                }
+                if (push_target(j, &cap, &t)) {
+                    rc = cli_fail(cmd, "out of memory");
+                    break;
+                }
+            }
+        s->nt = j->ntg - s->t0;
+    }
+    /* Head draws come after the gaze draws, from their own stream. */
+    for (size_t k = 0; !rc && o[O_HEADU].value && k < j->nsrc; k++) {
+        uint64_t st = (seed * 0x100000001B3ull ^ (uint64_t)k) + 0x5bd1e995ull;
+        splitmix(&st);
+        for (size_t i = 0; i < j->src[k].nt; i++) {
+            target *t = &j->tg[j->src[k].t0 + i];
+            t->use_head = 1;
+            t->hp = uniform(&st, hu[0] * DEG, hu[1] * DEG);
+            t->hy = uniform(&st, hu[2] * DEG, hu[3] * DEG);
+        }
+    }
+    size_t first = 0;
+    for (size_t k = 0; !rc && k < j->nsrc; k++) {
+        j->src[k].first = first;
+        first += j->src[k].nt;
+    }
+done:
+    free(gz);
+    free(heads);
+    return rc;
+}
+
+/* ---- the manifest ---- */
+
+/* Reads the manifest: marks done sources in done[] and *finished. A torn
+ * last line (no newline: killed mid-append) is cut off. Creates it (with
+ * the header) when absent. */
+static int open_manifest(job *j, unsigned char *done, int *finished)
+{
+    char header[200];
+    snprintf(header, sizeof header, "gazesplat-augment-manifest 1 %016llx %zu %zu\n",
+             (unsigned long long)j->fingerprint, j->nsrc, j->ntg);
+    *finished = 0;
+    FILE *f = fopen(j->manifest, "rb");
+    if (!f) {
+        if (errno != ENOENT)
+            return cli_fail(j->cmd, "%s: %s", j->manifest, strerror(errno));
+        if (commit_file(j, j->manifest, header, strlen(header)) || fsync_path(j->state))
+            return cli_fail(j->cmd, "%s: cannot write (%s)", j->manifest, strerror(errno));
+        return CLI_OK;
+    }
+    char line[256];
+    long good = 0;
+    int rc = CLI_OK, first = 1;
+    while (fgets(line, sizeof line, f)) {
+        size_t n = strlen(line);
+        if (n == 0 || line[n - 1] != '\n')
+            break; /* torn */
+        if (first) {
+            if (strcmp(line, header) != 0) {
+                rc = cli_fail(j->cmd, "%s was written by another augment run (other options, "
+                              "model, inputs or shard); use a new --out, or remove %s to "
+                              "start over", j->out, j->state);
+                break;
+            }
+            first = 0;
+        } else if (strcmp(line, "finished\n") == 0)
+            *finished = 1;
+        else {
+            unsigned long long k;
+            char tail;
+            if (sscanf(line, "done %llu%c", &k, &tail) != 2 || tail != '\n' || k >= j->nsrc) {
+                rc = cli_fail(j->cmd, "%s: bad line '%.*s'", j->manifest, (int)(n - 1), line);
+                break;
+            }
+            done[k] = 1;
+        }
+        good = ftell(f);
+    }
+    fseek(f, 0, SEEK_END);
+    long size = ftell(f);
+    fclose(f);
+    if (!rc && first)
+        rc = cli_fail(j->cmd, "%s: no header; remove %s to start over", j->manifest, j->state);
+    if (!rc && size != good && truncate(j->manifest, good))
+        rc = cli_fail(j->cmd, "%s: cannot cut its torn last line (%s)", j->manifest,
+                      strerror(errno));
+    return rc;
+}
+
+static int manifest_append(job *j, const char *line)
+{
+    if (j->write_budget == 0) {
+        errno = ENOSPC;
+        return -1;
+    }
+    if (j->write_budget > 0)
+        j->write_budget--;
+    int fd = open(j->manifest, O_WRONLY | O_APPEND);
+    if (fd < 0)
+        return -1;
+    size_t n = strlen(line);
+    ssize_t w = write(fd, line, n);
+    int e = errno;
+    int bad = w != (ssize_t)n || fsync(fd);
+    if (bad && w >= 0 && w != (ssize_t)n)
+        e = ENOSPC;
+    close(fd);
+    errno = e;
+    return bad ? -1 : 0;
+}
+
+/* ---- one source ---- */
+
+static void part_path(const job *j, size_t k, const char *ext, char *out, size_t cap)
+{
+    snprintf(out, cap, "%s/%08zu.%s", j->state, k, ext);
+}
+
+static void image_path(const job *j, size_t index, char *out, size_t cap, int rel)
+{
+    if (rel)
+        snprintf(out, cap, "images/%08zu.png", index);
+    else
+        snprintf(out, cap, "%s/images/%08zu.png", j->out, index);
+}
+
+/* Whether source k's parts are all there (manifest says done). */
+static int parts_present(const job *j, size_t k)
+{
+    const source *s = &j->src[k];
+    size_t S = (size_t)j->out_size;
+    char p[4300];
+    part_path(j, k, "jsonl", p, sizeof p);
+    if (!file_size_is(p, -1))
+        return 0;
+    if (j->want_h5) {
+        part_path(j, k, "bin", p, sizeof p);
+        if (!file_size_is(p, (long long)(s->nt * (S * S * 3 + 16))))
+            return 0;
+    }
+    for (size_t t = 0; j->want_png && t < s->nt; t++) {
+        image_path(j, s->first + t, p, sizeof p, 0);
+        if (!file_size_is(p, -1))
+            return 0;
+    }
+    return 1;
+}
+
+/* Bilinear resize of a square RGB patch (n x n) to S x S, pixel centres
+ * aligned (geom.h pixels). */
+static void resize_rgb(const uint8_t *in, int n, uint8_t *out, int S)
+{
+    double sc = (double)n / S;
+    for (int y = 0; y < S; y++) {
+        double fy = (y + 0.5) * sc - 0.5;
+        int y0 = (int)floor(fy);
+        double wy = fy - y0;
+        int ya = y0 < 0 ? 0 : y0 >= n ? n - 1 : y0, yb = y0 + 1 < 0 ? 0 : y0 + 1 >= n ? n - 1 : y0 + 1;
+        for (int x = 0; x < S; x++) {
+            double fx = (x + 0.5) * sc - 0.5;
+            int x0 = (int)floor(fx);
+            double wx = fx - x0;
+            int xa = x0 < 0 ? 0 : x0 >= n ? n - 1 : x0,
+                xb = x0 + 1 < 0 ? 0 : x0 + 1 >= n ? n - 1 : x0 + 1;
+            for (int c = 0; c < 3; c++) {
+                double v = (1 - wy) * ((1 - wx) * in[((size_t)ya * n + xa) * 3 + c] +
+                                       wx * in[((size_t)ya * n + xb) * 3 + c]) +
+                           wy * ((1 - wx) * in[((size_t)yb * n + xa) * 3 + c] +
+                                 wx * in[((size_t)yb * n + xb) * 3 + c]);
+                out[((size_t)y * S + x) * 3 + c] = (uint8_t)(v + 0.5);
+            }
+        }
+    }
+}
+
+typedef struct fitted {
+    gs_subject sub;
+    int photo;             /* the source was a photo */
+    double fit_seconds;
+    int fit_iters;
+    double ft_psnr;        /* NaN: no fine-tuning */
+} fitted;
+
+/* Source k's normalized face (S x S RGB in *face) and, for photos, mask
+ * and fit options. */
+static int load_face(job *j, size_t k, gs_io_image *face, cli_photo_face *pf, int *photo,
+                     gs_error *err)
+{
+    int S = j->info.image_size;
+    source *s = &j->src[k];
+    *photo = 0;
+    if (j->is_h5) {
+        int n = j->h5i.width;
+        uint8_t *patch = malloc((size_t)n * n * 3);
+        face->data = malloc((size_t)S * S * 3);
+        if (!patch || !face->data) {
+            free(patch);
+            return gs_error_set(err, GS_ERR_NOMEM, "out of memory");
+        }
+        face->width = face->height = S;
+        face->stride = (size_t)S * 3;
+        int rc = gs_h5_read_row(j->h5, s->row, patch, NULL, NULL, err);
+        if (rc == GS_OK && !j->h5_rgb)
+            for (size_t i = 0; i < (size_t)n * n; i++) {
+                uint8_t b = patch[3 * i];
+                patch[3 * i] = patch[3 * i + 2];
+                patch[3 * i + 2] = b;
+            }
+        if (rc == GS_OK) {
+            if (n == S)
+                memcpy(face->data, patch, (size_t)S * S * 3);
+            else
+                resize_rgb(patch, n, face->data, S);
+        }
+        free(patch);
+        return rc;
+    }
+    char path[4300];
+    snprintf(path, sizeof path, "%s/%s", j->input, s->name);
+    gs_io_image img = {0};
+    int rc = gs_io_image_read(path, NULL, &img, err);
+    if (rc != GS_OK)
+        return rc;
+    if (img.width == S && img.height == S) {
+        *face = img;
+        return GS_OK;
+    }
+    /* A photo: the face detector and landmark model, loaded once. */
+    *photo = 1;
+    if ((!j->det && (rc = gs_face_detector_load(NULL, &j->det, err)) != GS_OK) ||
+        (!j->sp && (rc = gs_face_shape_model_load(NULL, &j->sp, err)) != GS_OK)) {
+        gs_io_image_free(&img);
+        return rc;
+    }
+    rc = cli_photo_normalize(j->det, j->sp, &img, 0, &j->info, pf, err);
+    gs_io_image_free(&img);
+    if (rc == GS_OK) {
+        *face = pf->norm;
+        pf->norm.data = NULL;
+    }
+    return rc;
+}
+
+static const char *src_label(const job *j, size_t k, char *buf, size_t cap)
+{
+    if (j->is_h5)
+        snprintf(buf, cap, "%s row %zu", j->input, j->src[k].row);
+    else
+        snprintf(buf, cap, "%s/%s", j->input, j->src[k].name);
+    return buf;
+}
+
+/* The JSON line of one sample. */
+static void sample_json(const job *j, size_t k, size_t t, const fitted *fi, const double R[9],
+                        const double ht[3], const target *tg, double gcam_out[2], double hd[2],
+                        jbuf *b)
+{
+    const source *s = &j->src[k];
+    size_t index = s->first + t;
+    double gh[3], gc[3], gcp = NAN, gcy = NAN, hp, hy;
+    gs_geom_pitchyaw_to_vec(tg->gp, tg->gy, gh);
+    gs_geom_mat3_vec(R, gh, gc);
+    gs_geom_vec_to_pitchyaw(gc, &gcp, &gcy);
+    gs_geom_head_pitchyaw(R, &hp, &hy);
+    gcam_out[0] = gcp;
+    gcam_out[1] = gcy;
+    hd[0] = hp;
+    hd[1] = hy;
+    char img[64];
+    image_path(j, index, img, sizeof img, 1);
+    jput(b, "{\"image\":");
+    if (j->want_png)
+        jput(b, "\"%s\"", img);
+    else
+        jput(b, "null");
+    jput(b, ",\"index\":%zu", index);
+    if (j->want_h5)
+        jput(b, ",\"h5_row\":%zu", (size_t)0); /* patched at assembly */
+    char src[600];
+    if (j->is_h5)
+        snprintf(src, sizeof src, "%s", j->h5_name);
+    jstr(b, "source", j->is_h5 ? src : s->name);
+    jput(b, ",\"source_index\":%zu", k);
+    if (j->is_h5)
+        jput(b, ",\"source_row\":%zu", s->row);
+    else
+        jput(b, ",\"source_row\":null");
+    jput(b, ",\"source_kind\":\"%s\"", j->is_h5 ? "hdf5" : fi->photo ? "photo" : "normalized");
+    jput(b, ",\"target_index\":%zu", t);
+    jstr(b, "subject", s->subject);
+    jput(b, ",\"width\":%d,\"height\":%d", j->out_size, j->out_size);
+    jarr(b, "gaze_head", gh, 3);
+    jnum(b, "gaze_head_pitch_rad", tg->gp);
+    jnum(b, "gaze_head_yaw_rad", tg->gy);
+    jarr(b, "gaze_cam", gc, 3);
+    jnum(b, "gaze_cam_pitch_rad", gcp);
+    jnum(b, "gaze_cam_yaw_rad", gcy);
+    jarr(b, "head_R", R, 9);
+    jarr(b, "head_t_mm", ht, 3);
+    jnum(b, "head_pitch_rad", hp);
+    jnum(b, "head_yaw_rad", hy);
+    jnum(b, "head_roll_rad", gs_geom_head_roll(R));
+    jput(b, ",\"head_changed\":%s", tg->use_head ? "true" : "false");
+    jnum(b, "source_gaze_cam_pitch_rad", s->has_gaze ? s->gaze[0] : NAN);
+    jnum(b, "source_gaze_cam_yaw_rad", s->has_gaze ? s->gaze[1] : NAN);
+    jnum(b, "source_head_pitch_rad", s->has_head ? s->head[0] : NAN);
+    jnum(b, "source_head_yaw_rad", s->has_head ? s->head[1] : NAN);
+    jnum(b, "fit_gaze_head_pitch_rad", fi->sub.gaze_pitch);
+    jnum(b, "fit_gaze_head_yaw_rad", fi->sub.gaze_yaw);
+    jnum(b, "fit_psnr", fi->sub.fit_psnr);
+    jnum(b, "fit_ssim", fi->sub.fit_ssim);
+    jnum(b, "finetune_psnr", fi->ft_psnr);
+    jput(b, ",\"quality\":null}\n");
+}
+
+static void put_f32le(uint8_t *p, float v)
+{
+    uint32_t u;
+    memcpy(&u, &v, 4);
+    p[0] = (uint8_t)u;
+    p[1] = (uint8_t)(u >> 8);
+    p[2] = (uint8_t)(u >> 16);
+    p[3] = (uint8_t)(u >> 24);
+}
+
+static float get_f32le(const uint8_t *p)
+{
+    uint32_t u = (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 |
+                 (uint32_t)p[3] << 24;
+    float v;
+    memcpy(&v, &u, 4);
+    return v;
+}
+
+/* --addr: source k's FIT and REDIRECT through the daemon. Photos go as
+ * they are (the server detects and normalizes them as redirect does);
+ * normalized faces and HDF5 rows as PNGs of the normalized face. The
+ * renders land in *renders (nt x S x S x 3 RGB). */
+static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, const char *what)
+{
+    const cli_command *cmd = j->cmd;
+    source *s = &j->src[k];
+    int S = j->info.image_size;
+    gs_error err = {0, ""};
+    uint8_t *bytes = NULL;
+    void *enc = NULL;
+    size_t len = 0;
+    int rc = CLI_OK;
+    aug_remote_fit in;
+    memset(&in, 0, sizeof in);
+    if (j->is_h5) {
+        gs_io_image face = {0};
+        cli_photo_face pf = {0};
+        int photo = 0;
+        if (load_face(j, k, &face, &pf, &photo, &err) ||
+            gs_io_image_encode(&face, GS_IO_PNG, 0, &enc, &len, &err))
+            rc = cli_fail(cmd, "%s: %s", what, err.msg);
+        gs_io_image_free(&face);
+        in.image = enc;
+    } else {
+        char path[4300];
+        gs_io_image img = {0};
+        snprintf(path, sizeof path, "%s/%s", j->input, s->name);
+        if (gs_io_image_read(path, NULL, &img, &err))
+            rc = cli_fail(cmd, "%s: %s", what, err.msg);
+        else if (cli_read_file(path, (size_t)256 << 20, &bytes, &len))
+            rc = cli_fail(cmd, "%s: cannot read", what);
+        fi->photo = !rc && !(img.width == S && img.height == S);
+        gs_io_image_free(&img);
+        in.image = bytes;
+    }
+    in.len = len;
+    in.photo = fi->photo;
+    in.iters = (int)j->iters;
+    in.ft_steps = j->ft.iters;
+    in.ft_lr = j->ft.lr;
+    in.keep_image = j->transfer;
+    if (!fi->photo && j->fit_labels && s->has_head) {
+        in.known_head = 1;
+        in.head_deg[0] = s->head[0] / DEG;
+        in.head_deg[1] = s->head[1] / DEG;
+    }
+    if (!fi->photo && j->fit_labels && s->has_gaze) {
+        double R[9], g[3], gh[3], p, y;
+        if (s->has_head)
+            gs_geom_rot_from_pitchyaw(s->head[0], s->head[1], 0, R);
+        else
+            gs_geom_mat3_identity(R);
+        gs_geom_pitchyaw_to_vec(s->gaze[0], s->gaze[1], g);
+        gs_geom_mat3_tvec(R, g, gh);
+        gs_geom_vec_to_pitchyaw(gh, &p, &y);
+        in.known_gaze = 1;
+        in.gaze_deg[0] = p / DEG;
+        in.gaze_deg[1] = y / DEG;
+    }
+    aug_remote_subject rs;
+    char msg[600];
+    aug_remote_target *tg = rc ? NULL : calloc(s->nt + 1, sizeof *tg);
+    *renders = rc ? NULL : malloc((size_t)S * S * 3 * (s->nt + 1));
+    if (!rc && (!tg || !*renders))
+        rc = cli_fail(cmd, "out of memory");
+    if (!rc && aug_remote_fit_one(j->remote, &in, &rs, msg, sizeof msg))
+        rc = cli_fail(cmd, "%s: %s", what, msg);
+    /* The FIT's report, kept until the source is done: a rerun after a
+     * kill finds the subject in the server's cache, whose FIT_OK cannot
+     * say what the fine-tuning reached; the first run's report can. */
+    char fitp[4300];
+    part_path(j, k, "fit", fitp, sizeof fitp);
+    if (!rc && rs.cached) {
+        uint8_t *b = NULL;
+        size_t bl = 0;
+        aug_remote_subject was;
+        if (cli_read_file(fitp, sizeof was, &b, &bl) == 0 && bl == sizeof was) {
+            memcpy(&was, b, sizeof was);
+            if (memcmp(was.key, rs.key, sizeof rs.key) == 0)
+                rs.ft_psnr = was.ft_psnr;
+        }
+        free(b);
+    } else if (!rc && commit_file(j, fitp, &rs, sizeof rs))
+        rc = cli_fail(cmd, "%s: cannot write (%s)", fitp, strerror(errno));
+    for (size_t t = 0; !rc && t < s->nt; t++) {
+        const target *x = &j->tg[s->t0 + t];
+        tg[t].gaze_deg[0] = x->gp / DEG;
+        tg[t].gaze_deg[1] = x->gy / DEG;
+        tg[t].use_head = x->use_head;
+        tg[t].head_deg[0] = x->hp / DEG;
+        tg[t].head_deg[1] = x->hy / DEG;
+    }
+    if (!rc && aug_remote_render(j->remote, &rs, tg, s->nt, j->transfer, S, *renders,
+                                 (size_t)S * S * 3, msg, sizeof msg))
+        rc = cli_fail(cmd, "%s: %s", what, msg);
+    if (!rc) {
+        /* The subject as FIT_OK tells it: head angles (roll 0), gaze. */
+        gs_geom_rot_from_pitchyaw(rs.head_deg[0] * DEG, rs.head_deg[1] * DEG, 0, fi->sub.head_R);
+        fi->sub.head_t[0] = fi->sub.head_t[1] = fi->sub.head_t[2] = NAN;
+        fi->sub.gaze_pitch = rs.gaze_deg[0] * DEG;
+        fi->sub.gaze_yaw = rs.gaze_deg[1] * DEG;
+        fi->sub.fit_psnr = (float)rs.psnr;
+        fi->sub.fit_ssim = (float)rs.ssim;
+        fi->ft_psnr = rs.ft_psnr;
+    }
+    free(tg);
+    free(bytes);
+    free(enc);
+    return rc;
+}
+
+/* Fit, fine-tune, render and commit source k. */
+static int do_source(job *j, size_t k, double *psnr_out)
+{
+    const cli_command *cmd = j->cmd;
+    source *s = &j->src[k];
+    int S = j->info.image_size, So = j->out_size;
+    size_t img_bytes = (size_t)So * So * 3;
+    char what[4400];
+    src_label(j, k, what, sizeof what);
+    gs_error err = {0, ""};
+    gs_io_image face = {0};
+    cli_photo_face pf = {0};
+    fitted fi;
+    memset(&fi, 0, sizeof fi);
+    fi.ft_psnr = NAN;
+    int rc = CLI_OK;
+    gs_model_ctx *c = NULL;
+    gs_model *tuned = NULL;
+    uint8_t *blob = NULL, *remote = NULL;
+    jbuf jb = {0};
+    if (j->remote) {
+        if ((rc = remote_source(j, k, &fi, &remote, what)))
+            goto done;
+        goto render;
+    }
+    if (load_face(j, k, &face, &pf, &fi.photo, &err)) {
+        rc = cli_fail(cmd, "%s: %s", what, err.msg);
+        goto done;
+    }
+    gs_fit_options o;
+    if (fi.photo)
+        cli_photo_fit_options(&pf, (int)j->iters, &o);
+    else {
+        gs_fit_options_default(&o);
+        o.max_iters = (int)j->iters;
+        if (j->fit_labels && s->has_head) {
+            o.known_head = 1;
+            gs_geom_rot_from_pitchyaw(s->head[0], s->head[1], 0, o.head_R);
+            o.head_t[2] = j->info.distance_mm;
+        }
+        if (j->fit_labels && s->has_gaze) {
+            /* The label is in the normalized camera; the fit wants it in
+             * the head frame: the labelled head pose's, or the frontal. */
+            double R[9], g[3], gh[3];
+            if (s->has_head)
+                gs_geom_rot_from_pitchyaw(s->head[0], s->head[1], 0, R);
+            else
+                gs_geom_mat3_identity(R);
+            gs_geom_pitchyaw_to_vec(s->gaze[0], s->gaze[1], g);
+            gs_geom_mat3_tvec(R, g, gh);
+            o.known_gaze = 1;
+            gs_geom_vec_to_pitchyaw(gh, &o.gaze_pitch, &o.gaze_yaw);
+        }
+    }
+    /* A fresh context per source: its renders never depend on the sources
+     * before it, so a resumed run writes the same bytes. */
+    if (!(c = gs_model_ctx_create(j->model))) {
+        rc = cli_fail(cmd, "out of memory");
+        goto done;
+    }
+    gs_fit_report fr;
+    if (gs_model_fit(c, j->pool, face.data, face.stride, &o, &fi.sub, &fr, &err)) {
+        rc = cli_fail(cmd, "%s: fit: %s", what, err.msg);
+        goto done;
+    }
+    if (j->ft.iters > 0) {
+        gs_finetune_options fo = j->ft;
+        fo.mask = fi.photo ? pf.mask_n : NULL;
+        gs_finetune_report r;
+        if (gs_model_clone(j->model, &tuned, &err) ||
+            gs_model_finetune(tuned, j->pool, &fi.sub, face.data, face.stride, &fo, &r, &err)) {
+            rc = cli_fail(cmd, "%s: finetune: %s", what, err.msg);
+            goto done;
+        }
+        fi.ft_psnr = r.psnr_best;
+        gs_model_ctx_destroy(c);
+        if (!(c = gs_model_ctx_create(tuned))) {
+            rc = cli_fail(cmd, "out of memory");
+            goto done;
+        }
+    }
+render:
+    *psnr_out = fi.sub.fit_psnr;
+    /* Blob: per target the RGB patch as BGR (face_patch's order), then
+     * face_gaze and face_head_pose as float32 LE. */
+    size_t rec = img_bytes + 16;
+    blob = malloc(s->nt * rec + 1);
+    uint8_t *render = So != S ? malloc((size_t)S * S * 3) : NULL;
+    if (!blob || (So != S && !render)) {
+        free(render);
+        rc = cli_fail(cmd, "out of memory");
+        goto done;
+    }
+    gs_io_image out = {So, So, (size_t)So * 3, NULL};
+    for (size_t t = 0; t < s->nt && !rc; t++) {
+        const target *tg = &j->tg[s->t0 + t];
+        gs_view v;
+        memset(&v, 0, sizeof v);
+        v.gaze_pitch = tg->gp;
+        v.gaze_yaw = tg->gy;
+        double R[9], ht[3];
+        memcpy(R, fi.sub.head_R, sizeof R);
+        memcpy(ht, fi.sub.head_t, sizeof ht);
+        if (tg->use_head) {
+            v.use_head = 1;
+            gs_geom_rot_from_pitchyaw(tg->hp, tg->hy, 0, v.head_R);
+            memcpy(v.head_t, fi.sub.head_t, sizeof v.head_t);
+            memcpy(R, v.head_R, sizeof R);
+        }
+        uint8_t *px = blob + t * rec, *dst = render ? render : px;
+        out.data = px;
+        int r = 0;
+        if (remote)
+            memcpy(dst, remote + t * (size_t)S * S * 3, (size_t)S * S * 3);
+        else if (j->transfer)
+            r = gs_model_render_transfer(c, j->pool, &fi.sub, face.data, face.stride, &v, dst,
+                                         (size_t)S * 3, &err);
+        else
+            r = gs_model_render(c, j->pool, &fi.sub, &v, dst, (size_t)S * 3, &err);
+        if (r) {
+            rc = cli_fail(cmd, "%s: target %zu: %s", what, t, err.msg);
+            break;
+        }
+        if (render)
+            resize_rgb(render, S, px, So);
+        double gc[2], hd[2];
+        sample_json(j, k, t, &fi, R, ht, tg, gc, hd, &jb);
+        if (j->want_png) {
+            void *png = NULL;
+            size_t plen = 0;
+            char path[4300];
+            image_path(j, s->first + t, path, sizeof path, 0);
+            if (gs_io_image_encode(&out, GS_IO_PNG, 0, &png, &plen, &err)) {
+                rc = cli_fail(cmd, "%s: %s", path, err.msg);
+                break;
+            }
+            if (commit_file(j, path, png, plen))
+                rc = cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
+            free(png);
+        }
+        for (size_t i = 0; i < (size_t)So * So; i++) { /* RGB -> BGR in place */
+            uint8_t b = px[3 * i];
+            px[3 * i] = px[3 * i + 2];
+            px[3 * i + 2] = b;
+        }
+        put_f32le(px + img_bytes, (float)gc[0]);
+        put_f32le(px + img_bytes + 4, (float)gc[1]);
+        put_f32le(px + img_bytes + 8, (float)hd[0]);
+        put_f32le(px + img_bytes + 12, (float)hd[1]);
+    }
+    free(render);
+    if (!rc && jb.oom)
+        rc = cli_fail(cmd, "out of memory");
+    char path[4300];
+    if (!rc && j->want_h5) {
+        part_path(j, k, "bin", path, sizeof path);
+        if (commit_file(j, path, blob, s->nt * rec))
+            rc = cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
+    }
+    if (!rc) {
+        part_path(j, k, "jsonl", path, sizeof path);
+        if (commit_file(j, path, jb.p ? jb.p : "", jb.len))
+            rc = cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
+    }
+    if (!rc) {
+        char images[4200];
+        snprintf(images, sizeof images, "%s/images", j->out);
+        char line[64];
+        snprintf(line, sizeof line, "done %zu\n", k);
+        if ((j->want_png && fsync_path(images)) || fsync_path(j->state) ||
+            manifest_append(j, line))
+            rc = cli_fail(cmd, "%s: cannot write (%s)", j->manifest, strerror(errno));
+    }
+done:
+    free(jb.p);
+    free(blob);
+    free(remote);
+    gs_model_ctx_destroy(c);
+    gs_model_destroy(tuned);
+    cli_photo_face_free(&pf);
+    gs_io_image_free(&face);
+    return rc;
+}
+
+/* ---- assembly ---- */
+
+static int assemble(job *j, size_t *rows_out)
+{
+    const cli_command *cmd = j->cmd;
+    size_t S = (size_t)j->out_size, img_bytes = S * S * 3, rec = img_bytes + 16;
+    size_t rows = 0;
+    for (size_t k = (size_t)j->shard_i; k < j->nsrc; k += (size_t)j->shard_n)
+        rows += j->src[k].nt;
+    *rows_out = rows;
+    jbuf all = {0};
+    int rc = CLI_OK;
+    size_t row = 0;
+    gs_h5_writer *w = NULL;
+    gs_error err = {0, ""};
+    char tmp[4200];
+    snprintf(tmp, sizeof tmp, "%s.tmp", j->h5_path);
+    if (j->want_h5) {
+        if (j->write_budget == 0) {
+            errno = ENOSPC;
+            return cli_fail(cmd, "%s: cannot write (%s)", j->h5_path, strerror(errno));
+        }
+        if (gs_h5_create(tmp, rows, (int)S, &w, &err))
+            return cli_fail(cmd, "%s: %s", j->h5_path, err.msg);
+    }
+    uint8_t *blob = NULL;
+    float *gz = NULL, *hd = NULL;
+    for (size_t k = (size_t)j->shard_i; k < j->nsrc && !rc; k += (size_t)j->shard_n) {
+        char path[4300];
+        const source *s = &j->src[k];
+        uint8_t *buf = NULL;
+        size_t len = 0;
+        part_path(j, k, "jsonl", path, sizeof path);
+        if (s->nt && cli_read_file(path, (size_t)1 << 30, &buf, &len)) {
+            rc = cli_fail(cmd, "%s: cannot read; remove %s to start over", path, j->state);
+            break;
+        }
+        /* Each line gets its HDF5 row in place of the placeholder. */
+        const char *p = (const char *)buf, *end = p + len;
+        size_t r = row;
+        while (p < end) {
+            const char *nl = memchr(p, '\n', (size_t)(end - p));
+            const char *stop = nl ? nl + 1 : end;
+            const char *ph = j->want_h5 ? strstr(p, ",\"h5_row\":0,") : NULL;
+            if (ph && ph < stop) {
+                jput(&all, "%.*s,\"h5_row\":%zu,", (int)(ph - p), p, r);
+                const char *rest = ph + strlen(",\"h5_row\":0,");
+                jput(&all, "%.*s", (int)(stop - rest), rest);
+            } else
+                jput(&all, "%.*s", (int)(stop - p), p);
+            r++;
+            p = stop;
+        }
+        free(buf);
+        if (r - row != s->nt) {
+            rc = cli_fail(cmd, "%s: %zu lines, want %zu; remove %s to start over", path, r - row,
+                          s->nt, j->state);
+            break;
+        }
+        if (w && s->nt) {
+            part_path(j, k, "bin", path, sizeof path);
+            if (cli_read_file(path, (size_t)1 << 40, &blob, &len) || len != s->nt * rec) {
+                rc = cli_fail(cmd, "%s: cannot read; remove %s to start over", path, j->state);
+                free(blob);
+                blob = NULL;
+                break;
+            }
+            uint8_t *pt = malloc(s->nt * img_bytes);
+            gz = malloc(s->nt * 2 * sizeof *gz);
+            hd = malloc(s->nt * 2 * sizeof *hd);
+            if (!pt || !gz || !hd)
+                rc = cli_fail(cmd, "out of memory");
+            for (size_t t = 0; !rc && t < s->nt; t++) {
+                const uint8_t *q = blob + t * rec;
+                memcpy(pt + t * img_bytes, q, img_bytes);
+                gz[2 * t] = get_f32le(q + img_bytes);
+                gz[2 * t + 1] = get_f32le(q + img_bytes + 4);
+                hd[2 * t] = get_f32le(q + img_bytes + 8);
+                hd[2 * t + 1] = get_f32le(q + img_bytes + 12);
+            }
+            if (!rc && gs_h5_write_rows(w, row, s->nt, pt, gz, hd, &err))
+                rc = cli_fail(cmd, "%s: %s", j->h5_path, err.msg);
+            free(pt);
+            free(gz);
+            free(hd);
+            free(blob);
+            gz = hd = NULL;
+            blob = NULL;
+        }
+        row = r;
+    }
+    if (w) {
+        if (rc)
+            gs_h5_abort(w);
+        else if (gs_h5_finish(w, &err))
+            rc = cli_fail(cmd, "%s: %s", j->h5_path, err.msg);
+        if (!rc && (fsync_path(tmp) || rename(tmp, j->h5_path)))
+            rc = cli_fail(cmd, "%s: cannot write (%s)", j->h5_path, strerror(errno));
+        if (rc)
+            unlink(tmp);
+    }
+    if (!rc && all.oom)
+        rc = cli_fail(cmd, "out of memory");
+    if (!rc && commit_file(j, j->labels_path, all.p ? all.p : "", all.len))
+        rc = cli_fail(cmd, "%s: cannot write (%s)", j->labels_path, strerror(errno));
+    if (!rc && fsync_path(j->out))
+        rc = cli_fail(cmd, "%s: cannot sync (%s)", j->out, strerror(errno));
+    free(all.p);
+    return rc;
+}
+
+/* After the final files: the parts are no longer needed. */
+static void remove_parts(job *j)
+{
+    char path[4300];
+    for (size_t k = (size_t)j->shard_i; k < j->nsrc; k += (size_t)j->shard_n) {
+        part_path(j, k, "bin", path, sizeof path);
+        unlink(path);
+        part_path(j, k, "jsonl", path, sizeof path);
+        unlink(path);
+        part_path(j, k, "fit", path, sizeof path);
+        unlink(path);
+    }
+}
+
+/* ---- progress ---- */
+
+static void fmt_eta(double s, char *buf, size_t cap)
+{
+    if (!(s >= 0) || s > 1e8)
+        snprintf(buf, cap, "?");
+    else if (s >= 3600)
+        snprintf(buf, cap, "%dh%02dm", (int)(s / 3600), (int)fmod(s / 60, 60));
+    else if (s >= 60)
+        snprintf(buf, cap, "%dm%02ds", (int)(s / 60), (int)fmod(s, 60));
+    else
+        snprintf(buf, cap, "%ds", (int)(s + 0.5));
+}
+
+/* ---- the command ---- */
+
+static uint64_t hash_file(uint64_t h, const char *path)
+{
+    FILE *f = fopen(path, "rb");
+    if (!f)
+        return fnv_str(h, "(unreadable)");
+    unsigned char buf[65536];
+    size_t n;
+    while ((n = fread(buf, 1, sizeof buf, f)) > 0)
+        h = fnv(h, buf, n);
+    fclose(f);
+    return h;
+}
+
+static void job_free(job *j)
+{
+    for (size_t i = 0; i < j->nsrc; i++) {
+        free(j->src[i].name);
+        free(j->src[i].subject);
+    }
+    free(j->src);
+    free(j->tg);
+    gs_h5_close(j->h5);
+    gs_face_detector_free(j->det);
+    gs_face_shape_model_free(j->sp);
+    gs_pool_destroy(j->pool);
+    gs_model_destroy(j->model);
+    aug_remote_close(j->remote);
+}
+
+static int run_augment(int argc, char **argv)
+{
+    const cli_command *cmd = &cli_augment_command;
+    cli_opt o[O_N] = {
+        {"--model", 1, NULL},   {"--input", 1, NULL},        {"--out", 1, NULL},
+        {"--grid", 1, NULL},    {"--gaze-deg", 1, NULL},     {"--uniform", 1, NULL},
+        {"--per-image", 1, NULL}, {"--targets", 1, NULL},    {"--head-deg", 1, NULL},
+        {"--head-uniform", 1, NULL}, {"--labels", 1, NULL},  {"--format", 1, NULL},
+        {"--shard", 1, NULL},   {"--seed", 1, NULL},         {"--iters", 1, NULL},
+        {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
+        {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
+        {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, O_N);
+    if (rc == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (rc != CLI_PARSED)
+        return rc;
+    job j;
+    memset(&j, 0, sizeof j);
+    j.cmd = cmd;
+    j.write_budget = -1;
+    if ((!o[O_MODEL].value == !o[O_ADDR].value) || !o[O_INPUT].value || !o[O_OUT].value)
+        return cli_usage_error(cmd, "--input, --out and one of --model (in process) and --addr "
+                               "(through gazesplatd) are needed");
+    if (o[O_TOKEN].value && !o[O_ADDR].value)
+        return cli_usage_error(cmd, "--token goes with --addr");
+    if (o[O_ADDR].value && o[O_THREADS].value)
+        return cli_usage_error(cmd, "--threads is the server's with --addr");
+    j.input = o[O_INPUT].value;
+    j.out = o[O_OUT].value;
+    j.want_png = j.want_h5 = 1;
+    if (o[O_FORMAT].value) {
+        const char *f = o[O_FORMAT].value;
+        if (!strcmp(f, "png"))
+            j.want_h5 = 0;
+        else if (!strcmp(f, "h5"))
+            j.want_png = 0;
+        else if (strcmp(f, "both"))
+            return cli_usage_error(cmd, "--format: want png, h5 or both; got '%s'", f);
+    }
+    j.shard_i = 0;
+    j.shard_n = 1;
+    if (o[O_SHARD].value) {
+        char a[32];
+        const char *sl = strchr(o[O_SHARD].value, '/');
+        size_t n = sl ? (size_t)(sl - o[O_SHARD].value) : 0;
+        if (!sl || n == 0 || n >= sizeof a)
+            return cli_usage_error(cmd, "--shard: want I/N with 0 <= I < N; got '%s'",
+                                   o[O_SHARD].value);
+        memcpy(a, o[O_SHARD].value, n);
+        a[n] = 0;
+        if (cli_parse_long(sl + 1, 1, 1000000, &j.shard_n) ||
+            cli_parse_long(a, 0, 1000000, &j.shard_i))
+            return cli_usage_error(cmd, "--shard: want I/N with 0 <= I < N; got '%s'",
+                                   o[O_SHARD].value);
+        if (j.shard_i >= j.shard_n)
+            return cli_usage_error(cmd, "--shard %s: index %ld out of range (0..%ld)",
+                                   o[O_SHARD].value, j.shard_i, j.shard_n - 1);
+    }
+    long seed = 0, threads = 2, size = 0;
+    j.iters = 200;
+    if (o[O_SEED].value && cli_parse_long(o[O_SEED].value, 0, 4294967295L, &seed))
+        return cli_usage_error(cmd, "--seed: want 0..4294967295; got '%s'", o[O_SEED].value);
+    if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &j.iters))
+        return cli_usage_error(cmd, "--iters: want 1..100000; got '%s'", o[O_ITERS].value);
+    if (o[O_SIZE].value && cli_parse_long(o[O_SIZE].value, 16, 1024, &size))
+        return cli_usage_error(cmd, "--size: want 16..1024 px; got '%s'", o[O_SIZE].value);
+    if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256, &threads))
+        return cli_usage_error(cmd, "--threads: want 1..256; got '%s'", o[O_THREADS].value);
+    /* The served setting (daemon/README.md, bench/eval/README.md): the fit
+     * to its plateau (at most 200 iterations), 15 fine-tuning steps at
+     * 0.004 with the mirrored view, detail transfer with the eyeball warp. */
+    const char *ftn = o[O_FT].value ? o[O_FT].value : "15";
+    if (strcmp(ftn, "0") == 0) {
+        if (o[O_FTLR].value)
+            return cli_usage_error(cmd, "--finetune-lr goes with --finetune N > 0");
+        gs_finetune_options_default(&j.ft);
+        j.ft.iters = 0;
+    } else if ((rc = cli_parse_finetune(cmd, ftn, NULL,
+                                        o[O_FTLR].value ? o[O_FTLR].value : "0.004", NULL, NULL,
+                                        NULL, &j.ft)))
+        return rc;
+    j.transfer = o[O_TRANSFER].value == NULL;
+    j.fit_labels = o[O_FITLAB].value != NULL;
+    j.h5_rgb = o[O_RGB].value != NULL;
+    const char *hook = getenv("GAZESPLAT_AUGMENT_ENOSPC_AFTER");
+    if (hook && *hook && cli_parse_long(hook, 0, 1L << 40, &j.write_budget))
+        return cli_usage_error(cmd, "GAZESPLAT_AUGMENT_ENOSPC_AFTER: want a count");
+
+    /* Inputs. */
+    struct stat st;
+    if (stat(j.input, &st) != 0) {
+        rc = cli_fail(cmd, "%s: %s", j.input, strerror(errno));
+        goto out;
+    }
+    j.is_h5 = !S_ISDIR(st.st_mode);
+    if (j.is_h5 && o[O_LABELS].value) {
+        rc = cli_usage_error(cmd, "--labels goes with a folder (an HDF5 file has its labels)");
+        goto out;
+    }
+    if (!j.is_h5 && j.h5_rgb) {
+        rc = cli_usage_error(cmd, "--h5-rgb goes with an HDF5 input");
+        goto out;
+    }
+    uint64_t fp = 1469598103934665603ull;
+    if ((rc = j.is_h5 ? open_h5(&j) : list_dir(&j)))
+        goto out;
+    if (!j.is_h5 && o[O_LABELS].value && (rc = read_labels(&j, o[O_LABELS].value, &fp)))
+        goto out;
+    if ((rc = make_targets(&j, o, (uint64_t)seed)))
+        goto out;
+    /* Everything that shapes the outputs goes into the fingerprint. */
+    for (int i = 0; i < O_N; i++)
+        if (i != O_THREADS && i != O_OUT) {
+            fp = fnv_str(fp, o[i].name);
+            fp = fnv_str(fp, o[i].value);
+        }
+    if (o[O_MODEL].value)
+        fp = hash_file(fp, o[O_MODEL].value);
+    if (j.is_h5)
+        fp = fnv(fp, &st.st_size, sizeof st.st_size);
+    for (size_t i = 0; i < j.nsrc; i++)
+        fp = fnv_str(fp, j.src[i].name);
+    fp = fnv(fp, j.tg, j.ntg * sizeof *j.tg);
+    j.fingerprint = fp;
+
+    gs_error err = {0, ""};
+    gs_nn_blas_set_threads(1);
+    if (o[O_ADDR].value) {
+        char server[256], msg[600];
+        int srv_size = 0;
+        const char *token = o[O_TOKEN].value ? o[O_TOKEN].value : getenv("GAZESPLAT_TOKEN");
+        if (aug_remote_connect(o[O_ADDR].value, token, &j.remote, &srv_size, server, sizeof server,
+                               msg, sizeof msg)) {
+            rc = cli_fail(cmd, "%s", msg);
+            goto out;
+        }
+        /* The server's model is in the fingerprint as far as HELLO tells it. */
+        j.fingerprint = fnv_str(fnv(j.fingerprint, &srv_size, sizeof srv_size), server);
+        memset(&j.info, 0, sizeof j.info);
+        j.info.image_size = srv_size;
+        j.info.distance_mm = NAN;
+    } else if (gs_model_load(o[O_MODEL].value, &j.model, &err)) {
+        rc = cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
+        goto out;
+    } else
+        gs_model_get_info(j.model, &j.info);
+    j.out_size = size ? (int)size : j.info.image_size;
+    j.pool = gs_pool_create((int)threads);
+    if (!j.pool) {
+        rc = cli_fail(cmd, "out of memory");
+        goto out;
+    }
+
+    /* Outputs. */
+    char suffix[64] = "";
+    if (j.shard_n > 1)
+        snprintf(suffix, sizeof suffix, "-%ld-of-%ld", j.shard_i, j.shard_n);
+    snprintf(j.state, sizeof j.state, "%s/.augment%s", j.out, j.shard_n > 1 ? suffix : "");
+    snprintf(j.manifest, sizeof j.manifest, "%s/manifest", j.state);
+    snprintf(j.labels_path, sizeof j.labels_path, "%s/labels%s.jsonl", j.out, suffix);
+    snprintf(j.h5_path, sizeof j.h5_path, "%s/augment%s.h5", j.out, suffix);
+    char images[4200];
+    snprintf(images, sizeof images, "%s/images", j.out);
+    if (strlen(j.out) > 3800 || make_dir(j.out) || make_dir(j.state) ||
+        (j.want_png && make_dir(images))) {
+        rc = cli_fail(cmd, "cannot create %s (%s)", j.out, strerror(errno));
+        goto out;
+    }
+    unsigned char *done = calloc(j.nsrc, 1);
+    int finished = 0;
+    if (!done) {
+        rc = cli_fail(cmd, "out of memory");
+        goto out;
+    }
+    if ((rc = open_manifest(&j, done, &finished))) {
+        free(done);
+        goto out;
+    }
+    size_t todo = 0, total = 0, shard_samples = 0;
+    for (size_t k = (size_t)j.shard_i; k < j.nsrc; k += (size_t)j.shard_n) {
+        total++;
+        shard_samples += j.src[k].nt;
+    }
+    if (finished) {
+        if (!file_size_is(j.labels_path, -1) || (j.want_h5 && !file_size_is(j.h5_path, -1)))
+            rc = cli_fail(cmd, "%s: finished, but its files are gone; remove %s to make them "
+                          "again", j.out, j.state);
+        else
+            printf("gazesplat augment: already complete: %zu images -> %s\n", shard_samples,
+                   j.out);
+        free(done);
+        goto out;
+    }
+    for (size_t k = (size_t)j.shard_i; k < j.nsrc; k += (size_t)j.shard_n) {
+        if (done[k] && !parts_present(&j, k))
+            done[k] = 0; /* listed but its parts are gone: made again */
+        todo += !done[k];
+    }
+    int tty = isatty(2);
+    double t0 = cli_now_s();
+    size_t ndone = 0, images_done = 0, images_todo = 0;
+    for (size_t k = (size_t)j.shard_i; k < j.nsrc; k += (size_t)j.shard_n)
+        images_todo += done[k] ? 0 : j.src[k].nt;
+    if (total > todo)
+        fprintf(stderr, "gazesplat augment: resuming: %zu of %zu sources done\n", total - todo,
+                total);
+    for (size_t k = (size_t)j.shard_i; k < j.nsrc && !rc; k += (size_t)j.shard_n) {
+        if (done[k])
+            continue;
+        double psnr = NAN;
+        rc = do_source(&j, k, &psnr);
+        if (rc)
+            break;
+        ndone++;
+        images_done += j.src[k].nt;
+        double el = cli_now_s() - t0, rate = el > 0 ? images_done / el : 0;
+        char eta[32], what[4400];
+        fmt_eta(rate > 0 ? (images_todo - images_done) / rate : -1, eta, sizeof eta);
+        if (tty)
+            fprintf(stderr, "\rgazesplat augment: %zu/%zu sources, %zu images, %.2f images/s, "
+                    "ETA %s   ", total - todo + ndone, total, images_done, rate, eta);
+        else
+            fprintf(stderr, "gazesplat augment: %zu/%zu %s: PSNR %.2f dB, %zu images "
+                    "(%.2f images/s, ETA %s)\n", total - todo + ndone, total,
+                    src_label(&j, k, what, sizeof what), psnr, j.src[k].nt, rate, eta);
+    }
+    if (tty && ndone)
+        fputc('\n', stderr);
+    free(done);
+    if (rc) {
+        fprintf(stderr, "gazesplat augment: stopped; the sources done are kept in %s: run the "
+                "same command again to continue\n", j.manifest);
+        goto out;
+    }
+    size_t rows = 0;
+    if ((rc = assemble(&j, &rows)))
+        goto out;
+    if (manifest_append(&j, "finished\n")) {
+        rc = cli_fail(cmd, "%s: cannot write (%s)", j.manifest, strerror(errno));
+        goto out;
+    }
+    remove_parts(&j);
+    double el = cli_now_s() - t0;
+    printf("gazesplat augment: %zu images from %zu sources -> %s (%s%s%s) in %.1f s\n", rows,
+           total, j.out, j.labels_path + strlen(j.out) + 1, j.want_h5 ? ", " : "",
+           j.want_h5 ? j.h5_path + strlen(j.out) + 1 : "", el);
+out:
+    job_free(&j);
+    return rc;
+}

@@ -1,0 +1,52 @@
+/* The photo path's first half (photo_prep.h). */
+#include <stdlib.h>
+#include <string.h>
+
+#include "photo_prep.h"
+#include "gazesplat/geom.h"
+
+int cli_photo_normalize(gs_face_detector *det, const gs_face_shape_model *sp,
+                        const gs_io_image *photo, int index, const gs_model_info *info,
+                        cli_photo_face *out, gs_error *err)
+{
+    memset(out, 0, sizeof *out);
+    int S = info->image_size;
+    gs_face_opts fo;
+    gs_face_opts_default(&fo);
+    fo.index = index;
+    /* The model was trained on synthetic heads, whose labels use the
+     * synthetic head frame: solve the pose against the mean synthetic head
+     * so the normalization and the head angles are in that frame. */
+    fo.pose_model = GS_FACE_POSE_SYNTH;
+    fo.norm_size = S;
+    fo.norm_distance_mm = info->distance_mm;
+    fo.norm_focal = info->focal;
+    int rc = gs_face_analyze(det, sp, photo, &fo, &out->res, err);
+    if (rc == GS_OK)
+        rc = gs_face_normalize_image(photo, &out->res.norm, &out->norm, err);
+    if (rc == GS_OK && !(out->mask_n = malloc((size_t)S * S)))
+        rc = gs_error_set(err, GS_ERR_NOMEM, "out of memory");
+    if (rc == GS_OK)
+        gs_face_mask((const double(*)[2])out->res.uv_n, GS_FACE_MASK_FACE, 0, 4, S, S,
+                     out->mask_n, NULL);
+    if (rc != GS_OK)
+        cli_photo_face_free(out);
+    return rc;
+}
+
+void cli_photo_fit_options(const cli_photo_face *p, int iters, gs_fit_options *o)
+{
+    gs_fit_options_default(o);
+    o->mask = p->mask_n;
+    o->max_iters = iters;
+    o->known_head = 1;
+    gs_geom_norm_rot(&p->res.norm, p->res.pose.R, o->head_R);
+    o->head_t[2] = gs_geom_vec3_norm(p->res.pose.t);
+}
+
+void cli_photo_face_free(cli_photo_face *p)
+{
+    gs_io_image_free(&p->norm);
+    free(p->mask_n);
+    p->mask_n = NULL;
+}
