@@ -25,8 +25,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..", "..")
 sys.path.insert(0, os.path.join(ROOT, "clients", "python"))
 sys.path.insert(0, os.path.join(ROOT, "tests", "integration"))
-import gazesplat_client as gc  # noqa: E402
 from daemon_util import Daemon  # noqa: E402
+gc = None  # the client, imported once the build tree is known
 
 
 def cli_fit_seconds(cli, model, image, iters, steps, out):
@@ -47,6 +47,10 @@ def main():
     ap.add_argument("--iters", type=int, default=45)
     ap.add_argument("--finetune", type=int, default=15)
     a = ap.parse_args()
+    global gc
+    os.environ.setdefault("GAZESPLAT_PB2_DIR", os.path.join(a.build, "python"))
+    import gazesplat_client
+    gc = gazesplat_client
     cli = os.path.join(a.build, "clients", "cli", "gazesplat")
     daemon_bin = os.path.join(a.build, "daemon", "gazesplatd")
     work = tempfile.mkdtemp(prefix="fit_vs_cli_")
