@@ -60,6 +60,23 @@ install(FILES ${PROJECT_SOURCE_DIR}/daemon/README.md DESTINATION ${CMAKE_INSTALL
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/docs
   FILES_MATCHING PATTERN "*.md" PATTERN "*.png")
 
+# Man pages, compressed as Debian wants them (gzip -9n: no name or time
+# stamp, so the same bytes every build).
+find_program(GS_GZIP gzip)
+set(gs_man_gz)
+foreach(page gazesplat.1 gazesplatd.8 gazesplatd.conf.5)
+  set(src ${PROJECT_SOURCE_DIR}/docs/man/${page})
+  set(dst ${CMAKE_BINARY_DIR}/man/${page}.gz)
+  add_custom_command(OUTPUT ${dst}
+    COMMAND ${CMAKE_COMMAND} -E make_directory ${CMAKE_BINARY_DIR}/man
+    COMMAND ${GS_GZIP} -9n -c ${src} > ${dst}
+    DEPENDS ${src} VERBATIM)
+  list(APPEND gs_man_gz ${dst})
+  string(REGEX MATCH "[0-9]$" section ${page})
+  install(FILES ${dst} DESTINATION ${CMAKE_INSTALL_MANDIR}/man${section})
+endforeach()
+add_custom_target(gs_man ALL DEPENDS ${gs_man_gz})
+
 # ---- Debian package ----------------------------------------------------------
 set(CPACK_GENERATOR DEB)
 set(CPACK_PACKAGE_NAME gazesplat)

@@ -54,6 +54,10 @@ FHS = [
     "usr/share/doc/gazesplat/README.md",
     "usr/share/doc/gazesplat/PROTOCOL.md",
     "usr/share/doc/gazesplat/gazesplatd.md",
+    "usr/share/man/man1/gazesplat.1.gz",
+    "usr/share/man/man8/gazesplatd.8.gz",
+    "usr/share/man/man5/gazesplatd.conf.5.gz",
+    "usr/lib/modprobe.d/gazesplat-v4l2loopback.conf",
 ]
 # Shared libraries dpkg-shlibdeps must have found (package name prefixes).
 LIB_DEPS = ["libc6", "libopenblas", "libprotobuf-c1", "libopencv-core", "libopencv-imgcodecs",
