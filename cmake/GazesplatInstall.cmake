@@ -60,11 +60,19 @@ install(FILES ${PROJECT_SOURCE_DIR}/daemon/README.md DESTINATION ${CMAKE_INSTALL
 install(DIRECTORY ${PROJECT_SOURCE_DIR}/docs/ DESTINATION ${CMAKE_INSTALL_DOCDIR}/docs
   FILES_MATCHING PATTERN "*.md" PATTERN "*.png")
 
+# A native package's changelog, compressed like the man pages.
+add_custom_command(OUTPUT ${CMAKE_BINARY_DIR}/deb/changelog.gz
+  COMMAND ${CMAKE_COMMAND} -E make_directory ${CMAKE_BINARY_DIR}/deb
+  COMMAND gzip -9n -c ${PROJECT_SOURCE_DIR}/cmake/deb/changelog > ${CMAKE_BINARY_DIR}/deb/changelog.gz
+  DEPENDS ${PROJECT_SOURCE_DIR}/cmake/deb/changelog VERBATIM)
+add_custom_target(gs_changelog ALL DEPENDS ${CMAKE_BINARY_DIR}/deb/changelog.gz)
+install(FILES ${CMAKE_BINARY_DIR}/deb/changelog.gz DESTINATION ${CMAKE_INSTALL_DOCDIR})
+
 # Man pages, compressed as Debian wants them (gzip -9n: no name or time
 # stamp, so the same bytes every build).
 find_program(GS_GZIP gzip)
 set(gs_man_gz)
-foreach(page gazesplat.1 gazesplatd.8 gazesplatd.conf.5)
+foreach(page gazesplat.1 gazesplat-grid.1 gazesplatd.8 gazesplatd.conf.5)
   set(src ${PROJECT_SOURCE_DIR}/docs/man/${page})
   set(dst ${CMAKE_BINARY_DIR}/man/${page}.gz)
   add_custom_command(OUTPUT ${dst}
@@ -83,9 +91,10 @@ set(CPACK_PACKAGE_NAME gazesplat)
 set(CPACK_PACKAGE_VERSION ${PROJECT_VERSION})
 set(CPACK_PACKAGE_DESCRIPTION_SUMMARY "gaze redirection service (GazeGaussian) with its clients")
 set(CPACK_PACKAGE_DESCRIPTION
-  "gazesplatd serves GazeGaussian gaze redirection (3D Gaussian splatting and a\n\
-neural renderer, on the CPU) over a Unix socket; gazesplat is its command-line\n\
-client and tool box. Ships the default model, systemd units and a Python client.")
+  "gazesplatd serves GazeGaussian gaze redirection (3D Gaussian splatting and\n\
+a neural renderer, on the CPU) over a Unix socket; gazesplat is its\n\
+command-line client and tool box. Ships the default model, systemd units,\n\
+man pages and the Python package gazesplat.")
 set(CPACK_PACKAGE_CONTACT "gazesplat maintainers <gazesplat@localhost>")
 set(CPACK_DEBIAN_FILE_NAME DEB-DEFAULT)
 # The package holds what `cmake --install` puts down for this build's prefix
@@ -108,4 +117,11 @@ set(CPACK_DEBIAN_PACKAGE_CONTROL_EXTRA
   ${CMAKE_BINARY_DIR}/deb/conffiles ${CMAKE_BINARY_DIR}/deb/postinst
   ${CMAKE_BINARY_DIR}/deb/prerm ${CMAKE_BINARY_DIR}/deb/postrm)
 set(CPACK_DEBIAN_PACKAGE_CONTROL_STRICT_PERMISSION ON)
+# Stripped binaries in the package, their debug information (the Release
+# build's -g, cmake/GazesplatWarnings.cmake) in gazesplat-dbgsym, a .ddeb
+# found by build id. (CPACK_STRIP_FILES would strip before the split and
+# leave the dbgsym package empty.)
+set(CPACK_DEBIAN_DEBUGINFO_PACKAGE ON)
+# The maintainer scripts' deb-systemd-helper and deb-systemd-invoke come
+# with init-system-helpers, an essential package: not a declared dependency.
 include(CPack)

@@ -55,6 +55,8 @@ FHS = [
     "usr/share/doc/gazesplat/PROTOCOL.md",
     "usr/share/doc/gazesplat/gazesplatd.md",
     "usr/share/man/man1/gazesplat.1.gz",
+    "usr/share/man/man1/gazesplat-grid.1.gz",
+    "usr/share/doc/gazesplat/changelog.gz",
     "usr/share/man/man8/gazesplatd.8.gz",
     "usr/share/man/man5/gazesplatd.conf.5.gz",
     "usr/lib/modprobe.d/gazesplat-v4l2loopback.conf",
@@ -75,6 +77,15 @@ def build_deb(t, build, out):
     debs = [f for f in os.listdir(out) if f.endswith(".deb")]
     t.check(r.returncode == 0 and len(debs) == 1, "cpack rc %d, debs %s\n%s%s" % (r.returncode, debs,
                                                                                r.stdout[-3000:], r.stderr[-3000:]))
+    # A Release build carries -g: its debug information goes to the dbgsym
+    # package (by build id) and the package's binaries are stripped.
+    if "CMAKE_BUILD_TYPE:STRING=Release" in open(os.path.join(build, "CMakeCache.txt")).read():
+        ddebs = [f for f in os.listdir(out) if f.endswith(".ddeb")]
+        t.check(len(ddebs) == 1 and ddebs[0].startswith("gazesplat-dbgsym_"), "dbgsym package: %s" % ddebs)
+        if ddebs:
+            listed = run(["dpkg-deb", "-c", os.path.join(out, ddebs[0])]).stdout
+            t.check(listed.count(".debug") >= 2 and "usr/lib/debug/.build-id/" in listed,
+                    "dbgsym contents: %s" % listed[-500:])
     return os.path.join(out, debs[0]) if debs else None
 
 
@@ -113,8 +124,12 @@ def check_scripts(t, ctrl):
             r = run(["sh", "-n", p])
             t.check(r.returncode == 0, "%s: sh -n: %s" % (s, r.stderr))
     if os.path.exists(os.path.join(ctrl, "postinst")):
-        t.check("systemd-sysusers gazesplat.conf" in open(os.path.join(ctrl, "postinst")).read(),
+        text = open(os.path.join(ctrl, "postinst")).read()
+        t.check(re.search(r"systemd-sysusers .*gazesplat\.conf", text) is not None,
                 "postinst does not create the group")
+        # Debian's helpers, not systemctl, for enablement and restarts.
+        t.check("deb-systemd-helper" in text and "deb-systemd-invoke try-restart" in text and
+                "systemctl try-restart" not in text, "postinst not in debhelper's style")
 
 
 def check_contents(t, deb, prefix, conffiles, version):
@@ -152,6 +167,9 @@ def check_extracted(t, deb, root, prefix, version, tmp):
             "gazesplatd --version: rc %d %r (package %s)" % (r.returncode, r.stdout, version))
     r = run([binp, "--help"])
     t.check(r.returncode == 0 and "usage" in (r.stdout + r.stderr).lower(), "gazesplat --help rc %d" % r.returncode)
+    for exe in (sbin, binp):
+        r = run(["file", "-b", exe])
+        t.check(", stripped" in r.stdout, "%s not stripped: %s" % (exe, r.stdout.strip()))
     unit_dir = os.path.join(root, prefix.lstrip("/"), "lib/systemd/system")
     exe, conf = unit_paths(root, unit_dir)
     t.check(exe is not None and os.access(root + exe, os.X_OK), "ExecStart %s not in the package" % exe)
