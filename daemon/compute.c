@@ -456,6 +456,27 @@ static int job_stop(gsd_job *j)
     return now_ms() > j->deadline_ms ? E(ERR_DEADLINE) : 0;
 }
 
+/* Before the next image of a REDIRECT: waits while the job's connection
+ * has max_output_kb unsent, or the server's unsent output is over
+ * output_budget_mb while this job has some of it, so a client that does
+ * not read holds back its own renders, never the server's memory. Returns
+ * 0, or the job's stop reason (CANCEL, deadline, stopping). */
+static int wait_output(gsd_server *s, gsd_job *j)
+{
+    for (int waited = 0;; waited = 1) {
+        int why = job_stop(j);
+        if (why)
+            return why;
+        if (!atomic_load(&j->conn_paused) &&
+            (atomic_load(&j->out_bytes) == 0 || atomic_load(&s->out_total) <= atomic_load(&s->out_budget)))
+            return 0;
+        if (!waited)
+            atomic_fetch_add(&s->ctr.output_waits, 1);
+        struct timespec ts = {0, 2 * 1000000L};
+        nanosleep(&ts, NULL);
+    }
+}
+
 /* The fit's and fine-tune's cancel callback (gs_fit_options.cancel):
  * polled every iteration, so CANCEL, a closed connection, the deadline
  * and a stopping server end a fit within one iteration. */
@@ -1507,9 +1528,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     memset(&ps, 0, sizeof ps);
     gsd_out *o = rgb ? NULL : gsd_error_frame(j, E(ERR_INTERNAL), "out of memory");
     for (size_t i = 0; i < r->n_targets && !o; i++) {
-        int why = job_stop(j);
-        if (!why && i > 0) /* a peer that does not read holds back its renders */
-            why = gsd_wait_output(s, j);
+        int why = i > 0 ? wait_output(s, j) : job_stop(j);
         if (why)
             o = stop_frame(s, j, why);
         else if ((why = render_target(w, ctx, j, r, i, &subj, so.face.data ? &so.face : NULL, &photo, &ps,

@@ -129,26 +129,6 @@ static void out_detach(gsd_conn *c, const gsd_job *j)
             o->job = NULL;
 }
 
-int gsd_wait_output(gsd_server *s, gsd_job *j)
-{
-    int counted = 0;
-    for (;;) {
-        int why = atomic_load(&j->stop);
-        if (!why && ev_now_ms() > j->deadline_ms)
-            why = E(ERR_DEADLINE);
-        if (why)
-            return why;
-        size_t mine = atomic_load(&j->out_bytes);
-        if (!atomic_load(&j->conn_paused) &&
-            (mine == 0 || atomic_load(&s->out_total) <= atomic_load(&s->out_budget)))
-            return 0;
-        if (!counted++)
-            bump(&s->ctr.output_waits, 1);
-        struct timespec ts = {0, 2 * 1000000L};
-        nanosleep(&ts, NULL);
-    }
-}
-
 gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage *msg)
 {
     gs_frame_header h;

@@ -63,7 +63,7 @@ typedef struct gsd_job {
     uint32_t est_ms;             /* estimated run time, for BUSY hints (work.c) */
     uint32_t targets;            /* REDIRECT: targets; for the per-target cost */
     int inline_fit;              /* REDIRECT with an image: fits first */
-    /* Output pacing (gsd_wait_output): bytes of this job's frames not yet
+    /* Output pacing (wait_output, compute.c): bytes of this job's frames not yet
      * written to the peer, and whether its connection's output is over
      * max_output_kb (set by the loop). */
     atomic_size_t out_bytes;
@@ -230,13 +230,6 @@ gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage
 /* An ERROR frame for a job (final). */
 gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
-
-/* Worker side, before rendering the next image of job j: waits while j's
- * connection has max_output_kb unsent, or the server's unsent output is
- * over output_budget_mb while j has some of it; a client that does not
- * read holds back its own renders, never the server's memory. Returns 0,
- * or the job's stop reason (CANCEL, deadline, stopping). */
-int gsd_wait_output(gsd_server *s, gsd_job *j);
 
 /* ---- work.c ---- */
 int gsd_work_start(gsd_server *s, int nworkers, int depth);

@@ -1794,7 +1794,6 @@ static int run_augment(int argc, char **argv)
     j.fingerprint = fp;
 
     gs_error err = {0, ""};
-    gs_nn_blas_set_threads(1);
     if (o[O_ADDR].value) {
         char server[256], msg[600];
         int srv_size = 0;

@@ -225,9 +225,17 @@ static int do_stats(gs_client *c, int timeout)
         const Gazesplat__Stats *s = (const Gazesplat__Stats *)f.msg;
         if (json_out) /* one flat object: {"fits": 3, ...} */
             putchar('{');
-        for (size_t i = 0; i < s->n_counters; i++)
-            printf(json_out ? "%s\"%s\":%llu" : "%.0s%s %llu\n", json_out && i ? "," : "", s->counters[i]->name,
-                   (unsigned long long)s->counters[i]->value);
+        for (size_t i = 0; i < s->n_counters; i++) {
+            unsigned long long v = s->counters[i]->value;
+            if (!json_out) {
+                printf("%s %llu\n", s->counters[i]->name, v);
+                continue;
+            }
+            if (i)
+                putchar(',');
+            gs_msg_write_json_string(stdout, s->counters[i]->name);
+            printf(":%llu", v);
+        }
         if (json_out)
             puts("}");
     } else {

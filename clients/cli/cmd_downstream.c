@@ -312,7 +312,6 @@ static int run_checked(ds_cli *d)
     snprintf(fits, sizeof fits, "%s/fits", d->out);
     if (!make_dir(d->out) || !make_dir(fits))
         return cli_fail(cmd, "cannot create %s", fits);
-    gs_nn_blas_set_threads(1); /* one image per thread (gaze.h) */
     gs_error err = {0, ""};
     gs_model *m = NULL;
     gs_gaze_net *est = NULL;

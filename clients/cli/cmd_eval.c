@@ -880,7 +880,6 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     snprintf(fits, sizeof fits, "%s/images", o[O_OUT].value);
     if (!rc && ev->save_images && !make_dir(fits))
         rc = cli_fail(cmd, "cannot create %s", fits);
-    gs_nn_blas_set_threads(1);
     if (!rc && gs_model_load(o[O_MODEL].value, &ev->m, &err))
         rc = cli_fail(cmd, "%s: %s", o[O_MODEL].value, err.msg);
     if (!rc && o[O_EST].value &&

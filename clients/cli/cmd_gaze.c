@@ -181,7 +181,6 @@ static int run_train_est(int argc, char **argv)
     t.log = log_line;
     t.render_size = (int)rsize, t.white = share[0], t.shift = (int)shift, t.blur = share[1];
 
-    gs_nn_blas_set_threads(1);
     gs_error err = {0, ""};
     gs_gaze_net *n = NULL;
     gs_gaze_spec spec;
@@ -222,7 +221,6 @@ static int run_estimate(int argc, char **argv)
         return rc;
     if (!o[0].value || !o[1].value)
         return cli_usage_error(cmd, "need --model and --image");
-    gs_nn_blas_set_threads(1);
     gs_error err = {0, ""};
     gs_gaze_net *n = NULL;
     gs_io_image img = {0};
@@ -424,7 +422,6 @@ static int run_eval_est(int argc, char **argv)
     gc.size = (int)size;
     gc.rig = GS_SYNTH_RIG_NORMALIZED;
     gc.supersample = 1;
-    gs_nn_blas_set_threads(1);
     es.white = o[E_WHITE].value != NULL;
     rc = eval_run(cmd, &es, &gc, count, threads, o[E_CSV].value, sp);
     eval_free(&es);

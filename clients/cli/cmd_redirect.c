@@ -122,7 +122,6 @@ const cli_command cli_redirect_command = {
 static int load_model(const cli_command *cmd, const char *path, gs_model **m)
 {
     gs_error err = {0, ""};
-    gs_nn_blas_set_threads(1);
     if (gs_model_load(path, m, &err))
         return cli_fail(cmd, "%s: %s", path, err.msg);
     return CLI_OK;

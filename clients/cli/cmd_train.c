@@ -264,7 +264,6 @@ static int run_train(int argc, char **argv)
                                     "--supersample");
     t.log = log_line;
 
-    gs_nn_blas_set_threads(1);
     gs_error err = {0, ""};
     gs_model *m = NULL;
     rc = t.resume ? gs_model_load(t.out_path, &m, &err)
