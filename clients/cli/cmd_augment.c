@@ -1267,23 +1267,6 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, const 
         rc = cli_fail(cmd, "out of memory");
     if (!rc && aug_remote_fit_one(j->remote, &in, &rs, msg, sizeof msg))
         rc = cli_fail(cmd, "%s: %s", what, msg);
-    /* The FIT's report, kept until the source is done: a rerun after a
-     * kill finds the subject in the server's cache, whose FIT_OK cannot
-     * say what the fine-tuning reached; the first run's report can. */
-    char fitp[4300];
-    part_path(j, k, "fit", fitp, sizeof fitp);
-    if (!rc && rs.cached) {
-        uint8_t *b = NULL;
-        size_t bl = 0;
-        aug_remote_subject was;
-        if (cli_read_file(fitp, sizeof was, &b, &bl) == 0 && bl == sizeof was) {
-            memcpy(&was, b, sizeof was);
-            if (memcmp(was.key, rs.key, sizeof rs.key) == 0)
-                rs.ft_psnr = was.ft_psnr;
-        }
-        free(b);
-    } else if (!rc && commit_file(j, fitp, &rs, sizeof rs))
-        rc = cli_fail(cmd, "%s: cannot write (%s)", fitp, strerror(errno));
     for (size_t t = 0; !rc && t < s->nt; t++) {
         const target *x = &j->tg[s->t0 + t];
         tg[t].gaze_deg[0] = x->gp / DEG;
@@ -1303,7 +1286,12 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, const 
         fi->sub.gaze_yaw = rs.gaze_deg[1] * DEG;
         fi->sub.fit_psnr = (float)rs.psnr;
         fi->sub.fit_ssim = (float)rs.ssim;
-        fi->ft_psnr = rs.ft_psnr;
+        /* A FIT answered from the server's cache cannot tell what the
+         * fine-tuning reached, and whether a rerun after a kill finds the
+         * subject cached depends on when the kill came: left out over a
+         * daemon, so that a resumed run gives the bytes of an
+         * uninterrupted one. */
+        fi->ft_psnr = NAN;
     }
     free(tg);
     free(bytes);
@@ -1614,8 +1602,6 @@ static void remove_parts(job *j)
         part_path(j, k, "bin", path, sizeof path);
         unlink(path);
         part_path(j, k, "jsonl", path, sizeof path);
-        unlink(path);
-        part_path(j, k, "fit", path, sizeof path);
         unlink(path);
     }
 }
