@@ -593,9 +593,27 @@ static int decode_image(gsd_job *j, const Gazesplat__Image *img, gs_io_image *ou
     return 0;
 }
 
+_Static_assert((int)GAZESPLAT__FACE_REFUSAL__REFUSAL_HEAD_POSE == (int)GS_FACE_REFUSED_HEAD_POSE &&
+                   (int)GAZESPLAT__FACE_REFUSAL__REFUSAL_EYES_CLOSED == (int)GS_FACE_REFUSED_EYES_CLOSED &&
+                   (int)GAZESPLAT__FACE_REFUSAL__REFUSAL_FLAT == (int)GS_FACE_REFUSED_FLAT &&
+                   (int)GAZESPLAT__FACE_REFUSAL__REFUSAL_NOISE == (int)GS_FACE_REFUSED_NOISE,
+               "FaceRefusal follows gs_face_refusal");
+
+/* ERR_FACE_REFUSED when the gate said no (its reason in msg and the
+ * Error's refusal field), else 0. */
+static int refuse(gsd_job *j, const gs_face_gate *g, char *msg, size_t cap)
+{
+    if (g->refusal == GS_FACE_USABLE)
+        return 0;
+    j->refusal = (int)g->refusal;
+    snprintf(msg, cap, "face refused (%s): %s", gs_face_refusal_name(g->refusal), g->reason);
+    return E(ERR_FACE_REFUSED);
+}
+
 /* Photo -> face analysis (detection, landmarks, head pose) -> the face
- * normalized to the model's camera, and its face mask. */
-static int normalize_photo(gsd_worker *w, const Gazesplat__Intrinsics *k, photo_input *p,
+ * normalized to the model's camera, and its face mask, through the face
+ * gate (face_gate). */
+static int normalize_photo(gsd_worker *w, gsd_job *j, const Gazesplat__Intrinsics *k, photo_input *p,
                            gs_io_image *face, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
@@ -632,6 +650,19 @@ static int normalize_photo(gsd_worker *w, const Gazesplat__Intrinsics *k, photo_
         return E(ERR_INTERNAL);
     }
     p->is_photo = 1;
+    if (s->cfg.face_gate) {
+        gs_face_gate g;
+        int e = 0;
+        if (gs_face_gate_photo(&p->face, face, NULL, &g, &err) != GS_OK) {
+            snprintf(msg, cap, "face gate: %s", err.msg);
+            e = E(ERR_INTERNAL);
+        } else {
+            e = refuse(j, &g, msg, cap);
+        }
+        if (e)
+            gs_io_image_free(face);
+        return e;
+    }
     return 0;
 }
 
@@ -644,7 +675,7 @@ static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, co
     memset(p, 0, sizeof *p);
     if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
         int e = decode_image(j, img, &p->photo, msg, cap);
-        return e ? e : normalize_photo(w, k, p, face, msg, cap);
+        return e ? e : normalize_photo(w, j, k, p, face, msg, cap);
     }
     int e = decode_image(j, img, face, msg, cap);
     if (!e && (face->width != size || face->height != size)) {
@@ -652,6 +683,19 @@ static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, co
                  size, size);
         gs_io_image_free(face);
         return E(ERR_BAD_IMAGE);
+    }
+    if (!e && w->srv->cfg.face_gate) {
+        gs_face_gate g;
+        gs_error err;
+        gs_error_clear(&err);
+        if (gs_face_gate_normalized(face, NULL, &g, &err) != GS_OK) {
+            snprintf(msg, cap, "face gate: %s", err.msg);
+            e = E(ERR_INTERNAL);
+        } else {
+            e = refuse(j, &g, msg, cap);
+        }
+        if (e)
+            gs_io_image_free(face);
     }
     return e;
 }

@@ -58,6 +58,7 @@ static const key_def keys[] = {
     {"log_level", T_LEVEL, OFF(log_level), 0, 3, "info"},
     {"debug_requests", T_BOOL, OFF(debug_requests), 0, 1, "no"},
     {"photo_input", T_BOOL, OFF(photo_input), 0, 1, "yes"},
+    {"face_gate", T_BOOL, OFF(face_gate), 0, 1, "yes"},
     {"face_landmarks", T_STR, OFF(face_landmarks), 0, 0, GS_FACE_SHAPE_MODEL_DEFAULT},
     {"face_cascade", T_STR, OFF(face_cascade), 0, 0, GS_FACE_CASCADE_DEFAULT},
     {"live.device", T_STR, OFF(live_device), 0, 0, ""},

@@ -40,6 +40,7 @@ typedef struct gsd_config {
     int log_level;
     int debug_requests;
     int photo_input;                  /* accept KIND_PHOTO (needs the two below) */
+    int face_gate;                    /* refuse faces gs_face_gate refuses */
     char face_landmarks[GSD_STR_MAX]; /* dlib 68-point shape predictor */
     char face_cascade[GSD_STR_MAX];   /* OpenCV face cascade */
     /* live eye contact hosted by the daemon (live.c); "" device = off */

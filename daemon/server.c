@@ -166,7 +166,14 @@ gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     h.version = job->version;
     h.request_id = job->request_id;
     memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
-    gsd_out *o = error_out(job->srv, &h, code, text);
+    Gazesplat__Error e = GAZESPLAT__ERROR__INIT;
+    e.code = (Gazesplat__ErrorCode)code;
+    e.message = text;
+    e.request_id = h.request_id;
+    if (code == E(ERR_FACE_REFUSED))
+        e.refusal = (Gazesplat__FaceRefusal)job->refusal;
+    h.type = T(ERROR);
+    gsd_out *o = out_pack(job->srv, &h, &e.base);
     ((gsd_job *)job)->result = code; /* for its log line */
     if (o) {
         out_attach(o, job);

@@ -73,6 +73,7 @@ typedef struct gsd_job {
      * fit iterations, fine-tuning steps, images sent, answered from the
      * cache; and who asked. */
     int result, iters, ft_steps, images, cached;
+    int refusal;                 /* ERR_FACE_REFUSED: the gs_face_refusal */
     char peer[64];
     int max_side;                /* image limits when the job was accepted */
     size_t max_pixels;

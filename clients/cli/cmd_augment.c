@@ -49,7 +49,7 @@ const cli_command cli_augment_command = {
     "                         [--labels FILE] [--format png|h5|both] [--shard I/N]\n"
     "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
     "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
-    "                         [--threads N]\n"
+    "                         [--threads N] [--no-gate]\n"
     "\n"
     "  --model M        fit and render in this process with model file M\n"
     "  --addr ADDR      or through gazesplatd at ADDR (unix:PATH, tcp:HOST:PORT or\n"
@@ -110,8 +110,14 @@ const cli_command cli_augment_command = {
     "(--no-transfer: the model's render alone). --seed N (0): --uniform's\n"
     "and --head-uniform's draws. --threads N (2): the same bytes for any N.\n"
     "\n"
+    "Every source goes through the face gate first (docs/face.md): a flat or\n"
+    "noise image, and in a photo no face, eyes under 16 px or closed, a head\n"
+    "beyond the trained range or a face cut by the border, stop the run with\n"
+    "exit status 3 naming the source and the reason; --no-gate: augment\n"
+    "every source whatever it holds.\n"
+    "\n"
     "Exit status: 0 done, 1 a failure (named with its file and line or row;\n"
-    "the sources done are kept), 2 bad usage.\n",
+    "the sources done are kept), 2 bad usage, 3 a source the gate refused.\n",
     run_augment,
 };
 
@@ -122,7 +128,7 @@ const cli_command cli_augment_command = {
 enum {
     O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
     O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
-    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_N
+    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_NOGATE, O_N
 };
 
 typedef struct target {
@@ -145,6 +151,8 @@ typedef struct job {
     const cli_command *cmd;
     const char *input, *out;
     int is_h5, h5_rgb, fit_labels, transfer, want_png, want_h5;
+    int gate;    /* the face gate (off: --no-gate) */
+    int refused; /* load_face: the gate refused the source */
     long iters, shard_i, shard_n;
     gs_finetune_options ft;
     source *src;
@@ -1047,8 +1055,27 @@ typedef struct fitted {
     double ft_psnr;        /* NaN: no fine-tuning */
 } fitted;
 
+/* The face gate on a normalized face (a file or an HDF5 row): a refusal
+ * frees the face, sets j->refused and says why in err. */
+static int gate_normalized(job *j, gs_io_image *face, gs_error *err)
+{
+    j->refused = 0;
+    if (!j->gate)
+        return GS_OK;
+    gs_face_gate g;
+    int rc = gs_face_gate_normalized(face, NULL, &g, err);
+    if (rc == GS_OK && g.refusal != GS_FACE_USABLE) {
+        j->refused = 1;
+        rc = gs_error_set(err, GS_ERR_ARG, "face refused (%s): %s",
+                          gs_face_refusal_name(g.refusal), g.reason);
+    }
+    if (rc != GS_OK)
+        gs_io_image_free(face);
+    return rc;
+}
+
 /* Source k's normalized face (S x S RGB in *face) and, for photos, mask
- * and fit options. */
+ * and fit options; through the face gate unless --no-gate. */
 static int load_face(job *j, size_t k, gs_io_image *face, cli_photo_face *pf, int *photo,
                      gs_error *err)
 {
@@ -1079,7 +1106,7 @@ static int load_face(job *j, size_t k, gs_io_image *face, cli_photo_face *pf, in
                 resize_rgb(patch, n, face->data, S);
         }
         free(patch);
-        return rc;
+        return rc == GS_OK ? gate_normalized(j, face, err) : rc;
     }
     char path[4300];
     snprintf(path, sizeof path, "%s/%s", j->input, s->name);
@@ -1089,7 +1116,7 @@ static int load_face(job *j, size_t k, gs_io_image *face, cli_photo_face *pf, in
         return rc;
     if (img.width == S && img.height == S) {
         *face = img;
-        return GS_OK;
+        return gate_normalized(j, face, err);
     }
     /* A photo: the face detector and landmark model, loaded once. */
     *photo = 1;
@@ -1098,7 +1125,8 @@ static int load_face(job *j, size_t k, gs_io_image *face, cli_photo_face *pf, in
         gs_io_image_free(&img);
         return rc;
     }
-    rc = cli_photo_normalize(j->det, j->sp, &img, 0, &j->info, pf, err);
+    rc = cli_photo_normalize(j->det, j->sp, &img, 0, &j->info, j->gate, pf, err);
+    j->refused = rc != GS_OK && pf->gate.refusal != GS_FACE_USABLE;
     gs_io_image_free(&img);
     if (rc == GS_OK) {
         *face = pf->norm;
@@ -1220,7 +1248,10 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, const 
         int photo = 0;
         if (load_face(j, k, &face, &pf, &photo, &err) ||
             gs_io_image_encode(&face, GS_IO_PNG, 0, &enc, &len, &err))
-            rc = cli_fail(cmd, "%s: %s", what, err.msg);
+            rc = j->refused ? (cli_fail(cmd, "%s: %s (--no-gate to augment it anyway)", what,
+                                        err.msg),
+                               CLI_REFUSED)
+                            : cli_fail(cmd, "%s: %s", what, err.msg);
         gs_io_image_free(&face);
         in.image = enc;
     } else {
@@ -1325,7 +1356,10 @@ static int do_source(job *j, size_t k, double *psnr_out)
         goto render;
     }
     if (load_face(j, k, &face, &pf, &fi.photo, &err)) {
-        rc = cli_fail(cmd, "%s: %s", what, err.msg);
+        rc = cli_fail(cmd, "%s: %s%s", what, err.msg,
+                      j->refused ? " (--no-gate to augment it anyway)" : "");
+        if (j->refused)
+            rc = CLI_REFUSED;
         goto done;
     }
     gs_fit_options o;
@@ -1662,7 +1696,8 @@ static int run_augment(int argc, char **argv)
         {"--shard", 1, NULL},   {"--seed", 1, NULL},         {"--iters", 1, NULL},
         {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
         {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
-        {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL}};
+        {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL},
+        {"--no-gate", 0, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -1683,6 +1718,7 @@ static int run_augment(int argc, char **argv)
         return cli_usage_error(cmd, "--threads is the server's with --addr");
     j.input = o[O_INPUT].value;
     j.out = o[O_OUT].value;
+    j.gate = !o[O_NOGATE].value;
     j.want_png = j.want_h5 = 1;
     if (o[O_FORMAT].value) {
         const char *f = o[O_FORMAT].value;

@@ -55,6 +55,8 @@ const cli_command cli_fit_command = {
     "  --finetune-mirror 0|1  also fit the input mirrored left to right, from\n"
     "                   the mirrored pose (1, the default: the side the input\n"
     "                   hides takes the other side's look); 0: the input alone\n"
+    "  --no-gate        fit whatever the image holds; by default a face the\n"
+    "                   gate refuses (a flat or noise image) exits 3\n"
     "  --out FILE       the fitted subject (binary, gs_subject_encode),\n"
     "                   followed by the tuned block with --finetune\n"
     "                   (gs_model_tuned_encode; 3.4 MB for the default parts at cpu)\n"
@@ -113,6 +115,11 @@ const cli_command cli_redirect_command = {
     "                   the input's eyeball pixels, turned with the eye\n"
     "                   inside its opening, weighted exp(-(turn / DEG)^2);\n"
     "                   0..90 (20; 0 = off)\n"
+    "  --no-gate        redirect whatever the image holds; by default a face\n"
+    "                   the gate refuses exits 3 with the reason: no face,\n"
+    "                   eyes under 16 px wide or closed, head beyond the\n"
+    "                   trained range (yaw 60, pitch 40 deg), the face cut\n"
+    "                   by the border, a flat or noise image (docs/face.md)\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
     run_redirect,
 };
@@ -195,7 +202,7 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
  * (*tuned, NULL otherwise). */
 static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
                      const char *image, const char *mask, const double *gaze,
-                     long iters, double budget, const gs_finetune_options *ft,
+                     long iters, double budget, const gs_finetune_options *ft, int gate,
                      gs_subject *sub, gs_model **tuned)
 {
     double t_start = cli_now_s();
@@ -211,6 +218,16 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
         rc = cli_fail(cmd, "%s is %dx%d; the model wants %dx%d normalized "
                       "faces", image, img.width, img.height, info.image_size,
                       info.image_size);
+    gs_face_gate g;
+    if (!rc && gate) {
+        if (gs_face_gate_normalized(&img, NULL, &g, &err))
+            rc = cli_fail(cmd, "%s: %s", image, err.msg);
+        else if (g.refusal != GS_FACE_USABLE) {
+            cli_fail(cmd, "%s: face refused (%s): %s", image, gs_face_refusal_name(g.refusal),
+                     g.reason);
+            rc = CLI_REFUSED;
+        }
+    }
     uint8_t *w = NULL;
     if (!rc && mask) {
         if (gs_io_image_read(mask, NULL, &mk, &err))
@@ -276,14 +293,14 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
 static int run_fit(int argc, char **argv)
 {
     const cli_command *cmd = &cli_fit_command;
-    cli_opt o[13] = {{"--model", 1, NULL},    {"--image", 1, NULL},
+    cli_opt o[14] = {{"--model", 1, NULL},    {"--image", 1, NULL},
                      {"--mask", 1, NULL},     {"--gaze-deg", 1, NULL},
                      {"--iters", 1, NULL},    {"--time", 1, NULL},
                      {"--out", 1, NULL},      {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
                      {"--finetune-plateau", 1, NULL}, {"--finetune-outline", 1, NULL},
-                     {"--finetune-mirror", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 13);
+                     {"--finetune-mirror", 1, NULL}, {"--no-gate", 0, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 14);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -314,7 +331,7 @@ static int run_fit(int argc, char **argv)
     gs_subject sub;
     gs_model *tuned = NULL;
     rc = fit_image(cmd, m, pool, o[1].value, o[2].value, o[3].value ? gaze[0] : NULL, iters,
-                   budget, &ft, &sub, &tuned);
+                   budget, &ft, !o[13].value, &sub, &tuned);
     uint8_t *blk = NULL;
     size_t blen = 0;
     gs_error err = {0, ""};
@@ -404,7 +421,7 @@ static int read_subject(const cli_command *cmd, const char *path, gs_model *m,
 static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
                           const char *path, int index, int iters,
                           const gs_finetune_options *ft, double tg[][2],
-                          int nt, const char *dir, int out_norm, int transfer)
+                          int nt, const char *dir, int out_norm, int transfer, int gate)
 {
     gs_model *tuned = NULL;
     gs_model_info info;
@@ -421,8 +438,10 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
     if (gs_io_image_read(path, NULL, &photo, &err) ||
         gs_face_detector_load(NULL, &det, &err) ||
         gs_face_shape_model_load(NULL, &sp, &err) ||
-        cli_photo_normalize(det, sp, &photo, index, &info, &pf, &err)) {
+        cli_photo_normalize(det, sp, &photo, index, &info, gate, &pf, &err)) {
         rc = cli_fail(cmd, "%s: %s", path, err.msg);
+        if (pf.gate.refusal != GS_FACE_USABLE)
+            rc = CLI_REFUSED;
         goto done;
     }
     const gs_face_result res = pf.res;
@@ -504,7 +523,7 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[20] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[21] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
@@ -513,8 +532,9 @@ static int run_redirect(int argc, char **argv)
                      {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
                      {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
                      {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
-                     {"--finetune-mirror", 1, NULL}, {"--transfer-eye-warp", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 20);
+                     {"--finetune-mirror", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
+                     {"--no-gate", 0, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 21);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -600,7 +620,7 @@ static int run_redirect(int argc, char **argv)
             else
                 rc = redirect_photo(cmd, m, pool, o[2].value, (int)index,
                                     (int)iters, &ft, tg, nt, o[4].value,
-                                    o[7].value != NULL, transfer);
+                                    o[7].value != NULL, transfer, !o[20].value);
             gs_pool_destroy(pool);
             gs_model_destroy(m);
             return rc;
@@ -610,7 +630,7 @@ static int run_redirect(int argc, char **argv)
     gs_model *tuned = NULL;
     rc = o[1].value ? read_subject(cmd, o[1].value, m, &sub, &tuned)
                     : fit_image(cmd, m, pool, o[2].value, NULL, NULL, iters, 0,
-                                &ft, &sub, &tuned);
+                                &ft, !o[20].value, &sub, &tuned);
     if (!rc && !make_dir(o[4].value))
         rc = cli_fail(cmd, "cannot create %s", o[4].value);
     gs_model_info info;

@@ -42,8 +42,9 @@ const cli_command cli_synth_command = {
     "                        'landmark' element with the 68 3D landmarks\n"
     "  --spacing MM          template point spacing (default 2)\n"
     "  --face-model6         print the 6-point face model of the mean head (iBUG\n"
-    "                        36, 39, 42, 45, 31, 35; head frame, mm) as the C\n"
-    "                        initialiser of gs_geom_face_model6_synth\n"
+    "                        36, 39, 42, 45, 31, 35; head frame, mm) and its\n"
+    "                        nose (27-30, 32-34) as the C initialisers of\n"
+    "                        gs_geom_face_model6_synth and _nose7_synth\n"
     "\n"
     "Everything is deterministic: the same options give the same bytes.\n",
     run_synth,
@@ -218,11 +219,18 @@ static int do_face_model6(gs_pool *pool)
     gs_error err = {0, ""};
     if (gs_synth_template_build(20.0, pool, &t, &err) != GS_OK)
         return cli_fail(&cli_synth_command, "%s", err.msg);
+    static const int nose[7] = {27, 28, 29, 30, 32, 33, 34};
     printf("    /* iBUG 36, 39, 42, 45, 31, 35 of the mean synthetic head, mm */\n");
     printf("    static const double m[6][3] = {\n");
     for (int i = 0; i < 6; i++) {
         const double *p = t.landmarks[ibug[i]];
         printf("        {%.4f, %.4f, %.4f}%s\n", p[0], p[1], p[2], i < 5 ? "," : "};");
+    }
+    printf("    /* iBUG 27, 28, 29, 30, 32, 33, 34 (gs_geom_face_nose7_synth), mm */\n");
+    printf("    static const double m[7][3] = {\n");
+    for (int i = 0; i < 7; i++) {
+        const double *p = t.landmarks[nose[i]];
+        printf("        {%.4f, %.4f, %.4f}%s\n", p[0], p[1], p[2], i < 6 ? "," : "};");
     }
     gs_synth_template_free(&t);
     return CLI_OK;

@@ -7,7 +7,7 @@
 
 int cli_photo_normalize(gs_face_detector *det, const gs_face_shape_model *sp,
                         const gs_io_image *photo, int index, const gs_model_info *info,
-                        cli_photo_face *out, gs_error *err)
+                        int gate, cli_photo_face *out, gs_error *err)
 {
     memset(out, 0, sizeof *out);
     int S = info->image_size;
@@ -22,15 +22,25 @@ int cli_photo_normalize(gs_face_detector *det, const gs_face_shape_model *sp,
     fo.norm_distance_mm = info->distance_mm;
     fo.norm_focal = info->focal;
     int rc = gs_face_analyze(det, sp, photo, &fo, &out->res, err);
+    if (rc == GS_ERR_ARG)
+        out->gate.refusal = GS_FACE_REFUSED_NO_FACE;
     if (rc == GS_OK)
         rc = gs_face_normalize_image(photo, &out->res.norm, &out->norm, err);
+    if (rc == GS_OK && gate &&
+        (rc = gs_face_gate_photo(&out->res, &out->norm, NULL, &out->gate, err)) == GS_OK &&
+        out->gate.refusal != GS_FACE_USABLE)
+        rc = gs_error_set(err, GS_ERR_ARG, "face refused (%s): %s",
+                          gs_face_refusal_name(out->gate.refusal), out->gate.reason);
     if (rc == GS_OK && !(out->mask_n = malloc((size_t)S * S)))
         rc = gs_error_set(err, GS_ERR_NOMEM, "out of memory");
     if (rc == GS_OK)
         gs_face_mask((const double(*)[2])out->res.uv_n, GS_FACE_MASK_FACE, 0, 4, S, S,
                      out->mask_n, NULL);
-    if (rc != GS_OK)
+    if (rc != GS_OK) {
+        gs_face_gate g = out->gate;
         cli_photo_face_free(out);
+        out->gate = g;
+    }
     return rc;
 }
 

@@ -15,14 +15,17 @@ typedef struct cli_photo_face {
     gs_face_result res; /* the analysis (landmarks, pose, normalization) */
     gs_io_image norm;   /* the normalized face, image_size^2 */
     uint8_t *mask_n;    /* its face mask, image_size^2 bytes */
+    gs_face_gate gate;  /* the gate's measures (when asked for) */
 } cli_photo_face;
 
 /* Face `index` (largest first) of photo, normalized to the model's camera
- * (info), with its face mask. On failure everything is freed and err says
- * why (GS_ERR_NOMEM: "out of memory"). */
+ * (info), with its face mask; with `gate`, through the face gate too. On
+ * failure everything is freed and err says why (GS_ERR_NOMEM: "out of
+ * memory"); out->gate.refusal says whether the gate refused the face
+ * (GS_FACE_REFUSED_NO_FACE when none was found). */
 int cli_photo_normalize(gs_face_detector *det, const gs_face_shape_model *sp,
                         const gs_io_image *photo, int index, const gs_model_info *info,
-                        cli_photo_face *out, gs_error *err);
+                        int gate, cli_photo_face *out, gs_error *err);
 
 /* The fit's options for it: defaults, the mask, max_iters and the
  * landmarks' head pose rotated into the normalized camera. */

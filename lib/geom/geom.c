@@ -265,6 +265,16 @@ void gs_geom_face_model6_synth(double out[6][3])
     memcpy(out, m, sizeof m);
 }
 
+/* Generated with the six above by `gazesplat synth --face-model6`. */
+void gs_geom_face_nose7_synth(double out[7][3])
+{
+    static const double m[7][3] = {
+        {0.0000, -25.0000, -12.8236}, {0.0000, -11.6667, -17.1458}, {0.0000, 1.6667, -23.0248},
+        {0.0000, 15.0000, -28.0987},  {-5.1000, 23.7500, -8.4015},  {0.0000, 24.5000, -10.1554},
+        {5.1000, 23.7500, -8.4015}};
+    memcpy(out, m, sizeof m);
+}
+
 void gs_geom_face_centre6(const double pts[6][3], double centre[3])
 {
     for (int i = 0; i < 3; i++) {

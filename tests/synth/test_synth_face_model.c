@@ -27,6 +27,19 @@ int main(void)
                       "regenerate with `gazesplat synth --face-model6`", i, ibug[i], j,
                       m[i][j], t.landmarks[ibug[i]][j]);
         }
+    static const int nose[7] = {27, 28, 29, 30, 32, 33, 34};
+    double n7[7][3];
+    gs_geom_face_nose7_synth(n7);
+    for (int i = 0; i < 7; i++)
+        for (int j = 0; j < 3; j++) {
+            double d = fabs(n7[i][j] - t.landmarks[nose[i]][j]);
+            worst = fmax(worst, d);
+            CHECK_MSG(d <= 1e-4, "nose point %d (iBUG %d) axis %d: shipped %.4f, template %.6f; "
+                      "regenerate with `gazesplat synth --face-model6`", i, nose[i], j,
+                      n7[i][j], t.landmarks[nose[i]][j]);
+        }
+    /* The nose tip stands out toward the camera (-z) of the eye corners. */
+    CHECK(n7[3][2] < m[1][2] - 20 && n7[3][2] < m[4][2]);
     /* The head frame's origin is the face centre of these very points. */
     gs_geom_face_centre6((const double(*)[3])m, c);
     CHECK_MSG(gs_geom_vec3_norm(c) < 1e-3, "face centre of the model %.5f mm from the origin",

@@ -141,10 +141,11 @@ void gs_face_default_intrinsics(int width, int height, double k[9]);
  * whose frame the consumer of the pose uses:
  *   GENERIC  gs_geom_face_model6, the widely used generic model: head angles
  *            comparable with other tools (the default of gs_face_opts).
- *   SYNTH    gs_geom_face_model6_synth, the mean synthetic head of
- *            lib/synth: the head frame the synthetic labels, and so every
- *            model trained on them, use (`gazesplat redirect`, the
- *            daemon's photo input). */
+ *   SYNTH    gs_geom_face_model6_synth and gs_geom_face_nose7_synth, 13
+ *            points of the mean synthetic head of lib/synth: the head
+ *            frame the synthetic labels, and so every model trained on
+ *            them, use (`gazesplat redirect`, the daemon's photo input).
+ *            The nose bridge makes its tilt well-conditioned. */
 typedef enum gs_face_pose_model {
     GS_FACE_POSE_GENERIC = 0,
     GS_FACE_POSE_SYNTH = 1
@@ -159,7 +160,8 @@ typedef struct gs_face_pose {
     double rvec[3];     /* the same, axis-angle */
     double t[3];        /* face centre, camera frame, mm: X = R X_head + t */
     double pitch, yaw;  /* head angles (gs_geom_head_pitchyaw), radians */
-    double rms_px;      /* reprojection error of the 6 points */
+    double rms_px;      /* reprojection error, px, of the points solved
+                           from (6; 13 for SYNTH) */
 } gs_face_pose;
 
 /* Head pose from the 68 landmarks (uv, geom.h pixels) and intrinsics k:
@@ -212,6 +214,15 @@ int gs_face_analyze(gs_face_detector *det, const gs_face_shape_model *sp,
                     const gs_io_image *img, const gs_face_opts *opts,
                     gs_face_result *out, gs_error *err);
 
+/* The same from 68 landmarks found by other means (iBUG order, geom.h
+ * pixels of a width x height photo): head pose and normalization, as
+ * gs_face_analyze does after its own landmarks. `box` becomes the
+ * landmarks' bounding box; opts->index, use_box and detect are unused.
+ * GS_ERR_ARG for a landmark outside the photo, GS_ERR_NONFINITE for NaN. */
+int gs_face_analyze_landmarks(const double uv[][2], int width, int height,
+                              const gs_face_opts *opts, gs_face_result *out,
+                              gs_error *err);
+
 /* ---- warps ---- */
 
 /* The normalized face: img warped by n->W into a new n->width x
@@ -258,6 +269,83 @@ int gs_face_mask(const double uv[][2], gs_face_mask_kind kind, double dilate,
 int gs_face_paste_back(gs_io_image *photo, const gs_io_image *norm_face,
                        const gs_geom_norm *n, const uint8_t *mask,
                        gs_error *err);
+
+/* ---- the gate: can this face be redirected well? ----
+ *
+ * Checked before any fit. A refusal is a normal result (GS_OK with
+ * `refusal` set and `reason` in words), so callers can report it and go
+ * on: the CLI exits 3, the daemon answers ERR_FACE_REFUSED, augment lists
+ * the source as refused. Thresholds and why (docs/face.md, "The gate"):
+ *
+ *   at border     more than max_outside of the face lies outside the photo
+ *   head pose     the head (normalized camera) beyond the range the
+ *                 shipped models were trained on (lib/synth's scenes: yaw
+ *                 +-60, pitch +-40 degrees)
+ *   small eyes    an eye narrower than min_eye_px (corner to corner, in
+ *                 the photo): its iris is a few pixels and the fit cannot
+ *                 see where it looks
+ *   eyes closed   an eye's opening (eye aspect ratio: the two lid
+ *                 distances over twice the width) under min_eye_open
+ *   flat          the face region's luma has no contrast (black, white or
+ *                 grey frames)
+ *   noise         the face region is pixel noise: its mean neighbour
+ *                 difference over its standard deviation (about 1.13 for
+ *                 independent pixels, 0.09-0.21 on faces) over max_roughness
+ *
+ * They are checked in the order of the enum below (flat and noise first:
+ * on a frame that is no face the landmarks mean nothing).
+ * A normalized face given as such has no landmarks: only flat and noise
+ * apply to it. */
+typedef enum gs_face_refusal {
+    GS_FACE_USABLE = 0,
+    GS_FACE_REFUSED_NO_FACE = 1,     /* gs_face_analyze found none (callers) */
+    GS_FACE_REFUSED_FLAT = 2,
+    GS_FACE_REFUSED_NOISE = 3,
+    GS_FACE_REFUSED_AT_BORDER = 4,
+    GS_FACE_REFUSED_HEAD_POSE = 5,
+    GS_FACE_REFUSED_SMALL_EYES = 6,
+    GS_FACE_REFUSED_EYES_CLOSED = 7
+} gs_face_refusal;
+#define GS_FACE_REFUSAL_COUNT 8
+
+typedef struct gs_face_gate_opts {
+    double min_eye_px;          /* default 16 */
+    double min_eye_open;        /* default 0.13 */
+    double max_head_yaw_deg;    /* default 60 */
+    double max_head_pitch_deg;  /* default 40 */
+    double max_outside;         /* default 0.05 */
+    double min_contrast;        /* luma standard deviation, default 5 */
+    double max_roughness;       /* default 0.5 */
+} gs_face_gate_opts;
+void gs_face_gate_opts_default(gs_face_gate_opts *o);
+
+typedef struct gs_face_gate {
+    gs_face_refusal refusal;    /* the first check that failed, in the
+                                   enum's order; every measure below is
+                                   filled either way */
+    double eye_px[2];           /* eye widths in the photo (36-39, 42-45);
+                                   0 for a normalized face */
+    double eye_open[2];         /* eye aspect ratios; 0 likewise */
+    double head_pitch_deg, head_yaw_deg; /* normalized camera; 0 likewise */
+    double outside;             /* fraction of the face outside the photo */
+    double contrast, roughness; /* of the normalized face's centre */
+    char reason[192];           /* "" when usable */
+} gs_face_gate;
+
+/* Stable lower-case names ("usable", "no_face", "flat", "noise",
+ * "at_border", "head_pose", "small_eyes", "eyes_closed"); NULL for a value
+ * outside the enum. */
+const char *gs_face_refusal_name(gs_face_refusal r);
+
+/* A photo's face: `r` from gs_face_analyze and `norm_face`, the photo
+ * normalized by r->norm (gs_face_normalize_image). opts may be NULL. */
+int gs_face_gate_photo(const gs_face_result *r, const gs_io_image *norm_face,
+                       const gs_face_gate_opts *opts, gs_face_gate *out,
+                       gs_error *err);
+/* A normalized face given as such (flat and noise only). */
+int gs_face_gate_normalized(const gs_io_image *norm_face,
+                            const gs_face_gate_opts *opts, gs_face_gate *out,
+                            gs_error *err);
 
 #ifdef __cplusplus
 }

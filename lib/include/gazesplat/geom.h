@@ -104,6 +104,12 @@ void gs_geom_face_model6(double out[6][3]);
  * `gazesplat synth --face-model6`; tests/synth/test_synth_face_model.c
  * checks them against the template. */
 void gs_geom_face_model6_synth(double out[6][3]);
+/* Seven more points of the same head, same frame: the nose bridge and tip
+ * (iBUG 27, 28, 29, 30) and the nostrils (32, 33, 34). With the six they
+ * are the 13 points the head pose of a photo is solved from
+ * (GS_FACE_POSE_SYNTH): the bridge stands out of the nearly flat plane of
+ * the six, which alone leave the tilt ill-conditioned (docs/face.md). */
+void gs_geom_face_nose7_synth(double out[7][3]);
 /* Face centre of six points in that order: mean of (mean of the 4 eye
  * corners, mean of the 2 nose wings). */
 void gs_geom_face_centre6(const double pts[6][3], double centre[3]);

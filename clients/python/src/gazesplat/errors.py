@@ -48,6 +48,16 @@ class GazesplatError(Exception):
     def __reduce__(self) -> Tuple[Any, ...]:
         return (type(self), (self.code, self.message, self.request_id, self.name))
 
+    @property
+    def refusal(self) -> str:
+        """For ERR_FACE_REFUSED, why the server's face gate refused the
+        input: "no_face", "flat", "noise", "at_border", "small_eyes",
+        "eyes_closed" or "head_pose" (docs/face.md, "The gate"); "" for any
+        other error. The server's message names it first, so the reason
+        survives pickling with the message."""
+        m = re.match(r"face refused \(([a-z_]+)\)", self.message)
+        return m.group(1) if m and self.name == "ERR_FACE_REFUSED" else ""
+
     def __str__(self) -> str:
         return "%s: %s" % (self.name, self.message) if self.message else self.name
 

@@ -1,0 +1,142 @@
+"""The face gate through the real daemon and the CLI (issue 47): inputs
+that cannot be redirected well are refused with a reason before any fit,
+and the daemon goes on serving.
+
+- normalized black, white, grey and noise frames: ERR_FACE_REFUSED with
+  Error.refusal FLAT or NOISE, the reason in the message, the Python
+  client's GazesplatError.refusal naming it; a synthetic face fits;
+- photos: a photo with no face is ERR_NO_FACE; the astronaut fits; the
+  astronaut shrunk until its eyes are 10 px wide is refused (SMALL_EYES);
+- face_gate = no: the black frame fits (the gate is the only thing that
+  refused it);
+- the CLI: gazesplat fit of the black frame exits 3 naming the reason,
+  --no-gate exits 0; gazesplat redirect of the small face exits 3.
+usage: test_daemon_gate.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
+import io
+import os
+import subprocess
+import sys
+
+import numpy as np
+from PIL import Image
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
+from daemon_util import Checks, Daemon  # noqa: E402
+from model_fixture import faces, tiny_model  # noqa: E402
+from client_checks import expect_error, finish, wait_ready  # noqa: E402
+import gazesplat_client as gc  # noqa: E402
+
+ASTRONAUT = os.path.join(HERE, "..", "..", "samples", "astronaut.jpg")
+FAST = 3
+
+
+def png(a):
+    b = io.BytesIO()
+    Image.fromarray(np.asarray(a, dtype=np.uint8)).save(b, format="PNG")
+    return b.getvalue()
+
+
+def raw_fit(c, image, photo=False):
+    """One FIT sent by hand: (frame type, message), to read Error.refusal."""
+    req = gc.pb.FitRequest(max_iters=FAST)
+    req.image.CopyFrom(gc.pb.Image(format=gc.pb.FORMAT_PNG, data=image,
+                                   kind=gc.pb.KIND_PHOTO if photo else gc.pb.KIND_NORMALIZED_FACE))
+    rid = c.new_id()
+    c.send(gc.FT.FRAME_FIT, req, rid, gc.ZERO_KEY)
+    while True:
+        ftype, got, _, msg = c.recv()
+        if got == rid:
+            return ftype, msg
+
+
+def main():
+    daemon, cli, work = (os.path.abspath(a) for a in sys.argv[1:4])
+    os.makedirs(work, exist_ok=True)
+    t = Checks()
+    model = tiny_model(cli, work, seed=1)
+    face = faces(cli, work, 128, 3)[0]
+    rng = np.random.default_rng(47)
+    frames = {"black": (np.zeros((128, 128, 3)), "REFUSAL_FLAT", "flat"),
+              "white": (np.full((128, 128, 3), 255), "REFUSAL_FLAT", "flat"),
+              "grey": (np.full((128, 128, 3), 128), "REFUSAL_FLAT", "flat"),
+              "noise": (rng.integers(0, 256, (128, 128, 3)), "REFUSAL_NOISE", "noise")}
+    astro = Image.open(ASTRONAUT).convert("RGB")
+    small = Image.new("RGB", (640, 480), (90, 100, 110))
+    small.paste(astro.resize((160, 160), Image.BILINEAR), (240, 160))
+    sb = io.BytesIO()
+    small.save(sb, format="PNG")
+    small_png = sb.getvalue()
+    small_path = os.path.join(work, "gate_small_face.png")
+    with open(small_path, "wb") as f:
+        f.write(small_png)
+    astro_png = open(ASTRONAUT, "rb").read()
+    no_face = png(np.full((480, 640, 3), 40))
+
+    d = Daemon(daemon, ["--model", model]).start()
+    try:
+        addr = "unix:" + d.sock
+        wait_ready(t, addr)
+        with gc.Client(addr) as c:
+            for name, (a, refusal, word) in frames.items():
+                ftype, msg = raw_fit(c, png(a))
+                t.check(ftype == gc.FT.FRAME_ERROR and msg.code == gc.pb.ERR_FACE_REFUSED and
+                        msg.refusal == gc.pb.FaceRefusal.Value(refusal),
+                        "%s frame: %s %s" % (name, gc.FT.Name(ftype), msg))
+                if ftype == gc.FT.FRAME_ERROR:
+                    t.check(msg.message.startswith("face refused (%s): " % word),
+                            "%s frame: message %r" % (name, msg.message))
+                e = expect_error(t, lambda: c.fit(png(a), max_iters=FAST), gc.pb.ERR_FACE_REFUSED,
+                                 "%s frame (client)" % name)
+                if e:
+                    t.check(e.refusal == word, "%s: GazesplatError.refusal %r" % (name, e.refusal))
+            r = c.fit(face, max_iters=FAST)
+            t.check(len(r.subject_key) == 16, "a synthetic face fits")
+            e = expect_error(t, lambda: c.fit(no_face, photo=True, max_iters=FAST),
+                             gc.pb.ERR_NO_FACE, "photo without a face", "no face")
+            t.check(e is None or e.refusal == "", "ERR_NO_FACE carries no gate refusal")
+            ftype, msg = raw_fit(c, small_png, photo=True)
+            t.check(ftype == gc.FT.FRAME_ERROR and msg.code == gc.pb.ERR_FACE_REFUSED and
+                    msg.refusal == gc.pb.REFUSAL_SMALL_EYES and "eyes too small" in msg.message,
+                    "10 px eyes: %s %s" % (gc.FT.Name(ftype), msg))
+            r = c.fit(astro_png, photo=True, max_iters=FAST)
+            t.check(len(r.subject_key) == 16, "the astronaut fits")
+            st = c.stats()
+            t.check(st["request_errors"] >= 7, "request_errors %d" % st["request_errors"])
+    finally:
+        rc = finish(t, d)
+    d = Daemon(daemon, ["--model", model, "--set", "photo_input=no", "--set", "face_gate=no"]).start()
+    try:
+        addr = "unix:" + d.sock
+        wait_ready(t, addr)
+        with gc.Client(addr) as c:
+            r = c.fit(png(frames["black"][0]), max_iters=FAST)
+            t.check(len(r.subject_key) == 16, "face_gate = no: the black frame fits")
+    finally:
+        rc = finish(t, d) or rc
+
+    black = os.path.join(work, "gate_black.png")
+    with open(black, "wb") as f:
+        f.write(png(frames["black"][0]))
+    sub = os.path.join(work, "gate_black.bin")
+    if os.path.exists(sub):
+        os.remove(sub)
+    p = subprocess.run([cli, "fit", "--model", model, "--image", black, "--out", sub,
+                        "--iters", str(FAST)], capture_output=True, text=True)
+    t.check(p.returncode == 3 and "face refused (flat)" in p.stderr,
+            "gazesplat fit of a black frame: exit %d, %s" % (p.returncode, p.stderr.strip()))
+    t.check(not os.path.exists(sub), "no subject file for a refused face")
+    p = subprocess.run([cli, "fit", "--model", model, "--image", black, "--out", sub,
+                        "--iters", str(FAST), "--no-gate"], capture_output=True, text=True)
+    t.check(p.returncode == 0 and os.path.exists(sub), "--no-gate: exit %d %s" % (p.returncode, p.stderr))
+    p = subprocess.run([cli, "redirect", "--model", model, "--image", small_path, "--gaze-deg", "0,10",
+                        "--out", os.path.join(work, "gate_out"), "--iters", str(FAST)],
+                       capture_output=True, text=True)
+    t.check(p.returncode == 3 and "face refused (small_eyes)" in p.stderr,
+            "gazesplat redirect of 10 px eyes: exit %d, %s" % (p.returncode, p.stderr.strip()))
+    return t.status()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
