@@ -107,17 +107,18 @@ def main():
     check(len(raw) == end + nv * 28 + 68 * 12, "template PLY size")
     check(nv > 1000, "template has %d points" % nv)
 
-    # The 6-point face model printed for lib/geom equals the template's
-    # landmarks 36, 39, 42, 45, 31, 35 (float32 in the PLY).
+    # The face model printed for lib/geom equals the template's landmarks
+    # 36, 39, 42, 45, 31, 35, then the nose 27-30, 32-34 (float32 in the PLY).
     out = run(exe, ["--face-model6"]).stdout
     rows = [[float(v) for v in line.strip().strip("{},;").replace("}", "").split(",")]
             for line in out.splitlines() if line.strip().startswith("{")]
     lm = struct.unpack("<%df" % (68 * 3), raw[len(raw) - 68 * 12:])
-    check(len(rows) == 6 and all(len(r) == 3 for r in rows),
+    check(len(rows) == 13 and all(len(r) == 3 for r in rows),
           "--face-model6 printed %r" % out)
-    if len(rows) == 6:
+    if len(rows) == 13:
         worst = max(abs(rows[i][j] - lm[3 * k + j])
-                    for i, k in enumerate((36, 39, 42, 45, 31, 35)) for j in range(3))
+                    for i, k in enumerate((36, 39, 42, 45, 31, 35, 27, 28, 29, 30, 32, 33, 34))
+                    for j in range(3))
         check(worst < 1e-3, "--face-model6 vs template landmarks: %g mm" % worst)
 
     # Usage errors.
