@@ -96,7 +96,7 @@ def haproxy_config(text, bind_port, stats_sock, servers, balance=None):
     for ln in text.splitlines():
         s = ln.strip()
         if s.startswith("log /dev/log"):
-            ln = "    log stderr format short local0 notice"
+            ln = "    log stderr format short local0 " + os.environ.get("GS_HAPROXY_LOG", "notice")
         if s.startswith("bind "):
             ln = "    bind 127.0.0.1:%d" % bind_port
         elif s.startswith("stats socket "):

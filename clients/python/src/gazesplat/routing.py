@@ -82,8 +82,8 @@ class RetryPolicy:
 
     def delay(self, retry: int, rng: Optional[random.Random] = None) -> float:
         base = min(self.max_backoff_s, self.backoff_s * (2 ** max(0, retry - 1)))
-        r = (rng or random).random()
-        return base * (1 - self.jitter / 2 + self.jitter * r)
+        r = float((rng or random).random())
+        return float(base * (1 - self.jitter / 2 + self.jitter * r))
 
 
 class SubjectClient:
@@ -112,6 +112,7 @@ class SubjectClient:
         self.on_retry = on_retry
         self.errors: List[BaseException] = []  # retryable errors of the last request
         self.refits = 0                        # FITs redone after ERR_UNKNOWN_SUBJECT
+        self.last_fit: Any = None              # the FitResult of the last FIT sent
         self._conn: Optional[Client] = None
         self._rng = random.Random()
 
@@ -153,7 +154,8 @@ class SubjectClient:
         while True:
             tries += 1
             try:
-                return self.connection().fit(self.image, key=self.key, **self.fit_kwargs)
+                self.last_fit = self.connection().fit(self.image, key=self.key, **self.fit_kwargs)
+                return self.last_fit
             except Exception as e:  # noqa: BLE001 (sorted by _retry)
                 self._retry(e, tries)
 
@@ -176,7 +178,7 @@ class SubjectClient:
             try:
                 c = self.connection()
                 if need_fit:
-                    c.fit(self.image, key=self.key, **self.fit_kwargs)
+                    self.last_fit = c.fit(self.image, key=self.key, **self.fit_kwargs)
                     need_fit = False
                     self.refits += 1
                 stream = c.redirect([gaze[i] for i in todo], subject=self.key,
