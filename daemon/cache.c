@@ -11,6 +11,8 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <blake2.h>
+
 typedef struct entry {
     uint8_t key[GSD_CACHE_KEY];
     struct entry *hnext;       /* hash chain */
@@ -26,6 +28,7 @@ struct gsd_cache {
     entry *head, *tail;
     size_t budget, max_blob;
     gsd_cache_stats st;
+    uint8_t digest[GSD_CACHE_KEY]; /* XOR of BLAKE2b-128(key) over the entries */
 };
 
 /* What an entry costs against the budget. */
@@ -65,6 +68,16 @@ gsd_cache *gsd_cache_create_sized(size_t budget_bytes, size_t max_blob)
     return c;
 }
 
+/* Adds or removes key's share of the set digest (XOR is its own inverse,
+ * and the order of the entries does not matter). */
+static void digest_toggle(gsd_cache *c, const uint8_t *key)
+{
+    uint8_t h[GSD_CACHE_KEY];
+    blake2b(h, key, NULL, sizeof h, GSD_CACHE_KEY, 0);
+    for (int i = 0; i < GSD_CACHE_KEY; i++)
+        c->digest[i] ^= h[i];
+}
+
 static void free_all(gsd_cache *c)
 {
     for (entry *e = c->head, *n; e; e = n) {
@@ -74,6 +87,7 @@ static void free_all(gsd_cache *c)
     memset(c->buckets, 0, c->nbuckets * sizeof *c->buckets);
     c->head = c->tail = NULL;
     c->st.entries = c->st.bytes = 0;
+    memset(c->digest, 0, sizeof c->digest);
 }
 
 void gsd_cache_destroy(gsd_cache *c)
@@ -126,6 +140,7 @@ static void remove_entry(gsd_cache *c, entry *e)
     lookup(c, e->key, &pp);
     *pp = e->hnext;
     lru_unlink(c, e);
+    digest_toggle(c, e->key);
     c->st.entries--;
     c->st.bytes -= cost(e->len);
     free(e);
@@ -176,6 +191,7 @@ static int put_locked(gsd_cache *c, const uint8_t *key, const void *blob, size_t
     e->hnext = c->buckets[i];
     c->buckets[i] = e;
     lru_push_front(c, e);
+    digest_toggle(c, key);
     c->st.entries++;
     c->st.bytes += cost(len);
     c->st.inserts++;
@@ -250,6 +266,19 @@ void gsd_cache_set_budget(gsd_cache *c, size_t budget_bytes)
     c->st.budget = budget_bytes;
     evict(c);
     pthread_mutex_unlock(&c->mu);
+}
+
+size_t gsd_cache_keys(gsd_cache *c, uint8_t *keys, size_t max, uint8_t digest[GSD_CACHE_KEY])
+{
+    pthread_mutex_lock(&c->mu);
+    size_t n = 0;
+    for (entry *e = c->head; e && n < max; e = e->next, n++)
+        memcpy(keys + n * GSD_CACHE_KEY, e->key, GSD_CACHE_KEY);
+    size_t total = c->st.entries;
+    if (digest)
+        memcpy(digest, c->digest, GSD_CACHE_KEY);
+    pthread_mutex_unlock(&c->mu);
+    return total;
 }
 
 void gsd_cache_stats_get(gsd_cache *c, gsd_cache_stats *s)

@@ -46,6 +46,12 @@ void gsd_cache_clear(gsd_cache *c);
 
 void gsd_cache_stats_get(gsd_cache *c, gsd_cache_stats *s);
 
+/* The held keys for routers (HEALTH): copies up to max keys, most recently
+ * used first, into keys (max * GSD_CACHE_KEY bytes; NULL when max is 0) and
+ * the set's digest (XOR over the keys of BLAKE2b-128(key), all zero when
+ * empty; digest may be NULL); returns the number of entries. */
+size_t gsd_cache_keys(gsd_cache *c, uint8_t *keys, size_t max, uint8_t digest[GSD_CACHE_KEY]);
+
 /* Writes dir/GSD_CACHE_FILE atomically; tag names what the blobs belong to
  * (the model id). 0, or -1 with a message. */
 int gsd_cache_save(gsd_cache *c, const char *dir, const char *tag, char *msg, size_t cap);

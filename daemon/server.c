@@ -490,7 +490,10 @@ static void handle_hello(gsd_conn *c, const gs_frame_header *h, const Gazesplat_
     reply(c, h, T(HELLO_OK), &ok.base);
 }
 
-static void handle_health(gsd_conn *c, const gs_frame_header *h)
+/* Most keys one HEALTH lists (18 bytes each on the wire: 1.2 MB). */
+#define HEALTH_MAX_KEYS 65536
+
+static void handle_health(gsd_conn *c, const gs_frame_header *h, const Gazesplat__HealthRequest *r)
 {
     gsd_server *s = c->srv;
     bump(&s->ctr.req_health, 1);
@@ -508,7 +511,34 @@ static void handle_health(gsd_conn *c, const gs_frame_header *h)
     int photo = atomic_load(&s->photo_state);
     m.photo_input = photo > 0;
     m.photo_detail = photo < 0 ? s->photo_msg : photo == 0 ? "face models not loaded yet" : "";
+    /* The subjects held, for routers that prefer a warm daemon. */
+    uint8_t digest[GSD_CACHE_KEY];
+    size_t max = r->list_subjects ? HEALTH_MAX_KEYS : 0;
+    size_t held = gsd_cache_keys(s->cache, NULL, 0, digest);
+    uint8_t *keys = NULL;
+    ProtobufCBinaryData *list = NULL;
+    if (max && held) {
+        size_t want = held < max ? held : max;
+        keys = malloc(want * GSD_CACHE_KEY);
+        list = malloc(want * sizeof *list);
+        if (!keys || !list) {
+            free(keys);
+            free(list);
+            reply_error(c, h, E(ERR_INTERNAL), "out of memory listing %zu subjects", want);
+            return;
+        }
+        held = gsd_cache_keys(s->cache, keys, want, digest);
+        size_t n = held < want ? held : want; /* the cache may have shrunk since */
+        for (size_t i = 0; i < n; i++)
+            list[i] = (ProtobufCBinaryData){GSD_CACHE_KEY, keys + i * GSD_CACHE_KEY};
+        m.n_subject_keys = n;
+        m.subject_keys = list;
+    }
+    m.subjects = (uint32_t)held;
+    m.subjects_digest = (ProtobufCBinaryData){GSD_CACHE_KEY, digest};
     reply(c, h, T(HEALTH_OK), &m.base);
+    free(keys);
+    free(list);
 }
 
 size_t gsd_stats_collect(gsd_server *s, gsd_stat *out, size_t cap)
@@ -782,7 +812,7 @@ static void dispatch(gsd_conn *c)
     } else if (h.type == T(HELLO)) {
         handle_hello(c, &h, (const Gazesplat__Hello *)m);
     } else if (h.type == T(HEALTH)) {
-        handle_health(c, &h);
+        handle_health(c, &h, (const Gazesplat__HealthRequest *)m);
     } else if (h.type == T(STATS)) {
         handle_stats(c, &h);
     } else if (h.type == T(CANCEL)) {

@@ -29,6 +29,10 @@ PACKAGES=(
   # the Python package (clients/python): a venv to pip-install it into
   # without network, the build backend, and its type check
   python3-venv python3-setuptools python3-wheel mypy
+  # scale-out tier (tests/scale): HAProxy in front of several daemons, and a
+  # one-node Slurm (controller, node daemon, client commands, munge) for
+  # augment as a job array; the tests start them as plain processes
+  haproxy slurmctld slurmd slurm-client munge
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev

@@ -25,6 +25,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include "augment_merge.h"
 #include "augment_remote.h"
 #include "augment_table.h"
 #include "cli.h"
@@ -50,6 +51,7 @@ const cli_command cli_augment_command = {
     "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
     "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
     "                         [--threads N] [--no-gate]\n"
+    "       gazesplat augment --merge N --out DIR\n"
     "\n"
     "  --model M        fit and render in this process with model file M\n"
     "  --addr ADDR      or through gazesplatd at ADDR (unix:PATH, tcp:HOST:PORT or\n"
@@ -102,6 +104,11 @@ const cli_command cli_augment_command = {
     "  manifest and the per-source parts; run the same command again after\n"
     "  a crash, a kill or a full disk and it continues where it stopped,\n"
     "  ending with the bytes an uninterrupted run writes.\n"
+    "  --merge N        after the N shards of one run finished in DIR (a shared\n"
+    "                   folder; a Slurm job array: deploy/slurm): write DIR's\n"
+    "                   labels.jsonl and augment.h5, the unsharded run's bytes;\n"
+    "                   checks that every shard finished and every image is\n"
+    "                   there once\n"
     "\n"
     "Fit and render: the daemon's served setting by default, through the\n"
     "library calls gazesplat redirect makes: the fit to its plateau, at most\n"
@@ -128,7 +135,7 @@ const cli_command cli_augment_command = {
 enum {
     O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
     O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
-    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_NOGATE, O_N
+    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_MERGE, O_NOGATE, O_N
 };
 
 typedef struct target {
@@ -1697,7 +1704,7 @@ static int run_augment(int argc, char **argv)
         {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
         {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
         {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL},
-        {"--no-gate", 0, NULL}};
+        {"--merge", 1, NULL},   {"--no-gate", 0, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -1705,6 +1712,18 @@ static int run_augment(int argc, char **argv)
     }
     if (rc != CLI_PARSED)
         return rc;
+    if (o[O_MERGE].value) {
+        long n;
+        for (int i = 0; i < O_N; i++)
+            if (i != O_MERGE && i != O_OUT && o[i].value)
+                return cli_usage_error(cmd, "--merge takes --out alone, not %s", o[i].name);
+        if (!o[O_OUT].value)
+            return cli_usage_error(cmd, "--merge N needs --out DIR (where the shards are)");
+        if (cli_parse_long(o[O_MERGE].value, 2, 1000000, &n))
+            return cli_usage_error(cmd, "--merge: want the number of shards, 2 or more; got '%s'",
+                                   o[O_MERGE].value);
+        return aug_merge(cmd, o[O_OUT].value, n);
+    }
     job j;
     memset(&j, 0, sizeof j);
     j.cmd = cmd;

@@ -179,8 +179,45 @@ static void test_persist(void)
     rmdir(dir);
 }
 
+/* The held keys and their digest (HEALTH): most recent first, the
+ * digest independent of the order, back to zero when all are gone. */
+static void test_keys(void)
+{
+    gsd_cache *a = gsd_cache_create(1 << 20), *b = gsd_cache_create(2 * 1100);
+    uint8_t k[16], blob[1000] = {0}, keys[4 * 16], da[16], db[16], zero[16] = {0};
+    CHECK(gsd_cache_keys(a, NULL, 0, da) == 0 && !memcmp(da, zero, 16));
+    for (int i = 0; i < 3; i++) {
+        key_of(i, k);
+        CHECK(gsd_cache_put(a, k, blob, 10) == 0);
+        key_of(2 - i, k);
+        CHECK(gsd_cache_put(b, k, blob, 10) == 0);
+    }
+    CHECK(gsd_cache_keys(a, keys, 4, da) == 3);
+    key_of(2, k);
+    CHECK(!memcmp(keys, k, 16)); /* the last put first */
+    key_of(0, k);
+    CHECK(!memcmp(keys + 32, k, 16));
+    CHECK(gsd_cache_keys(a, keys, 1, NULL) == 3); /* the count covers all */
+    CHECK(gsd_cache_keys(b, NULL, 0, db) == 3 && !memcmp(da, db, 16) && memcmp(da, zero, 16));
+    key_of(1, k); /* replacing a key keeps the set, and the digest */
+    CHECK(gsd_cache_put(a, k, blob, 20) == 0);
+    CHECK(gsd_cache_keys(a, NULL, 0, db) == 3 && !memcmp(da, db, 16));
+    /* b has room for about two 1000-byte blobs: evictions change the set. */
+    CHECK(gsd_cache_put(b, k, blob, sizeof blob) == 0);
+    key_of(7, k);
+    CHECK(gsd_cache_put(b, k, blob, sizeof blob) == 0);
+    gsd_cache_stats st;
+    gsd_cache_stats_get(b, &st);
+    CHECK(st.evictions >= 1 && gsd_cache_keys(b, keys, 4, db) == st.entries && memcmp(da, db, 16));
+    gsd_cache_clear(a);
+    CHECK(gsd_cache_keys(a, NULL, 0, da) == 0 && !memcmp(da, zero, 16));
+    gsd_cache_destroy(a);
+    gsd_cache_destroy(b);
+}
+
 int main(void)
 {
+    test_keys();
     test_lru();
     test_sized();
     test_many();

@@ -51,12 +51,15 @@ class _Request:
 
 
 class AsyncClient:
-    """addr, token, timeout, client_name, retry_busy: as gazesplat.Client.
+    """addr, token, timeout, client_name, retry_busy, route_key: as gazesplat.Client.
     Open with `async with AsyncClient(...)` or `await connect(...)`."""
 
     def __init__(self, addr: Optional[str] = None, token: Optional[str | bytes] = None,
                  timeout: Optional[float] = 120.0, client_name: str = "python-asyncio",
-                 retry_busy: int = 0) -> None:
+                 retry_busy: int = 0, route_key: Optional[bytes] = None) -> None:
+        if route_key is not None and len(route_key) != len(ZERO_KEY):
+            raise ValueError("route_key: want %d bytes, got %d" % (len(ZERO_KEY), len(route_key)))
+        self.route_key = bytes(route_key) if route_key is not None else ZERO_KEY
         self.addr = addr
         self.token = token if token is not None else os.environ.get("GAZESPLAT_TOKEN")
         self.timeout = timeout
@@ -85,7 +88,7 @@ class AsyncClient:
             msg = pb.Hello(min_version=VERSION_MIN, max_version=VERSION_MAX, client_name=self.client_name)
             if self.token:
                 msg.token = self.token.encode() if isinstance(self.token, str) else self.token
-            _, ok = await self.call(FT.FRAME_HELLO, msg, FT.FRAME_HELLO_OK)
+            _, ok = await self.call(FT.FRAME_HELLO, msg, FT.FRAME_HELLO_OK, self.route_key)
         except BaseException:
             await self.close()
             raise
@@ -248,8 +251,9 @@ class AsyncClient:
         raise AssertionError("unreachable")
 
     # ---- requests ---------------------------------------------------------
-    async def health(self) -> Any:
-        return (await self.call(FT.FRAME_HEALTH, pb.HealthRequest(), FT.FRAME_HEALTH_OK))[1]
+    async def health(self, list_subjects: bool = False) -> Any:
+        req = pb.HealthRequest(list_subjects=list_subjects)
+        return (await self.call(FT.FRAME_HEALTH, req, FT.FRAME_HEALTH_OK))[1]
 
     async def stats(self) -> Dict[str, int]:
         msg = (await self.call(FT.FRAME_STATS, pb.StatsRequest(), FT.FRAME_STATS_OK))[1]

@@ -50,12 +50,19 @@ class Client:
     secret of a TCP server (None: $GAZESPLAT_TOKEN). timeout: seconds any
     one socket operation may wait (a fit or render longer than this raises
     socket.timeout; the connection is then closed). retry_busy: how many
-    times call() retries a BUSY reply after the server's retry-after."""
+    times call() retries a BUSY reply after the server's retry-after.
+    route_key: 16 bytes sent as HELLO's subject key, so that a proxy that
+    hashes the first frame's key (docs/scale-out.md) takes this connection
+    to the daemon of that subject; use the connection for that subject only
+    (gazesplat.routing.SubjectClient does this, with retries)."""
 
     def __init__(self, addr: Optional[str] = None, token: Optional[str | bytes] = None,
                  timeout: Optional[float] = 120.0, client_name: str = "python",
-                 retry_busy: int = 0) -> None:
+                 retry_busy: int = 0, route_key: Optional[bytes] = None) -> None:
         token = token if token is not None else os.environ.get("GAZESPLAT_TOKEN")
+        if route_key is not None and len(route_key) != len(ZERO_KEY):
+            raise ValueError("route_key: want %d bytes, got %d" % (len(ZERO_KEY), len(route_key)))
+        self.route_key = bytes(route_key) if route_key is not None else ZERO_KEY
         self.timeout = timeout
         self.retry_busy = retry_busy
         self._next_id = 1
@@ -157,13 +164,15 @@ class Client:
         msg = pb.Hello(min_version=VERSION_MIN, max_version=VERSION_MAX, client_name=client_name)
         if token:
             msg.token = token.encode() if isinstance(token, str) else token
-        _, ok = self.call(FT.FRAME_HELLO, msg, FT.FRAME_HELLO_OK)
+        _, ok = self.call(FT.FRAME_HELLO, msg, FT.FRAME_HELLO_OK, self.route_key)
         self.version = ok.version
         return ok
 
-    def health(self) -> Any:
-        """The Health message (state, detail, queue, model_id, ...)."""
-        return self.call(FT.FRAME_HEALTH, pb.HealthRequest(), FT.FRAME_HEALTH_OK)[1]
+    def health(self, list_subjects: bool = False) -> Any:
+        """The Health message (state, detail, queue, model_id, the subjects
+        held: their count and digest; list_subjects: their keys too)."""
+        req = pb.HealthRequest(list_subjects=list_subjects)
+        return self.call(FT.FRAME_HEALTH, req, FT.FRAME_HEALTH_OK)[1]
 
     def stats(self) -> Dict[str, int]:
         """The server's counters by name."""

@@ -12,7 +12,19 @@ from __future__ import annotations
 import re
 from typing import Any, Optional, Tuple
 
-__all__ = ["GazesplatError", "Busy", "ProtocolError"]
+__all__ = ["GazesplatError", "Busy", "ProtocolError", "RETRYABLE_CODES", "retryable"]
+
+# Error codes a request may be retried after, unchanged, on a new
+# connection: the daemon (or the one a proxy chose) could not take it now
+# but another, or the same one shortly, can (docs/scale-out.md, "What a
+# client does"). ERR_UNKNOWN_SUBJECT is not among them: the request needs a
+# FIT first (gazesplat.routing refits and retries).
+RETRYABLE_CODES = frozenset((
+    7,   # ERR_TIMEOUT: an idle connection was closed
+    8,   # ERR_TOO_MANY_CONNECTIONS
+    22,  # ERR_LOADING
+    28,  # ERR_SHUTTING_DOWN: draining; a proxy sends the next one elsewhere
+))
 
 
 class GazesplatError(Exception):
@@ -45,6 +57,11 @@ class GazesplatError(Exception):
         self.name = name if name is not None else error_name(self.code)
         super().__init__(self.code, self.message, self.request_id, self.name)
 
+    @property
+    def retryable(self) -> bool:
+        """The same request may succeed on a new connection (RETRYABLE_CODES)."""
+        return self.code in RETRYABLE_CODES
+
     def __reduce__(self) -> Tuple[Any, ...]:
         return (type(self), (self.code, self.message, self.request_id, self.name))
 
@@ -75,6 +92,7 @@ class Busy(Exception):
     request_id: int
     message: str
     name = "BUSY"
+    retryable = True  # after retry_after_ms
 
     def __init__(self, retry_after_ms: Any, queue_length: int = 0, request_id: int = 0) -> None:
         text = None
@@ -107,6 +125,19 @@ class Busy(Exception):
 class ProtocolError(ConnectionError):
     """The server's bytes broke the protocol (bad magic, an unknown frame
     type, a reply for another request): the connection is unusable."""
+
+
+def retryable(exc: BaseException) -> bool:
+    """Whether a failed request may be sent again, unchanged, on a new
+    connection: a lost connection (the daemon died, a proxy closed it, a
+    reset, a refused connect; not a ProtocolError, which is a bug), BUSY,
+    or an error in RETRYABLE_CODES. A socket timeout is not: the server may
+    still be working on the request."""
+    if isinstance(exc, (GazesplatError, Busy)):
+        return bool(exc.retryable)
+    if isinstance(exc, (ProtocolError, TimeoutError)):
+        return False
+    return isinstance(exc, (ConnectionError, OSError))
 
 
 def error_code(name: str) -> int:
