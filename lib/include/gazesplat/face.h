@@ -347,6 +347,114 @@ int gs_face_gate_normalized(const gs_io_image *norm_face,
                             const gs_face_gate_opts *opts, gs_face_gate *out,
                             gs_error *err);
 
+/* ---- iris ---- */
+
+/* Why an eye has no iris result. Not an error: the call returns GS_OK and
+ * says so in gs_face_iris.status (a quality gate refuses on it). */
+typedef enum gs_face_iris_status {
+    GS_FACE_IRIS_OK = 0,
+    GS_FACE_IRIS_TOO_SMALL = 1, /* corner distance under min_eye_width_px */
+    GS_FACE_IRIS_CLOSED = 2,    /* contour opening under min_opening */
+    GS_FACE_IRIS_NO_EDGE = 3,   /* too little limbus edge, too low a contrast
+                                   or a fit that does not hold together */
+    GS_FACE_IRIS_PARTIAL = 4    /* the limbus seen on one side only (the iris
+                                   in a corner) and no pupil: the centre is
+                                   filled but rests on the radius prior */
+} gs_face_iris_status;
+
+typedef struct gs_face_iris_opts {
+    double min_eye_width_px;  /* default 10 */
+    double min_opening;       /* height / width of the contour; default 0.12 */
+    double radius_min_px;     /* iris radius searched, px; both 0 (default): */
+    double radius_max_px;     /*   0.14 to 0.62 eye widths (head yaw narrows
+                                   the eye, not the iris). At a known scale
+                                   pass it: 5.5 to 9 px at 256 px normalized
+                                   faces (docs/face.md) */
+    double min_visible;       /* fraction of the limbus with edge support;
+                                 default 0.08 */
+    double min_contrast;      /* limbus step, grey levels; default 8 */
+} gs_face_iris_opts;
+void gs_face_iris_opts_default(gs_face_iris_opts *o);
+/* Sets the radius range for a known scale at the eye, px per mm: human
+ * irises measure 10.7-13 mm across, so GS_FACE_IRIS_RADIUS_MIN_MM to
+ * _MAX_MM times px_per_mm. A normalized face: f_n / d_n (800 / 680 at
+ * 256 px); a photo with a pose: the focal length over |pose.t|. */
+#define GS_FACE_IRIS_RADIUS_MIN_MM 4.8
+#define GS_FACE_IRIS_RADIUS_MAX_MM 7.0
+void gs_face_iris_opts_scale(gs_face_iris_opts *o, double px_per_mm);
+
+typedef struct gs_face_iris {
+    gs_face_iris_status status;
+    /* Filled when status is OK (else NaN or 0): */
+    double centre[2];      /* iris centre, image pixels (geom.h, +0.5): the
+                              pupil's when one stands out, else the
+                              limbus ellipse's */
+    double limbus_centre[2]; /* centre of the fitted limbus ellipse */
+    double pupil_centre[2];  /* centre of the pupil (NaN when none) */
+    double radius;         /* limbus radius, px */
+    double pupil_radius;   /* px; 0 when no pupil stands out of the iris */
+    double pupil_contrast; /* pupil - iris grey: < 0 dark, > 0 bright
+                              (red-eye) */
+    double contrast;       /* sclera - iris grey at the centre (grey of
+                              (2G + B) / 3, 0..255) */
+    double residual;       /* robust rms misfit of the eye model, grey */
+    double centre_sd_px;   /* standard error of the centre from the fit
+                              (largest axis), px */
+    double visible;        /* fraction of the limbus circle inside the
+                              contour with an edge on it */
+    double confidence;     /* 0..1: visible, contrast over residual, and
+                              the centre's error against the radius */
+    double lab[3];         /* mean CIELAB (D65) of the iris ring inside the
+                              contour, glints left out */
+    int lab_pixels;        /* pixels averaged for lab */
+    /* Always filled: */
+    double eye_width;      /* corner distance |p3 - p0|, px */
+    double opening;        /* contour height / width: (|p1 p5| + |p2 p4|)
+                              / 2 across the corner line over the width;
+                              negative when the lids cross */
+} gs_face_iris;
+
+/* Locates the iris of one eye: img (RGB) and its 6 iBUG contour points
+ * (36-41 or 42-47, in that order, geom.h pixels). A gradient vote of
+ * circles on the lateral limbus arcs gives the start; a sub-pixel edge on
+ * each of 64 rays and a robust circle fit (Tukey IRLS) give the centre and
+ * radius (docs/face.md, "Iris localizer"). Deterministic; one allocation
+ * (the grey eye patch). opts may be NULL (defaults). Errors: GS_ERR_ARG for
+ * NULL pointers, a bad image, a contour point outside the image, or a
+ * degenerate contour (corners under 1 px apart, points farther than 3 eye
+ * widths apart); GS_ERR_NONFINITE for a non-finite point or option. An eye
+ * too small, closed or without iris edges is GS_OK with out->status
+ * saying which. */
+int gs_face_iris_locate(const gs_io_image *img, const double eye_uv[6][2],
+                        const gs_face_iris_opts *opts, gs_face_iris *out,
+                        gs_error *err);
+
+/* Gaze of an eye from its iris centre: the eyeball model calibrated on the
+ * synthetic heads (docs/face.md, "Calibration"): the iris centre sits
+ * GS_FACE_IRIS_ROT_X_MM / _Y_MM in front of the eyeball centre, which sits
+ * at a fixed head-frame offset from the midpoint of the eye corners; the
+ * corner distance in the image sets the scale. eye: 0 = the subject's
+ * right eye (36-41, image left in a frontal view), 1 = the left (42-47).
+ * head_R: head to camera rotation in the image's camera (the normalized
+ * camera for a normalized face, e.g. gs_geom_norm_rot of the pose), NULL
+ * for a frontal head. Writes the head-frame gaze (radians, ETH-XGaze
+ * convention of geom.h). GS_ERR_ARG for a bad eye index or contour. */
+#define GS_FACE_IRIS_ROT_X_MM 10.298
+#define GS_FACE_IRIS_ROT_Y_MM 10.205
+#define GS_FACE_IRIS_EYE_OFFSET_MM {-0.501, -0.265, 0.067}
+int gs_face_iris_gaze(int eye, const double eye_uv[6][2],
+                      const double iris_uv[2], const double head_R[9],
+                      double *pitch, double *yaw, gs_error *err);
+
+/* The gaze change between two images of the same eye (before -> after):
+ * gs_face_iris_gaze of each, after minus before, radians. Head shifts and
+ * scale changes between the images cancel through the corners. */
+int gs_face_iris_gaze_change(int eye, const double eye_uv0[6][2],
+                             const double iris_uv0[2],
+                             const double eye_uv1[6][2],
+                             const double iris_uv1[2], const double head_R[9],
+                             double *dpitch, double *dyaw, gs_error *err);
+
 #ifdef __cplusplus
 }
 #endif
