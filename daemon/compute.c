@@ -1385,14 +1385,35 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
 
 /* Encodes img as the request asks and posts it as target i's IMAGE frame. */
 static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
-                      const gs_io_image *img, char *msg, size_t cap)
+                      const gs_io_image *img, const gs_face_quality *q, char *msg, size_t cap)
 {
     Gazesplat__Image out = GAZESPLAT__IMAGE__INIT;
+    Gazesplat__Quality qm = GAZESPLAT__QUALITY__INIT;
+    Gazesplat__Angles asked = GAZESPLAT__ANGLES__INIT, seen = GAZESPLAT__ANGLES__INIT;
+    if (q) {
+        qm.score = q->score;
+        qm.eyes = (uint32_t)q->eyes;
+        asked.pitch_deg = q->commanded[0] / DEG;
+        asked.yaw_deg = q->commanded[1] / DEG;
+        qm.asked = &asked;
+        if (q->eyes) {
+            seen.pitch_deg = q->measured[0] / DEG;
+            seen.yaw_deg = q->measured[1] / DEG;
+            qm.seen = &seen;
+            qm.gaze_error_deg = q->gaze_error_deg;
+            qm.iris_delta_e = q->delta_e;
+        }
+        qm.eye_speckle = q->artifact;
+        qm.reason = (char *)q->reason;
+    }
+    int drop = q && r->min_quality > 0 && q->score < r->min_quality;
     void *enc = NULL;
     size_t enc_len = 0;
     int fmt = r->output_format ? (int)r->output_format : GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG;
     out.format = (Gazesplat__ImageFormat)fmt;
-    if (fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
+    if (drop) {
+        /* dropped: no pixels */
+    } else if (fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
         out.data.data = img->data;
         out.data.len = img->stride * (size_t)img->height;
         out.width = (uint32_t)img->width;
@@ -1401,9 +1422,9 @@ static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReques
     } else {
         gs_error err;
         gs_error_clear(&err);
-        int q = fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? (int)r->jpeg_quality : 0;
+        int jq = fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? (int)r->jpeg_quality : 0;
         if (gs_io_image_encode(img, fmt == GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG ? GS_IO_JPEG : GS_IO_PNG,
-                               q, &enc, &enc_len, &err) != GS_OK) {
+                               jq, &enc, &enc_len, &err) != GS_OK) {
             snprintf(msg, cap, "encode target %zu: %s", i, err.msg);
             return E(ERR_INTERNAL);
         }
@@ -1412,8 +1433,10 @@ static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReques
     }
     Gazesplat__ImageResult m = GAZESPLAT__IMAGE_RESULT__INIT;
     m.index = (uint32_t)i;
-    m.image = &out;
+    m.image = drop ? NULL : &out;
     m.target = r->targets[i];
+    m.quality = q ? &qm : NULL;
+    m.dropped = drop;
     gsd_out *o = gsd_frame_new(j, T(IMAGE), &m.base);
     free(enc);
     if (!o) {
@@ -1421,9 +1444,26 @@ static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReques
         return E(ERR_INTERNAL);
     }
     gsd_post(w->srv, o);
+    if (drop) {
+        atomic_fetch_add(&w->srv->ctr.images_dropped, 1);
+        return 0;
+    }
     j->images++;
     atomic_fetch_add(&w->srv->ctr.images_out, 1);
     return 0;
+}
+
+/* What the quality of a request's images is measured against: the input
+ * face (normalized) and its 68 landmarks there; face NULL: not measured. */
+typedef struct quality_ref {
+    const gs_io_image *face;
+    double uv[GS_FACE_LANDMARKS][2];
+} quality_ref;
+
+/* The landmarks of a normalized face given as such; -1 when unavailable. */
+static int normalized_landmarks(gsd_server *s, const gs_io_image *face, double uv[][2])
+{
+    return s->face_sp && gs_face_normalized_landmarks(s->face_sp, face, uv, NULL) == GS_OK ? 0 : -1;
 }
 
 /* Paste-back state of one request: the blend masks in the photo's pixels
@@ -1489,7 +1529,7 @@ static void count_render(gsd_worker *w, gs_model_ctx *ctx)
  * request asks for it. */
 static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gazesplat__RedirectRequest *r,
                          size_t i, const gs_subject *subj, const gs_io_image *input, const photo_input *p,
-                         paste_state *ps, uint8_t *rgb, char *msg, size_t cap)
+                         const quality_ref *qr, paste_state *ps, uint8_t *rgb, char *msg, size_t cap)
 {
     const Gazesplat__Target *t = r->targets[i];
     int size = w->model->info.image_size;
@@ -1515,10 +1555,25 @@ static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gaz
     if (input)
         atomic_fetch_add(&w->srv->ctr.renders_transfer, 1);
     gs_io_image norm = {size, size, (size_t)size * 3, rgb};
+    gs_face_quality q;
+    const gs_face_quality *qp = NULL;
+    if (qr->face && !t->head) {
+        /* The gaze only: the eyes stay where the input's landmarks put them. */
+        gs_face_quality_opts qo;
+        gs_face_quality_opts_default(&qo);
+        qo.px_per_mm = w->model->info.focal / w->model->info.distance_mm;
+        if (gs_face_redirect_quality(qr->face, &norm, (const double(*)[2])qr->uv, subj->head_R,
+                                     view.gaze_pitch - subj->gaze_pitch, view.gaze_yaw - subj->gaze_yaw,
+                                     &qo, &q, &err) != GS_OK) {
+            snprintf(msg, cap, "quality of target %zu: %s", i, err.msg);
+            return E(ERR_INTERNAL);
+        }
+        qp = &q;
+    }
     if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK)
-        return post_image(w, j, r, i, &norm, msg, cap);
+        return post_image(w, j, r, i, &norm, qp, msg, cap);
     int e = paste_back(p, ps, t->head != NULL, &norm, msg, cap);
-    return e ? e : post_image(w, j, r, i, &ps->out, msg, cap);
+    return e ? e : post_image(w, j, r, i, &ps->out, qp, msg, cap);
 }
 
 static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
@@ -1534,7 +1589,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         subject_ask a = {NULL, r->max_iters,
                          finetune_of(j, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
                                      r->finetune_no_mirror, r->finetune_lr),
-                         0, r->transfer};
+                         0, 1};
         int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {
             photo_input_free(&photo);
@@ -1548,7 +1603,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         gs_frame_key_hex(j->key, hex);
         if (cache_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0)
             return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
-        if (r->transfer && input_get(s, j->key, w->model->info.image_size, &so.face) != 0)
+        if (input_get(s, j->key, w->model->info.image_size, &so.face) != 0 && r->transfer)
             return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT),
                                    "subject %s: no kept input for transfer (FIT it with keep_image, or it "
                                    "was evicted: input_cache_mb); send the image inline or FIT again",
@@ -1565,6 +1620,16 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     }
     gs_model_ctx *ctx = slot >= 0 ? w->slots[slot].ctx : w->ctx;
     const gs_subject subj = so.subj;
+    quality_ref qr;
+    memset(&qr, 0, sizeof qr);
+    if (so.face.data) {
+        if (photo.is_photo) {
+            memcpy(qr.uv, photo.face.uv_n, sizeof qr.uv);
+            qr.face = &so.face;
+        } else if (normalized_landmarks(s, &so.face, qr.uv) == 0) {
+            qr.face = &so.face;
+        }
+    }
     recent_add(w, j->key);
     int size = w->model->info.image_size;
     uint8_t *rgb = malloc((size_t)size * size * 3);
@@ -1575,8 +1640,8 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         int why = i > 0 ? wait_output(s, j) : job_stop(j);
         if (why)
             o = stop_frame(s, j, why);
-        else if ((why = render_target(w, ctx, j, r, i, &subj, so.face.data ? &so.face : NULL, &photo, &ps,
-                                      rgb, msg, sizeof msg)) != 0)
+        else if ((why = render_target(w, ctx, j, r, i, &subj, r->transfer ? &so.face : NULL, &photo, &qr,
+                                      &ps, rgb, msg, sizeof msg)) != 0)
             o = gsd_error_frame(j, why, "%s", msg);
     }
     free(rgb);

@@ -72,7 +72,7 @@ static const struct {
     CTR(bytes_in), CTR(bytes_out), CTR(protocol_errors), CTR(request_errors), CTR(timeouts),
     CTR(req_hello), CTR(req_health), CTR(req_stats), CTR(req_fit), CTR(req_redirect),
     CTR(req_cancel), CTR(req_sleep), CTR(busy), CTR(cancelled), CTR(deadline_exceeded),
-    CTR(fits), CTR(fits_cached), CTR(images_out), CTR(jobs_done), CTR(renders_full),
+    CTR(fits), CTR(fits_cached), CTR(images_out), CTR(images_dropped), CTR(jobs_done), CTR(renders_full),
     CTR(renders_incremental), CTR(model_loads),
     CTR(model_load_failures), CTR(reloads), CTR(cache_saves), CTR(cache_save_failures),
     CTR(finetunes), CTR(tuned_swaps), CTR(tuned_saves), CTR(tuned_save_failures),

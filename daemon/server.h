@@ -38,7 +38,7 @@ typedef struct gsd_counters {
     atomic_ullong protocol_errors, request_errors, timeouts;
     atomic_ullong req_hello, req_health, req_stats, req_fit, req_redirect, req_cancel, req_sleep;
     atomic_ullong busy, cancelled, deadline_exceeded;
-    atomic_ullong fits, fits_cached, images_out, jobs_done;
+    atomic_ullong fits, fits_cached, images_out, images_dropped, jobs_done;
     atomic_ullong renders_full, renders_incremental;
     atomic_ullong model_loads, model_load_failures, reloads, cache_saves, cache_save_failures;
     atomic_ullong finetunes, tuned_swaps, tuned_saves, tuned_save_failures;

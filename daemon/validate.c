@@ -328,6 +328,10 @@ int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
         return e;
     if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
         return e;
+    if (!isfinite(r->min_quality) || r->min_quality < 0 || r->min_quality > 1) {
+        snprintf(msg, cap, "min_quality %g out of [0, 1]", r->min_quality);
+        return E(ERR_INVALID_ARGUMENT);
+    }
     if (r->output_format > GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8 || r->jpeg_quality > 100) {
         snprintf(msg, cap, "output format %d / jpeg quality %u out of range", (int)r->output_format,
                  r->jpeg_quality);

@@ -36,6 +36,7 @@ extern const cli_command cli_eval_command;
 extern const cli_command cli_eval_downstream_command;
 extern const cli_command cli_model_command;
 extern const cli_command cli_augment_command;
+extern const cli_command cli_eval_photos_command;
 
 /* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */
 typedef struct cli_opt {

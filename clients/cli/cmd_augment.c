@@ -1153,8 +1153,8 @@ static const char *src_label(const job *j, size_t k, char *buf, size_t cap)
 
 /* The JSON line of one sample. */
 static void sample_json(const job *j, size_t k, size_t t, const fitted *fi, const double R[9],
-                        const double ht[3], const target *tg, double gcam_out[2], double hd[2],
-                        jbuf *b)
+                        const double ht[3], const target *tg, const gs_face_quality *q,
+                        double gcam_out[2], double hd[2], jbuf *b)
 {
     const source *s = &j->src[k];
     size_t index = s->first + t;
@@ -1211,7 +1211,21 @@ static void sample_json(const job *j, size_t k, size_t t, const fitted *fi, cons
     jnum(b, "fit_psnr", fi->sub.fit_psnr);
     jnum(b, "fit_ssim", fi->sub.fit_ssim);
     jnum(b, "finetune_psnr", fi->ft_psnr);
-    jput(b, ",\"quality\":null}\n");
+    if (!q) {
+        jput(b, ",\"quality\":null}\n");
+        return;
+    }
+    /* Redirect quality (docs/face.md): the score and what it is made of. */
+    jput(b, ",\"quality\":{\"score\":%.4f,\"eyes\":%d", q->score, q->eyes);
+    jnum(b, "asked_pitch_rad", q->commanded[0]);
+    jnum(b, "asked_yaw_rad", q->commanded[1]);
+    jnum(b, "seen_pitch_rad", q->measured[0]);
+    jnum(b, "seen_yaw_rad", q->measured[1]);
+    jnum(b, "gaze_error_deg", q->gaze_error_deg);
+    jnum(b, "iris_delta_e", q->delta_e);
+    jnum(b, "eye_speckle", q->artifact);
+    jstr(b, "reason", q->reason);
+    jput(b, "}}\n");
 }
 
 static void put_f32le(uint8_t *p, float v)
@@ -1357,6 +1371,8 @@ static int do_source(job *j, size_t k, double *psnr_out)
     gs_model *tuned = NULL;
     uint8_t *blob = NULL, *remote = NULL;
     jbuf jb = {0};
+    double quv[GS_FACE_LANDMARKS][2];
+    int have_q = 0; /* in process: the quality of each gaze-only render */
     if (j->remote) {
         if ((rc = remote_source(j, k, &fi, &remote, what)))
             goto done;
@@ -1421,6 +1437,15 @@ static int do_source(job *j, size_t k, double *psnr_out)
             goto done;
         }
     }
+    /* What the quality of the renders is measured against: the input
+     * face and its landmarks (a photo's; found in a normalized face). */
+    if (fi.photo) {
+        memcpy(quv, pf.res.uv_n, sizeof quv);
+        have_q = 1;
+    } else if ((j->sp || gs_face_shape_model_load(NULL, &j->sp, NULL) == GS_OK) &&
+               gs_face_normalized_landmarks(j->sp, &face, quv, NULL) == GS_OK) {
+        have_q = 1;
+    }
 render:
     *psnr_out = fi.sub.fit_psnr;
     /* Blob: per target the RGB patch as BGR (face_patch's order), then
@@ -1463,10 +1488,25 @@ render:
             rc = cli_fail(cmd, "%s: target %zu: %s", what, t, err.msg);
             break;
         }
+        gs_face_quality q;
+        const gs_face_quality *qp = NULL;
+        if (have_q && !tg->use_head) {
+            gs_face_quality_opts qo;
+            gs_face_quality_opts_default(&qo);
+            qo.px_per_mm = j->info.focal / j->info.distance_mm;
+            gs_io_image ri = {S, S, (size_t)S * 3, dst};
+            if (gs_face_redirect_quality(&face, &ri, (const double(*)[2])quv, fi.sub.head_R,
+                                         tg->gp - fi.sub.gaze_pitch, tg->gy - fi.sub.gaze_yaw, &qo,
+                                         &q, &err)) {
+                rc = cli_fail(cmd, "%s: target %zu: quality: %s", what, t, err.msg);
+                break;
+            }
+            qp = &q;
+        }
         if (render)
             resize_rgb(render, S, px, So);
         double gc[2], hd[2];
-        sample_json(j, k, t, &fi, R, ht, tg, gc, hd, &jb);
+        sample_json(j, k, t, &fi, R, ht, tg, qp, gc, hd, &jb);
         if (j->want_png) {
             void *png = NULL;
             size_t plen = 0;

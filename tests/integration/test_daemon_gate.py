@@ -102,6 +102,31 @@ def main():
                     "10 px eyes: %s %s" % (gc.FT.Name(ftype), msg))
             r = c.fit(astro_png, photo=True, max_iters=FAST)
             t.check(len(r.subject_key) == 16, "the astronaut fits")
+            # Every gaze-only image carries its quality (the input is inline);
+            # a head change has none; min_quality 1 drops them all.
+            targets = [(0, 20), (10, 0)]
+            got = list(c.redirect(targets, image=face, max_iters=FAST))
+            t.check(len(got) == 2 and all(g.HasField("quality") and g.HasField("image") and
+                                          not g.dropped for g in got),
+                    "inline REDIRECT: quality with every image")
+            for g in got:
+                q = g.quality
+                t.check(0 <= q.score <= 1 and q.eye_speckle > 0 and
+                        abs(q.asked.yaw_deg + q.asked.pitch_deg) > 5,
+                        "quality fields: %s" % str(q).replace("\n", " "))
+            got = list(c.redirect([(0, 20)], image=face, max_iters=FAST, head_deg=[(10, 10)]))
+            t.check(len(got) == 1 and not got[0].HasField("quality"), "a head change has no quality")
+            got = list(c.redirect(targets, image=face, max_iters=FAST, min_quality=1.0))
+            t.check(len(got) == 2 and all(g.dropped and not g.HasField("image") for g in got),
+                    "min_quality 1: every image dropped, its index and quality kept: %s" %
+                    [(g.index, g.dropped, g.quality.score) for g in got])
+            key = c.fit(face, max_iters=FAST).subject_key
+            got = list(c.redirect(targets, subject=key))
+            t.check(len(got) == 2 and not any(g.HasField("quality") for g in got),
+                    "by key without a kept input: no quality")
+            expect_error(t, lambda: c.redirect(targets, image=face, min_quality=1.5),
+                         gc.pb.ERR_INVALID_ARGUMENT, "min_quality 1.5", "min_quality")
+            t.check(c.stats()["images_dropped"] == 2, "STATS images_dropped")
             st = c.stats()
             t.check(st["request_errors"] >= 7, "request_errors %d" % st["request_errors"])
     finally:

@@ -1,0 +1,160 @@
+/* Quality of one redirected face against its input (face.h, "Redirect
+ * quality"): the gaze the irises show against the gaze asked for, the
+ * iris colour kept, and the eye regions free of speckle. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "face_internal.h"
+
+#define RAD2DEG (180.0 / 3.14159265358979323846)
+
+void gs_face_quality_opts_default(gs_face_quality_opts *o)
+{
+    o->gaze_tol_deg = 5;
+    o->gaze_tol_frac = 0.3;
+    o->max_delta_e = 10;
+    o->max_artifact = 1.6;
+    o->px_per_mm = 0;
+}
+
+/* Fine-scale energy of the eye regions: the mean absolute difference of
+ * the luma from its 3 x 3 box mean, over the pixels of `mask` (eye
+ * polygons, grown). Speckle and doubled edges raise it; the smooth skin,
+ * sclera and iris of a good render do not. */
+static double fine_energy(const gs_io_image *im, const uint8_t *mask)
+{
+    int w = im->width, h = im->height;
+    double sum = 0;
+    long n = 0;
+    for (int y = 1; y + 1 < h; y++)
+        for (int x = 1; x + 1 < w; x++) {
+            if (mask[(size_t)y * w + x] < 128)
+                continue;
+            double c = 0, box = 0;
+            for (int dy = -1; dy <= 1; dy++)
+                for (int dx = -1; dx <= 1; dx++) {
+                    const uint8_t *p = im->data + (size_t)(y + dy) * im->stride + 3 * (size_t)(x + dx);
+                    double l = 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2];
+                    box += l;
+                    if (!dx && !dy)
+                        c = l;
+                }
+            sum += fabs(c - box / 9);
+            n++;
+        }
+    return n ? sum / (double)n : 0;
+}
+
+int gs_face_normalized_landmarks(const gs_face_shape_model *sp, const gs_io_image *img,
+                                 double uv[][2], gs_error *err)
+{
+    if (!sp || !img || !img->data || !uv || img->width < 16 || img->height < 16)
+        return gs_error_set(err, GS_ERR_ARG, "normalized landmarks: no model or image");
+    int w = img->width, h = img->height;
+    gs_face_box box = {(int)(0.16 * w), (int)(0.19 * h), (int)(0.84 * w), (int)(0.86 * h)};
+    int pts[GS_FACE_LANDMARKS][2];
+    return gs_face_shape_predict(sp, img, box, &pts[0][0], &uv[0][0], err);
+}
+
+static double sq(double v)
+{
+    return v * v;
+}
+
+int gs_face_redirect_quality(const gs_io_image *input, const gs_io_image *output,
+                             const double uv[][2], const double head_R[9], double cmd_pitch,
+                             double cmd_yaw, const gs_face_quality_opts *opts, gs_face_quality *out,
+                             gs_error *err)
+{
+    gs_face_quality_opts def;
+    if (!opts) {
+        gs_face_quality_opts_default(&def);
+        opts = &def;
+    }
+    if (!input || !output || !uv || !out || !input->data || !output->data)
+        return gs_error_set(err, GS_ERR_ARG, "redirect quality: NULL argument");
+    if (input->width != output->width || input->height != output->height || input->width < 8 ||
+        input->height < 8)
+        return gs_error_set(err, GS_ERR_ARG, "redirect quality: images of %dx%d and %dx%d",
+                            input->width, input->height, output->width, output->height);
+    if (!isfinite(cmd_pitch) || !isfinite(cmd_yaw))
+        return gs_error_set(err, GS_ERR_NONFINITE, "redirect quality: non-finite target");
+    gs_face_quality q;
+    memset(&q, 0, sizeof q);
+    q.commanded[0] = cmd_pitch;
+    q.commanded[1] = cmd_yaw;
+    gs_face_iris_opts io;
+    gs_face_iris_opts_default(&io);
+    if (opts->px_per_mm > 0)
+        gs_face_iris_opts_scale(&io, opts->px_per_mm);
+    double meas[2] = {0, 0}, de = 0;
+    int in_found = 0;
+    for (int e = 0; e < 2; e++) {
+        const double(*eye)[2] = (const double(*)[2])uv[36 + 6 * e];
+        gs_face_iris a, b;
+        int rc = gs_face_iris_locate(input, eye, &io, &a, err);
+        if (!rc)
+            rc = gs_face_iris_locate(output, eye, &io, &b, err);
+        if (rc)
+            return rc;
+        q.iris[e][0] = a;
+        q.iris[e][1] = b;
+        if (a.status != GS_FACE_IRIS_OK)
+            continue;
+        in_found++;
+        if (b.status != GS_FACE_IRIS_OK)
+            continue;
+        double dp, dy;
+        if ((rc = gs_face_iris_gaze_change(e, eye, a.centre, eye, b.centre, head_R, &dp, &dy, err)))
+            return rc;
+        meas[0] += dp;
+        meas[1] += dy;
+        de += sqrt(sq(a.lab[0] - b.lab[0]) + sq(a.lab[1] - b.lab[1]) + sq(a.lab[2] - b.lab[2]));
+        q.eyes++;
+    }
+    /* The artifact measure, over both eye regions. */
+    int w = input->width, h = input->height;
+    uint8_t *m = malloc((size_t)w * (size_t)h);
+    if (!m)
+        return gs_error_set(err, GS_ERR_NOMEM, "redirect quality: out of memory");
+    int rc = gs_face_mask(uv, GS_FACE_MASK_EYES, 0, 0, w, h, m, err);
+    double e_in = rc ? 0 : fine_energy(input, m), e_out = rc ? 0 : fine_energy(output, m);
+    free(m);
+    if (rc)
+        return rc;
+    q.artifact = e_out / fmax(e_in, 0.5);
+    /* The score: one factor per measure, each 1 within its tolerance and
+     * falling smoothly past it. */
+    double s_gaze, s_colour = 1;
+    if (q.eyes) {
+        q.measured[0] = meas[0] / q.eyes;
+        q.measured[1] = meas[1] / q.eyes;
+        q.delta_e = de / q.eyes;
+        q.gaze_error_deg = hypot(q.measured[0] - cmd_pitch, q.measured[1] - cmd_yaw) * RAD2DEG;
+        double tol = fmax(opts->gaze_tol_deg, opts->gaze_tol_frac * hypot(cmd_pitch, cmd_yaw) * RAD2DEG);
+        s_gaze = exp(-0.5 * sq(fmax(0, q.gaze_error_deg - tol) / tol));
+        s_colour = exp(-0.5 * sq(fmax(0, q.delta_e - opts->max_delta_e) / opts->max_delta_e));
+    } else {
+        q.measured[0] = q.measured[1] = q.delta_e = q.gaze_error_deg = NAN;
+        /* An iris the input shows and the output lost: the eyes are
+         * broken. Neither shows one: nothing to measure, half marks. */
+        s_gaze = in_found ? 0 : 0.5;
+    }
+    double s_art = exp(-0.5 * sq(fmax(0, q.artifact - opts->max_artifact) / 0.5));
+    q.score = s_gaze * s_colour * s_art;
+    if (!q.eyes)
+        snprintf(q.reason, sizeof q.reason, in_found ? "no iris in the output's eyes"
+                                                     : "no iris found in the input to compare");
+    else if (s_gaze < 0.5)
+        snprintf(q.reason, sizeof q.reason, "gaze off by %.1f deg (asked %+.1f, %+.1f; seen %+.1f, %+.1f)",
+                 q.gaze_error_deg, cmd_pitch * RAD2DEG, cmd_yaw * RAD2DEG, q.measured[0] * RAD2DEG,
+                 q.measured[1] * RAD2DEG);
+    else if (s_art < 0.5)
+        snprintf(q.reason, sizeof q.reason, "speckle in the eyes: %.2f times the input's", q.artifact);
+    else if (s_colour < 0.5)
+        snprintf(q.reason, sizeof q.reason, "iris colour changed: delta E %.1f", q.delta_e);
+    *out = q;
+    return GS_OK;
+}

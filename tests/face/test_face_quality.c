@@ -1,0 +1,162 @@
+/* Redirect quality (face.h) where the truth is known: synthetic normalized
+ * faces of the test split rendered at a start gaze (the "input") and at a
+ * changed gaze (the "output": the exact image a perfect redirect would
+ * give), with the renderer's exact landmarks.
+ *
+ * - exact outputs: the gaze change the irises show against the change
+ *   made (its error is the measure's own), iris delta E and speckle near
+ *   their neutral values, scores high;
+ * - broken outputs made from the exact ones: speckle painted over the eye
+ *   regions raises the speckle measure and the score falls; the irises
+ *   painted over with sclera white leave no iris and score 0; an unchanged
+ *   output (the input again) for a 20 deg change shows the gaze error;
+ * - the landmarks of a normalized face predicted from the canonical box
+ *   (as the daemon does) against the exact ones. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "gazesplat/face.h"
+#include "gazesplat/geom.h"
+#include "gazesplat/synth.h"
+#include "gs_test.h"
+
+#define DEG (3.14159265358979323846 / 180.0)
+#define S 256
+#define HEADS 8
+
+static int render(gs_synth_scene *sc, gs_synth_sample *smp)
+{
+    gs_synth_camera base, cam;
+    gs_error err = {0, ""};
+    gs_synth_camera_single(S, 650, 300, &base);
+    int rc = gs_synth_camera_normalized(sc, &base, S, 0, 0, &cam, &err);
+    if (!rc)
+        rc = gs_synth_render(sc, &cam, NULL, NULL, smp, &err);
+    CHECK_MSG(rc == GS_OK, "%s", err.msg);
+    return rc;
+}
+
+static uint64_t rng = 0x9e3779b97f4a7c15ull;
+static unsigned rnd(void)
+{
+    rng ^= rng << 13, rng ^= rng >> 7, rng ^= rng << 17;
+    return (unsigned)(rng >> 33);
+}
+
+int main(void)
+{
+    gs_synth_ranges rg;
+    gs_synth_ranges_default(&rg);
+    rg.head_yaw = 25 * DEG;
+    rg.head_pitch = 15 * DEG;
+    rg.gaze_yaw = 15 * DEG;
+    rg.gaze_pitch = 10 * DEG;
+    rg.blink_prob = 0;
+    rg.expression_prob = 0;
+    gs_synth_sample a = {0}, b = {0};
+    gs_error err = {0, ""};
+    CHECK(gs_synth_sample_alloc(&a, S, S, &err) == GS_OK);
+    CHECK(gs_synth_sample_alloc(&b, S, S, &err) == GS_OK);
+    gs_face_quality_opts qo;
+    gs_face_quality_opts_default(&qo);
+    qo.px_per_mm = 800.0 / 680.0;
+    static const double change[4][2] = {{0, 20}, {0, -20}, {15, 0}, {-15, 10}};
+    double err_sum = 0, err_max = 0, de_max = 0, art_max = 0, score_min = 1, lm_err = 0;
+    int n = 0, lm_n = 0;
+    double speck_min = 1e9, speck_score_max = 0, flat_score_max = 0, still_err_min = 1e9;
+    gs_face_shape_model *sp = NULL;
+    int have_sp = gs_face_shape_model_load(NULL, &sp, NULL) == GS_OK;
+    for (int k = 0; k < HEADS; k++) {
+        gs_synth_scene sc;
+        gs_synth_scene_random(gs_synth_split_seed(GS_SYNTH_TEST, (uint64_t)k), (uint64_t)k, &rg, &sc);
+        if (render(&sc, &a))
+            break;
+        gs_io_image in = {S, S, a.stride, a.rgb}, out = {S, S, b.stride, b.rgb};
+        double uv[68][2];
+        memcpy(uv, a.labels.lm2d, sizeof uv);
+        /* The camera is the normalized one: the labels' head rotation is
+         * the head in the normalized camera. */
+        double hR[9];
+        memcpy(hR, a.labels.head_R, sizeof hR);
+        if (have_sp) {
+            double pu[68][2];
+            if (gs_face_normalized_landmarks(sp, &in, pu, NULL) == GS_OK)
+                for (int i = 36; i < 48; i++, lm_n++)
+                    lm_err += hypot(pu[i][0] - uv[i][0], pu[i][1] - uv[i][1]);
+        }
+        for (int c = 0; c < 4; c++) {
+            gs_synth_scene sc2 = sc;
+            sc2.gaze_pitch += change[c][0] * DEG;
+            sc2.gaze_yaw += change[c][1] * DEG;
+            if (render(&sc2, &b))
+                break;
+            /* The change made, in the head frame. */
+            double dp = sc2.gaze_pitch - sc.gaze_pitch, dy = sc2.gaze_yaw - sc.gaze_yaw;
+            gs_face_quality q;
+            CHECK_MSG(gs_face_redirect_quality(&in, &out, (const double(*)[2])uv, hR, dp, dy, &qo, &q,
+                                               &err) == GS_OK, "%s", err.msg);
+            if (q.eyes) {
+                err_sum += q.gaze_error_deg;
+                err_max = fmax(err_max, q.gaze_error_deg);
+                de_max = fmax(de_max, q.delta_e);
+                n++;
+            }
+            art_max = fmax(art_max, q.artifact);
+            score_min = fmin(score_min, q.score);
+            /* Speckle over the eye regions. */
+            uint8_t *m = malloc((size_t)S * S);
+            gs_face_mask((const double(*)[2])uv, GS_FACE_MASK_EYES, 0, 0, S, S, m, NULL);
+            gs_synth_sample_free(&b);
+            CHECK(gs_synth_sample_alloc(&b, S, S, &err) == GS_OK);
+            if (render(&sc2, &b))
+                break;
+            out.data = b.rgb;
+            for (int i = 0; i < S * S; i++)
+                if (m[i] >= 128 && rnd() % 3 == 0)
+                    for (int ch = 0; ch < 3; ch++)
+                        b.rgb[3 * i + ch] = (uint8_t)(rnd() % 2 ? 20 + rnd() % 40 : 200 + rnd() % 50);
+            CHECK(gs_face_redirect_quality(&in, &out, (const double(*)[2])uv, hR, dp, dy, &qo, &q, &err) ==
+                  GS_OK);
+            speck_min = fmin(speck_min, q.artifact);
+            speck_score_max = fmax(speck_score_max, q.score);
+            /* The irises painted over with the sclera's white. */
+            if (render(&sc2, &b))
+                break;
+            for (int i = 0; i < S * S; i++)
+                if (m[i] >= 128)
+                    b.rgb[3 * i] = 235, b.rgb[3 * i + 1] = 228, b.rgb[3 * i + 2] = 222;
+            CHECK(gs_face_redirect_quality(&in, &out, (const double(*)[2])uv, hR, dp, dy, &qo, &q, &err) ==
+                  GS_OK);
+            flat_score_max = fmax(flat_score_max, q.score);
+            /* Unchanged: the input again. */
+            CHECK(gs_face_redirect_quality(&in, &in, (const double(*)[2])uv, hR, dp, dy, &qo, &q, &err) ==
+                  GS_OK);
+            if (q.eyes)
+                still_err_min = fmin(still_err_min, q.gaze_error_deg);
+            CHECK_MSG(q.score < 0.5, "an unchanged output for a %.0f deg change scores %.2f",
+                      hypot(change[c][0], change[c][1]), q.score);
+            free(m);
+        }
+    }
+    printf("exact outputs (%d with irises in both): gaze error mean %.2f max %.2f deg; iris dE max "
+           "%.1f; speckle max %.2f; score min %.2f\n",
+           n, n ? err_sum / n : NAN, err_max, de_max, art_max, score_min);
+    printf("speckled outputs: speckle >= %.2f, score <= %.2f; irises painted out: score <= %.2f; "
+           "unchanged outputs: gaze error >= %.1f deg\n",
+           speck_min, speck_score_max, flat_score_max, still_err_min);
+    if (lm_n)
+        printf("eye landmarks from the canonical box: %.2f px from the exact ones on average\n",
+               lm_err / lm_n);
+    CHECK(n >= HEADS * 4 * 3 / 4);
+    CHECK(err_sum / n < 3 && err_max < 8);
+    CHECK(de_max < 10 && art_max < 1.6 && score_min > 0.5);
+    CHECK(speck_min > 2 && speck_score_max < 0.2);
+    CHECK(flat_score_max < 0.05);
+    CHECK(still_err_min > 8);
+    gs_face_shape_model_free(sp);
+    gs_synth_sample_free(&a);
+    gs_synth_sample_free(&b);
+    GS_TEST_END();
+}
