@@ -75,6 +75,14 @@ float *gs_xfer_target_opening(gs_xfer *x);
 
 struct gs_model_ctx {
     const gs_model *m;
+    /* the buffers only a backward reads (frame.c, "what only fitting and
+     * training use") are allocated: train_bytes of them */
+    int train_ready;
+    size_t train_bytes;
+    /* a render's face stream without them: fscr_threads pool threads'
+     * scratch of one block each */
+    float *fscr;
+    int fscr_threads;
     int nf, ne, n;         /* face, eye, total Gaussians */
     /* lids: the face Gaussians [nm, nf), eye 0's first (nl0 of them);
      * they move with the gaze, so renders treat [nm, n) as the moving
@@ -230,9 +238,10 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                      int stream, int force_face, gs_error *err);
 
 /* Only the streams of gs_frame_forward: the camera-frame Gaussians in
- * c->g_* (tests of the stream gradients). */
-void gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
-                              const gs_frame *fr, int force_face);
+ * c->g_* (tests of the stream gradients); allocates the training buffers
+ * as gs_frame_forward does (GS_ERR_NOMEM when it cannot). */
+int gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
+                             const gs_frame *fr, int force_face);
 
 /* Backward of the last forward from d_rgb [3,S,S] (may be NULL),
  * d_fmap [C,fs,fs] (may be NULL), d_fmap_face (the face-only map

@@ -160,8 +160,24 @@ typedef struct gs_view {
     int light_on_head;   /* 0 (default): lights fixed in the camera */
 } gs_view;
 
+/* Contexts and memory. A context belongs to one model (which must outlive
+ * it) and is used by one thread at a time; it owns every buffer it
+ * allocates. It starts with what rendering needs (about 40 MB at the cpu
+ * configuration once it has rendered, mostly the renderer's forward
+ * scratch and the face stream's outputs). The first fit or training step
+ * through it (gs_model_fit, gazesplat train) adds the buffers a backward
+ * reads: the face MLPs' activations of every Gaussian, gradients, the
+ * renderer's saved maps (about 95 MB more at cpu), kept until
+ * gs_model_ctx_trim or destroy. Renders compute the same bytes either
+ * way. gs_model_finetune uses a context of its own, freed before it
+ * returns. */
 gs_model_ctx *gs_model_ctx_create(const gs_model *m);
 void gs_model_ctx_destroy(gs_model_ctx *c);
+/* Frees the buffers only fitting and training use (gs_model_ctx_stats.
+ * train_bytes) and goes back to the rendering set; kept renders and the
+ * face stream stay. The next fit allocates them again. GS_ERR_NOMEM (and
+ * nothing freed) when the rendering set's renderer scratch cannot be had. */
+int gs_model_ctx_trim(gs_model_ctx *c);
 
 /* Renders `view` of subject `s` into rgb (image_size^2, 8-bit sRGB RGB,
  * `stride` bytes per row; every pixel is written). Consecutive calls for the
@@ -211,6 +227,10 @@ typedef struct gs_model_ctx_stats {
     uint64_t transfers_full;
     uint64_t transfers_incremental;
     int last_transfer_incremental;  /* the last successful transfer's path */
+    /* bytes held by the buffers only fitting and training use (0 until
+     * the context's first fit or training step, and after
+     * gs_model_ctx_trim; a context that only renders never has them) */
+    size_t train_bytes;
 } gs_model_ctx_stats;
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st);
 
