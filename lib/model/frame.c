@@ -97,6 +97,13 @@ static void mat_to_quat(const double r[9], double q[4])
 
 /* ---- context ---- */
 
+/* A render's scratch ("a render's scratch" below). */
+struct gs_ctx_scratch {
+    int refs;                /* contexts using it */
+    float *act, *face;
+    size_t act_len, face_len; /* floats */
+};
+
 static float *falloc(size_t n, int *fail)
 {
     float *p = calloc(n ? n : 1, sizeof(float));
@@ -180,8 +187,11 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->alpha = falloc(fsz, &fail);
     c->rgb = falloc(isz * 3, &fail);
     c->v_rgb = falloc(isz * 3, &fail);
-    c->r_act_len = gs_renderer_fwd_size(&m->rcfg, c->fs, c->fs);
-    c->r_act = falloc(c->r_act_len, &fail);
+    c->scr = calloc(1, sizeof *c->scr);
+    if (c->scr)
+        c->scr->refs = 1;
+    else
+        fail = 1;
     c->fmap_face = falloc(fsz * c->C, &fail);
     c->v_fmap_face = falloc(fsz * c->C, &fail);
     c->alpha_face = falloc(fsz, &fail);
@@ -245,11 +255,12 @@ static void train_free(gs_model_ctx *c)
                    &c->v_mean, &c->v_scale, &c->v_quat, &c->v_opac,
                    &c->v_feat, &c->r_grad, &c->blk_grad, &c->blk_red,
                    &c->scratch, &c->fmap_eye, &c->v_fmap_eye, &c->alpha_eye,
-                   &c->lid_save};
+                   &c->lid_save, &c->r_act};
     for (size_t i = 0; i < sizeof b / sizeof b[0]; i++) {
         free(*b[i]);
         *b[i] = NULL;
     }
+    c->r_act_len = 0;
     c->train_ready = 0;
     c->train_bytes = 0;
 }
@@ -307,32 +318,82 @@ static int train_alloc(gs_model_ctx *c)
     c->v_fmap_eye = talloc(fsz * c->C, &tb, &fail);
     c->alpha_eye = talloc(fsz, &tb, &fail);
     c->lid_save = talloc((size_t)(c->nl ? c->nl : 1) * 7, &tb, &fail);
-    size_t full = gs_renderer_act_size(&m->rcfg, c->fs, c->fs);
-    float *act = fail ? NULL : falloc(full, &fail);
+    c->r_act_len = gs_renderer_act_size(&m->rcfg, c->fs, c->fs);
+    c->r_act = talloc(c->r_act_len, &tb, &fail);
     if (fail) {
         train_free(c);
         return GS_ERR_NOMEM;
     }
-    free(c->r_act);
-    c->r_act = act;
-    c->r_act_len = full;
     c->train_ready = 1;
-    c->train_bytes = (tb + full) * sizeof(float);
+    c->train_bytes = tb * sizeof(float);
     return GS_OK;
 }
 
 int gs_model_ctx_trim(gs_model_ctx *c)
 {
-    if (!c || !c->train_ready)
+    if (!c)
         return GS_OK;
-    size_t lean = gs_renderer_fwd_size(&c->m->rcfg, c->fs, c->fs);
-    float *act = calloc(lean ? lean : 1, sizeof(float));
-    if (!act)
-        return GS_ERR_NOMEM;
     train_free(c);
-    free(c->r_act);
-    c->r_act = act;
-    c->r_act_len = lean;
+    /* the records training forwards kept for their backwards */
+    gs_raster *r[] = {c->raster, c->raster_face, c->raster_eye, c->raster_crop,
+                      c->raster_cov, c->raster_dir};
+    for (size_t i = 0; i < sizeof r / sizeof r[0]; i++)
+        gs_raster_trim(r[i]);
+    return GS_OK;
+}
+
+/* ---- a render's scratch ----
+ * A render (no backward follows) needs the renderer's forward-only buffer
+ * and, for the face stream, each pool thread's scratch for one block's MLP
+ * inputs and activations; nothing in them outlives the call, so contexts
+ * that are never used at the same time can share them
+ * (gs_model_ctx_share_scratch). Made, or grown, at first need. */
+static int scratch_grow(float **buf, size_t *len, size_t need)
+{
+    if (*len >= need)
+        return GS_OK;
+    float *b = calloc(need ? need : 1, sizeof(float));
+    if (!b)
+        return GS_ERR_NOMEM;
+    free(*buf);
+    *buf = b;
+    *len = need;
+    return GS_OK;
+}
+
+static void scratch_release(gs_ctx_scratch *s)
+{
+    if (s && --s->refs == 0) {
+        free(s->act);
+        free(s->face);
+        free(s);
+    }
+}
+
+/* The renderer's buffer of a forward: the training one when the context
+ * has it (it also serves renders), else the scratch's forward-only one. */
+static int render_acts(gs_model_ctx *c, float **acts, size_t *len)
+{
+    if (c->r_act) {
+        *acts = c->r_act, *len = c->r_act_len;
+        return GS_OK;
+    }
+    gs_ctx_scratch *s = c->scr;
+    if (scratch_grow(&s->act, &s->act_len, gs_renderer_fwd_size(&c->m->rcfg, c->fs, c->fs)))
+        return GS_ERR_NOMEM;
+    *acts = s->act, *len = s->act_len;
+    return GS_OK;
+}
+
+int gs_model_ctx_share_scratch(gs_model_ctx *c, gs_model_ctx *with)
+{
+    if (!c || !with)
+        return GS_ERR_ARG;
+    if (c->scr == with->scr)
+        return GS_OK;
+    scratch_release(c->scr);
+    c->scr = with->scr;
+    c->scr->refs++;
     return GS_OK;
 }
 
@@ -348,28 +409,22 @@ static size_t face_scratch_each(const gs_model_ctx *c)
 
 static int face_scratch(gs_model_ctx *c, int threads)
 {
-    if (c->fscr_threads >= threads)
-        return GS_OK;
-    float *b = malloc((size_t)threads * face_scratch_each(c) * sizeof(float));
-    if (!b)
-        return GS_ERR_NOMEM;
-    free(c->fscr);
-    c->fscr = b;
-    c->fscr_threads = threads;
-    return GS_OK;
+    gs_ctx_scratch *s = c->scr;
+    return scratch_grow(&s->face, &s->face_len, (size_t)threads * face_scratch_each(c));
 }
 
 void gs_model_ctx_destroy(gs_model_ctx *c)
 {
     if (!c)
         return;
+    train_free(c);
     float **bufs[] = {&c->fe_in, &c->fe_act, &c->fe_out, &c->fp_in,
                       &c->fp_act, &c->fp_out, &c->e_in, &c->e_act, &c->e_out,
                       &c->er_act[0], &c->er_act[1], &c->g_mean, &c->g_scale,
                       &c->g_quat, &c->g_opac, &c->g_feat, &c->x_head,
                       &c->q_head, &c->v_mean, &c->v_scale, &c->v_quat,
                       &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
-                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->r_grad,
+                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_grad,
                       &c->scratch, &c->fmap_face, &c->v_fmap_face,
                       &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
                       &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,
@@ -381,8 +436,7 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
         free(*bufs[i]);
     free(c->rgb8);
     free(c->fbox);
-    free(c->lid_save);
-    free(c->fscr);
+    scratch_release(c->scr);
     free(c->cov_ind), free(c->cov_bg), free(c->cover), free(c->v_ind);
     free(c->ss_buf);
     free(c->dir_feat), free(c->dir_vfeat), free(c->dir_out), free(c->dir_alpha);
@@ -463,7 +517,7 @@ static void face_fwd_task(void *ctx, int b, int worker)
         eact = c->fe_act + gs_mlp_act_size(&p->face_e, r0);
         pact = c->fp_act + gs_mlp_act_size(&p->face_p, r0);
     } else {
-        ein = c->fscr + (size_t)worker * face_scratch_each(c);
+        ein = c->scr->face + (size_t)worker * face_scratch_each(c);
         pin = ein + (size_t)c->fblk * de;
         eact = pin + (size_t)c->fblk * dp;
         pact = eact + gs_mlp_act_size(&p->face_e, c->fblk);
@@ -1024,10 +1078,13 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         if (rc)
             return rc;
     }
+    float *acts;
+    size_t alen;
+    if (render_acts(c, &acts, &alen))
+        return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
     rc = gs_renderer_forward_src(&c->m->rcfg, &c->m->p.rend, c->fmap,
                                  fr->code, c->used_src ? c->fmap_face : NULL,
-                                 c->fs, c->fs, c->r_act, c->r_act_len, c->rgb,
-                                 pool);
+                                 c->fs, c->fs, acts, alen, c->rgb, pool);
     if (rc)
         return gs_error_set(err, rc, "model: renderer forward failed");
     if (c->eye_direct && stream == GS_STREAM_BOTH)
@@ -1298,8 +1355,13 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
             memcpy(x + ((size_t)k * h + y) * w,
                    c->fmap + ((size_t)k * fs + in[1] + y) * fs + in[0],
                    (size_t)w * sizeof(float));
-    int rc = gs_renderer_forward_vec(&c->m->rcfg, &c->m->p.rend, x, c->gvec,
-                                     h, w, c->r_act, c->r_act_len, out, pool);
+    float *acts;
+    size_t alen;
+    int rc = render_acts(c, &acts, &alen);
+    if (rc)
+        return rc;
+    rc = gs_renderer_forward_vec(&c->m->rcfg, &c->m->p.rend, x, c->gvec, h, w,
+                                 acts, alen, out, pool);
     if (rc)
         return rc;
     int W4 = 4 * w, H4 = 4 * h;
@@ -1576,9 +1638,13 @@ static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     if (rc)
         return rc;
     if (c->src_mode) {
+        float *acts;
+        size_t alen;
+        if (render_acts(c, &acts, &alen))
+            return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
         rc = gs_renderer_guide_vector(&c->m->rcfg, &c->m->p.rend,
                                       c->fmap_face, fr->code, c->fs, c->fs,
-                                      c->r_act, c->r_act_len, c->gvec, pool);
+                                      acts, alen, c->gvec, pool);
         if (rc)
             return gs_error_set(err, rc, "model: guidance vector failed");
     }

@@ -151,6 +151,56 @@ static void check_model(gs_model *m, const char *name)
     free(ref), free(got), free(img), free(xf), free(fitted);
 }
 
+static void check_shared(gs_model *m)
+{
+    int S = m->cfg.image_size;
+    size_t isz = (size_t)S * S * 3;
+    gs_error err = {0, ""};
+    gs_model *cl = NULL;
+    CHECK(gs_model_clone(m, &cl, &err) == GS_OK);
+    for (size_t i = 0; cl && i < cl->nparams; i += 7) /* another model */
+        cl->params[i] *= 1.01f;
+    gs_subject s = frame_subject(m), s2 = s;
+    s2.code[1] -= 0.3f;
+    gs_pool *pool = gs_pool_create(2);
+    uint8_t *ra = malloc(NVIEW * isz), *rb = malloc(NVIEW * isz), *got = malloc(NVIEW * isz);
+    /* the references, each through a context of its own */
+    gs_model_ctx *a = gs_model_ctx_create(m), *b = gs_model_ctx_create(cl);
+    render_views(a, pool, &s, S, ra);
+    render_views(b, pool, &s2, S, rb);
+    gs_model_ctx_destroy(a);
+    gs_model_ctx_destroy(b);
+    /* three contexts on one scratch, in turns */
+    a = gs_model_ctx_create(m), b = gs_model_ctx_create(cl);
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    CHECK_EQ_INT(gs_model_ctx_share_scratch(b, a), GS_OK);
+    CHECK_EQ_INT(gs_model_ctx_share_scratch(c, b), GS_OK);
+    CHECK_EQ_INT(gs_model_ctx_share_scratch(c, a), GS_OK); /* already */
+    CHECK_EQ_INT(gs_model_ctx_share_scratch(NULL, a), GS_ERR_ARG);
+    for (int round = 0; round < 2; round++) {
+        render_views(b, pool, &s2, S, got);
+        same_bytes(rb, got, NVIEW * isz, "the clone on a shared scratch");
+        render_views(a, round ? pool : NULL, &s, S, got);
+        same_bytes(ra, got, NVIEW * isz, "the model on a shared scratch");
+        uint8_t *img = malloc(isz);
+        memcpy(img, ra, isz);
+        gs_subject f;
+        fit(c, img, S, &f); /* its own training buffers, the shared scratch */
+        free(img);
+    }
+    gs_model_ctx_destroy(a); /* the scratch's first owner */
+    render_views(b, NULL, &s2, S, got);
+    same_bytes(rb, got, NVIEW * isz, "the clone after the first owner went");
+    gs_model_ctx_trim(c); /* renders through the shared scratch again */
+    render_views(c, pool, &s, S, got);
+    same_bytes(ra, got, NVIEW * isz, "the model after the first owner went");
+    gs_model_ctx_destroy(c);
+    gs_model_ctx_destroy(b);
+    gs_model_destroy(cl);
+    gs_pool_destroy(pool);
+    free(ra), free(rb), free(got);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -158,6 +208,8 @@ int main(void)
     CHECK(m != NULL);
     if (m)
         check_model(m, "two streams, SOURCE guidance");
+    if (m)
+        check_shared(m);
     gs_model_destroy(m);
     m = with_lids(tiny_model(GS_GUIDE_MULTIPLICATIVE, 8));
     CHECK(m != NULL);

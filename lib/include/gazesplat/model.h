@@ -162,22 +162,33 @@ typedef struct gs_view {
 
 /* Contexts and memory. A context belongs to one model (which must outlive
  * it) and is used by one thread at a time; it owns every buffer it
- * allocates. It starts with what rendering needs (about 40 MB at the cpu
- * configuration once it has rendered, mostly the renderer's forward
- * scratch and the face stream's outputs). The first fit or training step
- * through it (gs_model_fit, gazesplat train) adds the buffers a backward
- * reads: the face MLPs' activations of every Gaussian, gradients, the
- * renderer's saved maps (about 95 MB more at cpu), kept until
- * gs_model_ctx_trim or destroy. Renders compute the same bytes either
- * way. gs_model_finetune uses a context of its own, freed before it
+ * allocates. Rendering needs the render state it keeps (the face stream's
+ * Gaussians, the feature map and image of its kept renders: about 16 MB
+ * at the cpu configuration) and a scratch used only during a call (the
+ * renderer's forward buffer and the face stream's per-thread block
+ * scratch: about 26 MB at cpu with two threads), which contexts can share
+ * (gs_model_ctx_share_scratch). The first fit or training step through a
+ * context (gs_model_fit, gazesplat train) adds the buffers a backward
+ * reads (the face MLPs' activations of every Gaussian, gradients, the
+ * renderer's saved maps: 108 MB at cpu), kept until gs_model_ctx_trim or
+ * destroy. Renders compute the same bytes whatever a context holds.
+ * gs_model_finetune runs through a context of its own, freed before it
  * returns. */
 gs_model_ctx *gs_model_ctx_create(const gs_model *m);
 void gs_model_ctx_destroy(gs_model_ctx *c);
 /* Frees the buffers only fitting and training use (gs_model_ctx_stats.
- * train_bytes) and goes back to the rendering set; kept renders and the
- * face stream stay. The next fit allocates them again. GS_ERR_NOMEM (and
- * nothing freed) when the rendering set's renderer scratch cannot be had. */
+ * train_bytes); kept renders and the face stream stay. The next fit
+ * allocates them again. GS_OK (NULL: nothing to do). */
 int gs_model_ctx_trim(gs_model_ctx *c);
+/* c uses with's render scratch from now on (its own goes when no other
+ * context uses it). For contexts that are never in a call at the same
+ * time, such as one thread's contexts for several fine-tuned clones of a
+ * model (any models: the scratch grows to the largest need); a call on
+ * one may then not run while a call on another does, and they must be
+ * created and destroyed by that one thread too. The scratch lives until
+ * the last context using it is destroyed, in any order. GS_ERR_ARG for
+ * NULL. */
+int gs_model_ctx_share_scratch(gs_model_ctx *c, gs_model_ctx *with);
 
 /* Renders `view` of subject `s` into rgb (image_size^2, 8-bit sRGB RGB,
  * `stride` bytes per row; every pixel is written). Consecutive calls for the
