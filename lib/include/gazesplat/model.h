@@ -163,11 +163,12 @@ typedef struct gs_view {
 /* Contexts and memory. A context belongs to one model (which must outlive
  * it) and is used by one thread at a time; it owns every buffer it
  * allocates. Rendering needs the render state it keeps (the face stream's
- * Gaussians, the feature map and image of its kept renders: about 16 MB
- * at the cpu configuration) and a scratch used only during a call (the
- * renderer's forward buffer and the face stream's per-thread block
- * scratch: about 26 MB at cpu with two threads), which contexts can share
- * (gs_model_ctx_share_scratch). The first fit or training step through a
+ * Gaussians, the feature maps and the image of its live render: about
+ * 18 MB at the cpu configuration, and 4.5 MB per other kept render) and a
+ * scratch used only during a call (the renderer's forward buffer and the
+ * face stream's per-thread block scratch: 27 MB at cpu with two threads),
+ * which contexts can share (gs_model_ctx_share_scratch: then owned by
+ * all of them together, freed with the last). The first fit or training step through a
  * context (gs_model_fit, gazesplat train) adds the buffers a backward
  * reads (the face MLPs' activations of every Gaussian, gradients, the
  * renderer's saved maps: 108 MB at cpu), kept until gs_model_ctx_trim or
@@ -177,7 +178,8 @@ typedef struct gs_view {
 gs_model_ctx *gs_model_ctx_create(const gs_model *m);
 void gs_model_ctx_destroy(gs_model_ctx *c);
 /* Frees the buffers only fitting and training use (gs_model_ctx_stats.
- * train_bytes); kept renders and the face stream stay. The next fit
+ * train_bytes) and the records its rasterizers kept for a backward
+ * (gs_raster_trim); kept renders and the face stream stay. The next fit
  * allocates them again. GS_OK (NULL: nothing to do). */
 int gs_model_ctx_trim(gs_model_ctx *c);
 /* c uses with's render scratch from now on (its own goes when no other
