@@ -16,6 +16,9 @@
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 #include <blake2.h>
 
@@ -57,10 +60,14 @@ struct gsd_worker {
      * the context keeps its render for incremental REDIRECTs */
     int prime, prime_slot; /* prime_slot: a tuned slot, or -1 */
     gs_subject prime_subj;
+    /* a fit or fine-tune ran: once the job is done, the allocator gives
+     * the pages it freed back to the system (worker_release) */
+    int release;
     /* Fine-tuned subjects render with clones of the model holding their
      * tuned tensors (gs_model_tuned_apply): tuned_subjects slots per
-     * worker, each a clone and its context, made at the first need, the
-     * least recently used one switched to a subject no slot holds. */
+     * worker, each a clone and its context (sharing ctx's render
+     * scratch), made at the first need, the least recently used one
+     * switched to a subject no slot holds. */
     struct tuned_slot {
         gs_model *m;
         gs_model_ctx *ctx;
@@ -1083,6 +1090,9 @@ static int slot_take(gsd_worker *w, char *msg, size_t cap)
         }
         /* One subject per slot: a switch drops every kept render anyway. */
         gs_model_ctx_set_sweep_cache(sl->ctx, 1, NULL);
+        /* The worker runs one job at a time: its contexts take turns with
+         * one render scratch (about 26 MB at the cpu model). */
+        gs_model_ctx_share_scratch(sl->ctx, w->ctx);
     }
     sl->has = 0;
     sl->used = ++w->tick;
@@ -1259,6 +1269,11 @@ static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const gs
     gs_error err;
     gs_error_clear(&err);
     int r = gs_model_fit(w->ctx, w->pool, face->data, face->stride, &opt, subj, &o->fit, &err);
+    /* The worker's context renders between fits: the fit's gradients and
+     * saved activations (about 110 MB at the cpu model) go until the next
+     * fit (daemon/README.md, "Memory"). */
+    gs_model_ctx_trim(w->ctx);
+    w->release = 1;
     if (r == GS_ERR_CANCELLED) {
         int why = job_stop(j);
         snprintf(msg, cap, "fit stopped at iteration %d", o->fit.iters);
@@ -1688,6 +1703,22 @@ static void worker_prime(gsd_worker *w)
         LOG_W("worker %d: render after FIT: %s", w->index, rgb ? err.msg : "out of memory");
     free(rgb);
 }
+
+/* A fit or fine-tune freed its working set (over 100 MB at the cpu model:
+ * the fine-tune's own context, gradients and Adam moments). glibc keeps
+ * freed memory in the thread's arena for later allocations, and a fit
+ * done, the next one is far off: malloc_trim returns every free page of
+ * every arena to the system (a few ms), so the resident size falls back
+ * to what the worker keeps. */
+static void worker_release(gsd_worker *w)
+{
+    if (!w->release)
+        return;
+    w->release = 0;
+#ifdef __GLIBC__
+    malloc_trim(0);
+#endif
+}
 #else
 static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
 {
@@ -1697,6 +1728,11 @@ static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
 }
 
 static void worker_prime(gsd_worker *w)
+{
+    (void)w;
+}
+
+static void worker_release(gsd_worker *w)
 {
     (void)w;
 }
@@ -1720,4 +1756,5 @@ void gsd_worker_run(gsd_worker *w, gsd_job *j)
     }
     gsd_post(s, o);
     worker_prime(w); /* the job is the loop's now; only w is used */
+    worker_release(w);
 }

@@ -4,6 +4,9 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
 
 #include "gazesplat/nn.h"
 
@@ -134,6 +137,16 @@ int main(int argc, char **argv)
      * count), and OpenBLAS's own threads would fight them for the cores
      * (the FIT measured 4.6x slower on 2 cores without this). */
     gs_nn_blas_set_threads(1);
+#ifdef __GLIBC__
+    /* Buffers of 1 MiB and more (a fit's gradients and activations, a
+     * fine-tune's context: docs in daemon/README.md, "Memory") get pages
+     * of their own, returned when freed. glibc otherwise raises this
+     * threshold to the size of the largest such buffer freed (up to 32
+     * MiB), after which the next fit's buffers come from the arenas and
+     * stay there; measured 10 to 14 MB less RSS with fine-tuned subjects,
+     * with no change in the images per second of REDIRECTs. */
+    mallopt(M_MMAP_THRESHOLD, 1 << 20);
+#endif
     app a = {argc, argv, NULL};
     gsd_config cfg;
     int check = 0;

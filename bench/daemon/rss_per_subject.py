@@ -2,10 +2,11 @@
 
 Starts one daemon (one worker) on the model, then fits N synthetic faces
 in turn, each fine-tuned and rendered once by key, and prints the daemon's
-VmRSS and its STATS tuned/subject bytes after each. The first subjects
-pay the fixed costs (the fine-tune's working set, the worker's tuned slots:
-a model clone and a context each, `tuned_subjects`); later ones show the
-margin per subject.
+VmRSS (and its peak so far, VmHWM: a fit's and a fine-tune's working set
+while they run) and its STATS tuned/subject bytes after each. The first
+subjects pay the fixed costs (the worker's context, its tuned slots: a
+model clone and a context each, `tuned_subjects`); later ones show the
+margin per subject (daemon/README.md, "Memory").
 
 usage: /usr/bin/python3 bench/daemon/rss_per_subject.py [--model M] [--build build]
            [--subjects 5] [--tuned-subjects 2] [--iters 10] [--finetune 3]
@@ -25,9 +26,9 @@ sys.path.insert(0, os.path.join(ROOT, "tests", "integration"))
 from daemon_util import Daemon  # noqa: E402
 
 
-def rss_mb(pid):
+def rss_mb(pid, field="VmRSS"):
     with open("/proc/%d/status" % pid) as f:
-        return int(re.search(r"VmRSS:\s+(\d+)", f.read()).group(1)) / 1024.0
+        return int(re.search(field + r":\s+(\d+)", f.read()).group(1)) / 1024.0
 
 
 def main():
@@ -67,9 +68,9 @@ def main():
                 key = c.fit(img, max_iters=a.iters, finetune_steps=a.finetune).subject_key
                 list(c.redirect([(0, 0)], subject=key))
                 st = c.stats()
-            print("subjects %d: RSS %.0f MB, tuned blocks %.1f MB, subject cache %.1f KB"
-                  % (i + 1, rss_mb(d.proc.pid), st["tuned_bytes"] / 2**20, st["cache_bytes"] / 1024),
-                  flush=True)
+            print("subjects %d: RSS %.0f MB (peak %.0f MB), tuned blocks %.1f MB, subject cache %.1f KB"
+                  % (i + 1, rss_mb(d.proc.pid), rss_mb(d.proc.pid, "VmHWM"), st["tuned_bytes"] / 2**20,
+                     st["cache_bytes"] / 1024), flush=True)
     finally:
         d.stop()
 

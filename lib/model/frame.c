@@ -97,6 +97,13 @@ static void mat_to_quat(const double r[9], double q[4])
 
 /* ---- context ---- */
 
+/* A render's scratch ("a render's scratch" below). */
+struct gs_ctx_scratch {
+    int refs;                /* contexts using it */
+    float *act, *face;
+    size_t act_len, face_len; /* floats */
+};
+
 static float *falloc(size_t n, int *fail)
 {
     float *p = calloc(n ? n : 1, sizeof(float));
@@ -157,18 +164,10 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->S = k->image_size;
     size_t nf = (size_t)c->nf, ne = (size_t)(c->ne ? c->ne : 1),
            n = (size_t)c->n;
-    c->fe_in = falloc(nf * p->face_e.dims[0], &fail);
-    c->fe_act = falloc(gs_mlp_act_size(&p->face_e, c->nf), &fail);
     c->fe_out = falloc(nf * GS_FACE_OUT(c->C), &fail);
-    c->fp_in = falloc(nf * p->face_p.dims[0], &fail);
-    c->fp_act = falloc(gs_mlp_act_size(&p->face_p, c->nf), &fail);
     c->fp_out = falloc(nf * GS_FACE_OUT(c->C), &fail);
     c->fblk = face_block_rows(c->nf);
     c->nfblk = c->nf > 0 ? (c->nf + c->fblk - 1) / c->fblk : 0;
-    size_t pe = mlp_param_count(&p->face_e), pp = mlp_param_count(&p->face_p);
-    c->blk_grad_len = pe > pp ? pe : pp;
-    c->blk_grad = falloc((size_t)c->nfblk * c->blk_grad_len, &fail);
-    c->blk_red = falloc((size_t)c->nfblk * (size_t)(c->D + GS_PE_DIM(2)), &fail);
     c->e_in = falloc(ne * p->eye.dims[0], &fail);
     c->e_act = falloc(gs_mlp_act_size(&p->eye, (int)ne), &fail);
     c->e_out = falloc(ne * GS_EYE_OUT(c->C), &fail);
@@ -181,11 +180,6 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->g_feat = falloc(n * c->C, &fail);
     c->x_head = falloc(n * 3, &fail);
     c->q_head = falloc(nf * 4, &fail);
-    c->v_mean = falloc(n * 3, &fail);
-    c->v_scale = falloc(n * 3, &fail);
-    c->v_quat = falloc(n * 4, &fail);
-    c->v_opac = falloc(n, &fail);
-    c->v_feat = falloc(n * c->C, &fail);
     size_t fsz = (size_t)c->fs * c->fs, isz = (size_t)c->S * c->S;
     c->bg = falloc(fsz * c->C, &fail);
     c->fmap = falloc(fsz * c->C, &fail);
@@ -193,38 +187,18 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->alpha = falloc(fsz, &fail);
     c->rgb = falloc(isz * 3, &fail);
     c->v_rgb = falloc(isz * 3, &fail);
-    c->r_act_len = gs_renderer_act_size(&m->rcfg, c->fs, c->fs);
-    c->r_act = falloc(c->r_act_len, &fail);
-    size_t rn = gs_renderer_param_count(&m->rcfg);
-    c->r_grad = falloc(rn, &fail);
-    if (c->r_grad)
-        gs_renderer_bind(&m->rcfg, c->r_grad, rn, &c->r_grad_p);
-    size_t sc = gs_mlp_scratch_size(&p->face_e, c->nf);
-    size_t s2 = gs_mlp_scratch_size(&p->face_p, c->nf);
-    size_t s3 = gs_mlp_scratch_size(&p->eye, (int)ne);
-    sc = sc > s2 ? sc : s2;
-    sc = sc > s3 ? sc : s3;
-    size_t blk = nf * (size_t)p->face_e.dims[0];
-    size_t cand[] = {nf * (size_t)p->face_p.dims[0],
-                     ne * (size_t)p->eye.dims[0],
-                     nf * (size_t)GS_FACE_OUT(c->C),
-                     ne * (size_t)GS_EYE_OUT(c->C)};
-    for (int i = 0; i < 4; i++)
-        blk = cand[i] > blk ? cand[i] : blk;
-    c->scratch_blk = blk;
-    c->scratch_len = sc + 2 * blk;
-    c->scratch = falloc(c->scratch_len, &fail);
+    c->scr = calloc(1, sizeof *c->scr);
+    if (c->scr)
+        c->scr->refs = 1;
+    else
+        fail = 1;
     c->fmap_face = falloc(fsz * c->C, &fail);
     c->v_fmap_face = falloc(fsz * c->C, &fail);
     c->alpha_face = falloc(fsz, &fail);
     c->bg_crop = falloc(fsz * c->C, &fail);
-    c->fmap_eye = falloc(fsz * c->C, &fail);
-    c->v_fmap_eye = falloc(fsz * c->C, &fail);
-    c->alpha_eye = falloc(fsz, &fail);
     c->gvec = falloc((size_t)c->C, &fail);
     c->rgb8 = malloc(isz * 3);
     c->fbox = calloc(nf ? nf : 1, 4 * sizeof(int16_t));
-    c->lid_save = falloc((size_t)(c->nl ? c->nl : 1) * 7, &fail);
     c->k_mean = falloc(n * 3, &fail);
     c->k_scale = falloc(n * 3, &fail);
     c->k_quat = falloc(n * 4, &fail);
@@ -265,17 +239,192 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     return GS_OK;
 }
 
+/* ---- what only fitting and training use ----
+ *
+ * A context renders with the buffers gs_frame_ctx_init makes. A backward
+ * needs more: the face MLPs' inputs and activations of every row (a render
+ * runs each block through a scratch of its pool thread instead), the
+ * Gaussians' and the blocks' gradients, the backward's scratch, the
+ * eye-only map and the renderer's full activation buffer (a render's
+ * forward keeps nothing: gs_renderer_fwd_size). train_alloc makes them at
+ * the first training forward; gs_model_ctx_trim frees them. Either way a
+ * render computes the same bytes. */
+static void train_free(gs_model_ctx *c)
+{
+    float **b[] = {&c->fe_in, &c->fe_act, &c->fp_in, &c->fp_act,
+                   &c->v_mean, &c->v_scale, &c->v_quat, &c->v_opac,
+                   &c->v_feat, &c->r_grad, &c->blk_grad, &c->blk_red,
+                   &c->scratch, &c->fmap_eye, &c->v_fmap_eye, &c->alpha_eye,
+                   &c->lid_save, &c->r_act};
+    for (size_t i = 0; i < sizeof b / sizeof b[0]; i++) {
+        free(*b[i]);
+        *b[i] = NULL;
+    }
+    c->r_act_len = 0;
+    c->train_ready = 0;
+    c->train_bytes = 0;
+}
+
+/* falloc, counting the floats into *tb */
+static float *talloc(size_t n, size_t *tb, int *fail)
+{
+    *tb += n;
+    return falloc(n, fail);
+}
+
+static int train_alloc(gs_model_ctx *c)
+{
+    if (c->train_ready)
+        return GS_OK;
+    const gs_model *m = c->m;
+    const gs_model_params *p = &m->p;
+    size_t nf = (size_t)c->nf, ne = (size_t)(c->ne ? c->ne : 1),
+           n = (size_t)c->n, fsz = (size_t)c->fs * c->fs;
+    int fail = 0;
+    size_t tb = 0; /* floats */
+    c->fe_in = talloc(nf * p->face_e.dims[0], &tb, &fail);
+    c->fe_act = talloc(gs_mlp_act_size(&p->face_e, c->nf), &tb, &fail);
+    c->fp_in = talloc(nf * p->face_p.dims[0], &tb, &fail);
+    c->fp_act = talloc(gs_mlp_act_size(&p->face_p, c->nf), &tb, &fail);
+    size_t pe = mlp_param_count(&p->face_e), pp = mlp_param_count(&p->face_p);
+    c->blk_grad_len = pe > pp ? pe : pp;
+    c->blk_grad = talloc((size_t)c->nfblk * c->blk_grad_len, &tb, &fail);
+    c->blk_red = talloc((size_t)c->nfblk * (size_t)(c->D + GS_PE_DIM(2)), &tb, &fail);
+    c->v_mean = talloc(n * 3, &tb, &fail);
+    c->v_scale = talloc(n * 3, &tb, &fail);
+    c->v_quat = talloc(n * 4, &tb, &fail);
+    c->v_opac = talloc(n, &tb, &fail);
+    c->v_feat = talloc(n * c->C, &tb, &fail);
+    size_t rn = gs_renderer_param_count(&m->rcfg);
+    c->r_grad = talloc(rn, &tb, &fail);
+    if (c->r_grad)
+        gs_renderer_bind(&m->rcfg, c->r_grad, rn, &c->r_grad_p);
+    size_t sc = gs_mlp_scratch_size(&p->face_e, c->nf);
+    size_t s2 = gs_mlp_scratch_size(&p->face_p, c->nf);
+    size_t s3 = gs_mlp_scratch_size(&p->eye, (int)ne);
+    sc = sc > s2 ? sc : s2;
+    sc = sc > s3 ? sc : s3;
+    size_t blk = nf * (size_t)p->face_e.dims[0];
+    size_t cand[] = {nf * (size_t)p->face_p.dims[0],
+                     ne * (size_t)p->eye.dims[0],
+                     nf * (size_t)GS_FACE_OUT(c->C),
+                     ne * (size_t)GS_EYE_OUT(c->C)};
+    for (int i = 0; i < 4; i++)
+        blk = cand[i] > blk ? cand[i] : blk;
+    c->scratch_blk = blk;
+    c->scratch_len = sc + 2 * blk;
+    c->scratch = talloc(c->scratch_len, &tb, &fail);
+    c->fmap_eye = talloc(fsz * c->C, &tb, &fail);
+    c->v_fmap_eye = talloc(fsz * c->C, &tb, &fail);
+    c->alpha_eye = talloc(fsz, &tb, &fail);
+    c->lid_save = talloc((size_t)(c->nl ? c->nl : 1) * 7, &tb, &fail);
+    c->r_act_len = gs_renderer_act_size(&m->rcfg, c->fs, c->fs);
+    c->r_act = talloc(c->r_act_len, &tb, &fail);
+    if (fail) {
+        train_free(c);
+        return GS_ERR_NOMEM;
+    }
+    c->train_ready = 1;
+    c->train_bytes = tb * sizeof(float);
+    return GS_OK;
+}
+
+int gs_model_ctx_trim(gs_model_ctx *c)
+{
+    if (!c)
+        return GS_OK;
+    train_free(c);
+    /* the records training forwards kept for their backwards */
+    gs_raster *r[] = {c->raster, c->raster_face, c->raster_eye, c->raster_crop,
+                      c->raster_cov, c->raster_dir};
+    for (size_t i = 0; i < sizeof r / sizeof r[0]; i++)
+        gs_raster_trim(r[i]);
+    return GS_OK;
+}
+
+/* ---- a render's scratch ----
+ * A render (no backward follows) needs the renderer's forward-only buffer
+ * and, for the face stream, each pool thread's scratch for one block's MLP
+ * inputs and activations; nothing in them outlives the call, so contexts
+ * that are never used at the same time can share them
+ * (gs_model_ctx_share_scratch). Made, or grown, at first need. */
+static int scratch_grow(float **buf, size_t *len, size_t need)
+{
+    if (*len >= need)
+        return GS_OK;
+    float *b = calloc(need ? need : 1, sizeof(float));
+    if (!b)
+        return GS_ERR_NOMEM;
+    free(*buf);
+    *buf = b;
+    *len = need;
+    return GS_OK;
+}
+
+static void scratch_release(gs_ctx_scratch *s)
+{
+    if (s && --s->refs == 0) {
+        free(s->act);
+        free(s->face);
+        free(s);
+    }
+}
+
+/* The renderer's buffer of a forward: the training one when the context
+ * has it (it also serves renders), else the scratch's forward-only one. */
+static int render_acts(gs_model_ctx *c, float **acts, size_t *len)
+{
+    if (c->r_act) {
+        *acts = c->r_act, *len = c->r_act_len;
+        return GS_OK;
+    }
+    gs_ctx_scratch *s = c->scr;
+    if (scratch_grow(&s->act, &s->act_len, gs_renderer_fwd_size(&c->m->rcfg, c->fs, c->fs)))
+        return GS_ERR_NOMEM;
+    *acts = s->act, *len = s->act_len;
+    return GS_OK;
+}
+
+int gs_model_ctx_share_scratch(gs_model_ctx *c, gs_model_ctx *with)
+{
+    if (!c || !with)
+        return GS_ERR_ARG;
+    if (c->scr == with->scr)
+        return GS_OK;
+    scratch_release(c->scr);
+    c->scr = with->scr;
+    c->scr->refs++;
+    return GS_OK;
+}
+
+/* A render's face stream: each pool thread's scratch for one block's MLP
+ * inputs and activations (the context keeps no rows for a backward). */
+static size_t face_scratch_each(const gs_model_ctx *c)
+{
+    const gs_model_params *p = &c->m->p;
+    return (size_t)c->fblk * (size_t)(p->face_e.dims[0] + p->face_p.dims[0]) +
+           gs_mlp_act_size(&p->face_e, c->fblk) +
+           gs_mlp_act_size(&p->face_p, c->fblk);
+}
+
+static int face_scratch(gs_model_ctx *c, int threads)
+{
+    gs_ctx_scratch *s = c->scr;
+    return scratch_grow(&s->face, &s->face_len, (size_t)threads * face_scratch_each(c));
+}
+
 void gs_model_ctx_destroy(gs_model_ctx *c)
 {
     if (!c)
         return;
+    train_free(c);
     float **bufs[] = {&c->fe_in, &c->fe_act, &c->fe_out, &c->fp_in,
                       &c->fp_act, &c->fp_out, &c->e_in, &c->e_act, &c->e_out,
                       &c->er_act[0], &c->er_act[1], &c->g_mean, &c->g_scale,
                       &c->g_quat, &c->g_opac, &c->g_feat, &c->x_head,
                       &c->q_head, &c->v_mean, &c->v_scale, &c->v_quat,
                       &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
-                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_act, &c->r_grad,
+                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_grad,
                       &c->scratch, &c->fmap_face, &c->v_fmap_face,
                       &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
                       &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,
@@ -287,7 +436,7 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
         free(*bufs[i]);
     free(c->rgb8);
     free(c->fbox);
-    free(c->lid_save);
+    scratch_release(c->scr);
     free(c->cov_ind), free(c->cov_bg), free(c->cover), free(c->v_ind);
     free(c->ss_buf);
     free(c->dir_feat), free(c->dir_vfeat), free(c->dir_out), free(c->dir_alpha);
@@ -352,36 +501,46 @@ static void face_assemble(gs_model_ctx *c, const double qR[4], int from,
 static void to_camera(gs_model_ctx *c, const gs_frame *fr, int from, int to,
                       const double qR[4]);
 
+static size_t face_scratch_each(const gs_model_ctx *c);
 static void face_fwd_task(void *ctx, int b, int worker)
 {
-    (void)worker;
     const face_fwd_job *j = ctx;
     gs_model_ctx *c = j->c;
     const gs_model_params *p = &c->m->p;
     int F = c->F, D = c->D, O = GS_FACE_OUT(c->C);
     int de = p->face_e.dims[0], dp = p->face_p.dims[0];
     int r0 = b * c->fblk, r1 = r0 + c->fblk < c->nf ? r0 + c->fblk : c->nf;
+    /* the block's rows of the training buffers, or this thread's scratch */
+    float *ein, *pin, *eact, *pact;
+    if (c->fe_act) {
+        ein = c->fe_in + (size_t)r0 * de, pin = c->fp_in + (size_t)r0 * dp;
+        eact = c->fe_act + gs_mlp_act_size(&p->face_e, r0);
+        pact = c->fp_act + gs_mlp_act_size(&p->face_p, r0);
+    } else {
+        ein = c->scr->face + (size_t)worker * face_scratch_each(c);
+        pin = ein + (size_t)c->fblk * de;
+        eact = pin + (size_t)c->fblk * dp;
+        pact = eact + gs_mlp_act_size(&p->face_e, c->fblk);
+    }
     for (int i = r0; i < r1; i++) {
-        float *a = c->fe_in + (size_t)i * de, *bb = c->fp_in + (size_t)i * dp;
+        float *a = ein + (size_t)(i - r0) * de, *bb = pin + (size_t)(i - r0) * dp;
         memcpy(a, p->f_feat + (size_t)i * F, F * sizeof(float));
         memcpy(a + F, j->fr->code, D * sizeof(float));
         memcpy(bb, p->f_feat + (size_t)i * F, F * sizeof(float));
         memcpy(bb + F, j->pe, j->npe * sizeof(float));
     }
-    gs_mlp_forward(&p->face_e, c->fe_in + (size_t)r0 * de, r1 - r0,
-                   c->fe_act + gs_mlp_act_size(&p->face_e, r0),
-                   c->fe_out + (size_t)r0 * O);
-    gs_mlp_forward(&p->face_p, c->fp_in + (size_t)r0 * dp, r1 - r0,
-                   c->fp_act + gs_mlp_act_size(&p->face_p, r0),
-                   c->fp_out + (size_t)r0 * O);
+    gs_mlp_forward(&p->face_e, ein, r1 - r0, eact, c->fe_out + (size_t)r0 * O);
+    gs_mlp_forward(&p->face_p, pin, r1 - r0, pact, c->fp_out + (size_t)r0 * O);
     face_assemble(c, j->qR, r0, r1);
     to_camera(c, j->fr, r0, r1, j->qR);
 }
 
 /* The face stream: MLPs, head-frame Gaussians, into the camera. */
-static void face_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
-                         const double qR[4])
+static int face_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                        const double qR[4])
 {
+    if (!c->fe_act && face_scratch(c, gs_pool_threads(pool)))
+        return GS_ERR_NOMEM;
     double rvec[3];
     float pe[GS_PE_DIM(3) + GS_PE_DIM(2)];
     gs_geom_rot_to_rodrigues(fr->head_R, rvec);
@@ -393,6 +552,7 @@ static void face_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     }
     face_fwd_job j = {c, fr, qR, pe, npe};
     gs_pool_for(pool, c->nfblk, face_fwd_task, &j);
+    return GS_OK;
 }
 
 /* Head-frame face Gaussians [from, to) from the MLP outputs. */
@@ -613,13 +773,15 @@ static int same_face_key(const gs_model_ctx *c, const gs_frame *fr)
     return 1;
 }
 
-void gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
-                              const gs_frame *fr, int force_face)
+static int streams_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
+                           int force_face)
 {
     double qR[4];
     mat_to_quat(fr->head_R, qR);
     if (force_face || !c->face_valid || !same_face_key(c, fr)) {
-        face_forward(c, pool, fr, qR);
+        c->face_valid = 0;
+        if (face_forward(c, pool, fr, qR))
+            return GS_ERR_NOMEM;
         c->face_key = *fr;
         c->face_valid = 1;
         c->face_fresh = 1;
@@ -634,6 +796,15 @@ void gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
         lid_forward(c, fr, qR);
     }
     c->fr = *fr;
+    return GS_OK;
+}
+
+int gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
+                             const gs_frame *fr, int force_face)
+{
+    if (train_alloc(c))
+        return GS_ERR_NOMEM;
+    return streams_forward(c, pool, fr, force_face);
 }
 
 /* The Gaussians [first, first + count) as a raster input. */
@@ -871,7 +1042,11 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->rgb8_valid = 0;
     c->cover_valid = 0;
     c->dir_valid = 0;
-    gs_frame_forward_streams(c, pool, fr, force_face);
+    if (!render && train_alloc(c))
+        return gs_error_set(err, GS_ERR_NOMEM,
+                            "model: out of memory for the training buffers");
+    if (streams_forward(c, pool, fr, force_face))
+        return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
     c->stream = stream;
     int first = 0, count = c->n;
     if (stream == GS_STREAM_FACE)
@@ -894,7 +1069,8 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         if (rc)
             return rc;
     }
-    c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss;
+    c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss &&
+                      c->fmap_eye;
     if (c->used_eye_map) { /* the eye stream alone, for its training loss */
         gs_gaussians ge = gaussians_of(c, c->nf, c->ne);
         rc = raster_at(c, c->raster_eye, pool, &ge, fsr, render, c->fmap_eye,
@@ -902,10 +1078,13 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         if (rc)
             return rc;
     }
+    float *acts;
+    size_t alen;
+    if (render_acts(c, &acts, &alen))
+        return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
     rc = gs_renderer_forward_src(&c->m->rcfg, &c->m->p.rend, c->fmap,
                                  fr->code, c->used_src ? c->fmap_face : NULL,
-                                 c->fs, c->fs, c->r_act, c->r_act_len, c->rgb,
-                                 pool);
+                                 c->fs, c->fs, acts, alen, c->rgb, pool);
     if (rc)
         return gs_error_set(err, rc, "model: renderer forward failed");
     if (c->eye_direct && stream == GS_STREAM_BOTH)
@@ -1176,8 +1355,13 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
             memcpy(x + ((size_t)k * h + y) * w,
                    c->fmap + ((size_t)k * fs + in[1] + y) * fs + in[0],
                    (size_t)w * sizeof(float));
-    int rc = gs_renderer_forward_vec(&c->m->rcfg, &c->m->p.rend, x, c->gvec,
-                                     h, w, c->r_act, c->r_act_len, out, pool);
+    float *acts;
+    size_t alen;
+    int rc = render_acts(c, &acts, &alen);
+    if (rc)
+        return rc;
+    rc = gs_renderer_forward_vec(&c->m->rcfg, &c->m->p.rend, x, c->gvec, h, w,
+                                 acts, alen, out, pool);
     if (rc)
         return rc;
     int W4 = 4 * w, H4 = 4 * h;
@@ -1430,6 +1614,7 @@ void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st)
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         st->sweep_kept += c->slots[i].valid;
     st->sweep_kept += c->inc_valid;
+    st->train_bytes = c->train_bytes;
 }
 
 /* ---- rendering for display ---- */
@@ -1453,9 +1638,13 @@ static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     if (rc)
         return rc;
     if (c->src_mode) {
+        float *acts;
+        size_t alen;
+        if (render_acts(c, &acts, &alen))
+            return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
         rc = gs_renderer_guide_vector(&c->m->rcfg, &c->m->p.rend,
                                       c->fmap_face, fr->code, c->fs, c->fs,
-                                      c->r_act, c->r_act_len, c->gvec, pool);
+                                      acts, alen, c->gvec, pool);
         if (rc)
             return gs_error_set(err, rc, "model: guidance vector failed");
     }
@@ -2034,6 +2223,9 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       gs_frame_grad *fg, gs_error *err)
 {
     size_t fsz = (size_t)c->fs * c->fs * c->C;
+    if (!c->train_ready)
+        return gs_error_set(err, GS_ERR_STATE,
+                            "model: a backward needs a training forward first");
     if (c->feat_mask && d_fmap_eye)
         return gs_error_set(err, GS_ERR_ARG,
                             "model: a feature mask with the eye-only map");

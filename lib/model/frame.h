@@ -73,8 +73,17 @@ float *gs_xfer_target_opening(gs_xfer *x);
 #define GS_XFER_IRIS_RATIO 0.5
 #define GS_XFER_IRIS_INSET 0.03
 
+typedef struct gs_ctx_scratch gs_ctx_scratch;
+
 struct gs_model_ctx {
     const gs_model *m;
+    /* the buffers only a backward reads (frame.c, "what only fitting and
+     * training use") are allocated: train_bytes of them */
+    int train_ready;
+    size_t train_bytes;
+    /* a render's scratch (frame.c, "a render's scratch"), perhaps shared
+     * with other contexts (gs_model_ctx_share_scratch) */
+    gs_ctx_scratch *scr;
     int nf, ne, n;         /* face, eye, total Gaussians */
     /* lids: the face Gaussians [nm, nf), eye 0's first (nl0 of them);
      * they move with the gaze, so renders treat [nm, n) as the moving
@@ -202,7 +211,7 @@ struct gs_model_ctx {
     int last_inc;
     float *bg, *fmap, *alpha, *rgb;   /* [C,fs,fs], [fs,fs], [3,S,S] */
     float *v_fmap, *v_rgb;
-    float *r_act;
+    float *r_act;           /* the renderer's full buffer (training) */
     size_t r_act_len;
     float *r_grad;          /* renderer weight gradients nobody asked for */
     gs_renderer_params r_grad_p;
@@ -230,9 +239,10 @@ int gs_frame_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                      int stream, int force_face, gs_error *err);
 
 /* Only the streams of gs_frame_forward: the camera-frame Gaussians in
- * c->g_* (tests of the stream gradients). */
-void gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
-                              const gs_frame *fr, int force_face);
+ * c->g_* (tests of the stream gradients); allocates the training buffers
+ * as gs_frame_forward does (GS_ERR_NOMEM when it cannot). */
+int gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
+                             const gs_frame *fr, int force_face);
 
 /* Backward of the last forward from d_rgb [3,S,S] (may be NULL),
  * d_fmap [C,fs,fs] (may be NULL), d_fmap_face (the face-only map

@@ -264,8 +264,15 @@ static int source_guided(const gs_renderer_config *cfg)
            cfg->guide_source == GS_GUIDE_SRC_SOURCE;
 }
 
+/* The full layout keeps every map the backward reads. The forward-only
+ * one (lean) keeps none: each block's maps go to two ping-pong buffers A
+ * and B of [C, HW2] floats (the largest block map), with block 0's output
+ * g0 [C, HW1] in a third (block 1 reads it twice); conv_a A, conv_b B,
+ * shuffle A, blur B, conv_c A, guidance B (block 0: g0). Every pass reads
+ * and writes what it does in the full layout, so the output is the same
+ * bytes; no pass runs in place. */
 static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
-                        int W, float *base)
+                        int W, int lean, float *base)
 {
     int C = cfg->channels, guided = cfg->guidance != GS_GUIDE_NONE,
         src = source_guided(cfg);
@@ -273,7 +280,24 @@ static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
     L->C = C, L->D = cfg->code_dim, L->H = H, L->W = W;
     L->hw0 = (size_t)H * (size_t)W, L->hw1 = 4 * L->hw0, L->hw2 = 16 * L->hw0;
     size_t Cs = (size_t)C;
-    for (int b = 0; b < GS_RENDERER_BLOCKS; b++) {
+    if (lean) {
+        float *A = carve(L, base, Cs * L->hw2), *B = carve(L, base, Cs * L->hw2);
+        float *g0 = carve(L, base, Cs * L->hw1);
+        float *att = guided && !src ? carve(L, base, L->hw2) : NULL;
+        for (int b = 0; b < GS_RENDERER_BLOCKS; b++) {
+            block_acts *a = &L->blk[b];
+            a->ya = A, a->yb = B, a->z = B, a->att = att;
+            if (b == 0) {
+                a->u = guided ? A : g0;
+                a->g = g0;
+            } else {
+                a->u = A;
+                a->g = guided ? B : A;
+            }
+        }
+        L->bufP = A;
+    }
+    for (int b = 0; !lean && b < GS_RENDERER_BLOCKS; b++) {
         size_t hwi = b == 0 ? L->hw0 : L->hw1, hwo = 4 * hwi;
         block_acts *a = &L->blk[b];
         a->ya = carve(L, base, 2 * Cs * hwi);
@@ -287,9 +311,11 @@ static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
     L->satt = src ? carve(L, base, L->hw0) : NULL;
     L->gvec = src ? carve(L, base, Cs) : NULL;
     L->gda = src ? carve(L, base, Cs) : NULL;
-    L->bufP = carve(L, base, Cs * L->hw2);
-    L->bufQ = carve(L, base, Cs * L->hw2);
-    L->bufX = carve(L, base, Cs * L->hw1);
+    if (!lean) {
+        L->bufP = carve(L, base, Cs * L->hw2);
+        L->bufQ = carve(L, base, Cs * L->hw2);
+        L->bufX = carve(L, base, Cs * L->hw1);
+    }
     L->rgb2a = carve(L, base, 3 * L->hw2);
     L->rgb2b = carve(L, base, 3 * L->hw2);
     L->rgb1a = carve(L, base, 3 * L->hw1);
@@ -301,14 +327,24 @@ static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
     L->rbuf = guided ? carve(L, base, L->hw2) : NULL;
 }
 
-size_t gs_renderer_act_size(const gs_renderer_config *cfg, int H, int W)
+static size_t act_size(const gs_renderer_config *cfg, int H, int W, int lean)
 {
     if (gs_renderer_config_validate(cfg, NULL) != GS_OK ||
         check_sizes(cfg->channels, H, W) != GS_OK)
         return 0;
     act_layout L;
-    layout_make(&L, cfg, H, W, NULL);
+    layout_make(&L, cfg, H, W, lean, NULL);
     return L.total;
+}
+
+size_t gs_renderer_act_size(const gs_renderer_config *cfg, int H, int W)
+{
+    return act_size(cfg, H, W, 0);
+}
+
+size_t gs_renderer_fwd_size(const gs_renderer_config *cfg, int H, int W)
+{
+    return act_size(cfg, H, W, 1);
 }
 
 /* Every pointer the config uses is set. */
@@ -327,10 +363,12 @@ static int params_ok(const gs_renderer_config *cfg, const gs_renderer_params *p)
            (p->key_w && p->value_w && p->value_b);
 }
 
-/* Shared checks of forward and backward; fills *L on success. */
+/* Shared checks of forward and backward; fills *L on success. A forward
+ * (fwd) takes the full layout when acts_len holds it, else the lean one;
+ * a backward needs the full one. */
 static int check_call(const gs_renderer_config *cfg, const gs_renderer_params *p,
                       const float *x, const float *tau, int H, int W,
-                      float *acts, size_t acts_len, act_layout *L)
+                      float *acts, size_t acts_len, int fwd, act_layout *L)
 {
     int rc = gs_renderer_config_validate(cfg, NULL);
     if (rc)
@@ -341,10 +379,15 @@ static int check_call(const gs_renderer_config *cfg, const gs_renderer_params *p
     if (!x || !acts || !params_ok(cfg, p) ||
         (cfg->guidance != GS_GUIDE_NONE && !tau))
         return GS_ERR_ARG;
-    layout_make(L, cfg, H, W, NULL);
+    int lean = 0;
+    layout_make(L, cfg, H, W, 0, NULL);
+    if (acts_len < L->total && fwd) {
+        lean = 1;
+        layout_make(L, cfg, H, W, 1, NULL);
+    }
     if (acts_len < L->total)
         return GS_ERR_ARG;
-    layout_make(L, cfg, H, W, acts);
+    layout_make(L, cfg, H, W, lean, acts);
     return GS_OK;
 }
 
@@ -492,7 +535,7 @@ int gs_renderer_forward_src(const gs_renderer_config *cfg,
                             gs_pool *pool)
 {
     act_layout L;
-    int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, &L);
+    int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, 1, &L);
     if (rc)
         return rc;
     if (!out_rgb)
@@ -521,7 +564,7 @@ int gs_renderer_guide_vector(const gs_renderer_config *cfg,
                              size_t acts_len, float *a, gs_pool *pool)
 {
     act_layout L;
-    int rc = check_call(cfg, p, src, tau, H, W, acts, acts_len, &L);
+    int rc = check_call(cfg, p, src, tau, H, W, acts, acts_len, 1, &L);
     if (rc)
         return rc;
     if (!a || !source_guided(cfg))
@@ -544,7 +587,7 @@ int gs_renderer_forward_vec(const gs_renderer_config *cfg,
         return GS_ERR_ARG;
     /* check_call wants a tau for guided configs; the blocks never read it
      * here, so the vector stands in. */
-    int rc = check_call(cfg, p, x, a, H, W, acts, acts_len, &L);
+    int rc = check_call(cfg, p, x, a, H, W, acts, acts_len, 1, &L);
     if (rc)
         return rc;
     if (!out_rgb)
@@ -564,7 +607,7 @@ int gs_renderer_backward_src(const gs_renderer_config *cfg,
                              float *dsrc, float *dtau, gs_pool *pool)
 {
     act_layout L;
-    int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, &L);
+    int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, 0, &L);
     if (rc)
         return rc;
     if (!dout_rgb || !params_ok(cfg, dparams))

@@ -149,6 +149,13 @@ int gs_renderer_init(const gs_renderer_config *cfg, float *base, size_t n,
 /* Floats of the activation buffer for an H x W feature map (everything the
  * backward needs, plus its scratch); 0 for invalid sizes or config. */
 size_t gs_renderer_act_size(const gs_renderer_config *cfg, int H, int W);
+/* Floats a forward needs when no backward follows (renders): the blocks'
+ * maps share two ping-pong buffers, about a third of gs_renderer_act_size
+ * (24 MB against 72 MB at 64^2, C = 32, D = 144). Every forward below takes a
+ * buffer of either size: at least gs_renderer_act_size keeps what the
+ * backward reads; a smaller one (at least this) keeps nothing, and no
+ * backward may use it. The output is the same bytes either way. */
+size_t gs_renderer_fwd_size(const gs_renderer_config *cfg, int H, int W);
 
 /* out_rgb[3, 4H, 4W] in [0,1] from x[C, H, W] and tau[D] (tau may be NULL
  * for GS_GUIDE_NONE). acts[acts_len] receives the saved activations. */

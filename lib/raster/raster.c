@@ -136,6 +136,23 @@ void gs_raster_set_records(gs_raster *r, int on)
         r->no_records = !on;
 }
 
+void gs_raster_trim(gs_raster *r)
+{
+    if (!r)
+        return;
+    for (int w = 0; w < r->n_arenas; w++) {
+        free(r->arenas[w].hdr);
+        free(r->arenas[w].vis);
+        memset(&r->arenas[w], 0, sizeof r->arenas[w]);
+    }
+    /* the last forward's tiles: not recorded, a backward evaluates them */
+    for (size_t t = 0; r->tile_rec && t < r->cap_tile_rec; t++)
+        r->tile_rec[t].n = GS_REC_NONE;
+    free(r->slots);
+    r->slots = NULL;
+    r->cap_slots = 0;
+}
+
 void gs_raster_destroy(gs_raster *r)
 {
     if (!r)

@@ -2,7 +2,9 @@
  * layout (count, names, shapes, offsets, binding), the seeded init (bounds,
  * determinism, guidance starting as the identity), determinism of forward
  * and backward (same bytes twice, backward accumulating, the same bytes on
- * pools of 1, 2 and 3 threads as inline), the CPU default size (64^2 -> 256^2) and bad arguments. */
+ * pools of 1, 2 and 3 threads as inline), the forward-only buffer (the same
+ * bytes as the full one), the CPU default size (64^2 -> 256^2) and bad
+ * arguments. */
 #include "gazesplat/nn.h"
 #include "gazesplat/pool.h"
 #include "gs_test.h"
@@ -320,8 +322,9 @@ static void t_default_size(void)
     for (size_t i = 0; i < n.nx; i++)
         bad += !isfinite(n.dx[i]);
     CHECK_MSG(bad == 0, "%zu values out of range or non-finite", bad);
-    printf("64x64 -> 256x256: %zu parameters, activations %.1f MB\n", n.np,
-           (double)n.na * 4.0 / 1e6);
+    printf("64x64 -> 256x256: %zu parameters, activations %.1f MB (forward only %.1f MB)\n",
+           n.np, (double)n.na * 4.0 / 1e6,
+           (double)gs_renderer_fwd_size(&n.cfg, 64, 64) * 4.0 / 1e6);
     net_free(&n);
 }
 
@@ -341,9 +344,14 @@ static void t_bad_args(void)
     CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 0, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, GS_RENDERER_MAX_SIDE + 1, 4,
                                      n.acts, n.na, n.out, NULL), GS_ERR_LIMIT);
-    /* a buffer sized for 4 x 4 is too short for 4 x 5 */
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 5, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
-    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, n.na - 1, n.out, NULL), GS_ERR_ARG);
+    /* a forward-only buffer for 4 x 4 is too short for 4 x 5, and one
+     * float short of it for 4 x 4 (a forward takes any buffer of at least
+     * gs_renderer_fwd_size) */
+    size_t nl = gs_renderer_fwd_size(c, 4, 4);
+    CHECK(nl > 0 && nl < n.na);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 5, n.acts, nl, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, nl - 1, n.out, NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_forward(c, &n.p, n.x, n.tau, 4, 4, n.acts, nl, n.out, NULL), GS_OK);
     /* NULLs and a bad config */
     CHECK_EQ_INT(gs_renderer_forward(NULL, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
     CHECK_EQ_INT(gs_renderer_forward(&badcfg, &n.p, n.x, n.tau, 4, 4, n.acts, n.na, n.out, NULL), GS_ERR_ARG);
@@ -556,6 +564,56 @@ static void t_elementwise_lengths(void)
     gs_pool_destroy(pool2);
 }
 
+/* A forward-only buffer (gs_renderer_fwd_size, what renders use) gives
+ * the same bytes as the full one, through every forward, guidance mode and
+ * source, inline and on a pool, over a dirty buffer; a backward refuses
+ * it. */
+static void t_lean(int guidance, int source)
+{
+    net n;
+    net_make(&n, guidance, 144, 24, 20, 9);
+    n.cfg.guide_source = source;
+    if (guidance != GS_GUIDE_NONE) {
+        fill(n.p.value_w, 32 * 32, 15);
+        fill(n.p.value_b, 32, 16);
+    }
+    size_t nl = gs_renderer_fwd_size(&n.cfg, n.H, n.W);
+    CHECK_MSG(nl > 0 && nl < n.na, "lean %zu floats, full %zu", nl, n.na);
+    float *lean = xcalloc(nl), *o1 = xcalloc(n.nout), *o2 = xcalloc(n.nout);
+    float *src = xcalloc(n.nx), a[32];
+    fill(src, n.nx, 21);
+    gs_pool *pool = gs_pool_create(2);
+    for (int pi = 0; pi < 2; pi++) {
+        gs_pool *pl = pi ? pool : NULL;
+        fill(lean, nl, 78 + pi);
+        CHECK_EQ_INT(gs_renderer_forward_src(&n.cfg, &n.p, n.x, n.tau, src, n.H, n.W, n.acts,
+                                             n.na, o1, pl), GS_OK);
+        CHECK_EQ_INT(gs_renderer_forward_src(&n.cfg, &n.p, n.x, n.tau, src, n.H, n.W, lean, nl,
+                                             o2, pl), GS_OK);
+        CHECK_MSG(memcmp(o1, o2, n.nout * sizeof(float)) == 0,
+                  "guidance %d source %d pool %d: the lean forward differs", guidance, source,
+                  pi);
+        if (guidance == GS_GUIDE_NONE || source == GS_GUIDE_SRC_SOURCE) {
+            if (guidance != GS_GUIDE_NONE)
+                CHECK_EQ_INT(gs_renderer_guide_vector(&n.cfg, &n.p, src, n.tau, n.H, n.W, lean,
+                                                      nl, a, pl), GS_OK);
+            CHECK_EQ_INT(gs_renderer_forward_vec(&n.cfg, &n.p, n.x, a, n.H, n.W, n.acts, n.na,
+                                                 o1, pl), GS_OK);
+            CHECK_EQ_INT(gs_renderer_forward_vec(&n.cfg, &n.p, n.x, a, n.H, n.W, lean, nl, o2,
+                                                 pl), GS_OK);
+            CHECK_MSG(memcmp(o1, o2, n.nout * sizeof(float)) == 0,
+                      "guidance %d pool %d: the lean forward_vec differs", guidance, pi);
+        }
+    }
+    CHECK_EQ_INT(gs_renderer_forward(&n.cfg, &n.p, n.x, n.tau, n.H, n.W, lean, nl - 1, o2,
+                                     NULL), GS_ERR_ARG);
+    CHECK_EQ_INT(gs_renderer_backward(&n.cfg, &n.p, lean, nl, n.x, n.tau, n.dout, n.H, n.W,
+                                      &n.dp, n.dx, n.dtau, NULL), GS_ERR_ARG);
+    gs_pool_destroy(pool);
+    free(lean); free(o1); free(o2); free(src);
+    net_free(&n);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -571,6 +629,9 @@ int main(void)
     t_threads(GS_GUIDE_MULTIPLICATIVE);
     t_source_locality(GS_GUIDE_ADDITIVE);
     t_source_locality(GS_GUIDE_MULTIPLICATIVE);
+    for (int g = GS_GUIDE_NONE; g <= GS_GUIDE_MULTIPLICATIVE; g++)
+        for (int src = GS_GUIDE_SRC_BLOCK; src <= GS_GUIDE_SRC_SOURCE; src++)
+            t_lean(g, src);
     t_default_size();
     t_bad_args();
     t_elementwise_lengths();

@@ -4,7 +4,8 @@
  * composited which tile, so on scheduling): this runs one scene with the
  * default budget, with none (every tile evaluated again) and with budgets
  * that record only some tiles, on 1, 2 and 3 threads, and with records
- * switched off (gs_raster_set_records), and compares bytes. */
+ * switched off (gs_raster_set_records), and with the records freed between
+ * a forward and its backward (gs_raster_trim), and compares bytes. */
 #include "raster_internal.h"
 #include "rt_util.h"
 
@@ -89,6 +90,47 @@ static void run_scene(uint64_t seed, int n, int C, int W, int H, int aa)
         gs_raster_destroy(r);
         gs_pool_destroy(pool);
     }
+    /* gs_raster_trim between a forward and its backward: the records and
+     * the backward scratch go, the backward evaluates every tile again,
+     * and the next forward records again; the same bytes throughout. */
+    for (int t = 1; t <= 2; t++) {
+        gs_pool *pool = gs_pool_create(t);
+        r = gs_raster_create();
+        CHECK(pool && r);
+        rt_result o;
+        rt_run_with(r, &s, GS_RASTER_FAST, pool, &u, &o); /* grows everything */
+        rt_result_free(&o);
+        rt_run_with(r, &s, GS_RASTER_FAST, pool, NULL, &o);
+        CHECK(o.fwd_status == GS_OK);
+        gs_raster_trim(r);
+        count_recorded(r, &rec, &filled, &all);
+        size_t kept = r->cap_slots;
+        for (int w = 0; w < r->n_arenas; w++)
+            kept += r->arenas[w].cap;
+        CHECK_MSG(rec == 0 && kept == 0, "trim, %d thread(s): %d tiles recorded, %zu kept", t,
+                  rec, kept);
+        gs_gaussian_grads gr = {o.g_means, o.g_log_scales, o.g_quats, o.g_opacity,
+                                o.g_features};
+        gs_error err;
+        o.bwd_status = gs_raster_backward(r, pool, u.v_features, u.v_alpha, u.v_depth, &gr,
+                                          o.g_background, &err);
+        CHECK(o.bwd_status == GS_OK);
+        char what[64];
+        snprintf(what, sizeof what, "trimmed before the backward, %d thread(s)", t);
+        if (rt_same_bytes(what, &o, &ref))
+            printf("  %s: bit-identical\n", what);
+        rt_result_free(&o);
+        rt_run_with(r, &s, GS_RASTER_FAST, pool, &u, &o);
+        count_recorded(r, &rec, &filled, &all);
+        CHECK_MSG(rec == all, "after trim, %d thread(s): %d of %d tiles recorded", t, rec, all);
+        snprintf(what, sizeof what, "a forward after trim, %d thread(s)", t);
+        if (rt_same_bytes(what, &o, &ref))
+            printf("  %s: bit-identical\n", what);
+        rt_result_free(&o);
+        gs_raster_destroy(r);
+        gs_pool_destroy(pool);
+    }
+    gs_raster_trim(NULL);
     rt_result_free(&ref);
     rt_upstream_free(&u);
     rt_scene_free(&s);

@@ -160,8 +160,37 @@ typedef struct gs_view {
     int light_on_head;   /* 0 (default): lights fixed in the camera */
 } gs_view;
 
+/* Contexts and memory. A context belongs to one model (which must outlive
+ * it) and is used by one thread at a time; it owns every buffer it
+ * allocates. Rendering needs the render state it keeps (the face stream's
+ * Gaussians, the feature maps and the image of its live render: about
+ * 18 MB at the cpu configuration, and 4.5 MB per other kept render) and a
+ * scratch used only during a call (the renderer's forward buffer and the
+ * face stream's per-thread block scratch: 27 MB at cpu with two threads),
+ * which contexts can share (gs_model_ctx_share_scratch: then owned by
+ * all of them together, freed with the last). The first fit or training step through a
+ * context (gs_model_fit, gazesplat train) adds the buffers a backward
+ * reads (the face MLPs' activations of every Gaussian, gradients, the
+ * renderer's saved maps: 108 MB at cpu), kept until gs_model_ctx_trim or
+ * destroy. Renders compute the same bytes whatever a context holds.
+ * gs_model_finetune runs through a context of its own, freed before it
+ * returns. */
 gs_model_ctx *gs_model_ctx_create(const gs_model *m);
 void gs_model_ctx_destroy(gs_model_ctx *c);
+/* Frees the buffers only fitting and training use (gs_model_ctx_stats.
+ * train_bytes) and the records its rasterizers kept for a backward
+ * (gs_raster_trim); kept renders and the face stream stay. The next fit
+ * allocates them again. GS_OK (NULL: nothing to do). */
+int gs_model_ctx_trim(gs_model_ctx *c);
+/* c uses with's render scratch from now on (its own goes when no other
+ * context uses it). For contexts that are never in a call at the same
+ * time, such as one thread's contexts for several fine-tuned clones of a
+ * model (any models: the scratch grows to the largest need); a call on
+ * one may then not run while a call on another does, and they must be
+ * created and destroyed by that one thread too. The scratch lives until
+ * the last context using it is destroyed, in any order. GS_ERR_ARG for
+ * NULL. */
+int gs_model_ctx_share_scratch(gs_model_ctx *c, gs_model_ctx *with);
 
 /* Renders `view` of subject `s` into rgb (image_size^2, 8-bit sRGB RGB,
  * `stride` bytes per row; every pixel is written). Consecutive calls for the
@@ -211,6 +240,10 @@ typedef struct gs_model_ctx_stats {
     uint64_t transfers_full;
     uint64_t transfers_incremental;
     int last_transfer_incremental;  /* the last successful transfer's path */
+    /* bytes held by the buffers only fitting and training use (0 until
+     * the context's first fit or training step, and after
+     * gs_model_ctx_trim; a context that only renders never has them) */
+    size_t train_bytes;
 } gs_model_ctx_stats;
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st);
 

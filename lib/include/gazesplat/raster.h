@@ -140,6 +140,10 @@ int gs_raster_set_frustum(gs_raster *r, const gs_camera *frustum,
  * bytes either way, and a backward after such a forward still gives the
  * same gradients, evaluating every tile again. */
 void gs_raster_set_records(gs_raster *r, int on);
+/* Frees the records and the backward's scratch (what training forwards
+ * and backwards grew; forwards regrow them). A backward of the forward
+ * before still gives the same gradients, evaluating every tile again. */
+void gs_raster_trim(gs_raster *r);
 
 /* The fast path's instruction set for later forwards: "avx512" (4 x 4
  * pixel groups, AVX-512 F/VL/DQ/BW with FMA), "avx2" (4 x 2 pixel groups,
