@@ -112,7 +112,7 @@ static void fit(int n)
                        &cam, &l))
                 exit(1);
             for (int e = 0; e < 2; e++) {
-                const double(*p)[2] = (const double(*)[2])l.lm2d[36 + 6 * e];
+                const double(*p)[2] = (const double(*)[2])&l.lm2d[36 + 6 * e];
                 double w[3], rw[3], rg[3];
                 for (int c = 0; c < 3; c++)
                     w[c] = m6[2 * e + 1][c] - m6[2 * e][c];
@@ -226,8 +226,8 @@ static void read_pairs(int n)
         double hz[3] = {la.head_R[2], la.head_R[5], la.head_R[8]};
         double hdeg = gs_geom_vec3_angle(hz, (double[3]){0, 0, 1}) / DEG;
         for (int e = 0; e < 2; e++) {
-            const double(*pa)[2] = (const double(*)[2])la.lm2d[36 + 6 * e];
-            const double(*pb)[2] = (const double(*)[2])lb.lm2d[36 + 6 * e];
+            const double(*pa)[2] = (const double(*)[2])&la.lm2d[36 + 6 * e];
+            const double(*pb)[2] = (const double(*)[2])&lb.lm2d[36 + 6 * e];
             double d[2], f[2];
             gs_error err;
             if (gs_face_iris_gaze_change(e, pa, la.pupil_uv[e], pb, lb.pupil_uv[e], la.head_R,
@@ -289,8 +289,8 @@ static void read_rendered(int n)
         gs_face_iris_opts_default(&o);
         gs_face_iris_opts_scale(&o, 800.0 / 680.0);
         for (int e = 0; e < 2; e++) {
-            const double(*pa)[2] = (const double(*)[2])l0->lm2d[36 + 6 * e];
-            const double(*pb)[2] = (const double(*)[2])l1->lm2d[36 + 6 * e];
+            const double(*pa)[2] = (const double(*)[2])&l0->lm2d[36 + 6 * e];
+            const double(*pb)[2] = (const double(*)[2])&l1->lm2d[36 + 6 * e];
             gs_face_iris ra, rb;
             if (gs_face_iris_locate(&ia, pa, &o, &ra, &err) ||
                 gs_face_iris_locate(&ib, pb, &o, &rb, &err)) {
