@@ -172,13 +172,13 @@ int main(int argc, char **argv)
             if (verbose)
                 printf("scene %d eye %d status %d error %.2f (%+.2f %+.2f) r %.2f pupil %.2f "
                        "visible %.2f contrast %.0f residual %.1f sd %.2f conf %.2f seen %.2f "
-                       "gaze %.0f head %.0f narrowed %d limbus_err %.2f pupil_err %.2f\n",
+                       "gaze %.0f head %.0f narrowed %d pupil_err %.2f\n",
                        i, e, ir.status, d, ir.centre[0] - l->pupil_uv[e][0],
                        ir.centre[1] - l->pupil_uv[e][1], ir.radius, ir.pupil_radius, ir.visible,
                        ir.contrast, ir.residual, ir.centre_sd_px, ir.confidence,
                        contour_seen(&smp, e), gdeg, hdeg, narrowed,
-                       hypot(ir.limbus_centre[0] - l->pupil_uv[e][0], ir.limbus_centre[1] - l->pupil_uv[e][1]),
-                       hypot(ir.pupil_centre[0] - l->pupil_uv[e][0], ir.pupil_centre[1] - l->pupil_uv[e][1]));
+                       hypot(ir.pupil_centre[0] - l->pupil_uv[e][0],
+                             ir.pupil_centre[1] - l->pupil_uv[e][1]));
             if (narrowed) {
                 double c = fmax(sc.expr.squint, sc.expr.blink);
                 add(&narrow[c < 0.6 ? 0 : c < 0.8 ? 1 : 2], ok, d);

@@ -37,18 +37,25 @@ static const change changes[] = {
 #define NCH (int)(sizeof changes / sizeof changes[0])
 
 /* The changed photo: out(X) = in(X / s + d) in geom.h pixels (bilinear,
- * edges repeated). */
-static int apply(const gs_io_image *in, const change *c, gs_io_image *out)
+ * edges repeated), computed only inside roi (x0, y0, x1, y1 of the
+ * original photo, mapped; black elsewhere: nothing reads there). */
+static int apply(const gs_io_image *in, const change *c, const int roi[4], gs_io_image *out)
 {
     int w = (int)lround(in->width * c->s), h = (int)lround(in->height * c->s);
     out->width = w;
     out->height = h;
     out->stride = 3 * (size_t)w;
-    out->data = malloc(out->stride * (size_t)h);
+    out->data = calloc(out->stride, (size_t)h);
     if (!out->data)
         return -1;
-    for (int y = 0; y < h; y++)
-        for (int x = 0; x < w; x++) {
+    int x0 = (int)floor((roi[0] - c->dx) * c->s), x1 = (int)ceil((roi[2] - c->dx) * c->s);
+    int y0 = (int)floor((roi[1] - c->dy) * c->s), y1 = (int)ceil((roi[3] - c->dy) * c->s);
+    x0 = x0 < 0 ? 0 : x0;
+    y0 = y0 < 0 ? 0 : y0;
+    x1 = x1 > w ? w : x1;
+    y1 = y1 > h ? h : y1;
+    for (int y = y0; y < y1; y++)
+        for (int x = x0; x < x1; x++) {
             double u = (x + 0.5) / c->s + c->dx - 0.5, v = (y + 0.5) / c->s + c->dy - 0.5;
             u = u < 0 ? 0 : u > in->width - 1 ? in->width - 1 : u;
             v = v < 0 ? 0 : v > in->height - 1 ? in->height - 1 : v;
@@ -149,24 +156,40 @@ int main(void)
         gs_face_detection d[16];
         int nd = 0;
         CHECK(gs_face_detect(det, &img, NULL, d, 16, &nd, &err) == GS_OK);
+        gs_face_iris ir0[16][2];
+        int ok0[16] = {0};
+        /* The faces' boxes grown by their size: all the landmark model and
+         * the localizer read. */
+        int roi[4] = {img.width, img.height, 0, 0};
         for (int i = 0; i < nd && i < 16; i++) {
-            gs_face_iris ir0[2];
+            int bw = d[i].box.right - d[i].box.left + 1;
+            roi[0] = d[i].box.left - bw < roi[0] ? d[i].box.left - bw : roi[0];
+            roi[1] = d[i].box.top - bw < roi[1] ? d[i].box.top - bw : roi[1];
+            roi[2] = d[i].box.right + bw > roi[2] ? d[i].box.right + bw : roi[2];
+            roi[3] = d[i].box.bottom + bw > roi[3] ? d[i].box.bottom + bw : roi[3];
+        }
+        for (int i = 0; i < nd && i < 16; i++) {
             double uv0[GS_FACE_LANDMARKS][2];
-            if (irises(&img, d[i].box, ir0, uv0))
+            if (irises(&img, d[i].box, ir0[i], uv0))
                 continue;
+            ok0[i] = 1;
             faces++;
             for (int e = 0; e < 2; e++) {
                 eyes++;
-                located += ir0[e].status == GS_FACE_IRIS_OK;
+                located += ir0[i][e].status == GS_FACE_IRIS_OK;
             }
-            for (int c = 0; c < NCH; c++) {
-                gs_io_image ch;
-                CHECK(apply(&img, &changes[c], &ch) == 0);
+        }
+        for (int c = 0; c < NCH; c++) {
+            gs_io_image ch;
+            CHECK(apply(&img, &changes[c], roi, &ch) == 0);
+            for (int i = 0; i < nd && i < 16; i++) {
                 gs_face_iris ir1[2];
                 double uv1[GS_FACE_LANDMARKS][2];
-                int ok = irises(&ch, map_box(d[i].box, &changes[c]), ir1, uv1) == 0;
-                for (int e = 0; e < 2 && ok; e++) {
-                    if (ir0[e].status != GS_FACE_IRIS_OK)
+                if (!ok0[i] || irises(&ch, map_box(d[i].box, &changes[c]), ir1, uv1))
+                    continue;
+                for (int e = 0; e < 2; e++) {
+                    const gs_face_iris *r0 = &ir0[i][e];
+                    if (r0->status != GS_FACE_IRIS_OK)
                         continue;
                     if (ir1[e].status != GS_FACE_IRIS_OK) {
                         lost[c]++;
@@ -175,23 +198,23 @@ int main(void)
                     /* Back to the original pixels: X = X' / s + d. */
                     double x = ir1[e].centre[0] / changes[c].s + changes[c].dx;
                     double y = ir1[e].centre[1] / changes[c].s + changes[c].dy;
-                    double m = hypot(x - ir0[e].centre[0], y - ir0[e].centre[1]);
-                    if (m > 0.2 * ir0[e].radius)
+                    double m = hypot(x - r0->centre[0], y - r0->centre[1]);
+                    if (m > 0.2 * r0->radius)
                         printf("%s face %d eye %d, %s: moved %.2f px (radius %.2f px, eye "
                                "width %.1f px; confidence %.2f, then %.2f)\n", names[f], i, e,
-                               changes[c].name, m, ir0[e].radius, ir0[e].eye_width,
-                               ir0[e].confidence, ir1[e].confidence);
+                               changes[c].name, m, r0->radius, r0->eye_width, r0->confidence,
+                               ir1[e].confidence);
                     if (n[c] < MAXM) {
                         px[c][n[c]] = m;
-                        rel[c][n[c]] = m / ir0[e].radius;
+                        rel[c][n[c]] = m / r0->radius;
                         n[c]++;
                         all_px[na] = m;
-                        all_rel[na] = m / ir0[e].radius;
+                        all_rel[na] = m / r0->radius;
                         na++;
                     }
                 }
-                free(ch.data);
             }
+            free(ch.data);
         }
         gs_io_image_free(&img);
     }
