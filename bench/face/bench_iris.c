@@ -10,12 +10,14 @@
  * cornea does not refract in lib/synth).
  *
  *   bench_iris [--count N] [--first K] [--auto] [--open-lids]
- *              [--supersample 2] [--verbose]
+ *              [--supersample 2] [--val] [--verbose]
  *
  * --auto: the radius range from the eye width instead of the scale;
  * --open-lids: lids pulled back (open_lids render option) so no lid
  * covers the iris; --supersample 2: 2 x 2 samples per pixel (the
- * evaluation renders 1); --verbose: one line per eye. Eyes the face hides (less than half of the contour's
+ * evaluation renders 1); --val: validation-split identities (where the
+ * localizer's constants were chosen) instead of the test split;
+ * --verbose: one line per eye. Eyes the face hides (less than half of the contour's
  * pixels on the rendered eyeball: the nose at large head yaw) are counted
  * apart. Prints Markdown tables: centre error (median, p95, max, px) and
  * how many eyes were flagged, by eye-in-head gaze angle, by head angle
@@ -81,7 +83,7 @@ static void header(const char *what)
 /* Fraction of the contour's pixels on the rendered eyeball. */
 static double contour_seen(const gs_synth_sample *s, int e)
 {
-    const double(*pg)[2] = (const double(*)[2])s->labels.lm2d[36 + 6 * e];
+    const double(*pg)[2] = (const double(*)[2])&s->labels.lm2d[36 + 6 * e];
     const uint8_t *m = gs_synth_sample_mask(s, e == GS_SYNTH_EYE_RIGHT ? GS_SYNTH_MASK_RIGHT_EYE
                                                                         : GS_SYNTH_MASK_LEFT_EYE);
     int in = 0, both = 0;
@@ -102,6 +104,7 @@ static double contour_seen(const gs_synth_sample *s, int e)
 int main(int argc, char **argv)
 {
     int count = 300, autor = 0, open = 0, verbose = 0, ss = 1;
+    gs_synth_split split = GS_SYNTH_TEST;
     uint64_t first = 0;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--count") && i + 1 < argc)
@@ -112,13 +115,15 @@ int main(int argc, char **argv)
             autor = 1;
         else if (!strcmp(argv[i], "--supersample") && i + 1 < argc)
             ss = atoi(argv[++i]) == 2 ? 2 : 1;
+        else if (!strcmp(argv[i], "--val"))
+            split = GS_SYNTH_VAL;
         else if (!strcmp(argv[i], "--verbose"))
             verbose = 1;
         else if (!strcmp(argv[i], "--open-lids"))
             open = 1;
         else {
             fprintf(stderr, "usage: bench_iris [--count N] [--first K] [--auto] [--open-lids] "
-                            "[--supersample 2] [--verbose]\n");
+                            "[--supersample 2] [--val] [--verbose]\n");
             return 2;
         }
     }
@@ -136,7 +141,7 @@ int main(int argc, char **argv)
     for (int i = 0; i < count; i++) {
         uint64_t k = first + (uint64_t)i;
         gs_synth_scene sc;
-        gs_synth_scene_random(gs_synth_split_seed(GS_SYNTH_TEST, k % 100), 7000 + k, &rg, &sc);
+        gs_synth_scene_random(gs_synth_split_seed(split, k % 100), 7000 + k, &rg, &sc);
         gs_synth_camera base, cam;
         gs_synth_camera_single(S, 600, 260, &base);
         if (gs_synth_camera_normalized(&sc, &base, S, 680, 800, &cam, &err) ||
@@ -157,7 +162,7 @@ int main(int argc, char **argv)
         int narrowed = gs_eval_expr_narrowed(&sc.expr);
         for (int e = 0; e < 2; e++) {
             gs_face_iris ir;
-            if (gs_face_iris_locate(&img, (const double(*)[2])l->lm2d[36 + 6 * e], &o, &ir,
+            if (gs_face_iris_locate(&img, (const double(*)[2])&l->lm2d[36 + 6 * e], &o, &ir,
                                     &err)) {
                 fprintf(stderr, "scene %d eye %d: %s\n", i, e, err.msg);
                 return 1;
@@ -167,13 +172,13 @@ int main(int argc, char **argv)
             if (verbose)
                 printf("scene %d eye %d status %d error %.2f (%+.2f %+.2f) r %.2f pupil %.2f "
                        "visible %.2f contrast %.0f residual %.1f sd %.2f conf %.2f seen %.2f "
-                       "gaze %.0f head %.0f narrowed %d limbus_err %.2f pupil_err %.2f\n",
+                       "gaze %.0f head %.0f narrowed %d pupil_err %.2f\n",
                        i, e, ir.status, d, ir.centre[0] - l->pupil_uv[e][0],
                        ir.centre[1] - l->pupil_uv[e][1], ir.radius, ir.pupil_radius, ir.visible,
                        ir.contrast, ir.residual, ir.centre_sd_px, ir.confidence,
                        contour_seen(&smp, e), gdeg, hdeg, narrowed,
-                       hypot(ir.limbus_centre[0] - l->pupil_uv[e][0], ir.limbus_centre[1] - l->pupil_uv[e][1]),
-                       hypot(ir.pupil_centre[0] - l->pupil_uv[e][0], ir.pupil_centre[1] - l->pupil_uv[e][1]));
+                       hypot(ir.pupil_centre[0] - l->pupil_uv[e][0],
+                             ir.pupil_centre[1] - l->pupil_uv[e][1]));
             if (narrowed) {
                 double c = fmax(sc.expr.squint, sc.expr.blink);
                 add(&narrow[c < 0.6 ? 0 : c < 0.8 ? 1 : 2], ok, d);

@@ -15,7 +15,9 @@
  * gaze drawn from the same ranges): the change read by
  * gs_face_iris_gaze_change (the header's constants) against the true
  * head-frame change, from the label iris centres with the true R, from
- * them with R = NULL (a frontal head assumed), and from the localizer's
+ * them with R from PnP of the label's landmarks on the synthetic 6-point
+ * model (what a photo gives), with R = NULL (a frontal head assumed), and
+ * from the localizer's
  * centres on rendered images (both eyes located, status OK). Reported:
  * gain (slope through 0 of read against true change), rms and p95 of the
  * error, cross-talk (slope of the other axis' error against the change),
@@ -112,7 +114,7 @@ static void fit(int n)
                        &cam, &l))
                 exit(1);
             for (int e = 0; e < 2; e++) {
-                const double(*p)[2] = (const double(*)[2])l.lm2d[36 + 6 * e];
+                const double(*p)[2] = (const double(*)[2])&l.lm2d[36 + 6 * e];
                 double w[3], rw[3], rg[3];
                 for (int c = 0; c < 3; c++)
                     w[c] = m6[2 * e + 1][c] - m6[2 * e][c];
@@ -210,7 +212,7 @@ static void pair_scene(uint64_t k, const gs_synth_scene *in, gs_synth_scene *out
 
 static void read_pairs(int n)
 {
-    static acc all_r, all_f, head_r[3];
+    static acc all_r, all_f, all_p, head_r[3], head_f0, head_p0;
     for (int i = 0; i < n; i++) {
         gs_synth_scene a, b;
         gs_synth_camera cam;
@@ -225,11 +227,30 @@ static void read_pairs(int n)
                            (lb.gaze_head_yaw - la.gaze_head_yaw) / DEG};
         double hz[3] = {la.head_R[2], la.head_R[5], la.head_R[8]};
         double hdeg = gs_geom_vec3_angle(hz, (double[3]){0, 0, 1}) / DEG;
+        /* The head rotation a photo would give: PnP of the label's
+         * landmarks on the synthetic 6-point model. */
+        gs_face_pose pose;
+        gs_error perr;
+        if (gs_face_head_pose_model((const double(*)[2])la.lm2d, la.K, GS_FACE_POSE_SYNTH, &pose,
+                                    &perr)) {
+            fprintf(stderr, "%s\n", perr.msg);
+            exit(1);
+        }
         for (int e = 0; e < 2; e++) {
-            const double(*pa)[2] = (const double(*)[2])la.lm2d[36 + 6 * e];
-            const double(*pb)[2] = (const double(*)[2])lb.lm2d[36 + 6 * e];
-            double d[2], f[2];
+            const double(*pa)[2] = (const double(*)[2])&la.lm2d[36 + 6 * e];
+            const double(*pb)[2] = (const double(*)[2])&lb.lm2d[36 + 6 * e];
+            double d[2], f[2], q[2];
             gs_error err;
+            if (gs_face_iris_gaze_change(e, pa, la.pupil_uv[e], pb, lb.pupil_uv[e], pose.R, &q[0],
+                                         &q[1], &err)) {
+                fprintf(stderr, "%s\n", err.msg);
+                exit(1);
+            }
+            q[0] /= DEG;
+            q[1] /= DEG;
+            acc_add(&all_p, truth, q);
+            if (hdeg < 15)
+                acc_add(&head_p0, truth, q);
             if (gs_face_iris_gaze_change(e, pa, la.pupil_uv[e], pb, lb.pupil_uv[e], la.head_R,
                                          &d[0], &d[1], &err) ||
                 gs_face_iris_gaze_change(e, pa, la.pupil_uv[e], pb, lb.pupil_uv[e], NULL, &f[0],
@@ -244,6 +265,8 @@ static void read_pairs(int n)
             acc_add(&all_r, truth, d);
             acc_add(&all_f, truth, f);
             acc_add(&head_r[hdeg < 15 ? 0 : hdeg < 30 ? 1 : 2], truth, d);
+            if (hdeg < 15)
+                acc_add(&head_f0, truth, f);
         }
     }
     header("label iris centres");
@@ -251,7 +274,10 @@ static void read_pairs(int n)
     acc_row("head R known, head 0-15°", &head_r[0]);
     acc_row("head R known, head 15-30°", &head_r[1]);
     acc_row("head R known, head 30-50°", &head_r[2]);
+    acc_row("R by PnP of the landmarks (synthetic 6-point model), all", &all_p);
+    acc_row("R by PnP, head 0-15°", &head_p0);
     acc_row("frontal assumed (R = NULL), all", &all_f);
+    acc_row("frontal assumed (R = NULL), head 0-15°", &head_f0);
 }
 
 static void read_rendered(int n)
@@ -289,8 +315,8 @@ static void read_rendered(int n)
         gs_face_iris_opts_default(&o);
         gs_face_iris_opts_scale(&o, 800.0 / 680.0);
         for (int e = 0; e < 2; e++) {
-            const double(*pa)[2] = (const double(*)[2])l0->lm2d[36 + 6 * e];
-            const double(*pb)[2] = (const double(*)[2])l1->lm2d[36 + 6 * e];
+            const double(*pa)[2] = (const double(*)[2])&l0->lm2d[36 + 6 * e];
+            const double(*pb)[2] = (const double(*)[2])&l1->lm2d[36 + 6 * e];
             gs_face_iris ra, rb;
             if (gs_face_iris_locate(&ia, pa, &o, &ra, &err) ||
                 gs_face_iris_locate(&ib, pb, &o, &rb, &err)) {

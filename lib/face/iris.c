@@ -44,6 +44,8 @@
 #define RADIUS_SD 0.05
 #define SHAPE_SD 0.3
 #define MIN_ARC_SPAN 0.8
+#define STRONG_PUPIL 0.3   /* pupil contrast, of the limbus contrast, that wins outright */
+#define START_PUPIL 0.4   /* pupil size of the start search, of the radius */
 
 void gs_face_iris_opts_default(gs_face_iris_opts *o)
 {
@@ -106,7 +108,7 @@ static double poly_dist(const double pg[6][2], double qx, double qy)
         double ee = ex * ex + ey * ey;
         double t = ee > 0 ? (wx * ex + wy * ey) / ee : 0;
         t = t < 0 ? 0 : t > 1 ? 1 : t;
-        double d = hypot(wx - t * ex, wy - t * ey);
+        double px = wx - t * ex, py = wy - t * ey, d = sqrt(px * px + py * py);
         if (d < best)
             best = d;
         if ((a[1] > qy) != (b[1] > qy) && qx < a[0] + (qy - a[1]) * ex / ey)
@@ -267,12 +269,12 @@ static double cover(double r, double d)
     return m <= 0 ? 0 : m >= 1 ? 1 : m;
 }
 
-static double start_score(const patch *p, const float *w, double cu, double cv, double r);
+static double start_score(const patch *p, const double *w, double cu, double cv, double r);
 
 /* Best start over centres on a grid of `step` in the eye-frame box
  * [a0, a1] x [b0, b1] (patch px about the frame origin o) and radii r0..r1
  * in steps of 6 %. */
-static void best_start(const patch *p, const float *w, const eye_geom *g, const double o[2],
+static void best_start(const patch *p, const double *w, const eye_geom *g, const double o[2],
                        const double box[4], double r0, double r1, double step, circle *best)
 {
     int na = (int)floor((box[1] - box[0]) / step) + 1;
@@ -309,7 +311,7 @@ static void ell_dist(const double t[NGEO], double qu, double qv, double *de, dou
     double mu = (1 + t[4]) * qu + t[5] * qv, mv = t[5] * qu + (1 - t[4]) * qv;
     double d2 = qu * mu + qv * mv;
     *de = sqrt(d2 > 0 ? d2 : 0);
-    *gm = *de > 1e-9 ? hypot(mu, mv) / *de : 1;
+    *gm = *de > 1e-9 ? sqrt(mu * mu + mv * mv) / *de : 1;
 }
 
 /* Coverage by the ellipse of radius r: the elliptic distance turned into
@@ -367,7 +369,7 @@ static int chol_solve(double *a, double *b, int n)
 /* The levels for geometry t by weighted least squares (a small ridge keeps
  * an absent pupil or sclera solvable), the residuals into res (may be
  * NULL) and the weighted SSE into m. */
-static void solve_levels(const patch *p, const float *w, const double t[NGEO], model *m,
+static void solve_levels(const patch *p, const double *w, const double t[NGEO], model *m,
                          double *res)
 {
     double a[NLIN * NLIN] = {0}, b[NLIN] = {0}, f[NLIN];
@@ -414,17 +416,17 @@ static void solve_levels(const patch *p, const float *w, const double t[NGEO], m
 
 /* The start's score: minus the misfit of an iris disc (no pupil) on the
  * shaded sclera; -inf unless the disc is darker than the sclera. */
-static double start_score(const patch *p, const float *w, double cu, double cv, double r)
+static double start_score(const patch *p, const double *w, double cu, double cv, double r)
 {
-    double t[NGEO] = {cu, cv, r, -1, 0, 0};
+    double t[NGEO] = {cu, cv, r, START_PUPIL * r, 0, 0};
     model m;
     solve_levels(p, w, t, &m, NULL);
     return m.beta[2] > m.beta[1] ? -m.sse : -INFINITY;
 }
 
-static int cmp_float(const void *a, const void *b)
+static int cmp_double(const void *a, const void *b)
 {
-    float x = *(const float *)a, y = *(const float *)b;
+    double x = *(const double *)a, y = *(const double *)b;
     return (x > y) - (x < y);
 }
 
@@ -459,7 +461,7 @@ typedef struct fit_out {
 
 /* Damped Gauss-Newton on the geometry with the levels projected out;
  * Huber weights from the residuals of the previous step (scale 1.4826 x
- * their median magnitude). w and res hold n_op floats / doubles. */
+ * their median magnitude). w holds n_op weights, res (2 + NGEO) n_op. */
 /* Gaussian priors on the geometry: mean and 1/sigma^2 (0: none), in
  * units of the robust residual variance per opening pixel. */
 typedef struct prior {
@@ -478,7 +480,7 @@ static double prior_cost(const prior *pr, const double t[NGEO], double k)
 }
 
 static void fit_model(const patch *p, const double start[NGEO], double r0, double r1,
-                      const prior *pr, float *w, double *res, fit_out *out)
+                      const prior *pr, double *w, double *res, fit_out *out)
 {
     static const double h[NGEO] = {0.05, 0.05, 0.05, 0.05, 0.01, 0.01};
     int n = p->n_op;
@@ -492,14 +494,14 @@ static void fit_model(const patch *p, const double start[NGEO], double r0, doubl
     double lambda = 1e-2, scale = 1;
     for (int it = 0; it < 30; it++) {
         /* Huber weights at 1.345 robust sigmas. */
-        float *mag = (float *)(res + n);  /* scratch after the residuals */
+        double *mag = res + n; /* scratch after the residuals */
         for (int k = 0; k < n; k++)
-            mag[k] = (float)fabs(res[k]);
-        qsort(mag, (size_t)n, sizeof *mag, cmp_float);
+            mag[k] = fabs(res[k]);
+        qsort(mag, (size_t)n, sizeof *mag, cmp_double);
         scale = fmax(1.0, 1.4826 * mag[n / 2]);
         double c = 1.345 * scale;
         for (int k = 0; k < n; k++)
-            w[k] = fabs(res[k]) <= c ? 1.0f : (float)(c / fabs(res[k]));
+            w[k] = fabs(res[k]) <= c ? 1 : c / fabs(res[k]);
         solve_levels(p, w, t, &cur, res);
         double kp = scale * scale * PRIOR_PIXELS;
         /* Jacobian of the residuals by forward differences. */
@@ -659,8 +661,20 @@ static double limbus_visible(const patch *p, const eye_geom *g, const model *m, 
  * lid's shadow or a lash line only on one), signed: > 0 for a dark disc.
  * Returns |contrast| sqrt(disc pixels), 0 when under 60 % of the disc or
  * under three quadrants (each 40 % present) lie inside. */
-static double pupil_score(const patch *p, const double t[NGEO], double cu, double cv, double rho,
-                          double *delta)
+/* The grey where a pupil may be, into p->tmp: pixels inside the contour
+ * and 0.75 px inside the limbus ellipse t; NaN elsewhere. */
+static void pupil_plane(patch *p, const double t[NGEO])
+{
+    for (int j = 0; j < p->h; j++)
+        for (int i = 0; i < p->w; i++) {
+            size_t k = (size_t)j * p->w + i;
+            double de, gm;
+            ell_dist(t, i + 0.5 - t[0], j + 0.5 - t[1], &de, &gm);
+            p->tmp[k] = p->in[k] && de <= t[2] - 0.75 ? p->g[k] : NAN;
+        }
+}
+
+static double pupil_score(const patch *p, double cu, double cv, double rho, double *delta)
 {
     double outer = 1.6 * rho, sd = 0, nd = 0, fd = 0;
     double sq[4] = {0}, nq[4] = {0}, fq[4] = {0};
@@ -668,18 +682,15 @@ static double pupil_score(const patch *p, const double t[NGEO], double cu, doubl
     int j0 = (int)floor(cv - outer - 1), j1 = (int)ceil(cv + outer + 1);
     for (int j = j0 < 0 ? 0 : j0; j <= j1 && j < p->h; j++)
         for (int i = i0 < 0 ? 0 : i0; i <= i1 && i < p->w; i++) {
-            double du = i + 0.5 - cu, dv = j + 0.5 - cv, d = hypot(du, dv);
+            double du = i + 0.5 - cu, dv = j + 0.5 - cv, d = sqrt(du * du + dv * dv);
             double md = cover(rho, d), mr = cover(outer, d) - md;
             if (md <= 0 && mr <= 0)
                 continue;
             int q = (du >= 0) + 2 * (dv >= 0);
             fd += md;
             fq[q] += mr;
-            size_t k = (size_t)j * p->w + i;
-            float v = p->g[k];
-            double de, gm;
-            ell_dist(t, i + 0.5 - t[0], j + 0.5 - t[1], &de, &gm);
-            if (!p->in[k] || isnan(v) || de > t[2] - 0.75)
+            float v = p->tmp[(size_t)j * p->w + i];
+            if (isnan(v))
                 continue;
             sd += md * v;
             nd += md;
@@ -714,9 +725,10 @@ typedef struct pupil {
 /* Best pupil within `reach` of (cu, cv), radius rlo..rhi: a grid of 0.5
  * patch px and 10 % radius steps, then one of 0.1 px and 3 % around the
  * best. */
-static pupil find_pupil(const patch *p, const double t[NGEO], double cu, double cv,
-                        double reach, double rlo, double rhi)
+static pupil find_pupil(patch *p, const double t[NGEO], double cu, double cv, double reach,
+                        double rlo, double rhi)
 {
+    pupil_plane(p, t);
     pupil best = {cu, cv, 0, 0, 0};
     for (int pass = 0; pass < 2; pass++) {
         double step = pass ? 0.1 : 0.5, rstep = pass ? 1.03 : 1.1;
@@ -729,10 +741,10 @@ static pupil find_pupil(const patch *p, const double t[NGEO], double cu, double 
         for (int j = -nstep; j <= nstep; j++)
             for (int i = -nstep; i <= nstep; i++) {
                 double u = u0 + i * step, v = v0 + j * step;
-                if (!pass && hypot(u - cu, v - cv) > reach)
+                if (!pass && (u - cu) * (u - cu) + (v - cv) * (v - cv) > reach * reach)
                     continue;
                 for (double r = ra; r <= rb * 1.0001; r *= rstep) {
-                    double dl, sc = pupil_score(p, t, u, v, r, &dl);
+                    double dl, sc = pupil_score(p, u, v, r, &dl);
                     if (sc > best.score)
                         best = (pupil){u, v, r, dl, sc};
                 }
@@ -792,7 +804,7 @@ static void iris_lab(const gs_io_image *img, const eye_geom *g, double cx, doubl
         }
         for (int y = y0; y <= y1; y++)
             for (int x = x0; x <= x1; x++) {
-                double d = hypot(x + 0.5 - cx, y + 0.5 - cy);
+                double dx = x + 0.5 - cx, dy = y + 0.5 - cy, d = sqrt(dx * dx + dy * dy);
                 if (d < inner || d > outer || poly_dist(g->poly, x + 0.5, y + 0.5) > 0)
                     continue;
                 double lab[3];
@@ -855,7 +867,6 @@ static void result_empty(gs_face_iris *out, gs_face_iris_status st, const eye_ge
     memset(out, 0, sizeof *out);
     out->status = st;
     out->centre[0] = out->centre[1] = out->radius = out->pupil_radius = NAN;
-    out->limbus_centre[0] = out->limbus_centre[1] = NAN;
     out->pupil_centre[0] = out->pupil_centre[1] = NAN;
     out->residual = out->centre_sd_px = out->contrast = NAN;
     out->lab[0] = out->lab[1] = out->lab[2] = NAN;
@@ -885,15 +896,16 @@ static int locate(const gs_io_image *img, const eye_geom *g, const gs_face_iris_
     patch_opening(&p, g, 0.04 * g->width + 0.3);
     out->status = GS_FACE_IRIS_NO_EDGE;
     int n = p.n_op;
-    float *w = NULL;
+    double *w = NULL;
     double *res = NULL;
     if (n >= 12) {
-        w = malloc((size_t)(n + 1) * sizeof *w + (size_t)(2 + NGEO) * n * sizeof *res);
+        /* weights, then residuals, scratch and the Jacobian's columns */
+        w = malloc((size_t)(3 + NGEO) * (size_t)n * sizeof *w);
         if (!w) {
             free(p.g);
             return GS_ERR_NOMEM;
         }
-        res = (double *)(w + n + (n & 1));
+        res = w + n;
     }
     if (w) {
         /* Start: centres between the lids' extremes along the corner line. */
@@ -934,7 +946,11 @@ static int locate(const gs_io_image *img, const eye_geom *g, const gs_face_iris_
             if (pu.score > 0 && fabs(pu.delta) >= o->min_contrast) {
                 double tb[NGEO] = {pu.u, pu.v, m->t[2], pu.rho, m->t[4], m->t[5]};
                 fit_model(&p, tb, r0, r1, &pr, w, res, &fb);
-                if (fb.cost < fa.cost)
+                /* A strong pupil wins when the fit from it stays on it. */
+                double sclera_a = fa.m.beta[2], con_a = sclera_a - fa.m.beta[1];
+                int strong = fabs(pu.delta) >= STRONG_PUPIL * con_a &&
+                             hypot(fb.m.t[0] - pu.u, fb.m.t[1] - pu.v) <= 0.12 * major_axis(fb.m.t) + 0.5;
+                if (fb.cost < fa.cost || strong)
                     f = &fb;
             }
             m = &f->m;
@@ -956,8 +972,6 @@ static int locate(const gs_io_image *img, const eye_geom *g, const gs_face_iris_
             int pupil_ok = pf.score > 0 && fabs(pf.delta) >= fmax(o->min_contrast, 0.15 * contrast) &&
                            hypot(pf.u - m->t[0], pf.v - m->t[1]) <= 0.12 * rmaj + 0.5;
             int both = sides[0] >= LIMBUS_POINTS / 16 && sides[1] >= LIMBUS_POINTS / 16;
-            out->limbus_centre[0] = cx;
-            out->limbus_centre[1] = cy;
             if (pupil_ok) {
                 out->pupil_centre[0] = p.x0 + s * pf.u;
                 out->pupil_centre[1] = p.y0 + s * pf.v;

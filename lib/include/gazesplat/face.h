@@ -357,9 +357,11 @@ typedef enum gs_face_iris_status {
     GS_FACE_IRIS_CLOSED = 2,    /* contour opening under min_opening */
     GS_FACE_IRIS_NO_EDGE = 3,   /* too little limbus edge, too low a contrast
                                    or a fit that does not hold together */
-    GS_FACE_IRIS_PARTIAL = 4    /* the limbus seen on one side only (the iris
-                                   in a corner) and no pupil: the centre is
-                                   filled but rests on the radius prior */
+    GS_FACE_IRIS_PARTIAL = 4    /* no pupil stands out and the limbus is not
+                                   seen on both sides over a vertical span
+                                   of its arc (the iris in a corner or under
+                                   the lids): the centre is filled but rests
+                                   on the radius prior */
 } gs_face_iris_status;
 
 typedef struct gs_face_iris_opts {
@@ -368,8 +370,9 @@ typedef struct gs_face_iris_opts {
     double radius_min_px;     /* iris radius searched, px; both 0 (default): */
     double radius_max_px;     /*   0.14 to 0.62 eye widths (head yaw narrows
                                    the eye, not the iris). At a known scale
-                                   pass it: 5.5 to 9 px at 256 px normalized
-                                   faces (docs/face.md) */
+                                   set it with gs_face_iris_opts_scale
+                                   (5.6 to 8.2 px at 256 px normalized
+                                   faces): much better (docs/face.md) */
     double min_visible;       /* fraction of the limbus with edge support;
                                  default 0.08 */
     double min_contrast;      /* limbus step, grey levels; default 8 */
@@ -385,13 +388,13 @@ void gs_face_iris_opts_scale(gs_face_iris_opts *o, double px_per_mm);
 
 typedef struct gs_face_iris {
     gs_face_iris_status status;
-    /* Filled when status is OK (else NaN or 0): */
+    /* Filled when status is OK or PARTIAL (else NaN or 0): */
     double centre[2];      /* iris centre, image pixels (geom.h, +0.5): the
-                              pupil's when one stands out, else the
-                              limbus ellipse's */
-    double limbus_centre[2]; /* centre of the fitted limbus ellipse */
-    double pupil_centre[2];  /* centre of the pupil (NaN when none) */
-    double radius;         /* limbus radius, px */
+                              centre of the fitted limbus ellipse (pupil
+                              and iris concentric) */
+    double pupil_centre[2]; /* the pupil detector's own centre, NaN when no
+                               pupil stands out */
+    double radius;         /* limbus radius (major semi-axis), px */
     double pupil_radius;   /* px; 0 when no pupil stands out of the iris */
     double pupil_contrast; /* pupil - iris grey: < 0 dark, > 0 bright
                               (red-eye) */
@@ -400,8 +403,9 @@ typedef struct gs_face_iris {
     double residual;       /* robust rms misfit of the eye model, grey */
     double centre_sd_px;   /* standard error of the centre from the fit
                               (largest axis), px */
-    double visible;        /* fraction of the limbus circle inside the
-                              contour with an edge on it */
+    double visible;        /* fraction of 64 points of the limbus ellipse
+                              inside the contour with the grey stepping up
+                              across them */
     double confidence;     /* 0..1: visible, contrast over residual, and
                               the centre's error against the radius */
     double lab[3];         /* mean CIELAB (D65) of the iris ring inside the
@@ -415,11 +419,14 @@ typedef struct gs_face_iris {
 } gs_face_iris;
 
 /* Locates the iris of one eye: img (RGB) and its 6 iBUG contour points
- * (36-41 or 42-47, in that order, geom.h pixels). A gradient vote of
- * circles on the lateral limbus arcs gives the start; a sub-pixel edge on
- * each of 64 rays and a robust circle fit (Tukey IRLS) give the centre and
- * radius (docs/face.md, "Iris localizer"). Deterministic; one allocation
- * (the grey eye patch). opts may be NULL (defaults). Errors: GS_ERR_ARG for
+ * (36-41 or 42-47, in that order, geom.h pixels). The grey of the
+ * contour's opening (lids and lashes left out, glints opened away) is fitted
+ * by a pupil disc inside a concentric iris disc on a shaded sclera, both
+ * one ellipse shape, sub-pixel edges, levels by least squares, geometry by
+ * damped Gauss-Newton; started from the best-fitting iris disc on a grid
+ * and again from the pupil a detector finds (docs/face.md, "Iris
+ * localizer"). Deterministic; two allocations. opts may be NULL
+ * (defaults). Errors: GS_ERR_ARG for
  * NULL pointers, a bad image, a contour point outside the image, or a
  * degenerate contour (corners under 1 px apart, points farther than 3 eye
  * widths apart); GS_ERR_NONFINITE for a non-finite point or option. An eye
