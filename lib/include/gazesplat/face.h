@@ -476,9 +476,9 @@ int gs_face_iris_gaze_change(int eye, const double eye_uv0[6][2],
  * falling as a Gaussian past it; an output whose irises vanished where the
  * input showed them scores 0. */
 typedef struct gs_face_quality_opts {
-    double gaze_tol_deg;   /* gaze error allowed, at least (default 5) */
-    double gaze_tol_frac;  /* ... or this fraction of the change asked (0.3) */
-    double max_delta_e;    /* iris colour change allowed (10) */
+    double gaze_tol_deg;   /* gaze error allowed, at least (default 10) */
+    double gaze_tol_frac;  /* ... or this fraction of the change asked (0.5) */
+    double max_delta_e;    /* iris colour change allowed (15) */
     double max_artifact;   /* eye speckle over the input's allowed (1.6) */
     double px_per_mm;      /* the scale at the eyes for the iris search
                               (gs_face_iris_opts_scale); 0: unknown */
