@@ -513,7 +513,8 @@ static void face_fwd_task(void *ctx, int b, int worker)
     /* the block's rows of the training buffers, or this thread's scratch */
     float *ein, *pin, *eact, *pact;
     if (c->fe_act) {
-        ein = c->fe_in + (size_t)r0 * de, pin = c->fp_in + (size_t)r0 * dp;
+        ein = c->fe_in + (size_t)r0 * de;
+        pin = c->fp_in + (size_t)r0 * dp;
         eact = c->fe_act + gs_mlp_act_size(&p->face_e, r0);
         pact = c->fp_act + gs_mlp_act_size(&p->face_p, r0);
     } else {
