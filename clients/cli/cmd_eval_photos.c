@@ -240,6 +240,19 @@ done:
     return rc;
 }
 
+/* A number with `prec` decimals (a sign with plus) for JSON (`none`
+ * "null" when not finite) or the table ("-"). */
+static const char *num(char *buf, size_t cap, int prec, int plus, double v, const char *none)
+{
+    if (!isfinite(v))
+        return none;
+    if (plus)
+        snprintf(buf, cap, "%+.*f", prec, v);
+    else
+        snprintf(buf, cap, "%.*f", prec, v);
+    return buf;
+}
+
 static void print_row(const face_eval *fe)
 {
     static const char *const names[2] = {"plain", "transfer"};
@@ -252,12 +265,14 @@ static void print_row(const face_eval *fe)
     }
     for (int k = 0; k < 2; k++) {
         const mode_stats *m = &fe->mode[k];
-        printf("| %s | %d | %s%s | %.1f + %.1f s | %d/25 | %.2f / %.2f | %+.2f / %+.2f | %.0f %% | "
-               "%.1f | %.2f | %.0f %% | %.2f (%.2f) |\n",
-               base, fe->index, names[k],
-               fe->gate.refusal ? " (gate off)" : "", fe->fit_s, fe->ft_s, m->n, m->gain[1],
-               m->gain[0], m->cross[1], m->cross[0], 100 * m->sign, m->delta_e, m->artifact,
-               100 * m->detected, m->score_mean, m->score_min);
+        char b[8][32];
+        printf("| %s | %d | %s%s | %.1f + %.1f s | %d/25 | %s / %s | %s / %s | %s | %s | %.2f | %.0f %% | "
+               "%.2f (%.2f) |\n",
+               base, fe->index, names[k], fe->gate.refusal ? " (gate off)" : "", fe->fit_s, fe->ft_s,
+               m->n, num(b[0], 32, 2, 0, m->gain[1], "-"), num(b[1], 32, 2, 0, m->gain[0], "-"),
+               num(b[2], 32, 2, 1, m->cross[1], "-"), num(b[3], 32, 2, 1, m->cross[0], "-"),
+               num(b[4], 32, 0, 0, 100 * m->sign, "-"), num(b[5], 32, 1, 0, m->delta_e, "-"),
+               m->artifact, 100 * m->detected, m->score_mean, m->score_min);
     }
 }
 
@@ -273,20 +288,24 @@ static void json_face(FILE *f, const face_eval *fe, int first)
                 fe->ft_s, fe->fit_psnr);
         for (int k = 0; k < 2; k++) {
             const mode_stats *m = &fe->mode[k];
-            fprintf(f, "%s{\"mode\":\"%s\",\"measured\":%d,\"gain_yaw\":%.4f,\"gain_pitch\":%.4f,"
-                       "\"cross_yaw_from_pitch\":%.4f,\"cross_pitch_from_yaw\":%.4f,\"sign\":%.4f,"
-                       "\"delta_e\":%.3f,\"artifact\":%.4f,\"detected\":%.3f,\"score_mean\":%.4f,"
+            char b[8][32];
+            fprintf(f, "%s{\"mode\":\"%s\",\"measured\":%d,\"gain_yaw\":%s,\"gain_pitch\":%s,"
+                       "\"cross_yaw_from_pitch\":%s,\"cross_pitch_from_yaw\":%s,\"sign\":%s,"
+                       "\"delta_e\":%s,\"artifact\":%.4f,\"detected\":%.3f,\"score_mean\":%.4f,"
                        "\"score_min\":%.4f,\"images\":[",
-                    k ? "," : "", k ? "transfer" : "plain", m->n, m->gain[1], m->gain[0],
-                    m->cross[1], m->cross[0], m->sign, m->delta_e, m->artifact, m->detected,
-                    m->score_mean, m->score_min);
+                    k ? "," : "", k ? "transfer" : "plain", m->n,
+                    num(b[0], 32, 4, 0, m->gain[1], "null"), num(b[1], 32, 4, 0, m->gain[0], "null"),
+                    num(b[2], 32, 4, 0, m->cross[1], "null"), num(b[3], 32, 4, 0, m->cross[0], "null"),
+                    num(b[4], 32, 4, 0, m->sign, "null"), num(b[5], 32, 3, 0, m->delta_e, "null"),
+                    m->artifact, m->detected, m->score_mean, m->score_min);
             for (int t = 0; t < NT; t++) {
                 const gs_face_quality *q = &fe->q[k][t];
-                fprintf(f, "%s{\"asked_deg\":[%.2f,%.2f],\"seen_deg\":[%.2f,%.2f],\"eyes\":%d,"
-                           "\"delta_e\":%.2f,\"artifact\":%.3f,\"score\":%.4f}",
+                fprintf(f, "%s{\"asked_deg\":[%.2f,%.2f],\"seen_deg\":[%s,%s],\"eyes\":%d,"
+                           "\"delta_e\":%s,\"artifact\":%.3f,\"score\":%.4f}",
                         t ? "," : "", q->commanded[0] / DEG, q->commanded[1] / DEG,
-                        q->measured[0] / DEG, q->measured[1] / DEG, q->eyes, q->delta_e,
-                        q->artifact, q->score);
+                        num(b[0], 32, 2, 0, q->measured[0] / DEG, "null"),
+                        num(b[1], 32, 2, 0, q->measured[1] / DEG, "null"), q->eyes,
+                        num(b[2], 32, 2, 0, q->delta_e, "null"), q->artifact, q->score);
             }
             fprintf(f, "]}");
         }
@@ -339,7 +358,7 @@ static int run_eval_photos(int argc, char **argv)
     if (jf)
         fprintf(jf, "{\"faces\":[\n");
     printf("| photo | face | mode | fit + fine-tune | measured | gain yaw / pitch | cross-talk "
-           "yaw / pitch | sign | iris dE | speckle | detected | score (min) |\n"
+           "yaw / pitch | sign %% | iris dE | speckle | detected | score (min) |\n"
            "|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     char *list = strdup(o[1].value);
     int nfaces = 0, passed = 0;

@@ -10,7 +10,11 @@ and the daemon goes on serving.
 - face_gate = no: the black frame fits (the gate is the only thing that
   refused it);
 - the CLI: gazesplat fit of the black frame exits 3 naming the reason,
-  --no-gate exits 0; gazesplat redirect of the small face exits 3.
+  --no-gate exits 0; gazesplat redirect of the small face exits 3;
+- redirect quality: every gaze-only image of an inline REDIRECT carries
+  Quality, a head change none, min_quality 1 drops every image (dropped,
+  no pixels, STATS images_dropped), by key without a kept input none;
+- gazesplat eval-photos: one face row, valid JSON of 25 images a mode.
 usage: test_daemon_gate.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import io
 import os
@@ -160,6 +164,26 @@ def main():
                        capture_output=True, text=True)
     t.check(p.returncode == 3 and "face refused (small_eyes)" in p.stderr,
             "gazesplat redirect of 10 px eyes: exit %d, %s" % (p.returncode, p.stderr.strip()))
+    # The real-photo report on the astronaut and on a photo without a face:
+    # one row per face and mode, valid JSON with 25 measured images a mode.
+    rep = os.path.join(work, "gate_eval.json")
+    nf = os.path.join(work, "gate_noface.png")
+    with open(nf, "wb") as f:
+        f.write(no_face)
+    p = subprocess.run([cli, "eval-photos", "--model", model, "--photos", ASTRONAUT + "," + nf,
+                        "--iters", str(FAST), "--finetune", "0", "--out-json", rep],
+                       capture_output=True, text=True)
+    t.check(p.returncode == 0 and "| astronaut.jpg | 0 | plain |" in p.stdout and
+            "1 faces, 1 passed the gate" in p.stdout, "eval-photos: exit %d %s %s" %
+            (p.returncode, p.stdout[-400:], p.stderr[-400:]))
+    if p.returncode == 0:
+        import json
+        d = json.load(open(rep))
+        f0 = d["faces"][0] if d["faces"] else {}
+        t.check(len(d["faces"]) == 1 and f0.get("gate") == "usable" and len(f0.get("modes", [])) == 2 and
+                all(len(m["images"]) == 25 for m in f0["modes"]), "eval-photos JSON: %s" % str(d)[:300])
+    p = subprocess.run([cli, "eval-photos", "--model", model], capture_output=True, text=True)
+    t.check(p.returncode == 2, "eval-photos without --photos: exit %d" % p.returncode)
     return t.status()
 
 
