@@ -14,9 +14,12 @@ and the daemon goes on serving.
 - redirect quality: every gaze-only image of an inline REDIRECT carries
   Quality, a head change none, min_quality 1 drops every image (dropped,
   no pixels, STATS images_dropped), by key without a kept input none;
-- gazesplat eval-photos: one face row, valid JSON of 25 images a mode.
+- gazesplat eval-photos: one face row, valid JSON of 25 images a mode;
+- grey, CMYK and EXIF-rotated JPEGs find the face; a truncated one is a
+  clear error.
 usage: test_daemon_gate.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import io
+import json
 import os
 import subprocess
 import sys
@@ -177,11 +180,32 @@ def main():
             "1 faces, 1 passed the gate" in p.stdout, "eval-photos: exit %d %s %s" %
             (p.returncode, p.stdout[-400:], p.stderr[-400:]))
     if p.returncode == 0:
-        import json
         d = json.load(open(rep))
         f0 = d["faces"][0] if d["faces"] else {}
         t.check(len(d["faces"]) == 1 and f0.get("gate") == "usable" and len(f0.get("modes", [])) == 2 and
                 all(len(m["images"]) == 25 for m in f0["modes"]), "eval-photos JSON: %s" % str(d)[:300])
+    # Photos in the forms phones and scanners write: grey and CMYK JPEGs and
+    # an EXIF-rotated one find the face as the plain photo does (within a
+    # few px); a truncated one is a clear error.
+    variants = {"grey": astro.convert("L"), "cmyk": astro.convert("CMYK")}
+    rot = astro.rotate(90, expand=True)
+    ex = Image.Exif()
+    ex[0x0112] = 6  # shown rotated 90 degrees clockwise
+    for name, im in list(variants.items()) + [("exif", rot)]:
+        path = os.path.join(work, "gate_%s.jpg" % name)
+        im.save(path, quality=92, **({"exif": ex} if name == "exif" else {}))
+        p = subprocess.run([cli, "face", "--image", path, "--json"], capture_output=True, text=True)
+        ok = p.returncode == 0
+        if ok:
+            box = json.loads(p.stdout)["box"]
+            ok = abs(box[0] - 173) <= 6 and abs(box[1] - 128) <= 6
+        t.check(ok, "%s JPEG: exit %d %s %s" % (name, p.returncode, p.stdout[:120], p.stderr[-200:]))
+    trunc = os.path.join(work, "gate_trunc.jpg")
+    with open(trunc, "wb") as f:
+        f.write(open(ASTRONAUT, "rb").read()[:5000])
+    p = subprocess.run([cli, "face", "--image", trunc], capture_output=True, text=True)
+    t.check(p.returncode == 1 and "truncated" in p.stderr, "truncated JPEG: exit %d %s" %
+            (p.returncode, p.stderr.strip()))
     p = subprocess.run([cli, "eval-photos", "--model", model], capture_output=True, text=True)
     t.check(p.returncode == 2, "eval-photos without --photos: exit %d" % p.returncode)
     return t.status()
