@@ -140,9 +140,28 @@ int aug_remote_fit_one(gs_client *c, const aug_remote_fit *in, aug_remote_subjec
 }
 
 /* One REDIRECT of targets [t0, t0 + n). */
+/* The server's Quality as the library's record. */
+static void quality_of(const Gazesplat__Quality *m, gs_face_quality *q)
+{
+    const double deg = 3.14159265358979323846 / 180.0;
+    memset(q, 0, sizeof *q);
+    q->score = m->score;
+    q->eyes = (int)m->eyes;
+    if (m->asked) {
+        q->commanded[0] = m->asked->pitch_deg * deg;
+        q->commanded[1] = m->asked->yaw_deg * deg;
+    }
+    q->measured[0] = m->seen ? m->seen->pitch_deg * deg : NAN;
+    q->measured[1] = m->seen ? m->seen->yaw_deg * deg : NAN;
+    q->gaze_error_deg = m->eyes ? m->gaze_error_deg : NAN;
+    q->delta_e = m->eyes ? m->iris_delta_e : NAN;
+    q->artifact = m->eye_speckle;
+    snprintf(q->reason, sizeof q->reason, "%s", m->reason ? m->reason : "");
+}
+
 static int render_group(gs_client *c, const aug_remote_subject *s, const aug_remote_target *t,
                         size_t t0, size_t n, int transfer, int size, uint8_t *out, size_t rec,
-                        char *msg, size_t cap)
+                        gs_face_quality *q, char *msg, size_t cap)
 {
     Gazesplat__Target *tg = calloc(n, sizeof *tg);
     Gazesplat__Target **tp = calloc(n, sizeof *tp);
@@ -213,6 +232,8 @@ static int render_group(gs_client *c, const aug_remote_subject *s, const aug_rem
                     for (int y = 0; y < size; y++)
                         memcpy(dst + (size_t)y * row, im->data.data + (size_t)y * im->stride, row);
                     got[m->index] = 1;
+                    if (q && m->quality)
+                        quality_of(m->quality, &q[t0 + m->index]);
                 }
                 gs_client_frame_free(&f);
                 if (rc)
@@ -245,12 +266,16 @@ done:
 }
 
 int aug_remote_render(gs_client *c, const aug_remote_subject *s, const aug_remote_target *t,
-                      size_t n, int transfer, int size, uint8_t *out, size_t rec, char *msg,
-                      size_t cap)
+                      size_t n, int transfer, int size, uint8_t *out, size_t rec,
+                      gs_face_quality *q, char *msg, size_t cap)
 {
+    for (size_t i = 0; q && i < n; i++) {
+        memset(&q[i], 0, sizeof q[i]);
+        q[i].score = NAN;
+    }
     for (size_t t0 = 0; t0 < n; t0 += max_targets) {
         size_t k = n - t0 < max_targets ? n - t0 : max_targets;
-        if (render_group(c, s, t, t0, k, transfer, size, out, rec, msg, cap))
+        if (render_group(c, s, t, t0, k, transfer, size, out, rec, q, msg, cap))
             return -1;
     }
     return 0;

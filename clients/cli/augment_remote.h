@@ -7,6 +7,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "gazesplat/face.h"
+
 typedef struct gs_client gs_client;
 
 typedef struct aug_remote_fit {
@@ -44,9 +46,12 @@ int aug_remote_fit_one(gs_client *c, const aug_remote_fit *in, aug_remote_subjec
                        size_t cap);
 
 /* REDIRECT by key, n targets (sent in groups of the server's
- * max_targets), raw RGB8 of size x size into out + i * rec for target i. */
+ * max_targets), raw RGB8 of size x size into out + i * rec for target i;
+ * q (NULL, or n entries): the server's Quality of each image, score NaN
+ * where it sent none (face.h, gs_face_quality; the irises' records are
+ * left zero). */
 int aug_remote_render(gs_client *c, const aug_remote_subject *s, const aug_remote_target *t,
-                      size_t n, int transfer, int size, uint8_t *out, size_t rec, char *msg,
-                      size_t cap);
+                      size_t n, int transfer, int size, uint8_t *out, size_t rec,
+                      gs_face_quality *q, char *msg, size_t cap);
 
 #endif

@@ -1251,7 +1251,8 @@ static float get_f32le(const uint8_t *p)
  * they are (the server detects and normalizes them as redirect does);
  * normalized faces and HDF5 rows as PNGs of the normalized face. The
  * renders land in *renders (nt x S x S x 3 RGB). */
-static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, const char *what)
+static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, gs_face_quality **quals,
+                         const char *what)
 {
     const cli_command *cmd = j->cmd;
     source *s = &j->src[k];
@@ -1327,8 +1328,10 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, const 
         tg[t].head_deg[0] = x->hp / DEG;
         tg[t].head_deg[1] = x->hy / DEG;
     }
+    if (!rc && !(*quals = calloc(s->nt + 1, sizeof **quals)))
+        rc = cli_fail(cmd, "out of memory");
     if (!rc && aug_remote_render(j->remote, &rs, tg, s->nt, j->transfer, S, *renders,
-                                 (size_t)S * S * 3, msg, sizeof msg))
+                                 (size_t)S * S * 3, *quals, msg, sizeof msg))
         rc = cli_fail(cmd, "%s: %s", what, msg);
     if (!rc) {
         /* The subject as FIT_OK tells it: head angles (roll 0), gaze. */
@@ -1373,8 +1376,9 @@ static int do_source(job *j, size_t k, double *psnr_out)
     jbuf jb = {0};
     double quv[GS_FACE_LANDMARKS][2];
     int have_q = 0; /* in process: the quality of each gaze-only render */
+    gs_face_quality *rquals = NULL; /* through the daemon: its Quality of each */
     if (j->remote) {
-        if ((rc = remote_source(j, k, &fi, &remote, what)))
+        if ((rc = remote_source(j, k, &fi, &remote, &rquals, what)))
             goto done;
         goto render;
     }
@@ -1502,6 +1506,8 @@ render:
                 break;
             }
             qp = &q;
+        } else if (rquals && !isnan(rquals[t].score)) {
+            qp = &rquals[t];
         }
         if (render)
             resize_rgb(render, S, px, So);
@@ -1557,6 +1563,7 @@ done:
     free(jb.p);
     free(blob);
     free(remote);
+    free(rquals);
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);
     cli_photo_face_free(&pf);

@@ -64,11 +64,12 @@ def prepare(cli, work):
     faces = os.path.join(work, "faces256_%d" % SOURCES)
     synth_faces(cli, work, SOURCES)
     ref = os.path.join(work, "unsharded")
-    if not os.path.exists(os.path.join(ref, "labels.jsonl")):
-        shutil.rmtree(ref, ignore_errors=True)
-        r = run(cli, "--out", ref, "--threads", "2", *augment_args(os.path.join(faces, "images")))
-        if r.returncode != 0:
-            raise RuntimeError("unsharded run: %s" % r.stderr)
+    # Made afresh by every run: a reference left by an older build would
+    # hold that build's labels.
+    shutil.rmtree(ref, ignore_errors=True)
+    r = run(cli, "--out", ref, "--threads", "2", *augment_args(os.path.join(faces, "images")))
+    if r.returncode != 0:
+        raise RuntimeError("unsharded run: %s" % r.stderr)
     return os.path.join(faces, "images"), ref
 
 
