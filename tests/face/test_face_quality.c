@@ -119,14 +119,11 @@ int main(void)
             }
             scores[pairs] = q.score;
             art_max = fmax(art_max, q.artifact);
-            /* Speckle over the eye regions. */
+            /* Speckle over the eye regions (of a copy of the exact render). */
             uint8_t *m = malloc((size_t)S * S);
+            uint8_t *exact = malloc((size_t)S * S * 3);
             gs_face_mask((const double(*)[2])uv, GS_FACE_MASK_EYES, 0, 0, S, S, m, NULL);
-            gs_synth_sample_free(&b);
-            CHECK(gs_synth_sample_alloc(&b, S, S, &err) == GS_OK);
-            if (render(&sc2, &b))
-                break;
-            out.data = b.rgb;
+            memcpy(exact, b.rgb, (size_t)S * S * 3);
             for (int i = 0; i < S * S; i++)
                 if (m[i] >= 128 && rnd() % 3 == 0)
                     for (int ch = 0; ch < 3; ch++)
@@ -136,8 +133,8 @@ int main(void)
             speck_min = fmin(speck_min, q.artifact);
             speck_score_max = fmax(speck_score_max, q.score);
             /* The irises painted over with the sclera's white. */
-            if (render(&sc2, &b))
-                break;
+            memcpy(b.rgb, exact, (size_t)S * S * 3);
+            free(exact);
             for (int i = 0; i < S * S; i++)
                 if (m[i] >= 128)
                     b.rgb[3 * i] = 235, b.rgb[3 * i + 1] = 228, b.rgb[3 * i + 2] = 222;

@@ -8,6 +8,7 @@ import os
 import re
 import socket
 import sys
+import time
 import urllib.error
 import urllib.request
 
@@ -98,7 +99,14 @@ def main():
             ftype, m = sleep(c, 70000)
             t.check(ftype == FT.FRAME_ERROR and m.code == gc.pb.ERR_INVALID_ARGUMENT, "refused: %s" % m)
             c.health()
+            # The SLEEP cut by its deadline was answered when the deadline
+            # passed; its worker lets go at its next check. Wait for that,
+            # so that STATS and the scrape see the same gauges.
+            end = time.time() + 10
             stats = c.stats()
+            while stats.get("jobs_running", 0) and time.time() < end:
+                time.sleep(0.02)
+                stats = c.stats()
         status, ctype, body = http(addr, "/metrics")
         t.check(status == 200 and ctype.startswith("text/plain; version=0.0.4"), "200 %s" % ctype)
         s = parse(t, body)
