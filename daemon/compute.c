@@ -606,20 +606,37 @@ _Static_assert((int)GAZESPLAT__FACE_REFUSAL__REFUSAL_HEAD_POSE == (int)GS_FACE_R
                    (int)GAZESPLAT__FACE_REFUSAL__REFUSAL_NOISE == (int)GS_FACE_REFUSED_NOISE,
                "FaceRefusal follows gs_face_refusal");
 
-/* ERR_FACE_REFUSED when the gate said no (its reason in msg and the
- * Error's refusal field), else 0. */
-static int refuse(gsd_job *j, const gs_face_gate *g, char *msg, size_t cap)
+/* The face gate (face_gate) on the normalized face, with the photo's
+ * analysis when there is one: ERR_FACE_REFUSED when it says no (its
+ * reason in msg and the Error's refusal field), ERR_INTERNAL when it
+ * cannot run; either frees *face. 0: go on. */
+static int gate_face(gsd_worker *w, gsd_job *j, const gs_face_result *photo, gs_io_image *face,
+                     char *msg, size_t cap)
 {
-    if (g->refusal == GS_FACE_USABLE)
+    if (!w->srv->cfg.face_gate)
         return 0;
-    j->refusal = (int)g->refusal;
-    snprintf(msg, cap, "face refused (%s): %s", gs_face_refusal_name(g->refusal), g->reason);
-    return E(ERR_FACE_REFUSED);
+    gs_face_gate g;
+    gs_error err;
+    gs_error_clear(&err);
+    int rc = photo ? gs_face_gate_photo(photo, face, NULL, &g, &err)
+                   : gs_face_gate_normalized(face, NULL, &g, &err);
+    int e = 0;
+    if (rc != GS_OK) {
+        snprintf(msg, cap, "face gate: %s", err.msg);
+        e = E(ERR_INTERNAL);
+    } else if (g.refusal != GS_FACE_USABLE) {
+        j->refusal = (int)g.refusal;
+        snprintf(msg, cap, "face refused (%s): %s", gs_face_refusal_name(g.refusal), g.reason);
+        e = E(ERR_FACE_REFUSED);
+    }
+    if (e)
+        gs_io_image_free(face);
+    return e;
 }
 
 /* Photo -> face analysis (detection, landmarks, head pose) -> the face
  * normalized to the model's camera, and its face mask, through the face
- * gate (face_gate). */
+ * gate. */
 static int normalize_photo(gsd_worker *w, gsd_job *j, const Gazesplat__Intrinsics *k, photo_input *p,
                            gs_io_image *face, char *msg, size_t cap)
 {
@@ -657,20 +674,7 @@ static int normalize_photo(gsd_worker *w, gsd_job *j, const Gazesplat__Intrinsic
         return E(ERR_INTERNAL);
     }
     p->is_photo = 1;
-    if (s->cfg.face_gate) {
-        gs_face_gate g;
-        int e = 0;
-        if (gs_face_gate_photo(&p->face, face, NULL, &g, &err) != GS_OK) {
-            snprintf(msg, cap, "face gate: %s", err.msg);
-            e = E(ERR_INTERNAL);
-        } else {
-            e = refuse(j, &g, msg, cap);
-        }
-        if (e)
-            gs_io_image_free(face);
-        return e;
-    }
-    return 0;
+    return gate_face(w, j, &p->face, face, msg, cap);
 }
 
 /* The request's image as the normalized face the model fits; a photo is
@@ -691,20 +695,7 @@ static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, co
         gs_io_image_free(face);
         return E(ERR_BAD_IMAGE);
     }
-    if (!e && w->srv->cfg.face_gate) {
-        gs_face_gate g;
-        gs_error err;
-        gs_error_clear(&err);
-        if (gs_face_gate_normalized(face, NULL, &g, &err) != GS_OK) {
-            snprintf(msg, cap, "face gate: %s", err.msg);
-            e = E(ERR_INTERNAL);
-        } else {
-            e = refuse(j, &g, msg, cap);
-        }
-        if (e)
-            gs_io_image_free(face);
-    }
-    return e;
+    return e ? e : gate_face(w, j, NULL, face, msg, cap);
 }
 
 /* What a FIT (or an inline REDIRECT) asks to fine-tune. */
@@ -1468,17 +1459,30 @@ static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReques
     return 0;
 }
 
-/* What the quality of a request's images is measured against: the input
- * face (normalized) and its 68 landmarks there; face NULL: not measured. */
-typedef struct quality_ref {
-    const gs_io_image *face;
-    double uv[GS_FACE_LANDMARKS][2];
-} quality_ref;
-
-/* The landmarks of a normalized face given as such; -1 when unavailable. */
-static int normalized_landmarks(gsd_server *s, const gs_io_image *face, double uv[][2])
+/* What the quality of a request's images is measured against (face.h):
+ * the input face (normalized) with its landmarks, a photo's or found in
+ * the face; NULL when the request does not ask for it (quality or
+ * min_quality: it costs about 5 gaze-sweep renders an image), the input or its
+ * landmarks are not at hand, or no target is gaze-only (a head change
+ * carries no quality). */
+static gs_face_quality_ref *quality_ref_of(const gsd_worker *w, const Gazesplat__RedirectRequest *r,
+                                           const gs_io_image *face, const photo_input *p)
 {
-    return s->face_sp && gs_face_normalized_landmarks(s->face_sp, face, uv, NULL) == GS_OK ? 0 : -1;
+    size_t i = 0;
+    while (i < r->n_targets && r->targets[i]->head)
+        i++;
+    if (!(r->quality || r->min_quality > 0) || !face->data || i == r->n_targets)
+        return NULL;
+    double uv[GS_FACE_LANDMARKS][2];
+    if (p->is_photo)
+        memcpy(uv, p->face.uv_n, sizeof uv);
+    else if (!w->srv->face_sp || gs_face_normalized_landmarks(w->srv->face_sp, face, uv, NULL) != GS_OK)
+        return NULL;
+    gs_face_quality_opts qo;
+    gs_face_quality_opts_default(&qo);
+    qo.px_per_mm = w->model->info.focal / w->model->info.distance_mm;
+    gs_face_quality_ref *q = NULL;
+    return gs_face_quality_ref_create(face, (const double(*)[2])uv, &qo, &q, NULL) == GS_OK ? q : NULL;
 }
 
 /* Paste-back state of one request: the blend masks in the photo's pixels
@@ -1544,7 +1548,8 @@ static void count_render(gsd_worker *w, gs_model_ctx *ctx)
  * request asks for it. */
 static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gazesplat__RedirectRequest *r,
                          size_t i, const gs_subject *subj, const gs_io_image *input, const photo_input *p,
-                         const quality_ref *qr, paste_state *ps, uint8_t *rgb, char *msg, size_t cap)
+                         const gs_face_quality_ref *qr, paste_state *ps, uint8_t *rgb, char *msg,
+                         size_t cap)
 {
     const Gazesplat__Target *t = r->targets[i];
     int size = w->model->info.image_size;
@@ -1572,14 +1577,10 @@ static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gaz
     gs_io_image norm = {size, size, (size_t)size * 3, rgb};
     gs_face_quality q;
     const gs_face_quality *qp = NULL;
-    if (qr->face && !t->head) {
+    if (qr && !t->head) {
         /* The gaze only: the eyes stay where the input's landmarks put them. */
-        gs_face_quality_opts qo;
-        gs_face_quality_opts_default(&qo);
-        qo.px_per_mm = w->model->info.focal / w->model->info.distance_mm;
-        if (gs_face_redirect_quality(qr->face, &norm, (const double(*)[2])qr->uv, subj->head_R,
-                                     view.gaze_pitch - subj->gaze_pitch, view.gaze_yaw - subj->gaze_yaw,
-                                     &qo, &q, &err) != GS_OK) {
+        if (gs_face_quality_measure(qr, &norm, subj->head_R, view.gaze_pitch - subj->gaze_pitch,
+                                    view.gaze_yaw - subj->gaze_yaw, &q, &err) != GS_OK) {
             snprintf(msg, cap, "quality of target %zu: %s", i, err.msg);
             return E(ERR_INTERNAL);
         }
@@ -1635,16 +1636,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     }
     gs_model_ctx *ctx = slot >= 0 ? w->slots[slot].ctx : w->ctx;
     const gs_subject subj = so.subj;
-    quality_ref qr;
-    memset(&qr, 0, sizeof qr);
-    if (so.face.data) {
-        if (photo.is_photo) {
-            memcpy(qr.uv, photo.face.uv_n, sizeof qr.uv);
-            qr.face = &so.face;
-        } else if (normalized_landmarks(s, &so.face, qr.uv) == 0) {
-            qr.face = &so.face;
-        }
-    }
+    gs_face_quality_ref *qr = quality_ref_of(w, r, &so.face, &photo);
     recent_add(w, j->key);
     int size = w->model->info.image_size;
     uint8_t *rgb = malloc((size_t)size * size * 3);
@@ -1655,10 +1647,11 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         int why = i > 0 ? wait_output(s, j) : job_stop(j);
         if (why)
             o = stop_frame(s, j, why);
-        else if ((why = render_target(w, ctx, j, r, i, &subj, r->transfer ? &so.face : NULL, &photo, &qr,
+        else if ((why = render_target(w, ctx, j, r, i, &subj, r->transfer ? &so.face : NULL, &photo, qr,
                                       &ps, rgb, msg, sizeof msg)) != 0)
             o = gsd_error_frame(j, why, "%s", msg);
     }
+    gs_face_quality_ref_destroy(qr);
     free(rgb);
     gs_io_image_free(&so.face);
     paste_state_free(&ps);

@@ -2,6 +2,7 @@
  * small helpers several of them share. */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
 #include <errno.h>
+#include <fcntl.h>
 #include <float.h>
 #include <math.h>
 #include <stdarg.h>
@@ -283,6 +284,36 @@ void cli_progress_done(cli_progress_t *p)
     if (p->tty && p->drawn) /* the line goes: what follows reports the result */
         fputs("\r\033[K", stderr);
     p->drawn = 0;
+}
+
+int cli_write_all(int fd, const void *p, size_t n)
+{
+    const char *b = p;
+    while (n) {
+        ssize_t w = write(fd, b, n);
+        if (w < 0 && errno == EINTR)
+            continue;
+        if (w <= 0) {
+            if (w == 0)
+                errno = ENOSPC;
+            return -1;
+        }
+        b += w;
+        n -= (size_t)w;
+    }
+    return 0;
+}
+
+int cli_fsync_path(const char *path)
+{
+    int fd = open(path, O_RDONLY);
+    if (fd < 0)
+        return -1;
+    int r = fsync(fd);
+    int e = errno;
+    close(fd);
+    errno = e;
+    return r;
 }
 
 int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len)

@@ -35,33 +35,6 @@ typedef struct merge {
     gs_h5_reader **h5;
 } merge;
 
-static int fsync_path(const char *path)
-{
-    int fd = open(path, O_RDONLY);
-    if (fd < 0)
-        return -1;
-    int r = fsync(fd);
-    close(fd);
-    return r;
-}
-
-static int write_all(int fd, const char *p, size_t n)
-{
-    while (n) {
-        ssize_t w = write(fd, p, n);
-        if (w < 0 && errno == EINTR)
-            continue;
-        if (w <= 0) {
-            if (w == 0)
-                errno = ENOSPC;
-            return -1;
-        }
-        p += w;
-        n -= (size_t)w;
-    }
-    return 0;
-}
-
 /* Reads shard i's manifest: finished, and the run's source and target
  * counts (the same in every shard of one run). */
 static int read_manifest(merge *m, long i, size_t *nsrc, size_t *ntg)
@@ -166,10 +139,10 @@ static int commit(merge *m, const char *path, const line *lines, size_t count, i
         if (renumber && field(l->p, l->len, ",\"h5_row\":", &at, &digits) >= 0) {
             char num[32];
             int k = snprintf(num, sizeof num, "%zu", r);
-            rc = write_all(fd, l->p, (size_t)(at - l->p)) || write_all(fd, num, (size_t)k) ||
-                 write_all(fd, at + digits, l->len - (size_t)(at + digits - l->p));
+            rc = cli_write_all(fd, l->p, (size_t)(at - l->p)) || cli_write_all(fd, num, (size_t)k) ||
+                 cli_write_all(fd, at + digits, l->len - (size_t)(at + digits - l->p));
         } else
-            rc = write_all(fd, l->p, l->len);
+            rc = cli_write_all(fd, l->p, l->len);
     }
     if (!rc && fsync(fd))
         rc = -1;
@@ -225,7 +198,7 @@ static int merge_h5(merge *m)
         gs_h5_abort(w);
     } else if (gs_h5_finish(w, &err)) {
         rc = cli_fail(m->cmd, "%s: %s", path, err.msg);
-    } else if (fsync_path(tmp) || rename(tmp, path)) {
+    } else if (cli_fsync_path(tmp) || rename(tmp, path)) {
         rc = cli_fail(m->cmd, "%s: cannot write (%s)", path, strerror(errno));
     }
     if (rc)
@@ -286,7 +259,7 @@ int aug_merge(const cli_command *cmd, const char *out, long n)
         rc = merge_h5(&m);
     if (!rc)
         rc = commit(&m, labels, m.lines, m.total, h5 > 0);
-    if (!rc && fsync_path(out))
+    if (!rc && cli_fsync_path(out))
         rc = cli_fail(cmd, "%s: cannot sync (%s)", out, strerror(errno));
     if (!rc)
         printf("gazesplat augment: merged %ld shards: %zu images -> %s (labels.jsonl%s)\n", n,

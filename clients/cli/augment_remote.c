@@ -193,6 +193,7 @@ static int render_group(gs_client *c, const aug_remote_subject *s, const aug_rem
     req.targets = tp;
     req.output_format = GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8;
     req.transfer = transfer;
+    req.quality = q != NULL;
     for (;;) {
         gs_error err;
         gs_error_clear(&err);

@@ -47,7 +47,7 @@ int aug_remote_fit_one(gs_client *c, const aug_remote_fit *in, aug_remote_subjec
 
 /* REDIRECT by key, n targets (sent in groups of the server's
  * max_targets), raw RGB8 of size x size into out + i * rec for target i;
- * q (NULL, or n entries): the server's Quality of each image, score NaN
+ * q (NULL: not asked for, or n entries): the server's Quality of each image, score NaN
  * where it sent none (face.h, gs_face_quality; the irises' records are
  * left zero). */
 int aug_remote_render(gs_client *c, const aug_remote_subject *s, const aug_remote_target *t,

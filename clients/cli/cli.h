@@ -131,6 +131,11 @@ void cli_progress_done(cli_progress_t *p);
 /* Reads a regular file of 1..max bytes whole into *out (malloc'd).
  * Returns 0, or -1 (missing, empty, too large, unreadable; *out NULL). */
 int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len);
+/* Writes all n bytes to fd (EINTR retried; a write of 0 is ENOSPC).
+ * Returns 0 or -1 with errno. */
+int cli_write_all(int fd, const void *p, size_t n);
+/* fsync of a file or directory by path: 0 or -1 with errno. */
+int cli_fsync_path(const char *path);
 
 /* Demo scene (demo_head.c): a stylised head, see cmd_scene.c. */
 struct gs_ply_scene;

@@ -50,7 +50,7 @@ const cli_command cli_augment_command = {
     "                         [--labels FILE] [--format png|h5|both] [--shard I/N]\n"
     "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
     "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
-    "                         [--threads N] [--no-gate]\n"
+    "                         [--threads N] [--no-gate] [--quality]\n"
     "       gazesplat augment --merge N --out DIR\n"
     "\n"
     "  --model M        fit and render in this process with model file M\n"
@@ -122,6 +122,8 @@ const cli_command cli_augment_command = {
     "beyond the trained range or a face cut by the border, stop the run with\n"
     "exit status 3 naming the source and the reason; --no-gate: augment\n"
     "every source whatever it holds.\n"
+    "--quality: each gaze-only sample's label gets its redirect quality\n"
+    "(docs/face.md; 28 ms a sample at 256 px), else null.\n"
     "\n"
     "Exit status: 0 done, 1 a failure (named with its file and line or row;\n"
     "the sources done are kept), 2 bad usage, 3 a source the gate refused.\n",
@@ -135,7 +137,7 @@ const cli_command cli_augment_command = {
 enum {
     O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
     O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
-    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_MERGE, O_NOGATE, O_N
+    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_MERGE, O_NOGATE, O_QUALITY, O_N
 };
 
 typedef struct target {
@@ -159,6 +161,7 @@ typedef struct job {
     const char *input, *out;
     int is_h5, h5_rgb, fit_labels, transfer, want_png, want_h5;
     int gate;    /* the face gate (off: --no-gate) */
+    int quality; /* --quality: each gaze-only sample's redirect quality */
     int refused; /* load_face: the gate refused the source */
     long iters, shard_i, shard_n;
     gs_finetune_options ft;
@@ -308,16 +311,6 @@ static int grid_values(double lo, double hi, double step, double *v)
 
 /* ---- files: every write goes through here ---- */
 
-static int fsync_path(const char *path)
-{
-    int fd = open(path, O_RDONLY);
-    if (fd < 0)
-        return -1;
-    int r = fsync(fd);
-    close(fd);
-    return r;
-}
-
 /* Writes data to path via path.tmp: write, fsync, rename. The test hook
  * GAZESPLAT_AUGMENT_ENOSPC_AFTER=K makes the write after the first K fail
  * as a full disk does. errno says why on failure. */
@@ -334,21 +327,12 @@ static int commit_file(job *j, const char *path, const void *data, size_t len)
     int fd = open(tmp, O_WRONLY | O_CREAT | O_TRUNC, 0666);
     if (fd < 0)
         return -1;
-    const char *p = data;
-    size_t left = len;
-    while (left) {
-        ssize_t w = write(fd, p, left);
-        if (w < 0 && errno == EINTR)
-            continue;
-        if (w <= 0) {
-            int e = w < 0 ? errno : ENOSPC;
-            close(fd);
-            unlink(tmp);
-            errno = e;
-            return -1;
-        }
-        p += w;
-        left -= (size_t)w;
+    if (cli_write_all(fd, data, len)) {
+        int e = errno;
+        close(fd);
+        unlink(tmp);
+        errno = e;
+        return -1;
     }
     if (fsync(fd) || close(fd)) {
         int e = errno;
@@ -925,7 +909,7 @@ static int open_manifest(job *j, unsigned char *done, int *finished)
     if (!f) {
         if (errno != ENOENT)
             return cli_fail(j->cmd, "%s: %s", j->manifest, strerror(errno));
-        if (commit_file(j, j->manifest, header, strlen(header)) || fsync_path(j->state))
+        if (commit_file(j, j->manifest, header, strlen(header)) || cli_fsync_path(j->state))
             return cli_fail(j->cmd, "%s: cannot write (%s)", j->manifest, strerror(errno));
         return CLI_OK;
     }
@@ -1070,12 +1054,8 @@ static int gate_normalized(job *j, gs_io_image *face, gs_error *err)
     if (!j->gate)
         return GS_OK;
     gs_face_gate g;
-    int rc = gs_face_gate_normalized(face, NULL, &g, err);
-    if (rc == GS_OK && g.refusal != GS_FACE_USABLE) {
-        j->refused = 1;
-        rc = gs_error_set(err, GS_ERR_ARG, "face refused (%s): %s",
-                          gs_face_refusal_name(g.refusal), g.reason);
-    }
+    int rc = cli_gate_normalized(face, &g, err);
+    j->refused = g.refusal != GS_FACE_USABLE;
     if (rc != GS_OK)
         gs_io_image_free(face);
     return rc;
@@ -1328,7 +1308,7 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, gs_fac
         tg[t].head_deg[0] = x->hp / DEG;
         tg[t].head_deg[1] = x->hy / DEG;
     }
-    if (!rc && !(*quals = calloc(s->nt + 1, sizeof **quals)))
+    if (!rc && j->quality && !(*quals = calloc(s->nt + 1, sizeof **quals)))
         rc = cli_fail(cmd, "out of memory");
     if (!rc && aug_remote_render(j->remote, &rs, tg, s->nt, j->transfer, S, *renders,
                                  (size_t)S * S * 3, *quals, msg, sizeof msg))
@@ -1374,8 +1354,7 @@ static int do_source(job *j, size_t k, double *psnr_out)
     gs_model *tuned = NULL;
     uint8_t *blob = NULL, *remote = NULL;
     jbuf jb = {0};
-    double quv[GS_FACE_LANDMARKS][2];
-    int have_q = 0; /* in process: the quality of each gaze-only render */
+    gs_face_quality_ref *qref = NULL; /* in process: the quality of each gaze-only render */
     gs_face_quality *rquals = NULL; /* through the daemon: its Quality of each */
     if (j->remote) {
         if ((rc = remote_source(j, k, &fi, &remote, &rquals, what)))
@@ -1441,14 +1420,25 @@ static int do_source(job *j, size_t k, double *psnr_out)
             goto done;
         }
     }
-    /* What the quality of the renders is measured against: the input
-     * face and its landmarks (a photo's; found in a normalized face). */
-    if (fi.photo) {
+    /* --quality: what the renders are measured against, the input face and
+     * its landmarks (a photo's; found in a normalized face). */
+    double quv[GS_FACE_LANDMARKS][2];
+    int have_uv = 0;
+    if (j->quality && fi.photo) {
         memcpy(quv, pf.res.uv_n, sizeof quv);
-        have_q = 1;
-    } else if ((j->sp || gs_face_shape_model_load(NULL, &j->sp, NULL) == GS_OK) &&
+        have_uv = 1;
+    } else if (j->quality && (j->sp || gs_face_shape_model_load(NULL, &j->sp, NULL) == GS_OK) &&
                gs_face_normalized_landmarks(j->sp, &face, quv, NULL) == GS_OK) {
-        have_q = 1;
+        have_uv = 1;
+    }
+    if (have_uv) {
+        gs_face_quality_opts qo;
+        gs_face_quality_opts_default(&qo);
+        qo.px_per_mm = j->info.focal / j->info.distance_mm;
+        if (gs_face_quality_ref_create(&face, (const double(*)[2])quv, &qo, &qref, &err)) {
+            rc = cli_fail(cmd, "%s: quality: %s", what, err.msg);
+            goto done;
+        }
     }
 render:
     *psnr_out = fi.sub.fit_psnr;
@@ -1494,14 +1484,10 @@ render:
         }
         gs_face_quality q;
         const gs_face_quality *qp = NULL;
-        if (have_q && !tg->use_head) {
-            gs_face_quality_opts qo;
-            gs_face_quality_opts_default(&qo);
-            qo.px_per_mm = j->info.focal / j->info.distance_mm;
+        if (qref && !tg->use_head) {
             gs_io_image ri = {S, S, (size_t)S * 3, dst};
-            if (gs_face_redirect_quality(&face, &ri, (const double(*)[2])quv, fi.sub.head_R,
-                                         tg->gp - fi.sub.gaze_pitch, tg->gy - fi.sub.gaze_yaw, &qo,
-                                         &q, &err)) {
+            if (gs_face_quality_measure(qref, &ri, fi.sub.head_R, tg->gp - fi.sub.gaze_pitch,
+                                        tg->gy - fi.sub.gaze_yaw, &q, &err)) {
                 rc = cli_fail(cmd, "%s: target %zu: quality: %s", what, t, err.msg);
                 break;
             }
@@ -1555,7 +1541,7 @@ render:
         snprintf(images, sizeof images, "%s/images", j->out);
         char line[64];
         snprintf(line, sizeof line, "done %zu\n", k);
-        if ((j->want_png && fsync_path(images)) || fsync_path(j->state) ||
+        if ((j->want_png && cli_fsync_path(images)) || cli_fsync_path(j->state) ||
             manifest_append(j, line))
             rc = cli_fail(cmd, "%s: cannot write (%s)", j->manifest, strerror(errno));
     }
@@ -1564,6 +1550,7 @@ done:
     free(blob);
     free(remote);
     free(rquals);
+    gs_face_quality_ref_destroy(qref);
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);
     cli_photo_face_free(&pf);
@@ -1667,7 +1654,7 @@ static int assemble(job *j, size_t *rows_out)
             gs_h5_abort(w);
         else if (gs_h5_finish(w, &err))
             rc = cli_fail(cmd, "%s: %s", j->h5_path, err.msg);
-        if (!rc && (fsync_path(tmp) || rename(tmp, j->h5_path)))
+        if (!rc && (cli_fsync_path(tmp) || rename(tmp, j->h5_path)))
             rc = cli_fail(cmd, "%s: cannot write (%s)", j->h5_path, strerror(errno));
         if (rc)
             unlink(tmp);
@@ -1676,7 +1663,7 @@ static int assemble(job *j, size_t *rows_out)
         rc = cli_fail(cmd, "out of memory");
     if (!rc && commit_file(j, j->labels_path, all.p ? all.p : "", all.len))
         rc = cli_fail(cmd, "%s: cannot write (%s)", j->labels_path, strerror(errno));
-    if (!rc && fsync_path(j->out))
+    if (!rc && cli_fsync_path(j->out))
         rc = cli_fail(cmd, "%s: cannot sync (%s)", j->out, strerror(errno));
     free(all.p);
     return rc;
@@ -1751,7 +1738,7 @@ static int run_augment(int argc, char **argv)
         {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
         {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
         {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL},
-        {"--merge", 1, NULL},   {"--no-gate", 0, NULL}};
+        {"--merge", 1, NULL},   {"--no-gate", 0, NULL},      {"--quality", 0, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -1785,6 +1772,7 @@ static int run_augment(int argc, char **argv)
     j.input = o[O_INPUT].value;
     j.out = o[O_OUT].value;
     j.gate = !o[O_NOGATE].value;
+    j.quality = o[O_QUALITY].value != NULL;
     j.want_png = j.want_h5 = 1;
     if (o[O_FORMAT].value) {
         const char *f = o[O_FORMAT].value;

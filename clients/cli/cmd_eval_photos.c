@@ -2,7 +2,7 @@
  * Every face of the given photos through the gate, then, for those it
  * passes, the served fit and a 5 x 5 gaze grid in two modes (the model's
  * render, detail transfer), each image measured against the input by
- * gs_face_redirect_quality: the gaze its irises show against the gaze asked
+ * gs_face_quality_measure: the gaze its irises show against the gaze asked
  * for (gain and cross-talk by least squares, sign agreement), the iris
  * colour (CIELAB delta E), the eye regions' speckle, and whether the face
  * detector still finds the face. */
@@ -174,6 +174,7 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
     gs_subject sub;
     gs_fit_report fr;
     gs_model *tuned = NULL;
+    gs_face_quality_ref *qref = NULL;
     gs_model_ctx *c = gs_model_ctx_create(m);
     uint8_t *out = malloc((size_t)S * S * 3);
     if (!c || !out) {
@@ -207,6 +208,10 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
     gs_face_quality_opts qo;
     gs_face_quality_opts_default(&qo);
     qo.px_per_mm = info.focal / info.distance_mm;
+    if (gs_face_quality_ref_create(&pf->norm, (const double(*)[2])pf->res.uv_n, &qo, &qref, &err)) {
+        rc = cli_fail(cmd, "%s face %d: quality: %s", fe->photo, fe->index, err.msg);
+        goto done;
+    }
     gs_io_image oi = {S, S, 3 * (size_t)S, out};
     for (int mode = 0; mode < 2 && !rc; mode++) {
         int dets[NT];
@@ -220,9 +225,8 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
                                                     &v, out, oi.stride, &err)
                          : gs_model_render(c, pool, &sub, &v, out, oi.stride, &err);
             if (!r)
-                r = gs_face_redirect_quality(&pf->norm, &oi, (const double(*)[2])pf->res.uv_n,
-                                             sub.head_R, v.gaze_pitch - sub.gaze_pitch,
-                                             v.gaze_yaw - sub.gaze_yaw, &qo, &fe->q[mode][t], &err);
+                r = gs_face_quality_measure(qref, &oi, sub.head_R, v.gaze_pitch - sub.gaze_pitch,
+                                            v.gaze_yaw - sub.gaze_yaw, &fe->q[mode][t], &err);
             if (r) {
                 rc = cli_fail(cmd, "%s face %d: %s", fe->photo, fe->index, err.msg);
                 break;
@@ -234,6 +238,7 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
     }
     fe->evaluated = !rc;
 done:
+    gs_face_quality_ref_destroy(qref);
     free(out);
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);

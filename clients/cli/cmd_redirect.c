@@ -219,14 +219,9 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
                       "faces", image, img.width, img.height, info.image_size,
                       info.image_size);
     gs_face_gate g;
-    if (!rc && gate) {
-        if (gs_face_gate_normalized(&img, NULL, &g, &err))
-            rc = cli_fail(cmd, "%s: %s", image, err.msg);
-        else if (g.refusal != GS_FACE_USABLE) {
-            cli_fail(cmd, "%s: face refused (%s): %s", image, gs_face_refusal_name(g.refusal),
-                     g.reason);
-            rc = CLI_REFUSED;
-        }
+    if (!rc && gate && cli_gate_normalized(&img, &g, &err)) {
+        cli_fail(cmd, "%s: %s", image, err.msg);
+        rc = g.refusal != GS_FACE_USABLE ? CLI_REFUSED : CLI_FAIL;
     }
     uint8_t *w = NULL;
     if (!rc && mask) {

@@ -5,6 +5,22 @@
 #include "photo_prep.h"
 #include "gazesplat/geom.h"
 
+static int refused(const gs_face_gate *g, gs_error *err)
+{
+    return gs_error_set(err, GS_ERR_ARG, "face refused (%s): %s", gs_face_refusal_name(g->refusal),
+                        g->reason);
+}
+
+int cli_gate_normalized(const gs_io_image *face, gs_face_gate *g, gs_error *err)
+{
+    int rc = gs_face_gate_normalized(face, NULL, g, err);
+    if (rc != GS_OK)
+        g->refusal = GS_FACE_USABLE;
+    else if (g->refusal != GS_FACE_USABLE)
+        rc = refused(g, err);
+    return rc;
+}
+
 int cli_photo_normalize(gs_face_detector *det, const gs_face_shape_model *sp,
                         const gs_io_image *photo, int index, const gs_model_info *info,
                         int gate, cli_photo_face *out, gs_error *err)
@@ -29,8 +45,7 @@ int cli_photo_normalize(gs_face_detector *det, const gs_face_shape_model *sp,
     if (rc == GS_OK && gate &&
         (rc = gs_face_gate_photo(&out->res, &out->norm, NULL, &out->gate, err)) == GS_OK &&
         out->gate.refusal != GS_FACE_USABLE)
-        rc = gs_error_set(err, GS_ERR_ARG, "face refused (%s): %s",
-                          gs_face_refusal_name(out->gate.refusal), out->gate.reason);
+        rc = refused(&out->gate, err);
     if (rc == GS_OK && !(out->mask_n = malloc((size_t)S * S)))
         rc = gs_error_set(err, GS_ERR_NOMEM, "out of memory");
     if (rc == GS_OK)

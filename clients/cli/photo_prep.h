@@ -27,6 +27,11 @@ int cli_photo_normalize(gs_face_detector *det, const gs_face_shape_model *sp,
                         const gs_io_image *photo, int index, const gs_model_info *info,
                         int gate, cli_photo_face *out, gs_error *err);
 
+/* The face gate on a normalized face given as such: GS_OK, or
+ * GS_ERR_ARG "face refused (NAME): reason" with g->refusal set, or the
+ * gate's own error (g->refusal GS_FACE_USABLE). */
+int cli_gate_normalized(const gs_io_image *face, gs_face_gate *g, gs_error *err);
+
 /* The fit's options for it: defaults, the mask, max_iters and the
  * landmarks' head pose rotated into the normalized camera. */
 void cli_photo_fit_options(const cli_photo_face *p, int iters, gs_fit_options *o);

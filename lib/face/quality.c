@@ -67,68 +67,107 @@ static double sq(double v)
     return v * v;
 }
 
-int gs_face_redirect_quality(const gs_io_image *input, const gs_io_image *output,
-                             const double uv[][2], const double head_R[9], double cmd_pitch,
-                             double cmd_yaw, const gs_face_quality_opts *opts, gs_face_quality *out,
-                             gs_error *err)
+/* What every image of one input is measured against: the input's irises,
+ * its eye mask and the mask's fine-scale energy, found once. */
+struct gs_face_quality_ref {
+    gs_face_quality_opts opts;
+    gs_face_iris_opts iris_opts;
+    double uv[GS_FACE_LANDMARKS][2];
+    gs_face_iris iris[2];
+    int width, height, in_found;
+    uint8_t *mask;
+    double energy;
+};
+
+int gs_face_quality_ref_create(const gs_io_image *input, const double uv[][2],
+                               const gs_face_quality_opts *opts, gs_face_quality_ref **out,
+                               gs_error *err)
 {
-    gs_face_quality_opts def;
-    if (!opts) {
-        gs_face_quality_opts_default(&def);
-        opts = &def;
-    }
-    if (!input || !output || !uv || !out || !input->data || !output->data)
+    if (!input || !input->data || !uv || !out)
         return gs_error_set(err, GS_ERR_ARG, "redirect quality: NULL argument");
-    if (input->width != output->width || input->height != output->height || input->width < 8 ||
-        input->height < 8)
+    *out = NULL;
+    if (input->width < 8 || input->height < 8)
+        return gs_error_set(err, GS_ERR_ARG, "redirect quality: a %dx%d input", input->width,
+                            input->height);
+    gs_face_quality_ref *r = calloc(1, sizeof *r);
+    if (r)
+        r->mask = malloc((size_t)input->width * (size_t)input->height);
+    if (!r || !r->mask) {
+        free(r);
+        return gs_error_set(err, GS_ERR_NOMEM, "redirect quality: out of memory");
+    }
+    if (opts)
+        r->opts = *opts;
+    else
+        gs_face_quality_opts_default(&r->opts);
+    gs_face_iris_opts_default(&r->iris_opts);
+    if (r->opts.px_per_mm > 0)
+        gs_face_iris_opts_scale(&r->iris_opts, r->opts.px_per_mm);
+    memcpy(r->uv, uv, sizeof r->uv);
+    r->width = input->width;
+    r->height = input->height;
+    int rc = GS_OK;
+    for (int e = 0; e < 2 && !rc; e++) {
+        rc = gs_face_iris_locate(input, (const double(*)[2])r->uv[36 + 6 * e], &r->iris_opts,
+                                 &r->iris[e], err);
+        r->in_found += !rc && r->iris[e].status == GS_FACE_IRIS_OK;
+    }
+    if (!rc)
+        rc = gs_face_mask(uv, GS_FACE_MASK_EYES, 0, 0, r->width, r->height, r->mask, err);
+    if (rc) {
+        gs_face_quality_ref_destroy(r);
+        return rc;
+    }
+    r->energy = fine_energy(input, r->mask);
+    *out = r;
+    return GS_OK;
+}
+
+void gs_face_quality_ref_destroy(gs_face_quality_ref *r)
+{
+    if (r) {
+        free(r->mask);
+        free(r);
+    }
+}
+
+int gs_face_quality_measure(const gs_face_quality_ref *r, const gs_io_image *output,
+                            const double head_R[9], double cmd_pitch, double cmd_yaw,
+                            gs_face_quality *out, gs_error *err)
+{
+    if (!r || !output || !output->data || !out)
+        return gs_error_set(err, GS_ERR_ARG, "redirect quality: NULL argument");
+    if (output->width != r->width || output->height != r->height)
         return gs_error_set(err, GS_ERR_ARG, "redirect quality: images of %dx%d and %dx%d",
-                            input->width, input->height, output->width, output->height);
+                            r->width, r->height, output->width, output->height);
     if (!isfinite(cmd_pitch) || !isfinite(cmd_yaw))
         return gs_error_set(err, GS_ERR_NONFINITE, "redirect quality: non-finite target");
+    const gs_face_quality_opts *opts = &r->opts;
     gs_face_quality q;
     memset(&q, 0, sizeof q);
     q.commanded[0] = cmd_pitch;
     q.commanded[1] = cmd_yaw;
-    gs_face_iris_opts io;
-    gs_face_iris_opts_default(&io);
-    if (opts->px_per_mm > 0)
-        gs_face_iris_opts_scale(&io, opts->px_per_mm);
     double meas[2] = {0, 0}, de = 0;
-    int in_found = 0;
     for (int e = 0; e < 2; e++) {
-        const double(*eye)[2] = (const double(*)[2])uv[36 + 6 * e];
-        gs_face_iris a, b;
-        int rc = gs_face_iris_locate(input, eye, &io, &a, err);
-        if (!rc)
-            rc = gs_face_iris_locate(output, eye, &io, &b, err);
+        const double(*eye)[2] = (const double(*)[2])r->uv[36 + 6 * e];
+        const gs_face_iris *a = &r->iris[e];
+        gs_face_iris b;
+        int rc = gs_face_iris_locate(output, eye, &r->iris_opts, &b, err);
         if (rc)
             return rc;
-        q.iris[e][0] = a;
+        q.iris[e][0] = *a;
         q.iris[e][1] = b;
-        if (a.status != GS_FACE_IRIS_OK)
-            continue;
-        in_found++;
-        if (b.status != GS_FACE_IRIS_OK)
+        if (a->status != GS_FACE_IRIS_OK || b.status != GS_FACE_IRIS_OK)
             continue;
         double dp, dy;
-        if ((rc = gs_face_iris_gaze_change(e, eye, a.centre, eye, b.centre, head_R, &dp, &dy, err)))
+        if ((rc = gs_face_iris_gaze_change(e, eye, a->centre, eye, b.centre, head_R, &dp, &dy, err)))
             return rc;
         meas[0] += dp;
         meas[1] += dy;
-        de += sqrt(sq(a.lab[0] - b.lab[0]) + sq(a.lab[1] - b.lab[1]) + sq(a.lab[2] - b.lab[2]));
+        de += sqrt(sq(a->lab[0] - b.lab[0]) + sq(a->lab[1] - b.lab[1]) + sq(a->lab[2] - b.lab[2]));
         q.eyes++;
     }
-    /* The artifact measure, over both eye regions. */
-    int w = input->width, h = input->height;
-    uint8_t *m = malloc((size_t)w * (size_t)h);
-    if (!m)
-        return gs_error_set(err, GS_ERR_NOMEM, "redirect quality: out of memory");
-    int rc = gs_face_mask(uv, GS_FACE_MASK_EYES, 0, 0, w, h, m, err);
-    double e_in = rc ? 0 : fine_energy(input, m), e_out = rc ? 0 : fine_energy(output, m);
-    free(m);
-    if (rc)
-        return rc;
-    q.artifact = e_out / fmax(e_in, 0.5);
+    q.artifact = fine_energy(output, r->mask) / fmax(r->energy, 0.5);
     /* The score: one factor per measure, each 1 within its tolerance and
      * falling smoothly past it. */
     double s_gaze, s_colour = 1;
@@ -147,13 +186,13 @@ int gs_face_redirect_quality(const gs_io_image *input, const gs_io_image *output
         q.measured[0] = q.measured[1] = q.delta_e = q.gaze_error_deg = NAN;
         /* An iris the input shows and the output lost: the eyes are
          * broken. Neither shows one: nothing to measure, half marks. */
-        s_gaze = in_found ? 0 : 0.5;
+        s_gaze = r->in_found ? 0 : 0.5;
     }
     double s_art = exp(-0.5 * sq(fmax(0, q.artifact - opts->max_artifact) / 0.5));
     q.score = s_gaze * s_colour * s_art;
     if (!q.eyes)
-        snprintf(q.reason, sizeof q.reason, in_found ? "no iris in the output's eyes"
-                                                     : "no iris found in the input to compare");
+        snprintf(q.reason, sizeof q.reason, r->in_found ? "no iris in the output's eyes"
+                                                        : "no iris found in the input to compare");
     else if (s_gaze < 0.5)
         snprintf(q.reason, sizeof q.reason, "gaze off by %.1f deg (asked %+.1f, %+.1f; seen %+.1f, %+.1f)",
                  q.gaze_error_deg, cmd_pitch * RAD2DEG, cmd_yaw * RAD2DEG, q.measured[0] * RAD2DEG,
@@ -164,4 +203,18 @@ int gs_face_redirect_quality(const gs_io_image *input, const gs_io_image *output
         snprintf(q.reason, sizeof q.reason, "iris colour changed: delta E %.1f", q.delta_e);
     *out = q;
     return GS_OK;
+}
+
+int gs_face_redirect_quality(const gs_io_image *input, const gs_io_image *output,
+                             const double uv[][2], const double head_R[9], double cmd_pitch,
+                             double cmd_yaw, const gs_face_quality_opts *opts, gs_face_quality *out,
+                             gs_error *err)
+{
+    gs_face_quality_ref *r;
+    int rc = gs_face_quality_ref_create(input, uv, opts, &r, err);
+    if (rc)
+        return rc;
+    rc = gs_face_quality_measure(r, output, head_R, cmd_pitch, cmd_yaw, out, err);
+    gs_face_quality_ref_destroy(r);
+    return rc;
 }

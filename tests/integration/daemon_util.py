@@ -8,6 +8,32 @@ import tempfile
 import time
 
 
+def free_port():
+    """A TCP port on 127.0.0.1 free just now."""
+    s = socket.socket()
+    s.bind(("127.0.0.1", 0))
+    port = s.getsockname()[1]
+    s.close()
+    return port
+
+
+def unix_request(path, data, timeout=10):
+    """Sends data on a Unix stream socket and reads until the peer closes;
+    the reply decoded."""
+    s = socket.socket(socket.AF_UNIX)
+    s.settimeout(timeout)
+    s.connect(path)
+    s.sendall(data)
+    out = b""
+    while True:
+        b = s.recv(65536)
+        if not b:
+            break
+        out += b
+    s.close()
+    return out.decode()
+
+
 class Daemon:
     def __init__(self, binary, args=(), env=None, cwd=None):
         self.dir = tempfile.mkdtemp(prefix="gsd_py_")

@@ -11,8 +11,8 @@ and the daemon goes on serving.
   refused it);
 - the CLI: gazesplat fit of the black frame exits 3 naming the reason,
   --no-gate exits 0; gazesplat redirect of the small face exits 3;
-- redirect quality: every gaze-only image of an inline REDIRECT carries
-  Quality, a head change none, min_quality 1 drops every image (dropped,
+- redirect quality: asked for, every gaze-only image of an inline
+  REDIRECT carries Quality (not asked, none), a head change none, min_quality 1 drops every image (dropped,
   no pixels, STATS images_dropped), by key without a kept input none;
 - gazesplat eval-photos: one face row, valid JSON of 25 images a mode;
 - grey, CMYK and EXIF-rotated JPEGs find the face; a truncated one is a
@@ -21,6 +21,7 @@ usage: test_daemon_gate.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import io
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -109,10 +110,14 @@ def main():
                     "10 px eyes: %s %s" % (gc.FT.Name(ftype), msg))
             r = c.fit(astro_png, photo=True, max_iters=FAST)
             t.check(len(r.subject_key) == 16, "the astronaut fits")
-            # Every gaze-only image carries its quality (the input is inline);
-            # a head change has none; min_quality 1 drops them all.
+            # Asked for, every gaze-only image carries its quality (the input
+            # is inline); not asked, none; a head change has none;
+            # min_quality 1 drops them all.
             targets = [(0, 20), (10, 0)]
             got = list(c.redirect(targets, image=face, max_iters=FAST))
+            t.check(len(got) == 2 and not any(g.HasField("quality") for g in got),
+                    "not asked: no quality")
+            got = list(c.redirect(targets, image=face, max_iters=FAST, quality=True))
             t.check(len(got) == 2 and all(g.HasField("quality") and g.HasField("image") and
                                           not g.dropped for g in got),
                     "inline REDIRECT: quality with every image")
@@ -121,14 +126,15 @@ def main():
                 t.check(0 <= q.score <= 1 and q.eye_speckle > 0 and
                         abs(q.asked.yaw_deg + q.asked.pitch_deg) > 5,
                         "quality fields: %s" % str(q).replace("\n", " "))
-            got = list(c.redirect([(0, 20)], image=face, max_iters=FAST, head_deg=[(10, 10)]))
+            got = list(c.redirect([(0, 20)], image=face, max_iters=FAST, head_deg=[(10, 10)],
+                                  quality=True))
             t.check(len(got) == 1 and not got[0].HasField("quality"), "a head change has no quality")
             got = list(c.redirect(targets, image=face, max_iters=FAST, min_quality=1.0))
             t.check(len(got) == 2 and all(g.dropped and not g.HasField("image") for g in got),
                     "min_quality 1: every image dropped, its index and quality kept: %s" %
                     [(g.index, g.dropped, g.quality.score) for g in got])
             key = c.fit(face, max_iters=FAST).subject_key
-            got = list(c.redirect(targets, subject=key))
+            got = list(c.redirect(targets, subject=key, quality=True))
             t.check(len(got) == 2 and not any(g.HasField("quality") for g in got),
                     "by key without a kept input: no quality")
             expect_error(t, lambda: c.redirect(targets, image=face, min_quality=1.5),
@@ -184,6 +190,23 @@ def main():
         f0 = d["faces"][0] if d["faces"] else {}
         t.check(len(d["faces"]) == 1 and f0.get("gate") == "usable" and len(f0.get("modes", [])) == 2 and
                 all(len(m["images"]) == 25 for m in f0["modes"]), "eval-photos JSON: %s" % str(d)[:300])
+    # augment --quality: each gaze-only label carries its quality; without
+    # it, null.
+    for flag in ([], ["--quality"]):
+        out = os.path.join(work, "gate_aug%s" % ("_q" if flag else ""))
+        shutil.rmtree(out, ignore_errors=True)
+        p = subprocess.run([cli, "augment", "--model", model, "--input",
+                            os.path.join(work, "faces128", "images"), "--out", out,
+                            "--gaze-deg", "0,15;10,0", "--iters", str(FAST), "--finetune", "0",
+                            "--format", "png"] + flag, capture_output=True, text=True)
+        t.check(p.returncode == 0, "augment %s: exit %d %s" % (flag, p.returncode, p.stderr[-300:]))
+        if p.returncode == 0:
+            qs = [json.loads(x)["quality"] for x in open(os.path.join(out, "labels.jsonl"))]
+            if flag:
+                t.check(len(qs) == 6 and all(q and 0 <= q["score"] <= 1 and q["eye_speckle"] > 0
+                                             for q in qs), "augment --quality: %s" % qs[:2])
+            else:
+                t.check(len(qs) == 6 and all(q is None for q in qs), "augment: quality null")
     # Photos in the forms phones and scanners write: grey and CMYK JPEGs and
     # an EXIF-rotated one find the face as the plain photo does (within a
     # few px); a truncated one is a clear error.

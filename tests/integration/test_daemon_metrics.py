@@ -15,19 +15,11 @@ import urllib.request
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(HERE, "..", "..", "clients", "python"))
-from daemon_util import Checks, Daemon  # noqa: E402
+from daemon_util import Checks, Daemon, free_port, unix_request  # noqa: E402
 import gazesplat_client as gc  # noqa: E402
 
 FT = gc.pb.FrameType
 LINE = re.compile(r'^([a-zA-Z_:][a-zA-Z0-9_:]*)(\{[^}]*\})? (-?[0-9.e+]+|\+Inf)$')
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def parse(t, body):
@@ -66,21 +58,6 @@ def http(addr, path, method="GET"):
             return r.status, r.headers.get("Content-Type"), r.read().decode()
     except urllib.error.HTTPError as e:
         return e.code, e.headers.get("Content-Type"), e.read().decode()
-
-
-def unix_get(path, request):
-    s = socket.socket(socket.AF_UNIX)
-    s.settimeout(10)
-    s.connect(path)
-    s.sendall(request)
-    out = b""
-    while True:
-        b = s.recv(65536)
-        if not b:
-            break
-        out += b
-    s.close()
-    return out.decode()
 
 
 def main():
@@ -172,10 +149,10 @@ def main():
     d.args = ["--set", "metrics=unix:" + msock]
     d.start()
     try:
-        out = unix_get(msock, b"GET /metrics HTTP/1.0\r\n\r\n")
+        out = unix_request(msock, b"GET /metrics HTTP/1.0\r\n\r\n")
         t.check(out.startswith("HTTP/1.0 200 OK") and "gazesplatd_req_sleep_total 0" in out,
                 "unix scrape: %r" % out[:80])
-        head = unix_get(msock, b"HEAD /metrics HTTP/1.0\r\n\r\n")
+        head = unix_request(msock, b"HEAD /metrics HTTP/1.0\r\n\r\n")
         t.check(head.startswith("HTTP/1.0 200 OK") and head.endswith("\r\n\r\n"), "HEAD: headers only")
     finally:
         d.stop()

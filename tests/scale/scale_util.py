@@ -15,18 +15,10 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.join(HERE, "..", "..")
 sys.path.insert(0, os.path.join(ROOT, "tests", "integration"))
-from daemon_util import Checks  # noqa: E402,F401
+from daemon_util import Checks, Daemon, free_port, unix_request  # noqa: E402,F401
 
 SHIPPED_CFG = os.path.join(ROOT, "deploy", "haproxy", "gazesplat.cfg")
 MODEL = os.path.join(ROOT, "models", "gazegaussian-cpu.safetensors")
-
-
-def free_port():
-    s = socket.socket()
-    s.bind(("127.0.0.1", 0))
-    port = s.getsockname()[1]
-    s.close()
-    return port
 
 
 def wait_port(port, proc=None, timeout=20.0):
@@ -42,8 +34,9 @@ def wait_port(port, proc=None, timeout=20.0):
     raise RuntimeError("port %d never answered" % port)
 
 
-class TcpDaemon:
-    """gazesplatd on 127.0.0.1:port (no Unix socket), its own state dir."""
+class TcpDaemon(Daemon):
+    """gazesplatd on 127.0.0.1:port (no Unix socket), its own state dir;
+    stop and log as Daemon's."""
 
     def __init__(self, binary, name, root, model=MODEL, extra=()):
         self.name = name
@@ -70,22 +63,11 @@ class TcpDaemon:
         if self.proc is not None:
             self.proc.send_signal(sig)
 
-    def stop(self, timeout=15):
-        if self.proc is None:
-            return None
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-        try:
-            rc = self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            rc = self.proc.wait()
-        self.proc = None
-        return rc
-
-    def log(self):
-        with open(self.log_path, errors="replace") as f:
-            return f.read()
+    def stop(self, sig=signal.SIGTERM, timeout=15):
+        if self.proc is not None and self.proc.poll() is not None:
+            rc, self.proc = self.proc.returncode, None  # killed by the test
+            return rc
+        return super().stop(sig, timeout)
 
 
 def haproxy_config(text, bind_port, stats_sock, servers, balance=None):
@@ -155,18 +137,7 @@ class Haproxy:
             self.proc = None
 
     def command(self, cmd):
-        s = socket.socket(socket.AF_UNIX)
-        s.settimeout(5)
-        s.connect(self.stats)
-        s.sendall(cmd.encode() + b"\n")
-        out = b""
-        while True:
-            b = s.recv(65536)
-            if not b:
-                break
-            out += b
-        s.close()
-        return out.decode()
+        return unix_request(self.stats, cmd.encode() + b"\n", timeout=5)
 
     def servers(self):
         """{server name: {"status": "UP"/"DOWN"/..., "stot": sessions}}."""

@@ -518,6 +518,18 @@ int gs_face_redirect_quality(const gs_io_image *input, const gs_io_image *output
                              const gs_face_quality_opts *opts,
                              gs_face_quality *out, gs_error *err);
 
+/* The same in two steps for many images of one input: the reference (the
+ * input's irises, eye mask and speckle, found once; the input itself is
+ * not kept), then one measure per image. */
+typedef struct gs_face_quality_ref gs_face_quality_ref;
+int gs_face_quality_ref_create(const gs_io_image *input, const double uv[][2],
+                               const gs_face_quality_opts *opts,
+                               gs_face_quality_ref **out, gs_error *err);
+void gs_face_quality_ref_destroy(gs_face_quality_ref *r);
+int gs_face_quality_measure(const gs_face_quality_ref *r, const gs_io_image *output,
+                            const double head_R[9], double cmd_pitch, double cmd_yaw,
+                            gs_face_quality *out, gs_error *err);
+
 #ifdef __cplusplus
 }
 #endif

@@ -297,12 +297,12 @@ class AsyncClient:
                        finetune_parts: str = "", transfer: bool = False,
                        finetune_outline_px: int = 0, finetune_mirror: bool = True,
                        finetune_lr: float = 0.0,
-                       min_quality: float = 0.0) -> AsyncGenerator[Any, None]:
+                       min_quality: float = 0.0, quality: bool = False) -> AsyncGenerator[Any, None]:
         """As Client.redirect, an async generator of ImageResults. BUSY is
         retried retry_busy times before any image came."""
         req = redirect_request(gaze_deg, subject, image, head_deg, fmt, jpeg_quality, deadline_ms,
                                max_iters, photo, paste_back, finetune_steps, finetune_parts, transfer,
-                               finetune_outline_px, finetune_mirror, finetune_lr, min_quality)
+                               finetune_outline_px, finetune_mirror, finetune_lr, min_quality, quality)
         for attempt in range(self.retry_busy + 1):
             rid, r = await self._start(FT.FRAME_REDIRECT, req, subject or ZERO_KEY)
             retry_ms = 0

@@ -159,7 +159,7 @@ def redirect_request(gaze_deg: Sequence[AnglePair], subject: Optional[bytes] = N
                      photo: bool = False, paste_back: bool = False, finetune_steps: int = 0,
                      finetune_parts: str = "", transfer: bool = False, finetune_outline_px: int = 0,
                      finetune_mirror: bool = True, finetune_lr: float = 0.0,
-                     min_quality: float = 0.0) -> Any:
+                     min_quality: float = 0.0, quality: bool = False) -> Any:
     """The RedirectRequest of Client.redirect's arguments."""
     if (subject is None) == (image is None):
         raise ValueError("give exactly one of subject and image")
@@ -171,7 +171,8 @@ def redirect_request(gaze_deg: Sequence[AnglePair], subject: Optional[bytes] = N
         output_format=_FORMATS[fmt], jpeg_quality=jpeg_quality, deadline_ms=deadline_ms,
         max_iters=max_iters, finetune_steps=finetune_steps, finetune_parts=finetune_parts,
         transfer=transfer, finetune_outline_px=finetune_outline_px,
-        finetune_no_mirror=not finetune_mirror, finetune_lr=finetune_lr, min_quality=min_quality)
+        finetune_no_mirror=not finetune_mirror, finetune_lr=finetune_lr, min_quality=min_quality,
+        quality=quality)
     if image is not None:
         req.image.CopyFrom(image_message(image, pb.KIND_PHOTO if photo else pb.KIND_NORMALIZED_FACE))
     if paste_back:
