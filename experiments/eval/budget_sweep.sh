@@ -4,7 +4,7 @@
 # served rate), run at once with 2 threads each, so a 16-core machine runs
 # the screen in the time of one eval. Each setting's pairs.csv (written
 # input by input: a run stopped early keeps what it reached) goes to
-# OUTDIR/itN-ftM.csv; read them with experiments/eval/readout_stats.py.
+# OUTDIR/itN-ftM.csv; read them with bench/eval/readout_stats.py.
 #
 #   experiments/eval/budget_sweep.sh GAZESPLAT OUTDIR [INPUTS] [SECONDS]
 #
