@@ -1890,7 +1890,7 @@ static int run_augment(int argc, char **argv)
         return cli_usage_error(cmd, "--size: want 16..1024 px; got '%s'", o[O_SIZE].value);
     if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256, &threads))
         return cli_usage_error(cmd, "--threads: want 1..256; got '%s'", o[O_THREADS].value);
-    /* The served setting (daemon/README.md, bench/eval/README.md): the fit
+    /* The served setting (daemon/README.md, experiments/eval/README.md): the fit
      * to its plateau (at most 200 iterations), 15 fine-tuning steps at
      * 0.004 with the mirrored view, detail transfer with the eyeball warp. */
     const char *ftn = o[O_FT].value ? o[O_FT].value : "15";
