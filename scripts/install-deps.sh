@@ -45,9 +45,9 @@ PACKAGES=(
   # with apt-get download, never installed on the host)
   qemu-system-x86 busybox-static v4l-utils kmod
   # systemd VM tier (tests/vm/vm_systemd.py): the guest's userland is the
-  # host's systemd plus procps' kill (the unit's ExecReload) and util-linux's
-  # setpriv (clients under other users)
-  procps util-linux
+  # host's systemd plus procps' kill (the unit's ExecReload), util-linux's
+  # setpriv (clients under other users) and mount
+  procps util-linux mount
 )
 # npm fetches the face test photos (scripts/fetch-test-assets.sh). A node
 # install from elsewhere may already bring its own npm, which Debian's

@@ -37,7 +37,10 @@ import vm_live  # noqa: E402
 
 # The host packages whose files make the guest's userland (dpkg -L).
 HOST_PACKAGES = ["systemd", "libsystemd-shared", "libsystemd0"]
-HOST_FILES = ["/usr/bin/busybox", "/usr/bin/setpriv", "/usr/bin/kill", "/usr/bin/v4l2-ctl"]
+SYSTEMD_LIBDIR = "/usr/lib/x86_64-linux-gnu/systemd"
+# mount and umount: the API file system units (dev-mqueue.mount ...) run them.
+HOST_FILES = ["/usr/bin/busybox", "/usr/bin/setpriv", "/usr/bin/kill", "/usr/bin/v4l2-ctl",
+              "/usr/bin/mount", "/usr/bin/umount"]
 # Packages unpacked in the VM cache (the host has no udev). Its
 # libsystemd-shared stays there: the host's systemd binaries need the host's
 # (the same file name for every 252.x), and udev links against that name.
@@ -229,7 +232,10 @@ def add_packages(root, cache):
 
 def needed_libraries(elf):
     r = subprocess.run(["file", "-b", elf], capture_output=True, text=True)
-    return [] if "statically linked" in r.stdout else vm_live.ldd(elf)
+    # systemd's private libraries find each other through the binaries' RUNPATH.
+    if "dynamically linked" not in r.stdout:  # busybox-static, kernel modules
+        return []
+    return vm_live.ldd(elf, [SYSTEMD_LIBDIR])
 
 
 def add_libraries(root):
@@ -313,7 +319,7 @@ def main():
     ap.add_argument("--stall", type=float, default=240,
                     help="longest wait for the next line on the serial console (s)")
     args = ap.parse_args()
-    args.cache = os.path.abspath(args.cache)
+    args.cache, args.work = os.path.abspath(args.cache), os.path.abspath(args.work)
     os.makedirs(args.work, exist_ok=True)
     prep = subprocess.run([os.path.join(ROOT, "scripts/vm/prepare.sh"), args.cache],
                           capture_output=True, text=True)
