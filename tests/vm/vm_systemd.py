@@ -76,9 +76,9 @@ MASK = ["serial-getty@ttyS0.service", "getty@tty1.service", "systemd-logind.serv
 
 
 class Root:
-    """The guest tree: guest path (no leading slash) -> (kind, source).
-    kind: 'f' (host file to copy), 'd' (directory), 'l' (symlink target),
-    'b' (bytes)."""
+    """The guest tree: guest path (no leading slash) -> (kind, source, mode).
+    kind 'f': source is a host file to copy; 'd': a directory; 'l': source
+    is the link's target; 'b': source is the bytes. mode None: the default."""
 
     def __init__(self):
         self.entries = {}
@@ -270,7 +270,7 @@ def add_modules(root, cache, krel, work):
     root.add_tree("usr/lib/modules/" + krel, dst)
 
 
-def add_config(root, stage, args):
+def add_config(root, stage):
     root.add_tree("", stage)
     enable_units(root, stage)
     examples = os.path.join(stage, "usr/share/doc/gazesplat/examples",
@@ -304,7 +304,7 @@ def build_initramfs(args, krel, out_path):
     model = stage_package(args.build, stage)
     root = Root()
     add_packages(root, args.cache)
-    add_config(root, stage, args)
+    add_config(root, stage)
     add_modules(root, args.cache, krel, args.work)
     add_libraries(root)
     return root.write_cpio(out_path), model
