@@ -76,6 +76,21 @@ t0us=$(awk -v a="$t0" 'BEGIN { printf "%d", a * 1000000 }')
     fail "$U started at ${start:-?} us, before the client (at $t0us us)"
 pid=$(prop $U MainPID)
 
+# The unit's resource controls and sandbox, as the kernel sees the process.
+cg=/sys/fs/cgroup$(cut -d: -f3 /proc/$pid/cgroup)
+nofile=$(sed -n 's/^Max open files *[0-9]* *\([0-9]*\).*/\1/p' /proc/$pid/limits)
+res="nofile-hard $nofile memory.high $(cat $cg/memory.high 2>&1) cpu.weight $(cat $cg/cpu.weight 2>&1)"
+[ "$res" = "nofile-hard 65536 memory.high 3221225472 cpu.weight 50" ] &&
+    pass "LimitNOFILE/MemoryHigh/CPUWeight in force: $res ($cg)" || fail "resource controls: $res ($cg)"
+st=$(grep -E '^(Uid|NoNewPrivs|Seccomp|CapEff):' /proc/$pid/status | tr -s '\t ' ' ' | tr '\n' ' ')
+uid=$(echo "$st" | sed -n 's/.*Uid: \([0-9]*\).*/\1/p')
+if echo "$st" | grep -q 'NoNewPrivs: 1 Seccomp: 2' && echo "$st" | grep -q 'CapEff: 0000000000000000' &&
+   [ "${uid:-0}" -ge 61184 ] && [ "$uid" -le 65519 ]; then
+    pass "sandbox in force: $st(DynamicUser range)"
+else
+    fail "sandbox: $st"
+fi
+
 # 2. The socket's group: a member is served, anyone else refused at connect.
 sed -i "/^gazesplat:/ s/:\$/:gsmember/" /etc/group
 if health --reuid=gsmember --regid=gsmember --init-groups && grep -q '^state READY' /tmp/health; then
