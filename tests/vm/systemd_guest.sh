@@ -56,6 +56,11 @@ label=$(cat /sys/class/video4linux/video9/name 2>/dev/null)
 st=$(systemctl is-active $U)
 [ "$st" != active ] && pass "$U not started before the first connection ($st)" ||
     fail "$U already $st before any client"
+docs=$(prop $U Documentation | tr -d '"')
+missing=""
+for d in $docs; do [ -f "${d#file:}" ] || missing="$missing $d"; done
+[ -n "$docs" ] && [ -z "$missing" ] && pass "Documentation= names installed files: $docs" ||
+    fail "Documentation='$docs', not installed:$missing"
 perm=$(stat -c '%a %U:%G' $SOCK 2>&1)
 [ "$perm" = "660 root:gazesplat" ] && pass "socket $SOCK is $perm" || fail "socket is '$perm'"
 # The first client is answered (LOADING while the model loads, READY after).

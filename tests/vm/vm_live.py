@@ -177,6 +177,9 @@ def main():
     return 0 if result == "PASS" else 1
 
 
+# no_timer_check: the kernel's IO-APIC timer test can fail when the host
+# starves the emulated CPU ("IO-APIC + timer doesn't work!", a panic at
+# boot, seen in CI); the guest's timers work regardless.
 BASE_APPEND = "console=ttyS0 panic=-1 loglevel=4 rdinit=/init no_timer_check"
 
 
@@ -188,9 +191,6 @@ def boot(args, kernel, initrd, t_end, attempt, append=BASE_APPEND, mem_mb=1536):
     mon = os.path.join(args.work, "monitor.sock")
     if os.path.exists(mon):
         os.unlink(mon)
-    # no_timer_check: the kernel's IO-APIC timer test can fail when the host
-    # starves the emulated CPU ("IO-APIC + timer doesn't work!", a panic at
-    # boot, seen in CI); the guest's timers work regardless.
     cmd = ["qemu-system-x86_64", "-accel", "tcg,thread=multi", "-cpu", "max", "-smp", "2",
            "-m", str(mem_mb), "-display", "none", "-no-reboot", "-nodefaults",
            "-serial", "stdio", "-monitor", "unix:%s,server,nowait" % mon,
