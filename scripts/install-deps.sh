@@ -44,6 +44,10 @@ PACKAGES=(
   # a kernel module build (the kernel itself is fetched by scripts/vm/prepare.sh
   # with apt-get download, never installed on the host)
   qemu-system-x86 busybox-static v4l-utils kmod
+  # systemd VM tier (tests/vm/vm_systemd.py): the guest's userland is the
+  # host's systemd plus procps' kill (the unit's ExecReload), util-linux's
+  # setpriv (clients under other users) and mount
+  procps util-linux mount
 )
 # npm fetches the face test photos (scripts/fetch-test-assets.sh). A node
 # install from elsewhere may already bring its own npm, which Debian's
