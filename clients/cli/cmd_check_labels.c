@@ -36,10 +36,14 @@ const cli_command cli_check_labels_command = {
     "  --h5-rgb           the HDF5 patches are RGB\n"
     "  --estimator FILE   gaze estimator (default\n"
     "                     models/gaze-resnet.safetensors); 'none': skip it\n"
-    "  --readout auto|off synth datasets (DIR/README.md names the generator):\n"
-    "                     also read each image's gaze by synthesis, exactly\n"
-    "                     (gs_eval_gaze_readout; about 0.3 s an image at 128\n"
-    "                     px); auto (default) does so when the README is one\n"
+    "  --readout MODE     synth datasets (DIR/README.md names the generator):\n"
+    "                     exact (auto, the default, on such a dataset): the\n"
+    "                     generator renders each index again and, when the\n"
+    "                     image is that render byte for byte, its gaze is the\n"
+    "                     readout, exactly; synthesis: the gaze read from the\n"
+    "                     pixels by analysis by synthesis (gs_eval_gaze_readout,\n"
+    "                     for images the generator did not write; about 1 s an\n"
+    "                     image); off: the estimator alone\n"
     "  --threshold DEG    outlier when the sample's error exceeds DEG (the\n"
     "                     readout's error where there is one, else the\n"
     "                     estimator's; default 20)\n"
@@ -62,6 +66,8 @@ enum {
     O_LIST, O_LIMIT, O_THREADS, O_N
 };
 
+enum { READ_NONE = 0, READ_EXACT, READ_SYNTHESIS };
+
 typedef struct sample {
     long row;               /* line of the labels (1-based) or HDF5 row (0-based) */
     long long index;        /* the dataset's index */
@@ -79,8 +85,9 @@ typedef struct checker {
     const cli_command *cmd;
     gs_pool *pool;
     eval_estimator *est;
-    int readout;                /* synth config below is valid */
+    int readout;                /* READ_*: with one, synth is valid */
     gs_synth_gen_config synth;
+    gs_synth_sample render;     /* the generator's render (exact) */
     gs_h5_reader *h5;           /* --h5, or DIR/augment.h5 when needed */
     gs_h5_info h5info;
     int h5_bgr;
@@ -196,44 +203,63 @@ static int estimate(checker *c, const uint8_t *rgb, int w, int h, size_t stride,
     return CLI_OK;
 }
 
-/* The exact readout of a synth sample: its scene from the generator
+/* The readouts of a synth sample. Its scene comes from the generator
  * (checked against the line's identity and head pose, which a gaze label
- * error leaves alone), the gaze read by synthesis, taken to the
- * normalized camera as the label is. */
+ * error leaves alone). exact: the generator's render of that index must
+ * be the image, byte for byte; its gaze is then what the image shows,
+ * exactly. synthesis: the gaze read from the pixels by analysis by
+ * synthesis (gs_eval_gaze_readout), for images that are not the
+ * generator's own. Either is taken to the normalized camera, as the label. */
 static void readout(checker *c, const js_object *o, const uint8_t *rgb, size_t stride,
                     sample *s)
 {
     gs_synth_scene sc;
     gs_synth_camera cam;
-    gs_synth_labels lab;
     gs_error err = {0, ""};
     double seed, head_R[9];
     if (s->index < 0 || gs_synth_gen_scene(&c->synth, (uint64_t)s->index, &sc, &cam, &err) ||
-        gs_synth_labels_compute(&sc, &cam, &lab, &err)) {
+        gs_synth_labels_compute(&sc, &cam, &c->render.labels, &err)) {
         s->note = "no scene for this index";
         return;
     }
+    const gs_synth_labels *lab = &c->render.labels;
     if (js_get_number(o, "identity_seed", &seed, NULL) || (uint64_t)seed != sc.identity.seed ||
         get_numbers(o, "head_R", head_R, 9)) {
         s->note = "identity differs from the generator's";
         return;
     }
     for (int k = 0; k < 9; k++)
-        if (fabs(head_R[k] - lab.head_R[k]) > 1e-6) {
+        if (fabs(head_R[k] - lab->head_R[k]) > 1e-6) {
             s->note = "head pose differs from the generator's";
             return;
         }
-    gs_eval_readout ro;
-    if (gs_eval_gaze_readout(&sc, c->synth.size, 0.0, 0.0, rgb, stride, NULL, c->pool, &ro,
-                             &err) != GS_OK) {
-        s->note = "readout failed (eyes closed or hidden)";
-        return;
+    if (c->readout == READ_EXACT) {
+        int n = c->synth.size;
+        if (gs_synth_gen_sample(&c->synth, (uint64_t)s->index, c->pool, &c->render, &err)) {
+            s->note = "the generator failed on this index";
+            return;
+        }
+        for (int y = 0; y < n; y++)
+            if (memcmp(rgb + (size_t)y * stride, c->render.rgb + (size_t)y * c->render.stride,
+                       3 * (size_t)n)) {
+                s->note = "image differs from the generator's render";
+                return;
+            }
+        s->read_p = c->render.labels.gaze_norm_pitch;
+        s->read_y = c->render.labels.gaze_norm_yaw;
+    } else {
+        gs_eval_readout ro;
+        if (gs_eval_gaze_readout(&sc, c->synth.size, 0.0, 0.0, rgb, stride, NULL, c->pool,
+                                 &ro, &err) != GS_OK) {
+            s->note = "readout failed (eyes closed or hidden)";
+            return;
+        }
+        double gh[3], gc[3], gn[3];
+        gs_geom_pitchyaw_to_vec(ro.pitch, ro.yaw, gh);
+        gs_geom_mat3_vec(lab->head_R, gh, gc);
+        gs_geom_norm_vec(&lab->norm, gc, gn);
+        gs_geom_vec_to_pitchyaw(gn, &s->read_p, &s->read_y);
     }
-    double gh[3], gc[3], gn[3];
-    gs_geom_pitchyaw_to_vec(ro.pitch, ro.yaw, gh);
-    gs_geom_mat3_vec(lab.head_R, gh, gc);
-    gs_geom_norm_vec(&lab.norm, gc, gn);
-    gs_geom_vec_to_pitchyaw(gn, &s->read_p, &s->read_y);
     s->read_err = angle_deg(s->label_p, s->label_y, s->read_p, s->read_y);
 }
 
@@ -544,9 +570,10 @@ static int write_json(const char *path, const report *r, const sample *s, const 
         json_str(f, r->estimator);
     else
         fputs("null", f);
+    static const char *const modes[3] = {"null", "\"exact\"", "\"synthesis\""};
     fprintf(f, ",\"readout\":%s,\"threshold_deg\":%.6g,\"samples\":%ld,\"scored\":%ld,"
                "\"outliers\":%ld,\"outlier_fraction\":",
-            r->readout ? "true" : "false", r->threshold, r->n, r->scored, r->outliers);
+            modes[r->readout], r->threshold, r->n, r->scored, r->outliers);
     json_num(f, r->scored ? (double)r->outliers / (double)r->scored : NAN);
     fputc(',', f);
     json_stats(f, "estimator_error_deg", stats_of(s, r->n, 0, NULL));
@@ -599,11 +626,14 @@ static void print_table(const report *r, const sample *s, const long *subj, long
 {
     printf("gazesplat check-labels: %s: %ld samples, %ld scored (%s), threshold %.3g deg\n",
            r->dataset, r->n, r->scored,
-           r->readout ? "readout by synthesis, estimator alongside" : "estimator", r->threshold);
+           r->readout == READ_EXACT       ? "exact readout, estimator alongside"
+           : r->readout == READ_SYNTHESIS ? "readout by synthesis, estimator alongside"
+                                          : "estimator",
+           r->threshold);
     printf("  %-22s %6s  %7s  %7s  %7s  %7s\n", "error vs label (deg)", "n", "mean", "median",
            "p90", "max");
     print_stats("estimator", stats_of(s, r->n, 0, NULL));
-    print_stats("readout (exact)", stats_of(s, r->n, 1, NULL));
+    print_stats("readout", stats_of(s, r->n, 1, NULL));
     printf("  outliers: %ld of %ld scored (%.1f %%)\n", r->outliers, r->scored,
            r->scored ? 100.0 * (double)r->outliers / (double)r->scored : 0.0);
     if (nsubj > 1) {
@@ -660,23 +690,33 @@ static int setup(checker *c, const cli_opt *o, double *thresh, double *maxout, l
     if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256, &threads))
         return cli_usage_error(cmd, "--threads: want 1..256; got '%s'", o[O_THREADS].value);
     const char *ro = o[O_READOUT].value ? o[O_READOUT].value : "auto";
-    if (strcmp(ro, "auto") && strcmp(ro, "off"))
-        return cli_usage_error(cmd, "--readout: want auto or off; got '%s'", ro);
+    int mode = !strcmp(ro, "auto") || !strcmp(ro, "exact") ? READ_EXACT
+               : !strcmp(ro, "synthesis")                  ? READ_SYNTHESIS
+                                                           : READ_NONE;
+    if (mode == READ_NONE && strcmp(ro, "off"))
+        return cli_usage_error(cmd, "--readout: want auto, exact, synthesis or off; got '%s'",
+                               ro);
     *est_path = o[O_EST].value ? o[O_EST].value : "models/gaze-resnet.safetensors";
     if (!strcmp(*est_path, "none"))
         *est_path = NULL;
-    if (!*est_path && (o[O_H5].value || !strcmp(ro, "off")))
+    if (!*est_path && (o[O_H5].value || mode == READ_NONE))
         return cli_usage_error(cmd, "nothing reads the images: --estimator none needs the "
                                "readout of a synth dataset");
     c->h5_bgr = !o[O_H5RGB].value;
     gs_error err = {0, ""};
-    if (o[O_DIR].value && !strcmp(ro, "auto") &&
-        gs_synth_dataset_config_read(o[O_DIR].value, &c->synth, NULL, NULL, &err) == GS_OK) {
-        if (c->synth.rig != GS_SYNTH_RIG_NORMALIZED)
+    if (o[O_DIR].value && mode != READ_NONE) {
+        int synth = gs_synth_dataset_config_read(o[O_DIR].value, &c->synth, NULL, NULL,
+                                                 &err) == GS_OK;
+        if (!synth && strcmp(ro, "auto"))
+            return cli_fail(cmd, "--readout %s needs a gazesplat synth dataset: %s", ro,
+                            err.msg);
+        if (synth && c->synth.rig != GS_SYNTH_RIG_NORMALIZED)
             return cli_fail(cmd, "%s: a synth dataset of rig %s; check-labels reads "
                             "normalized face images (rig normalized)", o[O_DIR].value,
                             c->synth.rig == GS_SYNTH_RIG_ETHX ? "ethx" : "single");
-        c->readout = 1;
+        if (synth && gs_synth_sample_alloc(&c->render, c->synth.size, c->synth.size, &err))
+            return cli_fail(cmd, "%s", err.msg);
+        c->readout = synth ? mode : READ_NONE;
     }
     if (!c->readout && !*est_path)
         return cli_fail(cmd, "%s is not a gazesplat synth dataset (no README.md naming the "
@@ -761,6 +801,7 @@ static int run_check(int argc, char **argv)
     free(c.patch);
     if (c.h5)
         gs_h5_close(c.h5);
+    gs_synth_sample_free(&c.render);
     eval_estimator_free(c.est);
     if (c.pool)
         gs_pool_destroy(c.pool);
