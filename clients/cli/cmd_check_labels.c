@@ -1,12 +1,10 @@
 /* gazesplat check-labels: scores a dataset's gaze labels against the gaze
  * its images show (a shipped estimator on any dataset; on a gazesplat
  * synth dataset also the exact readout by synthesis) and lists outliers. */
-#define _POSIX_C_SOURCE 200809L /* isatty */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <unistd.h>
 
 #include "cli.h"
 #include "eval_estimator.h"
@@ -322,6 +320,8 @@ static int check_dir(checker *c, const char *dir, const char *file, long limit,
     int rc = ss && o ? CLI_OK : cli_fail(c->cmd, "out of memory");
     long n = 0, line = 0;
     size_t at = 0;
+    cli_progress_t prog;
+    cli_progress_start(&prog);
     while (rc == CLI_OK && at < len && (limit <= 0 || n < limit)) {
         const char *p = (const char *)text + at;
         const char *nl = memchr(p, '\n', len - at);
@@ -347,11 +347,11 @@ static int check_dir(checker *c, const char *dir, const char *file, long limit,
         if (owned)
             gs_io_image_free(&img);
         n++;
-        if (rc == CLI_OK && isatty(2) && n % 10 == 0)
-            fprintf(stderr, "\rgazesplat check-labels: %ld samples", n);
+        if (rc == CLI_OK)
+            cli_progress(&prog, 0, "gazesplat check-labels: %ld samples, %.0f s", n,
+                         cli_now_s() - prog.start);
     }
-    if (isatty(2) && n >= 10)
-        fputc('\n', stderr);
+    cli_progress_done(&prog);
     free(o);
     free(text);
     if (rc == CLI_OK && n == 0)
