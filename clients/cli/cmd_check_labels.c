@@ -621,6 +621,15 @@ static void print_stats(const char *what, stats st)
         printf("  %-22s %6s\n", what, "-");
 }
 
+/* "pitch,yaw" in degrees, or "-" when there is no reading. */
+static void pair(char buf[32], double p, double y)
+{
+    if (isfinite(p) && isfinite(y))
+        snprintf(buf, 32, "%.1f,%.1f", p * DEG, y * DEG);
+    else
+        snprintf(buf, 32, "-");
+}
+
 static void print_table(const report *r, const sample *s, const long *subj, long nsubj,
                         long list)
 {
@@ -655,10 +664,12 @@ static void print_table(const report *r, const sample *s, const long *subj, long
                "label p,y", "estimator p,y", "readout p,y", "error");
         for (long i = 0; i < r->outliers && i < list; i++) {
             const sample *x = &s[r->order[i]];
-            printf("  %-10lld %-22.22s %-12.12s %7.1f,%-7.1f %7.1f,%-7.1f %7.1f,%-7.1f %7.2f\n",
-                   x->index, x->image[0] ? x->image : "-", x->subject, x->label_p * DEG,
-                   x->label_y * DEG, x->est_p * DEG, x->est_y * DEG, x->read_p * DEG,
-                   x->read_y * DEG, x->score);
+            char lab[32], est[32], rd[32];
+            pair(lab, x->label_p, x->label_y);
+            pair(est, x->est_p, x->est_y);
+            pair(rd, x->read_p, x->read_y);
+            printf("  %-10lld %-22.22s %-12.12s %15s %15s %15s %7.2f\n", x->index,
+                   x->image[0] ? x->image : "-", x->subject, lab, est, rd, x->score);
         }
         if (r->outliers > list)
             printf("  ... %ld more (--list, --json)\n", r->outliers - list);
