@@ -164,7 +164,10 @@ static int parse_line(const checker *c, const char *file, long line, const char 
     s->index = js_get_number(o, "index", &d, NULL) == 0 ? (long long)d : line - 1;
     const js_value *im = js_get(o, "image");
     if (im && im->kind == JS_STRING) {
-        if (js_get_string(o, "image", s->image, sizeof s->image) || !s->image[0] ||
+        if (js_get_string(o, "image", s->image, sizeof s->image))
+            return cli_fail(c->cmd, "%s:%ld: image name longer than %zu bytes or with a "
+                            "non-ASCII escape", file, line, sizeof s->image - 1);
+        if (!s->image[0] ||
             s->image[0] == '/' || strstr(s->image, ".."))
             return cli_fail(c->cmd, "%s:%ld: image must be a relative path inside the "
                             "dataset folder", file, line);
@@ -223,7 +226,7 @@ static void readout(checker *c, const js_object *o, const uint8_t *rgb, size_t s
     const gs_synth_labels *lab = &c->render.labels;
     if (js_get_number(o, "identity_seed", &seed, NULL) || (uint64_t)seed != sc.identity.seed ||
         get_numbers(o, "head_R", head_R, 9)) {
-        s->note = "identity differs from the generator's";
+        s->note = "identity or head pose unreadable or not the generator's";
         return;
     }
     for (int k = 0; k < 9; k++)
