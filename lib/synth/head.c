@@ -115,7 +115,8 @@ static void build_eye(const build_ctx *b, const float *p,
     e->iris_d = limbus - 0.35f;
     float pupil = 2.0f + 0.5f * p[GS_SYNTH_ID_PUPIL_SIZE] + 1.2f * ex->pupil;
     e->pupil_r = clampf(pupil, 1.0f, 3.5f) * b->sc;
-    /* Optical axis: the eye rotation maps -z to the gaze vector. */
+    /* Optical axis: the eye rotation maps -z to the gaze vector (the
+     * visual axis), turned by the identity's kappa when it has one. */
     double r[9], mz[3] = {0, 0, -1}, a[3];
     gs_geom_rot_from_pitchyaw(gp, gy, 0.0, r);
     if (b->kappa) {

@@ -145,6 +145,10 @@ static void test_signs(void)
         }
         CHECK(memcmp(l.face_centre, l0.face_centre, sizeof l.face_centre) == 0);
         CHECK(memcmp(l.eye_centre, l0.eye_centre, sizeof l.eye_centre) == 0);
+        /* A scene's non-finite kappa is refused. */
+        sc.kappa = 1;
+        sc.kappa_v = NAN;
+        CHECK(gs_synth_labels_compute(&sc, &cam, &l, NULL) == GS_ERR_NONFINITE);
     }
 }
 
