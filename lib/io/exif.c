@@ -22,11 +22,16 @@ static uint32_t rd32(const unsigned char *p, int le)
 int gs_exif_orientation(const unsigned char *app1, size_t len)
 {
     static const unsigned char magic[6] = {'E', 'x', 'i', 'f', 0, 0};
-    if (!app1 || len < 6 + 8 || memcmp(app1, magic, 6) != 0)
+    if (!app1 || len < 6 || memcmp(app1, magic, 6) != 0)
         return 1;
-    const unsigned char *t = app1 + 6; /* the TIFF header: offsets count from here */
-    size_t n = len - 6;
+    return gs_exif_tiff_orientation(app1 + 6, len - 6);
+}
+
+int gs_exif_tiff_orientation(const unsigned char *t, size_t n)
+{
     int le;
+    if (!t || n < 8)
+        return 1;
     if (t[0] == 'I' && t[1] == 'I')
         le = 1;
     else if (t[0] == 'M' && t[1] == 'M')

@@ -18,7 +18,8 @@
  * max_pixels and max_side each way. JPEG: grey, YCbCr, RGB, CMYK and YCCK
  * (Adobe-inverted, as photo tools write it); the EXIF orientation is
  * applied. PNG: every colour type and depth; alpha is dropped, 16-bit
- * samples keep their high byte. */
+ * samples keep their high byte; the orientation of an eXIf chunk is
+ * applied. */
 int gs_jpeg_decode(const unsigned char *buf, size_t len, size_t max_pixels, int max_side,
                    gs_io_image *out, gs_error *err);
 int gs_png_decode(const unsigned char *buf, size_t len, size_t max_pixels, int max_side,
@@ -34,6 +35,10 @@ int gs_png_encode(const gs_io_image *img, int level, unsigned char **out, size_t
 /* The EXIF Orientation (IFD0 tag 0x0112) in the body of an APP1 segment
  * (from "Exif\0\0" on), 1..8; 1 when absent, malformed or out of range. */
 int gs_exif_orientation(const unsigned char *app1, size_t len);
+
+/* The same from a bare TIFF block (II or MM first), as a PNG eXIf chunk
+ * holds it; offsets count from t. */
+int gs_exif_tiff_orientation(const unsigned char *t, size_t n);
 
 /* Replaces img (stride 3 * width) by its version displayed upright for
  * EXIF orientation 1..8 (2..8 flip or rotate it; 5..8 swap width and

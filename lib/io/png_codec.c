@@ -9,7 +9,9 @@
  * grey expanded, 16-bit samples reduced to their high byte
  * (png_set_strip_16), alpha and tRNS dropped without compositing,
  * interlaced files de-interlaced; the transforms OpenCV's imread applied,
- * so pixels are unchanged from the OpenCV days. */
+ * so pixels are unchanged from the OpenCV days. The EXIF orientation of an
+ * eXIf chunk (before or after the image data) is applied, as OpenCV 4.6
+ * did. */
 #include <setjmp.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -30,6 +32,7 @@ typedef struct png_ctx {
     size_t in_len, in_pos;
     unsigned char *pix;
     png_bytep *rows;
+    int orientation;
     /* encode: the output, grown by doubling */
     unsigned char *out;
     size_t out_cap, out_len;
@@ -92,7 +95,14 @@ static int png_decode_run(png_ctx *c, size_t max_pixels, int max_side, gs_error 
     for (size_t y = 0; y < h; y++)
         c->rows[y] = c->pix + y * w * 3;
     png_read_image(png, c->rows);
-    png_read_end(png, NULL);
+    png_read_end(png, info);
+    c->orientation = 1;
+#ifdef PNG_eXIf_SUPPORTED
+    png_bytep exif = NULL;
+    png_uint_32 exif_len = 0;
+    if (png_get_eXIf_1(png, info, &exif_len, &exif) && exif)
+        c->orientation = gs_exif_tiff_orientation(exif, exif_len);
+#endif
     return GS_OK;
 }
 
@@ -115,11 +125,15 @@ int gs_png_decode(const unsigned char *buf, size_t len, size_t max_pixels, int m
         rc = png_decode_run(c, max_pixels, max_side, err);
     }
     if (rc == GS_OK) {
-        out->width = (int)png_get_image_width(c->png, c->info);
-        out->height = (int)png_get_image_height(c->png, c->info);
-        out->stride = (size_t)out->width * 3;
-        out->data = c->pix;
-        c->pix = NULL;
+        gs_io_image img = {(int)png_get_image_width(c->png, c->info),
+                           (int)png_get_image_height(c->png, c->info), 0, c->pix};
+        img.stride = (size_t)img.width * 3;
+        rc = gs_image_orient(&img, c->orientation, err);
+        c->pix = img.data; /* freed below unless handed out */
+        if (rc == GS_OK) {
+            *out = img;
+            c->pix = NULL;
+        }
     }
     png_destroy_read_struct(c->png ? &c->png : NULL, c->info ? &c->info : NULL, NULL);
     free(c->pix);

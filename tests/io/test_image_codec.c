@@ -48,6 +48,7 @@ typedef struct jpeg_spec {
     int w, h, comps;           /* input components: 1, 3 or 4 */
     J_COLOR_SPACE in, stored;  /* input space, space in the file */
     int quality, progressive, subsample; /* subsample: 4:2:0 (else 4:4:4) */
+    int arith;                           /* arithmetic coding (SOF9) */
     const unsigned char *app1[2];        /* APP1 bodies written in order */
     size_t app1_len[2];
 } jpeg_spec;
@@ -73,6 +74,7 @@ static bytes write_jpeg(const jpeg_spec *s, const unsigned char *pix)
             ci.comp_info[c].h_samp_factor = ci.comp_info[c].v_samp_factor = 1;
     if (s->progressive)
         jpeg_simple_progression(&ci);
+    ci.arith_code = s->arith ? TRUE : FALSE;
     jpeg_start_compress(&ci, TRUE);
     for (int i = 0; i < 2; i++)
         if (s->app1[i])
@@ -97,6 +99,9 @@ typedef struct png_spec {
     int nplte;
     const unsigned char *trns;
     int ntrns;
+    const unsigned char *exif; /* an eXIf chunk (a bare TIFF block) */
+    size_t exif_len;
+    int exif_after;            /* after the image data instead of before */
 } png_spec;
 
 static void png_put(png_structp png, png_bytep src, size_t n)
@@ -131,7 +136,11 @@ static bytes write_png(const png_spec *s, const unsigned char *rows, size_t rowl
         png_set_PLTE(png, info, s->plte, s->nplte);
     if (s->trns)
         png_set_tRNS(png, info, s->trns, s->ntrns, NULL);
+    if (s->exif && !s->exif_after)
+        png_set_eXIf_1(png, info, (png_uint_32)s->exif_len, (png_bytep)s->exif);
     png_write_info(png, info);
+    if (s->exif && s->exif_after)
+        png_set_eXIf_1(png, info, (png_uint_32)s->exif_len, (png_bytep)s->exif);
     int passes = png_set_interlace_handling(png);
     for (int p = 0; p < passes; p++)
         for (int y = 0; y < s->h; y++)
@@ -178,7 +187,7 @@ static void test_jpeg_grey(void)
     for (int y = 0; y < 16; y++)
         for (int x = 0; x < 64; x++)
             pix[y * 64 + x] = (unsigned char)(x < 32 ? 40 : 210);
-    jpeg_spec s = {64, 16, 1, JCS_GRAYSCALE, JCS_GRAYSCALE, 100, 0, 0, {NULL, NULL}, {0, 0}};
+    jpeg_spec s = {64, 16, 1, JCS_GRAYSCALE, JCS_GRAYSCALE, 100, 0, 0, 0, {NULL, NULL}, {0, 0}};
     bytes b = write_jpeg(&s, pix);
     dump("grey.jpg", &b);
     gs_io_image img;
@@ -209,7 +218,7 @@ static void test_jpeg_cmyk(J_COLOR_SPACE stored, const char *name)
             p[2] = c[2];
             p[3] = (unsigned char)kinv;
         }
-    jpeg_spec s = {64, 16, 4, JCS_CMYK, stored, 100, 0, 0, {NULL, NULL}, {0, 0}};
+    jpeg_spec s = {64, 16, 4, JCS_CMYK, stored, 100, 0, 0, 0, {NULL, NULL}, {0, 0}};
     bytes b = write_jpeg(&s, pix);
     dump(name, &b);
     gs_io_image img;
@@ -241,11 +250,24 @@ static unsigned char *blocks_rgb(int w, int h)
 static void test_jpeg_progressive(void)
 {
     unsigned char *pix = blocks_rgb(64, 32);
-    jpeg_spec s = {64, 32, 3, JCS_RGB, JCS_YCbCr, 95, 1, 1, {NULL, NULL}, {0, 0}};
+    jpeg_spec s = {64, 32, 3, JCS_RGB, JCS_YCbCr, 95, 1, 1, 0, {NULL, NULL}, {0, 0}};
     bytes prog = write_jpeg(&s, pix);
     s.progressive = 0;
     bytes base = write_jpeg(&s, pix);
+    s.arith = 1;
+    bytes arith = write_jpeg(&s, pix);
+    s.arith = 0;
     dump("progressive.jpg", &prog);
+    dump("arithmetic.jpg", &arith);
+    gs_io_image c;
+    gs_error aerr = {0, ""};
+    CHECK_MSG(decode(&arith, &c, &aerr) == GS_OK, "arithmetic: %s", aerr.msg);
+    if (c.data)
+        for (int i = 0; i < NB; i++)
+            check_rgb("arithmetic", &c, 16 * i + 8, 16, block_rgb[i][0], block_rgb[i][1],
+                      block_rgb[i][2], 6);
+    gs_io_image_free(&c);
+    free(arith.p);
     gs_io_image a, b;
     gs_error err = {0, ""};
     CHECK_MSG(decode(&prog, &a, &err) == GS_OK, "progressive: %s", err.msg);
@@ -344,7 +366,7 @@ static void test_exif_orientations(void)
             size_t n = exif_body(app1, le & 1, o, 3);
             CHECK_EQ_INT(gs_exif_orientation(app1, n), o);
             const int xmp_first = le == 2;
-            jpeg_spec s = {sw, sh, 3, JCS_RGB, JCS_YCbCr, 100, 0, 0,
+            jpeg_spec s = {sw, sh, 3, JCS_RGB, JCS_YCbCr, 100, 0, 0, 0,
                            {xmp_first ? xmp : app1, xmp_first || o % 2 ? (xmp_first ? app1 : xmp) : NULL},
                            {xmp_first ? sizeof xmp : n, xmp_first ? n : o % 2 ? sizeof xmp : 0}};
             bytes b = write_jpeg(&s, pix);
@@ -369,6 +391,27 @@ static void test_exif_orientations(void)
             }
             gs_io_image_free(&img);
             free(b.p);
+            /* The same as a PNG with an eXIf chunk (the TIFF block alone),
+             * before the image data in one byte order, after it in the
+             * other. */
+            if (le < 2) {
+                png_spec ps = {sw, sh, 8, PNG_COLOR_TYPE_RGB, 0, NULL, 0, NULL, 0,
+                               app1 + 6, n - 6, le};
+                CHECK_EQ_INT(gs_exif_tiff_orientation(app1 + 6, n - 6), o);
+                bytes pb = write_png(&ps, pix, (size_t)sw * 3);
+                snprintf(name, sizeof name, "exif_%d_%s.png", o, le ? "II_after" : "MM");
+                dump(name, &pb);
+                CHECK_MSG(decode(&pb, &img, &err) == GS_OK, "%s: %s", name, err.msg);
+                if (img.data) {
+                    unsigned char *want = stored_for(1, &sw, &sh);
+                    CHECK_MSG(img.width == 64 && img.height == 32 &&
+                                  memcmp(img.data, want, 64 * 32 * 3) == 0,
+                              "%s: %dx%d, not the upright picture", name, img.width, img.height);
+                    free(want);
+                }
+                gs_io_image_free(&img);
+                free(pb.p);
+            }
             free(pix);
         }
 }
@@ -462,7 +505,7 @@ static void test_png_types(void)
             }
     for (int il = 0; il <= 1; il++) {
         char name[64];
-        png_spec s = {W, H, 8, PNG_COLOR_TYPE_RGB, il, NULL, 0, NULL, 0};
+        png_spec s = {W, H, 8, PNG_COLOR_TYPE_RGB, il, NULL, 0, NULL, 0, NULL, 0, 0};
         snprintf(name, sizeof name, "rgb8%s.png", il ? "_interlaced" : "");
         png_case(name, &s, &rgb[0][0], W * 3, &want[0][0], W);
         s.ctype = PNG_COLOR_TYPE_RGB_ALPHA;
@@ -489,7 +532,7 @@ static void test_png_types(void)
             idx[y][x] = (unsigned char)((x + y) % 3);
             memcpy(&wantp[y][3 * x], &plte[idx[y][x]], 3);
         }
-    png_spec p = {W, H, 8, PNG_COLOR_TYPE_PALETTE, 0, plte, 3, trns, 3};
+    png_spec p = {W, H, 8, PNG_COLOR_TYPE_PALETTE, 0, plte, 3, trns, 3, NULL, 0, 0};
     png_case("palette_trns.png", &p, &idx[0][0], W, &wantp[0][0], W);
     /* Grey at 1, 2 and 4 bits: scaled to 0..255 by bit replication. */
     for (int depth = 1; depth <= 4; depth *= 2) {
@@ -504,7 +547,7 @@ static void test_png_types(void)
             }
         char name[64];
         snprintf(name, sizeof name, "grey%d.png", depth);
-        png_spec g = {W, H, depth, PNG_COLOR_TYPE_GRAY, depth == 2, NULL, 0, NULL, 0};
+        png_spec g = {W, H, depth, PNG_COLOR_TYPE_GRAY, depth == 2, NULL, 0, NULL, 0, NULL, 0, 0};
         png_case(name, &g, &packed[0][0], W, &wl[0][0], W);
     }
 }
@@ -524,7 +567,7 @@ static void test_corrupt(void)
     gs_io_image img;
     gs_error err = {0, ""};
     unsigned char *pix = blocks_rgb(64, 32);
-    jpeg_spec s = {64, 32, 3, JCS_RGB, JCS_YCbCr, 90, 0, 1, {NULL, NULL}, {0, 0}};
+    jpeg_spec s = {64, 32, 3, JCS_RGB, JCS_YCbCr, 90, 0, 1, 0, {NULL, NULL}, {0, 0}};
     bytes j = write_jpeg(&s, pix);
     /* A frame header with 0 components: libjpeg's own error, caught. */
     size_t sof = find_marker(&j, 0xc0);
@@ -567,7 +610,7 @@ static void test_corrupt(void)
     free(pix);
     /* PNG: a damaged IDAT (libpng checks its CRC). */
     unsigned char rows[4][12] = {{0}};
-    png_spec p = {4, 4, 8, PNG_COLOR_TYPE_RGB, 0, NULL, 0, NULL, 0};
+    png_spec p = {4, 4, 8, PNG_COLOR_TYPE_RGB, 0, NULL, 0, NULL, 0, NULL, 0, 0};
     bytes png = write_png(&p, &rows[0][0], 12);
     size_t idat = 0;
     for (size_t i = 8; i + 4 < png.n; i++)
