@@ -14,6 +14,7 @@
 #include <string.h>
 
 #include <jpeglib.h>
+#include <jerror.h>
 
 #include "image_codec.h"
 
@@ -21,18 +22,29 @@ typedef struct jpeg_err {
     struct jpeg_error_mgr pub;
     jmp_buf jump;
     char msg[JMSG_LENGTH_MAX];
+    int code; /* libjpeg's message code (J_MESSAGE_CODE) */
 } jpeg_err;
 
 static void on_error_exit(j_common_ptr c)
 {
     jpeg_err *e = (jpeg_err *)c->err;
     (*c->err->format_message)(c, e->msg);
+    e->code = c->err->msg_code;
     longjmp(e->jump, 1);
 }
 
 static void on_output_message(j_common_ptr c)
 {
     (void)c; /* the library prints nothing */
+}
+
+/* A well-formed file this libjpeg does not decode (12-bit samples, an
+ * odd component layout) rather than a damaged one. */
+static int jpeg_err_unsupported(const jpeg_err *e)
+{
+    return e->code == JERR_BAD_PRECISION || e->code == JERR_CONVERSION_NOTIMPL ||
+           e->code == JERR_NOT_COMPILED || e->code == JERR_BAD_J_COLORSPACE ||
+           e->code == JERR_SOF_UNSUPPORTED;
 }
 
 static void jpeg_err_init(jpeg_err *e)
@@ -125,7 +137,9 @@ int gs_jpeg_decode(const unsigned char *buf, size_t len, size_t max_pixels, int 
     jpeg_err_init(&d->jerr);
     d->cinfo.err = &d->jerr.pub;
     if (setjmp(d->jerr.jump)) {
-        rc = gs_error_set(err, GS_ERR_FORMAT, "jpeg: corrupt data: %s", d->jerr.msg);
+        rc = jpeg_err_unsupported(&d->jerr)
+                 ? gs_error_set(err, GS_ERR_UNSUPPORTED, "jpeg: not supported: %s", d->jerr.msg)
+                 : gs_error_set(err, GS_ERR_FORMAT, "jpeg: corrupt data: %s", d->jerr.msg);
     } else {
         jpeg_create_decompress(&d->cinfo);
         rc = jpeg_decode_run(d, buf, len, max_pixels, max_side, err);

@@ -578,6 +578,15 @@ static void test_corrupt(void)
     bytes bad = {c, j.n};
     dump("bad_components.jpg", &bad);
     CHECK_ERR(decode(&bad, &img, &err), GS_ERR_FORMAT, err, "jpeg: corrupt data");
+    /* 12-bit samples: well-formed, but not what this libjpeg decodes. */
+    memcpy(c, j.p, j.n);
+    c[sof + 4] = 12;
+    CHECK_ERR(decode(&bad, &img, &err), GS_ERR_UNSUPPORTED, err,
+              "jpeg: not supported: Unsupported JPEG data precision 12");
+    /* Lossless (SOF3): a process this libjpeg was built without. */
+    memcpy(c, j.p, j.n);
+    c[sof + 1] = 0xc3;
+    CHECK_ERR(decode(&bad, &img, &err), GS_ERR_UNSUPPORTED, err, "jpeg: not supported");
     /* A Huffman table with impossible code counts. */
     memcpy(c, j.p, j.n);
     size_t dht = find_marker(&j, 0xc4);
