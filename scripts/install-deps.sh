@@ -9,7 +9,9 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   # libraries
   libopenblas-dev
-  libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  libopencv-core-dev libopencv-imgproc-dev
+  # image codecs (lib/io): libpng and libjpeg-turbo, called directly
+  libpng-dev libjpeg62-turbo-dev
   libusb-1.0-0-dev
   # augment: ETH-XGaze-style HDF5 files (lib/io/hdf5.c); h5py reads them in tests
   libhdf5-dev python3-h5py
@@ -36,6 +38,8 @@ PACKAGES=(
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev
+  # bench/io/bench_image: the former OpenCV decoder, side by side
+  libopencv-imgcodecs-dev
   # face tests: dlib as the landmark reference, skimage's photos
   libdlib-dev python3-skimage
   # bench/eval/downstream_plot.py and experiments/eval/speed_table.py: the plots
