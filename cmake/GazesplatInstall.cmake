@@ -49,7 +49,13 @@ install(FILES ${PROJECT_SOURCE_DIR}/systemd/gazesplat-v4l2loopback.modprobe.conf
   DESTINATION lib/modprobe.d RENAME gazesplat-v4l2loopback.conf)
 install(FILES ${PROJECT_SOURCE_DIR}/systemd/gazesplat-v4l2loopback.modules-load.conf
   DESTINATION ${CMAKE_INSTALL_DOCDIR}/examples)
+# The gaze estimators: check-labels and eval-downstream read gaze-resnet by
+# default; the others are its white-background and VGG variants.
 install(FILES ${PROJECT_SOURCE_DIR}/models/${GS_DEFAULT_MODEL} ${PROJECT_SOURCE_DIR}/models/README.md
+  ${PROJECT_SOURCE_DIR}/models/gaze-resnet.safetensors
+  ${PROJECT_SOURCE_DIR}/models/gaze-resnet-white.safetensors
+  ${PROJECT_SOURCE_DIR}/models/gaze-vgg.safetensors
+  ${PROJECT_SOURCE_DIR}/models/gaze-vgg-white.safetensors
   DESTINATION ${CMAKE_INSTALL_DATADIR}/gazesplat/models)
 install(FILES ${PROJECT_SOURCE_DIR}/samples/astronaut.jpg ${PROJECT_SOURCE_DIR}/samples/README.md
   DESTINATION ${CMAKE_INSTALL_DATADIR}/gazesplat/samples)

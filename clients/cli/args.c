@@ -316,6 +316,25 @@ int cli_fsync_path(const char *path)
     return r;
 }
 
+#ifndef GS_CLI_DATADIR /* the gazesplat_cli target names the install's */
+#define GS_CLI_DATADIR "/usr/share/gazesplat"
+#endif
+
+const char *cli_shipped_model(const char *name)
+{
+    static char path[4][512];
+    static int next;
+    char *p = path[next++ % 4];
+    snprintf(p, sizeof path[0], "models/%s", name);
+    if (access(p, R_OK) == 0)
+        return p;
+    char inst[512];
+    snprintf(inst, sizeof inst, "%s/models/%s", GS_CLI_DATADIR, name);
+    if (access(inst, R_OK) == 0)
+        snprintf(p, sizeof path[0], "%s", inst);
+    return p;
+}
+
 int cli_read_file(const char *path, size_t max, uint8_t **out, size_t *len)
 {
     *out = NULL;

@@ -32,8 +32,8 @@ const cli_command cli_check_labels_command = {
     "  --h5 FILE.h5       an ETH-XGaze-style HDF5 file (face_patch, face_gaze);\n"
     "                     patches BGR unless --h5-rgb; subject: the file's stem\n"
     "  --h5-rgb           the HDF5 patches are RGB\n"
-    "  --estimator FILE   gaze estimator (default\n"
-    "                     models/gaze-resnet.safetensors); 'none': skip it\n"
+    "  --estimator FILE   gaze estimator (default models/gaze-resnet.safetensors,\n"
+    "                     here or as installed); 'none': skip it\n"
     "  --readout MODE     synth datasets (DIR/README.md names the generator):\n"
     "                     exact (auto, the default, on such a dataset): the\n"
     "                     generator renders each index again and, when the\n"
@@ -710,7 +710,7 @@ static int setup(checker *c, const cli_opt *o, double *thresh, double *maxout, l
     if (mode == READ_NONE && strcmp(ro, "off"))
         return cli_usage_error(cmd, "--readout: want auto, exact, synthesis or off; got '%s'",
                                ro);
-    *est_path = o[O_EST].value ? o[O_EST].value : "models/gaze-resnet.safetensors";
+    *est_path = o[O_EST].value ? o[O_EST].value : cli_shipped_model("gaze-resnet.safetensors");
     if (!strcmp(*est_path, "none"))
         *est_path = NULL;
     if (!*est_path && (o[O_H5].value || mode == READ_NONE))

@@ -36,7 +36,7 @@ const cli_command cli_eval_downstream_command = {
     "                      DIR/fits/ (created if needed); plot with\n"
     "                      bench/eval/downstream_plot.py DIR\n"
     "  --estimator FILE    the estimator to fine-tune\n"
-    "                      (models/gaze-resnet.safetensors)\n"
+    "                      (models/gaze-resnet.safetensors, here or as installed)\n"
     "  --identities N      test identities 0..N-1 (15)\n"
     "  --test-images N     test images per identity (50)\n"
     "  --set-size N        real + redirected images per mixed set (200)\n"
@@ -355,7 +355,7 @@ static int run_downstream(int argc, char **argv)
     gs_eval_ds_options_default(&d.o);
     d.identities = 15;
     d.threads = 2;
-    d.est = "models/gaze-resnet.safetensors";
+    d.est = cli_shipped_model("gaze-resnet.safetensors");
     rc = parse(o, &d);
     if (rc)
         return rc;
