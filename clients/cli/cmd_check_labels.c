@@ -8,6 +8,7 @@
 
 #include "cli.h"
 #include "eval_estimator.h"
+#include "gs_msg.h"
 #include "gazesplat/eval.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
@@ -482,21 +483,6 @@ static void json_num(FILE *f, double v)
         fputs("null", f);
 }
 
-static void json_str(FILE *f, const char *s)
-{
-    fputc('"', f);
-    for (; *s; s++) {
-        unsigned char ch = (unsigned char)*s;
-        if (ch == '"' || ch == '\\')
-            fprintf(f, "\\%c", ch);
-        else if (ch < 0x20)
-            fprintf(f, "\\u%04x", ch);
-        else
-            fputc(ch, f);
-    }
-    fputc('"', f);
-}
-
 static void json_stats(FILE *f, const char *key, stats st)
 {
     fprintf(f, "\"%s\":{\"n\":%ld,\"mean\":", key, st.n);
@@ -514,11 +500,11 @@ static void json_sample(FILE *f, const sample *s)
 {
     fprintf(f, "{\"index\":%lld,\"row\":%ld,\"image\":", s->index, s->row);
     if (s->image[0])
-        json_str(f, s->image);
+        gs_msg_write_json_string(f, s->image);
     else
         fputs("null", f);
     fputs(",\"subject\":", f);
-    json_str(f, s->subject);
+    gs_msg_write_json_string(f, s->subject);
     const double v[9] = {s->label_p * DEG, s->label_y * DEG, s->est_p * DEG, s->est_y * DEG,
                          s->est_err,       s->read_p * DEG,  s->read_y * DEG, s->read_err,
                          s->score};
@@ -532,7 +518,7 @@ static void json_sample(FILE *f, const sample *s)
     }
     fprintf(f, ",\"outlier\":%s,\"note\":", s->outlier ? "true" : "false");
     if (s->note)
-        json_str(f, s->note);
+        gs_msg_write_json_string(f, s->note);
     else
         fputs("null", f);
     fputs("}", f);
@@ -567,10 +553,10 @@ static int write_json(const char *path, const report *r, const sample *s, const 
     if (!f)
         return -1;
     fputs("{\"dataset\":", f);
-    json_str(f, r->dataset);
+    gs_msg_write_json_string(f, r->dataset);
     fputs(",\"estimator\":", f);
     if (r->estimator)
-        json_str(f, r->estimator);
+        gs_msg_write_json_string(f, r->estimator);
     else
         fputs("null", f);
     static const char *const modes[3] = {"null", "\"exact\"", "\"synthesis\""};
@@ -592,7 +578,7 @@ static int write_json(const char *path, const report *r, const sample *s, const 
                 out += s[i].outlier;
             }
         fputs(j ? ",{\"subject\":" : "{\"subject\":", f);
-        json_str(f, name);
+        gs_msg_write_json_string(f, name);
         fprintf(f, ",\"samples\":%ld,\"outliers\":%ld,", cnt, out);
         json_stats(f, "error_deg", stats_of(s, r->n, 2, name));
         fputs("}", f);
