@@ -6,9 +6,10 @@ of them in order, say what the fit made of each (image_results), are
 cached, render by key, and fine-tune one set of tuned tensors; bad
 inputs (17 images, images of different sizes, mixed kinds, a bad label,
 a face the gate refuses) are refused naming the image, and the daemon
-still answers.
+still answers. `gazesplat client fit --image A,B,C` asks the same.
 usage: test_daemon_multi.py GAZESPLATD GAZESPLAT_CLI WORKDIR"""
 import os
+import subprocess
 import sys
 
 import numpy as np
@@ -82,6 +83,25 @@ def main():
             refused(t, lambda: c.fit(imgs[0], max_iters=FAST, more_images=[imgs[1], grey]),
                         gc.pb.ERR_FACE_REFUSED, "a flat image 2", "image 2")
             t.check(len(c.fit(imgs[1], max_iters=FAST).subject_key) == 16, "the daemon still fits")
+        paths = []
+        for i, im in enumerate(imgs):
+            paths.append(os.path.join(work, "multi_face%d.png" % i))
+            with open(paths[-1], "wb") as f:
+                f.write(im)
+        p = subprocess.run([cli, "client", "fit", "--addr", addr, "--image", ",".join(paths),
+                            "--gaze", "5,0;-;-", "--head", "-;3,-4;-", "--max-iters", str(FAST)],
+                           capture_output=True, text=True)
+        t.check(p.returncode == 0 and ("subject %s" % r.subject_key.hex()) in p.stdout
+                and "image 2 gaze_deg" not in p.stdout,
+                "client fit of three files: the same (cached) subject: %s %s" % (p.stdout, p.stderr))
+        p = subprocess.run([cli, "client", "fit", "--addr", addr, "--image", ",".join(paths[::-1]),
+                            "--max-iters", str(FAST)], capture_output=True, text=True)
+        t.check(p.returncode == 0 and "image 2 gaze_deg" in p.stdout,
+                "client fit of three files: each image's result: %s %s" % (p.stdout, p.stderr))
+        p = subprocess.run([cli, "client", "fit", "--addr", addr, "--image", ",".join(paths),
+                            "--gaze", "5,0;-"], capture_output=True, text=True)
+        t.check(p.returncode == 2 and "2 items for 3 images" in p.stderr,
+                "client fit: one label item short: %s" % p.stderr)
     finally:
         finish(t, d)
     return t.status()
