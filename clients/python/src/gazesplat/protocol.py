@@ -151,8 +151,13 @@ def fit_request(image: ImageInput, gaze_deg: Optional[AnglePair] = None,
         req.gaze.CopyFrom(angles(gaze_deg))
     if head_deg is not None:
         req.head.CopyFrom(angles(head_deg))
+    if len(more_images) > 15:
+        raise ValueError("at most 16 images of one person in one fit, got %d" % (1 + len(more_images)))
     for item in more_images:
-        img, g, h = (tuple(item) + (None, None))[:3] if isinstance(item, tuple) else (item, None, None)
+        if isinstance(item, tuple) and not 1 <= len(item) <= 3:
+            raise ValueError("a further image is an image or (image, gaze_deg, head_deg), got a "
+                             "tuple of %d" % len(item))
+        img, g, h = (item + (None, None))[:3] if isinstance(item, tuple) else (item, None, None)
         fi = req.more_images.add()
         fi.image.CopyFrom(image_message(img, kind))
         if g is not None:
