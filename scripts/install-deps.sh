@@ -38,7 +38,7 @@ PACKAGES=(
   cppcheck clang libclang-rt-14-dev
   # face tests: dlib as the landmark reference, skimage's photos
   libdlib-dev python3-skimage
-  # bench/eval: the speed-against-error plot
+  # bench/eval/downstream_plot.py and experiments/eval/speed_table.py: the plots
   python3-matplotlib
   # VM tier (tests/vm): the emulator, the guest's shell and tools, depmod and
   # a kernel module build (the kernel itself is fetched by scripts/vm/prepare.sh

@@ -18,7 +18,7 @@
  *               angle read between the two images against 2; then the
  *               same blurred by sigma 1.5 px
  *
- * The same changes as bench/eval/estimator_sensitivity.py applies to the
+ * The same changes as experiments/eval/estimator_sensitivity.py applies to the
  * learned estimator, so the two instruments can be set side by side.
  *
  *   bench_readout [--count N] [--threads N] [--soft PX]
@@ -26,7 +26,7 @@
  * --soft sets the readout's soft_max_px (the image softness it tries).
  *
  * Prints a Markdown table (mean, median, largest error in degrees) and the
- * mean time of a reading; bench/eval/README.md records its output. */
+ * mean time of a reading; experiments/eval/README.md records its output. */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
 #include <stdio.h>

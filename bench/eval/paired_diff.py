@@ -20,7 +20,7 @@ Standard library only.
 
 The interval counts the pairs' spread, not the fits': a change in the
 last digits of a fit's arithmetic moves a 15-input run's mean by about
-0.1 deg (bench/eval/README.md, "A prior on the fit's expression and
+0.1 deg (experiments/eval/README.md, "A prior on the fit's expression and
 lights"), so a difference that small is not an effect even when its
 interval leaves zero."""
 import argparse

@@ -6,7 +6,7 @@
  *
  *   bench_safetensors [--mb N] [--reps N] [--dir D]
  *
- * Prints a Markdown table; bench/README.md records its output. */
+ * Prints a Markdown table; experiments/bench/README.md records its output. */
 #define _POSIX_C_SOURCE 200809L
 #include <stdio.h>
 #include <stdlib.h>

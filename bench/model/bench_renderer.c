@@ -10,7 +10,7 @@
  * does not recognise (gs_nn_blas_select_kernels); --blas-as-installed keeps
  * the kernels OpenBLAS picked itself, for the comparison.
  *
- * Prints a Markdown table; bench/README.md records its output. Times are
+ * Prints a Markdown table; experiments/bench/README.md records its output. Times are
  * medians over reps; the configurations run interleaved rep by rep. */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>

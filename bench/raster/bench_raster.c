@@ -7,7 +7,7 @@
  *
  * --fast-only skips the scalar path (no speed-up columns: quicker runs while
  * tuning); --size keeps one of the two scenes.
- * Prints a Markdown table; bench/README.md records its output. Times are
+ * Prints a Markdown table; experiments/bench/README.md records its output. Times are
  * medians over reps; ratios compare paths measured side by side. */
 #define _POSIX_C_SOURCE 200809L
 #define GS_PI 3.14159265358979323846

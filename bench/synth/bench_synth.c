@@ -7,7 +7,7 @@
  * Each configuration renders the same sequence of generator indices; a rep
  * is one pass over the sequence, and the table reports the median rep.
  * Configurations run interleaved rep by rep so machine load hits them
- * alike. Prints a Markdown table; bench/README.md records its output. */
+ * alike. Prints a Markdown table; experiments/bench/README.md records its output. */
 #define _POSIX_C_SOURCE 200809L
 #include <stdio.h>
 #include <stdlib.h>

@@ -22,8 +22,16 @@ static void nap_ms(unsigned ms)
     nanosleep(&ts, NULL);
 }
 
-int aug_remote_connect(const char *addr, const char *token, gs_client **out, int *image_size,
-                       char *server, size_t server_cap, char *msg, size_t cap)
+/* Transport failures other than a timeout (the daemon went away, or the
+ * proxy found no daemon) may be retried on a new connection. */
+static int io_status(const gs_error *err)
+{
+    return strcmp(err->msg, "timeout") == 0 ? AUG_REMOTE_FATAL : AUG_REMOTE_RETRY;
+}
+
+int aug_remote_connect(const char *addr, const char *token, const uint8_t *route_key,
+                       gs_client **out, int *image_size, char *server, size_t server_cap,
+                       char *msg, size_t cap)
 {
     /* A server still loading its model says image_size 0: ask again for
      * up to a minute. */
@@ -33,14 +41,25 @@ int aug_remote_connect(const char *addr, const char *token, gs_client **out, int
         *out = NULL;
         if (gs_client_connect(addr, 10000, out, &err) != GS_OK) {
             snprintf(msg, cap, "%s: %s", addr, err.msg);
-            return -1;
+            return AUG_REMOTE_RETRY;
         }
+        if (route_key)
+            gs_client_set_route_key(*out, route_key);
         Gazesplat__HelloOk *ok = NULL;
-        if (gs_client_hello(*out, "gazesplat-augment", token, 10000, &ok, &err) != GS_OK) {
+        int hr = gs_client_hello(*out, "gazesplat-augment", token, 10000, &ok, &err);
+        if (hr != GS_OK) {
             snprintf(msg, cap, "%s: HELLO: %s", addr, err.msg);
             gs_client_close(*out);
             *out = NULL;
-            return -1;
+            /* A server's ERROR (a wrong token: fatal; too many connections,
+             * draining: retried) or the connection lost. */
+            if (hr == GS_ERR_STATE)
+                return strstr(err.msg, "ERR_TOO_MANY_CONNECTIONS") ||
+                               strstr(err.msg, "ERR_SHUTTING_DOWN") ||
+                               strstr(err.msg, "ERR_LOADING")
+                           ? AUG_REMOTE_RETRY
+                           : AUG_REMOTE_FATAL;
+            return hr == GS_ERR_IO ? io_status(&err) : AUG_REMOTE_FATAL;
         }
         *image_size = (int)ok->image_size;
         snprintf(server, server_cap, "%s", ok->server ? ok->server : "");
@@ -53,7 +72,7 @@ int aug_remote_connect(const char *addr, const char *token, gs_client **out, int
         *out = NULL;
         if (attempt == 240) {
             snprintf(msg, cap, "%s: the server has no model loaded (a minute)", addr);
-            return -1;
+            return AUG_REMOTE_FATAL;
         }
         nap_ms(250);
     }
@@ -65,14 +84,28 @@ void aug_remote_close(gs_client *c)
         gs_client_close(c);
 }
 
-/* ERROR or an unexpected frame into msg. */
-static void frame_problem(const gs_client_frame *f, const char *what, char *msg, size_t cap)
+/* ERROR or an unexpected frame into msg. AUG_REMOTE_RETRY for the errors a
+ * new connection may not meet (the daemon idle-closed, full, loading or
+ * draining; the subject gone from the daemon that answered, which a new
+ * FIT puts back), AUG_REMOTE_FATAL for the rest. */
+static int frame_problem(const gs_client_frame *f, const char *what, char *msg, size_t cap)
 {
     if (f->header.type == T(ERROR)) {
         const Gazesplat__Error *e = (const Gazesplat__Error *)f->msg;
         snprintf(msg, cap, "%s: server: %s: %s", what, gs_msg_error_name(e->code), e->message);
-    } else
-        snprintf(msg, cap, "%s: unexpected frame type %u", what, (unsigned)f->header.type);
+        switch (e->code) {
+        case GAZESPLAT__ERROR_CODE__ERR_TIMEOUT:
+        case GAZESPLAT__ERROR_CODE__ERR_TOO_MANY_CONNECTIONS:
+        case GAZESPLAT__ERROR_CODE__ERR_LOADING:
+        case GAZESPLAT__ERROR_CODE__ERR_SHUTTING_DOWN:
+        case GAZESPLAT__ERROR_CODE__ERR_UNKNOWN_SUBJECT:
+            return AUG_REMOTE_RETRY;
+        default:
+            return AUG_REMOTE_FATAL;
+        }
+    }
+    snprintf(msg, cap, "%s: unexpected frame type %u", what, (unsigned)f->header.type);
+    return AUG_REMOTE_FATAL;
 }
 
 int aug_remote_fit_one(gs_client *c, const aug_remote_fit *in, aug_remote_subject *out, char *msg,
@@ -110,7 +143,7 @@ int aug_remote_fit_one(gs_client *c, const aug_remote_fit *in, aug_remote_subjec
         gs_error_clear(&err);
         if (gs_client_call(c, T(FIT), key, next_id++, &req.base, TIMEOUT_MS, &f, &err) != GS_OK) {
             snprintf(msg, cap, "FIT: %s", err.msg);
-            return -1;
+            return io_status(&err);
         }
         if (f.header.type == T(BUSY)) {
             unsigned ms = ((const Gazesplat__Busy *)f.msg)->retry_after_ms;
@@ -130,10 +163,8 @@ int aug_remote_fit_one(gs_client *c, const aug_remote_fit *in, aug_remote_subjec
             out->ssim = m->ssim;
             out->ft_psnr = m->finetune_steps ? m->finetune_psnr : NAN;
             out->cached = m->cached;
-        } else {
-            frame_problem(&f, "FIT", msg, cap);
-            rc = -1;
-        }
+        } else
+            rc = frame_problem(&f, "FIT", msg, cap);
         gs_client_frame_free(&f);
         return rc;
     }
@@ -200,7 +231,7 @@ static int render_group(gs_client *c, const aug_remote_subject *s, const aug_rem
         uint32_t id = next_id++;
         if (gs_client_send(c, T(REDIRECT), s->key, id, &req.base, &err) != GS_OK) {
             snprintf(msg, cap, "REDIRECT: %s", err.msg);
-            rc = -1;
+            rc = io_status(&err);
             goto done;
         }
         int busy = 0;
@@ -208,7 +239,7 @@ static int render_group(gs_client *c, const aug_remote_subject *s, const aug_rem
             gs_client_frame f;
             if (gs_client_recv(c, TIMEOUT_MS, &f, &err) != GS_OK) {
                 snprintf(msg, cap, "REDIRECT: %s", err.msg);
-                rc = -1;
+                rc = io_status(&err);
                 goto done;
             }
             uint16_t type = f.header.type;
@@ -242,12 +273,10 @@ static int render_group(gs_client *c, const aug_remote_subject *s, const aug_rem
                 continue;
             }
             if (type != T(DONE))
-                frame_problem(&f, "REDIRECT", msg, cap);
+                rc = frame_problem(&f, "REDIRECT", msg, cap);
             gs_client_frame_free(&f);
-            if (type != T(DONE)) {
-                rc = -1;
+            if (rc)
                 goto done;
-            }
             break;
         }
         if (!busy)
@@ -276,8 +305,9 @@ int aug_remote_render(gs_client *c, const aug_remote_subject *s, const aug_remot
     }
     for (size_t t0 = 0; t0 < n; t0 += max_targets) {
         size_t k = n - t0 < max_targets ? n - t0 : max_targets;
-        if (render_group(c, s, t, t0, k, transfer, size, out, rec, q, msg, cap))
-            return -1;
+        int rc = render_group(c, s, t, t0, k, transfer, size, out, rec, q, msg, cap);
+        if (rc)
+            return rc;
     }
     return 0;
 }

@@ -36,12 +36,23 @@ typedef struct aug_remote_target {
     double head_deg[2];
 } aug_remote_target;
 
-/* Connects and says HELLO; *image_size is the server's model's. */
-int aug_remote_connect(const char *addr, const char *token, gs_client **out, int *image_size,
-                       char *server, size_t server_cap, char *msg, size_t cap);
+/* What the calls below return: 0, or one of these with a message. RETRY:
+ * the same request may succeed on a new connection (the connection was
+ * lost or refused, or the server answered ERR_TIMEOUT,
+ * ERR_TOO_MANY_CONNECTIONS, ERR_LOADING, ERR_SHUTTING_DOWN, or
+ * ERR_UNKNOWN_SUBJECT, which a new FIT mends); FATAL: it will not (bad
+ * arguments, a refused face, a timeout: the server may still be at it). */
+enum { AUG_REMOTE_FATAL = -1, AUG_REMOTE_RETRY = -2 };
+
+/* Connects and says HELLO, with route_key (NULL: zero) in its header so a
+ * proxy routing on it picks the subject's daemon; *image_size is the
+ * server's model's. */
+int aug_remote_connect(const char *addr, const char *token, const uint8_t *route_key,
+                       gs_client **out, int *image_size, char *server, size_t server_cap,
+                       char *msg, size_t cap);
 void aug_remote_close(gs_client *c);
 
-/* FIT; BUSY is waited out (its retry hint). Returns 0 or -1 (msg). */
+/* FIT; BUSY is waited out (its retry hint). Returns 0 or AUG_REMOTE_*. */
 int aug_remote_fit_one(gs_client *c, const aug_remote_fit *in, aug_remote_subject *out, char *msg,
                        size_t cap);
 

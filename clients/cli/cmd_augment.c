@@ -23,11 +23,13 @@
 #include <string.h>
 #include <strings.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 #include "augment_merge.h"
 #include "augment_remote.h"
 #include "augment_table.h"
+#include "gs_client.h"
 #include "cli.h"
 #include "photo_prep.h"
 #include "gazesplat/face.h"
@@ -50,13 +52,18 @@ const cli_command cli_augment_command = {
     "                         [--labels FILE] [--format png|h5|both] [--shard I/N]\n"
     "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
     "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
-    "                         [--threads N] [--no-gate] [--quality]\n"
+    "                         [--threads N] [--no-gate] [--quality] [--retries N]\n"
     "       gazesplat augment --merge N --out DIR\n"
     "\n"
     "  --model M        fit and render in this process with model file M\n"
     "  --addr ADDR      or through gazesplatd at ADDR (unix:PATH, tcp:HOST:PORT or\n"
     "                   a socket path; --token T or $GAZESPLAT_TOKEN): FIT, then\n"
-    "                   REDIRECT by the subject's key, the same options sent\n"
+    "                   REDIRECT by the subject's key, the same options sent.\n"
+    "                   Each source on a connection of its own that opens with\n"
+    "                   the source's route key, so a proxy hashing it (HAProxy:\n"
+    "                   deploy/haproxy) spreads the sources over its daemons;\n"
+    "                   a source whose daemon went away is fitted again where\n"
+    "                   the proxy sends it next (--retries N tries in all, 4)\n"
     "\n"
     "Inputs (--input):\n"
     "  DIR              its .png/.jpg/.jpeg files in byte order of name: a file\n"
@@ -137,7 +144,7 @@ const cli_command cli_augment_command = {
 enum {
     O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
     O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
-    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_MERGE, O_NOGATE, O_QUALITY, O_N
+    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_MERGE, O_NOGATE, O_QUALITY, O_RETRIES, O_N
 };
 
 typedef struct target {
@@ -181,7 +188,9 @@ typedef struct job {
     uint64_t fingerprint;
     long write_budget; /* test hook: writes left before ENOSPC (-1: off) */
     int out_size;      /* output patches, px (--size; default the model's) */
-    gs_client *remote; /* --addr: fits and renders through gazesplatd */
+    const char *addr, *token; /* --addr (fits and renders through gazesplatd), --token */
+    char server[256];  /* the first HELLO_OK's server name */
+    long retries;      /* --retries: tries of one source in all */
 } job;
 
 /* ---- small helpers ---- */
@@ -1227,6 +1236,72 @@ static float get_f32le(const uint8_t *p)
     return v;
 }
 
+static void nap_s(double s)
+{
+    struct timespec ts = {(time_t)s, (long)((s - (double)(time_t)s) * 1e9)};
+    nanosleep(&ts, NULL);
+}
+
+/* The fit's settings as route_key hashes them (with the image). */
+static size_t route_settings(const aug_remote_fit *in, char *buf, size_t cap)
+{
+    int n = snprintf(buf, cap, "photo=%d iters=%d ft=%d lr=%.17g keep=%d gaze=%d:%.17g,%.17g "
+                     "head=%d:%.17g,%.17g", in->photo, in->iters, in->ft_steps, in->ft_lr,
+                     in->keep_image, in->known_gaze, in->known_gaze ? in->gaze_deg[0] : 0,
+                     in->known_gaze ? in->gaze_deg[1] : 0, in->known_head,
+                     in->known_head ? in->head_deg[0] : 0, in->known_head ? in->head_deg[1] : 0);
+    return n < 0 ? 0 : (size_t)n < cap ? (size_t)n : cap - 1;
+}
+
+/* One source's FIT and REDIRECTs on a connection of its own, opened with
+ * the source's route key (docs/scale-out.md): behind a proxy that hashes
+ * it, every source has one daemon and a source's requests meet its fit.
+ * A try that fails in a way a new connection may mend (the daemon died,
+ * drained or dropped the subject: AUG_REMOTE_RETRY) starts again with a
+ * new FIT, after 0.5 s doubling up to 5 s, jittered; the renders are the
+ * same bytes on any daemon of the same model, so nothing a retry asks
+ * again lands twice. 0, or -1 with msg. */
+static int remote_fit_render(job *j, const aug_remote_fit *in, aug_remote_subject *rs,
+                             const aug_remote_target *tg, size_t nt, uint8_t *renders,
+                             gs_face_quality *quals, char *msg, size_t cap)
+{
+    char settings[512];
+    uint8_t key[16];
+    gs_client_route_key(in->image, in->len, settings, route_settings(in, settings, sizeof settings),
+                        key);
+    unsigned seed = (unsigned)key[0] | (unsigned)key[1] << 8 | (unsigned)getpid() << 16;
+    double wait_s = 0.5;
+    for (long attempt = 1;; attempt++) {
+        gs_client *c = NULL;
+        int size = 0, rc;
+        char server[256];
+        rc = aug_remote_connect(j->addr, j->token, key, &c, &size, server, sizeof server, msg, cap);
+        if (!rc && (size != j->info.image_size || strcmp(server, j->server))) {
+            snprintf(msg, cap, "%s: the daemons behind it differ (%s at %d px, then %s at %d px)",
+                     j->addr, j->server, j->info.image_size, server, size);
+            rc = AUG_REMOTE_FATAL;
+        }
+        if (!rc)
+            rc = aug_remote_fit_one(c, in, rs, msg, cap);
+        if (!rc)
+            rc = aug_remote_render(c, rs, tg, nt, j->transfer, j->info.image_size, renders,
+                                   (size_t)j->info.image_size * j->info.image_size * 3, quals,
+                                   msg, cap);
+        aug_remote_close(c);
+        if (rc != AUG_REMOTE_RETRY)
+            return rc ? -1 : 0;
+        if (attempt >= j->retries) {
+            size_t n = strlen(msg);
+            snprintf(msg + n, cap - n, " (after %ld tries)", attempt);
+            return -1;
+        }
+        fprintf(stderr, "gazesplat augment: %s; trying again\n", msg);
+        double f = 0.75 + 0.5 * (double)rand_r(&seed) / RAND_MAX;
+        nap_s(wait_s * f);
+        wait_s = wait_s * 2 > 5 ? 5 : wait_s * 2;
+    }
+}
+
 /* --addr: source k's FIT and REDIRECT through the daemon. Photos go as
  * they are (the server detects and normalizes them as redirect does);
  * normalized faces and HDF5 rows as PNGs of the normalized face. The
@@ -1298,8 +1373,6 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, gs_fac
     *renders = rc ? NULL : malloc((size_t)S * S * 3 * (s->nt + 1));
     if (!rc && (!tg || !*renders))
         rc = cli_fail(cmd, "out of memory");
-    if (!rc && aug_remote_fit_one(j->remote, &in, &rs, msg, sizeof msg))
-        rc = cli_fail(cmd, "%s: %s", what, msg);
     for (size_t t = 0; !rc && t < s->nt; t++) {
         const target *x = &j->tg[s->t0 + t];
         tg[t].gaze_deg[0] = x->gp / DEG;
@@ -1310,8 +1383,7 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, gs_fac
     }
     if (!rc && j->quality && !(*quals = calloc(s->nt + 1, sizeof **quals)))
         rc = cli_fail(cmd, "out of memory");
-    if (!rc && aug_remote_render(j->remote, &rs, tg, s->nt, j->transfer, S, *renders,
-                                 (size_t)S * S * 3, *quals, msg, sizeof msg))
+    if (!rc && remote_fit_render(j, &in, &rs, tg, s->nt, *renders, *quals, msg, sizeof msg))
         rc = cli_fail(cmd, "%s: %s", what, msg);
     if (!rc) {
         /* The subject as FIT_OK tells it: head angles (roll 0), gaze. */
@@ -1356,7 +1428,7 @@ static int do_source(job *j, size_t k, double *psnr_out)
     jbuf jb = {0};
     gs_face_quality_ref *qref = NULL; /* in process: the quality of each gaze-only render */
     gs_face_quality *rquals = NULL; /* through the daemon: its Quality of each */
-    if (j->remote) {
+    if (j->addr) {
         if ((rc = remote_source(j, k, &fi, &remote, &rquals, what)))
             goto done;
         goto render;
@@ -1723,7 +1795,6 @@ static void job_free(job *j)
     gs_face_shape_model_free(j->sp);
     gs_pool_destroy(j->pool);
     gs_model_destroy(j->model);
-    aug_remote_close(j->remote);
 }
 
 static int run_augment(int argc, char **argv)
@@ -1738,7 +1809,8 @@ static int run_augment(int argc, char **argv)
         {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
         {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
         {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL},
-        {"--merge", 1, NULL},   {"--no-gate", 0, NULL},      {"--quality", 0, NULL}};
+        {"--merge", 1, NULL},   {"--no-gate", 0, NULL},      {"--quality", 0, NULL},
+        {"--retries", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -1769,6 +1841,12 @@ static int run_augment(int argc, char **argv)
         return cli_usage_error(cmd, "--token goes with --addr");
     if (o[O_ADDR].value && o[O_THREADS].value)
         return cli_usage_error(cmd, "--threads is the server's with --addr");
+    if (o[O_RETRIES].value && !o[O_ADDR].value)
+        return cli_usage_error(cmd, "--retries goes with --addr");
+    j.retries = 4;
+    if (o[O_RETRIES].value && cli_parse_long(o[O_RETRIES].value, 1, 100, &j.retries))
+        return cli_usage_error(cmd, "--retries: want the tries of one source in all, 1..100; "
+                               "got '%s'", o[O_RETRIES].value);
     j.input = o[O_INPUT].value;
     j.out = o[O_OUT].value;
     j.gate = !o[O_NOGATE].value;
@@ -1812,7 +1890,7 @@ static int run_augment(int argc, char **argv)
         return cli_usage_error(cmd, "--size: want 16..1024 px; got '%s'", o[O_SIZE].value);
     if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256, &threads))
         return cli_usage_error(cmd, "--threads: want 1..256; got '%s'", o[O_THREADS].value);
-    /* The served setting (daemon/README.md, bench/eval/README.md): the fit
+    /* The served setting (daemon/README.md, experiments/eval/README.md): the fit
      * to its plateau (at most 200 iterations), 15 fine-tuning steps at
      * 0.004 with the mirrored view, detail transfer with the eyeball warp. */
     const char *ftn = o[O_FT].value ? o[O_FT].value : "15";
@@ -1874,13 +1952,19 @@ static int run_augment(int argc, char **argv)
         char server[256], msg[600];
         int srv_size = 0;
         const char *token = o[O_TOKEN].value ? o[O_TOKEN].value : getenv("GAZESPLAT_TOKEN");
-        if (aug_remote_connect(o[O_ADDR].value, token, &j.remote, &srv_size, server, sizeof server,
-                               msg, sizeof msg)) {
+        j.addr = o[O_ADDR].value;
+        j.token = token;
+        gs_client *first = NULL;
+        if (aug_remote_connect(o[O_ADDR].value, token, NULL, &first, &srv_size, server,
+                               sizeof server, msg, sizeof msg)) {
             rc = cli_fail(cmd, "%s", msg);
             goto out;
         }
         /* The server's model is in the fingerprint as far as HELLO tells it. */
         j.fingerprint = fnv_str(fnv(j.fingerprint, &srv_size, sizeof srv_size), server);
+        snprintf(j.server, sizeof j.server, "%s", server);
+        /* Each source opens its own connection (remote_fit_render). */
+        aug_remote_close(first);
         memset(&j.info, 0, sizeof j.info);
         j.info.image_size = srv_size;
         j.info.distance_mm = NAN;

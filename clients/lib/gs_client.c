@@ -12,10 +12,13 @@
 #include <time.h>
 #include <unistd.h>
 
+#include <blake2.h>
+
 struct gs_client {
     int fd;
     uint16_t version;
     gs_frame_parser parser;
+    uint8_t route_key[GS_FRAME_KEY_SIZE];
 };
 
 static int reply_type_ok(uint16_t type)
@@ -223,6 +226,28 @@ int gs_client_call(gs_client *c, uint16_t type, const uint8_t key[GS_FRAME_KEY_S
     return r != GS_OK ? r : gs_client_recv(c, timeout_ms, reply, err);
 }
 
+void gs_client_set_route_key(gs_client *c, const uint8_t key[GS_FRAME_KEY_SIZE])
+{
+    memcpy(c->route_key, key, GS_FRAME_KEY_SIZE);
+}
+
+void gs_client_route_key(const void *image, size_t len, const void *settings,
+                         size_t settings_len, uint8_t out[GS_FRAME_KEY_SIZE])
+{
+    static const uint8_t tag[] = "gazesplat-route-key-c1";
+    uint8_t n[8];
+    for (int i = 0; i < 8; i++)
+        n[i] = (uint8_t)((uint64_t)len >> (8 * i));
+    blake2b_state st;
+    blake2b_init(&st, GS_FRAME_KEY_SIZE);
+    blake2b_update(&st, tag, sizeof tag);
+    blake2b_update(&st, n, sizeof n);
+    blake2b_update(&st, image, len);
+    if (settings && settings_len)
+        blake2b_update(&st, settings, settings_len);
+    blake2b_final(&st, out, GS_FRAME_KEY_SIZE);
+}
+
 int gs_client_hello(gs_client *c, const char *client_name, const char *token, int timeout_ms,
                     Gazesplat__HelloOk **ok, gs_error *err)
 {
@@ -235,7 +260,7 @@ int gs_client_hello(gs_client *c, const char *client_name, const char *token, in
         hello.token.len = strlen(token);
     }
     gs_client_frame f;
-    int r = gs_client_call(c, GAZESPLAT__FRAME_TYPE__FRAME_HELLO, NULL, 0, &hello.base,
+    int r = gs_client_call(c, GAZESPLAT__FRAME_TYPE__FRAME_HELLO, c->route_key, 0, &hello.base,
                            timeout_ms, &f, err);
     if (r != GS_OK)
         return r;

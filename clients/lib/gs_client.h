@@ -27,6 +27,20 @@ int gs_client_fd(const gs_client *c);
 /* Version the frames are sent with (1 until HELLO negotiates). */
 void gs_client_set_version(gs_client *c, uint16_t version);
 
+/* The subject key HELLO's header carries (16 zero bytes until set): a
+ * proxy routing on the first frame's key (deploy/haproxy,
+ * docs/scale-out.md) takes the connection to that key's daemon. Set it
+ * before gs_client_hello. */
+void gs_client_set_route_key(gs_client *c, const uint8_t key[GS_FRAME_KEY_SIZE]);
+
+/* A route key for the subject fitted from `image` (the bytes as sent)
+ * with `settings` (any bytes naming the fit's settings; may be NULL):
+ * BLAKE2b-128 of a fixed tag, the image's length and bytes and the
+ * settings, so that every connection about one subject, from any process,
+ * opens with the same key. */
+void gs_client_route_key(const void *image, size_t len, const void *settings,
+                         size_t settings_len, uint8_t out[GS_FRAME_KEY_SIZE]);
+
 /* Sends HELLO (versions min..max, token may be NULL) and waits for
  * HELLO_OK; *ok (may be NULL) receives the reply, freed by the caller with
  * protobuf_c_message_free_unpacked. A server ERROR gives GS_ERR_STATE and

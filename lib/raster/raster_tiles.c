@@ -34,7 +34,7 @@
  * vector: 4 x 4 with 16 lanes, 4 x 2 with 8. Splats of a few pixels'
  * radius cover compact blocks in fewer groups, with more of each group's
  * lanes contributing, than runs of a row (16 x 1: about 3 of 16 lanes;
- * bench/README.md has the figures). */
+ * experiments/bench/README.md has the figures). */
 #ifndef GS_GROUP_W
 #define GS_GROUP_W 4
 #endif

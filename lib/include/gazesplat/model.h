@@ -501,7 +501,7 @@ enum {
 /* The face Gaussians' colours and features and the Gaussians' geometry:
  * better than the face alone on every image and gaze figure, on the
  * validation pairs at 15 and 100 steps and on the test pairs
- * (bench/eval/README.md, "Tuning the geometry too"). */
+ * (experiments/eval/README.md, "Tuning the geometry too"). */
 #define GS_FT_DEFAULT (GS_FT_FACE | GS_FT_GEOMETRY)
 
 typedef struct gs_finetune_options {

@@ -12,16 +12,16 @@
 #     the render settings). Scales below 1 always render in full, so only
 #     "full" runs there.
 # Writes OUT/i<iters>_t<threads>_p<percent>_s<scale>_<inc|full>/ per run,
-# then OUT/speed.md and OUT/speed.png (bench/eval/speed_table.py).
+# then OUT/speed.md and OUT/speed.png (experiments/eval/speed_table.py).
 #
-# Usage: bench/eval/speed.sh [BUILD_DIR] [OUT_DIR] [INPUTS]
+# Usage: experiments/eval/speed.sh [BUILD_DIR] [OUT_DIR] [INPUTS]
 # Environment (space-separated lists; the defaults are the full grid):
 #   FITS="25:2 50:2 100:2 200:2 200:1"  BASE_ITERS=200
 #   PRUNE="100 50 25 10"  SCALE="1 0.75 0.5"  MODES="inc full"
 #   THREADS="2 1"  MODEL=models/gazegaussian-cpu.safetensors
 #   ESTIMATOR=FILE (adds the gaze error; none by default)
 # A small check of the script: FITS="200:2" PRUNE="100 25" SCALE="1 0.5"
-#   MODES="inc full" THREADS=2 bench/eval/speed.sh build out/speed-check 1
+#   MODES="inc full" THREADS=2 experiments/eval/speed.sh build out/speed-check 1
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 build=${1:-$root/build}
@@ -82,4 +82,4 @@ for threads in $threads_list; do
     done
   done
 done
-/usr/bin/python3 "$root/bench/eval/speed_table.py" "$out"
+/usr/bin/python3 "$root/experiments/eval/speed_table.py" "$out"

@@ -1,4 +1,4 @@
-"""Speed against error from the runs of bench/eval/speed.sh.
+"""Speed against error from the runs of experiments/eval/speed.sh.
 
 usage: speed_table.py OUT_DIR
 Reads OUT_DIR/i<iters>_t<threads>_p<percent>_s<scale>_<inc|full>/pairs.csv

@@ -10,7 +10,7 @@ image shifted by one pixel, blurred (Gaussian, radius 0.7 px), saved as
 JPEG (quality 90) and with pixel noise (sigma 3 levels). Prints the mean,
 median and largest angle per change.
 
-    bench/eval/estimator_sensitivity.py build/clients/cli/gazesplat \
+    experiments/eval/estimator_sensitivity.py build/clients/cli/gazesplat \
         models/gaze-resnet.safetensors [--count 40]
 
 Needs numpy and PIL (python3-numpy, python3-pil)."""

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Remakes the committed evaluation report (bench/eval/README.md): the shipped
+# Remakes the committed evaluation report (experiments/eval/README.md): the shipped
 # default model, the warp baseline and identity over the first 30 inputs of
 # the committed pairing (two per test identity: every class) x 10 targets.
-# Usage: [ESTIMATOR=FILE] bench/eval/run.sh [BUILD_DIR] [OUT_DIR]
+# Usage: [ESTIMATOR=FILE] experiments/eval/run.sh [BUILD_DIR] [OUT_DIR]
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 build=${1:-$root/build}

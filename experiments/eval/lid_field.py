@@ -10,7 +10,7 @@ Knots of elevation 15..75 degrees (above the eyeball's centre) get K upper
 (0.85), of -75..-15 degrees K lower (0.3), the others 0; the outermost
 azimuth columns (+-90 degrees) are multiplied by F (0.3); everything by S
 (1; -1 negates the field, 0 zeroes it). docs/model.md, "Lids that follow
-the gaze", and bench/eval/README.md use it to ask whether placed lids help
+the gaze", and experiments/eval/README.md use it to ask whether placed lids help
 when the training has not learned them.
 
 --show prints each eye's knots (rows: elevation -90..90 degrees every 15,

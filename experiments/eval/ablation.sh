@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# The ablation table (bench/eval/ablation.md), like the GazeGaussian paper's
+# The ablation table (experiments/eval/ablation.md), like the GazeGaussian paper's
 # Table 3: the full model against single stream, no explicit eye rotation and
 # no expression guidance, each trained from scratch with the same budget and
 # seed, then evaluated the same way on held-out identities.
-# Usage: bench/eval/ablation.sh [BUILD_DIR] [WORK_DIR] [STEPS] [INPUTS] [ITERS]
+# Usage: experiments/eval/ablation.sh [BUILD_DIR] [WORK_DIR] [STEPS] [INPUTS] [ITERS]
 #   STEPS   training steps per model (default 1000)
 #   INPUTS  first inputs of bench/eval/pairs.csv to fit (default 15: one per
 #           test identity), each scored against its 10 targets
@@ -41,5 +41,5 @@ evaluate() {
 (evaluate full; evaluate noeye) &
 (evaluate single; evaluate noguide) &
 wait
-/usr/bin/python3 "$root/bench/eval/ablation_table.py" "$work" "$steps" "$inputs" "$iters" \
-  > "$root/bench/eval/ablation.md"
+/usr/bin/python3 "$root/experiments/eval/ablation_table.py" "$work" "$steps" "$inputs" "$iters" \
+  > "$root/experiments/eval/ablation.md"

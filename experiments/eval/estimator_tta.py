@@ -12,7 +12,7 @@ image alone, averaged (as unit gaze vectors) over the 5 shifts of at most
 1 px along one axis, and over all 9 shifts of at most 1 px each way
 (white fill). Prints the mean and median angle of each.
 
-    bench/eval/estimator_tta.py build/clients/cli/gazesplat \
+    experiments/eval/estimator_tta.py build/clients/cli/gazesplat \
         models/gaze-resnet-white.safetensors [--count 40]
 
 Needs numpy and PIL (python3-numpy, python3-pil)."""

@@ -6,7 +6,7 @@
 # input by input: a run stopped early keeps what it reached) goes to
 # OUTDIR/itN-ftM.csv; read them with bench/eval/readout_stats.py.
 #
-#   bench/eval/budget_sweep.sh GAZESPLAT OUTDIR [INPUTS] [SECONDS]
+#   experiments/eval/budget_sweep.sh GAZESPLAT OUTDIR [INPUTS] [SECONDS]
 #
 # INPUTS: validation inputs (default 5: 50 pairs); SECONDS: a limit for each
 # run (default none).

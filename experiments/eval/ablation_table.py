@@ -1,5 +1,5 @@
 #!/usr/bin/python3
-"""Writes the ablation table (Markdown) from bench/eval/ablation.sh's work
+"""Writes the ablation table (Markdown) from experiments/eval/ablation.sh's work
 directory: WORK/<name>/pairs.csv of `gazesplat eval` and WORK/<name>.train.log.
 Usage: ablation_table.py WORK STEPS INPUTS ITERS"""
 import csv
@@ -50,7 +50,7 @@ def train_psnr(log):
 def main():
     work, steps, inputs, iters = sys.argv[1], sys.argv[2], sys.argv[3], sys.argv[4]
     out = ["# Ablation (like the GazeGaussian paper's Table 3)", "",
-           "Made by `bench/eval/ablation.sh build out/ablation %s %s %s`: each model trained "
+           "Made by `experiments/eval/ablation.sh build out/ablation %s %s %s`: each model trained "
            "from scratch by `gazesplat train --preset cpu --identities 48 --steps %s --seed 1` "
            "plus its switch, then `gazesplat eval --method model --limit-inputs %s --iters %s` "
            "on the committed pairing (held-out test identities) with the evaluation estimator "
