@@ -72,7 +72,11 @@ def main():
             outs = list(c.redirect([(10, -15)], subject=ft.subject_key, fmt="raw"))
             t.check(len(outs) == 1, "REDIRECT of the fine-tuned multi-image subject")
 
-            refused(t, lambda: c.fit(imgs[0], max_iters=FAST, more_images=[imgs[1]] * 16),
+            # 17 images, past the client's own check: the server refuses them
+            big = gc.pb.FitRequest(image=gc.pb.Image(format=gc.pb.FORMAT_PNG, data=imgs[0]))
+            for _ in range(16):
+                big.more_images.add().image.CopyFrom(gc.pb.Image(format=gc.pb.FORMAT_PNG, data=imgs[1]))
+            refused(t, lambda: c.call(gc.pb.FRAME_FIT, big, gc.pb.FRAME_FIT_OK),
                     gc.pb.ERR_INVALID_ARGUMENT, "17 images", "too many images")
             small = np.zeros((64, 64, 3), np.uint8)
             refused(t, lambda: c.fit(imgs[0], max_iters=FAST, more_images=[imgs[1], small]),

@@ -326,6 +326,7 @@ static void shipped_checks(const char *model_path, int ids)
 
 int main(int argc, char **argv)
 {
+    setvbuf(stdout, NULL, _IOLBF, 0); /* the slow run's progress, line by line */
     if (argc > 1) {
         shipped_checks(argv[1], argc > 2 ? atoi(argv[2]) : 4);
         GS_TEST_END();
