@@ -465,8 +465,9 @@ void gs_fit_image_from_options(gs_fit_image *im, const uint8_t *rgb,
  * unset (GS_ERR_ARG): each image carries its own. k = 1 gives the bytes
  * gs_model_fit gives for that image and its labels. Deterministic for any
  * thread count; an iteration costs k single-image ones. A bad image or
- * label is GS_ERR_ARG naming the image (from 0); on any error *out is
- * untouched. */
+ * label is refused (GS_ERR_ARG; GS_ERR_NONFINITE for a non-finite label)
+ * before any work, the message naming the image (from 0) when k > 1; on
+ * any error *out is untouched. */
 int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
                         int k, const gs_fit_options *opt, gs_subject *out,
                         gs_fit_report *report, gs_error *err);
