@@ -244,7 +244,10 @@ static void tiny_checks(void)
     tiny_remove(path);
 }
 
-#define GAIN_MIN_DB 0.0
+/* The shipped model (param_id 2d2a9728e3a27b21) gains 0.22 dB on the mean
+ * over the 4 identities (+0.53, +0.20, +0.25, -0.10: docs/subjects.md);
+ * the run is deterministic, so this asks for about half of that. */
+#define GAIN_MIN_DB 0.1
 
 /* PSNR over the mask's pixels (255) of two S x S RGB images. */
 static double masked_psnr(const uint8_t *a, const uint8_t *b, size_t stride, const uint8_t *mask,
