@@ -1739,6 +1739,11 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     }
     gs_model_ctx *ctx = slot >= 0 ? w->slots[slot].ctx : w->ctx;
     const gs_subject subj = so.subj;
+    /* The same request gives the same bytes whatever this worker rendered
+     * before (the model's renders are a function of subject and view; a
+     * transfer's would go on from the subject's last target). */
+    if (r->transfer)
+        gs_model_ctx_forget_transfer_targets(ctx);
     gs_face_quality_ref *qr = quality_ref_of(w, r, &so.face, &photo);
     recent_add(w, j->key);
     int size = w->model->info.image_size;

@@ -82,11 +82,15 @@ int gsd_live_start(gsd_server *s, char *msg, size_t cap)
     s->live = l;
     gs_error e = {0};
     gs_cap_resolve_opts ro = {NULL, NULL, 1};
-    if (gs_cap_resolve(c->live_device, &ro, l->device, sizeof l->device, &e) != GS_OK) {
-        /* A usb: camera not plugged in yet: wait for it on its spec's path. */
+    char found[sizeof l->device];
+    /* A usb: camera is looked up again at every open (a camera plugged in
+     * after the start, or back as another videoN): the capture gets the
+     * spec itself. */
+    snprintf(l->device, sizeof l->device, "%s", c->live_device);
+    if (gs_cap_resolve(c->live_device, &ro, found, sizeof found, &e) != GS_OK)
         LOG_W("live: %s; waiting for it", e.msg);
-        snprintf(l->device, sizeof l->device, "%s", c->live_device);
-    }
+    else if (strcmp(found, c->live_device))
+        LOG_I("live: %s is %s now", c->live_device, found);
     snprintf(l->output, sizeof l->output, "%s", c->live_output);
     gs_cap_config cc = gs_cap_config_default(l->device);
     cc.width = c->live_width;

@@ -9,7 +9,9 @@ PACKAGES=(
   build-essential cmake ninja-build pkg-config git
   # libraries
   libopenblas-dev
-  libopencv-core-dev libopencv-imgproc-dev libopencv-imgcodecs-dev
+  libopencv-core-dev libopencv-imgproc-dev
+  # image codecs (lib/io): libpng and libjpeg-turbo, called directly
+  libpng-dev libjpeg62-turbo-dev
   libusb-1.0-0-dev
   # augment: ETH-XGaze-style HDF5 files (lib/io/hdf5.c); h5py reads them in tests
   libhdf5-dev python3-h5py
@@ -36,6 +38,8 @@ PACKAGES=(
   # tests: PyTorch reference, static analysis, libFuzzer
   python3 python3-numpy python3-torch
   cppcheck clang libclang-rt-14-dev
+  # bench/io/bench_image: the former OpenCV decoder, side by side
+  libopencv-imgcodecs-dev
   # face tests: dlib as the landmark reference, skimage's photos
   libdlib-dev python3-skimage
   # bench/eval/downstream_plot.py and experiments/eval/speed_table.py: the plots
@@ -44,6 +48,10 @@ PACKAGES=(
   # a kernel module build (the kernel itself is fetched by scripts/vm/prepare.sh
   # with apt-get download, never installed on the host)
   qemu-system-x86 busybox-static v4l-utils kmod
+  # systemd VM tier (tests/vm/vm_systemd.py): the guest's userland is the
+  # host's systemd plus procps' kill (the unit's ExecReload), util-linux's
+  # setpriv (clients under other users) and mount
+  procps util-linux mount
 )
 # npm fetches the face test photos (scripts/fetch-test-assets.sh). A node
 # install from elsewhere may already bring its own npm, which Debian's

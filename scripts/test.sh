@@ -6,7 +6,8 @@
 #   3. short libFuzzer runs (clang) over each fuzz target
 #   4. the release build (-O2, -Werror)
 #   5. the VM tier (ctest -L vm): qemu TCG boots Debian 12's kernel with
-#      vivid and v4l2loopback around `gazesplat live` (tests/vm)
+#      vivid and v4l2loopback around `gazesplat live`, then with the host's
+#      systemd as PID 1 and the installed package (tests/vm)
 #   6. every other tier in the release build; its ctest summary ends the
 #      output.
 set -euo pipefail

@@ -8,8 +8,9 @@
 #include <stddef.h>
 #include <stdint.h>
 
-/* Exit statuses: CLI_REFUSED, the face gate refused the input (face.h). */
-enum { CLI_OK = 0, CLI_FAIL = 1, CLI_USAGE = 2, CLI_REFUSED = 3 };
+/* Exit statuses: CLI_REFUSED, the face gate refused the input (face.h);
+ * CLI_OUTLIERS, check-labels found more outliers than allowed. */
+enum { CLI_OK = 0, CLI_FAIL = 1, CLI_USAGE = 2, CLI_REFUSED = 3, CLI_OUTLIERS = 4 };
 
 /* One subcommand. run gets argv[0] = the command name. */
 typedef struct cli_command {
@@ -37,6 +38,7 @@ extern const cli_command cli_eval_downstream_command;
 extern const cli_command cli_model_command;
 extern const cli_command cli_augment_command;
 extern const cli_command cli_eval_photos_command;
+extern const cli_command cli_check_labels_command;
 
 /* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */
 typedef struct cli_opt {

@@ -23,6 +23,7 @@ static const cli_command *const commands[] = {
     &cli_eval_command,
     &cli_eval_downstream_command,
     &cli_eval_photos_command,
+    &cli_check_labels_command,
     &cli_model_command,
 };
 #define NCOMMANDS (int)(sizeof commands / sizeof commands[0])

@@ -27,7 +27,8 @@ typedef struct cap_buf {
 
 struct gs_cap {
     gs_cap_config cfg;
-    char *path;
+    char *path;     /* the device opened (a usb: spec's node, found at each open) */
+    char *spec;     /* cfg.path as given */
     const gs_cap_ops *ops;
     int fd;
     int streaming;
@@ -92,15 +93,17 @@ int gs_cap_create(const gs_cap_config *cfg, gs_cap **out, gs_error *err)
         cfg->timeout_ms > 60000 || cfg->backoff_max_ms > 3600000)
         return gs_error_set(err, GS_ERR_ARG, "capture: timeout or back-off out of range");
     gs_cap *cap = calloc(1, sizeof *cap);
-    char *path = strdup(cfg->path);
-    if (!cap || !path) {
+    char *path = strdup(cfg->path), *spec = strdup(cfg->path);
+    if (!cap || !path || !spec) {
         free(cap);
         free(path);
+        free(spec);
         return gs_error_set(err, GS_ERR_NOMEM, "capture: out of memory");
     }
     cap->cfg = *cfg;
     cap->path = path;
-    cap->cfg.path = path;
+    cap->spec = spec;
+    cap->cfg.path = spec;
     if (!cap->cfg.nbuffers)
         cap->cfg.nbuffers = 4;
     if (!cap->cfg.timeout_ms)
@@ -151,6 +154,7 @@ void gs_cap_destroy(gs_cap *cap)
     gs_cap_close(cap);
     free(cap->rgb);
     free(cap->path);
+    free(cap->spec);
     free(cap);
 }
 
@@ -290,6 +294,20 @@ static int ensure_rgb(gs_cap *cap, gs_error *err)
 static int open_device(gs_cap *cap, gs_error *err)
 {
     cap->open_start_ns = now_ns(cap);
+    if (strncmp(cap->spec, "usb:", 4) == 0) {
+        /* A camera named by USB identity is looked up at every open: it
+         * may arrive after the start, or come back as another videoN. */
+        char dev[256];
+        gs_cap_resolve_opts ro = {NULL, NULL, 1};
+        int r = gs_cap_resolve(cap->spec, &ro, dev, sizeof dev, err);
+        if (r != GS_OK)
+            return r;
+        char *p = strdup(dev);
+        if (!p)
+            return gs_error_set(err, GS_ERR_NOMEM, "capture: out of memory");
+        free(cap->path);
+        cap->path = p;
+    }
     int fd = cap->ops->open(cap->ops->ctx, cap->path, O_RDWR | O_NONBLOCK);
     if (fd < 0)
         return gs_error_set(err, GS_ERR_IO, "%s: open: %s", cap->path, strerror(-fd));

@@ -1,4 +1,5 @@
-/* PNG and JPEG: the checks in front of the OpenCV shim, and file I/O.
+/* PNG and JPEG: the checks in front of the codecs (png_codec.c,
+ * jpeg_codec.c), and file I/O.
  *
  * Before any pixel is decoded the encoded stream is walked chunk by chunk
  * (PNG) or segment by segment (JPEG): truncation and structural damage are
@@ -17,7 +18,7 @@
 #include <strings.h>
 #include <sys/stat.h>
 
-#include "cv_shim.h"
+#include "image_codec.h"
 
 #define GS_IO_ENCODE_MAX_SIDE 65535 /* the JPEG format's limit; PNG alike */
 /* Progressive JPEGs need about ten scans; thousands of tiny scans are a
@@ -71,6 +72,40 @@ static uint32_t be32(const unsigned char *p)
 static unsigned be16(const unsigned char *p)
 {
     return (unsigned)p[0] << 8 | p[1];
+}
+
+/* The formats we do not decode, named in the refusal. */
+static const char *other_format(const unsigned char *b, size_t len)
+{
+    if (len >= 12 && memcmp(b, "RIFF", 4) == 0 && memcmp(b + 8, "WEBP", 4) == 0)
+        return "WebP";
+    if (len >= 4 && (memcmp(b, "II*\0", 4) == 0 || memcmp(b, "MM\0*", 4) == 0))
+        return "TIFF";
+    if (len >= 6 && (memcmp(b, "GIF87a", 6) == 0 || memcmp(b, "GIF89a", 6) == 0))
+        return "GIF";
+    if (len >= 2 && b[0] == 'B' && b[1] == 'M')
+        return "BMP";
+    if (len >= 12 && memcmp(b, "\0\0\0\x0cjP  ", 8) == 0)
+        return "JPEG 2000";
+    if (len >= 4 && memcmp(b, "\x76\x2f\x31\x01", 4) == 0)
+        return "OpenEXR";
+    if (len >= 12 && memcmp(b + 4, "ftyp", 4) == 0)
+        return "HEIF/AVIF";
+    if (len >= 3 && b[0] == 'P' && b[1] >= '1' && b[1] <= '7' &&
+        (b[2] == '\n' || b[2] == ' ' || b[2] == '\r' || b[2] == '\t'))
+        return "PNM (PBM/PGM/PPM/PAM)";
+    if (len >= 10 && memcmp(b, "#?RADIANCE", 10) == 0)
+        return "Radiance HDR";
+    return NULL;
+}
+
+static int refuse_format(const unsigned char *b, size_t len, gs_error *err)
+{
+    const char *name = other_format(b, len);
+    if (name)
+        return gs_error_set(err, GS_ERR_UNSUPPORTED,
+                            "image: %s is not supported (PNG or JPEG only)", name);
+    return gs_error_set(err, GS_ERR_UNSUPPORTED, "image: not a PNG or JPEG file");
 }
 
 /* ---- PNG structure ------------------------------------------------------ */
@@ -234,12 +269,13 @@ int gs_io_image_decode(const void *buf, size_t len, const gs_io_image_limits *li
     int fmt = gs_io_format_sniff(buf, len);
     int rc = fmt == GS_IO_PNG    ? png_check(buf, len, &w, &h, err)
              : fmt == GS_IO_JPEG ? jpeg_check(buf, len, &w, &h, err)
-                                 : gs_error_set(err, GS_ERR_UNSUPPORTED,
-                                                "image: not a PNG or JPEG file");
+                                 : refuse_format(buf, len, err);
     if (!rc)
         rc = check_dims(w, h, lim, err);
-    if (!rc)
-        rc = gs_cv_decode(buf, len, lim->max_pixels, out, err);
+    if (!rc && fmt == GS_IO_PNG)
+        rc = gs_png_decode(buf, len, lim->max_pixels, lim->max_side, out, err);
+    else if (!rc)
+        rc = gs_jpeg_decode(buf, len, lim->max_pixels, lim->max_side, out, err);
     return rc;
 }
 
@@ -310,7 +346,8 @@ int gs_io_image_encode(const gs_io_image *img, gs_io_format format, int quality,
     if (rc)
         return rc;
     unsigned char *buf = NULL;
-    rc = gs_cv_encode(img, format, q, &buf, out_len, err);
+    rc = format == GS_IO_JPEG ? gs_jpeg_encode(img, q, &buf, out_len, err)
+                              : gs_png_encode(img, q, &buf, out_len, err);
     if (!rc)
         *out = buf;
     return rc;

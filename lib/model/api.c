@@ -304,6 +304,19 @@ int gs_model_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
         return rc;
     gs_frame fr;
     frame_of(s, view, &fr);
+    /* A gaze-only render of a subject the context keeps no render of starts
+     * with the subject at its own gaze: the anchor every later gaze of it
+     * renders from (frame.h), so that the bytes of a render depend on the
+     * model, the subject and the view alone, not on what the context
+     * rendered before (one more incremental render, the first time). */
+    if (!view->use_head && gs_frame_wants_anchor(c, &fr) &&
+        (view->gaze_pitch != s->gaze_pitch || view->gaze_yaw != s->gaze_yaw)) {
+        gs_frame own;
+        frame_of(s, NULL, &own);
+        rc = gs_frame_render(c, pool, &own, NULL, err);
+        if (rc)
+            return rc;
+    }
     rc = gs_frame_render(c, pool, &fr, NULL, err);
     if (rc)
         return rc;

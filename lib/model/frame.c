@@ -441,6 +441,7 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
     free(c->ss_buf);
     free(c->dir_feat), free(c->dir_vfeat), free(c->dir_out), free(c->dir_alpha);
     free(c->dir_bg), free(c->rgb_main), free(c->dir_dmain), free(c->dir_d);
+    free(c->anc_fmap), free(c->anc_rgb);
     gs_raster_destroy(c->raster_dir);
     gs_raster_destroy(c->raster_cov);
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
@@ -1373,6 +1374,8 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
                        4 * in[0],
                    (size_t)(keep[2] - keep[0]) * sizeof(float));
     gs_frame_box_union(c->rgb_dirty, keep);
+    if (c->anc_valid)
+        gs_frame_box_union(c->anc_rbox, keep);
     return GS_OK;
 }
 
@@ -1425,6 +1428,11 @@ static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
     memcpy(s->rgb_dirty, r, sizeof r);
     memcpy(r, c->dir_box, sizeof r), memcpy(c->dir_box, s->dir_box, sizeof r);
     memcpy(s->dir_box, r, sizeof r);
+    swap_f(&c->anc_fmap, &s->anc_fmap), swap_f(&c->anc_rgb, &s->anc_rgb);
+    t = c->anc_valid, c->anc_valid = s->anc_valid, s->anc_valid = t;
+    int *cb[] = {c->anc_rect, c->anc_fbox, c->anc_rbox}, *sb[] = {s->anc_rect, s->anc_fbox, s->anc_rbox};
+    for (int i = 0; i < 3; i++)
+        memcpy(r, cb[i], sizeof r), memcpy(cb[i], sb[i], sizeof r), memcpy(sb[i], r, sizeof r);
     /* the face cache's outputs are not what g_* now holds */
     c->face_valid = 0;
     c->face_map_valid = 0;
@@ -1434,7 +1442,7 @@ static void sweep_slot_free(gs_sweep_slot *s)
 {
     float *f[] = {s->g_mean, s->g_scale, s->g_quat, s->g_opac,
                   s->g_feat, s->fmap, s->rgb, s->gvec, s->eye_base,
-                  s->x_head, s->q_head, s->rgb_main};
+                  s->x_head, s->q_head, s->rgb_main, s->anc_fmap, s->anc_rgb};
     for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
         free(f[i]);
     free(s->fbox);
@@ -1632,6 +1640,54 @@ static void eye_streams(gs_model_ctx *c, const gs_frame *fr)
     c->fr = *fr;
 }
 
+/* Keeps the full render just made (fmap, rgb, inc_rect) as the anchor of
+ * the incremental renders after it. Without the memory for it, the
+ * incremental renders go on from the last one, as exact to a few ulps. */
+static void anchor_set(gs_model_ctx *c)
+{
+    size_t fsz = (size_t)c->fs * c->fs * c->C, isz = (size_t)c->S * c->S * 3;
+    c->anc_valid = 0;
+    if (c->eye_direct)
+        return;
+    if (!c->anc_fmap)
+        c->anc_fmap = malloc(fsz * sizeof(float));
+    if (!c->anc_rgb)
+        c->anc_rgb = malloc(isz * sizeof(float));
+    if (!c->anc_fmap || !c->anc_rgb)
+        return;
+    memcpy(c->anc_fmap, c->fmap, fsz * sizeof(float));
+    memcpy(c->anc_rgb, c->rgb, isz * sizeof(float));
+    memcpy(c->anc_rect, c->inc_rect, sizeof c->anc_rect);
+    memset(c->anc_fbox, 0, sizeof c->anc_fbox);
+    memset(c->anc_rbox, 0, sizeof c->anc_rbox);
+    c->anc_valid = 1;
+}
+
+/* Puts back the anchor's values over what the last incremental render
+ * wrote (anc_fbox in fmap, anc_rbox in rgb; the 8-bit image follows rgb
+ * there through rgb_dirty). */
+static void anchor_restore(gs_model_ctx *c)
+{
+    if (!c->anc_valid)
+        return;
+    const int *f = c->anc_fbox, *r = c->anc_rbox;
+    int fs = c->fs, S = c->S;
+    for (int k = 0; f[0] < f[2] && k < c->C; k++)
+        for (int y = f[1]; y < f[3]; y++) {
+            size_t o = ((size_t)k * fs + y) * fs + f[0];
+            memcpy(c->fmap + o, c->anc_fmap + o, (size_t)(f[2] - f[0]) * sizeof(float));
+        }
+    for (int k = 0; r[0] < r[2] && k < 3; k++)
+        for (int y = r[1]; y < r[3]; y++) {
+            size_t o = ((size_t)k * S + y) * S + r[0];
+            memcpy(c->rgb + o, c->anc_rgb + o, (size_t)(r[2] - r[0]) * sizeof(float));
+        }
+    if (r[0] < r[2])
+        gs_frame_box_union(c->rgb_dirty, r);
+    memset(c->anc_fbox, 0, sizeof c->anc_fbox);
+    memset(c->anc_rbox, 0, sizeof c->anc_rbox);
+}
+
 static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                        gs_error *err)
 {
@@ -1656,6 +1712,7 @@ static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->inc_key = *fr;
     c->inc_valid = 1;
     c->n_full++;
+    anchor_set(c);
     return GS_OK;
 }
 
@@ -1669,14 +1726,18 @@ static int render_inc(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     int now[4], dirty[4];
     if (c->eye_direct)
         direct_undo(c);
+    else
+        anchor_restore(c);
     gs_frame_eye_tiles(c, &cam, now);
-    memcpy(dirty, c->inc_rect, sizeof dirty);
+    memcpy(dirty, c->anc_valid ? c->anc_rect : c->inc_rect, sizeof dirty);
     gs_frame_box_union(dirty, now);
     if (dirty[0] < dirty[2] && dirty[1] < dirty[3]) {
         int changed[4];
         int rc = raster_box(c, pool, &cam, dirty, changed, err);
         if (rc)
             return rc;
+        if (c->anc_valid)
+            gs_frame_box_union(c->anc_fbox, changed);
         if (changed[0] < changed[2])
             rc = render_box(c, pool, changed);
         if (rc)
@@ -1695,6 +1756,18 @@ static int render_inc(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     c->inc_valid = 1;
     c->n_inc++;
     return GS_OK;
+}
+
+int gs_frame_wants_anchor(const gs_model_ctx *c, const gs_frame *fr)
+{
+    if (!c->inc_ok || c->render_fs != c->fs || c->render_full || c->eye_direct)
+        return 0;
+    if (c->inc_valid && same_subject_pose(&c->inc_key, fr))
+        return 0;
+    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
+        if (c->slots[i].valid && same_subject_pose(&c->slots[i].key, fr))
+            return 0;
+    return 1;
 }
 
 int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,

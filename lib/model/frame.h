@@ -41,6 +41,9 @@ typedef struct gs_sweep_slot {
     int rgb_dirty[4];
     float *rgb_main;                  /* eye_direct: the renderer's image */
     int dir_box[4];
+    float *anc_fmap, *anc_rgb;
+    int anc_valid;
+    int anc_rect[4], anc_fbox[4], anc_rbox[4];
 } gs_sweep_slot;
 
 /* The eye stream's coverage of the merged feature map of the last forward
@@ -162,6 +165,16 @@ struct gs_model_ctx {
     gs_frame inc_key;
     int inc_rect[4];                  /* x0, y0, x1, y1 (exclusive), feat px */
     int16_t *fbox;                    /* [nf, 4] face Gaussian pixel boxes */
+    /* the anchor: the full render of inc_key (its feature map, float image
+     * and eye footprint), from which every incremental render starts, so
+     * that an incremental render is a function of the anchor and its own
+     * gaze alone, never of the gazes rendered before it. anc_fbox and
+     * anc_rbox bound what fmap and rgb hold of the last incremental render
+     * (feature px, image px): restored from the anchor before the next.
+     * Not for eye_direct models (their own undo, direct_undo). */
+    float *anc_fmap, *anc_rgb;        /* [C, fs, fs], [3, S, S] or NULL */
+    int anc_valid;
+    int anc_rect[4], anc_fbox[4], anc_rbox[4];
     gs_raster *raster_crop;
     double inc_stats[2];              /* feature px re-rasterized, changed */
     /* the crop's Gaussians: the face ones whose box meets it, then the eye
@@ -280,6 +293,11 @@ int gs_frame_set_feature_mask(gs_model_ctx *c, const float *mask,
  * new) is rasterized again and only the renderer's reach around it is
  * recomputed; the result equals gs_frame_forward's within float rounding
  * (test_model_api). *incremental (may be NULL) tells which path ran. */
+/* 1 when c renders incrementally (anchored renders: not eye_direct, no
+ * supersampling, not render_full) and keeps no full render (anchor) of
+ * fr's code and head pose, live or in its sweep cache: the next
+ * gs_frame_render of fr would take the full path. */
+int gs_frame_wants_anchor(const gs_model_ctx *c, const gs_frame *fr);
 int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                     int *incremental, gs_error *err);
 

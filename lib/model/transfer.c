@@ -241,6 +241,16 @@ void gs_xfer_forget_target(gs_xfer *x)
         x->cur.tgt_valid = 0;
 }
 
+void gs_model_ctx_forget_transfer_targets(gs_model_ctx *c)
+{
+    gs_xfer *x = c ? c->xfer : NULL;
+    if (!x)
+        return;
+    x->cur.tgt_valid = 0;
+    for (int i = 0; i < x->nslots; i++)
+        x->slots[i].tgt_valid = 0;
+}
+
 float *gs_xfer_eye_opening(gs_xfer *x)
 {
     return x && x->cur.ap_valid ? x->cur.src_ap : NULL;

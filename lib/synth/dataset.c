@@ -78,6 +78,22 @@ static const char readme_fields[] =
     "| identity | the identity parameters by name, each in [-1, 1] |\n"
     "| expression | mouth_open, smile, brow_raise, squint, blink (0..1 or -1..1), pupil |\n";
 
+/* Written after the fields only when kappa is on (without it the README
+ * keeps its bytes). */
+static const char readme_kappa[] =
+    "\n## Angle kappa\n"
+    "\n"
+    "`gaze` means the visual axis (line of sight) in every frame; each eyeball\n"
+    "renders along its optical axis, the visual axis turned temporally by\n"
+    "kappa_h and down by kappa_v (the identity's own, drawn from its seed).\n"
+    "\n"
+    "| field | meaning |\n"
+    "|---|---|\n"
+    "| gaze_axis | \"visual\": which axis the gaze_* fields give |\n"
+    "| kappa_h_rad, kappa_v_rad | the identity's kappa: visual axis nasal / up of the optical axis |\n"
+    "| gaze_optical_head, gaze_optical_cam | optical axes [right, left], unit, head and camera frames |\n"
+    "| gaze_optical_{head,cam,norm}_{pitch,yaw}_rad | their angles [right, left] |\n";
+
 static int make_dir(const char *path, gs_error *err)
 {
     if (mkdir(path, 0777) == 0)
@@ -87,6 +103,15 @@ static int make_dir(const char *path, gs_error *err)
         return GS_OK;
     return gs_error_set(err, GS_ERR_IO, "dataset: cannot create directory %s: %s",
                         path, strerror(errno));
+}
+
+/* The shortest of %.15g and %.17g that reads back as v (the config
+ * reader must find the same bits). */
+static void exact(char buf[32], double v)
+{
+    snprintf(buf, 32, "%.15g", v);
+    if (strtod(buf, NULL) != v)
+        snprintf(buf, 32, "%.17g", v);
 }
 
 static int write_readme(const char *dir, const gs_synth_gen_config *c,
@@ -112,7 +137,19 @@ static int write_readme(const char *dir, const gs_synth_gen_config *c,
                    "views of a frame show the same scene. Cameras: 3 rows (pitch "
                    "+20, 0, -20 deg) x 6 columns (yaw 62.5 .. -62.5 deg, image-left "
                    "first) on a sphere around the head's nominal position.\n\n");
+    if (c->kappa.enabled) {
+        char k[4][32];
+        exact(k[0], c->kappa.h_mean_deg);
+        exact(k[1], c->kappa.h_sd_deg);
+        exact(k[2], c->kappa.v_mean_deg);
+        exact(k[3], c->kappa.v_sd_deg);
+        fprintf(f, "Angle kappa per identity: horizontal %s +- %s deg, "
+                   "vertical %s +- %s deg (normal, truncated at 3 sd).\n\n",
+                k[0], k[1], k[2], k[3]);
+    }
     fputs(readme_fields, f);
+    if (c->kappa.enabled)
+        fputs(readme_kappa, f);
     int bad = ferror(f);
     bad |= fclose(f) != 0;
     return bad ? gs_error_set(err, GS_ERR_IO, "dataset: cannot write %s", path)
@@ -284,4 +321,67 @@ int gs_synth_contact_sheet(gs_synth_split split, int rows, int tile,
     *width = w;
     *height = h;
     return GS_OK;
+}
+
+/* Reads the generator configuration back from the first lines of a
+ * dataset's README.md (the ranges are the defaults: the only ones the
+ * writer's callers use). */
+int gs_synth_dataset_config_read(const char *dir, gs_synth_gen_config *c,
+                                 uint64_t *first, uint64_t *count, gs_error *err)
+{
+    char path[4096], text[2048];
+    if (!dir || strlen(dir) > 3900)
+        return gs_error_set(err, GS_ERR_ARG, "dataset: bad directory name");
+    snprintf(path, sizeof path, "%s/README.md", dir);
+    FILE *f = fopen(path, "r");
+    if (!f)
+        return gs_error_set(err, GS_ERR_IO, "dataset: cannot read %s: %s", path,
+                            strerror(errno));
+    size_t n = fread(text, 1, sizeof text - 1, f);
+    fclose(f);
+    text[n] = '\0';
+    gs_synth_gen_config_default(c);
+    unsigned long long cnt, f0, last, s0, ids, seed;
+    int w, h;
+    char split[16], rig[16], ss[32];
+    const char *head = "# Synthetic gaze dataset (gazesplat synth)\n\n";
+    if (strncmp(text, head, strlen(head)) != 0 ||
+        sscanf(text + strlen(head),
+               "%llu images, generator indices %llu..%llu; split %15s (identity "
+               "seeds %llu + k, k < %llu), scene seed %llu, %dx%d px, rig %15[a-z], %31[^.]",
+               &cnt, &f0, &last, split, &s0, &ids, &seed, &w, &h, rig, ss) != 11)
+        return gs_error_set(err, GS_ERR_FORMAT, "dataset: %s is not a gazesplat "
+                            "synth README (its first lines name the generator)", path);
+    int k = 0;
+    while (k < 3 && strcmp(split, split_names[k]) != 0)
+        k++;
+    int r = 0;
+    while (r < 3 && strcmp(rig, rig_names[r]) != 0)
+        r++;
+    if (k == 3 || r == 3 || w != h || ids < 1)
+        return gs_error_set(err, GS_ERR_FORMAT, "dataset: %s: unknown split '%s', "
+                            "rig '%s' or size %dx%d", path, split, rig, w, h);
+    c->split = (gs_synth_split)k;
+    c->rig = (gs_synth_rig)r;
+    c->identities = ids;
+    c->seed = seed;
+    c->size = w;
+    c->supersample = strncmp(ss, "2x2", 3) == 0 ? 2 : 1;
+    const char *kp = strstr(text, "Angle kappa per identity: ");
+    if (kp) {
+        c->kappa.enabled = 1;
+        if (sscanf(kp, "Angle kappa per identity: horizontal %lf +- %lf deg, "
+                       "vertical %lf +- %lf deg",
+                   &c->kappa.h_mean_deg, &c->kappa.h_sd_deg, &c->kappa.v_mean_deg,
+                   &c->kappa.v_sd_deg) != 4)
+            return gs_error_set(err, GS_ERR_FORMAT, "dataset: %s: unreadable kappa "
+                                "line", path);
+    }
+    if (first)
+        *first = f0;
+    if (count)
+        *count = cnt;
+    gs_synth_scene sc;
+    gs_synth_camera cam;
+    return gs_synth_gen_scene(c, f0, &sc, &cam, err);
 }

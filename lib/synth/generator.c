@@ -37,7 +37,12 @@ int gs_synth_gen_scene(const gs_synth_gen_config *c, uint64_t index,
     uint64_t frame = c->rig == GS_SYNTH_RIG_ETHX ? index / GS_SYNTH_ETHX_CAMERAS : index;
     uint64_t h = gs_synth_hash2(c->seed, frame);
     uint64_t k = gs_synth_hash2(h, 0x6964ULL) % c->identities;
+    int krc = c->kappa.enabled ? gs_synth_kappa_check(&c->kappa, err) : GS_OK;
+    if (krc != GS_OK)
+        return krc;
     gs_synth_scene_random(gs_synth_split_seed(c->split, k), h, &c->ranges, scene);
+    if (c->kappa.enabled)
+        gs_synth_scene_set_kappa(&c->kappa, scene);
     switch (c->rig) {
     case GS_SYNTH_RIG_SINGLE:
         gs_synth_camera_single(c->size, GEN_DISTANCE_MM, GEN_FIELD_MM, cam);

@@ -30,6 +30,7 @@ static const float DEG = 0.017453292519943295f;
 typedef struct build_ctx {
     float sc;  /* overall scale */
     v3 off;    /* subtracted after scaling */
+    const double *kappa; /* NULL, or the identity's (h, v) kappa, radians */
 } build_ctx;
 
 static v3 at(const build_ctx *b, float x, float y, float z)
@@ -114,9 +115,16 @@ static void build_eye(const build_ctx *b, const float *p,
     e->iris_d = limbus - 0.35f;
     float pupil = 2.0f + 0.5f * p[GS_SYNTH_ID_PUPIL_SIZE] + 1.2f * ex->pupil;
     e->pupil_r = clampf(pupil, 1.0f, 3.5f) * b->sc;
-    /* Optical axis: the eye rotation maps -z to the gaze vector. */
+    /* Optical axis: the eye rotation maps -z to the gaze vector (the
+     * visual axis), turned by the identity's kappa when it has one. */
     double r[9], mz[3] = {0, 0, -1}, a[3];
     gs_geom_rot_from_pitchyaw(gp, gy, 0.0, r);
+    if (b->kappa) {
+        /* The gaze is the visual axis; the eyeball turns by kappa more. */
+        double k[9];
+        gs_synth_kappa_rotation(side, b->kappa[0], b->kappa[1], k);
+        gs_geom_mat3_mul(r, k, r);
+    }
     gs_geom_mat3_vec(r, mz, a);
     e->axis = v3_make((float)a[0], (float)a[1], (float)a[2]);
     e->cornea_c = v3_add(e->c, v3_scale(e->axis, e->cornea_off));
@@ -408,10 +416,10 @@ static void build_bounds(const build_ctx *b, head_model *h)
 
 static void build_raw(const gs_synth_identity *id,
                       const gs_synth_expression *ex, double gp, double gy,
-                      v3 off, head_model *h)
+                      const double *kappa, v3 off, head_model *h)
 {
     const float *p = id->p;
-    build_ctx b = {1.0f + 0.05f * p[GS_SYNTH_ID_HEAD_SIZE], off};
+    build_ctx b = {1.0f + 0.05f * p[GS_SYNTH_ID_HEAD_SIZE], off, kappa};
     memset(h, 0, sizeof *h);
     h->offset = off;
     build_skull_face(&b, p, clampf(ex->smile, 0.0f, 1.0f), h);
@@ -433,11 +441,18 @@ void gs_synth_head_build(const gs_synth_identity *id,
                          const gs_synth_expression *ex, double gaze_pitch,
                          double gaze_yaw, head_model *h)
 {
+    gs_synth_head_build_kappa(id, ex, gaze_pitch, gaze_yaw, NULL, h);
+}
+
+void gs_synth_head_build_kappa(const gs_synth_identity *id,
+                               const gs_synth_expression *ex, double gaze_pitch,
+                               double gaze_yaw, const double *kappa, head_model *h)
+{
     /* The head frame origin is the face centre of the neutral face: build
      * it once at the origin, measure, and rebuild shifted. */
     gs_synth_expression neutral;
     gs_synth_expression_neutral(&neutral);
-    build_raw(id, &neutral, 0.0, 0.0, v3_make(0, 0, 0), h);
+    build_raw(id, &neutral, 0.0, 0.0, NULL, v3_make(0, 0, 0), h);
     double lm[68][3] = {{0}}, six[6][3], fc[3];
     gs_synth_head_face_points(h, lm);
     static const int idx[6] = {36, 39, 42, 45, 31, 35};
@@ -445,7 +460,7 @@ void gs_synth_head_build(const gs_synth_identity *id,
         for (int k = 0; k < 3; k++)
             six[i][k] = lm[idx[i]][k];
     gs_geom_face_centre6(six, fc);
-    build_raw(id, ex, gaze_pitch, gaze_yaw,
+    build_raw(id, ex, gaze_pitch, gaze_yaw, kappa,
               v3_make((float)fc[0], (float)fc[1], (float)fc[2]), h);
 }
 

@@ -111,6 +111,20 @@ int gs_synth_labels_json(const gs_synth_labels *l, const char *image,
     scalar(&j, "gaze_cam_yaw_rad", l->gaze_cam_yaw);
     scalar(&j, "gaze_norm_pitch_rad", l->gaze_norm_pitch);
     scalar(&j, "gaze_norm_yaw_rad", l->gaze_norm_yaw);
+    if (l->has_kappa) {
+        /* Only with kappa on, so that datasets without it keep their bytes. */
+        put(&j, ",\"gaze_axis\":\"visual\"");
+        scalar(&j, "kappa_h_rad", l->kappa_h);
+        scalar(&j, "kappa_v_rad", l->kappa_v);
+        arr2(&j, "gaze_optical_head", &l->optical_head[0][0], 2, 3);
+        arr(&j, "gaze_optical_head_pitch_rad", l->optical_head_pitch, 2);
+        arr(&j, "gaze_optical_head_yaw_rad", l->optical_head_yaw, 2);
+        arr2(&j, "gaze_optical_cam", &l->optical_cam[0][0], 2, 3);
+        arr(&j, "gaze_optical_cam_pitch_rad", l->optical_cam_pitch, 2);
+        arr(&j, "gaze_optical_cam_yaw_rad", l->optical_cam_yaw, 2);
+        arr(&j, "gaze_optical_norm_pitch_rad", l->optical_norm_pitch, 2);
+        arr(&j, "gaze_optical_norm_yaw_rad", l->optical_norm_yaw, 2);
+    }
     scalar(&j, "head_norm_pitch_rad", l->head_norm_pitch);
     scalar(&j, "head_norm_yaw_rad", l->head_norm_yaw);
     arr(&j, "norm_R", l->norm.R, 9);

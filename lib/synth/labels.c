@@ -49,6 +49,23 @@ void gs_synth_labels_from_head(const gs_synth_scene *s,
     gs_geom_pitchyaw_to_vec(s->gaze_pitch, s->gaze_yaw, l->gaze_head);
     gs_geom_mat3_vec(l->head_R, l->gaze_head, l->gaze_cam);
     gs_geom_vec_to_pitchyaw(l->gaze_cam, &l->gaze_cam_pitch, &l->gaze_cam_yaw);
+    /* Optical axes: what each eyeball renders along. */
+    l->has_kappa = s->kappa != 0;
+    if (l->has_kappa) {
+        l->kappa_h = s->kappa_h;
+        l->kappa_v = s->kappa_v;
+    }
+    for (int e = 0; e < 2; e++) {
+        double a[3] = {h->eye[e].axis.x, h->eye[e].axis.y, h->eye[e].axis.z};
+        double n = sqrt(a[0] * a[0] + a[1] * a[1] + a[2] * a[2]);
+        for (int k = 0; k < 3; k++)
+            l->optical_head[e][k] = a[k] / n;
+        gs_geom_vec_to_pitchyaw(l->optical_head[e], &l->optical_head_pitch[e],
+                                &l->optical_head_yaw[e]);
+        gs_geom_mat3_vec(l->head_R, l->optical_head[e], l->optical_cam[e]);
+        gs_geom_vec_to_pitchyaw(l->optical_cam[e], &l->optical_cam_pitch[e],
+                                &l->optical_cam_yaw[e]);
+    }
     /* Points: the head origin is the face centre. */
     memcpy(l->face_centre, l->head_t, sizeof l->face_centre);
     project(cam->K, l->face_centre, l->face_centre_uv);
@@ -79,7 +96,14 @@ void gs_synth_labels_from_head(const gs_synth_scene *s,
         gs_geom_vec_to_pitchyaw(gn, &l->gaze_norm_pitch, &l->gaze_norm_yaw);
         gs_geom_norm_rot(&l->norm, l->head_R, hrn);
         gs_geom_head_pitchyaw(hrn, &l->head_norm_pitch, &l->head_norm_yaw);
+        for (int e = 0; e < 2; e++) {
+            gs_geom_norm_vec(&l->norm, l->optical_cam[e], gn);
+            gs_geom_vec_to_pitchyaw(gn, &l->optical_norm_pitch[e],
+                                    &l->optical_norm_yaw[e]);
+        }
     } else {
+        l->optical_norm_pitch[0] = l->optical_norm_pitch[1] = NAN;
+        l->optical_norm_yaw[0] = l->optical_norm_yaw[1] = NAN;
         l->gaze_norm_pitch = l->gaze_norm_yaw = NAN;
         l->head_norm_pitch = l->head_norm_yaw = NAN;
     }

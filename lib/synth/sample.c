@@ -49,6 +49,7 @@ static int check_inputs(const gs_synth_scene *s, const gs_synth_camera *c,
 {
     if (!finite_all(s->head_R, 9) || !finite_all(s->head_t, 3) ||
         !isfinite(s->gaze_pitch) || !isfinite(s->gaze_yaw) ||
+        (s->kappa && (!isfinite(s->kappa_h) || !isfinite(s->kappa_v))) ||
         !finite_all(c->K, 9) || !finite_all(c->R, 9) || !finite_all(c->t, 3))
         return gs_error_set(err, GS_ERR_NONFINITE,
                             "synth: non-finite scene or camera value");
@@ -76,8 +77,7 @@ int gs_synth_labels_compute(const gs_synth_scene *scene,
     head_model *h = malloc(sizeof *h);
     if (!h)
         return gs_error_set(err, GS_ERR_NOMEM, "synth: out of memory");
-    gs_synth_head_build(&scene->identity, &scene->expr, scene->gaze_pitch,
-                        scene->gaze_yaw, h);
+    gs_synth_head_build_scene(scene, h);
     gs_synth_labels_from_head(scene, cam, h, lab);
     free(h);
     return GS_OK;
@@ -113,8 +113,7 @@ int gs_synth_render(const gs_synth_scene *scene, const gs_synth_camera *cam,
     render_ctx *r = malloc(sizeof *r);
     if (!r)
         return gs_error_set(err, GS_ERR_NOMEM, "synth: out of memory");
-    gs_synth_head_build(&scene->identity, &scene->expr, scene->gaze_pitch,
-                        scene->gaze_yaw, &r->head);
+    gs_synth_head_build_scene(scene, &r->head);
     if (opts && opts->open_lids)
         gs_synth_head_open_lids(&r->head);
     gs_synth_render_setup(r, scene, cam, ss);

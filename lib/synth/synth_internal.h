@@ -179,6 +179,13 @@ typedef struct head_model {
 void gs_synth_head_build(const gs_synth_identity *id,
                          const gs_synth_expression *ex, double gaze_pitch,
                          double gaze_yaw, head_model *h);
+/* The same with angle kappa: kappa NULL (none) or the identity's (h, v),
+ * radians (gs_synth_kappa_rotation); gaze_* is then the visual axis. */
+void gs_synth_head_build_kappa(const gs_synth_identity *id,
+                               const gs_synth_expression *ex, double gaze_pitch,
+                               double gaze_yaw, const double *kappa, head_model *h);
+/* The scene's head: gs_synth_head_build_kappa with the scene's kappa. */
+void gs_synth_head_build_scene(const gs_synth_scene *s, head_model *h);
 
 /* Pulls both lids of a built head back to 85 degrees above and below the
  * eye's front (gs_synth_render_opts.open_lids): the wedge between them

@@ -117,6 +117,32 @@ def jpeg(w, h, ncomp):
     return b"\xff\xd8" + dqt + sof + dht + sos + scan + b"\xff\xd9"
 
 
+def exif(order, orientation, tag_type=3):
+    """An APP1 body: "Exif\\0\\0", a TIFF header, IFD0 with one Orientation entry."""
+    e = "<" if order == "II" else ">"
+    ifd = struct.pack(e + "H", 1) + struct.pack(e + "HHI", 0x0112, tag_type, 1)
+    ifd += struct.pack(e + "HH", orientation, 0) + struct.pack(e + "I", 0)
+    return b"Exif\0\0" + order.encode() + struct.pack(e + "HI", 42, 8) + ifd
+
+
+def app1(body):
+    return b"\xff\xe1" + struct.pack(">H", len(body) + 2) + body
+
+
+def jpeg_with(j, segment):
+    """j with segment inserted after SOI."""
+    return j[:2] + segment + j[2:]
+
+
+def exif_files():
+    files = {"o%d_%s.bin" % (o, order): exif(order, o) for o in (1, 3, 6, 8) for order in ("II", "MM")}
+    files["o5_long.bin"] = exif("II", 5, tag_type=4)
+    files["o9.bin"] = exif("MM", 9)
+    files["cut.bin"] = exif("II", 6)[:-6]
+    files["xmp.bin"] = b"http://ns.adobe.com/xap/1.0/\0<x:xmpmeta/>"
+    return files
+
+
 def image_files():
     rgb = [bytes(v for x in range(5) for v in (x * 40, y * 60, 128)) for y in range(4)]
     files = {
@@ -127,6 +153,13 @@ def image_files():
         "grey_8x8.jpg": jpeg(8, 8, 1),
         "colour_20x9.jpg": jpeg(20, 9, 3),
     }
+    # EXIF orientation 6 (both byte orders), CMYK and YCCK (Adobe APP14
+    # transform 0 and 2) after SOI.
+    for order in ("II", "MM"):
+        files["exif6_%s_20x9.jpg" % order] = jpeg_with(jpeg(20, 9, 3), app1(exif(order, 6)))
+    for name, transform in (("cmyk", 0), ("ycck", 2)):
+        adobe = b"\xff\xee" + struct.pack(">H", 14) + b"Adobe" + struct.pack(">HHHB", 100, 0, 0, transform)
+        files["%s_8x8.jpg" % name] = jpeg_with(jpeg(8, 8, 4), adobe)
     files["truncated.png"] = files["rgb_5x4.png"][:-20]
     files["truncated.jpg"] = files["colour_20x9.jpg"][:-3]
     big = bytearray(files["grey_3x2.png"])
@@ -178,7 +211,7 @@ def safetensors_files():
 
 def main(out):
     for target, files in (("ply", ply_files()), ("npy", npy_files()), ("image", image_files()),
-                          ("safetensors", safetensors_files())):
+                          ("safetensors", safetensors_files()), ("exif", exif_files())):
         os.makedirs(os.path.join(out, target), exist_ok=True)
         for name, data in files.items():
             with open(os.path.join(out, target, name), "wb") as f:

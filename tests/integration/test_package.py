@@ -62,8 +62,11 @@ FHS = [
     "usr/lib/modprobe.d/gazesplat-v4l2loopback.conf",
 ]
 # Shared libraries dpkg-shlibdeps must have found (package name prefixes).
-LIB_DEPS = ["libc6", "libopenblas", "libprotobuf-c1", "libopencv-core", "libopencv-imgcodecs",
-            "libusb-1.0-0", "libstdc++6"]
+LIB_DEPS = ["libc6", "libopenblas", "libprotobuf-c1", "libopencv-core", "libjpeg62-turbo",
+            "libpng16-16", "libusb-1.0-0", "libstdc++6"]
+# Decoding goes through libpng and libjpeg directly: imgcodecs (and the GDAL
+# it brings) must not come back.
+LIB_NOT_DEPS = ["libopencv-imgcodecs"]
 DATA_DEPS = ["libdlib-data", "opencv-data", "systemd"]
 
 
@@ -107,6 +110,8 @@ def check_control(t, deb, tmp):
     names = [re.split(r"[ (|]", d)[0] for d in deps]
     for want in LIB_DEPS:
         t.check(any(n.startswith(want) for n in names), "Depends lacks %s: %s" % (want, deps))
+    for unwanted in LIB_NOT_DEPS:
+        t.check(not any(n.startswith(unwanted) for n in names), "Depends has %s: %s" % (unwanted, deps))
     for want in DATA_DEPS:
         t.check(want in names, "Depends lacks %s: %s" % (want, deps))
     ctrl = os.path.join(tmp, "DEBIAN")

@@ -340,7 +340,7 @@ static void test_png_damage(void)
     free(e.p);
     /* Other formats. */
     CHECK_ERR(gs_io_image_decode("BM\x36\0\0\0\0\0", 8, NULL, &img, &err), GS_ERR_UNSUPPORTED, err,
-              "not a PNG or JPEG");
+              "BMP is not supported");
     CHECK_ERR(gs_io_image_decode(NULL, 0, NULL, &img, &err), GS_ERR_UNSUPPORTED, err, "not a PNG");
 }
 

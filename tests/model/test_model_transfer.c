@@ -583,17 +583,25 @@ static void warp_head_checks(const gs_model *m, const gs_subject *s, const uint8
               "warp at a head change: an opening made with the option off");
     const float *tap = gs_xfer_target_opening(ch->xfer);
     CHECK_MSG(tap != NULL, "warp at a head change: no opening at the target's pose");
-    size_t outside = 0, open = 0;
+    /* Outside the opening only rounding may differ: with the option on,
+     * the target renders incrementally from the subject's render at that
+     * pose (the probes' anchor), with it off in full, and the two agree to
+     * about 1e-7 (docs/model.md, "Gaze sweeps"): a level at most, on a few
+     * samples within the renderer's reach of the eyes. */
+    size_t outside = 0, rounding = 0, open = 0;
     int bad_ap = 0;
     for (size_t i = 0; tap && i < px; i++) {
         bad_ap |= !(tap[i] >= 0.0f && tap[i] <= 1.0f);
         open += tap[i] > 0.0f;
-        for (int k = 0; k < 3; k++)
-            outside += tap[i] == 0.0f && o1[3 * i + k] != o0[3 * i + k];
+        for (int k = 0; k < 3; k++) {
+            int dv = abs((int)o1[3 * i + k] - (int)o0[3 * i + k]);
+            outside += tap[i] == 0.0f && dv > 1;
+            rounding += tap[i] == 0.0f && dv == 1;
+        }
     }
     CHECK_MSG(!bad_ap, "warp at a head change: opening outside [0, 1]");
-    CHECK_MSG(outside == 0, "warp at a head change: %zu samples changed outside the opening",
-              outside);
+    CHECK_MSG(outside == 0 && rounding <= 3 * px / 2000, "warp at a head change: %zu samples "
+              "changed outside the opening, %zu by one level", outside, rounding);
     CHECK_MSG(open < px / 10, "warp at a head change: opening of %zu of %zu pixels", open, px);
 
     /* pinned openings, ramp input (R = 2 x, G = 2 y) */
@@ -653,16 +661,18 @@ static void warp_head_checks(const gs_model *m, const gs_subject *s, const uint8
         half[i] = (int)(i % (size_t)S) < S / 2 ? 1.0f : 0.0f;
     transfer(cw, NULL, s, in, &vh, o1, S);
     transfer(cn, NULL, s, in, &vh, o0, S);
-    size_t left = 0, right = 0;
+    size_t left = 0, right = 0, right1 = 0;
     for (size_t i = 0; i < isz; i++) {
-        int ch_ = o1[i] != o0[i];
-        left += ch_ && (int)((i / 3) % (size_t)S) < S / 2;
-        right += ch_ && (int)((i / 3) % (size_t)S) >= S / 2;
+        int dv = abs((int)o1[i] - (int)o0[i]);
+        left += dv > 0 && (int)((i / 3) % (size_t)S) < S / 2;
+        right += dv > 1 && (int)((i / 3) % (size_t)S) >= S / 2;
+        right1 += dv == 1 && (int)((i / 3) % (size_t)S) >= S / 2;
     }
     printf("eyeball warp at a head change, the target's opening pinned to the left half: "
-           "%zu samples changed there, %zu elsewhere\n", left, right);
-    CHECK_MSG(left > 0 && right == 0, "warp at a head change, half opening: %zu changed "
-              "inside, %zu outside", left, right);
+           "%zu samples changed there, %zu elsewhere (%zu by one level: rounding)\n", left,
+           right, right1);
+    CHECK_MSG(left > 0 && right == 0 && right1 <= 3 * px / 2000, "warp at a head change, half "
+              "opening: %zu changed inside, %zu outside, %zu by one level", left, right, right1);
 
     /* a gaze sweep at that pose, openings pinned: incremental, and within
      * rounding of fresh full transfers */

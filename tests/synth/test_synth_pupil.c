@@ -60,50 +60,6 @@ static int pupil_visible(const head_model *h, const gs_synth_labels *l, int e)
     return 1;
 }
 
-/* Darkness-weighted centroid around (u, v) within rp + 2.5 px: a pixel
- * weighs (l_iris - L) / (l_iris - l_pupil), clamped to [0, 1], which is
- * its pupil coverage for edge pixels. l_pupil is the darkest pixel, l_iris
- * the 10th percentile of a ring just outside the pupil (so iris texture
- * and lid shading around the pupil weigh nothing). */
-static void dark_centroid(const gs_synth_sample *s, double u, double v,
-                          double rp, double out[2])
-{
-    double ring[2048];
-    int nr = 0;
-    double lmin = 1e9;
-    for (int y = 0; y < s->height; y++)
-        for (int x = 0; x < s->width; x++) {
-            double dx = x + 0.5 - u, dy = y + 0.5 - v, r = sqrt(dx * dx + dy * dy);
-            double lum = luminance(s, x, y);
-            if (r < rp + 2.0 && lum < lmin)
-                lmin = lum;
-            if (r > rp + 1.5 && r < rp + 3.5 && nr < 2048)
-                ring[nr++] = lum;
-        }
-    /* median of the ring (insertion sort, small) */
-    for (int i = 1; i < nr; i++)
-        for (int j = i; j > 0 && ring[j - 1] > ring[j]; j--) {
-            double t = ring[j];
-            ring[j] = ring[j - 1];
-            ring[j - 1] = t;
-        }
-    double lref = nr ? ring[nr / 10] : 1.0;
-    double sw = 0, sx = 0, sy = 0;
-    for (int y = 0; y < s->height; y++)
-        for (int x = 0; x < s->width; x++) {
-            double dx = x + 0.5 - u, dy = y + 0.5 - v;
-            if (dx * dx + dy * dy > (rp + 2.5) * (rp + 2.5))
-                continue;
-            double w = (lref - luminance(s, x, y)) / (lref - lmin);
-            w = w < 0 ? 0 : (w > 1 ? 1 : w);
-            sw += w;
-            sx += w * (x + 0.5);
-            sy += w * (y + 0.5);
-        }
-    out[0] = sx / sw;
-    out[1] = sy / sw;
-}
-
 /* Uniform in the k-th of BINS equal parts of [-range, range]. */
 static double stratified(gs_rng *rng, int k, double range)
 {

@@ -177,20 +177,26 @@ def main():
     return 0 if result == "PASS" else 1
 
 
-def boot(args, kernel, initrd, t_end, attempt):
-    """One qemu run. Returns (the guest's RESULT or None, whether /init ran)."""
+# no_timer_check: the kernel's IO-APIC timer test can fail when the host
+# starves the emulated CPU ("IO-APIC + timer doesn't work!", a panic at
+# boot, seen in CI); the guest's timers work regardless.
+BASE_APPEND = "console=ttyS0 panic=-1 loglevel=4 rdinit=/init no_timer_check"
+
+
+def boot(args, kernel, initrd, t_end, attempt, append=BASE_APPEND, mem_mb=1536):
+    """One qemu run. Returns (the guest's RESULT or None, whether /init ran).
+    The guest speaks in console lines starting "GS-VM:"; "GS-VM: HOTPLUG-READY"
+    asks for a USB keyboard on the xhci bus, "GS-VM: RESULT X" is the verdict.
+    vm_systemd.py boots its guest through this too (another append)."""
     mon = os.path.join(args.work, "monitor.sock")
     if os.path.exists(mon):
         os.unlink(mon)
-    # no_timer_check: the kernel's IO-APIC timer test can fail when the host
-    # starves the emulated CPU ("IO-APIC + timer doesn't work!", a panic at
-    # boot, seen in CI); the guest's timers work regardless.
     cmd = ["qemu-system-x86_64", "-accel", "tcg,thread=multi", "-cpu", "max", "-smp", "2",
-           "-m", "1536", "-display", "none", "-no-reboot", "-nodefaults",
+           "-m", str(mem_mb), "-display", "none", "-no-reboot", "-nodefaults",
            "-serial", "stdio", "-monitor", "unix:%s,server,nowait" % mon,
            "-device", "qemu-xhci,id=xhci",
            "-kernel", kernel, "-initrd", initrd,
-           "-append", "console=ttyS0 panic=-1 loglevel=4 rdinit=/init no_timer_check"]
+           "-append", append]
     log_path = os.path.join(args.work, "serial%s.log" % ("" if attempt == 1 else "-%d" % attempt))
     t_start = time.time()
     qemu = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

@@ -79,7 +79,8 @@ typedef enum gs_cap_pixfmt {
 #define GS_CAP_MAX_SIDE 8192
 
 typedef struct gs_cap_config {
-    const char *path;        /* /dev/videoN (copied) */
+    const char *path;        /* /dev/videoN, or usb:VID:PID[:SERIAL] looked up
+                                at every open (gs_cap_resolve; copied) */
     int width, height;       /* requested; the driver may adjust */
     int fps;                 /* requested; 0 keeps the driver's rate */
     gs_cap_pixfmt pixfmt;

@@ -4,11 +4,13 @@
  * little-endian, format versions 1.0 (written) and 1.0, 2.0, 3.0 (read).
  *
  * Images at the API are 8-bit RGB, interleaved, row 0 at the top, with an
- * explicit stride in bytes. PNG and JPEG are decoded and encoded by OpenCV;
- * every input is checked here first (magic, chunk/segment structure,
- * truncation, dimensions against the limits) so OpenCV never sees a file we
- * would refuse. Grey, palette, 16-bit and alpha PNGs decode to 8-bit RGB
- * (alpha is dropped); JPEG EXIF orientation is applied.
+ * explicit stride in bytes. PNG and JPEG are decoded and encoded by libpng
+ * and libjpeg(-turbo); every input is checked first (magic, chunk/segment
+ * structure, truncation, dimensions against the limits) so the decoders
+ * never see a file we would refuse. Grey, palette, 16-bit and alpha PNGs
+ * decode to 8-bit RGB (alpha is dropped, 16-bit keeps the high byte); grey,
+ * CMYK and YCCK JPEGs to RGB; the EXIF orientation (JPEG APP1, PNG eXIf) is
+ * applied. Other formats are GS_ERR_UNSUPPORTED with their name.
  *
  * Every call returns GS_OK or a negative gs_status and, where a person needs
  * to know what was wrong, fills the optional gs_error. Outputs are untouched
@@ -115,7 +117,7 @@ int gs_io_format_from_path(const char *path);
 int gs_io_format_sniff(const void *buf, size_t len);
 
 /* Decodes a PNG or JPEG held in memory. lim may be NULL (defaults).
- * Errors: GS_ERR_UNSUPPORTED (neither format), GS_ERR_FORMAT (corrupt or
+ * Errors: GS_ERR_UNSUPPORTED (another format), GS_ERR_FORMAT (corrupt or
  * truncated), GS_ERR_LIMIT, GS_ERR_NOMEM. */
 int gs_io_image_decode(const void *buf, size_t len,
                        const gs_io_image_limits *lim, gs_io_image *out,

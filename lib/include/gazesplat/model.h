@@ -218,6 +218,18 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
                              size_t in_stride, const gs_view *view,
                              uint8_t *rgb, size_t stride, gs_error *err);
 
+/* The bytes of a render. gs_model_render's depend on the model, the
+ * subject and the view alone: each gaze of a subject renders from the
+ * subject's render at its own gaze (docs/model.md, "Gaze sweeps"), never
+ * from the gaze rendered before it. A transfer's target maps and warped
+ * residual go on from the subject's last transfer target at the same head
+ * pose, so a transfer's bytes may also depend on that target, by a level
+ * in a few pixels near the eyes. This call forgets every subject's last
+ * transfer target: the next transfer of each takes the full path, as in a
+ * fresh context. A request that must give the same bytes whatever ran
+ * before it (a server's REDIRECT) calls it first. */
+void gs_model_ctx_forget_transfer_targets(gs_model_ctx *c);
+
 /* Gaze sweeps over several subjects: a context keeps the renders of the
  * last n (subject, head pose) pairs it rendered (n = 1: the last only), so
  * that returning to any of them renders incrementally. Each costs about

@@ -18,9 +18,13 @@
  *
  * Model facts: sclera sphere radius ~12 mm, corneal sphere ~7.8 mm
  * passing through the limbus, iris radius ~6 mm (a disc on the limbus
- * plane), pupil radius 1-3.5 mm. Both eyes rotate by the same head-frame
- * gaze (parallel optical axes, target at infinity; no kappa offset). The
- * cornea does not refract: the pupil is seen where its 3D centre projects.
+ * plane), pupil radius 1-3.5 mm. Both eyes' visual axes (lines of sight)
+ * are parallel to the head-frame gaze (target at infinity). By default the
+ * optical axes equal them; with angle kappa (gs_synth_kappa, off by
+ * default) each eye's optical axis, along which the eyeball renders, is
+ * its visual axis turned temporally and downward by the identity's kappa.
+ * The cornea does not refract: the pupil is seen where its 3D centre
+ * projects.
  *
  * Identity seeds: train, validation and test identities come from
  * disjoint seed ranges (GS_SYNTH_SEED_*). Everything is deterministic:
@@ -132,6 +136,13 @@ typedef struct gs_synth_scene {
     float ambient[3];      /* linear */
     float bg_top[3], bg_bottom[3]; /* background gradient, linear */
     int specular;          /* 0 disables every specular term (tests) */
+    /* Angle kappa of the identity (gs_synth_kappa_draw): kappa 0 (the
+     * default) renders optical = visual axis and writes no kappa labels;
+     * 1: each eye's optical axis is its visual axis (the gaze) turned
+     * temporally by kappa_h and down by kappa_v (radians, the visual
+     * axis is nasal and up of the optical one for positive values). */
+    int kappa;
+    double kappa_h, kappa_v;
 } gs_synth_scene;
 
 /* A neutral, frontal scene: mean identity, head at (0, 0, distance_mm)
@@ -156,6 +167,39 @@ void gs_synth_ranges_default(gs_synth_ranges *r);
  * expression, 1-2 lights, ambient and background. */
 void gs_synth_scene_random(uint64_t identity_seed, uint64_t scene_seed,
                            const gs_synth_ranges *ranges, gs_synth_scene *s);
+
+/* ---- angle kappa: visual vs optical axis ----
+ * The line of sight (visual axis: fixation point, nodal points, fovea) is
+ * not the eyeball's optical axis: the fovea lies temporal and slightly
+ * below the optical axis's pole, so in front of the eye the visual axis
+ * points nasally (about 5 deg) and up (about 1.5 deg) of the optical one
+ * (docs/synth.md, "Angle kappa", for the sources). Gaze labels mean the
+ * visual axis. Each identity draws its own (h, v) from independent normal
+ * distributions truncated at +-3 sd (redrawn beyond), from a stream of
+ * its seed alone, so an identity keeps its kappa in every scene, split
+ * position and thread count; both eyes share it, mirrored (nasal is +x
+ * for the right eye, -x for the left). */
+typedef struct gs_synth_kappa {
+    int enabled;          /* 0 (default): no kappa, outputs as before */
+    double h_mean_deg, h_sd_deg;  /* horizontal, nasal positive */
+    double v_mean_deg, v_sd_deg;  /* vertical, visual axis up positive */
+} gs_synth_kappa;
+
+/* The "literature" preset: h 5.0 +- 1.3 deg, v 1.5 +- 1.0 deg. */
+void gs_synth_kappa_literature(gs_synth_kappa *k);
+/* GS_ERR_ARG unless every value is finite, |means| <= 15 deg and the sds
+ * are in [0, 5] deg (the message names the field). */
+int gs_synth_kappa_check(const gs_synth_kappa *k, gs_error *err);
+/* The kappa of an identity (radians): 0, 0 when disabled. */
+void gs_synth_kappa_draw(const gs_synth_kappa *k, uint64_t identity_seed,
+                         double *h, double *v);
+/* Sets scene->kappa, kappa_h, kappa_v from k for the scene's identity. */
+void gs_synth_scene_set_kappa(const gs_synth_kappa *k, gs_synth_scene *s);
+/* K of eye `eye` (GS_SYNTH_EYE_*) for kappa (h, v) radians: the eye's
+ * rotation is R(gaze) K, so its visual axis K^T (-z) points along the
+ * gaze and its optical axis R(gaze) K (-z) is the gaze turned temporally
+ * by h and down by v. K = rot_from_pitchyaw(-v, +h right eye / -h left). */
+void gs_synth_kappa_rotation(int eye, double h, double v, double K[9]);
 
 /* ---- cameras and rigs ---- */
 typedef struct gs_synth_camera {
@@ -208,9 +252,19 @@ typedef struct gs_synth_labels {
     /* head pose in this camera: X_cam = head_R X_head + head_t */
     double head_R[9], head_t[3], head_rvec[3];
     double head_pitch, head_yaw, head_roll;
-    /* gaze (unit vectors, from the face centre; both eyes are parallel) */
+    /* gaze (unit vectors, from the face centre; both eyes are parallel):
+     * the visual axis (line of sight) */
     double gaze_head[3], gaze_head_pitch, gaze_head_yaw;
     double gaze_cam[3], gaze_cam_pitch, gaze_cam_yaw;
+    /* angle kappa (has_kappa 1 when the scene had it on; else the rest is
+     * 0 and the optical axes equal the gaze): the identity's kappa
+     * (radians) and each eye's optical axis [right, left], along which
+     * its eyeball renders, in the head, camera and normalized frames */
+    int has_kappa;
+    double kappa_h, kappa_v;
+    double optical_head[2][3], optical_head_pitch[2], optical_head_yaw[2];
+    double optical_cam[2][3], optical_cam_pitch[2], optical_cam_yaw[2];
+    double optical_norm_pitch[2], optical_norm_yaw[2];
     /* normalization of this image (defaults at d_n 680 mm, f_n for this
      * size): normalized gaze and head angles, and the full transform */
     gs_geom_norm norm;
@@ -318,6 +372,7 @@ typedef struct gs_synth_gen_config {
     gs_synth_rig rig;
     int supersample;       /* 1 or 2 */
     gs_synth_ranges ranges;
+    gs_synth_kappa kappa;  /* off by default */
 } gs_synth_gen_config;
 
 void gs_synth_gen_config_default(gs_synth_gen_config *c);
@@ -351,6 +406,14 @@ typedef struct gs_synth_dataset_opts {
 int gs_synth_dataset_write(const char *dir, const gs_synth_gen_config *c,
                            const gs_synth_dataset_opts *o, gs_pool *pool,
                            gs_error *err);
+
+/* The generator configuration of a dataset gs_synth_dataset_write wrote,
+ * read back from its README.md (split, identities, scene seed, size, rig,
+ * supersampling, kappa; default ranges), and its index range (first,
+ * count; either may be NULL). GS_ERR_IO when the README cannot be read,
+ * GS_ERR_FORMAT when it is not one (the message names the file). */
+int gs_synth_dataset_config_read(const char *dir, gs_synth_gen_config *c,
+                                 uint64_t *first, uint64_t *count, gs_error *err);
 
 /* A contact sheet: `rows` identities of a split (one per row, each with
  * its own slight head pose and lighting) x a 3x3 gaze grid (pitch +25, 0,

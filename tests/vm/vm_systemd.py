@@ -1,0 +1,348 @@
+#!/usr/bin/env python3
+"""systemd tier (label vm): boots Debian 12's kernel under qemu (TCG, no KVM)
+with the host's systemd as PID 1 and gazesplat installed into the guest
+root by the build's own install rules (the files the .deb holds: `cmake
+--install --strip` into a staging root), then systemd_guest.sh, started by
+the guest's systemd as a service, checks socket activation, the socket's
+group, the watchdog, reload, stop and a USB hot-plug reaching the daemon's
+live pipeline under the shipped unit. The shipped units are used unmodified;
+the configuration (a conffile) gets the live keys appended, as an
+administrator would. Needs no root. Exit 0 when the guest reports RESULT PASS.
+
+The guest root is one uncompressed initramfs (the kernel's rootfs): the
+files of the host's systemd, libsystemd-shared, util-linux's setpriv,
+procps' kill, busybox and v4l2-ctl, udev from the VM cache
+(scripts/vm/prepare.sh), the ELF libraries all of them need (ldd), the
+module chains of v4l2loopback and xhci_pci with a modules.dep made here, and
+the staged package.
+
+usage: vm_systemd.py --build DIR --cache DIR --work DIR [--timeout S] [--stall S]
+"""
+import argparse
+import concurrent.futures
+import io
+import os
+import re
+import shutil
+import stat
+import subprocess
+import sys
+import tarfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, HERE)
+import vm_live  # noqa: E402
+
+# The host packages whose files make the guest's userland (dpkg -L).
+HOST_PACKAGES = ["systemd", "libsystemd-shared", "libsystemd0"]
+SYSTEMD_LIBDIR = "/usr/lib/x86_64-linux-gnu/systemd"
+# mount and umount: the API file system units (dev-mqueue.mount ...) run them.
+HOST_FILES = ["/usr/bin/busybox", "/usr/bin/setpriv", "/usr/bin/kill", "/usr/bin/v4l2-ctl",
+              "/usr/bin/mount", "/usr/bin/umount"]
+# Packages unpacked in the VM cache (the host has no udev). Its
+# libsystemd-shared stays there: the host's systemd binaries need the host's
+# (the same file name for every 252.x), and udev links against that name.
+CACHE_DEBS = ["udev"]
+# Host paths not worth carrying into the guest.
+SKIP = re.compile(r"^/usr/share/(doc|man|locale|info|lintian|bash-completion|zsh|fish|polkit-1)/")
+# What the live pipeline is pointed at: qemu's usb-kbd (0627:0001), which
+# vm_live.boot hot-plugs on HOTPLUG-READY, and the loopback the shipped
+# modprobe.d options make (/dev/video9).
+LIVE_CONF = """
+# Added by the VM tier (tests/vm/vm_systemd.py): the live pipeline waits for
+# qemu's USB keyboard as its camera (it only needs the hot-plug event) and
+# writes to the loopback; no landmark model in the guest (libdlib-data).
+live.device = usb:0627:0001
+live.output = /dev/video9
+photo_input = no
+"""
+TEST_UNIT = """[Unit]
+Description=gazesplat VM tier checks (tests/vm/systemd_guest.sh)
+After=sockets.target systemd-modules-load.service systemd-sysusers.service
+After=systemd-udev-trigger.service systemd-journald.service
+
+[Service]
+Type=simple
+ExecStart=/usr/bin/busybox sh /usr/lib/gs-vm/systemd_guest.sh
+StandardOutput=tty
+StandardError=tty
+TTYPath=/dev/ttyS0
+"""
+# Units the guest cannot use (no agetty, no D-Bus): masked on the kernel
+# command line instead of failing at every boot.
+MASK = ["serial-getty@ttyS0.service", "getty@tty1.service", "systemd-logind.service"]
+
+
+class Root:
+    """The guest tree: guest path (no leading slash) -> (kind, source, mode).
+    kind 'f': source is a host file to copy; 'd': a directory; 'l': source
+    is the link's target; 'b': source is the bytes. mode None: the default."""
+
+    def __init__(self):
+        self.entries = {}
+        # Debian 12 is merged-/usr: /bin, /sbin, /lib, /lib64 are links into /usr.
+        self.merged = {}
+        for top in ("bin", "sbin", "lib", "lib64"):
+            target = os.readlink("/" + top) if os.path.islink("/" + top) else None
+            if target:
+                self.merged[top] = target.strip("/")
+                self.entries[top] = ("l", target, None)
+
+    def canon(self, path):
+        parts = path.strip("/").split("/", 1)
+        if parts[0] in self.merged:
+            parts[0] = self.merged[parts[0]]
+        return "/".join(parts)
+
+    def add(self, guest, kind, source, mode=None):
+        if guest.strip("/") in self.merged:  # /lib itself: the link made above
+            return
+        g = self.canon(guest)
+        if not g:
+            return
+        self.entries[g] = (kind, source, mode)
+        d = os.path.dirname(g)
+        while d and d not in self.entries:
+            self.entries[d] = ("d", None, None)
+            d = os.path.dirname(d)
+
+    def add_path(self, guest, host):
+        """A host path as it is: directory, link or file."""
+        st = os.lstat(host)
+        if stat.S_ISLNK(st.st_mode):
+            self.add(guest, "l", os.readlink(host))
+        elif stat.S_ISDIR(st.st_mode):
+            if self.canon(guest) not in self.entries:
+                self.add(guest, "d", None, stat.S_IMODE(st.st_mode))
+        elif stat.S_ISREG(st.st_mode):
+            self.add(guest, "f", host, stat.S_IMODE(st.st_mode))
+
+    def add_tree(self, guest_top, host_top):
+        for dirpath, dirnames, filenames in os.walk(host_top):
+            rel = os.path.relpath(dirpath, host_top)
+            for name in dirnames + filenames:
+                self.add_path(os.path.join(guest_top, rel, name), os.path.join(dirpath, name))
+
+    def elf_files(self):
+        out = []
+        for g, e in self.entries.items():
+            if e[0] == "f":
+                with open(e[1], "rb") as f:
+                    if f.read(4) == b"\x7fELF":
+                        out.append(e[1])
+        return out
+
+    def write_cpio(self, out_path):
+        dirs = sorted(g for g, e in self.entries.items() if e[0] == "d")
+        rest = sorted(g for g, e in self.entries.items() if e[0] != "d")
+        items = []
+        for g in dirs:
+            mode = self.entries[g][2]
+            items.append((g, stat.S_IFDIR | (mode if mode is not None else 0o755), b""))
+        for g in rest:
+            kind, src, mode = self.entries[g][0], self.entries[g][1], self.entries[g][2]
+            if kind == "l":
+                items.append((g, stat.S_IFLNK | 0o777, src.encode()))
+            elif kind == "b":
+                items.append((g, stat.S_IFREG | (mode or 0o644), src))
+            else:
+                with open(src, "rb") as f:
+                    items.append((g, stat.S_IFREG | (mode or 0o644), f.read()))
+        vm_live.newc(items, out_path)
+        return sum(len(i[2]) for i in items)
+
+
+def run(cmd, **kw):
+    r = subprocess.run(cmd, capture_output=True, text=True, **kw)
+    if r.returncode != 0:
+        raise SystemExit("vm: %s failed (rc %d):\n%s%s" % (" ".join(cmd), r.returncode,
+                                                          r.stdout[-2000:], r.stderr[-2000:]))
+    return r.stdout
+
+
+def stage_package(build, stage):
+    """What the package holds: the build's install rules, stripped as the
+    .deb's binaries are, into a staging root."""
+    shutil.rmtree(stage, ignore_errors=True)
+    env = dict(os.environ, DESTDIR=stage)
+    run(["cmake", "--install", build, "--strip"], env=env)
+    conf = os.path.join(stage, "etc/gazesplat/gazesplatd.conf")
+    if not os.path.exists(conf):
+        raise SystemExit("vm: the install put down no etc/gazesplat/gazesplatd.conf")
+    # The model the installed configuration names must be in the stage (the
+    # name of the default model may change; it is read, never assumed).
+    m = re.search(r"^model\s*=\s*(\S+)", open(conf).read(), re.M)
+    if not m or not os.path.isfile(stage + m.group(1)):
+        raise SystemExit("vm: the installed configuration names no installed model (%s)" %
+                         (m.group(1) if m else "no model line"))
+    with open(conf, "a") as f:
+        f.write(LIVE_CONF)
+    return m.group(1)
+
+
+def unit_value(path, key):
+    vals = re.findall(r"^%s=(.*)$" % re.escape(key), open(path).read(), re.M)
+    return vals[-1].split() if vals else []
+
+
+def enable_units(root, stage):
+    """What `systemctl enable gazesplatd.socket` (the package's postinst)
+    makes: a link in the .wants of each target its [Install] names."""
+    unitdir = None
+    for dirpath, _, files in os.walk(stage):
+        if "gazesplatd.socket" in files:
+            unitdir = dirpath
+    if not unitdir:
+        raise SystemExit("vm: the install put down no gazesplatd.socket")
+    guest_dir = "/" + os.path.relpath(unitdir, stage)
+    for target in unit_value(os.path.join(unitdir, "gazesplatd.socket"), "WantedBy"):
+        root.add("etc/systemd/system/%s.wants/gazesplatd.socket" % target, "l",
+                 guest_dir + "/gazesplatd.socket")
+    return guest_dir
+
+
+def add_packages(root, cache):
+    for pkg in HOST_PACKAGES:
+        for path in run(["dpkg", "-L", pkg]).splitlines():
+            if path in ("/.", "") or SKIP.match(path) or not os.path.lexists(path):
+                continue
+            root.add_path(path, path)
+    for path in HOST_FILES:
+        root.add_path(path, os.path.realpath(path))
+    cache_root = os.path.join(cache, "root")
+    for pkg in CACHE_DEBS:
+        debs = sorted(f for f in os.listdir(os.path.join(cache, "debs"))
+                      if f.startswith(pkg + "_") and f.endswith(".deb"))
+        if not debs:
+            raise SystemExit("vm: %s is not in %s/debs (scripts/vm/prepare.sh)" % (pkg, cache))
+        tar = subprocess.run(["dpkg-deb", "--fsys-tarfile", os.path.join(cache, "debs", debs[-1])],
+                             capture_output=True, check=True).stdout
+        with tarfile.open(fileobj=io.BytesIO(tar)) as t:
+            for m in t.getmembers():
+                name = m.name.lstrip("./")
+                if not name or SKIP.match("/" + name):
+                    continue
+                if m.issym():
+                    root.add(name, "l", m.linkname)
+                elif m.isfile():
+                    root.add(name, "f", os.path.join(cache_root, name), m.mode & 0o7777)
+
+
+def needed_libraries(elf):
+    r = subprocess.run(["file", "-b", elf], capture_output=True, text=True)
+    # systemd's private libraries find each other through the binaries' RUNPATH.
+    if "dynamically linked" not in r.stdout:  # busybox-static, kernel modules
+        return []
+    return vm_live.ldd(elf, [SYSTEMD_LIBDIR])
+
+
+def add_libraries(root):
+    with concurrent.futures.ThreadPoolExecutor(2) as pool:
+        for libs in pool.map(needed_libraries, root.elf_files()):
+            for lib in libs:
+                if root.canon(lib) not in root.entries:
+                    root.add(lib, "f", os.path.realpath(lib), 0o755)
+
+
+def add_modules(root, cache, krel, work):
+    """The v4l2loopback and xhci chains at their usual paths, with a
+    modules.dep for just them (depmod -b on a copy)."""
+    cache_root = os.path.join(cache, "root")
+    modroot = os.path.join(work, "modroot")
+    shutil.rmtree(modroot, ignore_errors=True)
+    src = os.path.join(cache_root, "lib/modules", krel)
+    dst = os.path.join(modroot, "lib/modules", krel)
+    os.makedirs(dst)
+    for f in ("modules.order", "modules.builtin", "modules.builtin.modinfo"):
+        if os.path.exists(os.path.join(src, f)):
+            shutil.copy(os.path.join(src, f), dst)
+    for top in ("v4l2loopback", "xhci_pci"):
+        out = run(["/sbin/modprobe", "-d", cache_root, "-S", krel, "--show-depends", top])
+        for line in out.splitlines():
+            if line.startswith("insmod "):
+                ko = os.path.realpath(line.split()[1])
+                rel = os.path.relpath(ko, os.path.realpath(src))
+                os.makedirs(os.path.dirname(os.path.join(dst, rel)), exist_ok=True)
+                shutil.copy(ko, os.path.join(dst, rel))
+    run(["/sbin/depmod", "-b", modroot, krel])
+    root.add_tree("usr/lib/modules/" + krel, dst)
+
+
+def add_config(root, stage):
+    root.add_tree("", stage)
+    enable_units(root, stage)
+    examples = os.path.join(stage, "usr/share/doc/gazesplat/examples",
+                            "gazesplat-v4l2loopback.modules-load.conf")
+    if not os.path.exists(examples):
+        raise SystemExit("vm: the install put down no modules-load.d example")
+    # As the example's own comment says: copied to /etc/modules-load.d.
+    root.add("etc/modules-load.d/gazesplat-v4l2loopback.conf", "f", examples, 0o644)
+    root.add("etc/modules-load.d/gs-vm.conf", "b", b"xhci_pci\n", 0o644)
+    root.add("etc/passwd", "b", b"root:x:0:0:root:/root:/bin/sh\n"
+             b"gsmember:x:1001:1001::/:/bin/sh\ngsother:x:1002:1002::/:/bin/sh\n", 0o644)
+    root.add("etc/group", "b", b"root:x:0:\ngsmember:x:1001:\ngsother:x:1002:\n", 0o644)
+    # A fixed machine id: no first-boot presets.
+    root.add("etc/machine-id", "b", b"6a5f0e4c2b8d4e1f9a3c7b5d0e2f4a68\n", 0o444)
+    root.add("etc/os-release", "f", os.path.realpath("/etc/os-release"), 0o644)
+    root.add("etc/systemd/system/default.target", "l", "/usr/lib/systemd/system/multi-user.target")
+    root.add("etc/systemd/system/gs-vm-test.service", "b", TEST_UNIT.encode(), 0o644)
+    root.add("etc/systemd/system/multi-user.target.wants/gs-vm-test.service", "l",
+             "/etc/systemd/system/gs-vm-test.service")
+    root.add("usr/lib/gs-vm/systemd_guest.sh", "f", os.path.join(HERE, "systemd_guest.sh"), 0o755)
+    root.add("usr/bin/sh", "l", "busybox")
+    root.add("init", "l", "/usr/lib/systemd/systemd")
+    for d, mode in (("tmp", 0o1777), ("var/tmp", 0o1777), ("var/lib", 0o755), ("var/cache", 0o755),
+                    ("var/log", 0o755), ("root", 0o700), ("proc", 0o555), ("sys", 0o555),
+                    ("dev", 0o755), ("run", 0o755), ("usr/local/bin", 0o755)):
+        root.add(d, "d", None, mode)
+
+
+def build_initramfs(args, krel, out_path):
+    stage = os.path.join(args.work, "stage")
+    model = stage_package(args.build, stage)
+    root = Root()
+    add_packages(root, args.cache)
+    add_config(root, stage)
+    add_modules(root, args.cache, krel, args.work)
+    add_libraries(root)
+    return root.write_cpio(out_path), model
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--build", required=True, help="the build tree (its install rules)")
+    ap.add_argument("--cache", required=True)
+    ap.add_argument("--work", required=True)
+    ap.add_argument("--timeout", type=float, default=600, help="whole run, boot included (s)")
+    ap.add_argument("--stall", type=float, default=240,
+                    help="longest wait for the next line on the serial console (s)")
+    args = ap.parse_args()
+    args.cache, args.work = os.path.abspath(args.cache), os.path.abspath(args.work)
+    os.makedirs(args.work, exist_ok=True)
+    prep = subprocess.run([os.path.join(ROOT, "scripts/vm/prepare.sh"), args.cache],
+                          capture_output=True, text=True)
+    if prep.returncode != 0:
+        print(prep.stdout + prep.stderr, file=sys.stderr)
+        print("vm: scripts/vm/prepare.sh failed", file=sys.stderr)
+        return 1
+    krel = prep.stdout.split()[-1]
+    initrd = os.path.join(args.work, "initramfs.cpio")
+    t0 = time.time()
+    size, model = build_initramfs(args, krel, initrd)
+    print("vm: guest root %.0f MB (model %s) in %.1f s" % (size / 1e6, model, time.time() - t0))
+    kernel = os.path.join(args.cache, "root/boot/vmlinuz-" + krel)
+    append = vm_live.BASE_APPEND + " systemd.show_status=error" + "".join(
+        " systemd.mask=" + u for u in MASK)
+    t_end = time.time() + args.timeout
+    for attempt in (1, 2):
+        result, reached = vm_live.boot(args, kernel, initrd, t_end, attempt, append, 2048)
+        if reached or attempt == 2:
+            break
+        print("vm: the checks never started; booting once more", flush=True)
+    return 0 if result == "PASS" else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
