@@ -743,34 +743,48 @@ static void key_f64(hash128 *h, double v)
  * normalized pixels, the mask, the known labels and head pose, the
  * iterations and the fine-tuning. The same input asked the same way maps
  * to the same subject; anything else to another. */
-static void content_key(const gsd_model *m, int is_photo, const gs_io_image *face, const gs_fit_options *opt,
-                        const gsd_finetune *ft, uint8_t key[16])
+static void key_image(hash128 *hp, int is_photo, const gs_io_image *face, const gs_fit_options *opt)
+{
+    key_u32(hp, (uint32_t)is_photo);
+    key_u32(hp, (uint32_t)face->width);
+    key_u32(hp, (uint32_t)face->height);
+    for (int y = 0; y < face->height; y++)
+        hash_bytes(hp, face->data + (size_t)y * face->stride, (size_t)face->width * 3);
+    key_u32(hp, opt->mask != NULL);
+    if (opt->mask)
+        hash_bytes(hp, opt->mask, (size_t)face->width * face->height);
+    key_u32(hp, (uint32_t)opt->known_gaze);
+    if (opt->known_gaze) {
+        key_f64(hp, opt->gaze_pitch);
+        key_f64(hp, opt->gaze_yaw);
+    }
+    key_u32(hp, (uint32_t)opt->known_head);
+    for (int k = 0; opt->known_head && k < 9; k++)
+        key_f64(hp, opt->head_R[k]);
+    for (int k = 0; opt->known_head && k < 3; k++)
+        key_f64(hp, opt->head_t[k]);
+}
+
+/* One image's record as above; several images (a multi-image FIT) add
+ * their count after the model and then each image's record in order, so
+ * their keys never meet a one-image key. */
+static void content_key(const gsd_model *m, int n, const int *is_photo, const gs_io_image *face,
+                        const gs_fit_options *opt, const gsd_finetune *ft, uint8_t key[16])
 {
     static const char tag[] = "gazesplatd subject";
+    static const char tag_n[] = "images";
     hash128 h;
     hash_init(&h);
     hash_bytes(&h, tag, sizeof tag);
     key_u32(&h, SUBJECT_KEY_VERSION);
     hash_bytes(&h, m->id, 32);
-    key_u32(&h, (uint32_t)is_photo);
-    key_u32(&h, (uint32_t)face->width);
-    key_u32(&h, (uint32_t)face->height);
-    for (int y = 0; y < face->height; y++)
-        hash_bytes(&h, face->data + (size_t)y * face->stride, (size_t)face->width * 3);
-    key_u32(&h, opt->mask != NULL);
-    if (opt->mask)
-        hash_bytes(&h, opt->mask, (size_t)face->width * face->height);
-    key_u32(&h, (uint32_t)opt->known_gaze);
-    if (opt->known_gaze) {
-        key_f64(&h, opt->gaze_pitch);
-        key_f64(&h, opt->gaze_yaw);
+    if (n > 1) {
+        hash_bytes(&h, tag_n, sizeof tag_n);
+        key_u32(&h, (uint32_t)n);
     }
-    key_u32(&h, (uint32_t)opt->known_head);
-    for (int k = 0; opt->known_head && k < 9; k++)
-        key_f64(&h, opt->head_R[k]);
-    for (int k = 0; opt->known_head && k < 3; k++)
-        key_f64(&h, opt->head_t[k]);
-    key_u32(&h, (uint32_t)opt->max_iters);
+    for (int i = 0; i < n; i++)
+        key_image(&h, is_photo[i], &face[i], &opt[i]);
+    key_u32(&h, (uint32_t)opt[0].max_iters);
     key_u32(&h, ft->steps);
     key_u32(&h, ft->parts);
     key_u32(&h, ft->outline);
@@ -1141,9 +1155,9 @@ static int worker_use_tuned(gsd_worker *w, const uint8_t key[16], uint64_t sum, 
 /* Fine-tunes a slot's clone, from the shared model's parameters, on the
  * fitted face and keeps the block (s->tuned, disk); the slot then holds
  * the subject. *sum: the block's checksum. */
-static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, const gs_subject *subj,
-                            const gs_io_image *face, const uint8_t *mask, gs_finetune_report *rep,
-                            uint64_t *sum, char *msg, size_t cap)
+static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, int n,
+                            const gs_subject *subj, const gs_io_image *face, const photo_input *p,
+                            gs_finetune_report *rep, uint64_t *sum, char *msg, size_t cap)
 {
     int i = slot_take(w, msg, cap);
     if (i < 0)
@@ -1162,13 +1176,19 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
     fo.outline_px = (int)ft->outline;
     fo.mirror = !ft->no_mirror;
     fo.lr = ft->lr;
-    fo.mask = mask;
     /* No time budget: a fine-tune cut short is not the subject the key
      * names. The deadline, CANCEL and a stop end it through the callback,
      * and nothing is kept. */
     fo.cancel = job_cancelled;
     fo.cancel_arg = j;
-    int r = gs_model_finetune(sl->m, w->pool, subj, face->data, face->stride, &fo, rep, &err);
+    /* One tuned set over the n (subject, image) pairs of a multi-image
+     * FIT; one pair is gs_model_finetune's. */
+    gs_fit_image im[GSD_FIT_IMAGES_MAX];
+    for (int q = 0; q < n; q++) {
+        gs_fit_image_from_options(&im[q], face[q].data, face[q].stride, NULL);
+        im[q].mask = p[q].mask_n;
+    }
+    int r = gs_model_finetune_images(sl->m, w->pool, subj, im, n, &fo, rep, &err);
     gs_model_ctx_reset(sl->ctx);
     if (r == GS_ERR_CANCELLED) {
         int why = job_stop(j);
@@ -1199,7 +1219,9 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, c
 
 /* What obtain_subject found or made. */
 typedef struct subject_out {
-    gs_subject subj;
+    gs_subject subj;       /* the subject (a multi-image fit's: image 0's) */
+    int n_all;             /* a multi-image fit this request ran: its images, */
+    gs_subject all[GSD_FIT_IMAGES_MAX]; /* and each one's subject */
     gs_fit_report fit;
     gs_finetune_report ft; /* ft.iters > 0 or psnr: this request fine-tuned */
     int cached, tuned, ft_ran;
@@ -1220,18 +1242,18 @@ typedef struct subject_ask {
 /* The fit's options for a request: its labels (FIT only), the photo's
  * landmark head pose and face mask, the iterations. The subject key is
  * made from these (content_key), so they are built once, before both. */
-static void fit_options_of(const gsd_worker *w, const subject_ask *a, const photo_input *p, gs_fit_options *opt)
+static void fit_options_of(const gsd_worker *w, const subject_ask *a, const Gazesplat__Angles *gaze,
+                           const Gazesplat__Angles *head, const photo_input *p, gs_fit_options *opt)
 {
-    const Gazesplat__FitRequest *fr = a->fr;
     gs_fit_options_default(opt);
-    if (fr && fr->gaze) {
+    if (gaze) {
         opt->known_gaze = 1;
-        opt->gaze_pitch = fr->gaze->pitch_deg * DEG;
-        opt->gaze_yaw = fr->gaze->yaw_deg * DEG;
+        opt->gaze_pitch = gaze->pitch_deg * DEG;
+        opt->gaze_yaw = gaze->yaw_deg * DEG;
     }
-    if (fr && fr->head) {
+    if (head) {
         opt->known_head = 1;
-        head_rotation(fr->head, opt->head_R);
+        head_rotation(head, opt->head_R);
     } else if (p->is_photo) {
         /* The landmarks' head pose, rotated into the normalized camera. */
         opt->known_head = 1;
@@ -1249,7 +1271,7 @@ static void fit_options_of(const gsd_worker *w, const subject_ask *a, const phot
 /* Runs the fit (and fine-tune) a new subject needs and caches it. Only a
  * whole fit is cached: one stopped by CANCEL, the deadline or a stopping
  * server answers that and leaves no trace. */
-static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const gs_fit_options *fit_opt,
+static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, int n, const gs_fit_options *fit_opt,
                        const photo_input *p, const gs_io_image *face, subject_out *o, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
@@ -1259,7 +1281,23 @@ static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const gs
     opt.cancel_arg = j;
     gs_error err;
     gs_error_clear(&err);
-    int r = gs_model_fit(w->ctx, w->pool, face->data, face->stride, &opt, subj, &o->fit, &err);
+    int r;
+    if (n == 1) {
+        r = gs_model_fit(w->ctx, w->pool, face->data, face->stride, &opt, subj, &o->fit, &err);
+    } else {
+        /* One identity over the n images, each with its own labels and
+         * mask; the subject renders from image 0's. */
+        gs_fit_image im[GSD_FIT_IMAGES_MAX];
+        for (int i = 0; i < n; i++)
+            gs_fit_image_from_options(&im[i], face[i].data, face[i].stride, &fit_opt[i]);
+        opt.known_gaze = opt.known_head = 0;
+        opt.mask = NULL;
+        r = gs_model_fit_images(w->ctx, w->pool, im, n, &opt, o->all, &o->fit, &err);
+        if (r == GS_OK) {
+            o->n_all = n;
+            *subj = o->all[0];
+        }
+    }
     /* The worker's context renders between fits: the fit's gradients and
      * saved activations (about 110 MB at the cpu model) go until the next
      * fit (daemon/README.md, "Memory"). */
@@ -1276,53 +1314,102 @@ static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const gs
     }
     atomic_fetch_add(&s->ctr.fits, 1);
     if (a->ft.steps) {
-        int e = finetune_subject(w, j, &a->ft, subj, face, p->mask_n, &o->ft, &o->sum, msg, cap);
+        int e = finetune_subject(w, j, &a->ft, n, n == 1 ? subj : o->all, face, p, &o->ft, &o->sum, msg,
+                                 cap);
         if (e)
             return e;
         o->tuned = o->ft_ran = 1;
     }
     uint8_t blob[GS_SUBJECT_ENCODED_MAX + 12];
-    size_t n = subject_blob(subj, o->tuned ? &o->sum : NULL, blob, sizeof blob);
+    size_t bn = subject_blob(subj, o->tuned ? &o->sum : NULL, blob, sizeof blob);
     /* Durable before the reply: a FIT_OK means the subject survives a crash. */
-    if (n == 0 || n > sizeof blob || gsd_cache_put(s->cache, j->key, blob, n) != 0) {
-        snprintf(msg, cap, "subject cache refused %zu bytes", n);
+    if (bn == 0 || bn > sizeof blob || gsd_cache_put(s->cache, j->key, blob, bn) != 0) {
+        snprintf(msg, cap, "subject cache refused %zu bytes", bn);
         return E(ERR_INTERNAL);
     }
     gsd_cache_persist(s);
     return 0;
 }
 
-/* Fits (or finds) the subject of `img` as a asks; fills the key and *o,
- * and *p for a photo (the caller frees it, and o->face when asked for).
- * Returns 0 or an ErrorCode with msg. */
+/* Image i of a request: FitRequest.image (i = 0, or the inline REDIRECT's
+ * img) or FitRequest.more_images[i - 1], with its labels. */
+static void image_of(const subject_ask *a, const Gazesplat__Image *img, const Gazesplat__Intrinsics *k, int i,
+                     const Gazesplat__Image **im, const Gazesplat__Intrinsics **ki,
+                     const Gazesplat__Angles **gaze, const Gazesplat__Angles **head)
+{
+    const Gazesplat__FitRequest *fr = a->fr;
+    if (i == 0) {
+        *im = img;
+        *ki = k;
+        *gaze = fr ? fr->gaze : NULL;
+        *head = fr ? fr->head : NULL;
+        return;
+    }
+    const Gazesplat__FitImage *f = fr->more_images[i - 1];
+    *im = f->image;
+    *ki = f->intrinsics;
+    *gaze = f->gaze;
+    *head = f->head;
+}
+
+/* Fits (or finds) the subject of `img` (and of a FIT's more_images: one
+ * subject from them all) as a asks; fills the key and *o, and *p for a
+ * photo (image 0's: the caller frees it, and o->face when asked for).
+ * Returns 0 or an ErrorCode with msg (naming the image when there are
+ * several). */
 static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const Gazesplat__Image *img,
                           const Gazesplat__Intrinsics *k, photo_input *p, subject_out *o, char *msg,
                           size_t cap)
 {
     gsd_server *s = w->srv;
     memset(o, 0, sizeof *o);
-    gs_io_image face;
-    int e = input_face(w, j, img, k, p, &face, msg, cap);
-    if (e)
-        return e;
-    gs_fit_options opt;
-    fit_options_of(w, a, p, &opt);
-    if (key_zero(j->key))
-        content_key(w->model, p->is_photo, &face, &opt, &a->ft, j->key);
-    o->cached = cache_lookup(s, j->key, &o->subj, &o->tuned, &o->sum) == 0;
-    if (o->cached && o->tuned && !gsd_cache_contains(s->tuned, j->key)) {
+    const int n = 1 + (a->fr ? (int)a->fr->n_more_images : 0);
+    photo_input ps[GSD_FIT_IMAGES_MAX];
+    gs_io_image face[GSD_FIT_IMAGES_MAX];
+    gs_fit_options opt[GSD_FIT_IMAGES_MAX];
+    int is_photo[GSD_FIT_IMAGES_MAX];
+    memset(ps, 0, sizeof ps);
+    memset(face, 0, sizeof face);
+    int e = 0, got = 0;
+    for (; !e && got < n; got++) {
+        const Gazesplat__Image *im;
+        const Gazesplat__Intrinsics *ki;
+        const Gazesplat__Angles *gaze, *head;
+        image_of(a, img, k, got, &im, &ki, &gaze, &head);
+        char why[360];
+        e = input_face(w, j, im, ki, &ps[got], &face[got], why, sizeof why);
+        if (e) {
+            if (n > 1)
+                snprintf(msg, cap, "image %d: %s", got, why);
+            else
+                snprintf(msg, cap, "%s", why);
+            break;
+        }
+        fit_options_of(w, a, gaze, head, &ps[got], &opt[got]);
+        is_photo[got] = ps[got].is_photo;
+    }
+    if (!e && key_zero(j->key))
+        content_key(w->model, n, is_photo, face, opt, &a->ft, j->key);
+    if (!e)
+        o->cached = cache_lookup(s, j->key, &o->subj, &o->tuned, &o->sum) == 0;
+    if (!e && o->cached && o->tuned && !gsd_cache_contains(s->tuned, j->key)) {
         /* Its tuned tensors were evicted: the subject cannot render, so
          * this FIT runs again (the error REDIRECT gives says so). */
         o->cached = o->tuned = 0;
     }
-    if (!o->cached)
-        e = fit_subject(w, j, a, &opt, p, &face, o, msg, cap);
+    if (!e && !o->cached)
+        e = fit_subject(w, j, a, n, opt, ps, face, o, msg, cap);
     if (!e && a->keep_image)
-        e = input_keep(s, j->key, &face, msg, cap);
+        e = input_keep(s, j->key, &face[0], msg, cap);
     if (!e && a->want_face)
-        o->face = face;
+        o->face = face[0];
     else
-        gs_io_image_free(&face);
+        gs_io_image_free(&face[0]);
+    *p = ps[0];
+    for (int i = 1; i < n; i++) {
+        gs_io_image_free(&face[i]);
+        photo_input_free(&ps[i]);
+    }
     return e;
 }
 
@@ -1386,6 +1473,22 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
         m.finetune_psnr = so.ft.psnr_best;
         m.finetune_lr = a.ft.lr;
     }
+    /* A multi-image fit this request ran: what it made of each image. */
+    Gazesplat__FitImageResult res[GSD_FIT_IMAGES_MAX], *resp[GSD_FIT_IMAGES_MAX];
+    Gazesplat__Angles rg[GSD_FIT_IMAGES_MAX], rh[GSD_FIT_IMAGES_MAX];
+    for (int i = 0; i < so.n_all; i++) {
+        gazesplat__fit_image_result__init(&res[i]);
+        gazesplat__angles__init(&rg[i]);
+        gazesplat__angles__init(&rh[i]);
+        subject_angles(&so.all[i], &rg[i], &rh[i]);
+        res[i].gaze = &rg[i];
+        res[i].head = &rh[i];
+        res[i].psnr = so.all[i].fit_psnr;
+        res[i].ssim = so.all[i].fit_ssim;
+        resp[i] = &res[i];
+    }
+    m.n_image_results = (size_t)so.n_all;
+    m.image_results = so.n_all ? resp : NULL;
     return gsd_frame_new(j, T(FIT_OK), &m.base);
 }
 

@@ -300,6 +300,8 @@ int gsd_image_probe(const uint8_t *p, size_t n, uint32_t *w, uint32_t *h);
  * points over U+10FFFF. */
 int gsd_utf8_valid(const char *s, size_t n);
 int gsd_check_deadline(const gsd_server *s, uint32_t ms, char *msg, size_t cap);
+/* Images of one FIT (FitRequest.image and more_images): GS_FIT_IMAGES_MAX. */
+#define GSD_FIT_IMAGES_MAX 16
 int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap);
 int gsd_check_redirect(const gsd_server *s, const gs_frame_header *h,
                        const Gazesplat__RedirectRequest *r, char *msg, size_t cap);

@@ -257,6 +257,65 @@ static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts
     return 0;
 }
 
+/* An image's declared size (RAW fields, or the PNG/JPEG header); -1 when
+ * the header says none (the decoder then explains). */
+static int declared_size(const Gazesplat__Image *img, uint32_t *w, uint32_t *h)
+{
+    if (img->format == GAZESPLAT__IMAGE_FORMAT__FORMAT_RAW_RGB8) {
+        *w = img->width;
+        *h = img->height;
+        return 0;
+    }
+    return gsd_image_probe(img->data.data, img->data.len, w, h);
+}
+
+/* FitRequest.more_images: at most GSD_FIT_IMAGES_MAX images in all, each
+ * valid with valid labels, all of image 0's kind, normalized faces all of
+ * one size. The message names the image (0: FitRequest.image). */
+static int check_more_images(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg,
+                             size_t cap)
+{
+    if (r->n_more_images + 1 > GSD_FIT_IMAGES_MAX) {
+        snprintf(msg, cap, "too many images: %zu, want 1..%d of one person",
+                 r->n_more_images + 1, GSD_FIT_IMAGES_MAX);
+        return E(ERR_INVALID_ARGUMENT);
+    }
+    uint32_t w0 = 0, h0 = 0;
+    int have0 = r->n_more_images && declared_size(r->image, &w0, &h0) == 0;
+    for (size_t i = 0; i < r->n_more_images; i++) {
+        const Gazesplat__FitImage *f = r->more_images[i];
+        char what[48], sub[300];
+        int e;
+        snprintf(what, sizeof what, "image %zu: ", i + 1);
+        if (!f->image) {
+            snprintf(msg, cap, "image %zu has no image", i + 1);
+            return E(ERR_INVALID_ARGUMENT);
+        }
+        if ((e = gsd_check_image(s, f->image, sub, sizeof sub)) != 0 ||
+            (e = check_intrinsics(f->intrinsics, sub, sizeof sub)) != 0) {
+            snprintf(msg, cap, "%s%s", what, sub);
+            return e;
+        }
+        if ((e = check_target(f->gaze, f->head, what, msg, cap)) != 0)
+            return e;
+        if (f->image->kind != r->image->kind) {
+            snprintf(msg, cap, "image %zu is a %s and image 0 a %s: the images of one FIT are "
+                     "all photos or all normalized faces", i + 1,
+                     f->image->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO ? "photo" : "normalized face",
+                     r->image->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO ? "photo" : "normalized face");
+            return E(ERR_INVALID_ARGUMENT);
+        }
+        uint32_t w, h;
+        if (r->image->kind == GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE && have0 &&
+            declared_size(f->image, &w, &h) == 0 && (w != w0 || h != h0)) {
+            snprintf(msg, cap, "images of different sizes: image %zu is %ux%u, image 0 %ux%u "
+                     "(normalized faces of one model are all its size)", i + 1, w, h, w0, h0);
+            return E(ERR_INVALID_ARGUMENT);
+        }
+    }
+    return 0;
+}
+
 int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg, size_t cap)
 {
     int e;
@@ -265,9 +324,12 @@ int gsd_check_fit(const gsd_server *s, const Gazesplat__FitRequest *r, char *msg
         return E(ERR_INVALID_ARGUMENT);
     }
     if ((e = gsd_check_image(s, r->image, msg, cap)) != 0 ||
-        (e = check_target(r->gaze, r->head, "FIT label: ", msg, cap)) != 0)
+        (e = check_target(r->gaze, r->head, r->n_more_images ? "image 0: FIT label: " : "FIT label: ",
+                          msg, cap)) != 0)
         return e;
     if ((e = check_intrinsics(r->intrinsics, msg, cap)) != 0)
+        return e;
+    if ((e = check_more_images(s, r, msg, cap)) != 0)
         return e;
     if (r->max_iters > 100000) {
         snprintf(msg, cap, "max_iters %u over 100000", r->max_iters);

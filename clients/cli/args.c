@@ -159,6 +159,66 @@ int cli_parse_angles(const cli_command *cmd, const char *flag, const char *s, in
     }
 }
 
+int cli_parse_image_labels(const cli_command *cmd, const char *flag, const char *s, int head,
+                           int n, double (*out)[2], int *known)
+{
+    if (!s || !*s)
+        return cli_usage_error(cmd, "%s: empty", flag);
+    int i = 0;
+    for (const char *p = s;; i++) {
+        size_t len = strcspn(p, ";");
+        if (i == n)
+            return cli_usage_error(cmd, "%s: more than %d items, one per image", flag, n);
+        char item[128];
+        if (len == 0 || len >= sizeof item)
+            return cli_usage_error(cmd, "%s: item %d is empty or too long", flag, i);
+        memcpy(item, p, len);
+        item[len] = 0;
+        known[i] = strcmp(item, "-") != 0;
+        int got = 0, rc;
+        if (known[i] && (rc = cli_parse_angles(cmd, flag, item, 0, head, &out[i], 1, &got)))
+            return rc;
+        p += len;
+        if (!*p)
+            break;
+        p++;
+    }
+    if (i + 1 != n)
+        return cli_usage_error(cmd, "%s: %d items for %d images: one per image, '-' where "
+                               "unknown", flag, i + 1, n);
+    return CLI_OK;
+}
+
+int cli_split_paths(const cli_command *cmd, const char *flag, const char *s, int max, char **buf,
+                    const char **out, int *n)
+{
+    *n = 0;
+    *buf = NULL;
+    if (!s || !*s)
+        return cli_usage_error(cmd, "%s: empty list", flag);
+    size_t len = strlen(s);
+    char *b = malloc(len + 1);
+    if (!b)
+        return cli_fail(cmd, "out of memory");
+    memcpy(b, s, len + 1);
+    for (char *p = b;;) {
+        char *c = strchr(p, ',');
+        if (c)
+            *c = 0;
+        if (!*p || *n == max) {
+            free(b);
+            return *p ? cli_usage_error(cmd, "%s: more than %d images", flag, max)
+                      : cli_usage_error(cmd, "%s: empty item %d", flag, *n);
+        }
+        out[(*n)++] = p;
+        if (!c)
+            break;
+        p = c + 1;
+    }
+    *buf = b;
+    return CLI_OK;
+}
+
 int cli_parse_long(const char *s, long lo, long hi, long *out)
 {
     char *e;

@@ -77,6 +77,19 @@ int cli_parse_floats(const char *s, float *out, int n);
 int cli_parse_angles(const cli_command *cmd, const char *flag, const char *s, int list, int head,
                      double (*out)[2], int max, int *n);
 
+/* The labels of n images, one item each separated by ';': "P,Y" degrees
+ * (checked as cli_parse_angles does) or "-" for an image without that
+ * label; known[i] says which. n = 1 takes one "P,Y" as before. A wrong
+ * count of items is a usage error naming flag. Returns CLI_OK or
+ * CLI_USAGE (reported). */
+int cli_parse_image_labels(const cli_command *cmd, const char *flag, const char *s, int head,
+                           int n, double (*out)[2], int *known);
+/* A comma-separated list of at most max paths: *buf (malloc'd, free it)
+ * holds them, out[] points into it. An empty list or item is a usage
+ * error naming flag. Returns CLI_OK or CLI_USAGE (reported). */
+int cli_split_paths(const cli_command *cmd, const char *flag, const char *s, int max, char **buf,
+                    const char **out, int *n);
+
 /* A decimal integer in [lo, hi]. Returns 0 or -1. */
 int cli_parse_long(const char *s, long lo, long hi, long *out);
 

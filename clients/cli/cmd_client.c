@@ -22,6 +22,9 @@ const cli_command cli_client_command = {
     "  health     print the server state (LOADING, READY, FAILED, DRAINING)\n"
     "  stats      print every STATS counter\n"
     "  fit        fit a subject to --image; prints its key and estimated labels\n"
+    "             (--image A,B,...: up to 16 images of one person, one subject\n"
+    "             rendering from the first; --gaze/--head then take one P,Y per\n"
+    "             image separated by ';', '-' where unknown; docs/subjects.md)\n"
     "  redirect   render --subject KEY (or --image) at each --gaze-deg target\n"
     "  live-policy  print the live eye-contact policy; --set k=v (repeatable, or\n"
     "             k=v,k=v) changes it at once, all settings or none; --refit\n"
@@ -161,6 +164,8 @@ static int parse_angles(const char *flag, const char *s, int list, int head, Gaz
     return rc;
 }
 
+#define FIT_IMAGES_MAX 16 /* the protocol's limit on the images of one FIT */
+
 /* Every angle option given, checked before connecting: a bad target is a
  * usage error whether or not a server is there. */
 static int check_angle_opts(const cli_opt *o)
@@ -172,7 +177,22 @@ static int check_angle_opts(const cli_opt *o)
              {O_HEAD, 0, 1, "--head"},
              {O_GAZES, 1, 0, "--gaze-deg"},
              {O_HEADS, 1, 1, "--head-deg"}};
+    /* fit --image A,B,...: --gaze and --head hold one item per image */
+    int images = 1;
+    for (const char *p = o[O_IMAGE].value; p && *p; p++)
+        images += *p == ',';
     for (size_t i = 0; i < sizeof k / sizeof k[0]; i++) {
+        if (images > 1 && !k[i].list) {
+            double v[FIT_IMAGES_MAX][2];
+            int known[FIT_IMAGES_MAX];
+            int rc = o[k[i].opt].value && images <= FIT_IMAGES_MAX
+                         ? cli_parse_image_labels(&cli_client_command, k[i].flag, o[k[i].opt].value,
+                                                  k[i].head, images, v, known)
+                         : CLI_OK;
+            if (rc != CLI_OK)
+                return rc;
+            continue;
+        }
         Gazesplat__Angles *a = NULL;
         int n, rc = o[k[i].opt].value
                         ? parse_angles(k[i].flag, o[k[i].opt].value, k[i].list, k[i].head, &a, &n)
@@ -349,20 +369,88 @@ static int do_live_status(gs_client *c, int timeout)
     return CLI_OK;
 }
 
-static int load_image(const cli_command *cmd, const cli_opt *o, Gazesplat__Image *img, uint8_t **data)
+static int load_image_path(const cli_command *cmd, const cli_opt *o, const char *path,
+                           Gazesplat__Image *img, uint8_t **data)
 {
     size_t len;
-    if (cli_read_file(o[O_IMAGE].value, (size_t)256 << 20, data, &len) != 0)
-        return cli_fail(cmd, "cannot read %s", o[O_IMAGE].value);
+    if (cli_read_file(path, (size_t)256 << 20, data, &len) != 0)
+        return cli_fail(cmd, "cannot read %s", path);
     int fmt = gs_io_format_sniff(*data, len);
     if (!fmt) {
         free(*data);
-        return cli_fail(cmd, "%s is neither PNG nor JPEG", o[O_IMAGE].value);
+        *data = NULL;
+        return cli_fail(cmd, "%s is neither PNG nor JPEG", path);
     }
     img->format = fmt == GS_IO_PNG ? GAZESPLAT__IMAGE_FORMAT__FORMAT_PNG : GAZESPLAT__IMAGE_FORMAT__FORMAT_JPEG;
     img->data.data = *data;
     img->data.len = len;
     img->kind = o[O_PHOTO].value ? GAZESPLAT__IMAGE_KIND__KIND_PHOTO : GAZESPLAT__IMAGE_KIND__KIND_NORMALIZED_FACE;
+    return CLI_OK;
+}
+
+static int load_image(const cli_command *cmd, const cli_opt *o, Gazesplat__Image *img, uint8_t **data)
+{
+    return load_image_path(cmd, o, o[O_IMAGE].value, img, data);
+}
+
+/* fit --image A,B,...: images 1..n-1 as FitRequest.more_images, with
+ * their --gaze / --head items (';'-separated, '-' unknown); image 0's
+ * labels go to *gaze and *head (their presence to *has). */
+typedef struct more_images {
+    int n;
+    char *buf;
+    const char *path[FIT_IMAGES_MAX];
+    uint8_t *data[FIT_IMAGES_MAX];
+    Gazesplat__FitImage fi[FIT_IMAGES_MAX], *fip[FIT_IMAGES_MAX];
+    Gazesplat__Image img[FIT_IMAGES_MAX];
+    Gazesplat__Angles gaze[FIT_IMAGES_MAX], head[FIT_IMAGES_MAX];
+} more_images;
+
+static void more_images_free(more_images *mi)
+{
+    for (int i = 0; i < mi->n; i++)
+        free(mi->data[i]);
+    free(mi->buf);
+}
+
+static int more_images_load(const cli_command *cmd, const cli_opt *o, more_images *mi,
+                            Gazesplat__FitRequest *req)
+{
+    double g[FIT_IMAGES_MAX][2] = {{0}}, h[FIT_IMAGES_MAX][2] = {{0}};
+    int kg[FIT_IMAGES_MAX] = {0}, kh[FIT_IMAGES_MAX] = {0};
+    int rc = cli_split_paths(cmd, "--image", o[O_IMAGE].value, FIT_IMAGES_MAX, &mi->buf, mi->path,
+                             &mi->n);
+    int n = mi->n;
+    mi->n = 0; /* images loaded */
+    if (!rc && o[O_GAZE].value)
+        rc = cli_parse_image_labels(cmd, "--gaze", o[O_GAZE].value, 0, n, g, kg);
+    if (!rc && o[O_HEAD].value)
+        rc = cli_parse_image_labels(cmd, "--head", o[O_HEAD].value, 1, n, h, kh);
+    for (int i = 0; !rc && i < n; i++) {
+        gazesplat__image__init(&mi->img[i]);
+        rc = load_image_path(cmd, o, mi->path[i], &mi->img[i], &mi->data[i]);
+        if (rc)
+            break;
+        mi->n = i + 1;
+        gazesplat__angles__init(&mi->gaze[i]);
+        gazesplat__angles__init(&mi->head[i]);
+        mi->gaze[i].pitch_deg = g[i][0];
+        mi->gaze[i].yaw_deg = g[i][1];
+        mi->head[i].pitch_deg = h[i][0];
+        mi->head[i].yaw_deg = h[i][1];
+        gazesplat__fit_image__init(&mi->fi[i]);
+        mi->fi[i].image = &mi->img[i];
+        mi->fi[i].gaze = kg[i] ? &mi->gaze[i] : NULL;
+        mi->fi[i].head = kh[i] ? &mi->head[i] : NULL;
+        mi->fip[i] = &mi->fi[i];
+    }
+    if (rc)
+        return rc;
+    req->image = &mi->img[0];
+    req->gaze = mi->fi[0].gaze;
+    req->head = mi->fi[0].head;
+    req->n_more_images = (size_t)(n - 1);
+    req->more_images = mi->fip + 1;
     return CLI_OK;
 }
 
@@ -376,7 +464,10 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
     Gazesplat__Angles gaze = GAZESPLAT__ANGLES__INIT, head = GAZESPLAT__ANGLES__INIT, *a = NULL;
     uint8_t key[GS_FRAME_KEY_SIZE] = {0}, *data = NULL;
     int n, rc;
-    for (int k = 0; k < 2; k++) { /* the labels, checked before anything is sent */
+    more_images mi;
+    memset(&mi, 0, sizeof mi);
+    const int several = strchr(o[O_IMAGE].value, ',') != NULL;
+    for (int k = 0; !several && k < 2; k++) { /* the labels, checked before anything is sent */
         const char *v = o[k ? O_HEAD : O_GAZE].value;
         if (v && (rc = parse_angles(k ? "--head" : "--gaze", v, 0, k, &a, &n)) != CLI_OK)
             return rc;
@@ -396,12 +487,20 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
                        &req.finetune_outline_px, &req.finetune_no_mirror, &req.finetune_lr);
     if (rc != CLI_OK)
         return rc;
-    rc = load_image(cmd, o, &img, &data);
-    if (rc != CLI_OK)
-        return rc;
-    req.image = &img;
-    req.gaze = o[O_GAZE].value ? &gaze : NULL;
-    req.head = o[O_HEAD].value ? &head : NULL;
+    if (several) { /* several images of one person: one subject */
+        rc = more_images_load(cmd, o, &mi, &req);
+        if (rc != CLI_OK) {
+            more_images_free(&mi);
+            return rc;
+        }
+    } else {
+        rc = load_image(cmd, o, &img, &data);
+        if (rc != CLI_OK)
+            return rc;
+        req.image = &img;
+        req.gaze = o[O_GAZE].value ? &gaze : NULL;
+        req.head = o[O_HEAD].value ? &head : NULL;
+    }
     req.max_iters = (uint32_t)iters;
     req.deadline_ms = (uint32_t)deadline;
     req.keep_image = o[O_KEEP].value != NULL;
@@ -409,6 +508,7 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
     gs_error err;
     int r = gs_client_call(c, T(FIT), key, 1, &req.base, timeout, &f, &err);
     free(data);
+    more_images_free(&mi);
     if (r != GS_OK)
         return cli_fail(cmd, "%s", err.msg);
     if (f.header.type == T(FIT_OK)) {
@@ -429,6 +529,13 @@ static int do_fit(gs_client *c, const cli_opt *o, int timeout)
         if (m->finetune_steps)
             printf("finetune_steps %u\nfinetune_psnr %.2f\nfinetune_lr %.6g\n", m->finetune_steps,
                    m->finetune_psnr, m->finetune_lr);
+        for (size_t i = 0; i < m->n_image_results; i++) {
+            const Gazesplat__FitImageResult *ir = m->image_results[i];
+            printf("image %zu gaze_deg %.3f,%.3f head_deg %.3f,%.3f psnr %.2f ssim %.4f\n", i,
+                   ir->gaze ? ir->gaze->pitch_deg : 0.0, ir->gaze ? ir->gaze->yaw_deg : 0.0,
+                   ir->head ? ir->head->pitch_deg : 0.0, ir->head ? ir->head->yaw_deg : 0.0,
+                   ir->psnr, ir->ssim);
+        }
         rc = CLI_OK;
     } else {
         rc = f.header.type == T(BUSY) ? print_busy(&f) : f.header.type == T(ERROR) ? print_error(&f) : CLI_FAIL;

@@ -21,21 +21,33 @@ static int run_redirect(int argc, char **argv);
 const cli_command cli_fit_command = {
     "fit",
     "fit a subject (latent code, head pose, gaze, colour) to a face image",
-    "usage: gazesplat fit --model M --image FACE.png --out SUBJECT.bin\n"
-    "                     [--gaze-deg P,Y] [--iters N] [--time S]\n"
+    "usage: gazesplat fit --model M --image FACE.png[,FACE2.png...] --out SUBJECT.bin\n"
+    "                     [--mask M[,M2...]] [--gaze-deg P,Y[;P,Y...]]\n"
+    "                     [--head-deg P,Y[;P,Y...]] [--ref I] [--iters N] [--time S]\n"
     "                     [--finetune N [--finetune-parts LIST]\n"
     "                      [--finetune-lr X] [--finetune-plateau R]\n"
     "                      [--finetune-outline PX] [--finetune-mirror 0|1]]\n"
     "\n"
     "  --model FILE     a model file (gazesplat train)\n"
-    "  --image FILE     a normalized face image (PNG/JPEG) of the model's\n"
+    "  --image LIST     a normalized face image (PNG/JPEG) of the model's\n"
     "                   image size: face centre at the image centre, the\n"
-    "                   model's normalized camera (docs/model.md)\n"
-    "  --mask FILE      optional grey image: weight of each pixel (face\n"
-    "                   region), same size\n"
-    "  --gaze-deg P,Y   the image's gaze (head frame, degrees; pitch in\n"
-    "                   [-50, 50], yaw in [-60, 60], inclusive) if known;\n"
-    "                   otherwise it is estimated with the fit\n"
+    "                   model's normalized camera (docs/model.md); or up to\n"
+    "                   16 of one person, comma-separated, fitted as one\n"
+    "                   subject: one identity (and one fine-tuning), each\n"
+    "                   image its own expression, lights, gaze and head pose\n"
+    "                   (docs/subjects.md)\n"
+    "  --mask LIST      optional grey images, one per image: weight of each\n"
+    "                   pixel (face region), same size\n"
+    "  --gaze-deg LIST  the images' gaze (head frame, degrees; pitch in\n"
+    "                   [-50, 50], yaw in [-60, 60], inclusive) if known,\n"
+    "                   one P,Y per image separated by ';', '-' for one not\n"
+    "                   known; an unknown gaze is estimated with the fit\n"
+    "  --head-deg LIST  the images' head pose (normalized camera, degrees,\n"
+    "                   each in [-70, 70]) if known, as --gaze-deg; an\n"
+    "                   unknown one is estimated with the fit\n"
+    "  --ref I          the image (0: the first) whose expression, lights,\n"
+    "                   head pose and gaze the subject file keeps; its\n"
+    "                   identity (and the fine-tuning) is all the images'\n"
     "  --iters N        iteration cap (200); --time S: time budget\n"
     "  --finetune N     then fine-tune a copy of the model on the image for N\n"
     "                   Adam steps (gs_model_finetune; the paper's last step)\n"
@@ -68,7 +80,7 @@ const cli_command cli_fit_command = {
 const cli_command cli_redirect_command = {
     "redirect",
     "render a fitted subject (or a face image, fitted first) at new gazes",
-    "usage: gazesplat redirect --model M (--subject S.bin | --image IMG)\n"
+    "usage: gazesplat redirect --model M (--subject S.bin | --image IMG[,IMG2...])\n"
     "                          --gaze-deg \"P,Y;P,Y;...\" --out DIR\n"
     "                          [--head-deg P,Y [--light-on-head]] [--index I]\n"
     "                          [--out-norm] [--transfer-head-weight W]\n"
@@ -77,13 +89,25 @@ const cli_command cli_redirect_command = {
     "                          [--iters N] [--transfer] [--finetune N\n"
     "                          [--finetune-parts LIST] [--finetune-lr X]\n"
     "                          [--finetune-plateau R] [--finetune-outline PX]\n"
-    "                          [--finetune-mirror 0|1]]\n"
+    "                          [--finetune-mirror 0|1]] [--ref I]\n"
+    "                          [--image-gaze-deg LIST] [--image-head-deg LIST]\n"
     "\n"
     "  --image IMG      a normalized face of the model's size, fitted first;\n"
     "                   or any photo: its face (--index I, largest first) is\n"
     "                   detected, normalized, fitted, redirected and pasted\n"
     "                   back into the photo's eye regions (full-size output;\n"
-    "                   --out-norm also writes the normalized crops)\n"
+    "                   --out-norm also writes the normalized crops). Up to\n"
+    "                   16 images of one person, comma-separated (all faces\n"
+    "                   or all photos), are fitted as one subject (one\n"
+    "                   identity, one fine-tuning; docs/subjects.md) and the\n"
+    "                   targets rendered from image --ref's expression,\n"
+    "                   lights and head pose (and pasted back into it)\n"
+    "  --ref I          (with --image) the image rendered from, 0 (the first)\n"
+    "                   by default\n"
+    "  --image-gaze-deg LIST  (with --image) the images' known gaze, one P,Y\n"
+    "                   per image separated by ';', '-' where unknown\n"
+    "  --image-head-deg LIST  (with normalized faces) their known head pose,\n"
+    "                   as --image-gaze-deg\n"
     "  --gaze-deg LIST  targets, head frame, degrees (pitch > 0 looks up,\n"
     "                   yaw > 0 toward image-left), separated by ';';\n"
     "                   pitch in [-50, 50], yaw in [-60, 60], inclusive\n"
@@ -162,16 +186,16 @@ static void iter_progress_start(iter_progress *ip, const char *cmd, const char *
     ip->total = total;
 }
 
-/* After a fit: a copy of m fine-tuned on the fitted image (ft->iters
- * steps), reported on stderr. */
-static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
-                         const gs_subject *sub, const uint8_t *rgb, size_t stride,
-                         const uint8_t *mask, const gs_finetune_options *ft,
-                         gs_model **tuned)
+/* After a fit: a copy of m fine-tuned on the n fitted images (ft->iters
+ * steps; one set of tuned parameters over the n pairs), reported on
+ * stderr. */
+static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool, int n,
+                         const gs_subject *subs, const gs_fit_image *im,
+                         const gs_finetune_options *ft, gs_model **tuned)
 {
     gs_error err = {0, ""};
     gs_finetune_options fo = *ft;
-    fo.mask = mask;
+    fo.mask = NULL; /* each image's is in im */
     gs_finetune_report r;
     char parts[64];
     if (gs_model_clone(m, tuned, &err))
@@ -180,7 +204,7 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
     iter_progress_start(&ip, cmd->name, "fine-tuning", fo.iters > 0 ? fo.iters : 50);
     fo.cancel = report_iteration;
     fo.cancel_arg = &ip;
-    int frc = gs_model_finetune(*tuned, pool, sub, rgb, stride, &fo, &r, &err);
+    int frc = gs_model_finetune_images(*tuned, pool, subs, im, n, &fo, &r, &err);
     cli_progress_done(&ip.p);
     if (frc) {
         gs_model_destroy(*tuned);
@@ -189,19 +213,100 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool,
     }
     fprintf(stderr,
             "gazesplat %s: fine-tuned %s (%zu floats) for %d steps in %.2f s%s: "
-            "PSNR %.2f -> %.2f dB\n",
+            "PSNR %.2f -> %.2f dB%s\n",
             cmd->name, gs_finetune_parts_name(fo.parts ? fo.parts : GS_FT_DEFAULT, parts,
                                          sizeof parts),
             r.params_tuned, r.iters, r.seconds,
             r.stopped_on_plateau ? " (plateau)" : r.stopped_on_time ? " (time)" : "",
-            r.psnr_first, r.psnr_best);
+            r.psnr_first, r.psnr_best, n > 1 ? " (mean over the images)" : "");
     return CLI_OK;
 }
 
-/* Fits the image; with ft->iters > 0 also fine-tunes a copy of m on it
- * (*tuned, NULL otherwise). */
-static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
-                     const char *image, const char *mask, const double *gaze,
+/* The images one subject is fitted from (--image A,B,... of gazesplat fit
+ * and redirect): paths, masks and labels per image, and the image whose
+ * expression, lights and head pose the subject keeps (--ref). */
+typedef struct fit_inputs {
+    int n, ref;
+    char *buf, *mask_buf; /* the lists' copies */
+    const char *image[GS_FIT_IMAGES_MAX], *mask[GS_FIT_IMAGES_MAX];
+    int known_gaze[GS_FIT_IMAGES_MAX], known_head[GS_FIT_IMAGES_MAX];
+    double gaze[GS_FIT_IMAGES_MAX][2], head[GS_FIT_IMAGES_MAX][2]; /* degrees */
+} fit_inputs;
+
+static void fit_inputs_free(fit_inputs *fi)
+{
+    free(fi->buf);
+    free(fi->mask_buf);
+    memset(fi, 0, sizeof *fi);
+}
+
+/* Parses the lists (masks, gaze, head and ref may be NULL); every item is
+ * checked before any work. */
+static int fit_inputs_parse(const cli_command *cmd, const char *images, const char *masks,
+                            const char *gaze, const char *head, const char *ref,
+                            const char *gaze_flag, const char *head_flag, fit_inputs *fi)
+{
+    memset(fi, 0, sizeof *fi);
+    int rc = cli_split_paths(cmd, "--image", images, GS_FIT_IMAGES_MAX, &fi->buf, fi->image, &fi->n);
+    int nm = 0;
+    if (!rc && masks &&
+        !(rc = cli_split_paths(cmd, "--mask", masks, GS_FIT_IMAGES_MAX, &fi->mask_buf, fi->mask, &nm)) &&
+        nm != fi->n)
+        rc = cli_usage_error(cmd, "--mask: %d masks for %d images: one per image", nm, fi->n);
+    if (!rc && gaze)
+        rc = cli_parse_image_labels(cmd, gaze_flag, gaze, 0, fi->n, fi->gaze, fi->known_gaze);
+    if (!rc && head)
+        rc = cli_parse_image_labels(cmd, head_flag, head, 1, fi->n, fi->head, fi->known_head);
+    long r = 0;
+    if (!rc && ref && cli_parse_long(ref, 0, fi->n - 1, &r))
+        rc = cli_usage_error(cmd, "--ref: want 0..%d, an index into --image", fi->n - 1);
+    fi->ref = (int)r;
+    if (rc)
+        fit_inputs_free(fi);
+    return rc;
+}
+
+/* Reads image i (and its mask) of fi: a normalized face of the model's
+ * size, through the gate when asked; *w: its weights or NULL. */
+static int read_face(const cli_command *cmd, const gs_model_info *info, const fit_inputs *fi, int i,
+                     int gate, gs_io_image *img, uint8_t **w)
+{
+    const char *image = fi->image[i], *mask = fi->mask[i];
+    gs_io_image mk = {0};
+    gs_error err = {0, ""};
+    *w = NULL;
+    if (gs_io_image_read(image, NULL, img, &err))
+        return cli_fail(cmd, "%s: %s", image, err.msg);
+    int rc = CLI_OK;
+    if (img->width != info->image_size || img->height != info->image_size)
+        rc = cli_fail(cmd, "%s is %dx%d; the model wants %dx%d normalized "
+                      "faces", image, img->width, img->height, info->image_size,
+                      info->image_size);
+    gs_face_gate g;
+    if (!rc && gate && cli_gate_normalized(img, &g, &err)) {
+        cli_fail(cmd, "%s: %s", image, err.msg);
+        rc = g.refusal != GS_FACE_USABLE ? CLI_REFUSED : CLI_FAIL;
+    }
+    if (!rc && mask) {
+        if (gs_io_image_read(mask, NULL, &mk, &err))
+            rc = cli_fail(cmd, "%s: %s", mask, err.msg);
+        else if (mk.width != img->width || mk.height != img->height)
+            rc = cli_fail(cmd, "mask size differs from the image");
+        else if (!(*w = malloc((size_t)img->width * img->height)))
+            rc = cli_fail(cmd, "out of memory");
+        for (int y = 0; !rc && y < img->height; y++)
+            for (int x = 0; x < img->width; x++)
+                (*w)[(size_t)y * img->width + x] = mk.data[(size_t)y * mk.stride + 3 * x];
+    }
+    gs_io_image_free(&mk);
+    return rc;
+}
+
+/* Fits one subject to fi's images (one identity; each image its own
+ * expression, lights, gaze and head); *sub is image fi->ref's. With
+ * ft->iters > 0 also fine-tunes a copy of m on them (*tuned, NULL
+ * otherwise). */
+static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool, const fit_inputs *fi,
                      long iters, double budget, const gs_finetune_options *ft, int gate,
                      gs_subject *sub, gs_model **tuned)
 {
@@ -209,65 +314,65 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
     *tuned = NULL;
     gs_model_info info;
     gs_model_get_info(m, &info);
-    gs_io_image img = {0}, mk = {0};
-    gs_error err = {0, ""};
-    if (gs_io_image_read(image, NULL, &img, &err))
-        return cli_fail(cmd, "%s: %s", image, err.msg);
+    const int n = fi->n;
+    gs_io_image img[GS_FIT_IMAGES_MAX];
+    uint8_t *w[GS_FIT_IMAGES_MAX] = {0};
+    gs_fit_image im[GS_FIT_IMAGES_MAX];
+    gs_subject subs[GS_FIT_IMAGES_MAX];
+    memset(img, 0, sizeof img);
     int rc = CLI_OK;
-    if (img.width != info.image_size || img.height != info.image_size)
-        rc = cli_fail(cmd, "%s is %dx%d; the model wants %dx%d normalized "
-                      "faces", image, img.width, img.height, info.image_size,
-                      info.image_size);
-    gs_face_gate g;
-    if (!rc && gate && cli_gate_normalized(&img, &g, &err)) {
-        cli_fail(cmd, "%s: %s", image, err.msg);
-        rc = g.refusal != GS_FACE_USABLE ? CLI_REFUSED : CLI_FAIL;
-    }
-    uint8_t *w = NULL;
-    if (!rc && mask) {
-        if (gs_io_image_read(mask, NULL, &mk, &err))
-            rc = cli_fail(cmd, "%s: %s", mask, err.msg);
-        else if (mk.width != img.width || mk.height != img.height)
-            rc = cli_fail(cmd, "mask size differs from the image");
-        else {
-            w = malloc((size_t)img.width * img.height);
-            for (int y = 0; y < img.height && w; y++)
-                for (int x = 0; x < img.width; x++)
-                    w[(size_t)y * img.width + x] =
-                        mk.data[(size_t)y * mk.stride + 3 * x];
+    for (int i = 0; !rc && i < n; i++) {
+        rc = read_face(cmd, &info, fi, i, gate, &img[i], &w[i]);
+        gs_fit_image_from_options(&im[i], img[i].data, img[i].stride, NULL);
+        im[i].mask = w[i];
+        if (fi->known_gaze[i]) { /* degrees, checked by the parser */
+            im[i].known_gaze = 1;
+            im[i].gaze_pitch = fi->gaze[i][0] * DEG;
+            im[i].gaze_yaw = fi->gaze[i][1] * DEG;
+        }
+        if (fi->known_head[i]) { /* the face centre on the camera's axis */
+            im[i].known_head = 1;
+            gs_geom_rot_from_pitchyaw(fi->head[i][0] * DEG, fi->head[i][1] * DEG, 0, im[i].head_R);
+            im[i].head_t[2] = info.distance_mm;
         }
     }
     gs_fit_options o;
     gs_fit_options_default(&o);
     o.max_iters = (int)iters;
     o.time_budget_s = budget;
-    o.mask = w;
-    if (gaze) { /* degrees, checked by the caller */
-        o.known_gaze = 1;
-        o.gaze_pitch = gaze[0] * DEG;
-        o.gaze_yaw = gaze[1] * DEG;
-    }
     iter_progress ip;
     iter_progress_start(&ip, cmd->name, "fit", o.max_iters > 0 ? o.max_iters : 200);
     o.cancel = report_iteration;
     o.cancel_arg = &ip;
+    gs_error err = {0, ""};
     if (!rc) {
         gs_model_ctx *c = gs_model_ctx_create(m);
         gs_fit_report r;
-        int frc = c ? gs_model_fit(c, pool, img.data, img.stride, &o, sub, &r, &err) : GS_ERR_NOMEM;
+        int frc = c ? gs_model_fit_images(c, pool, im, n, &o, subs, &r, &err) : GS_ERR_NOMEM;
         cli_progress_done(&ip.p);
         if (!c)
             rc = cli_fail(cmd, "out of memory");
         else if (frc)
             rc = cli_fail(cmd, "fit: %s", err.msg);
         else
-            fprintf(stderr,
-                    "gazesplat %s: fit %d iterations in %.2f s%s: PSNR %.2f "
-                    "dB, SSIM %.4f; gaze %.1f,%.1f deg\n",
-                    cmd->name, r.iters, r.seconds,
-                    r.stopped_on_plateau ? " (plateau)" : "", sub->fit_psnr,
-                    sub->fit_ssim, sub->gaze_pitch / DEG,
-                    sub->gaze_yaw / DEG);
+            *sub = subs[fi->ref];
+        if (!rc && n > 1)
+            fprintf(stderr, "gazesplat %s: fit %d images, %d iterations in %.2f s%s; "
+                    "the subject is image %d's\n", cmd->name, n, r.iters, r.seconds,
+                    r.stopped_on_plateau ? " (plateau)" : "", fi->ref);
+        for (int i = 0; !rc && i < n; i++)
+            if (n == 1)
+                fprintf(stderr,
+                        "gazesplat %s: fit %d iterations in %.2f s%s: PSNR %.2f "
+                        "dB, SSIM %.4f; gaze %.1f,%.1f deg\n",
+                        cmd->name, r.iters, r.seconds,
+                        r.stopped_on_plateau ? " (plateau)" : "", sub->fit_psnr,
+                        sub->fit_ssim, sub->gaze_pitch / DEG,
+                        sub->gaze_yaw / DEG);
+            else
+                fprintf(stderr, "gazesplat %s: image %d (%s): PSNR %.2f dB, SSIM %.4f; "
+                        "gaze %.1f,%.1f deg\n", cmd->name, i, fi->image[i], subs[i].fit_psnr,
+                        subs[i].fit_ssim, subs[i].gaze_pitch / DEG, subs[i].gaze_yaw / DEG);
         gs_model_ctx_destroy(c);
     }
     if (!rc && ft->iters > 0) {
@@ -277,25 +382,27 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool,
             f2.time_budget_s = budget - (cli_now_s() - t_start);
             f2.time_budget_s = f2.time_budget_s > 1e-3 ? f2.time_budget_s : 1e-3;
         }
-        rc = finetune_copy(cmd, m, pool, sub, img.data, img.stride, w, &f2, tuned);
+        rc = finetune_copy(cmd, m, pool, n, subs, im, &f2, tuned);
     }
-    free(w);
-    gs_io_image_free(&img);
-    gs_io_image_free(&mk);
+    for (int i = 0; i < n; i++) {
+        free(w[i]);
+        gs_io_image_free(&img[i]);
+    }
     return rc;
 }
 
 static int run_fit(int argc, char **argv)
 {
     const cli_command *cmd = &cli_fit_command;
-    cli_opt o[14] = {{"--model", 1, NULL},    {"--image", 1, NULL},
+    cli_opt o[16] = {{"--model", 1, NULL},    {"--image", 1, NULL},
                      {"--mask", 1, NULL},     {"--gaze-deg", 1, NULL},
                      {"--iters", 1, NULL},    {"--time", 1, NULL},
                      {"--out", 1, NULL},      {"--finetune", 1, NULL},
                      {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
                      {"--finetune-plateau", 1, NULL}, {"--finetune-outline", 1, NULL},
-                     {"--finetune-mirror", 1, NULL}, {"--no-gate", 0, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 14);
+                     {"--finetune-mirror", 1, NULL}, {"--no-gate", 0, NULL},
+                     {"--head-deg", 1, NULL}, {"--ref", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 16);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -315,18 +422,20 @@ static int run_fit(int argc, char **argv)
     if ((rc = cli_parse_finetune(cmd, o[7].value, o[8].value, o[9].value, o[10].value,
                                  o[11].value, o[12].value, &ft)))
         return rc;
-    double gaze[1][2];
-    int ng = 0;
-    if (o[3].value && (rc = cli_parse_angles(cmd, "--gaze-deg", o[3].value, 0, 0, gaze, 1, &ng)))
+    fit_inputs fi;
+    if ((rc = fit_inputs_parse(cmd, o[1].value, o[2].value, o[3].value, o[14].value, o[15].value,
+                               "--gaze-deg", "--head-deg", &fi)))
         return rc;
     gs_model *m = NULL;
-    if ((rc = load_model(cmd, o[0].value, &m)))
+    if ((rc = load_model(cmd, o[0].value, &m))) {
+        fit_inputs_free(&fi);
         return rc;
+    }
     gs_pool *pool = gs_pool_create(2);
     gs_subject sub;
     gs_model *tuned = NULL;
-    rc = fit_image(cmd, m, pool, o[1].value, o[2].value, o[3].value ? gaze[0] : NULL, iters,
-                   budget, &ft, !o[13].value, &sub, &tuned);
+    rc = fit_image(cmd, m, pool, &fi, iters, budget, &ft, !o[13].value, &sub, &tuned);
+    fit_inputs_free(&fi);
     uint8_t *blk = NULL;
     size_t blen = 0;
     gs_error err = {0, ""};
@@ -412,9 +521,12 @@ static int read_subject(const cli_command *cmd, const char *path, gs_model *m,
 }
 
 /* The photo path: detect -> landmarks -> pose -> normalize -> fit ->
- * render each target -> paste the eye regions back into the photo. */
+ * render each target -> paste the eye regions back into the photo. With
+ * several photos of one person (fi->n > 1) each is normalized and they
+ * are fitted as one subject (one identity, one fine-tuning); the targets
+ * are rendered from photo fi->ref's subject and pasted back into it. */
 static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
-                          const char *path, int index, int iters,
+                          const fit_inputs *fi, int index, int iters,
                           const gs_finetune_options *ft, double tg[][2],
                           int nt, const char *dir, int out_norm, int transfer, int gate)
 {
@@ -422,25 +534,44 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
     gs_model_info info;
     gs_model_get_info(m, &info);
     int S = info.image_size;
+    const int n = fi->n, ref = fi->ref;
     gs_error err = {0, ""};
-    gs_io_image photo = {0}, face = {S, S, 3 * (size_t)S, NULL};
+    gs_io_image photos[GS_FIT_IMAGES_MAX], face = {S, S, 3 * (size_t)S, NULL};
+    cli_photo_face pf[GS_FIT_IMAGES_MAX];
+    memset(photos, 0, sizeof photos);
+    memset(pf, 0, sizeof pf);
     gs_face_detector *det = NULL;
     gs_face_shape_model *sp = NULL;
-    cli_photo_face pf = {0};
     uint8_t *mask_p = NULL;
     gs_model_ctx *c = NULL;
+    gs_fit_image im[GS_FIT_IMAGES_MAX];
+    gs_subject subs[GS_FIT_IMAGES_MAX];
     int rc = CLI_OK;
-    if (gs_io_image_read(path, NULL, &photo, &err) ||
-        gs_face_detector_load(NULL, &det, &err) ||
-        gs_face_shape_model_load(NULL, &sp, &err) ||
-        cli_photo_normalize(det, sp, &photo, index, &info, gate, &pf, &err)) {
-        rc = cli_fail(cmd, "%s: %s", path, err.msg);
-        if (pf.gate.refusal != GS_FACE_USABLE)
-            rc = CLI_REFUSED;
+    if (gs_face_detector_load(NULL, &det, &err) || gs_face_shape_model_load(NULL, &sp, &err)) {
+        rc = cli_fail(cmd, "%s", err.msg);
         goto done;
     }
-    const gs_face_result res = pf.res;
-    const gs_io_image norm = pf.norm;
+    for (int i = 0; i < n; i++) {
+        const char *path = fi->image[i];
+        if (gs_io_image_read(path, NULL, &photos[i], &err) ||
+            cli_photo_normalize(det, sp, &photos[i], index, &info, gate, &pf[i], &err)) {
+            rc = cli_fail(cmd, "%s: %s", path, err.msg);
+            if (pf[i].gate.refusal != GS_FACE_USABLE)
+                rc = CLI_REFUSED;
+            goto done;
+        }
+        gs_fit_options oi;
+        cli_photo_fit_options(&pf[i], iters, &oi);
+        gs_fit_image_from_options(&im[i], pf[i].norm.data, pf[i].norm.stride, &oi);
+        if (fi->known_gaze[i]) {
+            im[i].known_gaze = 1;
+            im[i].gaze_pitch = fi->gaze[i][0] * DEG;
+            im[i].gaze_yaw = fi->gaze[i][1] * DEG;
+        }
+    }
+    const gs_io_image photo = photos[ref];
+    const gs_face_result res = pf[ref].res;
+    const gs_io_image norm = pf[ref].norm;
     mask_p = malloc((size_t)photo.width * photo.height);
     face.data = malloc(face.stride * (size_t)S);
     c = gs_model_ctx_create(m);
@@ -451,20 +582,23 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
     gs_face_mask((const double(*)[2])res.uv, GS_FACE_MASK_EYES, 2, 6,
                  photo.width, photo.height, mask_p, NULL);
     gs_fit_options o;
-    cli_photo_fit_options(&pf, iters, &o);
-    gs_subject sub;
+    gs_fit_options_default(&o);
+    o.max_iters = iters;
     gs_fit_report r;
-    if (gs_model_fit(c, pool, norm.data, norm.stride, &o, &sub, &r, &err)) {
+    if (gs_model_fit_images(c, pool, im, n, &o, subs, &r, &err)) {
         rc = cli_fail(cmd, "fit: %s", err.msg);
         goto done;
     }
+    const gs_subject sub = subs[ref];
+    if (n > 1)
+        fprintf(stderr, "gazesplat redirect: %d photos fitted as one subject, %d iterations; "
+                "rendering from photo %d (%s)\n", n, r.iters, ref, fi->image[ref]);
     fprintf(stderr, "gazesplat redirect: face %d of %d, head %.1f,%.1f deg; "
             "fit %d iterations, PSNR %.2f dB; gaze %.1f,%.1f deg\n",
             index, res.n_faces, res.head_pitch_n / DEG, res.head_yaw_n / DEG,
             r.iters, sub.fit_psnr, sub.gaze_pitch / DEG, sub.gaze_yaw / DEG);
     if (ft->iters > 0) { /* render with the tuned copy from here on */
-        if ((rc = finetune_copy(cmd, m, pool, &sub, norm.data, norm.stride, pf.mask_n, ft,
-                                &tuned)))
+        if ((rc = finetune_copy(cmd, m, pool, n, subs, im, ft, &tuned)))
             goto done;
         gs_model_ctx_destroy(c);
         if (!(c = gs_model_ctx_create(tuned))) {
@@ -508,8 +642,10 @@ done:
     gs_model_destroy(tuned);
     free(face.data);
     free(mask_p);
-    cli_photo_face_free(&pf);
-    gs_io_image_free(&photo);
+    for (int i = 0; i < n; i++) {
+        cli_photo_face_free(&pf[i]);
+        gs_io_image_free(&photos[i]);
+    }
     gs_face_detector_free(det);
     gs_face_shape_model_free(sp);
     return rc;
@@ -518,7 +654,7 @@ done:
 static int run_redirect(int argc, char **argv)
 {
     const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[21] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
+    cli_opt o[24] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
                      {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
                      {"--out", 1, NULL},      {"--head-deg", 1, NULL},
                      {"--index", 1, NULL},    {"--out-norm", 0, NULL},
@@ -528,8 +664,9 @@ static int run_redirect(int argc, char **argv)
                      {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
                      {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
                      {"--finetune-mirror", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
-                     {"--no-gate", 0, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 21);
+                     {"--no-gate", 0, NULL}, {"--ref", 1, NULL},
+                     {"--image-gaze-deg", 1, NULL}, {"--image-head-deg", 1, NULL}};
+    int rc = cli_parse(cmd, argc, argv, o, 24);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
         return CLI_OK;
@@ -579,53 +716,86 @@ static int run_redirect(int argc, char **argv)
     if (ft.iters > 0 && o[1].value)
         return cli_usage_error(cmd, "--finetune goes with --image (a subject file "
                                     "carries its own fine-tuning)");
-    gs_model *m = NULL;
-    if ((rc = load_model(cmd, o[0].value, &m)))
+    if ((o[21].value || o[22].value || o[23].value) && (!o[2].value || o[1].value))
+        return cli_usage_error(cmd, "--ref, --image-gaze-deg and --image-head-deg go with "
+                                    "--image (the faces fitted here)");
+    fit_inputs fi;
+    memset(&fi, 0, sizeof fi);
+    if (o[2].value && (rc = fit_inputs_parse(cmd, o[2].value, NULL, o[22].value, o[23].value,
+                                             o[21].value, "--image-gaze-deg",
+                                             "--image-head-deg", &fi)))
         return rc;
+    if (o[1].value && fi.n > 1) {
+        fit_inputs_free(&fi);
+        return cli_usage_error(cmd, "--transfer with --subject takes the one face it was "
+                                    "fitted to: --image FACE");
+    }
+    gs_model *m = NULL;
+    if ((rc = load_model(cmd, o[0].value, &m))) {
+        fit_inputs_free(&fi);
+        return rc;
+    }
     gs_pool *pool = gs_pool_create(2);
     long index = 0, iters = 200;
     if ((o[6].value && cli_parse_long(o[6].value, 0, 1000, &index)) ||
         (o[8].value && cli_parse_long(o[8].value, 1, 100000, &iters))) {
         gs_pool_destroy(pool);
         gs_model_destroy(m);
+        fit_inputs_free(&fi);
         return cli_usage_error(cmd, "--index: want 0..1000; --iters: 1..1e5");
     }
     if (o[2].value && !o[1].value) {
         /* A photo unless it is already a normalized face of the model's
          * size. */
-        gs_io_image probe = {0};
-        gs_error perr = {0, ""};
         gs_model_info mi;
         gs_model_get_info(m, &mi);
-        int photo = 1;
-        if (gs_io_image_read(o[2].value, NULL, &probe, &perr) == GS_OK)
-            photo = probe.width != mi.image_size ||
+        int photo = 1, photos = 0;
+        for (int i = 0; i < fi.n; i++) {
+            gs_io_image probe = {0};
+            gs_error perr = {0, ""};
+            int p = 1;
+            if (gs_io_image_read(fi.image[i], NULL, &probe, &perr) == GS_OK)
+                p = probe.width != mi.image_size ||
                     probe.height != mi.image_size || o[6].value;
-        gs_io_image_free(&probe);
-        if (photo && o[5].value) {
+            gs_io_image_free(&probe);
+            photos += p;
+            photo = i == 0 ? p : photo;
+        }
+        const char *bad = NULL;
+        if (photos != 0 && photos != fi.n)
+            bad = "--image: the images of one subject are all photos or all "
+                  "normalized faces of the model's size";
+        else if (photo && o[5].value)
+            bad = "--head-deg needs a normalized face of the model's size; a "
+                  "photo keeps its head pose (only the gaze changes)";
+        else if (photo && o[23].value)
+            bad = "--image-head-deg goes with normalized faces; a photo's head "
+                  "pose comes from its landmarks";
+        if (bad) {
             gs_pool_destroy(pool);
             gs_model_destroy(m);
-            return cli_usage_error(cmd, "--head-deg needs a normalized face of "
-                                        "the model's size; a photo keeps its "
-                                        "head pose (only the gaze changes)");
+            fit_inputs_free(&fi);
+            return cli_usage_error(cmd, "%s", bad);
         }
         if (photo) {
             if (!make_dir(o[4].value))
                 rc = cli_fail(cmd, "cannot create %s", o[4].value);
             else
-                rc = redirect_photo(cmd, m, pool, o[2].value, (int)index,
+                rc = redirect_photo(cmd, m, pool, &fi, (int)index,
                                     (int)iters, &ft, tg, nt, o[4].value,
                                     o[7].value != NULL, transfer, !o[20].value);
             gs_pool_destroy(pool);
             gs_model_destroy(m);
+            fit_inputs_free(&fi);
             return rc;
         }
     }
     gs_subject sub;
     gs_model *tuned = NULL;
     rc = o[1].value ? read_subject(cmd, o[1].value, m, &sub, &tuned)
-                    : fit_image(cmd, m, pool, o[2].value, NULL, NULL, iters, 0,
-                                &ft, !o[20].value, &sub, &tuned);
+                    : fit_image(cmd, m, pool, &fi, iters, 0, &ft, !o[20].value, &sub, &tuned);
+    /* --transfer: from the face the subject renders from (--ref's) */
+    const char *input_path = fi.n ? fi.image[fi.ref] : NULL;
     if (!rc && !make_dir(o[4].value))
         rc = cli_fail(cmd, "cannot create %s", o[4].value);
     gs_model_info info;
@@ -649,10 +819,10 @@ static int run_redirect(int argc, char **argv)
     gs_io_image input = {0}; /* --transfer: the face the subject was fitted to */
     if (!rc && transfer) {
         gs_error err = {0, ""};
-        if (gs_io_image_read(o[2].value, NULL, &input, &err))
-            rc = cli_fail(cmd, "%s: %s", o[2].value, err.msg);
+        if (gs_io_image_read(input_path, NULL, &input, &err))
+            rc = cli_fail(cmd, "%s: %s", input_path, err.msg);
         else if (input.width != info.image_size || input.height != info.image_size)
-            rc = cli_fail(cmd, "%s: %dx%d, the subject's face is %dx%d", o[2].value,
+            rc = cli_fail(cmd, "%s: %dx%d, the subject's face is %dx%d", input_path,
                           input.width, input.height, info.image_size, info.image_size);
     }
     for (int k = 0; !rc && k < nt; k++) {
@@ -683,5 +853,6 @@ static int run_redirect(int argc, char **argv)
     gs_model_destroy(tuned);
     gs_pool_destroy(pool);
     gs_model_destroy(m);
+    fit_inputs_free(&fi);
     return rc;
 }

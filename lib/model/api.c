@@ -371,6 +371,7 @@ static void adam_update(fit_state *s, int t)
 typedef struct fit_bufs {
     float *target, *w, *pred, *dpred, *ssim_scratch;
     size_t ssim_len;
+    int shared; /* pred, dpred and ssim_scratch are another's */
 } fit_bufs;
 
 static double image_loss(gs_model_ctx *c, gs_pool *pool, fit_bufs *b, const fit_state *s,
@@ -453,6 +454,8 @@ static void fit_bufs_free(fit_bufs *b)
 {
     free(b->target);
     free(b->w);
+    if (b->shared)
+        return;
     free(b->pred);
     free(b->dpred);
     free(b->ssim_scratch);
@@ -550,6 +553,257 @@ static void add_mirrored_grad(const gs_model_ctx *c, const gs_frame_grad *fm,
         g[V_CODE + k] += code[k];
 }
 
+/* Buffers of image i > 0 share image 0's scratch (pred, dpred, SSIM):
+ * the context holds one forward at a time, so the images' losses run one
+ * after another. Only the target and the weights are the image's own. */
+static int fit_bufs_init_with(fit_bufs *b, const fit_bufs *with,
+                              const gs_model_ctx *c, const uint8_t *rgb,
+                              size_t stride, const uint8_t *mask)
+{
+    if (!with)
+        return fit_bufs_init(b, c, rgb, stride, mask);
+    fit_bufs own = *with;
+    own.target = malloc(3 * (size_t)c->S * c->S * sizeof(float));
+    own.w = malloc((size_t)c->S * c->S * sizeof(float));
+    *b = own;
+    b->shared = 1;
+    if (!own.target || !own.w)
+        return GS_ERR_NOMEM;
+    int S = c->S;
+    size_t plane = (size_t)S * S;
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            size_t i = (size_t)y * S + x;
+            for (int k = 0; k < 3; k++)
+                b->target[k * plane + i] =
+                    rgb[(size_t)y * stride + 3 * x + k] / 255.0f;
+            b->w[i] = mask ? mask[i] / 255.0f : 1.0f;
+        }
+    return GS_OK;
+}
+
+/* One image's buffers (and its mirror's, o->mirror); 0 or GS_ERR_NOMEM. */
+static int fit_image_bufs(const gs_model_ctx *c, const gs_fit_image *im,
+                          int mirror, const fit_bufs *with, fit_bufs *b,
+                          fit_bufs *bm)
+{
+    if (fit_bufs_init_with(b, with, c, im->rgb, im->stride, im->mask))
+        return GS_ERR_NOMEM;
+    if (!mirror)
+        return GS_OK;
+    uint8_t *flip = mirror_image(im->rgb, im->stride, c->S);
+    int rc = flip ? fit_bufs_init_with(bm, with ? with : b, c, flip,
+                                       3 * (size_t)c->S, NULL)
+                  : GS_ERR_NOMEM;
+    free(flip); /* bm holds it as floats */
+    if (!rc && im->mask)
+        mirror_weights(im->mask, c->S, bm->w);
+    return rc;
+}
+
+void gs_fit_image_from_options(gs_fit_image *im, const uint8_t *rgb,
+                               size_t stride, const gs_fit_options *o)
+{
+    memset(im, 0, sizeof *im);
+    im->rgb = rgb;
+    im->stride = stride;
+    gs_geom_mat3_identity(im->head_R);
+    if (!o)
+        return;
+    im->mask = o->mask;
+    im->known_gaze = o->known_gaze;
+    im->gaze_pitch = o->gaze_pitch;
+    im->gaze_yaw = o->gaze_yaw;
+    im->known_head = o->known_head;
+    memcpy(im->head_R, o->head_R, sizeof im->head_R);
+    memcpy(im->head_t, o->head_t, sizeof im->head_t);
+}
+
+/* What the fit of several images keeps per image. */
+typedef struct fit_one {
+    fit_state s, best;
+    fit_bufs b, bm; /* bm: the mirrored view's (o.mirror) */
+    gs_frame_grad fg, fgm;
+    double R0[9];
+    double dgain[3], dbias[3], dgm[3], dbm[3];
+    double gprior[GS_CODE_PRIOR_DIM];
+} fit_one;
+
+static void fit_ones_free(fit_one *f, int k)
+{
+    for (int i = 0; f && i < k; i++) {
+        fit_bufs_free(&f[i].b);
+        fit_bufs_free(&f[i].bm);
+    }
+    free(f);
+}
+
+/* The options' checks shared by both fits; the prior weight resolved. */
+static int fit_check_options(const gs_model_ctx *c, gs_fit_options *o,
+                             gs_error *err)
+{
+    int rc = GS_OK;
+    if (!(o->lr_code >= 0 && o->lr_code <= 10 && o->lr_colour >= 0 &&
+          o->lr_colour <= 10))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: rates %g (code) and %g (colour): want [0, 10], "
+                          "0 for the defaults", o->lr_code, o->lr_colour);
+    if (o->code_prior == GS_FIT_CODE_PRIOR_MODEL)
+        o->code_prior = c->m->cfg.fit_code_prior;
+    if (!rc && !gs_code_prior_weight_ok(o->code_prior))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: code prior weight %g: want [0, 10], 0 for "
+                          "none, -1 for the model's",
+                          o->code_prior);
+    if (!rc && !gs_code_prior_weight_ok(o->id_prior))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: identity prior weight %g: want [0, 10], 0 for "
+                          "none", o->id_prior);
+    if (!rc && o->mirror != 0 && o->mirror != 1)
+        rc = gs_error_set(err, GS_ERR_ARG, "fit: mirror %d: want 0 or 1",
+                          o->mirror);
+    if (!rc && (o->anneal < 0 || o->anneal > GS_FIT_ANNEAL_MAX))
+        rc = gs_error_set(err, GS_ERR_ARG,
+                          "fit: anneal %d: want 0..%d halvings of the rates",
+                          o->anneal, GS_FIT_ANNEAL_MAX);
+    for (int k = 0; !rc && o->code_start && k < c->D; k++)
+        if (!isfinite(o->code_start[k]))
+            rc = gs_error_set(err, GS_ERR_ARG,
+                              "fit: code_start[%d] is not finite", k);
+    return rc;
+}
+
+static int fit_check_images(const gs_model_ctx *c, const gs_fit_image *im,
+                            int k, gs_error *err)
+{
+    if (k < 1 || k > GS_FIT_IMAGES_MAX)
+        return gs_error_set(err, GS_ERR_ARG, "fit: %d images: want 1..%d", k,
+                            GS_FIT_IMAGES_MAX);
+    for (int i = 0; i < k; i++) {
+        int rc = GS_OK;
+        if (!im[i].rgb)
+            return gs_error_set(err, GS_ERR_ARG, "fit: image %d is NULL", i);
+        if (im[i].stride < 3 * (size_t)c->S)
+            return gs_error_set(err, GS_ERR_ARG, "fit: image %d: stride %zu < %d",
+                                i, im[i].stride, 3 * c->S);
+        if (im[i].known_gaze)
+            rc = check_gaze(im[i].gaze_pitch, im[i].gaze_yaw, err);
+        if (!rc && im[i].known_head)
+            rc = check_pose(im[i].head_R, im[i].head_t, err);
+        if (rc && k > 1 && err) { /* name the image, keep the reason */
+            char why[sizeof err->msg];
+            snprintf(why, sizeof why, "%s", err->msg);
+            gs_error_set(err, rc, "fit: image %d: %s", i, why);
+        }
+        if (rc)
+            return rc;
+    }
+    return GS_OK;
+}
+
+/* The fitted subject of image f (its best iterate), rendered once more for
+ * its figures. */
+static int fit_result(gs_model_ctx *c, gs_pool *pool, fit_one *f,
+                      gs_subject *out, gs_error *err)
+{
+    gs_frame fr;
+    state_to_frame(c, &f->best, f->R0, &fr);
+    int rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
+    if (rc)
+        return rc;
+    /* Composites the best render into b.pred for the figures. */
+    double dg[3], db[3];
+    image_loss(c, pool, &f->b, &f->best, dg, db);
+    int S = c->S;
+    float ls = 0;
+    gs_nn_ssim_loss_fused(pool, &ls, NULL, 0.0f, f->b.pred, f->b.target, 3, S, S,
+                          GS_NN_SSIM_ZERO, f->b.ssim_scratch, f->b.ssim_len);
+    gs_subject r;
+    memset(&r, 0, sizeof r);
+    r.code_dim = c->D;
+    for (int k = 0; k < c->D; k++)
+        r.code[k] = fr.code[k];
+    memcpy(r.head_R, fr.head_R, sizeof r.head_R);
+    memcpy(r.head_t, fr.head_t, sizeof r.head_t);
+    r.gaze_pitch = fr.gaze[0];
+    r.gaze_yaw = fr.gaze[1];
+    for (int k = 0; k < 3; k++) {
+        r.colour_gain[k] = (float)f->best.x[V_GAIN + k];
+        r.colour_bias[k] = (float)f->best.x[V_BIAS + k];
+    }
+    r.fit_psnr = weighted_psnr(&f->b, S);
+    r.fit_ssim = 1.0f - ls;
+    *out = r;
+    return GS_OK;
+}
+
+/* Image f's gradient in the fit's variables, from its view's (and its
+ * mirror's) frame gradient, colours and code prior. */
+static void fit_gradient(const gs_model_ctx *c, fit_one *f, int use_prior,
+                         int V_PRIOR, const double *gid, int mirror)
+{
+    fit_state *s = &f->s;
+    memset(s->g, 0, sizeof s->g);
+    s->g[V_GAZE] = f->fg.gaze[0];
+    s->g[V_GAZE + 1] = f->fg.gaze[1];
+    for (int k = 0; k < 3; k++) {
+        s->g[V_ROT + k] = f->fg.rot[k];
+        s->g[V_TRANS + k] = f->fg.trans[k];
+        s->g[V_GAIN + k] = f->dgain[k];
+        s->g[V_BIAS + k] = f->dbias[k];
+    }
+    for (int k = 0; k < c->D; k++)
+        s->g[V_CODE + k] = f->fg.code[k];
+    for (int k = 0; use_prior && k < GS_CODE_PRIOR_DIM; k++)
+        s->g[V_PRIOR + k] += f->gprior[k];
+    for (int k = 0; gid && k < c->m->cfg.id_dim; k++)
+        s->g[V_CODE + k] += gid[k];
+    if (mirror)
+        add_mirrored_grad(c, &f->fgm, f->dgm, f->dbm, s->g);
+}
+
+/* Image f's loss at its current state (and its gradient when `backward`),
+ * with its code prior and, for gid != NULL, the identity prior. */
+static int fit_image_step(gs_model_ctx *c, gs_pool *pool, fit_one *f,
+                          const gs_fit_options *o, const gs_code_prior *prior,
+                          int V_PRIOR, const gs_id_prior *idp, double *gid,
+                          int backward, double *loss, gs_error *err)
+{
+    gs_frame fr;
+    state_to_frame(c, &f->s, f->R0, &fr);
+    int rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
+    if (rc)
+        return rc;
+    double l = image_loss(c, pool, &f->b, &f->s, f->dgain, f->dbias);
+    memset(f->gprior, 0, sizeof f->gprior);
+    if (prior)
+        l += gs_code_prior_eval(prior, o->code_prior, f->s.x + V_PRIOR,
+                                f->gprior);
+    if (idp)
+        l += gs_id_prior_eval(idp, o->id_prior, f->s.x + V_CODE, gid);
+    /* The mirrored view: the input's gradient first (the context holds
+     * one forward at a time), then the mirrored view's loss and
+     * gradient, so the loss the fit tracks is the sum of both. */
+    if ((o->mirror || backward) && isfinite(l)) {
+        memset(&f->fg, 0, sizeof f->fg);
+        rc = gs_frame_backward(c, pool, f->b.dpred, NULL, NULL, NULL, NULL,
+                               &f->fg, err);
+    }
+    if (!rc && o->mirror && isfinite(l)) {
+        memset(&f->fgm, 0, sizeof f->fgm);
+        gs_frame frm;
+        gs_frame_mirror(&fr, c->D, &frm);
+        rc = gs_frame_forward(c, pool, &frm, GS_STREAM_BOTH, 0, err);
+        if (!rc)
+            l += image_loss(c, pool, &f->bm, &f->s, f->dgm, f->dbm);
+        if (!rc && isfinite(l))
+            rc = gs_frame_backward(c, pool, f->bm.dpred, NULL, NULL, NULL,
+                                   NULL, &f->fgm, err);
+    }
+    *loss = l;
+    return rc;
+}
+
 int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                  size_t stride, const gs_fit_options *opt, gs_subject *out,
                  gs_fit_report *report, gs_error *err)
@@ -564,38 +818,31 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         o = *opt;
     else
         gs_fit_options_default(&o);
-    int rc = GS_OK;
-    if (o.known_gaze)
-        rc = check_gaze(o.gaze_pitch, o.gaze_yaw, err);
-    if (!rc && o.known_head)
-        rc = check_pose(o.head_R, o.head_t, err);
-    if (!rc && !(o.lr_code >= 0 && o.lr_code <= 10 && o.lr_colour >= 0 &&
-                 o.lr_colour <= 10))
-        rc = gs_error_set(err, GS_ERR_ARG,
-                          "fit: rates %g (code) and %g (colour): want [0, 10], "
-                          "0 for the defaults", o.lr_code, o.lr_colour);
-    if (o.code_prior == GS_FIT_CODE_PRIOR_MODEL)
-        o.code_prior = c->m->cfg.fit_code_prior;
-    if (!rc && !gs_code_prior_weight_ok(o.code_prior))
-        rc = gs_error_set(err, GS_ERR_ARG,
-                          "fit: code prior weight %g: want [0, 10], 0 for "
-                          "none, -1 for the model's",
-                          o.code_prior);
-    if (!rc && !gs_code_prior_weight_ok(o.id_prior))
-        rc = gs_error_set(err, GS_ERR_ARG,
-                          "fit: identity prior weight %g: want [0, 10], 0 for "
-                          "none", o.id_prior);
-    if (!rc && o.mirror != 0 && o.mirror != 1)
-        rc = gs_error_set(err, GS_ERR_ARG, "fit: mirror %d: want 0 or 1",
-                          o.mirror);
-    if (!rc && (o.anneal < 0 || o.anneal > GS_FIT_ANNEAL_MAX))
-        rc = gs_error_set(err, GS_ERR_ARG,
-                          "fit: anneal %d: want 0..%d halvings of the rates",
-                          o.anneal, GS_FIT_ANNEAL_MAX);
-    for (int k = 0; !rc && o.code_start && k < c->D; k++)
-        if (!isfinite(o.code_start[k]))
-            rc = gs_error_set(err, GS_ERR_ARG,
-                              "fit: code_start[%d] is not finite", k);
+    gs_fit_image im;
+    gs_fit_image_from_options(&im, rgb, stride, &o);
+    o.known_gaze = o.known_head = 0;
+    o.mask = NULL;
+    return gs_model_fit_images(c, pool, &im, 1, &o, out, report, err);
+}
+
+int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
+                        int k, const gs_fit_options *opt, gs_subject *out,
+                        gs_fit_report *report, gs_error *err)
+{
+    if (!c || !im || !out)
+        return gs_error_set(err, GS_ERR_ARG, "fit: NULL argument");
+    gs_fit_options o;
+    if (opt)
+        o = *opt;
+    else
+        gs_fit_options_default(&o);
+    if (o.known_gaze || o.known_head || o.mask)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "fit: several images take their labels and masks "
+                            "from gs_fit_image, not from the options");
+    int rc = fit_check_images(c, im, k, err);
+    if (!rc)
+        rc = fit_check_options(c, &o, err);
     /* the prior (weight > 0): on the stack, made before anything is
      * allocated; its slots are [expression | lights] after the identity */
     gs_code_prior prior;
@@ -610,32 +857,33 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         return rc;
     int iters = o.max_iters > 0 ? o.max_iters : 200;
     double plateau = o.plateau_rel > 0 ? o.plateau_rel : 1e-3;
-    double R0[9];
-    if (o.known_head)
-        memcpy(R0, o.head_R, sizeof R0);
-    else
-        gs_geom_mat3_identity(R0);
 
-    fit_bufs b, bm; /* bm: the mirrored view's (o.mirror) */
-    memset(&b, 0, sizeof b);
-    memset(&bm, 0, sizeof bm);
-    fit_state *s = calloc(1, sizeof *s), *best = calloc(1, sizeof *best);
-    uint8_t *flip = o.mirror ? mirror_image(rgb, stride, c->S) : NULL;
-    if (!s || !best || fit_bufs_init(&b, c, rgb, stride, o.mask) ||
-        (o.mirror && (!flip || fit_bufs_init(&bm, c, flip, 3 * (size_t)c->S,
-                                             NULL)))) {
-        free(s);
-        free(best);
-        free(flip);
-        fit_bufs_free(&b);
-        fit_bufs_free(&bm);
+    fit_one *f = calloc((size_t)k, sizeof *f);
+    gs_subject *res = calloc((size_t)k, sizeof *res);
+    for (int i = 0; f && res && !rc && i < k; i++)
+        rc = fit_image_bufs(c, &im[i], o.mirror, i ? &f[0].b : NULL, &f[i].b,
+                            &f[i].bm);
+    if (!f || !res || rc) {
+        fit_ones_free(f, f ? k : 0);
+        free(res);
         gs_id_prior_free(idp);
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
     }
-    free(flip); /* bm holds it as floats */
-    if (o.mirror && o.mask)
-        mirror_weights(o.mask, c->S, bm.w);
-    fit_init(c, &o, s);
+    for (int i = 0; i < k; i++) {
+        gs_fit_options oi = o;
+        oi.known_gaze = im[i].known_gaze;
+        oi.gaze_pitch = im[i].gaze_pitch;
+        oi.gaze_yaw = im[i].gaze_yaw;
+        oi.known_head = im[i].known_head;
+        memcpy(oi.head_R, im[i].head_R, sizeof oi.head_R);
+        memcpy(oi.head_t, im[i].head_t, sizeof oi.head_t);
+        fit_init(c, &oi, &f[i].s);
+        if (im[i].known_head)
+            memcpy(f[i].R0, im[i].head_R, sizeof f[i].R0);
+        else
+            gs_geom_mat3_identity(f[i].R0);
+    }
+    const int id_dim = c->m->cfg.id_dim;
     double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
     int it = 0, plateaued = 0, halvings = 0, since = 0, on_time = 0;
     for (; it < iters; it++) {
@@ -644,42 +892,19 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
                               "fit cancelled at iteration %d", it);
             break;
         }
-        gs_frame fr;
-        state_to_frame(c, s, R0, &fr);
-        rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
+        /* The sum of the images' losses; every image but the last has its
+         * gradient taken at once (one forward at a time), the last's waits
+         * for the stopping tests, as a fit of one image always did. */
+        double loss = 0, gid[GS_MODEL_MAX_CODE] = {0};
+        for (int i = 0; !rc && i < k && isfinite(loss); i++) {
+            double li = 0;
+            rc = fit_image_step(c, pool, &f[i], &o, use_prior ? &prior : NULL,
+                                V_PRIOR, i == 0 ? idp : NULL, gid, i < k - 1,
+                                &li, err);
+            loss += li;
+        }
         if (rc)
             break;
-        double dgain[3], dbias[3];
-        double loss = image_loss(c, pool, &b, s, dgain, dbias);
-        double gprior[GS_CODE_PRIOR_DIM] = {0};
-        if (use_prior)
-            loss += gs_code_prior_eval(&prior, o.code_prior, s->x + V_PRIOR,
-                                       gprior);
-        double gid[GS_MODEL_MAX_CODE] = {0};
-        if (idp)
-            loss += gs_id_prior_eval(idp, o.id_prior, s->x + V_CODE, gid);
-        /* The mirrored view: the input's gradient first (the context holds
-         * one forward at a time), then the mirrored view's loss and
-         * gradient, so the loss the fit tracks is the sum of both. */
-        gs_frame_grad fg, fgm;
-        double dgm[3], dbm[3];
-        if (o.mirror && isfinite(loss)) {
-            memset(&fg, 0, sizeof fg);
-            memset(&fgm, 0, sizeof fgm);
-            rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
-                                   &fg, err);
-            gs_frame frm;
-            gs_frame_mirror(&fr, c->D, &frm);
-            if (!rc)
-                rc = gs_frame_forward(c, pool, &frm, GS_STREAM_BOTH, 0, err);
-            if (!rc)
-                loss += image_loss(c, pool, &bm, s, dgm, dbm);
-            if (!rc && isfinite(loss))
-                rc = gs_frame_backward(c, pool, bm.dpred, NULL, NULL, NULL,
-                                       NULL, &fgm, err);
-            if (rc)
-                break;
-        }
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "fit diverged at iteration %d (loss %g, first "
@@ -690,7 +915,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             first = loss;
         if (loss < best_loss) {
             best_loss = loss;
-            *best = *s;
+            for (int i = 0; i < k; i++)
+                f[i].best = f[i].s;
         }
         hist[it % 20] = loss;
         if (it >= 20 && it - since >= 20 &&
@@ -702,88 +928,64 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
             /* anneal: the steps shrink and the fit goes on from here */
             halvings++;
             since = it;
-            for (int k = 0; k < s->n; k++)
-                s->lr[k] *= 0.5;
+            for (int i = 0; i < k; i++)
+                for (int j = 0; j < f[i].s.n; j++)
+                    f[i].s.lr[j] *= 0.5;
         }
         if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s) {
             on_time = it + 1 < iters;
             break;
         }
+        fit_one *last = &f[k - 1];
         if (!o.mirror) {
-            memset(&fg, 0, sizeof fg);
-            rc = gs_frame_backward(c, pool, b.dpred, NULL, NULL, NULL, NULL,
-                                   &fg, err);
+            memset(&last->fg, 0, sizeof last->fg);
+            rc = gs_frame_backward(c, pool, last->b.dpred, NULL, NULL, NULL,
+                                   NULL, &last->fg, err);
             if (rc)
                 break;
         }
-        memset(s->g, 0, sizeof s->g);
-        s->g[V_GAZE] = fg.gaze[0];
-        s->g[V_GAZE + 1] = fg.gaze[1];
-        for (int k = 0; k < 3; k++) {
-            s->g[V_ROT + k] = fg.rot[k];
-            s->g[V_TRANS + k] = fg.trans[k];
-            s->g[V_GAIN + k] = dgain[k];
-            s->g[V_BIAS + k] = dbias[k];
+        for (int i = 0; i < k; i++)
+            fit_gradient(c, &f[i], use_prior, V_PRIOR, i == 0 && idp ? gid : NULL,
+                         o.mirror);
+        /* One identity: its gradient is the sum over the images, in their
+         * order, and every image's copy takes the same Adam step from the
+         * same start, so the copies stay equal bit for bit. */
+        for (int j = 0; k > 1 && j < id_dim; j++) {
+            double sum = f[0].s.g[V_CODE + j];
+            for (int i = 1; i < k; i++)
+                sum += f[i].s.g[V_CODE + j];
+            for (int i = 0; i < k; i++)
+                f[i].s.g[V_CODE + j] = sum;
         }
-        for (int k = 0; k < c->D; k++)
-            s->g[V_CODE + k] = fg.code[k];
-        for (int k = 0; use_prior && k < GS_CODE_PRIOR_DIM; k++)
-            s->g[V_PRIOR + k] += gprior[k];
-        for (int k = 0; idp && k < c->m->cfg.id_dim; k++)
-            s->g[V_CODE + k] += gid[k];
-        if (o.mirror)
-            add_mirrored_grad(c, &fgm, dgm, dbm, s->g);
-        for (int k = 0; k < s->n; k++)
-            if (!isfinite(s->g[k])) {
-                rc = gs_error_set(err, GS_ERR_NONFINITE,
-                                  "fit: non-finite gradient at iteration %d",
-                                  it);
-                break;
-            }
+        for (int i = 0; !rc && i < k; i++)
+            for (int j = 0; j < f[i].s.n; j++)
+                if (!isfinite(f[i].s.g[j])) {
+                    rc = gs_error_set(err, GS_ERR_NONFINITE,
+                                      "fit: non-finite gradient at iteration "
+                                      "%d", it);
+                    break;
+                }
         if (rc)
             break;
-        adam_update(s, it + 1);
-        /* bound_expression: the expression stays where training put it. */
-        for (int k = 0; o.bound_expression && k < GS_MODEL_EXPR_DIM; k++) {
-            double *v = &s->x[V_CODE + c->m->cfg.id_dim + k];
-            *v = fmax(gs_model_expr_lo[k], fmin(gs_model_expr_hi[k], *v));
-        }
-        /* The gaze stays inside the model's documented range. */
-        s->x[V_GAZE] = fmax(-GS_MODEL_MAX_GAZE_PITCH,
-                            fmin(GS_MODEL_MAX_GAZE_PITCH, s->x[V_GAZE]));
-        s->x[V_GAZE + 1] = fmax(-GS_MODEL_MAX_GAZE_YAW,
-                                fmin(GS_MODEL_MAX_GAZE_YAW, s->x[V_GAZE + 1]));
-    }
-    if (!rc) {
-        gs_frame fr;
-        state_to_frame(c, best, R0, &fr);
-        rc = gs_frame_forward(c, pool, &fr, GS_STREAM_BOTH, 0, err);
-        if (!rc) {
-            /* Composites the best render into b.pred for the figures. */
-            double dg[3], db[3];
-            image_loss(c, pool, &b, best, dg, db);
-            int S = c->S;
-            float ls = 0;
-            gs_nn_ssim_loss_fused(pool, &ls, NULL, 0.0f, b.pred, b.target, 3, S, S,
-                                  GS_NN_SSIM_ZERO, b.ssim_scratch, b.ssim_len);
-            gs_subject r;
-            memset(&r, 0, sizeof r);
-            r.code_dim = c->D;
-            for (int k = 0; k < c->D; k++)
-                r.code[k] = fr.code[k];
-            memcpy(r.head_R, fr.head_R, sizeof r.head_R);
-            memcpy(r.head_t, fr.head_t, sizeof r.head_t);
-            r.gaze_pitch = fr.gaze[0];
-            r.gaze_yaw = fr.gaze[1];
-            for (int k = 0; k < 3; k++) {
-                r.colour_gain[k] = (float)best->x[V_GAIN + k];
-                r.colour_bias[k] = (float)best->x[V_BIAS + k];
+        for (int i = 0; i < k; i++) {
+            fit_state *s = &f[i].s;
+            adam_update(s, it + 1);
+            /* bound_expression: the expression stays where training put it. */
+            for (int e = 0; o.bound_expression && e < GS_MODEL_EXPR_DIM; e++) {
+                double *v = &s->x[V_CODE + id_dim + e];
+                *v = fmax(gs_model_expr_lo[e], fmin(gs_model_expr_hi[e], *v));
             }
-            r.fit_psnr = weighted_psnr(&b, S);
-            r.fit_ssim = 1.0f - ls;
-            *out = r;
+            /* The gaze stays inside the model's documented range. */
+            s->x[V_GAZE] = fmax(-GS_MODEL_MAX_GAZE_PITCH,
+                                fmin(GS_MODEL_MAX_GAZE_PITCH, s->x[V_GAZE]));
+            s->x[V_GAZE + 1] = fmax(-GS_MODEL_MAX_GAZE_YAW,
+                                    fmin(GS_MODEL_MAX_GAZE_YAW, s->x[V_GAZE + 1]));
         }
     }
+    for (int i = 0; !rc && i < k; i++)
+        rc = fit_result(c, pool, &f[i], &res[i], err);
+    if (!rc)
+        memcpy(out, res, (size_t)k * sizeof *out);
     if (report) {
         memset(report, 0, sizeof *report);
         report->iters = it;
@@ -794,10 +996,8 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
         report->stopped_on_time = on_time;
         report->halvings = halvings;
     }
-    free(s);
-    free(best);
-    fit_bufs_free(&b);
-    fit_bufs_free(&bm);
+    fit_ones_free(f, k);
+    free(res);
     gs_id_prior_free(idp);
     return rc;
 }
@@ -997,6 +1197,106 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         o = *opt;
     else
         gs_finetune_options_default(&o);
+    gs_fit_image im;
+    gs_fit_image_from_options(&im, rgb, stride, NULL);
+    im.mask = o.mask;
+    o.mask = NULL;
+    return gs_model_finetune_images(m, pool, s, &im, 1, &o, report, err);
+}
+
+/* What a fine-tune over several images keeps per (subject, image) pair. */
+typedef struct ft_one {
+    fit_state fs;   /* the subject's colour transform, for image_loss */
+    fit_bufs b, bm; /* bm: the mirrored view's (o.mirror) */
+    gs_frame fr, frm;
+    float *inner, *inner_m; /* outline masks (o.outline_px) */
+} ft_one;
+
+static void ft_ones_free(ft_one *f, int k)
+{
+    for (int i = 0; f && i < k; i++) {
+        fit_bufs_free(&f[i].b);
+        fit_bufs_free(&f[i].bm);
+        free(f[i].inner);
+        free(f[i].inner_m);
+    }
+    free(f);
+}
+
+/* Pair f's gradient at the context's current forward (its own), added
+ * to r->g, and its mirror's (o->mirror). */
+static int ft_pair_backward(ft_run *r, gs_pool *pool, ft_one *f,
+                            const gs_finetune_options *o, int masked, int it,
+                            gs_error *err)
+{
+    gs_frame_grad fg;
+    memset(&fg, 0, sizeof fg);
+    int rc = gs_frame_backward(r->c, pool, f->b.dpred, NULL, NULL, NULL, &r->g,
+                               &fg, err);
+    if (!rc && o->mirror) { /* the mirrored view adds its gradient */
+        double dgm[3], dbm[3];
+        rc = gs_frame_forward(r->c, pool, &f->frm, GS_STREAM_BOTH, 1, err);
+        if (!rc && !isfinite(image_loss(r->c, pool, &f->bm, &f->fs, dgm, dbm)))
+            rc = gs_error_set(err, GS_ERR_NONFINITE,
+                              "finetune: mirrored view diverged at step %d", it);
+        if (!rc && masked) { /* its own outline, from its first view */
+            if (it == 0)
+                outline_mask(r->c->alpha, r->c->fs, o->outline_px, f->inner_m);
+            rc = gs_frame_set_feature_mask(r->c, f->inner_m, err);
+        }
+        memset(&fg, 0, sizeof fg);
+        if (!rc)
+            rc = gs_frame_backward(r->c, pool, f->bm.dpred, NULL, NULL, NULL,
+                                   &r->g, &fg, err);
+        if (!rc && masked)
+            rc = gs_frame_set_feature_mask(r->c, f->inner, err);
+    }
+    return rc;
+}
+
+/* Pair f's loss at the model's current parameters and the PSNR of its
+ * composite; its gradient too when `backward` (else the context keeps its
+ * forward for ft_pair_backward). */
+static int ft_pair_step(ft_run *r, gs_pool *pool, ft_one *f,
+                        const gs_finetune_options *o, int masked, int it,
+                        int backward, double *loss, double *psnr,
+                        gs_error *err)
+{
+    int rc = gs_frame_forward(r->c, pool, &f->fr, GS_STREAM_BOTH, 1, err);
+    if (!rc && masked) {
+        if (it == 0)
+            outline_mask(r->c->alpha, r->c->fs, o->outline_px, f->inner);
+        rc = gs_frame_set_feature_mask(r->c, f->inner, err);
+    }
+    if (rc)
+        return rc;
+    double dg[3], db[3];
+    *loss = image_loss(r->c, pool, &f->b, &f->fs, dg, db);
+    *psnr = weighted_psnr(&f->b, r->c->S);
+    if (!backward || !isfinite(*loss))
+        return GS_OK;
+    return ft_pair_backward(r, pool, f, o, masked, it, err);
+}
+
+int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
+                             const gs_fit_image *im, int k,
+                             const gs_finetune_options *opt,
+                             gs_finetune_report *report, gs_error *err)
+{
+    if (!m || !s || !im)
+        return gs_error_set(err, GS_ERR_ARG, "finetune: NULL argument");
+    if (k < 1 || k > GS_FIT_IMAGES_MAX)
+        return gs_error_set(err, GS_ERR_ARG, "finetune: %d images: want 1..%d",
+                            k, GS_FIT_IMAGES_MAX);
+    gs_finetune_options o;
+    if (opt)
+        o = *opt;
+    else
+        gs_finetune_options_default(&o);
+    if (o.mask)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "finetune: several images take their masks from "
+                            "gs_fit_image, not from the options");
     int iters = o.iters > 0 ? o.iters : 50;
     double lr = o.lr > 0 ? o.lr : 1e-3;
     unsigned parts = o.parts ? o.parts : GS_FT_DEFAULT;
@@ -1013,68 +1313,71 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
     if (o.outline_px < 0 || o.outline_px > 8)
         return gs_error_set(err, GS_ERR_ARG,
                             "finetune: outline %d px: want 0..8", o.outline_px);
-    int rc = check_subject(m, s, err);
-    if (rc)
-        return rc;
-    if ((size_t)m->cfg.image_size * 3 > stride)
-        return gs_error_set(err, GS_ERR_ARG, "finetune: stride %zu < %d",
-                            stride, 3 * m->cfg.image_size);
+    int rc = GS_OK;
+    for (int i = 0; i < k; i++) {
+        if (!im[i].rgb)
+            return gs_error_set(err, GS_ERR_ARG, "finetune: image %d is NULL", i);
+        if ((rc = check_subject(m, &s[i], err)))
+            return rc;
+        if ((size_t)m->cfg.image_size * 3 > im[i].stride)
+            return gs_error_set(err, GS_ERR_ARG, "finetune: stride %zu < %d",
+                                im[i].stride, 3 * m->cfg.image_size);
+    }
     ft_run r;
-    fit_bufs b;
-    memset(&b, 0, sizeof b);
-    fit_state *fs = calloc(1, sizeof *fs);
-    rc = fs ? ft_init(&r, m, parts, err)
-            : gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
-    if (!rc && fit_bufs_init(&b, r.c, rgb, stride, o.mask))
-        rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
+    ft_one *f = calloc((size_t)k, sizeof *f);
+    rc = f ? ft_init(&r, m, parts, err)
+           : gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
     if (rc) {
-        if (fs)
-            ft_free(&r);
-        free(fs);
-        fit_bufs_free(&b);
+        free(f);
         return rc;
     }
-    /* The subject's colour transform, fixed: image_loss reads it here. */
-    for (int k = 0; k < 3; k++) {
-        fs->x[V_GAIN + k] = s->colour_gain[k];
-        fs->x[V_BIAS + k] = s->colour_bias[k];
+    int masked = o.outline_px > 0 && (parts & (GS_FT_FACE | GS_FT_EYE | GS_FT_MLP));
+    size_t fplane = (size_t)r.c->fs * r.c->fs;
+    for (int i = 0; !rc && i < k; i++) {
+        ft_one *p = &f[i];
+        gs_fit_image mi = im[i];
+        mi.mask = im[i].mask;
+        if (fit_image_bufs(r.c, &mi, o.mirror, i ? &f[0].b : NULL, &p->b, &p->bm))
+            rc = GS_ERR_NOMEM;
+        p->inner = malloc(fplane * sizeof(float));
+        p->inner_m = malloc(fplane * sizeof(float));
+        if (!p->inner || !p->inner_m)
+            rc = GS_ERR_NOMEM;
+        /* The subject's colour transform, fixed: image_loss reads it here. */
+        for (int c3 = 0; c3 < 3; c3++) {
+            p->fs.x[V_GAIN + c3] = s[i].colour_gain[c3];
+            p->fs.x[V_BIAS + c3] = s[i].colour_bias[c3];
+        }
+        frame_of(&s[i], NULL, &p->fr);
+        gs_frame_mirror(&p->fr, s[i].code_dim, &p->frm);
     }
-    gs_frame fr, frm;
-    frame_of(s, NULL, &fr);
-    gs_frame_mirror(&fr, s->code_dim, &frm);
-    /* The mirrored input and weights (o.mirror; docs/model.md). */
-    fit_bufs bm;
-    memset(&bm, 0, sizeof bm);
-    uint8_t *flip = o.mirror ? mirror_image(rgb, stride, r.c->S) : NULL;
-    if (o.mirror && (!flip || fit_bufs_init(&bm, r.c, flip, 3 * (size_t)r.c->S, NULL)))
+    if (rc)
         rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
-    free(flip); /* bm holds it as floats */
-    if (!rc && o.mirror && o.mask)
-        mirror_weights(o.mask, r.c->S, bm.w);
     double t0 = now_s(), best = INFINITY, first = NAN;
     float psnr_first = NAN, psnr_best = NAN;
     double hist[20];
     int it = 0, stopped_on_time = 0, plateaued = 0;
-    int masked = o.outline_px > 0 && (parts & (GS_FT_FACE | GS_FT_EYE | GS_FT_MLP));
-    float *inner = malloc((size_t)r.c->fs * r.c->fs * sizeof(float));
-    float *inner_m = malloc((size_t)r.c->fs * r.c->fs * sizeof(float));
-    if (!inner || !inner_m)
-        rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
     for (; !rc && it <= iters; it++) {
         if (o.cancel && o.cancel(o.cancel_arg)) {
             rc = gs_error_set(err, GS_ERR_CANCELLED,
                               "finetune cancelled at step %d", it);
             break;
         }
-        rc = gs_frame_forward(r.c, pool, &fr, GS_STREAM_BOTH, 1, err);
-        if (!rc && it == 0 && masked) {
-            outline_mask(r.c->alpha, r.c->fs, o.outline_px, inner);
-            rc = gs_frame_set_feature_mask(r.c, inner, err);
+        /* The pairs' gradients accumulate: every pair but the last has its
+         * gradient taken at once (one forward at a time), the last's waits
+         * for the stopping tests, as one image's always did. */
+        gs_nn_adam_zero_grad(r.adam);
+        double loss = 0, psnr = 0;
+        for (int i = 0; !rc && i < k && isfinite(loss); i++) {
+            double li = 0, pi = 0;
+            rc = ft_pair_step(&r, pool, &f[i], &o, masked, it, i < k - 1, &li,
+                              &pi, err);
+            loss += li;
+            psnr += pi;
         }
         if (rc)
             break;
-        double dg[3], db[3];
-        double loss = image_loss(r.c, pool, &b, fs, dg, db);
+        float psnr_now = (float)(psnr / k);
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "finetune diverged at step %d (loss %g, "
@@ -1083,11 +1386,11 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         }
         if (it == 0) {
             first = loss;
-            psnr_first = weighted_psnr(&b, r.c->S);
+            psnr_first = psnr_now;
         }
         if (loss < best) {
             best = loss;
-            psnr_best = weighted_psnr(&b, r.c->S);
+            psnr_best = psnr_now;
             if (it > 0)
                 ft_pack(&r, r.best, 0);
         }
@@ -1102,29 +1405,7 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
             stopped_on_time = 1;
             break;
         }
-        gs_nn_adam_zero_grad(r.adam);
-        gs_frame_grad fg;
-        memset(&fg, 0, sizeof fg);
-        rc = gs_frame_backward(r.c, pool, b.dpred, NULL, NULL, NULL, &r.g,
-                               &fg, err);
-        if (!rc && o.mirror) { /* the mirrored view adds its gradient */
-            double dgm[3], dbm[3];
-            rc = gs_frame_forward(r.c, pool, &frm, GS_STREAM_BOTH, 1, err);
-            if (!rc && !isfinite(image_loss(r.c, pool, &bm, fs, dgm, dbm)))
-                rc = gs_error_set(err, GS_ERR_NONFINITE,
-                                  "finetune: mirrored view diverged at step %d", it);
-            if (!rc && masked) { /* its own outline, from its first view */
-                if (it == 0)
-                    outline_mask(r.c->alpha, r.c->fs, o.outline_px, inner_m);
-                rc = gs_frame_set_feature_mask(r.c, inner_m, err);
-            }
-            memset(&fg, 0, sizeof fg);
-            if (!rc)
-                rc = gs_frame_backward(r.c, pool, bm.dpred, NULL, NULL, NULL,
-                                       &r.g, &fg, err);
-            if (!rc && masked)
-                rc = gs_frame_set_feature_mask(r.c, inner, err);
-        }
+        rc = ft_pair_backward(&r, pool, &f[k - 1], &o, masked, it, err);
         if (rc)
             break;
         double gn = 0;
@@ -1157,10 +1438,6 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
         report->stopped_on_plateau = plateaued;
     }
     ft_free(&r);
-    free(inner);
-    free(inner_m);
-    fit_bufs_free(&bm);
-    free(fs);
-    fit_bufs_free(&b);
+    ft_ones_free(f, k);
     return rc;
 }

@@ -359,3 +359,38 @@ int gs_model_tuned_apply(gs_model *dst, const gs_model *base, const uint8_t *buf
     dst->tuned = pt;
     return GS_OK;
 }
+
+uint64_t gs_model_fit_images_key(const gs_model *m, const gs_fit_options *opt,
+                                 const gs_fit_image *im, int k)
+{
+    if (!m || !im || k < 1 || k > GS_FIT_IMAGES_MAX)
+        return 0;
+    gs_fit_options o;
+    if (opt)
+        o = *opt;
+    else
+        gs_fit_options_default(&o);
+    /* Each image's key as gs_model_fit_key names it with its own labels
+     * and mask; one image is that key, several a hash of theirs in order
+     * (a record apart from any one image's, so never a single fit's). */
+    uint64_t keys[GS_FIT_IMAGES_MAX + 2] = {0x6d756c74692d6669ULL, (uint64_t)k};
+    for (int i = 0; i < k; i++) {
+        if (!im[i].rgb)
+            return 0;
+        gs_fit_options oi = o;
+        oi.mask = im[i].mask;
+        oi.known_gaze = im[i].known_gaze;
+        oi.gaze_pitch = im[i].gaze_pitch;
+        oi.gaze_yaw = im[i].gaze_yaw;
+        oi.known_head = im[i].known_head;
+        memcpy(oi.head_R, im[i].head_R, sizeof oi.head_R);
+        memcpy(oi.head_t, im[i].head_t, sizeof oi.head_t);
+        keys[2 + i] = gs_model_fit_key(m, &oi, im[i].rgb, im[i].stride);
+    }
+    if (k == 1)
+        return keys[2];
+    hash64 h;
+    hash_init(&h, 0x6669742d6b65796eULL);
+    hash_part(&h, keys, (size_t)(k + 2) * sizeof keys[0]);
+    return hash_final(&h);
+}

@@ -135,10 +135,45 @@ static void test_angles(void)
     CHECK(n == 2);
 }
 
+/* Per-image labels ("P,Y;-;P,Y", one item per image) and path lists. */
+static void test_image_lists(void)
+{
+    const cli_command *cmd = &cli_render_command;
+    double v[4][2];
+    int known[4];
+    CHECK_EQ_INT(cli_parse_image_labels(cmd, "--gaze-deg", "5,0;-;-3.5,2", 0, 3, v, known), CLI_OK);
+    CHECK(known[0] && !known[1] && known[2] && v[0][0] == 5 && v[2][0] == -3.5 && v[2][1] == 2);
+    CHECK_EQ_INT(cli_parse_image_labels(cmd, "--gaze-deg", "5,0", 0, 1, v, known), CLI_OK);
+    CHECK(known[0] && v[0][0] == 5);
+    static const char *const bad[] = {"5,0;1,1", "5,0;-;1,1;2,2", "", "5,0;;1,1", "5,0;x;1,1",
+                                      "5,0;-;0,99", "5;-;1,1"};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++)
+        CHECK_MSG(cli_parse_image_labels(cmd, "--gaze-deg", bad[i], 0, 3, v, known) == CLI_USAGE,
+                  "'%s' accepted", bad[i]);
+    CHECK_EQ_INT(cli_parse_image_labels(cmd, "--head-deg", "-;70,-70", 1, 2, v, known), CLI_OK);
+    CHECK_EQ_INT(cli_parse_image_labels(cmd, "--head-deg", "-;71,0", 1, 2, v, known), CLI_USAGE);
+    const char *p[4];
+    char *buf = NULL;
+    int n = 0;
+    CHECK_EQ_INT(cli_split_paths(cmd, "--image", "a.png,b c.png,d.png", 4, &buf, p, &n), CLI_OK);
+    CHECK(n == 3 && !strcmp(p[0], "a.png") && !strcmp(p[1], "b c.png") && !strcmp(p[2], "d.png"));
+    free(buf);
+    CHECK_EQ_INT(cli_split_paths(cmd, "--image", "a.png", 4, &buf, p, &n), CLI_OK);
+    CHECK(n == 1 && !strcmp(p[0], "a.png"));
+    free(buf);
+    static const char *const badp[] = {"", "a,,b", "a,", ",a", "a,b,c,d,e"};
+    for (size_t i = 0; i < sizeof badp / sizeof badp[0]; i++) {
+        CHECK_MSG(cli_split_paths(cmd, "--image", badp[i], 4, &buf, p, &n) == CLI_USAGE,
+                  "'%s' accepted", badp[i]);
+        CHECK(buf == NULL);
+    }
+}
+
 int main(void)
 {
     test_floats();
     test_angles();
+    test_image_lists();
     test_size_and_long();
     test_rate();
     test_options();

@@ -93,6 +93,17 @@ def test_protocol():
     r = P.redirect_request([(10, -5), (0, 0)], subject=b"k" * 16, head_deg=[None, (3, 4)], fmt="raw")
     check(len(r.targets) == 2 and not r.targets[0].HasField("head") and r.targets[1].head.yaw_deg == 4
           and r.output_format == pb.FORMAT_RAW_RGB8, "redirect request %s" % r)
+    png = b"\x89PNG\r\n\x1a\n" + b"\0" * 16
+    one = P.fit_request(png, gaze_deg=(5, 0))
+    check(one.SerializeToString() == P.fit_request(png, gaze_deg=(5, 0), more_images=[]).SerializeToString()
+          and len(one.more_images) == 0, "one image: the request of before")
+    f = P.fit_request(png, gaze_deg=(5, 0), photo=True, more_images=[png, (png, None, (3, -4)), (png, (1, 2))])
+    check(len(f.more_images) == 3 and not f.more_images[0].HasField("gaze")
+          and f.more_images[1].head.yaw_deg == -4 and not f.more_images[1].HasField("gaze")
+          and f.more_images[2].gaze.pitch_deg == 1 and f.more_images[2].image.kind == pb.KIND_PHOTO,
+          "further images with their labels: %s" % f.more_images)
+    raises(ValueError, lambda: P.fit_request(png, more_images=[png] * 16), "at most 16 images")
+    raises(ValueError, lambda: P.fit_request(png, more_images=[(png, None, None, None)]), "a tuple of 4")
     try:
         import numpy as np
         m = P.image_message(np.zeros((4, 5, 3), np.uint8))

@@ -444,6 +444,52 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
 uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
                           const uint8_t *rgb, size_t stride);
 
+/* ---- a subject from several images of one person (docs/subjects.md) ---- */
+
+/* At most this many images in one fit or fine-tune. */
+#define GS_FIT_IMAGES_MAX 16
+
+/* One image of a fit over several: the normalized face (image_size^2 RGB
+ * rows of `stride`), its face mask (as gs_fit_options.mask) and the labels
+ * known for it (as gs_fit_options' known_gaze and known_head). */
+typedef struct gs_fit_image {
+    const uint8_t *rgb;
+    size_t stride;
+    const uint8_t *mask;
+    int known_gaze;
+    double gaze_pitch, gaze_yaw;
+    int known_head;
+    double head_R[9], head_t[3];
+} gs_fit_image;
+
+/* An image with the mask and labels opt names (NULL: none): what
+ * gs_model_fit fits. */
+void gs_fit_image_from_options(gs_fit_image *im, const uint8_t *rgb,
+                               size_t stride, const gs_fit_options *opt);
+
+/* Fits k images (1..GS_FIT_IMAGES_MAX) of one person together: one identity
+ * (the code's first id_dim slots) shared by all, and per image its own
+ * expression, lights, gaze, head pose and colour gain and bias. Adam on the
+ * sum of the images' losses (each under its mask, the code prior per image,
+ * the identity prior once), the plateau and time tests on that sum.
+ * out[i] (k subjects) is image i's subject; their identity slots are equal
+ * bit for bit. opt as for gs_model_fit, but its labels and mask must be
+ * unset (GS_ERR_ARG): each image carries its own. k = 1 gives the bytes
+ * gs_model_fit gives for that image and its labels. Deterministic for any
+ * thread count; an iteration costs k single-image ones. A bad image or
+ * label is refused (GS_ERR_ARG; GS_ERR_NONFINITE for a non-finite label)
+ * before any work, the message naming the image (from 0) when k > 1; on
+ * any error *out is untouched. */
+int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
+                        int k, const gs_fit_options *opt, gs_subject *out,
+                        gs_fit_report *report, gs_error *err);
+
+/* gs_model_fit_key for gs_model_fit_images: covers every image, mask and
+ * label in order; k = 1 gives gs_model_fit_key of that image with its
+ * labels in the options. 0 for bad arguments (k out of range, NULL). */
+uint64_t gs_model_fit_images_key(const gs_model *m, const gs_fit_options *opt,
+                                 const gs_fit_image *im, int k);
+
 /* ---- per-image fine-tuning (the paper's last step) ---- */
 
 /* A copy of m with its own parameters (same configuration), for
@@ -530,6 +576,18 @@ int gs_model_finetune(gs_model *m, gs_pool *pool, const gs_subject *s,
                       const uint8_t *rgb, size_t stride,
                       const gs_finetune_options *opt,
                       gs_finetune_report *report, gs_error *err);
+
+/* gs_model_finetune over k (subject, image) pairs of one person (s[i]
+ * fitted to im[i].rgb, as gs_model_fit_images gives them): one set of
+ * tuned parameters, each step's loss the sum over the pairs (each under
+ * im[i].mask; the labels of im are not read). opt->mask must be NULL
+ * (GS_ERR_ARG). The report's PSNRs are the pairs' mean. k = 1 gives the
+ * bytes of gs_model_finetune with that image and mask. A step costs k
+ * single-image steps. */
+int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
+                             const gs_fit_image *im, int k,
+                             const gs_finetune_options *opt,
+                             gs_finetune_report *report, gs_error *err);
 
 /* ---- serving fine-tuned subjects (docs/model.md) ---- */
 

@@ -283,10 +283,11 @@ class AsyncClient:
                   max_iters: int = 0, deadline_ms: int = 0, photo: bool = False,
                   finetune_steps: int = 0, finetune_parts: str = "", keep_image: bool = False,
                   finetune_outline_px: int = 0, finetune_mirror: bool = True,
-                  finetune_lr: float = 0.0) -> Any:
+                  finetune_lr: float = 0.0, more_images: Sequence[Any] = ()) -> Any:
         """As Client.fit."""
         req = fit_request(image, gaze_deg, head_deg, max_iters, deadline_ms, photo, finetune_steps,
-                          finetune_parts, keep_image, finetune_outline_px, finetune_mirror, finetune_lr)
+                          finetune_parts, keep_image, finetune_outline_px, finetune_mirror, finetune_lr,
+                          more_images)
         return (await self.call(FT.FRAME_FIT, req, FT.FRAME_FIT_OK, key or ZERO_KEY))[1]
 
     async def redirect(self, gaze_deg: Sequence[AnglePair], subject: Optional[bytes] = None,

@@ -205,7 +205,8 @@ class Client:
             head_deg: Optional[AnglePair] = None, key: Optional[bytes] = None, max_iters: int = 0,
             deadline_ms: int = 0, photo: bool = False, finetune_steps: int = 0,
             finetune_parts: str = "", keep_image: bool = False, finetune_outline_px: int = 0,
-            finetune_mirror: bool = True, finetune_lr: float = 0.0) -> Any:
+            finetune_mirror: bool = True, finetune_lr: float = 0.0,
+            more_images: Sequence[Any] = ()) -> Any:
         """Fits a subject to a normalized face (PNG/JPEG bytes or HxWx3
         uint8 array; photo=True: any photo, the server finds and normalizes
         the face); returns the FitResult (subject_key, labels, quality).
@@ -218,9 +219,15 @@ class Client:
         the server's finetune_lr, 0.004 unless configured; the result's
         finetune_lr says which ran). keep_image: the server keeps the (normalized)
         input with the subject, so that redirect(subject=..., transfer=True)
-        works by key."""
+        works by key. more_images: other images of the same person (at most
+        15; each an image, or a tuple (image, gaze_deg, head_deg) with its
+        own labels), fitted with `image` as one subject: one identity (and
+        one fine-tuning), the subject rendering from `image`'s expression,
+        lights and head pose; the result's image_results say what the fit
+        made of each image (docs/subjects.md)."""
         req = fit_request(image, gaze_deg, head_deg, max_iters, deadline_ms, photo, finetune_steps,
-                          finetune_parts, keep_image, finetune_outline_px, finetune_mirror, finetune_lr)
+                          finetune_parts, keep_image, finetune_outline_px, finetune_mirror, finetune_lr,
+                          more_images)
         return self.call(FT.FRAME_FIT, req, FT.FRAME_FIT_OK, key or ZERO_KEY)[1]
 
     def redirect(self, gaze_deg: Sequence[AnglePair], subject: Optional[bytes] = None,

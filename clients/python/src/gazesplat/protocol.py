@@ -138,8 +138,10 @@ def fit_request(image: ImageInput, gaze_deg: Optional[AnglePair] = None,
                 head_deg: Optional[AnglePair] = None, max_iters: int = 0, deadline_ms: int = 0,
                 photo: bool = False, finetune_steps: int = 0, finetune_parts: str = "",
                 keep_image: bool = False, finetune_outline_px: int = 0, finetune_mirror: bool = True,
-                finetune_lr: float = 0.0) -> Any:
-    """The FitRequest of Client.fit's arguments."""
+                finetune_lr: float = 0.0, more_images: Sequence[Any] = ()) -> Any:
+    """The FitRequest of Client.fit's arguments. more_images: the same
+    person's other images (at most 15), each an image or a tuple (image,
+    gaze_deg, head_deg) with its own labels (None: unknown)."""
     kind = pb.KIND_PHOTO if photo else pb.KIND_NORMALIZED_FACE
     req = pb.FitRequest(image=image_message(image, kind), max_iters=max_iters, deadline_ms=deadline_ms,
                         finetune_steps=finetune_steps, finetune_parts=finetune_parts,
@@ -149,6 +151,19 @@ def fit_request(image: ImageInput, gaze_deg: Optional[AnglePair] = None,
         req.gaze.CopyFrom(angles(gaze_deg))
     if head_deg is not None:
         req.head.CopyFrom(angles(head_deg))
+    if len(more_images) > 15:
+        raise ValueError("at most 16 images of one person in one fit, got %d" % (1 + len(more_images)))
+    for item in more_images:
+        if isinstance(item, tuple) and not 1 <= len(item) <= 3:
+            raise ValueError("a further image is an image or (image, gaze_deg, head_deg), got a "
+                             "tuple of %d" % len(item))
+        img, g, h = (item + (None, None))[:3] if isinstance(item, tuple) else (item, None, None)
+        fi = req.more_images.add()
+        fi.image.CopyFrom(image_message(img, kind))
+        if g is not None:
+            fi.gaze.CopyFrom(angles(g))
+        if h is not None:
+            fi.head.CopyFrom(angles(h))
     return req
 
 
