@@ -152,11 +152,11 @@ int cli_write_all(int fd, const void *p, size_t n);
 /* fsync of a file or directory by path: 0 or -1 with errno. */
 int cli_fsync_path(const char *path);
 
-/* A shipped data file by its name under models/ (e.g. the gaze estimator
- * "gaze-resnet.safetensors"): models/NAME in the current directory (a
- * source tree), else the installed copy under the package's data
- * directory (GS_CLI_DATADIR/models/NAME), else models/NAME (so the error
- * names the relative path). The returned string is static. */
+/* A shipped model file by name (e.g. the gaze estimator
+ * "gaze-resnet.safetensors"): the one in the models folder of the current
+ * directory (a source tree), else the installed copy in the models folder
+ * of the package's data directory (GS_CLI_DATADIR), else the relative path
+ * (so that the error names it). The returned string is static. */
 const char *cli_shipped_model(const char *name);
 
 /* Demo scene (demo_head.c): a stylised head, see cmd_scene.c. */
