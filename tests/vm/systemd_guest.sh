@@ -55,6 +55,7 @@ apt install ./$deb </dev/null >/tmp/apt 2>&1; rc=$?
 sed 's/^/GS-VM: apt| /' /tmp/apt
 st=$(dpkg-query -W -f '${Status} ${Version}' gazesplat 2>&1)
 if [ $rc = 0 ] && grep -q '^0 upgraded, 1 newly installed, 0 to remove' /tmp/apt &&
+   grep -q '^Need to get 0 B/' /tmp/apt &&
    [ "${st% *}" = "install ok installed" ]; then
     pass "apt install ./$deb: $st, nothing else installed or fetched ($(ms "$t0" "$(now)") ms)"
 else

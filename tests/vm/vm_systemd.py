@@ -1,20 +1,23 @@
 #!/usr/bin/env python3
 """systemd tier (label vm): boots Debian 12's kernel under qemu (TCG, no KVM)
-with the host's systemd as PID 1 and gazesplat installed into the guest
-root by the build's own install rules (the files the .deb holds: `cmake
---install --strip` into a staging root), then systemd_guest.sh, started by
-the guest's systemd as a service, checks socket activation, the socket's
-group, the watchdog, reload, stop and a USB hot-plug reaching the daemon's
-live pipeline under the shipped unit. The shipped units are used unmodified;
-the configuration (a conffile) gets the live keys appended, as an
-administrator would. Needs no root. Exit 0 when the guest reports RESULT PASS.
+with the host's systemd as PID 1 and the .deb that cpack makes from the
+build in the guest root. systemd_guest.sh, started by the guest's systemd
+as a service, installs it with docs/usage.md's commands as written (apt
+install ./FILE.deb offline, usermod -aG gazesplat USER, systemctl enable
+--now gazesplatd.socket, gazesplat client health --addr ...), then checks
+socket activation, the socket's group, the sandbox, the watchdog, reload,
+stop and a USB hot-plug reaching the daemon's live pipeline under the
+shipped unit. The shipped units are used unmodified; the configuration (a
+conffile) gets the live keys appended, as an administrator would. Needs no
+root. Exit 0 when the guest reports RESULT PASS.
 
 The guest root is one uncompressed initramfs (the kernel's rootfs): the
-files of the host's systemd, libsystemd-shared, util-linux's setpriv,
-procps' kill, busybox and v4l2-ctl, udev from the VM cache
-(scripts/vm/prepare.sh), the ELF libraries all of them need (ldd), the
-module chains of v4l2loopback and xhci_pci with a modules.dep made here, and
-the staged package.
+files of the host's systemd, libsystemd-shared, apt, dpkg, perl-base and
+init-system-helpers, util-linux's setpriv, procps' kill, usermod, busybox
+and v4l2-ctl, udev from the VM cache (scripts/vm/prepare.sh), the ELF
+libraries all of them and the package need (ldd), the host's dpkg status
+(its packages meet the .deb's Depends), the module chains of v4l2loopback
+and xhci_pci with a modules.dep made here, and the .deb.
 
 usage: vm_systemd.py --build DIR --cache DIR --work DIR [--timeout S] [--stall S]
 """
