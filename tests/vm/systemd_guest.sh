@@ -87,6 +87,19 @@ systemctl enable --now gazesplatd.socket >/tmp/enable 2>&1; rc=$?
 links=$(ls /etc/systemd/system/*.wants/gazesplatd.socket 2>/dev/null | tr '\n' ' ')
 [ $rc = 0 ] && [ -n "$links" ] && pass "systemctl enable --now gazesplatd.socket: $links" ||
     fail "systemctl enable --now: rc $rc, $(cat /tmp/enable), links '$links'"
+# The postinst on an upgrade (here a reinstall of the same .deb) keeps the
+# administrator's enablement; the socket keeps listening, the service stays
+# down until a client comes (try-restart starts nothing).
+t0=$(now)
+(cd /usr/lib/gs-vm/build && apt install --reinstall ./$deb </dev/null >/tmp/apt 2>&1); rc=$?
+en=$(systemctl is-enabled $S 2>&1)
+if [ $rc = 0 ] && grep -q '^0 upgraded, 0 newly installed, 1 reinstalled' /tmp/apt && [ "$en" = enabled ] &&
+   [ "$(systemctl is-active $S)" = active ]; then
+    pass "apt install --reinstall: $S still $en and active ($(ms "$t0" "$(now)") ms)"
+else
+    sed 's/^/GS-VM: apt| /' /tmp/apt
+    fail "after the reinstall: rc $rc, $S $en, $(systemctl is-active $S)"
+fi
 label=$(cat /sys/class/video4linux/video9/name 2>/dev/null)
 [ "$label" = gazesplat ] && pass "modules-load.d + modprobe.d: /dev/video9 is '$label'" ||
     fail "no v4l2loopback /dev/video9 named gazesplat (got '$label'; $(ls /dev/video* 2>&1))"
