@@ -116,6 +116,7 @@ set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "python3, python3-protobuf")
 set(CPACK_DEBIAN_PACKAGE_SUGGESTS "python3-pil, python3-numpy, python3-torch, v4l2loopback-dkms")
 configure_file(${PROJECT_SOURCE_DIR}/cmake/deb/conffiles.in ${CMAKE_BINARY_DIR}/deb/conffiles @ONLY)
 foreach(script postinst prerm postrm)
+  set_property(DIRECTORY APPEND PROPERTY CMAKE_CONFIGURE_DEPENDS ${PROJECT_SOURCE_DIR}/cmake/deb/${script})
   file(COPY ${PROJECT_SOURCE_DIR}/cmake/deb/${script} DESTINATION ${CMAKE_BINARY_DIR}/deb
     FILE_PERMISSIONS OWNER_READ OWNER_WRITE OWNER_EXECUTE GROUP_READ GROUP_EXECUTE WORLD_READ WORLD_EXECUTE)
 endforeach()

@@ -1,8 +1,9 @@
 #!/usr/bin/busybox sh
 # The checks of the systemd VM tier, run by the guest's systemd (PID 1) as
-# gs-vm-test.service once sockets.target is up. gazesplat is installed in the
-# guest as the package installs it and gazesplatd.socket is enabled; the
-# service itself must not run before the first client connects. Lines
+# gs-vm-test.service once sockets.target is up. The guest holds the .deb that
+# cpack made; the checks install it and enable the socket with the commands
+# docs/usage.md gives ("Install and package"), then check the installed
+# system: the service itself must not run before the first client connects. Lines
 # starting "GS-VM:" are read by vm_systemd.py (through vm_live.boot, which
 # hot-plugs a USB keyboard on "HOTPLUG-READY").
 mkdir -p /usr/local/bin && /usr/bin/busybox --install -s /usr/local/bin
@@ -42,10 +43,63 @@ say "checks start at $(now) s: PID 1 is $(cat /proc/1/comm), $(systemctl --versi
 timeout 90 systemctl is-system-running --wait >/tmp/sysstate 2>&1
 say "system $(cat /tmp/sysstate) at $(now) s; failed units: $(systemctl list-units --failed --plain --no-legend | cut -d' ' -f1 | tr '\n' ' ')"
 
-# 0. The package's sysusers.d, modprobe.d and (copied) modules-load.d files.
+# 0. docs/usage.md's post-install commands as written, less sudo (these
+# checks run as root). apt installs the local .deb offline: the guest has no
+# network and no package lists, so it must find every Depends installed (the
+# host's dpkg status) and have nothing to fetch; without -y it would stop at
+# a prompt (stdin is /dev/null) if it wanted any other package.
+cd /usr/lib/gs-vm/build
+deb=$(ls *.deb)
+t0=$(now)
+apt install ./$deb </dev/null >/tmp/apt 2>&1; rc=$?
+sed 's/^/GS-VM: apt| /' /tmp/apt
+st=$(dpkg-query -W -f '${Status} ${Version}' gazesplat 2>&1)
+if [ $rc = 0 ] && grep -q '^0 upgraded, 1 newly installed, 0 to remove' /tmp/apt &&
+   grep -q '^Need to get 0 B/' /tmp/apt &&
+   [ "${st% *}" = "install ok installed" ]; then
+    pass "apt install ./$deb: $st, nothing else installed or fetched ($(ms "$t0" "$(now)") ms)"
+else
+    fail "apt install ./$deb: rc $rc, dpkg status '$st'"
+fi
+cd /
+en=$(systemctl is-enabled gazesplatd.socket 2>&1)
+[ "$en" = disabled ] && [ "$(systemctl is-active gazesplatd.socket)" = inactive ] &&
+    pass "the postinst enabled and started nothing: $S $en" || fail "after apt install: $S $en, $(systemctl is-active $S)"
+# As an administrator would before starting it: the live keys appended to
+# the configuration (a conffile) and the modules-load.d example copied, as
+# its own comment says; systemd-modules-load then loads v4l2loopback with
+# the package's modprobe.d options.
+cat /usr/lib/gs-vm/live.conf >>/etc/gazesplat/gazesplatd.conf
+cp /usr/share/doc/gazesplat/examples/gazesplat-v4l2loopback.modules-load.conf \
+    /etc/modules-load.d/gazesplat-v4l2loopback.conf
+systemctl restart systemd-modules-load.service ||
+    fail "systemd-modules-load: $(systemctl status --no-pager systemd-modules-load.service 2>&1 | tail -5)"
+# The postinst's systemd-sysusers made the group; the user is "gsmember".
 gid=$(sed -n 's/^gazesplat:x:\([0-9]*\):.*/\1/p' /etc/group)
-[ -n "$gid" ] && pass "systemd-sysusers made group gazesplat (gid $gid)" ||
+[ -n "$gid" ] && pass "the postinst's systemd-sysusers made group gazesplat (gid $gid)" ||
     fail "no gazesplat group in /etc/group"
+USER=gsmember
+usermod -aG gazesplat $USER >/tmp/usermod 2>&1; rc=$?
+line=$(grep '^gazesplat:' /etc/group)
+[ $rc = 0 ] && [ "${line##*:}" = gsmember ] && pass "usermod -aG gazesplat \$USER: $line" ||
+    fail "usermod: rc $rc, $(cat /tmp/usermod), group line '$line'"
+systemctl enable --now gazesplatd.socket >/tmp/enable 2>&1; rc=$?
+links=$(ls /etc/systemd/system/*.wants/gazesplatd.socket 2>/dev/null | tr '\n' ' ')
+[ $rc = 0 ] && [ -n "$links" ] && pass "systemctl enable --now gazesplatd.socket: $links" ||
+    fail "systemctl enable --now: rc $rc, $(cat /tmp/enable), links '$links'"
+# The postinst on an upgrade (here a reinstall of the same .deb) keeps the
+# administrator's enablement; the socket keeps listening, the service stays
+# down until a client comes (try-restart starts nothing).
+t0=$(now)
+(cd /usr/lib/gs-vm/build && apt install --reinstall ./$deb </dev/null >/tmp/apt 2>&1); rc=$?
+en=$(systemctl is-enabled $S 2>&1)
+if [ $rc = 0 ] && grep -q '^0 upgraded, 0 newly installed, 1 reinstalled' /tmp/apt && [ "$en" = enabled ] &&
+   [ "$(systemctl is-active $S)" = active ]; then
+    pass "apt install --reinstall: $S still $en and active ($(ms "$t0" "$(now)") ms)"
+else
+    sed 's/^/GS-VM: apt| /' /tmp/apt
+    fail "after the reinstall: rc $rc, $S $en, $(systemctl is-active $S)"
+fi
 label=$(cat /sys/class/video4linux/video9/name 2>/dev/null)
 [ "$label" = gazesplat ] && pass "modules-load.d + modprobe.d: /dev/video9 is '$label'" ||
     fail "no v4l2loopback /dev/video9 named gazesplat (got '$label'; $(ls /dev/video* 2>&1))"
@@ -63,18 +117,28 @@ for d in $docs; do [ -f "${d#file:}" ] || missing="$missing $d"; done
     fail "Documentation='$docs', not installed:$missing"
 perm=$(stat -c '%a %U:%G' $SOCK 2>&1)
 [ "$perm" = "660 root:gazesplat" ] && pass "socket $SOCK is $perm" || fail "socket is '$perm'"
-# The first client is answered (LOADING while the model loads, READY after).
+# The first client is the documented command, run by the user after logging
+# in again (setpriv --init-groups: the groups from /etc/group, as login
+# reads them). It is answered LOADING while the model loads (exit 1) and
+# exits 0 once READY.
+doc_health() {
+    /usr/bin/setpriv --reuid=$USER --regid=$USER --init-groups \
+        gazesplat client health --addr $SOCK >/tmp/health 2>&1
+}
 t0=$(now)
-health
+doc_health
 t1=$(now)
 first=$(sed -n 's/^state //p' /tmp/health)
 if [ "$first" = READY ] || [ "$first" = LOADING ]; then
     pass "first client answered: HEALTH $first $(ms "$t0" "$t1") ms after connecting"
 else
-    fail "first HEALTH: $(cat /tmp/health)"
+    fail "first HEALTH (as \$USER): $(cat /tmp/health)"
 fi
-waitfor 120 ready && pass "HEALTH READY $(ms "$t0" "$(now)") ms after the first connection" ||
+if waitfor 120 doc_health && grep -q '^state READY' /tmp/health; then
+    pass "gazesplat client health --addr $SOCK (as \$USER): exit 0, READY $(ms "$t0" "$(now)") ms after the first connection"
+else
     fail "not READY within 120 s: $(cat /tmp/health)"
+fi
 start=$(prop $U ExecMainStartTimestampMonotonic)
 t0us=$(awk -v a="$t0" 'BEGIN { printf "%d", a * 1000000 }')
 [ "${start:-0}" -ge "$t0us" ] && pass "$U started by that connection (at $start us, client at $t0us us)" ||
@@ -97,7 +161,6 @@ else
 fi
 
 # 2. The socket's group: a member is served, anyone else refused at connect.
-sed -i "/^gazesplat:/ s/:\$/:gsmember/" /etc/group
 if health --reuid=gsmember --regid=gsmember --init-groups && grep -q '^state READY' /tmp/health; then
     pass "gsmember (in group gazesplat) served"
 else

@@ -1,20 +1,23 @@
 #!/usr/bin/env python3
 """systemd tier (label vm): boots Debian 12's kernel under qemu (TCG, no KVM)
-with the host's systemd as PID 1 and gazesplat installed into the guest
-root by the build's own install rules (the files the .deb holds: `cmake
---install --strip` into a staging root), then systemd_guest.sh, started by
-the guest's systemd as a service, checks socket activation, the socket's
-group, the watchdog, reload, stop and a USB hot-plug reaching the daemon's
-live pipeline under the shipped unit. The shipped units are used unmodified;
-the configuration (a conffile) gets the live keys appended, as an
-administrator would. Needs no root. Exit 0 when the guest reports RESULT PASS.
+with the host's systemd as PID 1 and the .deb that cpack makes from the
+build in the guest root. systemd_guest.sh, started by the guest's systemd
+as a service, installs it with docs/usage.md's commands as written (apt
+install ./FILE.deb offline, usermod -aG gazesplat USER, systemctl enable
+--now gazesplatd.socket, gazesplat client health --addr ...), then checks
+socket activation, the socket's group, the sandbox, the watchdog, reload,
+stop and a USB hot-plug reaching the daemon's live pipeline under the
+shipped unit. The shipped units are used unmodified; the configuration (a
+conffile) gets the live keys appended, as an administrator would. Needs no
+root. Exit 0 when the guest reports RESULT PASS.
 
 The guest root is one uncompressed initramfs (the kernel's rootfs): the
-files of the host's systemd, libsystemd-shared, util-linux's setpriv,
-procps' kill, busybox and v4l2-ctl, udev from the VM cache
-(scripts/vm/prepare.sh), the ELF libraries all of them need (ldd), the
-module chains of v4l2loopback and xhci_pci with a modules.dep made here, and
-the staged package.
+files of the host's systemd, libsystemd-shared, apt, dpkg, perl-base and
+init-system-helpers, util-linux's setpriv, procps' kill, usermod, busybox
+and v4l2-ctl, udev from the VM cache (scripts/vm/prepare.sh), the ELF
+libraries all of them and the package need (ldd), the host's dpkg status
+(its packages meet the .deb's Depends), the module chains of v4l2loopback
+and xhci_pci with a modules.dep made here, and the .deb.
 
 usage: vm_systemd.py --build DIR --cache DIR --work DIR [--timeout S] [--stall S]
 """
@@ -36,11 +39,19 @@ sys.path.insert(0, HERE)
 import vm_live  # noqa: E402
 
 # The host packages whose files make the guest's userland (dpkg -L).
-HOST_PACKAGES = ["systemd", "libsystemd-shared", "libsystemd0"]
+# apt, dpkg, perl-base and init-system-helpers (deb-systemd-helper and
+# deb-systemd-invoke, which the package's maintainer scripts run) install the
+# .deb as a user does.
+HOST_PACKAGES = ["systemd", "libsystemd-shared", "libsystemd0", "apt", "libapt-pkg6.0", "dpkg",
+                 "perl-base", "init-system-helpers"]
 SYSTEMD_LIBDIR = "/usr/lib/x86_64-linux-gnu/systemd"
 # mount and umount: the API file system units (dev-mqueue.mount ...) run them.
 HOST_FILES = ["/usr/bin/busybox", "/usr/bin/setpriv", "/usr/bin/kill", "/usr/bin/v4l2-ctl",
-              "/usr/bin/mount", "/usr/bin/umount"]
+              "/usr/bin/mount", "/usr/bin/umount",
+              # dpkg wants ldconfig in PATH (and GNU tar, rm, diff over busybox's);
+              # usermod adds the user to the socket's group, reading login.defs.
+              "/usr/sbin/ldconfig", "/usr/bin/tar", "/usr/bin/rm", "/usr/bin/diff",
+              "/usr/sbin/usermod", "/etc/login.defs"]
 # Packages unpacked in the VM cache (the host has no udev). Its
 # libsystemd-shared stays there: the host's systemd binaries need the host's
 # (the same file name for every 252.x), and udev links against that name.
@@ -162,45 +173,71 @@ def run(cmd, **kw):
     return r.stdout
 
 
-def stage_package(build, stage):
-    """What the package holds: the build's install rules, stripped as the
-    .deb's binaries are, into a staging root."""
-    shutil.rmtree(stage, ignore_errors=True)
-    env = dict(os.environ, DESTDIR=stage)
-    run(["cmake", "--install", build, "--strip"], env=env)
-    conf = os.path.join(stage, "etc/gazesplat/gazesplatd.conf")
+def build_deb(build, out):
+    """The .deb a user installs: cpack from the build tree, as
+    tests/integration/test_package.py runs it (docs/usage.md: cd build && cpack)."""
+    shutil.rmtree(out, ignore_errors=True)
+    os.makedirs(out)
+    run(["cpack", "-G", "DEB", "-B", out, "--config", os.path.join(build, "CPackConfig.cmake")],
+        cwd=build, timeout=400)
+    debs = [f for f in os.listdir(out) if f.endswith(".deb")]
+    if len(debs) != 1:
+        raise SystemExit("vm: cpack made %s in %s" % (debs, out))
+    return os.path.join(out, debs[0])
+
+
+def inspect_deb(deb, tree):
+    """The package's files, unpacked on the host only to be read: the model
+    its configuration names and the ELF files whose libraries the guest needs.
+    The guest gets the .deb itself."""
+    shutil.rmtree(tree, ignore_errors=True)
+    run(["dpkg-deb", "-x", deb, tree])
+    conf = os.path.join(tree, "etc/gazesplat/gazesplatd.conf")
     if not os.path.exists(conf):
-        raise SystemExit("vm: the install put down no etc/gazesplat/gazesplatd.conf")
-    # The model the installed configuration names must be in the stage (the
+        raise SystemExit("vm: the package holds no etc/gazesplat/gazesplatd.conf")
+    # The model the installed configuration names must be in the package (the
     # name of the default model may change; it is read, never assumed).
     m = re.search(r"^model\s*=\s*(\S+)", open(conf).read(), re.M)
-    if not m or not os.path.isfile(stage + m.group(1)):
-        raise SystemExit("vm: the installed configuration names no installed model (%s)" %
+    if not m or not os.path.isfile(tree + m.group(1)):
+        raise SystemExit("vm: the package's configuration names no packaged model (%s)" %
                          (m.group(1) if m else "no model line"))
-    with open(conf, "a") as f:
-        f.write(LIVE_CONF)
-    return m.group(1)
+    elfs = []
+    for dirpath, _, files in os.walk(tree):
+        for name in files:
+            path = os.path.join(dirpath, name)
+            if not os.path.islink(path):
+                with open(path, "rb") as f:
+                    if f.read(4) == b"\x7fELF":
+                        elfs.append(path)
+    return m.group(1), elfs
 
 
-def unit_value(path, key):
-    vals = re.findall(r"^%s=(.*)$" % re.escape(key), open(path).read(), re.M)
-    return vals[-1].split() if vals else []
-
-
-def enable_units(root, stage):
-    """What `systemctl enable gazesplatd.socket` (the package's postinst)
-    makes: a link in the .wants of each target its [Install] names."""
-    unitdir = None
-    for dirpath, _, files in os.walk(stage):
-        if "gazesplatd.socket" in files:
-            unitdir = dirpath
-    if not unitdir:
-        raise SystemExit("vm: the install put down no gazesplatd.socket")
-    guest_dir = "/" + os.path.relpath(unitdir, stage)
-    for target in unit_value(os.path.join(unitdir, "gazesplatd.socket"), "WantedBy"):
-        root.add("etc/systemd/system/%s.wants/gazesplatd.socket" % target, "l",
-                 guest_dir + "/gazesplatd.socket")
-    return guest_dir
+def add_dpkg_database(root):
+    """What apt and dpkg need offline: the host's /var/lib/dpkg/status (the
+    guest is made of the host's files, whose packages satisfy the .deb's
+    Depends), the file lists of the packages carried into the guest (an empty
+    list for the others: none of their files is there), an empty
+    /var/lib/apt/lists (no repository: the local .deb is the only candidate)
+    and apt's own /etc/apt (HOST_PACKAGES)."""
+    root.add("var/lib/dpkg/status", "f", "/var/lib/dpkg/status", 0o644)
+    for f in ("available", "diversions", "statoverride"):
+        root.add("var/lib/dpkg/" + f, "b", b"", 0o644)
+    for d in ("updates", "triggers", "alternatives", "info", "parts"):
+        root.add("var/lib/dpkg/" + d, "d", None, 0o755)
+    carried = set(HOST_PACKAGES)
+    names = re.findall(r"^Package: (\S+)\n(?:.+\n)*?Architecture: (\S+)",
+                       open("/var/lib/dpkg/status").read(), re.M)
+    for name, arch in names:
+        for fname in (name + ":" + arch + ".list", name + ".list"):
+            host = "/var/lib/dpkg/info/" + fname
+            if os.path.exists(host):
+                if name in carried:
+                    root.add("var/lib/dpkg/info/" + fname, "f", host, 0o644)
+                else:
+                    root.add("var/lib/dpkg/info/" + fname, "b", b"", 0o644)
+                break
+    for d in ("var/lib/apt/lists/partial", "var/cache/apt/archives/partial", "var/log/apt"):
+        root.add(d, "d", None, 0o755)
 
 
 def add_packages(root, cache):
@@ -238,9 +275,9 @@ def needed_libraries(elf):
     return vm_live.ldd(elf, [SYSTEMD_LIBDIR])
 
 
-def add_libraries(root):
+def add_libraries(root, extra_elfs):
     with concurrent.futures.ThreadPoolExecutor(2) as pool:
-        for libs in pool.map(needed_libraries, root.elf_files()):
+        for libs in pool.map(needed_libraries, root.elf_files() + extra_elfs):
             for lib in libs:
                 if root.canon(lib) not in root.entries:
                     root.add(lib, "f", os.path.realpath(lib), 0o755)
@@ -270,19 +307,17 @@ def add_modules(root, cache, krel, work):
     root.add_tree("usr/lib/modules/" + krel, dst)
 
 
-def add_config(root, stage):
-    root.add_tree("", stage)
-    enable_units(root, stage)
-    examples = os.path.join(stage, "usr/share/doc/gazesplat/examples",
-                            "gazesplat-v4l2loopback.modules-load.conf")
-    if not os.path.exists(examples):
-        raise SystemExit("vm: the install put down no modules-load.d example")
-    # As the example's own comment says: copied to /etc/modules-load.d.
-    root.add("etc/modules-load.d/gazesplat-v4l2loopback.conf", "f", examples, 0o644)
+def add_config(root, deb):
+    # The .deb where a user has it after cpack; the guest installs it with apt.
+    root.add("usr/lib/gs-vm/build/" + os.path.basename(deb), "f", deb, 0o644)
+    root.add("usr/lib/gs-vm/live.conf", "b", LIVE_CONF.encode(), 0o644)
     root.add("etc/modules-load.d/gs-vm.conf", "b", b"xhci_pci\n", 0o644)
     root.add("etc/passwd", "b", b"root:x:0:0:root:/root:/bin/sh\n"
-             b"gsmember:x:1001:1001::/:/bin/sh\ngsother:x:1002:1002::/:/bin/sh\n", 0o644)
-    root.add("etc/group", "b", b"root:x:0:\ngsmember:x:1001:\ngsother:x:1002:\n", 0o644)
+             b"gsmember:x:1001:1001::/:/bin/sh\ngsother:x:1002:1002::/:/bin/sh\n"
+             b"_apt:x:42:65534::/nonexistent:/usr/sbin/nologin\n"
+             b"nobody:x:65534:65534:nobody:/nonexistent:/usr/sbin/nologin\n", 0o644)
+    root.add("etc/group", "b", b"root:x:0:\ngsmember:x:1001:\ngsother:x:1002:\n"
+             b"nogroup:x:65534:\n", 0o644)
     # A fixed machine id: no first-boot presets.
     root.add("etc/machine-id", "b", b"6a5f0e4c2b8d4e1f9a3c7b5d0e2f4a68\n", 0o444)
     root.add("etc/os-release", "f", os.path.realpath("/etc/os-release"), 0o644)
@@ -300,19 +335,22 @@ def add_config(root, stage):
 
 
 def build_initramfs(args, krel, out_path):
-    stage = os.path.join(args.work, "stage")
-    model = stage_package(args.build, stage)
+    t0 = time.time()
+    deb = build_deb(args.build, os.path.join(args.work, "deb"))
+    print("vm: cpack made %s in %.1f s" % (os.path.basename(deb), time.time() - t0), flush=True)
+    model, elfs = inspect_deb(deb, os.path.join(args.work, "deb-tree"))
     root = Root()
     add_packages(root, args.cache)
-    add_config(root, stage)
+    add_dpkg_database(root)
+    add_config(root, deb)
     add_modules(root, args.cache, krel, args.work)
-    add_libraries(root)
+    add_libraries(root, elfs)
     return root.write_cpio(out_path), model
 
 
 def main():
     ap = argparse.ArgumentParser()
-    ap.add_argument("--build", required=True, help="the build tree (its install rules)")
+    ap.add_argument("--build", required=True, help="the build tree (cpack makes the .deb there)")
     ap.add_argument("--cache", required=True)
     ap.add_argument("--work", required=True)
     ap.add_argument("--timeout", type=float, default=600, help="whole run, boot included (s)")
