@@ -206,9 +206,10 @@ int cli_split_paths(const cli_command *cmd, const char *flag, const char *s, int
         if (c)
             *c = 0;
         if (!*p || *n == max) {
+            int empty = !*p;
             free(b);
-            return *p ? cli_usage_error(cmd, "%s: more than %d images", flag, max)
-                      : cli_usage_error(cmd, "%s: empty item %d", flag, *n);
+            return empty ? cli_usage_error(cmd, "%s: empty item %d", flag, *n)
+                         : cli_usage_error(cmd, "%s: more than %d images", flag, max);
         }
         out[(*n)++] = p;
         if (!c)
