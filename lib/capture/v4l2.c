@@ -29,6 +29,7 @@ struct gs_cap {
     gs_cap_config cfg;
     char *path;     /* the device opened (a usb: spec's node, found at each open) */
     char *spec;     /* cfg.path as given */
+    gs_cap_resolve_opts resolve; /* where a usb: spec is looked up */
     const gs_cap_ops *ops;
     int fd;
     int streaming;
@@ -104,6 +105,11 @@ int gs_cap_create(const gs_cap_config *cfg, gs_cap **out, gs_error *err)
     cap->path = path;
     cap->spec = spec;
     cap->cfg.path = spec;
+    if (cfg->resolve)
+        cap->resolve = *cfg->resolve;
+    else
+        cap->resolve = (gs_cap_resolve_opts){NULL, NULL, 1};
+    cap->cfg.resolve = NULL;
     if (!cap->cfg.nbuffers)
         cap->cfg.nbuffers = 4;
     if (!cap->cfg.timeout_ms)
@@ -298,8 +304,7 @@ static int open_device(gs_cap *cap, gs_error *err)
         /* A camera named by USB identity is looked up at every open: it
          * may arrive after the start, or come back as another videoN. */
         char dev[256];
-        gs_cap_resolve_opts ro = {NULL, NULL, 1};
-        int r = gs_cap_resolve(cap->spec, &ro, dev, sizeof dev, err);
+        int r = gs_cap_resolve(cap->spec, &cap->resolve, dev, sizeof dev, err);
         if (r != GS_OK)
             return r;
         char *p = strdup(dev);

@@ -1,6 +1,8 @@
 /* Camera choice by USB identity through a fake sysfs tree: two cameras of
  * the same model told apart by serial, the capture node preferred over the
- * metadata node, malformed ids refused. */
+ * metadata node, malformed ids refused; and a capture opened by a usb:
+ * spec looks the camera up at every open (plugged in after the start, back
+ * as another videoN). */
 #define _GNU_SOURCE
 #include <limits.h>
 #include <stdio.h>
@@ -67,6 +69,67 @@ static void expect(const char *spec, int code, const char *want)
         CHECK_MSG(strcmp(path, want) == 0, "%s -> '%s', want '%s'", spec, path, want);
 }
 
+/* A capture whose opens are recorded (and fail: no device behind them). */
+static char opened[8][256];
+static int n_opened;
+static int64_t fake_clock;
+
+static int rec_open(void *ctx, const char *path, int flags)
+{
+    (void)ctx, (void)flags;
+    if (n_opened < 8)
+        snprintf(opened[n_opened], sizeof opened[0], "%s", path);
+    n_opened++;
+    return -2; /* ENOENT */
+}
+static int64_t rec_now(void *ctx)
+{
+    (void)ctx;
+    return fake_clock += 1000000000; /* a second a call: every back-off has passed */
+}
+static void rec_sleep(void *ctx, int64_t ns)
+{
+    (void)ctx;
+    fake_clock += ns;
+}
+
+static void reopen_by_spec(void)
+{
+    gs_cap_ops ops = {0};
+    ops.open = rec_open;
+    ops.now_ns = rec_now;
+    ops.sleep_ns = rec_sleep;
+    gs_cap_resolve_opts o = {root, "/devx", 0};
+    gs_cap_config cfg = gs_cap_config_default("usb:abcd:0001");
+    cfg.ops = &ops;
+    cfg.resolve = &o;
+    gs_cap *cap = NULL;
+    gs_error e = {0};
+    CHECK(gs_cap_create(&cfg, &cap, &e) == GS_OK);
+    gs_cap_frame fr;
+    /* not plugged in: no open at all, an I/O error naming the spec */
+    CHECK(gs_cap_grab(cap, &fr, &e) == GS_ERR_IO);
+    CHECK_MSG(n_opened == 0 && strstr(e.msg, "usb:abcd:0001"), "before the camera: %d opens, '%s'",
+              n_opened, e.msg);
+    /* plugged in as video11: the next open goes there */
+    usbdev("1-4", "abcd", "0001", NULL);
+    node(11, "1-4", 0);
+    gs_cap_kick(cap);
+    CHECK(gs_cap_grab(cap, &fr, &e) == GS_ERR_IO);
+    CHECK_MSG(n_opened == 1 && strcmp(opened[0], "/devx/video11") == 0, "plugged in: %d opens, '%s'",
+              n_opened, n_opened ? opened[0] : "");
+    /* unplugged and back as video12 */
+    char link[PATH_MAX * 2];
+    snprintf(link, sizeof link, "%s/class/video4linux/video11/device", root);
+    CHECK(unlink(link) == 0);
+    node(12, "1-4", 0);
+    gs_cap_kick(cap);
+    CHECK(gs_cap_grab(cap, &fr, &e) == GS_ERR_IO);
+    CHECK_MSG(n_opened == 2 && strcmp(opened[1], "/devx/video12") == 0, "back as video12: %d opens, '%s'",
+              n_opened, n_opened > 1 ? opened[1] : "");
+    gs_cap_destroy(cap);
+}
+
 int main(void)
 {
     snprintf(root, sizeof root, "%s/gs_sysfs_XXXXXX", getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
@@ -100,6 +163,8 @@ int main(void)
     gs_cap_resolve_opts none = {"/nonexistent-sysfs", NULL, 0};
     char path[64];
     CHECK_EQ_INT(gs_cap_resolve("usb:1:2", &none, path, sizeof path, NULL), GS_ERR_IO);
+
+    reopen_by_spec();
 
     char cmd[PATH_MAX + 16];
     snprintf(cmd, sizeof cmd, "rm -rf '%s'", root);

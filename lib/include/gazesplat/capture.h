@@ -89,6 +89,9 @@ typedef struct gs_cap_config {
     int backoff_min_ms;      /* first reopen delay (0: 100) */
     int backoff_max_ms;      /* delay doubles up to this (0: 1000) */
     const gs_cap_ops *ops;   /* NULL: gs_cap_ops_system() */
+    /* Where a usb: path is looked up (copied; its strings must outlive the
+     * capture). NULL: the system's /sys and /dev, with libusb's names. */
+    const struct gs_cap_resolve_opts *resolve;
 } gs_cap_config;
 
 /* A config with the defaults above for path, 640x480 at 30 fps, AUTO. */
@@ -201,7 +204,7 @@ int gs_cap_usb_id_parse(const char *spec, gs_cap_usb_id *id, gs_error *err);
 /* Where to look: sysfs_root (NULL: "/sys") and dev_root (NULL: "/dev") let
  * tests point at a fake tree. use_libusb: also enumerate with libusb and
  * keep only devices it lists (skipped when libusb cannot start). */
-typedef struct gs_cap_resolve_opts {
+typedef struct gs_cap_resolve_opts { /* gs_cap_resolve */
     const char *sysfs_root;
     const char *dev_root;
     int use_libusb;
