@@ -425,6 +425,21 @@ static void state_to_frame(const gs_model_ctx *c, const fit_state *s,
     fr->gaze[1] = s->x[V_GAZE + 1];
 }
 
+/* The image (planar, 0..1) and the mask's weights a fit's loss compares
+ * against. */
+static void fit_target_fill(fit_bufs *b, int S, const uint8_t *rgb, size_t stride,
+                            const uint8_t *mask)
+{
+    size_t plane = (size_t)S * S;
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            size_t i = (size_t)y * S + x;
+            for (int k = 0; k < 3; k++)
+                b->target[k * plane + i] = rgb[(size_t)y * stride + 3 * x + k] / 255.0f;
+            b->w[i] = mask ? mask[i] / 255.0f : 1.0f;
+        }
+}
+
 static int fit_bufs_init(fit_bufs *b, const gs_model_ctx *c,
                          const uint8_t *rgb, size_t stride,
                          const uint8_t *mask)
@@ -439,14 +454,7 @@ static int fit_bufs_init(fit_bufs *b, const gs_model_ctx *c,
     b->ssim_scratch = malloc(b->ssim_len * sizeof(float));
     if (!b->target || !b->w || !b->pred || !b->dpred || !b->ssim_scratch)
         return GS_ERR_NOMEM;
-    for (int y = 0; y < S; y++)
-        for (int x = 0; x < S; x++) {
-            size_t i = (size_t)y * S + x;
-            for (int k = 0; k < 3; k++)
-                b->target[k * plane + i] =
-                    rgb[(size_t)y * stride + 3 * x + k] / 255.0f;
-            b->w[i] = mask ? mask[i] / 255.0f : 1.0f;
-        }
+    fit_target_fill(b, S, rgb, stride, mask);
     return GS_OK;
 }
 
@@ -569,16 +577,7 @@ static int fit_bufs_init_with(fit_bufs *b, const fit_bufs *with,
     b->shared = 1;
     if (!own.target || !own.w)
         return GS_ERR_NOMEM;
-    int S = c->S;
-    size_t plane = (size_t)S * S;
-    for (int y = 0; y < S; y++)
-        for (int x = 0; x < S; x++) {
-            size_t i = (size_t)y * S + x;
-            for (int k = 0; k < 3; k++)
-                b->target[k * plane + i] =
-                    rgb[(size_t)y * stride + 3 * x + k] / 255.0f;
-            b->w[i] = mask ? mask[i] / 255.0f : 1.0f;
-        }
+    fit_target_fill(b, c->S, rgb, stride, mask);
     return GS_OK;
 }
 
