@@ -15,6 +15,7 @@
 
 #include "cli.h"
 #include "gazesplat/model.h"
+#include "gazesplat/synth.h"
 
 static void vreport(const cli_command *cmd, const char *fmt, va_list ap)
 {
@@ -445,4 +446,41 @@ int cli_parse_fit_lr(const char *s, double *code, double *colour)
     *code = v[0];
     *colour = v[1];
     return 0;
+}
+
+/* --kappa off | literature | H,HSD,V,VSD (degrees). */
+int cli_parse_kappa(const cli_command *cmd, const char *v, gs_synth_kappa *k)
+{
+    memset(k, 0, sizeof *k);
+    if (!strcmp(v, "off"))
+        return CLI_PARSED;
+    if (!strcmp(v, "literature")) {
+        gs_synth_kappa_literature(k);
+        return CLI_PARSED;
+    }
+    double f[4];
+    const char *p = v;
+    int n = 0;
+    while (n < 4) {
+        char *e;
+        f[n] = strtod(p, &e);
+        if (e == p || !isfinite(f[n]) || strspn(p, "0123456789+-.eE") < (size_t)(e - p))
+            break;
+        n++;
+        p = e;
+        if (n < 4 && *p++ != ',')
+            break;
+    }
+    if (n < 4 || *p != '\0')
+        return cli_usage_error(cmd, "--kappa: want off, literature or H,HSD,V,VSD "
+                               "(four numbers, degrees); got '%s'", v);
+    k->enabled = 1;
+    k->h_mean_deg = f[0];
+    k->h_sd_deg = f[1];
+    k->v_mean_deg = f[2];
+    k->v_sd_deg = f[3];
+    gs_error err = {0, ""};
+    if (gs_synth_kappa_check(k, &err) != GS_OK)
+        return cli_usage_error(cmd, "--kappa: %s", err.msg);
+    return CLI_PARSED;
 }

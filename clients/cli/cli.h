@@ -35,6 +35,7 @@ extern const cli_command cli_estimate_command;
 extern const cli_command cli_eval_estimator_command;
 extern const cli_command cli_eval_command;
 extern const cli_command cli_eval_downstream_command;
+extern const cli_command cli_eval_range_command;
 extern const cli_command cli_model_command;
 extern const cli_command cli_augment_command;
 extern const cli_command cli_eval_photos_command;
@@ -96,6 +97,11 @@ int cli_parse_long(const char *s, long lo, long hi, long *out);
 /* --fit-lr's "CODE[,COLOUR]": each in (0, 10] (doubles, as given); COLOUR
  * defaults to CODE / 6, the defaults' ratio. Returns 0 or -1. */
 int cli_parse_fit_lr(const char *s, double *code, double *colour);
+/* --kappa off | literature | H,HSD,V,VSD (degrees) into *k; CLI_PARSED,
+ * or a usage error of cmd naming the option. */
+struct gs_synth_kappa;
+int cli_parse_kappa(const cli_command *cmd, const char *v,
+                    struct gs_synth_kappa *k);
 
 /* A rate: a finite decimal number in (0, hi], read as a double (so 0.004
  * on the command line is the 0.004 a protocol field or a config key

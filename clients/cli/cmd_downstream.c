@@ -56,18 +56,34 @@ const cli_command cli_eval_downstream_command = {
     "  --reuse-fits        take each identity's fit from DIR/fits/ when\n"
     "                      it was made with this model, --iters, --fit-lr\n"
     "                      and input (each file is keyed by them; any\n"
-    "                      other is fitted again and rewritten)\n",
+    "                      other is fitted again and rewritten)\n"
+    "  --first-identity N  run identities N..N+--identities-1 (0): a long\n"
+    "                      run split over several processes or sessions\n"
+    "\n"
+    "The calibration experiment (docs/eval.md \"Calibration\"):\n"
+    "  --kappa SPEC        each identity gets its own angle kappa, as\n"
+    "                      gazesplat synth --kappa (off, literature or\n"
+    "                      H,HSD,V,VSD degrees); labels give the visual axis\n"
+    "  --subject-from-k    for each k, fit one subject from the k real\n"
+    "                      images together and redirect from them in turn\n"
+    "                      (default: from real image 1 for every k)\n"
+    "  --calibrate         the fits find each image's gaze (head pose given);\n"
+    "                      the renders aim at target + the mean of fitted -\n"
+    "                      labelled gaze over the fitted images, labelled the\n"
+    "                      target; DIR/subjects.csv lists the offsets\n"
+    "  --ks LIST           only these k, e.g. 1,3,9 (default 1..--max-k)\n",
     run_downstream,
 };
 
 enum {
     O_MODEL, O_OUT, O_EST, O_IDS, O_TESTS, O_SET, O_MAXK, O_STEPS, O_BATCH,
-    O_LR, O_FRAC, O_ITERS, O_FIT_LR, O_SEED, O_THREADS, O_REUSE, O_N
+    O_LR, O_FRAC, O_ITERS, O_FIT_LR, O_SEED, O_THREADS, O_REUSE, O_FIRST,
+    O_KAPPA, O_FROM_K, O_CALIB, O_KS, O_N
 };
 
 typedef struct ds_cli {
     gs_eval_ds_options o;
-    int identities, threads, reuse;
+    int identities, first, threads, reuse;
     const char *model, *est, *out;
     char line[2048];          /* the command as run */
     double fit_lr_code;       /* the code rate the fits run at (reported) */
@@ -104,6 +120,45 @@ static int opt_real(const cli_opt *o, double lo, double hi, int open_lo,
         return -1;
     *v = x;
     return 0;
+}
+
+/* --ks: a comma-separated list of k in 1..max_k into a bit set. */
+static int parse_ks(const char *v, int max_k, unsigned *ks)
+{
+    *ks = 0;
+    const char *p = v;
+    for (;;) {
+        char item[16];
+        size_t n = strcspn(p, ",");
+        long k;
+        if (n == 0 || n >= sizeof item)
+            return -1;
+        memcpy(item, p, n);
+        item[n] = '\0';
+        if (cli_parse_long(item, 1, max_k, &k))
+            return -1;
+        *ks |= 1u << k;
+        if (!p[n])
+            return 0;
+        p += n + 1;
+    }
+}
+
+static int parse_calibration(const cli_opt *o, ds_cli *d)
+{
+    const cli_command *cmd = &cli_eval_downstream_command;
+    if (opt_int(&o[O_FIRST], 0, 1000000, &d->first))
+        return cli_usage_error(cmd, "--first-identity: want 0..1000000");
+    if (o[O_KAPPA].value &&
+        cli_parse_kappa(cmd, o[O_KAPPA].value, &d->o.kappa) != CLI_PARSED)
+        return CLI_USAGE;
+    d->o.subject_from_k = o[O_FROM_K].value != NULL;
+    d->o.calibrate = o[O_CALIB].value != NULL;
+    if (o[O_KS].value && parse_ks(o[O_KS].value, d->o.max_k, &d->o.ks))
+        return cli_usage_error(cmd, "--ks: want a comma-separated list of k "
+                               "in 1..%d (--max-k); got '%s'", d->o.max_k,
+                               o[O_KS].value);
+    return CLI_OK;
 }
 
 static int parse(const cli_opt *o, ds_cli *d)
@@ -147,27 +202,46 @@ static int parse(const cli_opt *o, ds_cli *d)
     if (o[O_EST].value)
         d->est = o[O_EST].value;
     d->reuse = o[O_REUSE].value != NULL;
-    return CLI_OK;
+    return parse_calibration(o, d);
+}
+
+/* Whether row k is in the run: k = 0 and the k of --ks. */
+static int row_runs(const gs_eval_ds_options *o, int k)
+{
+    return k == 0 || (k <= o->max_k && (!o->ks || (o->ks >> k & 1u)));
 }
 
 static void csv_rows(FILE *f, int id, const gs_eval_ds_result *r,
-                     int max_k)
+                     const gs_eval_ds_options *o)
 {
     unsigned long long seed = gs_synth_split_seed(GS_SYNTH_TEST,
                                                   (uint64_t)id);
-    for (int k = 0; k <= max_k; k++)
-        for (int c = 0; c < GS_EVAL_DS_CONDITIONS; c++)
+    for (int k = 0; k <= o->max_k; k++)
+        for (int c = 0; c < GS_EVAL_DS_CONDITIONS && row_runs(o, k); c++)
             fprintf(f, "%d,%llu,%d,%s,%.4f\n", id, seed, k,
                     gs_eval_ds_condition_name(c), r->err[k][c]);
 }
 
 /* Mean over the identities that finished, per k and condition. */
+/* One row per identity and k of the calibration's subjects: the kappa
+ * drawn and the offset the renders aimed with. */
+static void subjects_rows(FILE *f, int id, const gs_eval_ds_result *r,
+                          const gs_eval_ds_options *o)
+{
+    for (int k = 1; k <= o->max_k; k++)
+        if (row_runs(o, k))
+            fprintf(f, "%d,%d,%.4f,%.4f,%.4f,%.4f\n", id, k, r->kappa_h_deg,
+                    r->kappa_v_deg, r->offset_deg[k][0], r->offset_deg[k][1]);
+}
+
 static void md_table(FILE *f, const gs_eval_ds_result *res, const int *ok,
-                     int n, int max_k)
+                     int n, const gs_eval_ds_options *o)
 {
     fputs("| k | real only | real + ours | real + warp |\n"
           "|---:|---:|---:|---:|\n", f);
-    for (int k = 0; k <= max_k; k++) {
+    for (int k = 0; k <= o->max_k; k++) {
+        if (!row_runs(o, k))
+            continue;
         fprintf(f, "| %d", k);
         for (int c = 0; c < GS_EVAL_DS_CONDITIONS; c++) {
             double s = 0;
@@ -207,10 +281,21 @@ static void md_write(FILE *f, const ds_cli *d, const gs_eval_ds_result *res,
             o->fit_iters, d->fit_lr_code, d->fit_lr_code_model ? ", the model's" : "",
             o->fit_lr_colour,
             (unsigned long long)o->seed);
+    if (d->first)
+        fprintf(f, "Identities %d..%d.\n\n", d->first, d->first + n - 1);
+    if (o->kappa.enabled || o->subject_from_k || o->calibrate)
+        fprintf(f, "Calibration: kappa %s (h %.2f +- %.2f, v %.2f +- %.2f "
+                   "deg); the subject of each k from %s; %s.\n\n",
+                o->kappa.enabled ? "on" : "off", o->kappa.h_mean_deg,
+                o->kappa.h_sd_deg, o->kappa.v_mean_deg, o->kappa.v_sd_deg,
+                o->subject_from_k ? "its k real images" : "real image 1",
+                o->calibrate ? "fits find the gaze, renders aim at target + "
+                               "the mean fitted - labelled offset"
+                             : "fits given the labelled gaze");
     fputs("Mean gaze angle (degrees) of the fine-tuned estimator against "
           "the true labels of each identity's test images, mean over "
           "identities; k = 0 is the estimator as given.\n\n", f);
-    md_table(f, res, ok, n, o->max_k);
+    md_table(f, res, ok, n, o);
     if (done)
         fprintf(f, "\nPer identity: fit %.1f s (mean, %d reused), fit PSNR "
                    "%.2f dB; model renders %ld incremental, %ld full; one "
@@ -238,34 +323,43 @@ static int write_md(const ds_cli *d, const gs_eval_ds_result *res,
 
 /* Runs every identity, appending its rows to the CSV as it finishes. */
 static int run_all(const ds_cli *d, const gs_model *m, const gs_gaze_net *est,
-                   gs_pool *pool, FILE *csv, gs_eval_ds_result *res, int *ok)
+                   gs_pool *pool, FILE *csv, FILE *subj, gs_eval_ds_result *res,
+                   int *ok)
 {
     const cli_command *cmd = &cli_eval_downstream_command;
     int failed = 0;
     double t0 = cli_now_s();
     for (int i = 0; i < d->identities; i++) {
+        const int id = d->first + i;
         char fit[4300];
         snprintf(fit, sizeof fit, "%s/fits/seed%llu_%05d.bin", d->out,
-                 (unsigned long long)d->o.seed, i);
+                 (unsigned long long)d->o.seed, id);
         gs_error err = {0, ""};
-        ok[i] = gs_eval_downstream_identity(m, est, &d->o, i, fit, d->reuse,
+        ok[i] = gs_eval_downstream_identity(m, est, &d->o, id, fit, d->reuse,
                                             pool, &res[i], &err) == GS_OK;
         if (!ok[i]) {
             fprintf(stderr, "gazesplat eval-downstream: identity %d: %s\n",
-                    i, err.msg);
+                    id, err.msg);
             failed++;
             continue;
         }
         if (res[i].cache_write_failed)
             fprintf(stderr, "gazesplat eval-downstream: cannot write %s\n",
                     fit);
-        csv_rows(csv, i, &res[i], d->o.max_k);
+        csv_rows(csv, id, &res[i], &d->o);
         fflush(csv);
-        fprintf(stderr, "gazesplat eval-downstream: identity %d/%d: k=%d "
+        if (subj) {
+            subjects_rows(subj, id, &res[i], &d->o);
+            fflush(subj);
+        }
+        int kl = d->o.max_k;
+        while (kl > 0 && !row_runs(&d->o, kl))
+            kl--;
+        fprintf(stderr, "gazesplat eval-downstream: identity %d (%d/%d): k=%d "
                 "real %.2f ours %.2f warp %.2f (k=0 %.2f), fit %.0f s, "
-                "%.2f s per fine-tune, %.0f s in all\n", i + 1,
-                d->identities, d->o.max_k, res[i].err[d->o.max_k][0],
-                res[i].err[d->o.max_k][1], res[i].err[d->o.max_k][2],
+                "%.2f s per fine-tune, %.0f s in all\n", id, i + 1,
+                d->identities, kl, res[i].err[kl][0], res[i].err[kl][1],
+                res[i].err[kl][2],
                 res[i].err[0][0], res[i].fit_s, res[i].finetune_s,
                 cli_now_s() - t0);
     }
@@ -285,14 +379,26 @@ static int run_loaded(const ds_cli *d, const gs_model *m,
     int *ok = calloc((size_t)d->identities, sizeof *ok);
     gs_pool *pool = gs_pool_create(d->threads);
     int rc = CLI_OK;
+    FILE *subj = NULL;
+    if (csv && (d->o.kappa.enabled || d->o.calibrate)) {
+        char sp[4200];
+        snprintf(sp, sizeof sp, "%s/subjects.csv", d->out);
+        if (!(subj = fopen(sp, "w")))
+            rc = cli_fail(cmd, "cannot write %s", sp);
+        else
+            fputs("identity,k,kappa_h_deg,kappa_v_deg,offset_pitch_deg,"
+                  "offset_yaw_deg\n", subj);
+    }
     if (!csv)
         rc = cli_fail(cmd, "cannot write %s", path);
     else if (!res || !ok || !pool)
         rc = cli_fail(cmd, "out of memory");
     if (!rc) {
         fputs("identity,identity_seed,k,condition,gaze_err_deg\n", csv);
-        rc = run_all(d, m, est, pool, csv, res, ok);
+        rc = run_all(d, m, est, pool, csv, subj, res, ok);
     }
+    if (subj && fclose(subj) && !rc)
+        rc = cli_fail(cmd, "cannot write %s/subjects.csv", d->out);
     if (csv && fclose(csv) && !rc)
         rc = cli_fail(cmd, "cannot write %s", path);
     int md = res && ok ? write_md(d, res, ok) : CLI_FAIL;
@@ -342,7 +448,9 @@ static int run_downstream(int argc, char **argv)
         {"--steps", 1, NULL}, {"--batch", 1, NULL}, {"--lr", 1, NULL},
         {"--real-fraction", 1, NULL}, {"--iters", 1, NULL},
         {"--fit-lr", 1, NULL}, {"--seed", 1, NULL}, {"--threads", 1, NULL},
-        {"--reuse-fits", 0, NULL}};
+        {"--reuse-fits", 0, NULL}, {"--first-identity", 1, NULL},
+        {"--kappa", 1, NULL}, {"--subject-from-k", 0, NULL},
+        {"--calibrate", 0, NULL}, {"--ks", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);

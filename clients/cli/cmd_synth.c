@@ -118,44 +118,6 @@ static int write_template_ply(const char *path, const gs_synth_template *t)
     return bad ? -1 : 0;
 }
 
-/* --kappa off | literature | H,HSD,V,VSD (degrees). */
-static int parse_kappa(const char *v, gs_synth_kappa *k)
-{
-    const cli_command *cmd = &cli_synth_command;
-    memset(k, 0, sizeof *k);
-    if (!strcmp(v, "off"))
-        return CLI_PARSED;
-    if (!strcmp(v, "literature")) {
-        gs_synth_kappa_literature(k);
-        return CLI_PARSED;
-    }
-    double f[4];
-    const char *p = v;
-    int n = 0;
-    while (n < 4) {
-        char *e;
-        f[n] = strtod(p, &e);
-        if (e == p || !isfinite(f[n]) || strspn(p, "0123456789+-.eE") < (size_t)(e - p))
-            break;
-        n++;
-        p = e;
-        if (n < 4 && *p++ != ',')
-            break;
-    }
-    if (n < 4 || *p != '\0')
-        return cli_usage_error(cmd, "--kappa: want off, literature or H,HSD,V,VSD "
-                               "(four numbers, degrees); got '%s'", v);
-    k->enabled = 1;
-    k->h_mean_deg = f[0];
-    k->h_sd_deg = f[1];
-    k->v_mean_deg = f[2];
-    k->v_sd_deg = f[3];
-    gs_error err = {0, ""};
-    if (gs_synth_kappa_check(k, &err) != GS_OK)
-        return cli_usage_error(cmd, "--kappa: %s", err.msg);
-    return CLI_PARSED;
-}
-
 /* Parses the options that shape the generator. */
 static int parse_config(const cli_opt *o, gs_synth_gen_config *c, long *count,
                         long *first, long *threads, long *rows, double *spacing)
@@ -208,7 +170,7 @@ static int parse_config(const cli_opt *o, gs_synth_gen_config *c, long *count,
             return cli_usage_error(cmd, "--supersample: want 1 or 2; got '%s'", o[O_SS].value);
         c->supersample = (int)v;
     }
-    if (o[O_KAPPA].value && parse_kappa(o[O_KAPPA].value, &c->kappa) != CLI_PARSED)
+    if (o[O_KAPPA].value && cli_parse_kappa(&cli_synth_command, o[O_KAPPA].value, &c->kappa) != CLI_PARSED)
         return CLI_USAGE;
     if (o[O_THREADS].value && cli_parse_long(o[O_THREADS].value, 1, 256, threads))
         return cli_usage_error(cmd, "--threads: want 1..256; got '%s'", o[O_THREADS].value);

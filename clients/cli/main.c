@@ -22,6 +22,7 @@ static const cli_command *const commands[] = {
     &cli_eval_estimator_command,
     &cli_eval_command,
     &cli_eval_downstream_command,
+    &cli_eval_range_command,
     &cli_eval_photos_command,
     &cli_check_labels_command,
     &cli_model_command,

@@ -24,6 +24,9 @@
 #define TAG_TARGET 0x647374676dull /* "dstgm" */
 #define TAG_BATCH 0x6473626174ull  /* "dsbat" */
 
+#define GS_DS_DEG (180.0 / 3.14159265358979323846) /* degrees per radian */
+#define OFFSET_MAX (15.0 / GS_DS_DEG) /* largest calibration offset */
+
 static double now_s(void)
 {
     struct timespec ts;
@@ -70,6 +73,16 @@ void gs_eval_ds_options_default(gs_eval_ds_options *o)
     o->fit_lr_code = 0; /* the model's rate, else GS_FIT_LR_CODE_DEFAULT */
     o->fit_lr_colour = GS_FIT_LR_COLOUR_DEFAULT;
     o->seed = 1;
+    memset(&o->kappa, 0, sizeof o->kappa);
+    o->subject_from_k = 0;
+    o->calibrate = 0;
+    o->ks = 0;
+}
+
+/* Whether k is one of the run's k. */
+static int k_runs(const gs_eval_ds_options *o, int k)
+{
+    return k >= 1 && k <= o->max_k && (!o->ks || (o->ks >> k & 1u));
 }
 
 int gs_eval_ds_options_check(const gs_eval_ds_options *o, gs_error *err)
@@ -96,6 +109,10 @@ int gs_eval_ds_options_check(const gs_eval_ds_options *o, gs_error *err)
     else if (!(o->fit_lr_code >= 0 && o->fit_lr_code <= 10 &&
                o->fit_lr_colour >= 0 && o->fit_lr_colour <= 10))
         what = "fit rates outside [0, 10]";
+    else if (o->ks & ~(((2u << o->max_k) - 1u) & ~1u))
+        what = "ks names a k outside 1..max_k";
+    if (!what && o->kappa.enabled && gs_synth_kappa_check(&o->kappa, err))
+        return GS_ERR_ARG;
     return what ? gs_error_set(err, GS_ERR_ARG, "eval-downstream: %s", what)
                 : GS_OK;
 }
@@ -166,9 +183,12 @@ typedef struct ds_run {
     int identity, S, threads;
     double focal, d_n;
     gs_pool *pool;
-    gs_synth_sample in;        /* real sample 1 (fit, warp input) */
-    gs_synth_scene in_scene;
+    gs_synth_sample src[GS_EVAL_DS_POOL];  /* the real pool (fit, warp
+                                              inputs); src[0] = sample 1 */
+    gs_synth_scene src_scene[GS_EVAL_DS_POOL];
     image_set real, test, ours, warp;
+    long renders_incremental, renders_full;
+    double fit_s;
     /* fine-tuning */
     gs_gaze_net *tuned;        /* the copy being fine-tuned */
     gs_gaze_net **work;        /* [threads] copies running the passes */
@@ -185,13 +205,16 @@ typedef struct ds_run {
     long step;
 } ds_run;
 
-/* Renders sample `index` of the identity into set slot i. */
+/* Renders sample `index` of the identity into set slot i; keep: the
+ * sample and its scene are kept as real pool image `index`. */
 static int render_into(ds_run *r, int index, image_set *set, int i,
-                       gs_synth_sample *keep, gs_error *err)
+                       int keep, gs_error *err)
 {
     gs_synth_scene sc;
     gs_synth_sample smp = {0};
     gs_eval_ds_scene(r->o->seed, r->identity, index, &sc);
+    if (r->o->kappa.enabled)
+        gs_synth_scene_set_kappa(&r->o->kappa, &sc);
     int rc = gs_eval_render_scene(&sc, r->S, r->d_n, r->focal, r->pool, &smp,
                                   err);
     if (rc)
@@ -202,8 +225,8 @@ static int render_into(ds_run *r, int index, image_set *set, int i,
                3 * (size_t)r->S);
     labels_of(&smp.labels, set->lab + 4 * i);
     if (keep) {
-        *keep = smp;
-        r->in_scene = sc;
+        r->src[index] = smp;
+        r->src_scene[index] = sc;
     } else {
         gs_synth_sample_free(&smp);
     }
@@ -214,18 +237,18 @@ static int render_ground_truth(ds_run *r, gs_error *err)
 {
     int rc = GS_OK;
     for (int i = 0; !rc && i < GS_EVAL_DS_POOL; i++)
-        rc = render_into(r, i, &r->real, i, i == 0 ? &r->in : NULL, err);
+        rc = render_into(r, i, &r->real, i, 1, err);
     for (int i = 0; !rc && i < r->o->test_images; i++)
-        rc = render_into(r, GS_EVAL_DS_POOL + i, &r->test, i, NULL, err);
+        rc = render_into(r, GS_EVAL_DS_POOL + i, &r->test, i, 0, err);
     return rc;
 }
 
-/* Labels of real sample 1 with the gaze turned to (pitch, yaw), head
+/* Labels of real pool image s with the gaze turned to (pitch, yaw), head
  * frame: the scene's labels through the same camera, without rendering. */
-static int target_labels(ds_run *r, double pitch, double yaw, float lab[4],
-                         gs_error *err)
+static int target_labels(ds_run *r, int s, double pitch, double yaw,
+                         float lab[4], gs_error *err)
 {
-    gs_synth_scene sc = r->in_scene;
+    gs_synth_scene sc = r->src_scene[s];
     sc.gaze_pitch = pitch;
     sc.gaze_yaw = yaw;
     gs_synth_camera cam;
@@ -238,65 +261,105 @@ static int target_labels(ds_run *r, double pitch, double yaw, float lab[4],
     return rc;
 }
 
-/* Fit (or the cached fit) on real sample 1. */
-static int fit(ds_run *r, const gs_model *m, gs_model_ctx *c,
-               const char *path, int reuse, gs_subject *sub,
+/* The subjects of real images 1..n (n = 1, or k with subject_from_k),
+ * fitted together, and with calibrate the offset the renders aim with.
+ * The fit of real sample 1 alone with its gaze given is cached in path. */
+static int fit(ds_run *r, const gs_model *m, gs_model_ctx *c, int n,
+               const char *path, int reuse, gs_subject *sub, double off[2],
                gs_eval_ds_result *res, gs_error *err)
 {
+    const gs_eval_ds_options *o = r->o;
+    const int cache = path && n == 1 && !o->calibrate;
     /* the key hashes the model's parameters: only with a cache */
-    const uint64_t key = path ? gs_eval_fit_sample_key(m, &r->in, r->o->fit_iters,
-                                                       r->o->fit_lr_code,
-                                                       r->o->fit_lr_colour)
-                              : 0;
-    if (path && reuse &&
-        gs_eval_fit_cache_read(path, key, sub, &res->fit_s, NULL) == GS_OK) {
+    const uint64_t key = cache ? gs_eval_fit_sample_key(m, &r->src[0],
+                                                        o->fit_iters,
+                                                        o->fit_lr_code,
+                                                        o->fit_lr_colour)
+                               : 0;
+    double secs = 0;
+    if (cache && reuse &&
+        gs_eval_fit_cache_read(path, key, sub, &secs, NULL) == GS_OK) {
         res->fit_reused = 1;
     } else {
-        int rc = gs_eval_fit_sample(c, r->pool, &r->in, r->o->fit_iters,
-                                    r->o->fit_lr_code, r->o->fit_lr_colour, sub,
-                                    &res->fit_s, err);
+        int rc = gs_eval_fit_samples(c, r->pool, r->src, n, o->fit_iters,
+                                     o->fit_lr_code, o->fit_lr_colour,
+                                     o->calibrate, sub, &secs, err);
         if (rc)
             return rc;
-        if (path && gs_eval_fit_cache_write(path, key, sub, res->fit_s, NULL))
+        if (cache && gs_eval_fit_cache_write(path, key, sub, secs, NULL))
             res->cache_write_failed = 1;
     }
-    res->fit_psnr = sub->fit_psnr;
+    r->fit_s += secs;
+    off[0] = off[1] = 0;
+    for (int i = 0; o->calibrate && i < n; i++) {
+        off[0] += (sub[i].gaze_pitch - r->src[i].labels.gaze_head_pitch) / n;
+        off[1] += (sub[i].gaze_yaw - r->src[i].labels.gaze_head_yaw) / n;
+    }
+    /* Beyond kappa's range (|mean| <= 15 deg, gs_synth_kappa_check) an
+     * offset is the fit's error, not the person's: it is held there, and
+     * every aimed gaze stays inside the model's range. */
+    for (int a = 0; a < 2; a++)
+        off[a] = fmax(-OFFSET_MAX, fmin(OFFSET_MAX, off[a]));
+    if (n == 1 || !res->fit_psnr)
+        res->fit_psnr = sub[0].fit_psnr;
     return GS_OK;
 }
 
-/* The model's and the warp's set_size images of real sample 1. */
-static int redirect(ds_run *r, const gs_model *m, const char *path,
-                    int reuse, gs_eval_ds_result *res, gs_error *err)
+/* The model's and the warp's `count` images, redirected from the n real
+ * images: target j from image j mod n, at its head pose. The model's are
+ * made image by image (one subject and head pose: after the first render
+ * only the eyes are redone, the sweep path). */
+static int redirect(ds_run *r, gs_model_ctx *c, const gs_subject *sub,
+                    int n, const double off[2], int count, gs_error *err)
+{
+    size_t st = 3 * (size_t)r->S;
+    int rc = GS_OK;
+    for (int s = 0; !rc && s < n; s++)
+        for (int j = s; !rc && j < count; j += n) {
+            double p, y;
+            gs_eval_ds_target(r->o->seed, r->identity, j, &p, &y);
+            rc = target_labels(r, s, p, y, r->ours.lab + 4 * j, err);
+            if (rc)
+                break;
+            memcpy(r->warp.lab + 4 * j, r->ours.lab + 4 * j,
+                   4 * sizeof(float));
+            gs_view v = {0};
+            v.gaze_pitch = p + off[0];
+            v.gaze_yaw = y + off[1];
+            rc = gs_model_render(c, r->pool, &sub[s], &v,
+                                 set_image(&r->ours, j, r->S), st, err);
+            if (!rc)
+                rc = gs_eval_warp_redirect(&r->src[s], p, y,
+                                           set_image(&r->warp, j, r->S), st,
+                                           err);
+        }
+    return rc;
+}
+
+/* Fits the subjects for k (k = 0: the one subject of every k) and makes
+ * the redirected sets the fine-tunes of that k draw from. */
+static int make_sets(ds_run *r, const gs_model *m, int k, const char *path,
+                     int reuse, gs_eval_ds_result *res, gs_error *err)
 {
     gs_model_ctx *c = gs_model_ctx_create(m);
     if (!c)
         return gs_error_set(err, GS_ERR_NOMEM, "eval-downstream: out of "
                             "memory");
-    gs_subject sub;
-    int rc = fit(r, m, c, path, reuse, &sub, res, err);
-    size_t st = 3 * (size_t)r->S;
-    for (int j = 0; !rc && j < r->o->set_size; j++) {
-        double p, y;
-        gs_eval_ds_target(r->o->seed, r->identity, j, &p, &y);
-        rc = target_labels(r, p, y, r->ours.lab + 4 * j, err);
-        if (rc)
-            break;
-        memcpy(r->warp.lab + 4 * j, r->ours.lab + 4 * j, 4 * sizeof(float));
-        /* Same subject and head pose every time: after the first render
-         * only the eyes are redone (the sweep path). */
-        gs_view v = {0};
-        v.gaze_pitch = p;
-        v.gaze_yaw = y;
-        rc = gs_model_render(c, r->pool, &sub, &v, set_image(&r->ours, j, r->S),
-                             st, err);
-        if (!rc)
-            rc = gs_eval_warp_redirect(&r->in, p, y,
-                                       set_image(&r->warp, j, r->S), st, err);
+    const int n = k ? k : 1;
+    gs_subject sub[GS_EVAL_DS_POOL];
+    double off[2] = {0, 0};
+    int rc = fit(r, m, c, n, path, reuse, sub, off, res, err);
+    if (!rc)
+        rc = redirect(r, c, sub, n, off, k ? r->o->set_size - k
+                                           : r->o->set_size, err);
+    for (int kk = k ? k : 1; kk <= (k ? k : GS_EVAL_DS_POOL); kk++) {
+        res->offset_deg[kk][0] = off[0] * GS_DS_DEG;
+        res->offset_deg[kk][1] = off[1] * GS_DS_DEG;
     }
     gs_model_ctx_stats cs;
     gs_model_ctx_get_stats(c, &cs);
-    res->renders_incremental = (long)cs.renders_incremental;
-    res->renders_full = (long)cs.renders_full;
+    r->renders_incremental += (long)cs.renders_incremental;
+    r->renders_full += (long)cs.renders_full;
     gs_model_ctx_destroy(c);
     return rc;
 }
@@ -492,21 +555,37 @@ static void run_free(ds_run *r)
     set_free(&r->test);
     set_free(&r->ours);
     set_free(&r->warp);
-    gs_synth_sample_free(&r->in);
+    for (int i = 0; i < GS_EVAL_DS_POOL; i++)
+        gs_synth_sample_free(&r->src[i]);
 }
 
-/* The fine-tunes of every k and condition, k = 0 first. */
-static int finetune_all(ds_run *r, gs_eval_ds_result *res, gs_error *err)
+/* The fine-tunes of every k and condition, k = 0 first; with
+ * subject_from_k the sets of each k are made before its fine-tunes. */
+static int finetune_all(ds_run *r, const gs_model *m, const char *path,
+                        int reuse, gs_eval_ds_result *res, gs_error *err)
 {
-    double k0;
+    double k0, tune = 0;
     int rc = measure(r, &k0, err), runs = 0;
     for (int c = 0; c < GS_EVAL_DS_CONDITIONS; c++)
         res->err[0][c] = k0;
-    double t0 = now_s();
-    for (int k = 1; !rc && k <= r->o->max_k; k++)
+    if (!rc && !r->o->subject_from_k)
+        rc = make_sets(r, m, 0, path, reuse, res, err);
+    for (int k = 1; !rc && k <= r->o->max_k; k++) {
+        if (!k_runs(r->o, k)) {
+            res->offset_deg[k][0] = res->offset_deg[k][1] = NAN;
+            continue;
+        }
+        if (r->o->subject_from_k)
+            rc = make_sets(r, m, k, path, reuse, res, err);
+        double t0 = now_s();
         for (int c = 0; !rc && c < GS_EVAL_DS_CONDITIONS; c++, runs++)
             rc = finetune(r, k, c, &res->err[k][c], err);
-    res->finetune_s = runs ? (now_s() - t0) / runs : NAN;
+        tune += now_s() - t0;
+    }
+    res->finetune_s = runs ? tune / runs : NAN;
+    res->fit_s = r->fit_s;
+    res->renders_incremental = r->renders_incremental;
+    res->renders_full = r->renders_full;
     return rc;
 }
 
@@ -543,10 +622,11 @@ int gs_eval_downstream_identity(const gs_model *m, const gs_gaze_net *est,
     rc = run_alloc(&r, est, err);
     if (!rc)
         rc = render_ground_truth(&r, err);
-    if (!rc)
-        rc = redirect(&r, m, fit_path, reuse_fit, res, err);
-    if (!rc)
-        rc = finetune_all(&r, res, err);
+    if (!rc) {
+        res->kappa_h_deg = r.src_scene[0].kappa_h * GS_DS_DEG;
+        res->kappa_v_deg = r.src_scene[0].kappa_v * GS_DS_DEG;
+        rc = finetune_all(&r, m, fit_path, reuse_fit, res, err);
+    }
     run_free(&r);
     return rc;
 }

@@ -66,6 +66,34 @@ int gs_eval_fit_sample_with(gs_model_ctx *c, gs_pool *pool,
     return rc;
 }
 
+int gs_eval_fit_samples(gs_model_ctx *c, gs_pool *pool,
+                        const gs_synth_sample *in, int k, int iters,
+                        double lr_code, double lr_colour, int free_gaze,
+                        gs_subject *out, double *secs, gs_error *err)
+{
+    if (!c || !in || !out)
+        return gs_error_set(err, GS_ERR_ARG, "eval fit: NULL argument");
+    if (k < 1 || k > GS_FIT_IMAGES_MAX)
+        return gs_error_set(err, GS_ERR_ARG, "eval fit: %d samples (want "
+                            "1..%d)", k, GS_FIT_IMAGES_MAX);
+    gs_fit_options o;
+    sample_options(iters, lr_code, lr_colour, &o);
+    gs_fit_image im[GS_FIT_IMAGES_MAX];
+    for (int i = 0; i < k; i++) {
+        gs_fit_options oi;
+        protocol_options(&o, &in[i], &oi);
+        if (free_gaze)
+            oi.known_gaze = 0;
+        gs_fit_image_from_options(&im[i], in[i].rgb, in[i].stride, &oi);
+    }
+    gs_fit_report rep;
+    double t0 = now_s();
+    int rc = gs_model_fit_images(c, pool, im, k, &o, out, &rep, err);
+    if (secs)
+        *secs = now_s() - t0;
+    return rc;
+}
+
 uint64_t gs_eval_fit_key(const gs_model *m, const gs_fit_options *base,
                          const gs_synth_sample *in)
 {

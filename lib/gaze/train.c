@@ -115,9 +115,12 @@ static void render_task(void *ctx, int task, int worker)
     lab[3] = (float)l->head_norm_yaw;
 }
 
-/* Renders indices [first, first + count) (count <= cache). */
+/* Renders indices [first, first + count) (count <= cache); nothing with a
+ * fixed set. */
 static int render(trainer *t, uint64_t first, uint64_t count, gs_error *err)
 {
+    if (t->o->data)
+        return GS_OK;
     t->first = first;
     gs_pool_for(t->pool, (int)count, render_task, t);
     for (uint64_t i = 0; i < count; i++)
@@ -131,7 +134,9 @@ static int render(trainer *t, uint64_t first, uint64_t count, gs_error *err)
 static size_t pick(const trainer *t, int b, int *flip)
 {
     uint64_t filled = (uint64_t)(t->step + 1) * (uint64_t)t->o->fresh;
-    if (filled > (uint64_t)t->o->cache)
+    if (t->o->data)
+        filled = (uint64_t)t->o->data_n;
+    else if (filled > (uint64_t)t->o->cache)
         filled = (uint64_t)t->o->cache;
     uint64_t h = mix(mix(t->o->seed, (uint64_t)t->step), (uint64_t)b);
     *flip = (int)(h >> 63);
@@ -170,7 +175,7 @@ static void batch_task(void *ctx, int b, int worker)
     trainer *t = ctx;
     int flip, S = t->S;
     size_t slot = pick(t, b, &flip), plane = (size_t)S * S;
-    const uint8_t *src = t->ring + slot * t->img_len;
+    const uint8_t *src = t->o->data ? t->o->data[slot] : t->ring + slot * t->img_len;
     float *img = t->img + (size_t)worker * t->img_len, lab[4], out[4], d[4];
     /* The shift and blur of this element: fixed by (seed, step, b). */
     uint64_t h = mix(mix(mix(t->o->seed, (uint64_t)t->step), (uint64_t)b), 0x5348494654ull);
@@ -188,7 +193,7 @@ static void batch_task(void *ctx, int b, int worker)
         }
     if (blur)
         blur121(img, t->tmp + (size_t)worker * t->img_len, S);
-    memcpy(lab, t->ring_lab + 4 * slot, sizeof lab);
+    memcpy(lab, t->o->data ? t->o->data_lab[slot] : t->ring_lab + 4 * slot, sizeof lab);
     if (flip) /* a mirror image looks the other way: yaws change sign */
         lab[1] = -lab[1], lab[3] = -lab[3];
     float *g = t->sgrad + (size_t)b * t->np;
@@ -207,7 +212,7 @@ static int trainer_init(trainer *t, gs_gaze_net *n, const gs_gaze_train_options 
     memset(t, 0, sizeof *t);
     t->n = n, t->o = o, t->pool = pool;
     t->threads = gs_pool_threads(pool);
-    t->S = o->render_size > 0 ? o->render_size : n->spec.input_size;
+    t->S = o->data ? o->data_size : o->render_size > 0 ? o->render_size : n->spec.input_size;
     t->img_len = 3 * (size_t)t->S * t->S;
     t->np = n->g.nparams;
     gs_synth_gen_config_default(&t->gen);
@@ -217,9 +222,10 @@ static int trainer_init(trainer *t, gs_gaze_net *n, const gs_gaze_train_options 
     t->gen.size = t->S;
     t->gen.rig = GS_SYNTH_RIG_NORMALIZED;
     t->gen.supersample = o->render_size > 0 ? 1 : 2;
-    size_t ntask = (size_t)(o->batch > o->cache ? o->batch : o->cache);
-    t->ring = malloc((size_t)o->cache * t->img_len);
-    t->ring_lab = malloc((size_t)o->cache * 4 * sizeof(float));
+    size_t ncache = o->data ? 1 : (size_t)o->cache; /* a fixed set needs no ring */
+    size_t ntask = (size_t)o->batch > ncache ? (size_t)o->batch : ncache;
+    t->ring = malloc(ncache * t->img_len);
+    t->ring_lab = malloc(ncache * 4 * sizeof(float));
     t->smp = calloc((size_t)t->threads, sizeof *t->smp);
     t->ctx = calloc((size_t)t->threads, sizeof *t->ctx);
     t->img = malloc((size_t)t->threads * t->img_len * sizeof(float));
@@ -270,9 +276,13 @@ static void trainer_free(trainer *t)
 /* What fixes the sample stream, which a resumed run must share. */
 static void stream_id(const gs_gaze_train_options *o, char *v, size_t n)
 {
-    snprintf(v, n, "%llu/%d/%d/%d/%llu/%d/%g/%d/%g", (unsigned long long)o->seed, o->batch,
-             o->cache, o->fresh, (unsigned long long)o->identities, o->render_size, o->white,
-             o->shift, o->blur);
+    if (o->data) /* a fixed set: its size stands for it */
+        snprintf(v, n, "%llu/%d/set%zu@%d/%d/%g", (unsigned long long)o->seed, o->batch,
+                 o->data_n, o->data_size, o->shift, o->blur);
+    else
+        snprintf(v, n, "%llu/%d/%d/%d/%llu/%d/%g/%d/%g", (unsigned long long)o->seed, o->batch,
+                 o->cache, o->fresh, (unsigned long long)o->identities, o->render_size,
+                 o->white, o->shift, o->blur);
 }
 
 static int save_opt(trainer *t, const char *path, long step, gs_error *err)
@@ -398,6 +408,9 @@ static int options_check(const gs_gaze_train_options *o, gs_error *err)
         o->render_size < 0 || o->render_size > 512 || !(o->white >= 0 && o->white <= 1) ||
         o->shift < 0 || o->shift > 16 || !(o->blur >= 0 && o->blur <= 1))
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: option out of range");
+    if (o->data && (!o->data_lab || o->data_n < 1 || o->data_n > (size_t)1 << 31 ||
+                    o->data_size < 16 || o->data_size > 512))
+        return gs_error_set(err, GS_ERR_ARG, "train-estimator: bad fixed set");
     if ((o->checkpoint_every || o->resume) && !o->out_path)
         return gs_error_set(err, GS_ERR_ARG, "train-estimator: checkpoints need out_path");
     return GS_OK;
@@ -411,6 +424,10 @@ int gs_gaze_train(gs_gaze_net *n, const gs_gaze_train_options *o, gs_pool *pool,
     int rc = options_check(o, err);
     if (rc)
         return rc;
+    if (o->data && o->data_size < n->spec.input_size)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "train-estimator: set image size %d below the net's input %d",
+                            o->data_size, n->spec.input_size);
     if (o->render_size && o->render_size < n->spec.input_size)
         return gs_error_set(err, GS_ERR_ARG,
                             "train-estimator: render size %d below the net's input %d",

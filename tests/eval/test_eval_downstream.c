@@ -42,7 +42,8 @@ static void tiny_estimator(const char *path)
 
 /* k = 0 as documented: the estimator on test images POOL..POOL+TESTS-1 of
  * the identity (seed 1), mean angle to the true normalized gaze. */
-static double k0_error(const char *model, const char *est, int identity)
+static double k0_error(const char *model, const char *est, int identity,
+                       const gs_synth_kappa *kappa)
 {
     gs_model *m = NULL;
     gs_gaze_net *net = NULL;
@@ -59,6 +60,8 @@ static double k0_error(const char *model, const char *est, int identity)
         gs_synth_sample smp = {0};
         float out[4];
         gs_eval_ds_scene(1, identity, GS_EVAL_DS_POOL + t, &sc);
+        if (kappa)
+            gs_synth_scene_set_kappa(kappa, &sc);
         CHECK(gs_eval_render_scene(&sc, mi.image_size, mi.distance_mm,
                                    mi.focal, NULL, &smp, &err) == GS_OK);
         CHECK(gs_gaze_net_predict(net, NULL, smp.rgb, smp.width, smp.height,
@@ -193,6 +196,195 @@ static void fit_cache(const char *out)
     CHECK(gs_eval_fit_cache_write(path, key, &s, 1.5, NULL) == GS_ERR_IO);
 }
 
+/* The rows of a CSV text whose k (third field) is k, in order. */
+static char *rows_of_k(const char *csv, int k)
+{
+    size_t n = strlen(csv);
+    char *out = calloc(n + 1, 1);
+    const char *p = strchr(csv, '\n');
+    while (out && p && p[1]) {
+        const char *e = strchr(p + 1, '\n');
+        size_t len = e ? (size_t)(e - p) : strlen(p + 1) + 1;
+        int id, kk;
+        unsigned long long seed;
+        if (sscanf(p + 1, "%d,%llu,%d,", &id, &seed, &kk) == 3 && kk == k)
+            strncat(out, p + 1, len);
+        p = e;
+    }
+    return out;
+}
+
+/* The CSV of a calibration run: only k = 0 and the --ks rows; k = 0 is the
+ * estimator on the identity's scenes with its kappa. */
+static void check_calibration_csv(const char *out, const double *k0kappa)
+{
+    char path[320];
+    snprintf(path, sizeof path, "%s/downstream.csv", out);
+    char *text = ev_slurp(path);
+    CHECK_MSG(text != NULL, "no %s", path);
+    int rows = 0;
+    const char *p = text ? strchr(text, '\n') : NULL;
+    while (p && p[1]) {
+        int id, k;
+        unsigned long long seed;
+        char cond[32];
+        double e;
+        CHECK(sscanf(p + 1, "%d,%llu,%d,%31[^,],%lf", &id, &seed, &k, cond,
+                     &e) == 5);
+        CHECK_MSG(k == 0 || k == 2, "row %d: k %d is not in --ks 2", rows, k);
+        CHECK_MSG(isfinite(e), "row %d: %g", rows, e);
+        if (k == 0 && id >= 0 && id < IDS)
+            CHECK_MSG(fabs(e - k0kappa[id]) <= 6e-5, "identity %d: k=0 %.6f, "
+                      "the estimator on its kappa scenes %.6f", id, e,
+                      k0kappa[id]);
+        rows++;
+        p = strchr(p + 1, '\n');
+    }
+    CHECK_EQ_INT(rows, IDS * 2 * 3);
+    free(text);
+}
+
+/* subjects.csv: one row per identity and k run, the identity's kappa
+ * (gs_synth_kappa_draw, degrees) and a finite offset, nonzero with
+ * --calibrate (the fits found a gaze other than the label). */
+static void check_subjects(const char *out, const gs_synth_kappa *kappa)
+{
+    char path[320];
+    snprintf(path, sizeof path, "%s/subjects.csv", out);
+    char *text = ev_slurp(path);
+    CHECK_MSG(text && strncmp(text, "identity,k,kappa_h_deg,kappa_v_deg,"
+                                    "offset_pitch_deg,offset_yaw_deg\n",
+                              62) == 0, "%s: %.80s", path, text ? text : "");
+    int rows = 0;
+    const char *p = text ? strchr(text, '\n') : NULL;
+    while (p && p[1]) {
+        int id, k;
+        double h, v, op, oy, th, tv;
+        CHECK(sscanf(p + 1, "%d,%d,%lf,%lf,%lf,%lf", &id, &k, &h, &v, &op,
+                     &oy) == 6);
+        CHECK_EQ_INT(id, rows);
+        CHECK_EQ_INT(k, 2);
+        gs_synth_kappa_draw(kappa, gs_synth_split_seed(GS_SYNTH_TEST,
+                                                       (uint64_t)id), &th,
+                            &tv);
+        const double deg = 180.0 / 3.14159265358979323846;
+        CHECK_MSG(fabs(h - th * deg) < 1e-4 && fabs(v - tv * deg) < 1e-4,
+                  "identity %d: kappa %g %g, drawn %g %g", id, h, v, th * deg,
+                  tv * deg);
+        CHECK_MSG(isfinite(op) && isfinite(oy) && (op != 0 || oy != 0),
+                  "identity %d: offset %g %g", id, op, oy);
+        rows++;
+        p = strchr(p + 1, '\n');
+    }
+    CHECK_EQ_INT(rows, IDS);
+    free(text);
+}
+
+/* The calibration options: kappa scenes, a subject from the k images, the
+ * fitted offset, --ks and --first-identity. */
+static int run_cal(const char *exe, const char *model, const char *est,
+                   const char *out, const char *threads, const char *extra)
+{
+    const char *a[] = {exe, "eval-downstream", "--model", model,
+                       "--estimator", est, "--out", out, "--identities", "2",
+                       "--test-images", "3", "--set-size", "10", "--max-k",
+                       "2", "--steps", "3", "--batch", "4", "--lr", "1e-3",
+                       "--iters", "2", "--threads", threads, "--kappa",
+                       "literature", "--subject-from-k", "--ks", "2", extra,
+                       NULL};
+    return ev_spawn(dir, a);
+}
+
+static void calibration(const char *exe, const char *model, const char *est,
+                        const char *legacy_csv)
+{
+    {
+        gs_eval_ds_options o;
+        gs_error e = {0, ""};
+        gs_eval_ds_options_default(&o);
+        o.max_k = 3;
+        o.ks = 1u << 3 | 1u << 1;
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_OK);
+        o.ks = 1u << 4;
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_ERR_ARG &&
+              strstr(e.msg, "ks"));
+        o.ks = 1u;
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_ERR_ARG);
+        o.ks = 0;
+        gs_synth_kappa_literature(&o.kappa);
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_OK);
+        o.kappa.h_mean_deg = 20;
+        CHECK(gs_eval_ds_options_check(&o, &e) == GS_ERR_ARG);
+    }
+    const char *bad[][2] = {{"--ks", "0"}, {"--ks", "3"}, {"--ks", "1,,2"},
+                            {"--ks", "x"}, {"--kappa", "bogus"},
+                            {"--kappa", "20,1,1,1"},
+                            {"--first-identity", "-1"}};
+    for (size_t i = 0; i < sizeof bad / sizeof bad[0]; i++) {
+        const char *a[] = {exe, "eval-downstream", "--model", model,
+                           "--estimator", est, "--out", dir, "--max-k", "2",
+                           bad[i][0], bad[i][1], NULL};
+        CHECK_MSG(ev_spawn(dir, a) == 2, "%s %s should be a usage error",
+                  bad[i][0], bad[i][1]);
+    }
+    gs_synth_kappa kappa;
+    gs_synth_kappa_literature(&kappa);
+    double k0[IDS];
+    for (int i = 0; i < IDS; i++)
+        k0[i] = k0_error(model, est, i, &kappa);
+    char c1[256], c2[256], c3[256], c4[256];
+    snprintf(c1, sizeof c1, "%s/cal1", dir);
+    snprintf(c2, sizeof c2, "%s/cal2", dir);
+    snprintf(c3, sizeof c3, "%s/cal3", dir);
+    snprintf(c4, sizeof c4, "%s/cal4", dir);
+    CHECK_EQ_INT(run_cal(exe, model, est, c1, "2", "--calibrate"), 0);
+    CHECK_EQ_INT(run_cal(exe, model, est, c2, "1", "--calibrate"), 0);
+    check_calibration_csv(c1, k0);
+    check_subjects(c1, &kappa);
+    const char *files[] = {"downstream.csv", "subjects.csv"};
+    for (int f = 0; f < 2; f++) {
+        char pa[320], pb[320];
+        snprintf(pa, sizeof pa, "%s/%s", c1, files[f]);
+        snprintf(pb, sizeof pb, "%s/%s", c2, files[f]);
+        char *a = ev_slurp(pa), *b = ev_slurp(pb);
+        CHECK_MSG(a && b && strcmp(a, b) == 0, "%s: 1 and 2 threads differ",
+                  files[f]);
+        free(a);
+        free(b);
+    }
+    /* Without --calibrate the renders aim at the targets themselves: the
+     * model's rows change, the real and warp rows do not. */
+    CHECK_EQ_INT(run_cal(exe, model, est, c3, "2", NULL), 0);
+    char pa[320], pb[320];
+    snprintf(pa, sizeof pa, "%s/downstream.csv", c1);
+    snprintf(pb, sizeof pb, "%s/downstream.csv", c3);
+    char *a = ev_slurp(pa), *b = ev_slurp(pb);
+    CHECK_MSG(a && b && strcmp(a, b) != 0, "--calibrate changed nothing");
+    free(a);
+    free(b);
+    /* A subject from k = 1 images without kappa is the legacy subject of
+     * real image 1, and the first set_size - 1 images are the same: the
+     * k = 1 rows equal the legacy run's. --first-identity 1 gives
+     * identity 1's rows. */
+    const char *one[] = {exe, "eval-downstream", "--model", model,
+                         "--estimator", est, "--out", c4, "--identities", "1",
+                         "--first-identity", "1", "--test-images", "3",
+                         "--set-size", "10", "--max-k", "2", "--steps", "3",
+                         "--batch", "4", "--lr", "1e-3", "--iters", "2",
+                         "--subject-from-k", "--ks", "1", NULL};
+    CHECK_EQ_INT(ev_spawn(dir, one), 0);
+    snprintf(pb, sizeof pb, "%s/downstream.csv", c4);
+    b = ev_slurp(pb);
+    char *want = rows_of_k(legacy_csv, 1), *got = b ? rows_of_k(b, 1) : NULL;
+    const char *id1 = want ? strstr(want, "\n1,") : NULL;
+    CHECK_MSG(got && id1 && strcmp(got, id1 + 1) == 0,
+              "k = 1 from 1 image, identity 1:\n%s\nlegacy:\n%s",
+              got ? got : "", want ? want : "");
+    free(b);
+    free(want);
+    free(got);
+}
+
 static int run_ds(const char *exe, const char *model, const char *est,
                   const char *out, const char *threads, int reuse)
 {
@@ -238,7 +430,7 @@ int main(int argc, char **argv)
 
     double k0[IDS];
     for (int i = 0; i < IDS; i++)
-        k0[i] = k0_error(model, est, i);
+        k0[i] = k0_error(model, est, i, NULL);
     CHECK_EQ_INT(run_ds(exe, model, est, out1, "2", 0), 0);
     char *a = check_csv(out1, k0);
     snprintf(md, sizeof md, "%s/downstream.md", out1);
@@ -267,6 +459,7 @@ int main(int argc, char **argv)
     sum = ev_slurp(md);
     CHECK_MSG(sum && strstr(sum, "2 reused"), "%s", sum ? sum : "");
     free(sum);
+    calibration(exe, model, est, a);
     free(a);
     free(b);
 

@@ -390,6 +390,113 @@ static void test_training_lowers_loss(void)
 /* usage: test_gaze_unit [train]: "train" runs only the training run (a
  * separate ctest case labelled slow: seconds in a release build, minutes
  * under ASan). */
+/* Mean L1 of the net over a fixed set (CHW bytes of S x S, 4 labels). */
+static double set_loss(gs_gaze_net *n, const uint8_t *const *img, const float *const *lab,
+                       int count, int S)
+{
+    float *x = malloc(3 * (size_t)S * (size_t)S * sizeof(float)), out[4], d[4];
+    double sum = 0;
+    gs_error err = {0, ""};
+    for (int i = 0; x && i < count; i++) {
+        for (size_t p = 0; p < 3 * (size_t)S * (size_t)S; p++)
+            x[p] = img[i][p] / 255.0f;
+        CHECK(gs_gaze_net_forward(n, NULL, x, S, S, out, &err) == GS_OK);
+        sum += gs_gaze_l1_loss(out, lab[i], 1.0f, d);
+    }
+    free(x);
+    return sum / count;
+}
+
+/* Training on a fixed set (gs_gaze_train_options.data): bad sets refused
+ * with the weights untouched; the same bytes for 1 and 3 threads; the
+ * labels are what is learnt (the set's loss falls, another labelling
+ * trains other weights); 2 steps + resume = 4 straight, and a resume with
+ * a set of another size is refused. */
+static void test_fixed_set(void)
+{
+    enum { N = 6, S = 40 };
+    static uint8_t pix[N][3 * S * S];
+    static float labs[2][N][4];
+    const uint8_t *img[N];
+    const float *lab[N], *lab2[N];
+    uint64_t h = 7;
+    for (int i = 0; i < N; i++) {
+        for (int p = 0; p < 3 * S * S; p++) {
+            h = h * 6364136223846793005ull + 1442695040888963407ull;
+            /* brightness 40 i plus noise: something a net learns fast */
+            pix[i][p] = (uint8_t)(40 * i + (int)(h >> 59));
+        }
+        for (int k = 0; k < 4; k++) {
+            labs[0][i][k] = 0.1f * (float)i - 0.25f + 0.02f * (float)k;
+            labs[1][i][k] = -labs[0][i][k] + 0.1f;
+        }
+        img[i] = pix[i];
+        lab[i] = labs[0][i];
+        lab2[i] = labs[1][i];
+    }
+    gs_pool *pool = gs_pool_create(3);
+    gs_error err = {0, ""};
+    gs_gaze_train_options o;
+    struct { size_t n; int size; int nolab; } bad[] = {{0, S, 0}, {N, 16, 0}, {N, 8, 0},
+                                                        {N, 600, 0}, {N, S, 1}};
+    for (size_t k = 0; k < sizeof bad / sizeof bad[0]; k++) {
+        gs_gaze_net *n = tiny(GS_GAZE_RESNET, 4);
+        train_opts(&o, 1, NULL, 0);
+        o.data = img, o.data_lab = bad[k].nolab ? NULL : lab;
+        o.data_n = bad[k].n, o.data_size = bad[k].size;
+        float before = n->params[0];
+        CHECK_MSG(gs_gaze_train(n, &o, NULL, NULL, &err) == GS_ERR_ARG, "bad set %zu accepted", k);
+        CHECK(n->params[0] == before);
+        gs_gaze_net_destroy(n);
+    }
+    gs_gaze_net *a = tiny(GS_GAZE_RESNET, 4), *b = tiny(GS_GAZE_RESNET, 4),
+                *c = tiny(GS_GAZE_RESNET, 4);
+    train_opts(&o, 40, NULL, 0);
+    o.data = img, o.data_lab = lab, o.data_n = N, o.data_size = S;
+    o.lr = 1e-2;
+    double before = set_loss(a, img, lab, N, S);
+    CHECK_MSG(gs_gaze_train(a, &o, NULL, NULL, &err) == GS_OK, "%s", err.msg);
+    CHECK_MSG(gs_gaze_train(b, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    size_t bytes = a->g.nparams * sizeof(float);
+    CHECK_MSG(!memcmp(a->params, b->params, bytes), "fixed set: 1 and 3 threads differ");
+    double after = set_loss(a, img, lab, N, S);
+    CHECK_MSG(after < 0.7 * before, "fixed set: loss %.4f -> %.4f, not learnt", before, after);
+    o.data_lab = lab2;
+    CHECK_MSG(gs_gaze_train(c, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    CHECK_MSG(memcmp(a->params, c->params, bytes), "other labels trained the same weights");
+    gs_gaze_net_destroy(a);
+    gs_gaze_net_destroy(b);
+    gs_gaze_net_destroy(c);
+
+    char path[256], opt[300];
+    snprintf(path, sizeof path, "%s/set.safetensors", dir);
+    snprintf(opt, sizeof opt, "%s.opt", path);
+    a = tiny(GS_GAZE_RESNET, 4);
+    c = tiny(GS_GAZE_RESNET, 4);
+    train_opts(&o, 4, NULL, 0);
+    o.data = img, o.data_lab = lab, o.data_n = N, o.data_size = S;
+    CHECK_MSG(gs_gaze_train(a, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    train_opts(&o, 4, path, 0);
+    o.data = img, o.data_lab = lab, o.data_n = N, o.data_size = S;
+    o.stop_after = 2;
+    CHECK_MSG(gs_gaze_train(c, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    gs_gaze_net *r = NULL;
+    CHECK_MSG(gs_gaze_net_load(path, &r, &err) == GS_OK, "%s", err.msg);
+    train_opts(&o, 4, path, 1);
+    o.data = img, o.data_lab = lab, o.data_n = N, o.data_size = S;
+    if (r)
+        CHECK_MSG(gs_gaze_train(r, &o, pool, NULL, &err) == GS_OK, "%s", err.msg);
+    CHECK_MSG(r && !memcmp(a->params, r->params, bytes), "fixed set: resumed run differs");
+    o.data_n = N - 1;
+    CHECK(r && gs_gaze_train(r, &o, pool, NULL, &err) == GS_ERR_ARG);
+    unlink(path);
+    unlink(opt);
+    gs_gaze_net_destroy(a);
+    gs_gaze_net_destroy(c);
+    gs_gaze_net_destroy(r);
+    gs_pool_destroy(pool);
+}
+
 int main(int argc, char **argv)
 {
     gs_nn_blas_set_threads(1);
@@ -406,6 +513,7 @@ int main(int argc, char **argv)
         test_loader();
         test_determinism_and_resume();
         test_augmentations();
+        test_fixed_set();
     }
     rmdir(dir);
     GS_TEST_END();

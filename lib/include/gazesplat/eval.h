@@ -248,6 +248,17 @@ int gs_eval_fit_sample_with(gs_model_ctx *c, gs_pool *pool,
  * given). m is the model the fit's context was made from. */
 uint64_t gs_eval_fit_key(const gs_model *m, const gs_fit_options *base,
                          const gs_synth_sample *in);
+/* The protocol's fit of k samples of one person together (1..
+ * GS_FIT_IMAGES_MAX, gs_model_fit_images: one identity, per image its own
+ * expression, lights, head pose and gaze): each sample's true head pose is
+ * given; its true gaze too unless free_gaze, when the fit finds the gaze
+ * each image shows (with angle kappa that is the eyeballs' optical axis,
+ * not the labelled visual one). out[k]; secs as for gs_eval_fit_sample.
+ * k = 1 without free_gaze gives gs_eval_fit_sample's subject. */
+int gs_eval_fit_samples(gs_model_ctx *c, gs_pool *pool,
+                        const gs_synth_sample *in, int k, int iters,
+                        double lr_code, double lr_colour, int free_gaze,
+                        gs_subject *out, double *secs, gs_error *err);
 /* The same for gs_eval_fit_sample's options. */
 uint64_t gs_eval_fit_sample_key(const gs_model *m, const gs_synth_sample *in,
                                 int iters, double lr_code, double lr_colour);
@@ -302,11 +313,29 @@ typedef struct gs_eval_ds_options {
                                           GS_FIT_LR_CODE_DEFAULT;
                                           GS_FIT_LR_COLOUR_DEFAULT) */
     uint64_t seed;         /* scenes, targets and batch draws (1) */
+    /* The calibration experiment (issue-free defaults: all off). */
+    gs_synth_kappa kappa;  /* every scene of an identity gets that
+                              identity's angle kappa (gs_synth_kappa_draw);
+                              labels stay the visual axis */
+    int subject_from_k;    /* 1: for each k the subject is fitted from the
+                              k real images together (gs_eval_fit_samples)
+                              and the k-th sets are redirected from them in
+                              turn (target j from real image j mod k, at
+                              its head pose); 0: one subject from real
+                              sample 1 for every k */
+    int calibrate;         /* 1: the fits find each image's gaze (head pose
+                              given) and the renders aim at target +
+                              offset, offset = mean over the fitted images
+                              of (fitted - labelled gaze), head frame: the
+                              person's visual-to-optical offset as the
+                              images show it; labels stay the target */
+    unsigned ks;           /* bit k set: run k (1..max_k); 0: every k */
 } gs_eval_ds_options;
 void gs_eval_ds_options_default(gs_eval_ds_options *o);
 /* GS_ERR_ARG with a message for options outside their ranges:
  * test_images 1..100000, steps 1..1000000, batch 1..4096, lr in (0, 1],
- * real_fraction in [0, 1], fit_iters 1..100000, fit rates in [0, 10]. */
+ * real_fraction in [0, 1], fit_iters 1..100000, fit rates in [0, 10],
+ * a valid kappa (gs_synth_kappa_check), ks within bits 1..max_k. */
 int gs_eval_ds_options_check(const gs_eval_ds_options *o, gs_error *err);
 
 /* Scene of sample `index` of test identity `identity` (the identity seed
@@ -330,6 +359,10 @@ typedef struct gs_eval_ds_result {
     long renders_incremental, renders_full; /* the model's renders */
     double finetune_s;     /* mean wall time of one fine-tune */
     int cache_write_failed;
+    double kappa_h_deg, kappa_v_deg; /* the identity's kappa (0: off) */
+    /* calibrate: the offset (pitch, yaw, degrees, head frame) the k-th
+     * renders aimed with; 0 without calibrate, NaN for k not run */
+    double offset_deg[GS_EVAL_DS_POOL + 1][2];
 } gs_eval_ds_result;
 
 /* The whole experiment for one identity. est is not changed. fit_path:
@@ -343,6 +376,75 @@ int gs_eval_downstream_identity(const gs_model *m, const gs_gaze_net *est,
                                 const char *fit_path, int reuse_fit,
                                 gs_pool *pool, gs_eval_ds_result *res,
                                 gs_error *err);
+
+/* ---- range: training an estimator on narrow data, augmented ---- */
+
+/* The range experiment (docs/eval.md "Range"): source data of a narrow gaze
+ * and head range; the same source images redirected across the model's
+ * range; estimators trained from scratch on each set; tested on identities
+ * no set holds, over the whole range. Conditions: */
+enum { GS_EVAL_RANGE_SOURCE = 0,   /* the source images alone */
+       GS_EVAL_RANGE_OURS = 1,     /* + the model's, gaze and head changed */
+       GS_EVAL_RANGE_OURS_GAZE = 2,/* + the model's, gaze only */
+       GS_EVAL_RANGE_WARP = 3,     /* + the warp's (gaze only: it cannot
+                                      turn a head) */
+       GS_EVAL_RANGE_CONDITIONS = 4 };
+/* "source", "source+ours", "source+ours-gaze", "source+warp"; "?". */
+const char *gs_eval_range_condition_name(int c);
+
+typedef struct gs_eval_range_options {
+    int sources;          /* source identities, TEST split 0.. (20) */
+    int per_source;       /* source images per identity (10) */
+    int targets;          /* redirected images per source identity and
+                             condition (100) */
+    double src_gaze_pitch, src_gaze_yaw; /* source gaze, head frame, +-
+                                            (10, 15 deg; radians) */
+    double src_head;      /* source head yaw and pitch, +- (10 deg) */
+    double gaze_pitch, gaze_yaw; /* the targets' and the tests' gaze, +-
+                                    (30, 40 deg: the model's range) */
+    double head_pitch, head_yaw; /* the targets' head changes and the tests'
+                                    head, +- (20, 30 deg: within the model's
+                                    training range) */
+    int tests;            /* test identities, VAL split 0.. (20) */
+    int per_test;         /* test images per identity (10) */
+    long steps;           /* training steps per estimator (3000) */
+    int batch;            /* (16) */
+    double lr;            /* peak rate, gs_gaze_train's schedule (1e-3) */
+    int fit_iters;        /* fit cap per source identity (200) */
+    uint64_t seed;        /* scenes, targets, init and batches (1) */
+    gs_gaze_log_fn log;   /* progress (may be NULL) */
+    void *log_ctx;
+} gs_eval_range_options;
+void gs_eval_range_options_default(gs_eval_range_options *o);
+int gs_eval_range_options_check(const gs_eval_range_options *o,
+                                gs_error *err);
+
+/* One test image's result. */
+typedef struct gs_eval_range_row {
+    int identity, index;          /* VAL split identity, image */
+    double gaze_pitch, gaze_yaw;  /* true normalized gaze, degrees */
+    double head_pitch, head_yaw;  /* true normalized head, degrees */
+    int in_source_range;          /* the gaze (head frame) inside the
+                                     source's range, whatever the head */
+    double err[GS_EVAL_RANGE_CONDITIONS]; /* gaze angle, degrees */
+} gs_eval_range_row;
+
+typedef struct gs_eval_range_result {
+    int n;                        /* tests * per_test rows */
+    gs_eval_range_row *rows;
+    double fit_s, render_s, train_s[GS_EVAL_RANGE_CONDITIONS];
+    double fit_psnr;              /* mean over the source identities */
+    long set_size[GS_EVAL_RANGE_CONDITIONS];
+    double train_loss[GS_EVAL_RANGE_CONDITIONS];
+} gs_eval_range_result;
+void gs_eval_range_result_free(gs_eval_range_result *r);
+
+/* The whole experiment. est_dir: when not NULL, each trained estimator is
+ * written there as <condition>.safetensors. Deterministic for any thread
+ * count (timings aside). */
+int gs_eval_range(const gs_model *m, const gs_eval_range_options *o,
+                  const char *est_dir, gs_pool *pool,
+                  gs_eval_range_result *res, gs_error *err);
 
 #ifdef __cplusplus
 }

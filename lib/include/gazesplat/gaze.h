@@ -145,6 +145,17 @@ typedef struct gs_gaze_train_options {
     int resume;            /* continue from out_path.opt */
     gs_gaze_log_fn log;    /* may be NULL */
     void *log_ctx;
+    /* A fixed set of samples instead of the generator (NULL: the
+     * generator): data_n samples, data[i] a data_size^2 image as CHW bytes
+     * (3 planes of data_size rows), data_lab[i] its 4 labels (as the
+     * outputs). Each batch element draws one uniformly by a hash of (seed,
+     * step, element), then the flips, shifts and blur as above; cache,
+     * fresh, identities, render_size and white are not used. The set must
+     * outlive the call and be the same on a resume (its size is checked). */
+    const uint8_t *const *data;
+    const float *const *data_lab;
+    size_t data_n;
+    int data_size;         /* input size..512 */
 } gs_gaze_train_options;
 
 void gs_gaze_train_options_default(gs_gaze_train_options *o);
