@@ -1612,12 +1612,9 @@ static int paste_back(const photo_input *p, paste_state *ps, int whole_face, con
     gs_error err;
     gs_error_clear(&err);
     if (!ps->mask[whole_face]) {
-        /* Feather with the face: about 4% of the face box width. */
-        double feather = 0.04 * (p->face.box.right - p->face.box.left + 1);
         ps->mask[whole_face] = malloc(px);
         if (!ps->mask[whole_face] ||
-            gs_face_mask(p->face.uv, whole_face ? GS_FACE_MASK_FACE : GS_FACE_MASK_EYES, 2.0,
-                         feather < 2 ? 2 : feather, ph->width, ph->height, ps->mask[whole_face], &err) != GS_OK) {
+            gs_face_paste_mask(&p->face, whole_face, ps->mask[whole_face], &err) != GS_OK) {
             snprintf(msg, cap, "paste-back mask: %s", ps->mask[whole_face] ? err.msg : "out of memory");
             return E(ERR_INTERNAL);
         }

@@ -273,6 +273,7 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
 {
     gs_finetune_options_default(fo);
     fo->iters = 0;
+    fo->lr = GS_FINETUNE_LR_SERVED; /* the daemon's: one default everywhere */
     if (n) {
         long v;
         if (cli_parse_long(n, 1, 100000, &v))

@@ -1900,7 +1900,7 @@ static int run_augment(int argc, char **argv)
         gs_finetune_options_default(&j.ft);
         j.ft.iters = 0;
     } else if ((rc = cli_parse_finetune(cmd, ftn, NULL,
-                                        o[O_FTLR].value ? o[O_FTLR].value : "0.004", NULL, NULL,
+                                        o[O_FTLR].value, NULL, NULL,
                                         NULL, &j.ft)))
         return rc;
     j.transfer = o[O_TRANSFER].value == NULL;

@@ -148,7 +148,7 @@ const cli_command cli_eval_command = {
     "                    Gaussians' colours and features), eye, renderer,\n"
     "                    mlp, geometry, face-geometry (the face stream's\n"
     "                    alone); default face,geometry\n"
-    "  --finetune-lr X   Adam's base rate (default 0.001)\n"
+    "  --finetune-lr X   Adam's base rate (default 0.004, the daemon's)\n"
     "  --finetune-eye-weight W  weight of the input's eye region in the\n"
     "                    fine-tuning loss, 0..1 (default 1; 0 leaves the\n"
     "                    eyes to the shared model)\n"

@@ -341,7 +341,7 @@ static int run_eval_photos(int argc, char **argv)
     if (!strcmp(ftn, "0")) {
         gs_finetune_options_default(&ft);
         ft.iters = 0;
-    } else if ((rc = cli_parse_finetune(cmd, ftn, NULL, "0.004", NULL, NULL, NULL, &ft)))
+    } else if ((rc = cli_parse_finetune(cmd, ftn, NULL, NULL, NULL, NULL, NULL, &ft)))
         return rc;
     gs_error err = {0, ""};
     gs_model *m = NULL;

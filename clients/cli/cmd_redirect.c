@@ -56,7 +56,7 @@ const cli_command cli_fit_command = {
     "                   Gaussians' colour and features), eye, renderer, mlp,\n"
     "                   geometry, face-geometry (the face stream's alone);\n"
     "                   default face,geometry\n"
-    "  --finetune-lr X  Adam's base rate (default 0.001)\n"
+    "  --finetune-lr X  Adam's base rate (default 0.004, the daemon's)\n"
     "  --finetune-plateau R  stop fine-tuning when the loss improved by less\n"
     "                   than the fraction R over 20 steps (default: never)\n"
     "                   (--time S bounds the fit and the fine-tuning together)\n"
@@ -579,8 +579,7 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
         rc = cli_fail(cmd, "out of memory");
         goto done;
     }
-    gs_face_mask((const double(*)[2])res.uv, GS_FACE_MASK_EYES, 2, 6,
-                 photo.width, photo.height, mask_p, NULL);
+    gs_face_paste_mask(&res, 0, mask_p, NULL); /* the daemon's paste-back */
     gs_fit_options o;
     gs_fit_options_default(&o);
     o.max_iters = iters;

@@ -66,7 +66,10 @@ void cli_photo_fit_options(const cli_photo_face *p, int iters, gs_fit_options *o
     o->max_iters = iters;
     o->known_head = 1;
     gs_geom_norm_rot(&p->res.norm, p->res.pose.R, o->head_R);
-    o->head_t[2] = gs_geom_vec3_norm(p->res.pose.t);
+    /* Normalization puts the face centre on the axis at d_n (the model's
+     * distance), as the daemon and the live path fit it; the photo's own
+     * distance |t| is not where the normalized face is. */
+    o->head_t[2] = p->res.norm.d_n_mm;
 }
 
 void cli_photo_face_free(cli_photo_face *p)

@@ -129,3 +129,15 @@ int gs_face_paste_back(gs_io_image *photo, const gs_io_image *norm_face, const g
     }
     return GS_OK;
 }
+
+int gs_face_paste_mask(const gs_face_result *r, int whole_face, uint8_t *mask,
+                       gs_error *err)
+{
+    if (!r || !mask)
+        return gs_error_set(err, GS_ERR_ARG, "paste mask: NULL argument");
+    double feather = 0.04 * (r->box.right - r->box.left + 1);
+    return gs_face_mask((const double(*)[2])r->uv,
+                        whole_face ? GS_FACE_MASK_FACE : GS_FACE_MASK_EYES, 2.0,
+                        feather < 2 ? 2 : feather, r->image_width, r->image_height,
+                        mask, err);
+}

@@ -270,6 +270,13 @@ int gs_face_paste_back(gs_io_image *photo, const gs_io_image *norm_face,
                        const gs_geom_norm *n, const uint8_t *mask,
                        gs_error *err);
 
+/* The mask every photo path pastes with (the daemon, gazesplat redirect):
+ * the EYES polygons (whole_face: FACE) of r->uv grown by 2 px, with a ramp
+ * of 4 % of the face box's width (at least 2 px), so the seam is as soft on
+ * a large face as on a small one. mask: r->image_width x r->image_height. */
+int gs_face_paste_mask(const gs_face_result *r, int whole_face, uint8_t *mask,
+                       gs_error *err);
+
 /* ---- the gate: can this face be redirected well? ----
  *
  * Checked before any fit. A refusal is a normal result (GS_OK with

@@ -548,6 +548,11 @@ typedef struct gs_finetune_options {
     void *cancel_arg;
 } gs_finetune_options;
 void gs_finetune_options_default(gs_finetune_options *o);
+/* The rate every served path fine-tunes at unless told otherwise (the
+ * daemon's finetune_lr, gazesplat fit/redirect/augment/eval-photos): it
+ * read best at 15 steps after the fit (docs/model.md, "The fit's rates");
+ * gs_finetune_options_default keeps the library's 1e-3. */
+#define GS_FINETUNE_LR_SERVED 0.004
 
 /* GS_FT_* bits from names, comma-separated: face, eye, renderer, mlp,
  * geometry, face-geometry ("face,eye"). GS_ERR_ARG for an unknown or empty name. */
