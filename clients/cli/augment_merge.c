@@ -4,7 +4,10 @@
  * byte: lines in global index order with h5_row renumbered, HDF5 rows in
  * the same order. The PNGs already carry global names and stay where they
  * are. Checked first: every shard finished, all of one run (the same
- * sources and targets), every sample exactly once. */
+ * sources and targets), every sample exactly once. A run with
+ * --min-quality has dropped-I-of-N.jsonl in every shard: each sample is
+ * then in exactly one shard's labels or dropped list, the HDF5 and the
+ * labels hold the kept ones and dropped.jsonl the others, in index order. */
 #define _POSIX_C_SOURCE 200809L
 #include "augment_merge.h"
 
@@ -30,7 +33,9 @@ typedef struct merge {
     const char *out;
     long n;
     uint8_t **bufs;  /* each shard's labels file */
-    line *lines;     /* by global index */
+    uint8_t **dbufs; /* each shard's dropped list (--min-quality) */
+    line *lines;     /* kept samples' labels by global index */
+    line *dlines;    /* dropped samples' lines by global index (NULL: no gate) */
     size_t total;    /* samples of the run (the manifests' target count) */
     gs_h5_reader **h5;
 } merge;
@@ -84,18 +89,32 @@ static long long field(const char *p, size_t len, const char *key, const char **
     return -1;
 }
 
-/* Shard i's labels: each line into its global index's slot. */
-static int take_lines(merge *m, long i, int *has_row)
+/* Where global index idx already is (a kept or a dropped sample), or NULL. */
+static const line *taken(const merge *m, long long idx, const char **as)
+{
+    if (m->lines[idx].p) {
+        *as = "labels";
+        return &m->lines[idx];
+    }
+    *as = "dropped list";
+    return m->dlines && m->dlines[idx].p ? &m->dlines[idx] : NULL;
+}
+
+/* Shard i's labels (dropped 0) or dropped list (1): each line into its
+ * global index's slot. */
+static int take_lines(merge *m, long i, int dropped, int *has_row)
 {
     char path[4300];
-    snprintf(path, sizeof path, "%s/labels-%ld-of-%ld.jsonl", m->out, i, m->n);
+    snprintf(path, sizeof path, "%s/%s-%ld-of-%ld.jsonl", m->out, dropped ? "dropped" : "labels",
+             i, m->n);
     size_t len = 0;
     struct stat st;
+    uint8_t **buf = dropped ? &m->dbufs[i] : &m->bufs[i];
     if (stat(path, &st) != 0)
         return cli_fail(m->cmd, "%s: cannot read (%s)", path, strerror(errno));
-    if (st.st_size > 0 && cli_read_file(path, (size_t)1 << 34, &m->bufs[i], &len))
+    if (st.st_size > 0 && cli_read_file(path, (size_t)1 << 34, buf, &len))
         return cli_fail(m->cmd, "%s: cannot read (%s)", path, strerror(errno));
-    const char *p = (const char *)m->bufs[i], *end = p + len;
+    const char *p = (const char *)*buf, *end = p + len;
     size_t row = 0;
     while (p < end) {
         const char *nl = memchr(p, '\n', (size_t)(end - p));
@@ -108,17 +127,18 @@ static int take_lines(merge *m, long i, int *has_row)
         if ((size_t)idx >= m->total)
             return cli_fail(m->cmd, "%s:%zu: index %lld, but the run has %zu samples", path,
                             row + 1, idx, m->total);
-        line *l = &m->lines[idx];
-        if (l->p)
-            return cli_fail(m->cmd, "%s:%zu: index %lld also in shard %d (line %zu)", path,
-                            row + 1, idx, l->shard, l->row + 1);
+        const char *as;
+        const line *o = taken(m, idx, &as);
+        if (o)
+            return cli_fail(m->cmd, "%s:%zu: index %lld also in shard %d's %s (line %zu)", path,
+                            row + 1, idx, o->shard, as, o->row + 1);
         int hr = field(p, n, ",\"h5_row\":", NULL, NULL) >= 0;
-        if (*has_row < 0)
+        if (!dropped && *has_row < 0)
             *has_row = hr;
-        else if (*has_row != hr)
+        else if (!dropped && *has_row != hr)
             return cli_fail(m->cmd, "%s:%zu: h5_row %s, unlike the lines before", path, row + 1,
                             hr ? "present" : "absent");
-        *l = (line){p, n, (int)i, row};
+        (dropped ? m->dlines : m->lines)[idx] = (line){p, n, (int)i, row};
         row++;
         p = nl + 1;
     }
@@ -162,8 +182,9 @@ static int commit(merge *m, const char *path, const line *lines, size_t count, i
     return CLI_OK;
 }
 
-/* augment.h5 from the shards' files, rows in global index order. */
-static int merge_h5(merge *m)
+/* augment.h5 from the shards' files: the rows of the count samples in
+ * kept (global index order). */
+static int merge_h5(merge *m, const line *kept, size_t count)
 {
     char path[4300], tmp[4400];
     gs_error err = {0, ""};
@@ -181,13 +202,13 @@ static int merge_h5(merge *m)
     snprintf(path, sizeof path, "%s/augment.h5", m->out);
     snprintf(tmp, sizeof tmp, "%s.tmp", path);
     gs_h5_writer *w = NULL;
-    if (gs_h5_create(tmp, m->total, side, &w, &err))
+    if (gs_h5_create(tmp, count, side, &w, &err))
         return cli_fail(m->cmd, "%s: %s", path, err.msg);
     size_t bytes = (size_t)side * (size_t)side * 3;
     uint8_t *patch = malloc(bytes);
     int rc = patch ? CLI_OK : cli_fail(m->cmd, "out of memory");
-    for (size_t r = 0; !rc && r < m->total; r++) {
-        const line *l = &m->lines[r];
+    for (size_t r = 0; !rc && r < count; r++) {
+        const line *l = &kept[r];
         float gaze[2], head[2];
         if (gs_h5_read_row(m->h5[l->shard], l->row, patch, gaze, head, &err) ||
             gs_h5_write_rows(w, r, 1, patch, gaze, head, &err))
@@ -206,19 +227,59 @@ static int merge_h5(merge *m)
     return rc;
 }
 
-static int shard_has_h5(const merge *m, long i)
+/* Whether shard i wrote the file NAME-i-of-n.EXT. */
+static int shard_has(const merge *m, long i, const char *name, const char *ext)
 {
     char path[4300];
     struct stat st;
-    snprintf(path, sizeof path, "%s/augment-%ld-of-%ld.h5", m->out, i, m->n);
+    snprintf(path, sizeof path, "%s/%s-%ld-of-%ld.%s", m->out, name, i, m->n, ext);
     return stat(path, &st) == 0;
+}
+
+/* Every sample once: in a shard's labels, or (--min-quality) in a shard's
+ * dropped list; the kept ones packed into kept (index order), the dropped
+ * into dropped, their counts in *nk, *nd, the kept without a score in *nu. */
+static int sort_samples(const merge *m, line *kept, line *dropped, size_t *nk, size_t *nd,
+                        size_t *nu)
+{
+    static const char unscored[] = ",\"quality\":null}\n";
+    size_t ul = sizeof unscored - 1;
+    *nk = *nd = *nu = 0;
+    for (size_t r = 0; r < m->total; r++) {
+        const line *l = &m->lines[r];
+        if (l->p) {
+            kept[(*nk)++] = *l;
+            *nu += l->len >= ul && !memcmp(l->p + l->len - ul, unscored, ul);
+        } else if (m->dlines && m->dlines[r].p) {
+            dropped[(*nd)++] = m->dlines[r];
+        } else {
+            return cli_fail(m->cmd, "sample %zu is in no shard's labels%s (of %zu)", r,
+                            m->dlines ? " or dropped list" : "", m->total);
+        }
+    }
+    return CLI_OK;
+}
+
+/* The merge's last line; on stderr when every sample was dropped. */
+static void merge_report(const merge *m, int h5, size_t nk, size_t nd, size_t nu)
+{
+    char gate[300] = "";
+    if (m->dlines)
+        snprintf(gate, sizeof gate, "; --min-quality: %zu kept (%zu of them unscored), %zu dropped "
+                 "(listed in dropped.jsonl)", nk, nu, nd);
+    printf("gazesplat augment: merged %ld shards: %zu images -> %s (labels.jsonl%s%s)%s\n", m->n,
+           nk, m->out, h5 ? ", augment.h5" : "", m->dlines ? ", dropped.jsonl" : "", gate);
+    if (m->dlines && nk == 0 && nd > 0)
+        fprintf(stderr, "gazesplat augment: every sample of the run was dropped: all %zu scored "
+                "under --min-quality; labels.jsonl is empty%s and dropped.jsonl lists them\n", nd,
+                h5 ? ", augment.h5 has no rows," : "");
 }
 
 int aug_merge(const cli_command *cmd, const char *out, long n)
 {
     if (n < 2 || n > 1000000)
         return cli_fail(cmd, "--merge: %ld shards (2..1000000)", n);
-    merge m = {cmd, out, n, NULL, NULL, 0, NULL};
+    merge m = {cmd, out, n, NULL, NULL, NULL, NULL, 0, NULL};
     size_t nsrc0 = 0, nsrc, ntg;
     int rc = CLI_OK;
     for (long i = 0; i < n && !rc; i++) {
@@ -234,42 +295,60 @@ int aug_merge(const cli_command *cmd, const char *out, long n)
     }
     if (rc)
         return rc;
+    int h5 = 0, gate = 0;
+    for (long i = 0; i < n; i++) {
+        h5 += shard_has(&m, i, "augment", "h5");
+        gate += shard_has(&m, i, "dropped", "jsonl");
+    }
+    if (gate && gate != n)
+        return cli_fail(cmd, "%d of %ld shards have a dropped list (dropped-I-of-%ld.jsonl, "
+                        "--min-quality): all or none", gate, n, n);
+    size_t cells = m.total ? m.total : 1;
     m.bufs = calloc((size_t)n, sizeof *m.bufs);
+    m.dbufs = calloc((size_t)n, sizeof *m.dbufs);
     m.h5 = calloc((size_t)n, sizeof *m.h5);
-    m.lines = calloc(m.total ? m.total : 1, sizeof *m.lines);
-    if (!m.bufs || !m.h5 || !m.lines)
+    m.lines = calloc(cells, sizeof *m.lines);
+    m.dlines = gate ? calloc(cells, sizeof *m.dlines) : NULL;
+    line *kept = calloc(cells, sizeof *kept), *dropped = calloc(cells, sizeof *dropped);
+    if (!m.bufs || !m.dbufs || !m.h5 || !m.lines || (gate && !m.dlines) || !kept || !dropped)
         rc = cli_fail(cmd, "out of memory");
     int has_row = -1;
     for (long i = 0; i < n && !rc; i++)
-        rc = take_lines(&m, i, &has_row);
-    for (size_t r = 0; !rc && r < m.total; r++)
-        if (!m.lines[r].p)
-            rc = cli_fail(cmd, "sample %zu is in no shard's labels (of %zu)", r, m.total);
-    int h5 = 0;
-    for (long i = 0; i < n; i++)
-        h5 += shard_has_h5(&m, i);
+        if (!(rc = take_lines(&m, i, 0, &has_row)) && gate)
+            rc = take_lines(&m, i, 1, NULL);
+    size_t nk = 0, nd = 0, nu = 0;
+    if (!rc)
+        rc = sort_samples(&m, kept, dropped, &nk, &nd, &nu);
     if (!rc && h5 && h5 != n)
         rc = cli_fail(cmd, "%d of %ld shards have an HDF5 file (augment-I-of-%ld.h5): all or none",
                       h5, n, n);
-    if (!rc && h5 && has_row != 1)
+    if (!rc && h5 && has_row != 1 && nk)
         rc = cli_fail(cmd, "the shards have HDF5 files but their labels no h5_row");
-    char labels[4300];
+    char labels[4300], dlist[4300];
     snprintf(labels, sizeof labels, "%s/labels.jsonl", out);
+    snprintf(dlist, sizeof dlist, "%s/dropped.jsonl", out);
     if (!rc && h5)
-        rc = merge_h5(&m);
+        rc = merge_h5(&m, kept, nk);
+    if (!rc && gate)
+        rc = commit(&m, dlist, dropped, nd, 0);
     if (!rc)
-        rc = commit(&m, labels, m.lines, m.total, h5 > 0);
+        rc = commit(&m, labels, kept, nk, h5 > 0);
     if (!rc && cli_fsync_path(out))
         rc = cli_fail(cmd, "%s: cannot sync (%s)", out, strerror(errno));
     if (!rc)
-        printf("gazesplat augment: merged %ld shards: %zu images -> %s (labels.jsonl%s)\n", n,
-               m.total, out, h5 ? ", augment.h5" : "");
+        merge_report(&m, h5, nk, nd, nu);
     for (long i = 0; m.bufs && i < n; i++)
         free(m.bufs[i]);
+    for (long i = 0; m.dbufs && i < n; i++)
+        free(m.dbufs[i]);
     for (long i = 0; m.h5 && i < n; i++)
         gs_h5_close(m.h5[i]);
     free(m.bufs);
+    free(m.dbufs);
     free(m.h5);
     free(m.lines);
+    free(m.dlines);
+    free(kept);
+    free(dropped);
     return rc;
 }

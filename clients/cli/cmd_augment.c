@@ -10,7 +10,10 @@
  * manifest and fsync'd. The final labels file and HDF5 are assembled only
  * when every source of the shard is done, from the per-source parts, in
  * source order, so a run killed at any moment and run again ends with the
- * bytes an uninterrupted run writes. */
+ * bytes an uninterrupted run writes. With --min-quality the manifest line
+ * of a source also records each sample's decision (kept, dropped, kept
+ * unscored), so a resume neither re-adds a dropped sample nor counts one
+ * twice. */
 #define _POSIX_C_SOURCE 200809L
 #include <dirent.h>
 #include <errno.h>
@@ -52,7 +55,8 @@ const cli_command cli_augment_command = {
     "                         [--labels FILE] [--format png|h5|both] [--shard I/N]\n"
     "                         [--seed N] [--iters N] [--finetune N] [--finetune-lr X]\n"
     "                         [--no-transfer] [--fit-labels] [--h5-rgb] [--size S]\n"
-    "                         [--threads N] [--no-gate] [--quality] [--retries N]\n"
+    "                         [--threads N] [--no-gate] [--quality] [--min-quality X]\n"
+    "                         [--retries N]\n"
     "       gazesplat augment --merge N --out DIR\n"
     "\n"
     "  --model M        fit and render in this process with model file M\n"
@@ -131,6 +135,15 @@ const cli_command cli_augment_command = {
     "every source whatever it holds.\n"
     "--quality: each gaze-only sample's label gets its redirect quality\n"
     "(docs/face.md; 28 ms a sample at 256 px), else null.\n"
+    "--min-quality X (0..1; implies --quality): a gaze-only sample scoring\n"
+    "under X is not written: no image, no HDF5 row, no label. Each one is\n"
+    "listed in DIR/dropped.jsonl (dropped-I-of-N.jsonl with --shard: index,\n"
+    "source, subject, target, score, reason). A sample without a score (a\n"
+    "head change; a face whose landmarks were not found) is kept and counted\n"
+    "as unscored. The HDF5 holds the kept samples only, in order; images\n"
+    "and index keep the global numbering. The last line counts kept,\n"
+    "dropped and unscored; a run whose every sample was dropped exits 0\n"
+    "and says so on stderr (docs/augment.md).\n"
     "\n"
     "Exit status: 0 done, 1 a failure (named with its file and line or row;\n"
     "the sources done are kept), 2 bad usage, 3 a source the gate refused.\n",
@@ -144,7 +157,7 @@ const cli_command cli_augment_command = {
 enum {
     O_MODEL, O_INPUT, O_OUT, O_GRID, O_GAZE, O_UNIFORM, O_PER, O_TARGETS, O_HEAD, O_HEADU,
     O_LABELS, O_FORMAT, O_SHARD, O_SEED, O_ITERS, O_FT, O_FTLR, O_TRANSFER, O_FITLAB, O_RGB,
-    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_MERGE, O_NOGATE, O_QUALITY, O_RETRIES, O_N
+    O_THREADS, O_SIZE, O_ADDR, O_TOKEN, O_MERGE, O_NOGATE, O_QUALITY, O_RETRIES, O_MINQ, O_N
 };
 
 typedef struct target {
@@ -169,6 +182,10 @@ typedef struct job {
     int is_h5, h5_rgb, fit_labels, transfer, want_png, want_h5;
     int gate;    /* the face gate (off: --no-gate) */
     int quality; /* --quality: each gaze-only sample's redirect quality */
+    int min_q;          /* --min-quality given: samples scoring under it are dropped */
+    double min_quality; /* its X, 0..1 */
+    char *decide;       /* with min_q, per target of j->tg: 'k' kept, 'd' dropped,
+                           'u' kept unscored, 0 not made yet */
     int refused; /* load_face: the gate refused the source */
     long iters, shard_i, shard_n;
     gs_finetune_options ft;
@@ -177,7 +194,7 @@ typedef struct job {
     target *tg;
     size_t ntg;
     char h5_name[512]; /* basename of the HDF5 input */
-    char state[4000], manifest[4100], labels_path[4100], h5_path[4100];
+    char state[4000], manifest[4100], labels_path[4100], h5_path[4100], dropped_path[4100];
     gs_model *model;
     gs_model_info info;
     gs_pool *pool;
@@ -905,6 +922,64 @@ done:
 
 /* ---- the manifest ---- */
 
+/* A source's line: "done K\n", or with --min-quality "done K q=LETTERS\n",
+ * one letter per target of source K (k kept, d dropped, u kept unscored).
+ * Marks K done and takes its decisions; -1 for a line of another form. */
+static int parse_done(job *j, const char *line, unsigned char *done)
+{
+    unsigned long long k;
+    int at = 0;
+    if (strncmp(line, "done ", 5) || line[5] < '0' || line[5] > '9' ||
+        sscanf(line, "done %llu%n", &k, &at) != 1 || k >= j->nsrc)
+        return -1;
+    const char *p = line + at;
+    if (j->min_q) {
+        const source *s = &j->src[k];
+        if (strncmp(p, " q=", 3) || strspn(p + 3, "kdu") != s->nt || strcmp(p + 3 + s->nt, "\n"))
+            return -1;
+        memcpy(j->decide + s->t0, p + 3, s->nt);
+    } else if (strcmp(p, "\n")) {
+        return -1;
+    }
+    done[k] = 1;
+    return 0;
+}
+
+/* Source k's line for the manifest (malloc'd; NULL: out of memory). */
+static char *done_line(const job *j, size_t k)
+{
+    const source *s = &j->src[k];
+    size_t cap = 48 + s->nt;
+    char *line = malloc(cap);
+    if (!line)
+        return NULL;
+    int n = snprintf(line, cap, "done %zu", k);
+    if (j->min_q) {
+        memcpy(line + n, " q=", 3);
+        memcpy(line + n + 3, j->decide + s->t0, s->nt);
+        n += 3 + (int)s->nt;
+    }
+    memcpy(line + n, "\n", 2);
+    return line;
+}
+
+/* Source k's samples by decision: kept (returned; all without
+ * --min-quality), and of them unscored; dropped. */
+static size_t kept_of(const job *j, size_t k, size_t *dropped, size_t *unscored)
+{
+    const source *s = &j->src[k];
+    size_t kept = s->nt, d = 0, u = 0;
+    for (size_t t = 0; j->decide && t < s->nt; t++) {
+        d += j->decide[s->t0 + t] == 'd';
+        u += j->decide[s->t0 + t] == 'u';
+    }
+    if (dropped)
+        *dropped = d;
+    if (unscored)
+        *unscored = u;
+    return kept - d;
+}
+
 /* Reads the manifest: marks done sources in done[] and *finished. A torn
  * last line (no newline: killed mid-append) is cut off. Creates it (with
  * the header) when absent. */
@@ -922,12 +997,14 @@ static int open_manifest(job *j, unsigned char *done, int *finished)
             return cli_fail(j->cmd, "%s: cannot write (%s)", j->manifest, strerror(errno));
         return CLI_OK;
     }
-    char line[256];
+    char *line = NULL;
+    size_t lcap = 0;
+    ssize_t got;
     long good = 0;
     int rc = CLI_OK, first = 1;
-    while (fgets(line, sizeof line, f)) {
-        size_t n = strlen(line);
-        if (n == 0 || line[n - 1] != '\n')
+    while ((got = getline(&line, &lcap, f)) > 0) {
+        size_t n = (size_t)got;
+        if (line[n - 1] != '\n' || strlen(line) != n)
             break; /* torn */
         if (first) {
             if (strcmp(line, header) != 0) {
@@ -939,17 +1016,14 @@ static int open_manifest(job *j, unsigned char *done, int *finished)
             first = 0;
         } else if (strcmp(line, "finished\n") == 0)
             *finished = 1;
-        else {
-            unsigned long long k;
-            char tail;
-            if (sscanf(line, "done %llu%c", &k, &tail) != 2 || tail != '\n' || k >= j->nsrc) {
-                rc = cli_fail(j->cmd, "%s: bad line '%.*s'", j->manifest, (int)(n - 1), line);
-                break;
-            }
-            done[k] = 1;
+        else if (parse_done(j, line, done)) {
+            rc = cli_fail(j->cmd, "%s: bad line '%.*s'", j->manifest, n > 200 ? 200 : (int)(n - 1),
+                          line);
+            break;
         }
         good = ftell(f);
     }
+    free(line);
     fseek(f, 0, SEEK_END);
     long size = ftell(f);
     fclose(f);
@@ -998,21 +1072,28 @@ static void image_path(const job *j, size_t index, char *out, size_t cap, int re
         snprintf(out, cap, "%s/images/%08zu.png", j->out, index);
 }
 
-/* Whether source k's parts are all there (manifest says done). */
+/* Whether source k's parts are all there (manifest says done): its
+ * labels, its dropped samples (--min-quality), the HDF5 records and the
+ * PNGs of the samples kept. */
 static int parts_present(const job *j, size_t k)
 {
     const source *s = &j->src[k];
-    size_t S = (size_t)j->out_size;
+    size_t S = (size_t)j->out_size, kept = kept_of(j, k, NULL, NULL);
     char p[4300];
     part_path(j, k, "jsonl", p, sizeof p);
     if (!file_size_is(p, -1))
         return 0;
+    part_path(j, k, "dropped", p, sizeof p);
+    if (j->min_q && !file_size_is(p, -1))
+        return 0;
     if (j->want_h5) {
         part_path(j, k, "bin", p, sizeof p);
-        if (!file_size_is(p, (long long)(s->nt * (S * S * 3 + 16))))
+        if (!file_size_is(p, (long long)(kept * (S * S * 3 + 16))))
             return 0;
     }
     for (size_t t = 0; j->want_png && t < s->nt; t++) {
+        if (j->decide && j->decide[s->t0 + t] == 'd')
+            continue;
         image_path(j, s->first + t, p, sizeof p, 0);
         if (!file_size_is(p, -1))
             return 0;
@@ -1140,6 +1221,50 @@ static const char *src_label(const job *j, size_t k, char *buf, size_t cap)
     return buf;
 }
 
+/* ,"quality":{...} of one sample (docs/face.md), or null. */
+static void quality_json(jbuf *b, const gs_face_quality *q)
+{
+    if (!q) {
+        jput(b, ",\"quality\":null");
+        return;
+    }
+    /* Redirect quality (docs/face.md): the score and what it is made of. */
+    jput(b, ",\"quality\":{\"score\":%.4f,\"eyes\":%d", q->score, q->eyes);
+    jnum(b, "asked_pitch_rad", q->commanded[0]);
+    jnum(b, "asked_yaw_rad", q->commanded[1]);
+    jnum(b, "seen_pitch_rad", q->measured[0]);
+    jnum(b, "seen_yaw_rad", q->measured[1]);
+    jnum(b, "gaze_error_deg", q->gaze_error_deg);
+    jnum(b, "iris_delta_e", q->delta_e);
+    jnum(b, "eye_speckle", q->artifact);
+    jstr(b, "reason", q->reason);
+    jput(b, "}");
+}
+
+/* The dropped.jsonl line of a sample --min-quality dropped: what it would
+ * have been (index, source, target) and why (its unrounded score, the
+ * quality's reason, the whole quality as the labels carry it). */
+static void dropped_json(const job *j, size_t k, size_t t, const target *tg,
+                         const gs_face_quality *q, jbuf *b)
+{
+    const source *s = &j->src[k];
+    jput(b, "{\"index\":%zu", s->first + t);
+    jstr(b, "source", j->is_h5 ? j->h5_name : s->name);
+    jput(b, ",\"source_index\":%zu", k);
+    if (j->is_h5)
+        jput(b, ",\"source_row\":%zu", s->row);
+    else
+        jput(b, ",\"source_row\":null");
+    jput(b, ",\"target_index\":%zu", t);
+    jstr(b, "subject", s->subject);
+    jnum(b, "gaze_head_pitch_rad", tg->gp);
+    jnum(b, "gaze_head_yaw_rad", tg->gy);
+    jput(b, ",\"score\":%.10g", q->score);
+    jstr(b, "reason", q->reason);
+    quality_json(b, q);
+    jput(b, "}\n");
+}
+
 /* The JSON line of one sample. */
 static void sample_json(const job *j, size_t k, size_t t, const fitted *fi, const double R[9],
                         const double ht[3], const target *tg, const gs_face_quality *q,
@@ -1200,21 +1325,8 @@ static void sample_json(const job *j, size_t k, size_t t, const fitted *fi, cons
     jnum(b, "fit_psnr", fi->sub.fit_psnr);
     jnum(b, "fit_ssim", fi->sub.fit_ssim);
     jnum(b, "finetune_psnr", fi->ft_psnr);
-    if (!q) {
-        jput(b, ",\"quality\":null}\n");
-        return;
-    }
-    /* Redirect quality (docs/face.md): the score and what it is made of. */
-    jput(b, ",\"quality\":{\"score\":%.4f,\"eyes\":%d", q->score, q->eyes);
-    jnum(b, "asked_pitch_rad", q->commanded[0]);
-    jnum(b, "asked_yaw_rad", q->commanded[1]);
-    jnum(b, "seen_pitch_rad", q->measured[0]);
-    jnum(b, "seen_yaw_rad", q->measured[1]);
-    jnum(b, "gaze_error_deg", q->gaze_error_deg);
-    jnum(b, "iris_delta_e", q->delta_e);
-    jnum(b, "eye_speckle", q->artifact);
-    jstr(b, "reason", q->reason);
-    jput(b, "}}\n");
+    quality_json(b, q);
+    jput(b, "}\n");
 }
 
 static void put_f32le(uint8_t *p, float v)
@@ -1348,7 +1460,8 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, gs_fac
     in.iters = (int)j->iters;
     in.ft_steps = j->ft.iters;
     in.ft_lr = j->ft.lr;
-    in.keep_image = j->transfer;
+    /* The server measures the quality against the input it keeps. */
+    in.keep_image = j->transfer || j->quality;
     if (!fi->photo && j->fit_labels && s->has_head) {
         in.known_head = 1;
         in.head_deg[0] = s->head[0] / DEG;
@@ -1406,13 +1519,172 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, gs_fac
     return rc;
 }
 
+/* What one source's renders leave for its parts. */
+typedef struct source_out {
+    uint8_t *blob; /* per kept sample: the patch as BGR (face_patch's order),
+                      then face_gaze and face_head_pose as float32 LE */
+    size_t kept;   /* records in blob, lines in labels */
+    jbuf labels, dropped;
+} source_out;
+
+/* With --min-quality, a sample's decision: unscored (no quality: a head
+ * change, or no landmarks to measure against), dropped under X, kept. */
+static char decision(const job *j, const gs_face_quality *q)
+{
+    if (!q || !isfinite(q->score))
+        return 'u';
+    return q->score < j->min_quality ? 'd' : 'k';
+}
+
+/* A kept sample (its patch, So x So RGB, at px): its label, its PNG, and
+ * its HDF5 record in place (BGR, then the labels). */
+static int emit_sample(job *j, size_t k, size_t t, const fitted *fi, const double R[9],
+                       const double ht[3], const target *tg, const gs_face_quality *qp,
+                       uint8_t *px, source_out *so)
+{
+    int So = j->out_size;
+    size_t img_bytes = (size_t)So * So * 3;
+    double gc[2], hd[2];
+    sample_json(j, k, t, fi, R, ht, tg, qp, gc, hd, &so->labels);
+    if (j->want_png) {
+        gs_io_image out = {So, So, (size_t)So * 3, px};
+        gs_error err = {0, ""};
+        void *png = NULL;
+        size_t plen = 0;
+        char path[4300];
+        image_path(j, j->src[k].first + t, path, sizeof path, 0);
+        if (gs_io_image_encode(&out, GS_IO_PNG, 0, &png, &plen, &err))
+            return cli_fail(j->cmd, "%s: %s", path, err.msg);
+        int bad = commit_file(j, path, png, plen);
+        free(png);
+        if (bad)
+            return cli_fail(j->cmd, "%s: cannot write (%s)", path, strerror(errno));
+    }
+    for (size_t i = 0; i < (size_t)So * So; i++) { /* RGB -> BGR in place */
+        uint8_t b = px[3 * i];
+        px[3 * i] = px[3 * i + 2];
+        px[3 * i + 2] = b;
+    }
+    put_f32le(px + img_bytes, (float)gc[0]);
+    put_f32le(px + img_bytes + 4, (float)gc[1]);
+    put_f32le(px + img_bytes + 8, (float)hd[0]);
+    put_f32le(px + img_bytes + 12, (float)hd[1]);
+    so->kept++;
+    return CLI_OK;
+}
+
+/* Renders source k at each of its targets (in process through c, or the
+ * daemon's renders in remote), measures the quality where asked and keeps
+ * or drops each sample (--min-quality) into *so. */
+static int render_source(job *j, size_t k, const fitted *fi, gs_model_ctx *c,
+                         const gs_io_image *face, const uint8_t *remote,
+                         const gs_face_quality *rquals, const gs_face_quality_ref *qref,
+                         source_out *so, const char *what)
+{
+    const source *s = &j->src[k];
+    int S = j->info.image_size, So = j->out_size;
+    size_t rec = (size_t)So * So * 3 + 16;
+    gs_error err = {0, ""};
+    so->blob = malloc(s->nt * rec + 1);
+    uint8_t *render = So != S ? malloc((size_t)S * S * 3) : NULL;
+    int rc = CLI_OK;
+    if (!so->blob || (So != S && !render))
+        rc = cli_fail(j->cmd, "out of memory");
+    for (size_t t = 0; t < s->nt && !rc; t++) {
+        const target *tg = &j->tg[s->t0 + t];
+        gs_view v;
+        memset(&v, 0, sizeof v);
+        v.gaze_pitch = tg->gp;
+        v.gaze_yaw = tg->gy;
+        double R[9], ht[3];
+        memcpy(R, fi->sub.head_R, sizeof R);
+        memcpy(ht, fi->sub.head_t, sizeof ht);
+        if (tg->use_head) {
+            v.use_head = 1;
+            gs_geom_rot_from_pitchyaw(tg->hp, tg->hy, 0, v.head_R);
+            memcpy(v.head_t, fi->sub.head_t, sizeof v.head_t);
+            memcpy(R, v.head_R, sizeof R);
+        }
+        /* A dropped sample's slot is the next one's. */
+        uint8_t *px = so->blob + so->kept * rec, *dst = render ? render : px;
+        int r = 0;
+        if (remote)
+            memcpy(dst, remote + t * (size_t)S * S * 3, (size_t)S * S * 3);
+        else if (j->transfer)
+            r = gs_model_render_transfer(c, j->pool, &fi->sub, face->data, face->stride, &v, dst,
+                                         (size_t)S * 3, &err);
+        else
+            r = gs_model_render(c, j->pool, &fi->sub, &v, dst, (size_t)S * 3, &err);
+        if (r) {
+            rc = cli_fail(j->cmd, "%s: target %zu: %s", what, t, err.msg);
+            break;
+        }
+        gs_face_quality q;
+        const gs_face_quality *qp = NULL;
+        if (qref && !tg->use_head) {
+            gs_io_image ri = {S, S, (size_t)S * 3, dst};
+            if (gs_face_quality_measure(qref, &ri, fi->sub.head_R, tg->gp - fi->sub.gaze_pitch,
+                                        tg->gy - fi->sub.gaze_yaw, &q, &err)) {
+                rc = cli_fail(j->cmd, "%s: target %zu: quality: %s", what, t, err.msg);
+                break;
+            }
+            qp = &q;
+        } else if (rquals && !isnan(rquals[t].score)) {
+            qp = &rquals[t];
+        }
+        char d = j->min_q ? decision(j, qp) : 'k';
+        if (j->min_q)
+            j->decide[s->t0 + t] = d;
+        if (d == 'd') {
+            dropped_json(j, k, t, tg, qp, &so->dropped);
+            continue;
+        }
+        if (render)
+            resize_rgb(render, S, px, So);
+        rc = emit_sample(j, k, t, fi, R, ht, tg, qp, px, so);
+    }
+    free(render);
+    if (!rc && (so->labels.oom || so->dropped.oom))
+        rc = cli_fail(j->cmd, "out of memory");
+    return rc;
+}
+
+/* Source k's parts (HDF5 records, labels, dropped samples), then its line
+ * in the manifest: after this it is done. */
+static int commit_source(job *j, size_t k, source_out *so)
+{
+    const cli_command *cmd = j->cmd;
+    size_t rec = (size_t)j->out_size * j->out_size * 3 + 16;
+    char path[4300];
+    if (j->want_h5) {
+        part_path(j, k, "bin", path, sizeof path);
+        if (commit_file(j, path, so->blob, so->kept * rec))
+            return cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
+    }
+    part_path(j, k, "jsonl", path, sizeof path);
+    if (commit_file(j, path, so->labels.p ? so->labels.p : "", so->labels.len))
+        return cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
+    part_path(j, k, "dropped", path, sizeof path);
+    if (j->min_q && commit_file(j, path, so->dropped.p ? so->dropped.p : "", so->dropped.len))
+        return cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
+    char images[4200];
+    snprintf(images, sizeof images, "%s/images", j->out);
+    char *line = done_line(j, k);
+    if (!line)
+        return cli_fail(cmd, "out of memory");
+    int bad = (j->want_png && cli_fsync_path(images)) || cli_fsync_path(j->state) ||
+              manifest_append(j, line);
+    free(line);
+    if (bad)
+        return cli_fail(cmd, "%s: cannot write (%s)", j->manifest, strerror(errno));
+    return CLI_OK;
+}
+
 /* Fit, fine-tune, render and commit source k. */
 static int do_source(job *j, size_t k, double *psnr_out)
 {
     const cli_command *cmd = j->cmd;
     source *s = &j->src[k];
-    int S = j->info.image_size, So = j->out_size;
-    size_t img_bytes = (size_t)So * So * 3;
     char what[4400];
     src_label(j, k, what, sizeof what);
     gs_error err = {0, ""};
@@ -1424,8 +1696,9 @@ static int do_source(job *j, size_t k, double *psnr_out)
     int rc = CLI_OK;
     gs_model_ctx *c = NULL;
     gs_model *tuned = NULL;
-    uint8_t *blob = NULL, *remote = NULL;
-    jbuf jb = {0};
+    uint8_t *remote = NULL;
+    source_out so;
+    memset(&so, 0, sizeof so);
     gs_face_quality_ref *qref = NULL; /* in process: the quality of each gaze-only render */
     gs_face_quality *rquals = NULL; /* through the daemon: its Quality of each */
     if (j->addr) {
@@ -1514,112 +1787,12 @@ static int do_source(job *j, size_t k, double *psnr_out)
     }
 render:
     *psnr_out = fi.sub.fit_psnr;
-    /* Blob: per target the RGB patch as BGR (face_patch's order), then
-     * face_gaze and face_head_pose as float32 LE. */
-    size_t rec = img_bytes + 16;
-    blob = malloc(s->nt * rec + 1);
-    uint8_t *render = So != S ? malloc((size_t)S * S * 3) : NULL;
-    if (!blob || (So != S && !render)) {
-        free(render);
-        rc = cli_fail(cmd, "out of memory");
-        goto done;
-    }
-    gs_io_image out = {So, So, (size_t)So * 3, NULL};
-    for (size_t t = 0; t < s->nt && !rc; t++) {
-        const target *tg = &j->tg[s->t0 + t];
-        gs_view v;
-        memset(&v, 0, sizeof v);
-        v.gaze_pitch = tg->gp;
-        v.gaze_yaw = tg->gy;
-        double R[9], ht[3];
-        memcpy(R, fi.sub.head_R, sizeof R);
-        memcpy(ht, fi.sub.head_t, sizeof ht);
-        if (tg->use_head) {
-            v.use_head = 1;
-            gs_geom_rot_from_pitchyaw(tg->hp, tg->hy, 0, v.head_R);
-            memcpy(v.head_t, fi.sub.head_t, sizeof v.head_t);
-            memcpy(R, v.head_R, sizeof R);
-        }
-        uint8_t *px = blob + t * rec, *dst = render ? render : px;
-        out.data = px;
-        int r = 0;
-        if (remote)
-            memcpy(dst, remote + t * (size_t)S * S * 3, (size_t)S * S * 3);
-        else if (j->transfer)
-            r = gs_model_render_transfer(c, j->pool, &fi.sub, face.data, face.stride, &v, dst,
-                                         (size_t)S * 3, &err);
-        else
-            r = gs_model_render(c, j->pool, &fi.sub, &v, dst, (size_t)S * 3, &err);
-        if (r) {
-            rc = cli_fail(cmd, "%s: target %zu: %s", what, t, err.msg);
-            break;
-        }
-        gs_face_quality q;
-        const gs_face_quality *qp = NULL;
-        if (qref && !tg->use_head) {
-            gs_io_image ri = {S, S, (size_t)S * 3, dst};
-            if (gs_face_quality_measure(qref, &ri, fi.sub.head_R, tg->gp - fi.sub.gaze_pitch,
-                                        tg->gy - fi.sub.gaze_yaw, &q, &err)) {
-                rc = cli_fail(cmd, "%s: target %zu: quality: %s", what, t, err.msg);
-                break;
-            }
-            qp = &q;
-        } else if (rquals && !isnan(rquals[t].score)) {
-            qp = &rquals[t];
-        }
-        if (render)
-            resize_rgb(render, S, px, So);
-        double gc[2], hd[2];
-        sample_json(j, k, t, &fi, R, ht, tg, qp, gc, hd, &jb);
-        if (j->want_png) {
-            void *png = NULL;
-            size_t plen = 0;
-            char path[4300];
-            image_path(j, s->first + t, path, sizeof path, 0);
-            if (gs_io_image_encode(&out, GS_IO_PNG, 0, &png, &plen, &err)) {
-                rc = cli_fail(cmd, "%s: %s", path, err.msg);
-                break;
-            }
-            if (commit_file(j, path, png, plen))
-                rc = cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
-            free(png);
-        }
-        for (size_t i = 0; i < (size_t)So * So; i++) { /* RGB -> BGR in place */
-            uint8_t b = px[3 * i];
-            px[3 * i] = px[3 * i + 2];
-            px[3 * i + 2] = b;
-        }
-        put_f32le(px + img_bytes, (float)gc[0]);
-        put_f32le(px + img_bytes + 4, (float)gc[1]);
-        put_f32le(px + img_bytes + 8, (float)hd[0]);
-        put_f32le(px + img_bytes + 12, (float)hd[1]);
-    }
-    free(render);
-    if (!rc && jb.oom)
-        rc = cli_fail(cmd, "out of memory");
-    char path[4300];
-    if (!rc && j->want_h5) {
-        part_path(j, k, "bin", path, sizeof path);
-        if (commit_file(j, path, blob, s->nt * rec))
-            rc = cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
-    }
-    if (!rc) {
-        part_path(j, k, "jsonl", path, sizeof path);
-        if (commit_file(j, path, jb.p ? jb.p : "", jb.len))
-            rc = cli_fail(cmd, "%s: cannot write (%s)", path, strerror(errno));
-    }
-    if (!rc) {
-        char images[4200];
-        snprintf(images, sizeof images, "%s/images", j->out);
-        char line[64];
-        snprintf(line, sizeof line, "done %zu\n", k);
-        if ((j->want_png && cli_fsync_path(images)) || cli_fsync_path(j->state) ||
-            manifest_append(j, line))
-            rc = cli_fail(cmd, "%s: cannot write (%s)", j->manifest, strerror(errno));
-    }
+    if (!(rc = render_source(j, k, &fi, c, &face, remote, rquals, qref, &so, what)))
+        rc = commit_source(j, k, &so);
 done:
-    free(jb.p);
-    free(blob);
+    free(so.labels.p);
+    free(so.dropped.p);
+    free(so.blob);
     free(remote);
     free(rquals);
     gs_face_quality_ref_destroy(qref);
@@ -1632,15 +1805,86 @@ done:
 
 /* ---- assembly ---- */
 
-static int assemble(job *j, size_t *rows_out)
+/* Appends source k's part ext ("jsonl": labels, h5_row given from *row
+ * on; "dropped": as they are) to *all; it must hold want lines. */
+static int append_part(job *j, size_t k, const char *ext, size_t want, size_t *row, jbuf *all)
+{
+    char path[4300];
+    uint8_t *buf = NULL;
+    size_t len = 0, n = 0;
+    part_path(j, k, ext, path, sizeof path);
+    if (want && cli_read_file(path, (size_t)1 << 30, &buf, &len))
+        return cli_fail(j->cmd, "%s: cannot read; remove %s to start over", path, j->state);
+    /* Each label gets its HDF5 row in place of the placeholder. */
+    const char *p = (const char *)buf, *end = p + len;
+    int renumber = row && j->want_h5;
+    while (p < end) {
+        const char *nl = memchr(p, '\n', (size_t)(end - p));
+        const char *stop = nl ? nl + 1 : end;
+        const char *ph = renumber ? strstr(p, ",\"h5_row\":0,") : NULL;
+        if (ph && ph < stop) {
+            jput(all, "%.*s,\"h5_row\":%zu,", (int)(ph - p), p, *row + n);
+            const char *rest = ph + strlen(",\"h5_row\":0,");
+            jput(all, "%.*s", (int)(stop - rest), rest);
+        } else
+            jput(all, "%.*s", (int)(stop - p), p);
+        n++;
+        p = stop;
+    }
+    free(buf);
+    if (n != want)
+        return cli_fail(j->cmd, "%s: %zu lines, want %zu; remove %s to start over", path, n, want,
+                        j->state);
+    if (row)
+        *row += n;
+    return CLI_OK;
+}
+
+/* Source k's n HDF5 records into rows [row, row + n) of w. */
+static int write_h5_part(job *j, size_t k, size_t n, size_t row, gs_h5_writer *w)
 {
     const cli_command *cmd = j->cmd;
     size_t S = (size_t)j->out_size, img_bytes = S * S * 3, rec = img_bytes + 16;
+    char path[4300];
+    uint8_t *blob = NULL;
+    size_t len = 0;
+    gs_error err = {0, ""};
+    part_path(j, k, "bin", path, sizeof path);
+    if (cli_read_file(path, (size_t)1 << 40, &blob, &len) || len != n * rec) {
+        free(blob);
+        return cli_fail(cmd, "%s: cannot read; remove %s to start over", path, j->state);
+    }
+    uint8_t *pt = malloc(n * img_bytes);
+    float *gz = malloc(n * 2 * sizeof *gz), *hd = malloc(n * 2 * sizeof *hd);
+    int rc = pt && gz && hd ? CLI_OK : cli_fail(cmd, "out of memory");
+    for (size_t t = 0; !rc && t < n; t++) {
+        const uint8_t *q = blob + t * rec;
+        memcpy(pt + t * img_bytes, q, img_bytes);
+        gz[2 * t] = get_f32le(q + img_bytes);
+        gz[2 * t + 1] = get_f32le(q + img_bytes + 4);
+        hd[2 * t] = get_f32le(q + img_bytes + 8);
+        hd[2 * t + 1] = get_f32le(q + img_bytes + 12);
+    }
+    if (!rc && gs_h5_write_rows(w, row, n, pt, gz, hd, &err))
+        rc = cli_fail(cmd, "%s: %s", j->h5_path, err.msg);
+    free(pt);
+    free(gz);
+    free(hd);
+    free(blob);
+    return rc;
+}
+
+/* The shard's final files from the parts, in source order: the HDF5 (the
+ * kept samples' rows), the dropped samples' list (--min-quality), the
+ * labels. *rows_out: the samples kept. */
+static int assemble(job *j, size_t *rows_out)
+{
+    const cli_command *cmd = j->cmd;
     size_t rows = 0;
     for (size_t k = (size_t)j->shard_i; k < j->nsrc; k += (size_t)j->shard_n)
-        rows += j->src[k].nt;
+        rows += kept_of(j, k, NULL, NULL);
     *rows_out = rows;
-    jbuf all = {0};
+    jbuf all = {0}, dropped = {0};
     int rc = CLI_OK;
     size_t row = 0;
     gs_h5_writer *w = NULL;
@@ -1652,74 +1896,16 @@ static int assemble(job *j, size_t *rows_out)
             errno = ENOSPC;
             return cli_fail(cmd, "%s: cannot write (%s)", j->h5_path, strerror(errno));
         }
-        if (gs_h5_create(tmp, rows, (int)S, &w, &err))
+        if (gs_h5_create(tmp, rows, j->out_size, &w, &err))
             return cli_fail(cmd, "%s: %s", j->h5_path, err.msg);
     }
-    uint8_t *blob = NULL;
-    float *gz = NULL, *hd = NULL;
     for (size_t k = (size_t)j->shard_i; k < j->nsrc && !rc; k += (size_t)j->shard_n) {
-        char path[4300];
-        const source *s = &j->src[k];
-        uint8_t *buf = NULL;
-        size_t len = 0;
-        part_path(j, k, "jsonl", path, sizeof path);
-        if (s->nt && cli_read_file(path, (size_t)1 << 30, &buf, &len)) {
-            rc = cli_fail(cmd, "%s: cannot read; remove %s to start over", path, j->state);
-            break;
-        }
-        /* Each line gets its HDF5 row in place of the placeholder. */
-        const char *p = (const char *)buf, *end = p + len;
-        size_t r = row;
-        while (p < end) {
-            const char *nl = memchr(p, '\n', (size_t)(end - p));
-            const char *stop = nl ? nl + 1 : end;
-            const char *ph = j->want_h5 ? strstr(p, ",\"h5_row\":0,") : NULL;
-            if (ph && ph < stop) {
-                jput(&all, "%.*s,\"h5_row\":%zu,", (int)(ph - p), p, r);
-                const char *rest = ph + strlen(",\"h5_row\":0,");
-                jput(&all, "%.*s", (int)(stop - rest), rest);
-            } else
-                jput(&all, "%.*s", (int)(stop - p), p);
-            r++;
-            p = stop;
-        }
-        free(buf);
-        if (r - row != s->nt) {
-            rc = cli_fail(cmd, "%s: %zu lines, want %zu; remove %s to start over", path, r - row,
-                          s->nt, j->state);
-            break;
-        }
-        if (w && s->nt) {
-            part_path(j, k, "bin", path, sizeof path);
-            if (cli_read_file(path, (size_t)1 << 40, &blob, &len) || len != s->nt * rec) {
-                rc = cli_fail(cmd, "%s: cannot read; remove %s to start over", path, j->state);
-                free(blob);
-                blob = NULL;
-                break;
-            }
-            uint8_t *pt = malloc(s->nt * img_bytes);
-            gz = malloc(s->nt * 2 * sizeof *gz);
-            hd = malloc(s->nt * 2 * sizeof *hd);
-            if (!pt || !gz || !hd)
-                rc = cli_fail(cmd, "out of memory");
-            for (size_t t = 0; !rc && t < s->nt; t++) {
-                const uint8_t *q = blob + t * rec;
-                memcpy(pt + t * img_bytes, q, img_bytes);
-                gz[2 * t] = get_f32le(q + img_bytes);
-                gz[2 * t + 1] = get_f32le(q + img_bytes + 4);
-                hd[2 * t] = get_f32le(q + img_bytes + 8);
-                hd[2 * t + 1] = get_f32le(q + img_bytes + 12);
-            }
-            if (!rc && gs_h5_write_rows(w, row, s->nt, pt, gz, hd, &err))
-                rc = cli_fail(cmd, "%s: %s", j->h5_path, err.msg);
-            free(pt);
-            free(gz);
-            free(hd);
-            free(blob);
-            gz = hd = NULL;
-            blob = NULL;
-        }
-        row = r;
+        size_t nd = 0, kept = kept_of(j, k, &nd, NULL), row0 = row;
+        rc = append_part(j, k, "jsonl", kept, &row, &all);
+        if (!rc && j->min_q)
+            rc = append_part(j, k, "dropped", nd, NULL, &dropped);
+        if (!rc && w && kept)
+            rc = write_h5_part(j, k, kept, row0, w);
     }
     if (w) {
         if (rc)
@@ -1731,13 +1917,17 @@ static int assemble(job *j, size_t *rows_out)
         if (rc)
             unlink(tmp);
     }
-    if (!rc && all.oom)
+    if (!rc && (all.oom || dropped.oom))
         rc = cli_fail(cmd, "out of memory");
+    if (!rc && j->min_q &&
+        commit_file(j, j->dropped_path, dropped.p ? dropped.p : "", dropped.len))
+        rc = cli_fail(cmd, "%s: cannot write (%s)", j->dropped_path, strerror(errno));
     if (!rc && commit_file(j, j->labels_path, all.p ? all.p : "", all.len))
         rc = cli_fail(cmd, "%s: cannot write (%s)", j->labels_path, strerror(errno));
     if (!rc && cli_fsync_path(j->out))
         rc = cli_fail(cmd, "%s: cannot sync (%s)", j->out, strerror(errno));
     free(all.p);
+    free(dropped.p);
     return rc;
 }
 
@@ -1749,6 +1939,8 @@ static void remove_parts(job *j)
         part_path(j, k, "bin", path, sizeof path);
         unlink(path);
         part_path(j, k, "jsonl", path, sizeof path);
+        unlink(path);
+        part_path(j, k, "dropped", path, sizeof path);
         unlink(path);
     }
 }
@@ -1768,6 +1960,43 @@ static void fmt_eta(double s, char *buf, size_t cap)
 }
 
 /* ---- the command ---- */
+
+/* --min-quality's counts over the shard for the last line, into buf (""
+ * without the option); on stderr when every sample was dropped, and when
+ * gaze-only samples could not be scored (kept all the same). Returns the
+ * samples dropped. */
+static size_t gate_report(const job *j, char *buf, size_t cap)
+{
+    size_t kept = 0, dropped = 0, unscored = 0, blind = 0;
+    buf[0] = 0;
+    if (!j->min_q)
+        return 0;
+    for (size_t k = (size_t)j->shard_i; k < j->nsrc; k += (size_t)j->shard_n) {
+        const source *s = &j->src[k];
+        size_t d, u;
+        kept += kept_of(j, k, &d, &u);
+        dropped += d;
+        unscored += u;
+        for (size_t t = 0; t < s->nt; t++)
+            blind += j->decide[s->t0 + t] == 'u' && !j->tg[s->t0 + t].use_head;
+    }
+    if (blind)
+        fprintf(stderr, "gazesplat augment: warning: %zu gaze-only samples carry no score and "
+                "were kept unscored (%s)\n", blind,
+                j->addr ? "the daemon measured none: it needs its landmark model (photo_input) "
+                          "and a face's landmarks"
+                        : "no landmarks found in their faces to measure against");
+    const char *list = j->dropped_path + strlen(j->out) + 1;
+    snprintf(buf, cap, "; --min-quality %.10g: %zu kept (%zu of them unscored), %zu dropped "
+             "(listed in %s)", j->min_quality, kept, unscored, dropped, list);
+    if (kept == 0 && dropped > 0)
+        fprintf(stderr, "gazesplat augment: every sample%s was dropped: all %zu scored under "
+                "--min-quality %.10g; %s is empty%s and %s lists them\n",
+                j->shard_n > 1 ? " of this shard" : "", dropped, j->min_quality,
+                j->labels_path + strlen(j->out) + 1,
+                j->want_h5 ? ", the HDF5 has no rows," : "", list);
+    return dropped;
+}
 
 static uint64_t hash_file(uint64_t h, const char *path)
 {
@@ -1790,6 +2019,7 @@ static void job_free(job *j)
     }
     free(j->src);
     free(j->tg);
+    free(j->decide);
     gs_h5_close(j->h5);
     gs_face_detector_free(j->det);
     gs_face_shape_model_free(j->sp);
@@ -1810,7 +2040,7 @@ static int run_augment(int argc, char **argv)
         {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
         {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL},
         {"--merge", 1, NULL},   {"--no-gate", 0, NULL},      {"--quality", 0, NULL},
-        {"--retries", 1, NULL}};
+        {"--retries", 1, NULL}, {"--min-quality", 1, NULL}};
     int rc = cli_parse(cmd, argc, argv, o, O_N);
     if (rc == CLI_HELP) {
         fputs(cmd->usage, stdout);
@@ -1851,6 +2081,12 @@ static int run_augment(int argc, char **argv)
     j.out = o[O_OUT].value;
     j.gate = !o[O_NOGATE].value;
     j.quality = o[O_QUALITY].value != NULL;
+    if (o[O_MINQ].value) {
+        if (parse_num(o[O_MINQ].value, &j.min_quality) || j.min_quality < 0 || j.min_quality > 1)
+            return cli_usage_error(cmd, "--min-quality: want a score in [0, 1] (the redirect "
+                                   "quality, docs/face.md); got '%s'", o[O_MINQ].value);
+        j.min_q = j.quality = 1;
+    }
     j.want_png = j.want_h5 = 1;
     if (o[O_FORMAT].value) {
         const char *f = o[O_FORMAT].value;
@@ -1932,9 +2168,15 @@ static int run_augment(int argc, char **argv)
         goto out;
     if ((rc = make_targets(&j, o, (uint64_t)seed)))
         goto out;
+    if (j.min_q && !(j.decide = calloc(j.ntg + 1, 1))) {
+        rc = cli_fail(cmd, "out of memory");
+        goto out;
+    }
     /* Everything that shapes the outputs goes into the fingerprint. */
     for (int i = 0; i < O_N; i++)
-        if (i != O_THREADS && i != O_OUT) {
+        if (i != O_THREADS && i != O_OUT && (i != O_MINQ || o[i].value)) {
+            /* (--min-quality only when given: a run without it keeps the
+             * fingerprint it had before the option existed.) */
             fp = fnv_str(fp, o[i].name);
             fp = fnv_str(fp, o[i].value);
         }
@@ -1988,6 +2230,7 @@ static int run_augment(int argc, char **argv)
     snprintf(j.manifest, sizeof j.manifest, "%s/manifest", j.state);
     snprintf(j.labels_path, sizeof j.labels_path, "%s/labels%s.jsonl", j.out, suffix);
     snprintf(j.h5_path, sizeof j.h5_path, "%s/augment%s.h5", j.out, suffix);
+    snprintf(j.dropped_path, sizeof j.dropped_path, "%s/dropped%s.jsonl", j.out, suffix);
     char images[4200];
     snprintf(images, sizeof images, "%s/images", j.out);
     if (strlen(j.out) > 3800 || make_dir(j.out) || make_dir(j.state) ||
@@ -2011,12 +2254,14 @@ static int run_augment(int argc, char **argv)
         shard_samples += j.src[k].nt;
     }
     if (finished) {
-        if (!file_size_is(j.labels_path, -1) || (j.want_h5 && !file_size_is(j.h5_path, -1)))
+        char gate[600];
+        if (!file_size_is(j.labels_path, -1) || (j.want_h5 && !file_size_is(j.h5_path, -1)) ||
+            (j.min_q && !file_size_is(j.dropped_path, -1)))
             rc = cli_fail(cmd, "%s: finished, but its files are gone; remove %s to make them "
                           "again", j.out, j.state);
         else
-            printf("gazesplat augment: already complete: %zu images -> %s\n", shard_samples,
-                   j.out);
+            printf("gazesplat augment: already complete: %zu images -> %s%s\n",
+                   shard_samples - gate_report(&j, gate, sizeof gate), j.out, gate);
         free(done);
         goto out;
     }
@@ -2070,9 +2315,11 @@ static int run_augment(int argc, char **argv)
     }
     remove_parts(&j);
     double el = cli_now_s() - t0;
-    printf("gazesplat augment: %zu images from %zu sources -> %s (%s%s%s) in %.1f s\n", rows,
+    char gate[600];
+    gate_report(&j, gate, sizeof gate);
+    printf("gazesplat augment: %zu images from %zu sources -> %s (%s%s%s) in %.1f s%s\n", rows,
            total, j.out, j.labels_path + strlen(j.out) + 1, j.want_h5 ? ", " : "",
-           j.want_h5 ? j.h5_path + strlen(j.out) + 1 : "", el);
+           j.want_h5 ? j.h5_path + strlen(j.out) + 1 : "", el, gate);
 out:
     job_free(&j);
     return rc;

@@ -11,10 +11,22 @@ usage: test_augment.py GAZESPLAT_CLI WORKDIR MODE
                moments and rerun: the same bytes as an uninterrupted run
   MODE addr GAZESPLATD  the same through the daemon (--addr): its renders
                are the in-process renders byte for byte, killed and rerun
-               too; an unreachable address"""
+               too; an unreachable address
+  MODE minq GAZESPLATD  --min-quality X, X between the scores of a --quality
+               run: the kept samples are that run's samples scoring >= X
+               (and the unscored head changes), byte for byte; dropped.jsonl
+               lists exactly the others; the HDF5's shapes; X = 0 drops
+               nothing; a bad X is bad usage; the manifest's decisions;
+               --threads, kill -9 and resume, a full disk and resume (only
+               the sources not done are made again), shards and --merge
+               (and its refusal of a missing dropped list), every sample
+               dropped (exit 0, HDF5 of 0 rows), and through the daemon:
+               the same decisions and bytes, also with --no-transfer; a
+               daemon that cannot measure: kept unscored, with a warning"""
 import json
 import os
 import pty
+import re
 import shutil
 import signal
 import subprocess
@@ -504,10 +516,315 @@ def addr(cli, work):
         kills, [n for n in set(got) | set(again) if got.get(n) != again.get(n)][:4]))
 
 
+def kill_until_done(args, full_s, fracs):
+    """Runs args, killing it (SIGKILL) after each fraction of full_s in
+    turn, until a run finishes; returns (its exit status, kills)."""
+    kills = 0
+    for k in range(40):
+        p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            p.wait(timeout=fracs[k % len(fracs)] * max(full_s, 0.5))
+        except subprocess.TimeoutExpired:
+            p.send_signal(signal.SIGKILL)
+            p.wait()
+            kills += 1
+            continue
+        return p.returncode, kills
+    return None, kills
+
+
+def no_row(line):
+    """A label line without its h5_row (the only field that moves when
+    samples before it are dropped)."""
+    return re.sub(r',"h5_row":[0-9]+', "", line)
+
+
+def pick_threshold(scores):
+    """A threshold midway between two distinct (rounded) scores, as even a
+    split as there is, with a gap wide enough that rounding to 4 places
+    cannot move a score across it; None when the scores do not spread."""
+    d = sorted(set(scores))
+    best = None
+    for a, b in zip(d, d[1:]):
+        if b - a < 0.002:
+            continue
+        split = min(sum(x < b for x in scores), sum(x >= b for x in scores))
+        if best is None or split > best[0]:
+            best = (split, round((a + b) / 2, 6))
+    return best[1] if best else None
+
+
+def h5_arrays(path):
+    import h5py
+    with h5py.File(path, "r") as f:
+        return {k: f[k][:] for k in ("face_patch", "face_gaze", "face_head_pose")}
+
+
+def minq_check_kept(ref, got, x, what):
+    """got (a --min-quality x run's tree) against ref (the --quality run's):
+    the kept samples, their labels, images and HDF5 rows, and the list of
+    the dropped. Returns the expected decisions by index."""
+    import numpy as np
+    ref_lines = ref["labels.jsonl"].decode().splitlines()
+    refs = [json.loads(x_) for x_ in ref_lines]
+    keep = [q["quality"] is None or q["quality"]["score"] >= x for q in refs]
+    got_lines = got.get("labels.jsonl", b"").decode().splitlines()
+    want = [no_row(ln) for ln, k in zip(ref_lines, keep) if k]
+    check([no_row(ln) for ln in got_lines] == want and len(want) > 0,
+          "%s: labels = the --quality run's kept lines (%d vs %d lines)" % (what, len(got_lines), len(want)))
+    check([json.loads(ln)["h5_row"] for ln in got_lines] == list(range(len(want))),
+          "%s: h5_row 0..kept-1" % what)
+    imgs = sorted(n for n in got if n.startswith("images/"))
+    want_imgs = sorted(q["image"] for q, k in zip(refs, keep) if k)
+    check(imgs == want_imgs and all(got[n] == ref[n] for n in imgs),
+          "%s: the kept images, byte for byte (%d vs %d)" % (what, len(imgs), len(want_imgs)))
+    dropped = [json.loads(ln) for ln in got.get("dropped.jsonl", b"").decode().splitlines()]
+    gone = [q for q, k in zip(refs, keep) if not k]
+    check([d["index"] for d in dropped] == [q["index"] for q in gone] and len(gone) > 0,
+          "%s: dropped.jsonl lists exactly the samples under %g (%s vs %s)" % (
+              what, x, [d["index"] for d in dropped], [q["index"] for q in gone]))
+    check(all(d["source"] == q["source"] and d["subject"] == q["subject"] and
+              d["source_index"] == q["source_index"] and d["target_index"] == q["target_index"] and
+              d["gaze_head_pitch_rad"] == q["gaze_head_pitch_rad"] and
+              d["gaze_head_yaw_rad"] == q["gaze_head_yaw_rad"] and d["score"] < x and
+              abs(d["score"] - q["quality"]["score"]) <= 5e-5 and
+              d["reason"] == q["quality"]["reason"] and d["quality"] == q["quality"]
+              for d, q in zip(dropped, gone)), "%s: dropped.jsonl's fields" % what)
+    path = got.get("augment.h5")
+    if check(path is not None, "%s: augment.h5 written" % what):
+        a, b = h5_arrays(path), h5_arrays(ref["augment.h5"])
+        rows = [q["h5_row"] for q, k in zip(refs, keep) if k]
+        n = len(rows)
+        check(a["face_patch"].shape == (n, 128, 128, 3) and a["face_gaze"].shape == (n, 2) and
+              a["face_head_pose"].shape == (n, 2), "%s: HDF5 shapes %s" % (
+                  what, [a[k].shape for k in sorted(a)]))
+        check(all(np.array_equal(a[k], b[k][rows]) for k in a), "%s: HDF5 rows = the kept rows" % what)
+    return {q["index"]: ("d" if not k else "u" if q["quality"] is None else "k")
+            for q, k in zip(refs, keep)}
+
+
+def tree_h5(d):
+    """tree_bytes, with augment.h5 as its path (read by h5py)."""
+    t = tree_bytes(d)
+    if "augment.h5" in t:
+        t["augment.h5"] = os.path.join(d, "augment.h5")
+    return t
+
+
+def minq(cli, work):
+    from daemon_util import Daemon
+    daemon = os.path.abspath(sys.argv[4])
+    model = tiny_model(cli, work, seed=1)
+    faces = synth_faces(cli, work, 6)
+    imgs = os.path.join(faces, "images")
+    # Per face 4 gaze-only targets (scored) and, last, one head change
+    # (unscored: kept whatever the threshold).
+    gazes = ["0,0", "15,-20", "-10,25", "20,10"]
+    tf = os.path.join(work, "aug_minq_targets.csv")
+    with open(tf, "w") as f:
+        f.write("file,gaze_pitch_deg,gaze_yaw_deg,head_pitch_deg,head_yaw_deg\n")
+        for n in sorted(os.listdir(imgs)):
+            for g in gazes:
+                f.write("%s,%s,,\n" % (n, g))
+            f.write("%s,5,-5,10,15\n" % n)
+    opts = ["--input", imgs, "--targets", tf, "--iters", "12", "--finetune", "0"]
+    local = ["--model", model] + opts
+
+    bad_out = os.path.join(work, "aug_minq_bad")
+    shutil.rmtree(bad_out, ignore_errors=True)
+    for bad in ("abc", "1.5", "-0.1", "nan", "inf", "", "0.5x"):
+        r = run(cli, "augment", *local, "--out", bad_out, "--min-quality", bad)
+        check(r.returncode == 2 and "--min-quality" in r.stderr and "'%s'" % bad in r.stderr,
+              "--min-quality %r: exit %d %s" % (bad, r.returncode, r.stderr[:200]))
+    check(not os.path.exists(bad_out), "nothing written on a bad --min-quality")
+
+    # The --quality run: its scores give the threshold.
+    qd = os.path.join(work, "aug_minq_quality")
+    shutil.rmtree(qd, ignore_errors=True)
+    t0 = time.time()
+    r = run(cli, "augment", *local, "--quality", "--out", qd)
+    full_s = time.time() - t0
+    if not check(r.returncode == 0, "--quality run: %s" % r.stderr[-300:]):
+        return
+    ref = tree_h5(qd)
+    refs = [json.loads(x) for x in ref["labels.jsonl"].decode().splitlines()]
+    check(len(refs) == 30 and all((x["quality"] is None) == x["head_changed"] for x in refs),
+          "--quality: gaze-only samples scored, head changes not")
+    scores = [x["quality"]["score"] for x in refs if x["quality"]]
+    x = pick_threshold(scores)
+    if not check(x is not None, "the scores spread: %s" % sorted(scores)):
+        return
+    n_drop = sum(s_ < x for s_ in scores)
+    n_unscored = sum(x_["quality"] is None for x_ in refs)
+    n_keep = len(refs) - n_drop
+    print("threshold %g: %d of %d scored samples under it, %d unscored; scores %s" % (
+        x, n_drop, len(scores), n_unscored, sorted(scores)))
+
+    md = os.path.join(work, "aug_minq")
+    shutil.rmtree(md, ignore_errors=True)
+    args = [cli, "augment", *local, "--min-quality", str(x), "--out", md]
+    r = run(*args)
+    check(r.returncode == 0 and ("%d images from 6 sources" % n_keep) in r.stdout and
+          ("%d kept (%d of them unscored), %d dropped" % (n_keep, n_unscored, n_drop)) in r.stdout,
+          "--min-quality %g: exit %d, last line %s %s" % (x, r.returncode, r.stdout[-300:], r.stderr[-300:]))
+    got = tree_h5(md)
+    decisions = minq_check_kept(ref, got, x, "--min-quality %g" % x)
+    man = open(os.path.join(md, ".augment", "manifest")).read().splitlines()
+    want_man = []
+    for k in range(6):
+        want_man.append("done %d q=%s" % (k, "".join(decisions[5 * k + t] for t in range(5))))
+    check(man[1:] == want_man + ["finished"], "the manifest's decisions: %s" % man[1:])
+    r = run(*args)
+    check(r.returncode == 0 and "already complete: %d images" % n_keep in r.stdout and
+          "%d dropped" % n_drop in r.stdout, "finished, run again: %s" % r.stdout)
+
+    # X = 0: nothing dropped, the --quality run's bytes and an empty list.
+    zd = os.path.join(work, "aug_minq0")
+    shutil.rmtree(zd, ignore_errors=True)
+    r = run(cli, "augment", *local, "--min-quality", "0", "--out", zd)
+    z = tree_bytes(zd)
+    check(r.returncode == 0 and z.pop("dropped.jsonl", None) == b"" and z == tree_bytes(qd),
+          "--min-quality 0: the --quality run's bytes (%s)" % r.stderr[-200:])
+
+    # Any --threads, and killed and resumed: the same bytes.
+    td = os.path.join(work, "aug_minq_t1")
+    shutil.rmtree(td, ignore_errors=True)
+    r = run(cli, "augment", *local, "--min-quality", str(x), "--threads", "1", "--out", td)
+    check(r.returncode == 0 and tree_bytes(td) == tree_bytes(md), "--threads 1: the same bytes")
+    kd = os.path.join(work, "aug_minq_killed")
+    shutil.rmtree(kd, ignore_errors=True)
+    rc, kills = kill_until_done(args[:-1] + [kd], full_s, [0.05, 0.3, 0.5, 0.2, 0.7, 0.9])
+    check(rc == 0 and kills >= 2, "killed %d times, then exit %s" % (kills, rc))
+    again = tree_bytes(kd)
+    want = tree_bytes(md)
+    check(again == want, "killed run's bytes = uninterrupted run's (%s)" %
+          [n for n in set(again) | set(want) if again.get(n) != want.get(n)][:5])
+    print("--min-quality run killed %d times; --quality run %.1f s" % (kills, full_s))
+    # Stopped by a full disk after a few sources: the rerun takes the done
+    # sources' decisions from the manifest and makes only the others.
+    ed = os.path.join(work, "aug_minq_enospc")
+    shutil.rmtree(ed, ignore_errors=True)
+    r = run(*args[:-1], ed, env={"GAZESPLAT_AUGMENT_ENOSPC_AFTER": "24"})
+    done = [ln for ln in open(os.path.join(ed, ".augment", "manifest")).read().splitlines()
+            if ln.startswith("done ")]
+    check(r.returncode == 1 and "No space left on device" in r.stderr and 1 <= len(done) < 6,
+          "full disk: exit %d, %d sources done" % (r.returncode, len(done)))
+    r = run(*args[:-1], ed)
+    redone = re.findall(r"^gazesplat augment: \d+/6 ", r.stderr, re.M)
+    check(r.returncode == 0 and "resuming: %d of 6 sources done" % len(done) in r.stderr and
+          len(redone) == 6 - len(done) and tree_bytes(ed) == want,
+          "full disk, rerun: %d sources made again of %d left, the same bytes (%s)" % (
+              len(redone), 6 - len(done), r.stderr[-300:]))
+
+    # Shards, merged: the unsharded run's bytes, dropped.jsonl included.
+    sh = os.path.join(work, "aug_minq_shards")
+    shutil.rmtree(sh, ignore_errors=True)
+    for i in range(2):
+        r = run(cli, "augment", *local, "--min-quality", str(x), "--out", sh, "--shard", "%d/2" % i)
+        check(r.returncode == 0, "shard %d: %s" % (i, r.stderr[-200:]))
+    r = run(cli, "augment", "--merge", "2", "--out", sh)
+    check(r.returncode == 0 and "%d kept (%d of them unscored), %d dropped" % (n_keep, n_unscored, n_drop)
+          in r.stdout, "merge: %s %s" % (r.stdout, r.stderr[-200:]))
+    merged = {n: b for n, b in tree_bytes(sh).items() if "-of-" not in n}
+    check(merged == want, "merged shards = the unsharded run (%s)" %
+          [n for n in set(merged) | set(want) if merged.get(n) != want.get(n)][:5])
+    lone = os.path.join(sh, "dropped-1-of-2.jsonl")
+    os.rename(lone, lone + ".away")
+    r = run(cli, "augment", "--merge", "2", "--out", sh)
+    check(r.returncode == 1 and "1 of 2 shards have a dropped list" in r.stderr,
+          "merge with one shard's dropped list gone: %d %s" % (r.returncode, r.stderr))
+    os.rename(lone + ".away", lone)
+
+    # Every sample dropped: one face whose scores are all under 1, its
+    # gaze-only targets alone (the same renders: they come first).
+    worst = [k for k in range(6) if all(refs[5 * k + t]["quality"]["score"] < 0.999 for t in range(4))]
+    one = os.path.join(work, "aug_minq_one")
+    shutil.rmtree(one, ignore_errors=True)
+    os.makedirs(one)
+    shutil.copy(os.path.join(imgs, refs[5 * (worst or [0])[0]]["source"]), one)
+    if check(worst, "a face scoring under 1 everywhere"):
+        ad = os.path.join(work, "aug_minq_all")
+        shutil.rmtree(ad, ignore_errors=True)
+        r = run(cli, "augment", "--model", model, "--input", one, "--gaze-deg", ";".join(gazes),
+                "--iters", "12", "--finetune", "0", "--min-quality", "1", "--out", ad)
+        t = tree_h5(ad)
+        lst = [json.loads(ln) for ln in t.get("dropped.jsonl", b"").decode().splitlines()]
+        check(r.returncode == 0 and "every sample was dropped" in r.stderr and
+              "0 kept (0 of them unscored), 4 dropped" in r.stdout and t.get("labels.jsonl") == b""
+              and not [n for n in t if n.startswith("images/")] and
+              [d["target_index"] for d in lst] == [0, 1, 2, 3] and
+              all(abs(d["score"] - q["quality"]["score"]) <= 5e-5
+                  for q, d in zip(refs[5 * worst[0]:], lst)),
+              "every sample dropped: exit %d %s %s" % (r.returncode, r.stdout[-200:], r.stderr[-300:]))
+        if "augment.h5" in t:
+            a = h5_arrays(t["augment.h5"])
+            check(a["face_patch"].shape == (0, 128, 128, 3) and a["face_gaze"].shape == (0, 2),
+                  "every sample dropped: an HDF5 of 0 rows %s" % [a[k].shape for k in sorted(a)])
+
+    # Through the daemon (which measures the quality with its landmark
+    # model): the same decisions, images, dropped list and HDF5 patches.
+    state = os.path.join(work, "aug_minq_state")
+    shutil.rmtree(state, ignore_errors=True)
+    os.makedirs(state)
+    d = Daemon(daemon, ["--model", model, "--state-dir", state]).start()
+    rd = os.path.join(work, "aug_minq_remote")
+    shutil.rmtree(rd, ignore_errors=True)
+    # Without detail transfer (first, so that no subject is cached with
+    # its input): the daemon keeps the input all the same to measure
+    # against, so the decisions are the in-process ones.
+    nt_opts = ["--input", imgs, "--gaze-deg", ";".join(gazes), "--iters", "12", "--finetune", "0",
+               "--no-transfer", "--min-quality", str(x)]
+    nt_local, nt_remote = os.path.join(work, "aug_minq_nt"), os.path.join(work, "aug_minq_nt_remote")
+    for o in (nt_local, nt_remote):
+        shutil.rmtree(o, ignore_errors=True)
+    r = run(cli, "augment", "--model", model, *nt_opts, "--out", nt_local)
+    check(r.returncode == 0, "--no-transfer in process: %s" % r.stderr[-200:])
+    try:
+        r2 = run(cli, "augment", "--addr", d.sock, *nt_opts, "--out", nt_remote)
+        r = run(cli, "augment", "--addr", d.sock, *opts, "--min-quality", str(x), "--out", rd)
+    finally:
+        d.stop()
+    ntl, ntr = tree_bytes(nt_local), tree_bytes(nt_remote)
+    check(r2.returncode == 0 and "warning" not in r2.stderr and ntl.get("dropped.jsonl") and
+          ntr.get("dropped.jsonl") == ntl.get("dropped.jsonl") and
+          sorted(n for n in ntr if n.startswith("images/")) == sorted(n for n in ntl if n.startswith("images/")),
+          "--addr --no-transfer: the in-process decisions (%s)" % r2.stderr[-200:])
+    # A daemon that cannot measure (no landmark model: photo_input=no):
+    # every gaze-only sample kept unscored, and stderr says so.
+    state2 = os.path.join(work, "aug_minq_state2")
+    shutil.rmtree(state2, ignore_errors=True)
+    os.makedirs(state2)
+    d = Daemon(daemon, ["--model", model, "--state-dir", state2, "--set", "photo_input=no"]).start()
+    blind = os.path.join(work, "aug_minq_blind")
+    shutil.rmtree(blind, ignore_errors=True)
+    try:
+        r3 = run(cli, "augment", "--addr", d.sock, "--input", one, "--gaze-deg", ";".join(gazes),
+                 "--iters", "12", "--finetune", "0", "--min-quality", str(x), "--out", blind)
+    finally:
+        d.stop()
+    check(r3.returncode == 0 and "4 kept (4 of them unscored), 0 dropped" in r3.stdout and
+          "warning: 4 gaze-only samples carry no score" in r3.stderr,
+          "a daemon without the landmark model: unscored, said so (%s %s)" % (r3.stdout[-200:], r3.stderr[-300:]))
+    check(r.returncode == 0 and "%d kept (%d of them unscored), %d dropped" % (n_keep, n_unscored, n_drop)
+          in r.stdout and "warning" not in r.stderr, "--addr: %s %s" % (r.stdout[-300:], r.stderr[-300:]))
+    rt = tree_h5(rd)
+    check(sorted(rt) == sorted(got) and all(rt[n] == got[n] for n in rt if n.startswith("images/"))
+          and rt.get("dropped.jsonl") == got["dropped.jsonl"],
+          "--addr: the same images and dropped.jsonl, byte for byte")
+    rl = [json.loads(ln) for ln in rt.get("labels.jsonl", b"").decode().splitlines()]
+    gl = [json.loads(ln) for ln in got["labels.jsonl"].decode().splitlines()]
+    check([(q["index"], q["quality"]) for q in rl] == [(q["index"], q["quality"]) for q in gl],
+          "--addr: the same kept samples and their quality")
+    if "augment.h5" in rt:
+        import numpy as np
+        check(np.array_equal(h5_arrays(rt["augment.h5"])["face_patch"],
+                             h5_arrays(got["augment.h5"])["face_patch"]), "--addr: the same HDF5 patches")
+
+
 def main():
     cli, work, mode = os.path.abspath(sys.argv[1]), os.path.abspath(sys.argv[2]), sys.argv[3]
     os.makedirs(work, exist_ok=True)
-    {"errors": errors, "resume": resume, "addr": addr}[mode](cli, work)
+    {"errors": errors, "resume": resume, "addr": addr, "minq": minq}[mode](cli, work)
     print("%d checks, %d failed" % (COUNT[0], len(FAILS)))
     return 1 if FAILS else 0
 
