@@ -22,6 +22,7 @@
 
 #include <blake2.h>
 
+#include "gazesplat/clock.h"
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
@@ -424,11 +425,6 @@ void gsd_worker_destroy(gsd_worker *w)
     free(w);
 }
 
-static int64_t now_ms(void)
-{
-    return ev_now_ms();
-}
-
 static int key_zero(const uint8_t *k)
 {
     for (int i = 0; i < GS_FRAME_KEY_SIZE; i++)
@@ -460,7 +456,7 @@ static int job_stop(gsd_job *j)
     int st = atomic_load(&j->stop);
     if (st)
         return st;
-    return now_ms() > j->deadline_ms ? E(ERR_DEADLINE) : 0;
+    return gs_clock_ms() > j->deadline_ms ? E(ERR_DEADLINE) : 0;
 }
 
 /* Before the next image of a REDIRECT: waits while the job's connection
@@ -509,7 +505,7 @@ static gsd_out *run_sleep(gsd_server *s, gsd_job *j, int64_t t0)
 {
     const Gazesplat__Sleep *r = (const Gazesplat__Sleep *)j->req;
     int64_t end = t0 + r->ms;
-    while (now_ms() < end) {
+    while (gs_clock_ms() < end) {
         int why = job_stop(j);
         if (why)
             return stop_frame(s, j, why);
@@ -517,7 +513,7 @@ static gsd_out *run_sleep(gsd_server *s, gsd_job *j, int64_t t0)
         nanosleep(&ts, NULL);
     }
     Gazesplat__Done d = GAZESPLAT__DONE__INIT;
-    d.seconds = (double)(now_ms() - t0) / 1000.0;
+    d.seconds = (double)(gs_clock_ms() - t0) / 1000.0;
     gsd_out *o = gsd_frame_new(j, T(SLEEP_OK), &d.base);
     if (o)
         o->final = 1;
@@ -1464,7 +1460,7 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     m.psnr = subj.fit_psnr;
     m.ssim = subj.fit_ssim;
     m.iters = (uint32_t)so.fit.iters;
-    m.seconds = (double)(now_ms() - t0) / 1000.0;
+    m.seconds = (double)(gs_clock_ms() - t0) / 1000.0;
     m.cached = so.cached;
     m.finetuned = so.tuned;
     m.image_kept = gsd_cache_contains(s->inputs, j->key);
@@ -1765,7 +1761,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         return o;
     Gazesplat__Done d = GAZESPLAT__DONE__INIT;
     d.count = (uint32_t)r->n_targets;
-    d.seconds = (double)(now_ms() - t0) / 1000.0;
+    d.seconds = (double)(gs_clock_ms() - t0) / 1000.0;
     return gsd_frame_new(j, T(DONE), &d.base);
 }
 
@@ -1839,7 +1835,7 @@ static void worker_release(gsd_worker *w)
 void gsd_worker_run(gsd_worker *w, gsd_job *j)
 {
     gsd_server *s = w->srv;
-    int64_t t0 = now_ms();
+    int64_t t0 = gs_clock_ms();
     int why = job_stop(j);
     gsd_out *o;
     if (why)
@@ -1850,7 +1846,7 @@ void gsd_worker_run(gsd_worker *w, gsd_job *j)
         o = run_model_job(w, j, t0);
     if (o) {
         o->final = 1;
-        o->job_ms = (uint64_t)(now_ms() - t0);
+        o->job_ms = (uint64_t)(gs_clock_ms() - t0);
     }
     gsd_post(s, o);
     worker_prime(w); /* the job is the loop's now; only w is used */

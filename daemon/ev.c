@@ -10,6 +10,8 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "gazesplat/clock.h"
+
 #define MAX_EVENTS 64
 
 struct ev_loop {
@@ -28,9 +30,7 @@ struct ev_loop {
 
 int64_t ev_now_ms(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
+    return gs_clock_ms();
 }
 
 static void on_wake(ev_loop *loop, ev_watch *w, int events)

@@ -14,6 +14,7 @@
 #include <unistd.h>
 
 #include "cli.h"
+#include "gazesplat/clock.h"
 #include "gazesplat/model.h"
 #include "gazesplat/synth.h"
 
@@ -311,9 +312,7 @@ int cli_parse_finetune(const cli_command *cmd, const char *n, const char *parts,
 
 double cli_now_s(void)
 {
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+    return gs_clock_s();
 }
 
 void cli_progress_start(cli_progress_t *p)

@@ -9,6 +9,7 @@
 #include <sys/resource.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "cli.h"
 #include "gazesplat/capture.h"
 #include "gazesplat/live.h"
@@ -53,13 +54,6 @@ static void on_signal(int sig)
     stop_flag = 1;
 }
 
-static double mono_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + (double)ts.tv_nsec / 1e9;
-}
-
 static double cpu_s(void)
 {
     struct rusage ru;
@@ -72,12 +66,12 @@ static void on_event(void *user, gs_cap_pipe_event ev, const char *msg)
 {
     (void)user;
     static const char *names[] = {"", "capture", "capture lost", "output error", "stage error"};
-    fprintf(stderr, "[%.3f] %s: %s\n", mono_s(), names[ev], msg);
+    fprintf(stderr, "[%.3f] %s: %s\n", gs_clock_s(), names[ev], msg);
 }
 
 static void on_hotplug(void *user, gs_cap_hotplug_event ev, uint16_t vid, uint16_t pid)
 {
-    fprintf(stderr, "[%.3f] hotplug: %04x:%04x %s\n", mono_s(), vid, pid,
+    fprintf(stderr, "[%.3f] hotplug: %04x:%04x %s\n", gs_clock_s(), vid, pid,
             ev == GS_CAP_HOTPLUG_ARRIVED ? "arrived" : "left");
     if (ev == GS_CAP_HOTPLUG_ARRIVED)
         gs_cap_kick(user);
@@ -97,7 +91,7 @@ static void print_live(gs_live_stage *st)
     fprintf(stderr,
             "[%.3f] eyes: face %d subject %s | fits %llu refits %llu renders %llu | weight "
             "%.2f | head %.0f/%.0f deg | last fit %.1f s\n",
-            mono_s(), s.face, s.subject_ready ? "ready" : s.fitting ? "fitting" : "none",
+            gs_clock_s(), s.face, s.subject_ready ? "ready" : s.fitting ? "fitting" : "none",
             (unsigned long long)s.fits, (unsigned long long)s.refits,
             (unsigned long long)s.renders, (double)s.weight, s.head_pitch * 57.29578,
             s.head_yaw * 57.29578, s.last_fit_s);
@@ -107,7 +101,7 @@ static void print_stats(gs_cap_pipe *p, tick *last, int final)
 {
     gs_cap_pipe_stats s;
     gs_cap_pipe_get_stats(p, &s);
-    tick now = {mono_s(), cpu_s(), s.in, s.out};
+    tick now = {gs_clock_s(), cpu_s(), s.in, s.out};
     double dt = now.t - last->t > 1e-6 ? now.t - last->t : 1e-6;
     fprintf(stderr,
             "[%.3f] %s: fps in %.1f out %.1f | frames in %llu out %llu | dropped stale %llu "
@@ -187,12 +181,12 @@ static int parse_format(const char *s, gs_cap_pixfmt *pf)
 /* Runs until a signal or the time limit, printing statistics. */
 static void loop(gs_cap_pipe *p, gs_live_stage *st, long seconds, long stats_every)
 {
-    tick last = {mono_s(), cpu_s(), 0, 0}, first = last;
+    tick last = {gs_clock_s(), cpu_s(), 0, 0}, first = last;
     double t_end = seconds > 0 ? last.t + (double)seconds : 0, t_stats = last.t + (double)stats_every;
-    while (!stop_flag && (t_end == 0 || mono_s() < t_end)) {
+    while (!stop_flag && (t_end == 0 || gs_clock_s() < t_end)) {
         struct timespec ts = {0, 50000000};
         nanosleep(&ts, NULL);
-        if (stats_every > 0 && mono_s() >= t_stats) {
+        if (stats_every > 0 && gs_clock_s() >= t_stats) {
             print_stats(p, &last, 0);
             print_live(st);
             t_stats += (double)stats_every;
@@ -269,9 +263,9 @@ static int run_live(int argc, char **argv)
         int filtered = gs_cap_usb_id_parse(o[O_IN].value, &id, NULL) == GS_OK;
         if (gs_cap_hotplug_start(filtered ? &id : NULL, o[O_HPANY].value != NULL, on_hotplug,
                                  cap, &hp, &e) != GS_OK)
-            fprintf(stderr, "[%.3f] hotplug: off (%s)\n", mono_s(), e.msg);
+            fprintf(stderr, "[%.3f] hotplug: off (%s)\n", gs_clock_s(), e.msg);
         else
-            fprintf(stderr, "[%.3f] hotplug: watching\n", mono_s());
+            fprintf(stderr, "[%.3f] hotplug: watching\n", gs_clock_s());
     }
     signal(SIGINT, on_signal);
     signal(SIGTERM, on_signal);
@@ -280,7 +274,7 @@ static int run_live(int argc, char **argv)
     gs_cap_pipe *p = NULL;
     r = gs_cap_pipe_start(&pc, &p, &e);
     if (r == GS_OK) {
-        fprintf(stderr, "[%.3f] live: %s -> %s\n", mono_s(), path,
+        fprintf(stderr, "[%.3f] live: %s -> %s\n", gs_clock_s(), path,
                 o[O_OUT].value ? o[O_OUT].value : "(discard)");
         loop(p, y.stage, seconds, stats_every);
         gs_cap_pipe_stop(p);

@@ -9,6 +9,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "cli.h"
 #include "gazesplat/image_io.h"
 #include "gazesplat/ply.h"
@@ -133,13 +134,6 @@ static int write_image(const char *path, int format, const float *planes, int w,
     return rc;
 }
 
-static double now_ms(void)
-{
-    struct timespec t;
-    clock_gettime(CLOCK_MONOTONIC, &t);
-    return (double)t.tv_sec * 1e3 + (double)t.tv_nsec * 1e-6;
-}
-
 /* Background planes (C x H x W): bg in channels 0..2, zero elsewhere. */
 static float *background_planes(const float bg[3], int channels, size_t hw)
 {
@@ -183,10 +177,10 @@ static int render_scene(const render_args *a, const gs_ply_scene *scene, gs_erro
     }
     gs_gaussians g;
     gs_ply_gaussians(scene, &g);
-    double t0 = now_ms();
+    double t0 = (1e3 * gs_clock_s());
     int rc = gs_raster_forward(b.r, b.pool, &a->cam, &g, b.bg, &a->ropt, b.features, b.alpha,
                                NULL, err);
-    double ms = now_ms() - t0;
+    double ms = (1e3 * gs_clock_s()) - t0;
     int nthreads = b.pool ? gs_pool_threads(b.pool) : 1;
     if (!rc)
         rc = a->out_kind == OUT_NPY ? write_npy(a->out, b.features, a->cam.width, a->cam.height, err)

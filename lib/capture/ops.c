@@ -8,6 +8,7 @@
 #include <unistd.h>
 
 #include "gazesplat/capture.h"
+#include "gazesplat/clock.h"
 
 static int sys_open(void *ctx, const char *path, int flags)
 {
@@ -62,9 +63,7 @@ static ssize_t sys_write(void *ctx, int fd, const void *buf, size_t len)
 static int64_t sys_now_ns(void *ctx)
 {
     (void)ctx;
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (int64_t)ts.tv_sec * 1000000000 + ts.tv_nsec;
+    return gs_clock_ns();
 }
 
 static void sys_sleep_ns(void *ctx, int64_t ns)

@@ -11,6 +11,7 @@
  * the threads hot across them. Spinning uses `pause`, and the time it may
  * burn is bounded per job. */
 #define _POSIX_C_SOURCE 200809L /* clock_gettime */
+#include "gazesplat/clock.h"
 #include "gazesplat/pool.h"
 
 #include <pthread.h>
@@ -50,23 +51,16 @@ typedef struct {
     int index;
 } worker_arg;
 
-static long long now_ns(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (long long)ts.tv_sec * 1000000000LL + ts.tv_nsec;
-}
-
 /* Spins until cond(p) holds or spin_ns have passed; returns cond(p). The
  * clock is read every 64 pauses. */
 #define SPIN_UNTIL(p, cond)                                                           \
     do {                                                                              \
         long spin_ = atomic_load_explicit(&(p)->spin_ns, memory_order_relaxed);      \
         if (spin_ > 0 && !(cond)) {                                                   \
-            long long end_ = now_ns() + spin_;                                        \
+            long long end_ = gs_clock_ns() + spin_;                                   \
             for (unsigned k_ = 1; !(cond); k_++) {                                    \
                 cpu_relax();                                                          \
-                if (k_ % 64 == 0 && now_ns() >= end_)                                 \
+                if (k_ % 64 == 0 && gs_clock_ns() >= end_)                            \
                     break;                                                            \
             }                                                                         \
         }                                                                             \

@@ -15,6 +15,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "gazesplat/eval.h"
 #include "gazesplat/nn.h"
 #include "eval_internal.h"
@@ -26,13 +27,6 @@
 
 #define GS_DS_DEG (180.0 / 3.14159265358979323846) /* degrees per radian */
 #define OFFSET_MAX (15.0 / GS_DS_DEG) /* largest calibration offset */
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 static uint64_t splitmix(uint64_t x)
 {
@@ -577,10 +571,10 @@ static int finetune_all(ds_run *r, const gs_model *m, const char *path,
         }
         if (r->o->subject_from_k)
             rc = make_sets(r, m, k, path, reuse, res, err);
-        double t0 = now_s();
+        double t0 = gs_clock_s();
         for (int c = 0; !rc && c < GS_EVAL_DS_CONDITIONS; c++, runs++)
             rc = finetune(r, k, c, &res->err[k][c], err);
-        tune += now_s() - t0;
+        tune += gs_clock_s() - t0;
     }
     res->finetune_s = runs ? tune / runs : NAN;
     res->fit_s = r->fit_s;

@@ -6,14 +6,8 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "gazesplat/eval.h"
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 /* The options of the protocol's fit: base with the sample's labels. */
 static void protocol_options(const gs_fit_options *base,
@@ -59,10 +53,10 @@ int gs_eval_fit_sample_with(gs_model_ctx *c, gs_pool *pool,
     gs_fit_options o;
     protocol_options(base, in, &o);
     gs_fit_report rep;
-    double t0 = now_s();
+    double t0 = gs_clock_s();
     int rc = gs_model_fit(c, pool, in->rgb, in->stride, &o, sub, &rep, err);
     if (secs)
-        *secs = now_s() - t0;
+        *secs = gs_clock_s() - t0;
     return rc;
 }
 
@@ -87,10 +81,10 @@ int gs_eval_fit_samples(gs_model_ctx *c, gs_pool *pool,
         gs_fit_image_from_options(&im[i], in[i].rgb, in[i].stride, &oi);
     }
     gs_fit_report rep;
-    double t0 = now_s();
+    double t0 = gs_clock_s();
     int rc = gs_model_fit_images(c, pool, im, k, &o, out, &rep, err);
     if (secs)
-        *secs = now_s() - t0;
+        *secs = gs_clock_s() - t0;
     return rc;
 }
 

@@ -21,6 +21,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "gazesplat/eval.h"
 #include "eval_internal.h"
 
@@ -29,13 +30,6 @@
 #define TAG_TEST 0x7267747374ull  /* "rgtst" */
 #define TAG_INIT 0x7267696e74ull  /* "rgint" */
 #define RG_DEG (3.14159265358979323846 / 180.0)
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
-}
 
 static uint64_t splitmix(uint64_t x)
 {
@@ -301,14 +295,14 @@ static int make_redirected(range_run *r, const gs_model *m, gs_error *err)
         r->res->fit_s += secs;
         if (!rc)
             r->res->fit_psnr += sub.fit_psnr / o->sources;
-        t0 = now_s();
+        t0 = gs_clock_s();
         for (int j = 0; !rc && j < o->per_source; j++)
             for (int t = j; !rc && t < o->targets; t += o->per_source) {
                 gs_synth_scene w;
                 target_scene(r, i, t, &w);
                 rc = redirect_one(r, c, &sub, q0 + (size_t)j, &w, err);
             }
-        r->res->render_s += now_s() - t0;
+        r->res->render_s += gs_clock_s() - t0;
         log_step(r, "fitted and redirected source identity", i + 1,
                  o->sources);
     }
@@ -392,10 +386,10 @@ static int train_and_test(range_run *r, int c, const char *est_dir,
     to.data_n = n;
     to.data_size = r->S;
     gs_gaze_train_report rep = {0};
-    double t0 = now_s();
+    double t0 = gs_clock_s();
     if (!rc)
         rc = gs_gaze_train(net, &to, r->pool, &rep, err);
-    r->res->train_s[c] = now_s() - t0;
+    r->res->train_s[c] = gs_clock_s() - t0;
     r->res->train_loss[c] = rep.final_loss;
     r->res->set_size[c] = (long)n;
     for (size_t t = 0; !rc && t < r->test.n; t++) {

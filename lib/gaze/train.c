@@ -14,6 +14,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "gazesplat/nn.h"
 #include "gazesplat/safetensors.h"
 #include "gazesplat/synth.h"
@@ -65,13 +66,6 @@ float gs_gaze_l1_loss(const float out[4], const float lab[4], float scale,
         dout[k] = e > 0 ? scale : e < 0 ? -scale : 0.0f;
     }
     return loss / 4.0f;
-}
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
 }
 
 static uint64_t mix(uint64_t a, uint64_t b)
@@ -439,7 +433,7 @@ int gs_gaze_train(gs_gaze_net *n, const gs_gaze_train_options *o, gs_pool *pool,
         rc = load_opt(&t, o->out_path, &start, err);
     if (!rc)
         rc = refill(&t, start, err);
-    double t0 = now_s(), tl = t0, wl = 0, we = 0, last = 0;
+    double t0 = gs_clock_s(), tl = t0, wl = 0, we = 0, last = 0;
     long wn = 0, done = 0;
     long end = o->stop_after > 0 && o->stop_after < o->steps ? o->stop_after : o->steps;
     for (t.step = start; !rc && t.step < end; t.step++) {
@@ -449,14 +443,14 @@ int gs_gaze_train(gs_gaze_net *n, const gs_gaze_train_options *o, gs_pool *pool,
             break;
         done++, wn++, wl += loss, we += gerr;
         if (o->log && o->log_every > 0 && (t.step + 1) % o->log_every == 0) {
-            double el = now_s() - t0;
+            double el = gs_clock_s() - t0;
             o->log(o->log_ctx,
                    "step %ld/%ld loss %.4f rad  gaze %.2f deg  lr %.2e  %.0f ms/step  eta %.0f s",
                    t.step + 1, o->steps, wl / wn, we / wn * 57.29577951308232,
-                   lr_at(o, t.step), 1000.0 * (now_s() - tl) / wn,
+                   lr_at(o, t.step), 1000.0 * (gs_clock_s() - tl) / wn,
                    (double)(o->steps - t.step - 1) * el / (double)done);
             last = wl / wn;
-            wl = we = 0, wn = 0, tl = now_s();
+            wl = we = 0, wn = 0, tl = gs_clock_s();
         }
         if (o->checkpoint_every > 0 && (t.step + 1) % o->checkpoint_every == 0)
             rc = save_opt(&t, o->out_path, t.step + 1, err);
@@ -465,7 +459,7 @@ int gs_gaze_train(gs_gaze_net *n, const gs_gaze_train_options *o, gs_pool *pool,
         rc = save_opt(&t, o->out_path, t.step, err);
     if (rep) {
         rep->steps = done;
-        rep->seconds = now_s() - t0;
+        rep->seconds = gs_clock_s() - t0;
         rep->final_loss = wn ? wl / wn : last;
     }
     trainer_free(&t);

@@ -7,6 +7,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "frame.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/nn.h"
@@ -345,13 +346,6 @@ typedef struct fit_state {
     double lr[V_CODE + GS_MODEL_MAX_CODE];
     int n;
 } fit_state;
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
-}
 
 static void adam_update(fit_state *s, int t)
 {
@@ -883,7 +877,7 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
             gs_geom_mat3_identity(f[i].R0);
     }
     const int id_dim = c->m->cfg.id_dim;
-    double t0 = now_s(), best_loss = INFINITY, first = NAN, hist[20];
+    double t0 = gs_clock_s(), best_loss = INFINITY, first = NAN, hist[20];
     int it = 0, plateaued = 0, halvings = 0, since = 0, on_time = 0;
     for (; it < iters; it++) {
         if (o.cancel && o.cancel(o.cancel_arg)) {
@@ -931,7 +925,7 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
                 for (int j = 0; j < f[i].s.n; j++)
                     f[i].s.lr[j] *= 0.5;
         }
-        if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s) {
+        if (o.time_budget_s > 0 && gs_clock_s() - t0 > o.time_budget_s) {
             on_time = it + 1 < iters;
             break;
         }
@@ -988,7 +982,7 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
     if (report) {
         memset(report, 0, sizeof *report);
         report->iters = it;
-        report->seconds = now_s() - t0;
+        report->seconds = gs_clock_s() - t0;
         report->loss_first = first;
         report->loss_last = best_loss;
         report->stopped_on_plateau = plateaued;
@@ -1352,7 +1346,7 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
     }
     if (rc)
         rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
-    double t0 = now_s(), best = INFINITY, first = NAN;
+    double t0 = gs_clock_s(), best = INFINITY, first = NAN;
     float psnr_first = NAN, psnr_best = NAN;
     double hist[20];
     int it = 0, stopped_on_time = 0, plateaued = 0;
@@ -1400,7 +1394,7 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
             plateaued = 1;
             break;
         }
-        if (o.time_budget_s > 0 && now_s() - t0 > o.time_budget_s) {
+        if (o.time_budget_s > 0 && gs_clock_s() - t0 > o.time_budget_s) {
             stopped_on_time = 1;
             break;
         }
@@ -1427,7 +1421,7 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
     if (report) {
         memset(report, 0, sizeof *report);
         report->iters = it;
-        report->seconds = now_s() - t0;
+        report->seconds = gs_clock_s() - t0;
         report->loss_first = first;
         report->loss_best = best;
         report->psnr_first = psnr_first;

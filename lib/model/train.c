@@ -22,6 +22,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "frame.h"
 #include "gazesplat/gaze.h"
 #include "gazesplat/nn.h"
@@ -91,13 +92,6 @@ void gs_model_light_code(const gs_synth_scene *s, float out[12])
     }
     for (int c = 0; c < 3; c++)
         out[9 + c] = s->ambient[c];
-}
-
-static double now_s(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return ts.tv_sec + 1e-9 * ts.tv_nsec;
 }
 
 /* What making a sample reads: fixed for the run, the producer's copy. */
@@ -836,7 +830,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (!rc)
         producer_start(&t, o->sync_samples);
     int ramp = o->resume && o->fresh_from_step >= 0 && o->warmup > 0;
-    double t0 = now_s(), last_log = t0;
+    double t0 = gs_clock_s(), last_log = t0;
     long skipped = 0, done = 0;
     double lr = o->lr; /* this step's learning rate */
     double psnr_acc = 0, loss_acc = 0, gaze_acc = 0;
@@ -895,7 +889,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         t.gaze_mean = t.mean_n == 1 ? t.gaze_rad : 0.98 * t.gaze_mean + 0.02 * t.gaze_rad;
         acc_n++;
         if (o->log && o->log_every > 0 && (step + 1) % o->log_every == 0) {
-            double el = now_s() - t0, rate = done / el;
+            double el = gs_clock_s() - t0, rate = done / el;
             char gz[48] = "";
             if (t.gnet)
                 snprintf(gz, sizeof gz, "  gaze %.2f deg",
@@ -904,9 +898,9 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
                    "step %ld/%ld loss %.4f psnr %.2f dB%s  lr %.2e  %.0f ms/step  "
                    "eta %.0f s  skipped %ld",
                    step + 1, o->steps, loss_acc / acc_n, psnr_acc / acc_n, gz, lr,
-                   1000.0 * (now_s() - last_log) / acc_n,
+                   1000.0 * (gs_clock_s() - last_log) / acc_n,
                    (o->steps - step - 1) / (rate > 0 ? rate : 1), skipped);
-            last_log = now_s();
+            last_log = gs_clock_s();
             psnr_acc = loss_acc = gaze_acc = 0;
             acc_n = 0;
         }
@@ -918,7 +912,7 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
     if (rep) {
         rep->steps = step;
         rep->skipped = skipped;
-        rep->seconds = now_s() - t0;
+        rep->seconds = gs_clock_s() - t0;
         rep->final_loss = t.loss_mean;
         rep->final_gaze_deg = t.gaze_mean * 180.0 / GS_MODEL_PI;
     }

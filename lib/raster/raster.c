@@ -8,6 +8,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "gazesplat/clock.h"
 #include "raster_internal.h"
 
 /* Upper bound on (tile, Gaussian) pairs in one render: 16M ids (64 MB). */
@@ -190,14 +191,6 @@ void gs_raster_get_stats(const gs_raster *r, gs_raster_stats *s)
     s->ms_sort = r ? r->ms_phase[1] : 0.0;
     s->ms_bin = r ? r->ms_phase[2] : 0.0;
     s->ms_composite = r ? r->ms_phase[3] : 0.0;
-}
-
-/* Wall-clock milliseconds, for the phase times of the stats only. */
-static double now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (double)ts.tv_sec * 1e3 + (double)ts.tv_nsec * 1e-6;
 }
 
 /* fmaxf and fminf are library calls on x86 (their NaN rules have no single
@@ -764,7 +757,7 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
             return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory");
     }
 
-    double t0 = now_ms();
+    double t0 = (1e3 * gs_clock_s());
     proj_ctx pc = {r, fast};
     int chunks = (int)((n + PROJ_CHUNK - 1) / PROJ_CHUNK);
     gs_pool_for(fast ? pool : NULL, chunks, project_chunk, &pc);
@@ -778,14 +771,14 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
             r->keys[m++] = bits;
         }
     r->visible = m;
-    double t1 = now_ms();
+    double t1 = (1e3 * gs_clock_s());
     if (m > 0)
         sort_by_depth(r, m);
-    double t2 = now_ms();
+    double t2 = (1e3 * gs_clock_s());
     rc = bin_tiles(r, pool, m, fast, err);
     if (rc)
         return rc;
-    double t3 = now_ms();
+    double t3 = (1e3 * gs_clock_s());
 
     if (fast) {
         r->fwd_kern = r->kern;
@@ -793,7 +786,7 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
             return gs_error_set(err, GS_ERR_NOMEM, "raster: out of memory for tile buffers");
     } else
         gs_raster_scalar_forward(r, background, out_f, out_alpha, out_depth);
-    double t4 = now_ms();
+    double t4 = (1e3 * gs_clock_s());
     r->ms_phase[0] = t1 - t0, r->ms_phase[1] = t2 - t1;
     r->ms_phase[2] = t3 - t2, r->ms_phase[3] = t4 - t3;
     r->have_forward = 1;
