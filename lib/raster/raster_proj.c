@@ -17,30 +17,16 @@
 #pragma GCC optimize("fp-contract=off")
 #endif
 
-/* exp(x) for any x: Cody-Waite reduction and the polynomial of vexp_neg;
- * +inf above 88.37, 0 below -87.33 (no denormal results). */
+/* exp(x) for any x: vexp_neg's reduction and polynomial (VEXP_REDUCED,
+ * raster_tiles.c), expanded here without fused multiply-adds; +inf above
+ * 88.37, 0 below -87.33 (no denormal results). */
 static inline vf vexp_any(vf x)
 {
     vi big = x > splat(88.3762626647949f), small = x < splat(-87.3365447504f);
     x = vmin(vmax(x, splat(-87.0f)), splat(88.0f));
-    vf fx = x * splat(1.44269504088896341f) + splat(0.5f);
-    vi n = __builtin_convertvector(fx, vi);
-    vf nf = __builtin_convertvector(n, vf);
-    n += (vi)(nf > fx); /* floor */
-    nf = __builtin_convertvector(n, vf);
-    vf r = x - nf * splat(0.693359375f) - nf * splat(-2.12194440e-4f);
-    vf r2 = r * r;
-    vf p = splat(1.9875691500e-4f);
-    p = p * r + splat(1.3981999507e-3f);
-    p = p * r + splat(8.3334519073e-3f);
-    p = p * r + splat(4.1665795894e-2f);
-    p = p * r + splat(1.6666665459e-1f);
-    p = p * r + splat(5.0000001201e-1f);
-    p = p * r2 + r + splat(1.0f);
-    vi bits = (n + 127) << 23;
-    vf scale;
-    memcpy(&scale, &bits, sizeof scale);
-    vf y = vsel(big, splat(INFINITY), p * scale);
+    vf e;
+    VEXP_REDUCED(x, e);
+    vf y = vsel(big, splat(INFINITY), e);
     return vsel(small, splat(0.0f), y);
 }
 

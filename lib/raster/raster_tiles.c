@@ -141,31 +141,42 @@ static inline float hsum(vf v)
 #endif
 }
 
-/* exp(x) for x <= 0: Cody-Waite reduction x = n ln2 + r, degree-6 minimax
- * polynomial for exp(r) on |r| <= ln2/2, scaling by 2^n through the
- * exponent bits. Below -87 returns 0 (alpha < 1/255 there anyway). */
+/* exp(x) for x in [-87, 88] into `out`: Cody-Waite reduction x = n ln2 +
+ * r, degree-6 minimax polynomial for exp(r) on |r| <= ln2/2, scaling by
+ * 2^n through the exponent bits. The one body of both exponentials
+ * (vexp_neg here, vexp_any in raster_proj.c); a macro, so that each
+ * expands under its own file's contraction rule (raster_proj.c compiles
+ * without fused multiply-adds) and neither's bytes change. */
+#define VEXP_REDUCED(x, out)                                                    \
+    do {                                                                        \
+        vf fx_ = (x) * splat(1.44269504088896341f) + splat(0.5f);               \
+        vi n_ = __builtin_convertvector(fx_, vi); /* truncates toward zero */    \
+        vf nf_ = __builtin_convertvector(n_, vf);                               \
+        n_ += (vi)(nf_ > fx_); /* -> floor (true is -1) */                      \
+        nf_ = __builtin_convertvector(n_, vf);                                  \
+        vf r_ = (x) - nf_ * splat(0.693359375f) - nf_ * splat(-2.12194440e-4f); \
+        vf r2_ = r_ * r_;                                                       \
+        vf p_ = splat(1.9875691500e-4f);                                        \
+        p_ = p_ * r_ + splat(1.3981999507e-3f);                                 \
+        p_ = p_ * r_ + splat(8.3334519073e-3f);                                 \
+        p_ = p_ * r_ + splat(4.1665795894e-2f);                                 \
+        p_ = p_ * r_ + splat(1.6666665459e-1f);                                 \
+        p_ = p_ * r_ + splat(5.0000001201e-1f);                                 \
+        p_ = p_ * r2_ + r_ + splat(1.0f);                                       \
+        vi bits_ = (n_ + 127) << 23;                                            \
+        vf scale_;                                                              \
+        memcpy(&scale_, &bits_, sizeof scale_);                                 \
+        (out) = p_ * scale_;                                                    \
+    } while (0)
+
+/* exp(x) for x <= 0. Below -87 returns 0 (alpha < 1/255 there anyway). */
 static inline vf vexp_neg(vf x)
 {
     vi tiny = x < splat(-87.0f);
     x = vmax(x, splat(-87.0f));
-    vf fx = x * splat(1.44269504088896341f) + splat(0.5f);
-    vi n = __builtin_convertvector(fx, vi); /* truncates toward zero */
-    vf nf = __builtin_convertvector(n, vf);
-    n += (vi)(nf > fx);                    /* -> floor (true is -1) */
-    nf = __builtin_convertvector(n, vf);
-    vf r = x - nf * splat(0.693359375f) - nf * splat(-2.12194440e-4f);
-    vf r2 = r * r;
-    vf p = splat(1.9875691500e-4f);
-    p = p * r + splat(1.3981999507e-3f);
-    p = p * r + splat(8.3334519073e-3f);
-    p = p * r + splat(4.1665795894e-2f);
-    p = p * r + splat(1.6666665459e-1f);
-    p = p * r + splat(5.0000001201e-1f);
-    p = p * r2 + r + splat(1.0f);
-    vi bits = (n + 127) << 23;
-    vf scale;
-    memcpy(&scale, &bits, sizeof scale);
-    return vsel(tiny, splat(0.0f), p * scale);
+    vf e;
+    VEXP_REDUCED(x, e);
+    return vsel(tiny, splat(0.0f), e);
 }
 
 /* Pixel centres of a group's lanes relative to its corner: lane j is
