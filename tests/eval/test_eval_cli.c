@@ -742,7 +742,7 @@ int main(int argc, char **argv)
     double p0 = NAN, p1 = NAN;
     const char *ft = sum ? strstr(sum, "input PSNR ") : NULL;
     CHECK_MSG(sum && strstr(sum, "fine-tuned per input (--finetune 6, parts "
-                                 "face,geometry, rate 0.001, eye weight 0, outline 0 px, mirror on)") &&
+                                 "face,geometry, rate 0.004, eye weight 0, outline 0 px, mirror on)") &&
                   strstr(sum, "non-finite outputs 0") && ft &&
                   sscanf(ft, "input PSNR %lf -> %lf", &p0, &p1) == 2,
               "%s", sum ? sum : "");
