@@ -1,6 +1,6 @@
 /* gazesplat augment: a gaze dataset made larger offline. Each source face
  * (a photo, a normalized face, or a row of an ETH-XGaze-style HDF5 file) is
- * fitted as gazesplat redirect fits it (photo_prep.h, the same library
+ * fitted as gazesplat redirect fits it (gazesplat/redirect.h, the same library
  * calls and defaults), optionally fine-tuned, and rendered at targets from
  * a grid, a list, a seeded distribution or a file. Outputs: PNGs and
  * labels.jsonl, and/or an ETH-XGaze-style HDF5 file.
@@ -34,7 +34,7 @@
 #include "augment_table.h"
 #include "gs_client.h"
 #include "cli.h"
-#include "photo_prep.h"
+#include "gazesplat/redirect.h"
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
@@ -1138,38 +1138,30 @@ typedef struct fitted {
 
 /* The face gate on a normalized face (a file or an HDF5 row): a refusal
  * frees the face, sets j->refused and says why in err. */
-static int gate_normalized(job *j, gs_io_image *face, gs_error *err)
-{
-    j->refused = 0;
-    if (!j->gate)
-        return GS_OK;
-    gs_face_gate g;
-    int rc = cli_gate_normalized(face, &g, err);
-    j->refused = g.refusal != GS_FACE_USABLE;
-    if (rc != GS_OK)
-        gs_io_image_free(face);
-    return rc;
-}
-
-/* Source k's normalized face (S x S RGB in *face) and, for photos, mask
- * and fit options; through the face gate unless --no-gate. */
-static int load_face(job *j, size_t k, gs_io_image *face, cli_photo_face *pf, int *photo,
-                     gs_error *err)
+/* Source k as a redirect input: its normalized face (an HDF5 row, resized
+ * to the model's size; an image of that size; or a photo's face,
+ * normalized, with its mask and landmarks), through the face gate unless
+ * --no-gate; j->refused says whether the gate refused it. */
+static int load_face(job *j, size_t k, gs_redirect_input *in, gs_error *err)
 {
     int S = j->info.image_size;
     source *s = &j->src[k];
-    *photo = 0;
+    memset(in, 0, sizeof *in);
+    j->refused = 0;
+    gs_io_image img = {0};
+    int rc;
     if (j->is_h5) {
         int n = j->h5i.width;
         uint8_t *patch = malloc((size_t)n * n * 3);
-        face->data = malloc((size_t)S * S * 3);
-        if (!patch || !face->data) {
+        img.data = malloc((size_t)S * S * 3);
+        if (!patch || !img.data) {
             free(patch);
+            gs_io_image_free(&img);
             return gs_error_set(err, GS_ERR_NOMEM, "out of memory");
         }
-        face->width = face->height = S;
-        face->stride = (size_t)S * 3;
-        int rc = gs_h5_read_row(j->h5, s->row, patch, NULL, NULL, err);
+        img.width = img.height = S;
+        img.stride = (size_t)S * 3;
+        rc = gs_h5_read_row(j->h5, s->row, patch, NULL, NULL, err);
         if (rc == GS_OK && !j->h5_rgb)
             for (size_t i = 0; i < (size_t)n * n; i++) {
                 uint8_t b = patch[3 * i];
@@ -1178,37 +1170,36 @@ static int load_face(job *j, size_t k, gs_io_image *face, cli_photo_face *pf, in
             }
         if (rc == GS_OK) {
             if (n == S)
-                memcpy(face->data, patch, (size_t)S * S * 3);
+                memcpy(img.data, patch, (size_t)S * S * 3);
             else
-                resize_rgb(patch, n, face->data, S);
+                resize_rgb(patch, n, img.data, S);
         }
         free(patch);
-        return rc == GS_OK ? gate_normalized(j, face, err) : rc;
+        if (rc != GS_OK) {
+            gs_io_image_free(&img);
+            return rc;
+        }
+    } else {
+        char path[4300];
+        snprintf(path, sizeof path, "%s/%s", j->input, s->name);
+        if ((rc = gs_io_image_read(path, NULL, &img, err)) != GS_OK)
+            return rc;
     }
-    char path[4300];
-    snprintf(path, sizeof path, "%s/%s", j->input, s->name);
-    gs_io_image img = {0};
-    int rc = gs_io_image_read(path, NULL, &img, err);
-    if (rc != GS_OK)
-        return rc;
-    if (img.width == S && img.height == S) {
-        *face = img;
-        return gate_normalized(j, face, err);
+    if (img.width == S && img.height == S)
+        rc = gs_redirect_input_face(&j->info, &img, j->gate, in, err);
+    else {
+        /* A photo: the face detector and landmark model, loaded once. */
+        if ((!j->det && (rc = gs_face_detector_load(NULL, &j->det, err)) != GS_OK) ||
+            (!j->sp && (rc = gs_face_shape_model_load(NULL, &j->sp, err)) != GS_OK)) {
+            gs_io_image_free(&img);
+            return rc;
+        }
+        gs_redirect_photo_opts po;
+        gs_redirect_photo_opts_default(&po);
+        po.gate = j->gate;
+        rc = gs_redirect_input_photo(j->det, j->sp, &j->info, &img, &po, in, err);
     }
-    /* A photo: the face detector and landmark model, loaded once. */
-    *photo = 1;
-    if ((!j->det && (rc = gs_face_detector_load(NULL, &j->det, err)) != GS_OK) ||
-        (!j->sp && (rc = gs_face_shape_model_load(NULL, &j->sp, err)) != GS_OK)) {
-        gs_io_image_free(&img);
-        return rc;
-    }
-    rc = cli_photo_normalize(j->det, j->sp, &img, 0, &j->info, j->gate, pf, err);
-    j->refused = rc != GS_OK && pf->gate.refusal != GS_FACE_USABLE;
-    gs_io_image_free(&img);
-    if (rc == GS_OK) {
-        *face = pf->norm;
-        pf->norm.data = NULL;
-    }
+    j->refused = rc != GS_OK && in->gate.refusal != GS_FACE_USABLE;
     return rc;
 }
 
@@ -1432,16 +1423,14 @@ static int remote_source(job *j, size_t k, fitted *fi, uint8_t **renders, gs_fac
     aug_remote_fit in;
     memset(&in, 0, sizeof in);
     if (j->is_h5) {
-        gs_io_image face = {0};
-        cli_photo_face pf = {0};
-        int photo = 0;
-        if (load_face(j, k, &face, &pf, &photo, &err) ||
-            gs_io_image_encode(&face, GS_IO_PNG, 0, &enc, &len, &err))
+        gs_redirect_input ri;
+        if (load_face(j, k, &ri, &err) ||
+            gs_io_image_encode(&ri.norm, GS_IO_PNG, 0, &enc, &len, &err))
             rc = j->refused ? (cli_fail(cmd, "%s: %s (--no-gate to augment it anyway)", what,
                                         err.msg),
                                CLI_REFUSED)
                             : cli_fail(cmd, "%s: %s", what, err.msg);
-        gs_io_image_free(&face);
+        gs_redirect_input_free(&ri);
         in.image = enc;
     } else {
         char path[4300];
@@ -1610,11 +1599,9 @@ static int render_source(job *j, size_t k, const fitted *fi, gs_model_ctx *c,
         int r = 0;
         if (remote)
             memcpy(dst, remote + t * (size_t)S * S * 3, (size_t)S * S * 3);
-        else if (j->transfer)
-            r = gs_model_render_transfer(c, j->pool, &fi->sub, face->data, face->stride, &v, dst,
-                                         (size_t)S * 3, &err);
         else
-            r = gs_model_render(c, j->pool, &fi->sub, &v, dst, (size_t)S * 3, &err);
+            r = gs_redirect_render(c, j->pool, &fi->sub, j->transfer ? face->data : NULL,
+                                   face->stride, &v, dst, (size_t)S * 3, &err);
         if (r) {
             rc = cli_fail(j->cmd, "%s: target %zu: %s", what, t, err.msg);
             break;
@@ -1688,8 +1675,9 @@ static int do_source(job *j, size_t k, double *psnr_out)
     char what[4400];
     src_label(j, k, what, sizeof what);
     gs_error err = {0, ""};
-    gs_io_image face = {0};
-    cli_photo_face pf = {0};
+    gs_redirect_input in;
+    memset(&in, 0, sizeof in);
+    const gs_io_image *face = &in.norm;
     fitted fi;
     memset(&fi, 0, sizeof fi);
     fi.ft_psnr = NAN;
@@ -1706,23 +1694,22 @@ static int do_source(job *j, size_t k, double *psnr_out)
             goto done;
         goto render;
     }
-    if (load_face(j, k, &face, &pf, &fi.photo, &err)) {
+    if (load_face(j, k, &in, &err)) {
         rc = cli_fail(cmd, "%s: %s%s", what, err.msg,
                       j->refused ? " (--no-gate to augment it anyway)" : "");
         if (j->refused)
             rc = CLI_REFUSED;
         goto done;
     }
+    fi.photo = in.is_photo;
     gs_fit_options o;
-    if (fi.photo)
-        cli_photo_fit_options(&pf, (int)j->iters, &o);
-    else {
-        gs_fit_options_default(&o);
-        o.max_iters = (int)j->iters;
+    gs_redirect_fit_options(&in, &o);
+    o.max_iters = (int)j->iters;
+    if (!fi.photo) {
         if (j->fit_labels && s->has_head) {
-            o.known_head = 1;
-            gs_geom_rot_from_pitchyaw(s->head[0], s->head[1], 0, o.head_R);
-            o.head_t[2] = j->info.distance_mm;
+            double R[9];
+            gs_geom_rot_from_pitchyaw(s->head[0], s->head[1], 0, R);
+            gs_redirect_fit_head(R, j->info.distance_mm, &o);
         }
         if (j->fit_labels && s->has_gaze) {
             /* The label is in the normalized camera; the fit wants it in
@@ -1745,16 +1732,16 @@ static int do_source(job *j, size_t k, double *psnr_out)
         goto done;
     }
     gs_fit_report fr;
-    if (gs_model_fit(c, j->pool, face.data, face.stride, &o, &fi.sub, &fr, &err)) {
+    if (gs_model_fit(c, j->pool, face->data, face->stride, &o, &fi.sub, &fr, &err)) {
         rc = cli_fail(cmd, "%s: fit: %s", what, err.msg);
         goto done;
     }
     if (j->ft.iters > 0) {
-        gs_finetune_options fo = j->ft;
-        fo.mask = fi.photo ? pf.mask_n : NULL;
+        gs_fit_image im;
+        gs_fit_image_from_options(&im, face->data, face->stride, NULL);
+        im.mask = in.mask;
         gs_finetune_report r;
-        if (gs_model_clone(j->model, &tuned, &err) ||
-            gs_model_finetune(tuned, j->pool, &fi.sub, face.data, face.stride, &fo, &r, &err)) {
+        if (gs_redirect_finetune(&tuned, j->model, j->pool, &fi.sub, &im, 1, &j->ft, &r, &err)) {
             rc = cli_fail(cmd, "%s: finetune: %s", what, err.msg);
             goto done;
         }
@@ -1765,29 +1752,29 @@ static int do_source(job *j, size_t k, double *psnr_out)
             goto done;
         }
     }
-    /* --quality: what the renders are measured against, the input face and
+/* --quality: what the renders are measured against, the input face and
      * its landmarks (a photo's; found in a normalized face). */
     double quv[GS_FACE_LANDMARKS][2];
     int have_uv = 0;
     if (j->quality && fi.photo) {
-        memcpy(quv, pf.res.uv_n, sizeof quv);
+        memcpy(quv, in.face.uv_n, sizeof quv);
         have_uv = 1;
     } else if (j->quality && (j->sp || gs_face_shape_model_load(NULL, &j->sp, NULL) == GS_OK) &&
-               gs_face_normalized_landmarks(j->sp, &face, quv, NULL) == GS_OK) {
+               gs_face_normalized_landmarks(j->sp, face, quv, NULL) == GS_OK) {
         have_uv = 1;
     }
     if (have_uv) {
         gs_face_quality_opts qo;
         gs_face_quality_opts_default(&qo);
         qo.px_per_mm = j->info.focal / j->info.distance_mm;
-        if (gs_face_quality_ref_create(&face, (const double(*)[2])quv, &qo, &qref, &err)) {
+        if (gs_face_quality_ref_create(face, (const double(*)[2])quv, &qo, &qref, &err)) {
             rc = cli_fail(cmd, "%s: quality: %s", what, err.msg);
             goto done;
         }
     }
 render:
     *psnr_out = fi.sub.fit_psnr;
-    if (!(rc = render_source(j, k, &fi, c, &face, remote, rquals, qref, &so, what)))
+    if (!(rc = render_source(j, k, &fi, c, face, remote, rquals, qref, &so, what)))
         rc = commit_source(j, k, &so);
 done:
     free(so.labels.p);
@@ -1798,8 +1785,7 @@ done:
     gs_face_quality_ref_destroy(qref);
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);
-    cli_photo_face_free(&pf);
-    gs_io_image_free(&face);
+    gs_redirect_input_free(&in);
     return rc;
 }
 

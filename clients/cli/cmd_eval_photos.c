@@ -13,7 +13,7 @@
 #include <string.h>
 
 #include "cli.h"
-#include "photo_prep.h"
+#include "gazesplat/redirect.h"
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/model.h"
@@ -160,9 +160,24 @@ static void stats_of(const gs_face_quality *q, const int *det, mode_stats *m)
     }
 }
 
+/* Face po->index of photo as a redirect input, from a copy of the photo
+ * (the photo's other faces come next). */
+static int photo_input(gs_face_detector *det, const gs_face_shape_model *sp,
+                       const gs_model_info *info, const gs_io_image *photo,
+                       const gs_redirect_photo_opts *po, gs_redirect_input *in, gs_error *err)
+{
+    gs_io_image copy = *photo;
+    size_t bytes = photo->stride * (size_t)photo->height;
+    memset(in, 0, sizeof *in);
+    if (!(copy.data = malloc(bytes)))
+        return gs_error_set(err, GS_ERR_NOMEM, "out of memory");
+    memcpy(copy.data, photo->data, bytes);
+    return gs_redirect_input_photo(det, sp, info, &copy, po, in, err);
+}
+
 /* The face's fit and both modes' 25 images, measured. */
 static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face_detector *det,
-                     const cli_photo_face *pf, long iters, const gs_finetune_options *ft,
+                     const gs_redirect_input *pf, long iters, const gs_finetune_options *ft,
                      face_eval *fe)
 {
     gs_model_info info;
@@ -170,7 +185,8 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
     int S = info.image_size, rc = CLI_OK;
     gs_error err = {0, ""};
     gs_fit_options o;
-    cli_photo_fit_options(pf, (int)iters, &o);
+    gs_redirect_fit_options(pf, &o);
+    o.max_iters = (int)iters;
     gs_subject sub;
     gs_fit_report fr;
     gs_model *tuned = NULL;
@@ -189,12 +205,12 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
     fe->fit_s = cli_now_s() - t0;
     fe->fit_psnr = sub.fit_psnr;
     if (ft->iters > 0) {
-        gs_finetune_options fo = *ft;
-        fo.mask = pf->mask_n;
+        gs_fit_image im;
+        gs_fit_image_from_options(&im, pf->norm.data, pf->norm.stride, NULL);
+        im.mask = pf->mask;
         gs_finetune_report r;
         t0 = cli_now_s();
-        if (gs_model_clone(m, &tuned, &err) ||
-            gs_model_finetune(tuned, pool, &sub, pf->norm.data, pf->norm.stride, &fo, &r, &err)) {
+        if (gs_redirect_finetune(&tuned, m, pool, &sub, &im, 1, ft, &r, &err)) {
             rc = cli_fail(cmd, "%s face %d: finetune: %s", fe->photo, fe->index, err.msg);
             goto done;
         }
@@ -208,7 +224,7 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
     gs_face_quality_opts qo;
     gs_face_quality_opts_default(&qo);
     qo.px_per_mm = info.focal / info.distance_mm;
-    if (gs_face_quality_ref_create(&pf->norm, (const double(*)[2])pf->res.uv_n, &qo, &qref, &err)) {
+    if (gs_face_quality_ref_create(&pf->norm, (const double(*)[2])pf->face.uv_n, &qo, &qref, &err)) {
         rc = cli_fail(cmd, "%s face %d: quality: %s", fe->photo, fe->index, err.msg);
         goto done;
     }
@@ -221,9 +237,8 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
             double dp = grid_pitch[t / 5] * DEG, dy = grid_yaw[t % 5] * DEG;
             v.gaze_pitch = fmax(-50 * DEG, fmin(50 * DEG, sub.gaze_pitch + dp));
             v.gaze_yaw = fmax(-60 * DEG, fmin(60 * DEG, sub.gaze_yaw + dy));
-            int r = mode ? gs_model_render_transfer(c, pool, &sub, pf->norm.data, pf->norm.stride,
-                                                    &v, out, oi.stride, &err)
-                         : gs_model_render(c, pool, &sub, &v, out, oi.stride, &err);
+            int r = gs_redirect_render(c, pool, &sub, mode ? pf->norm.data : NULL, pf->norm.stride,
+                                       &v, out, oi.stride, &err);
             if (!r)
                 r = gs_face_quality_measure(qref, &oi, sub.head_R, v.gaze_pitch - sub.gaze_pitch,
                                             v.gaze_yaw - sub.gaze_yaw, &fe->q[mode][t], &err);
@@ -382,22 +397,26 @@ static int run_eval_photos(int argc, char **argv)
         if (gs_face_detect(det, &photo, &dopt, d, 64, &n, &err))
             rc = cli_fail(cmd, "%s: %s", path, err.msg);
         for (int i = 0; i < n && !rc; i++) {
-            cli_photo_face pf;
+            gs_redirect_input pf;
             memset(fe, 0, sizeof *fe);
             fe->photo = path;
             fe->index = i;
-            int r = cli_photo_normalize(det, sp, &photo, i, &info, 1, &pf, &err);
+            gs_redirect_photo_opts po;
+            gs_redirect_photo_opts_default(&po);
+            po.index = i;
+            int r = photo_input(det, sp, &info, &photo, &po, &pf, &err);
             fe->gate = pf.gate;
             if (r && fe->gate.refusal != GS_FACE_USABLE && o[5].value &&
                 fe->gate.refusal != GS_FACE_REFUSED_NO_FACE) {
-                r = cli_photo_normalize(det, sp, &photo, i, &info, 0, &pf, &err);
+                po.gate = 0;
+                r = photo_input(det, sp, &info, &photo, &po, &pf, &err);
                 pf.gate = fe->gate;
             }
             nfaces++;
             if (!r) {
                 passed += fe->gate.refusal == GS_FACE_USABLE;
                 rc = eval_face(cmd, m, pool, det, &pf, iters, &ft, fe);
-                cli_photo_face_free(&pf);
+                gs_redirect_input_free(&pf);
             } else if (fe->gate.refusal == GS_FACE_USABLE) {
                 rc = cli_fail(cmd, "%s face %d: %s", path, i, err.msg);
             }

@@ -8,7 +8,7 @@
 #include <sys/stat.h>
 
 #include "cli.h"
-#include "photo_prep.h"
+#include "gazesplat/redirect.h"
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 #include "gazesplat/image_io.h"
@@ -195,22 +195,17 @@ static int finetune_copy(const cli_command *cmd, gs_model *m, gs_pool *pool, int
 {
     gs_error err = {0, ""};
     gs_finetune_options fo = *ft;
-    fo.mask = NULL; /* each image's is in im */
     gs_finetune_report r;
     char parts[64];
-    if (gs_model_clone(m, tuned, &err))
-        return cli_fail(cmd, "finetune: %s", err.msg);
     iter_progress ip;
     iter_progress_start(&ip, cmd->name, "fine-tuning", fo.iters > 0 ? fo.iters : 50);
     fo.cancel = report_iteration;
     fo.cancel_arg = &ip;
-    int frc = gs_model_finetune_images(*tuned, pool, subs, im, n, &fo, &r, &err);
+    *tuned = NULL;
+    int frc = gs_redirect_finetune(tuned, m, pool, subs, im, n, &fo, &r, &err);
     cli_progress_done(&ip.p);
-    if (frc) {
-        gs_model_destroy(*tuned);
-        *tuned = NULL;
+    if (frc)
         return cli_fail(cmd, "finetune: %s", err.msg);
-    }
     fprintf(stderr,
             "gazesplat %s: fine-tuned %s (%zu floats) for %d steps in %.2f s%s: "
             "PSNR %.2f -> %.2f dB%s\n",
@@ -267,26 +262,23 @@ static int fit_inputs_parse(const cli_command *cmd, const char *images, const ch
 }
 
 /* Reads image i (and its mask) of fi: a normalized face of the model's
- * size, through the gate when asked; *w: its weights or NULL. */
+ * size (in->norm), through the gate when asked; *w: its weights or NULL. */
 static int read_face(const cli_command *cmd, const gs_model_info *info, const fit_inputs *fi, int i,
-                     int gate, gs_io_image *img, uint8_t **w)
+                     int gate, gs_redirect_input *in, uint8_t **w)
 {
     const char *image = fi->image[i], *mask = fi->mask[i];
-    gs_io_image mk = {0};
+    gs_io_image mk = {0}, face = {0};
     gs_error err = {0, ""};
     *w = NULL;
-    if (gs_io_image_read(image, NULL, img, &err))
+    memset(in, 0, sizeof *in);
+    if (gs_io_image_read(image, NULL, &face, &err))
         return cli_fail(cmd, "%s: %s", image, err.msg);
     int rc = CLI_OK;
-    if (img->width != info->image_size || img->height != info->image_size)
-        rc = cli_fail(cmd, "%s is %dx%d; the model wants %dx%d normalized "
-                      "faces", image, img->width, img->height, info->image_size,
-                      info->image_size);
-    gs_face_gate g;
-    if (!rc && gate && cli_gate_normalized(img, &g, &err)) {
+    if (gs_redirect_input_face(info, &face, gate, in, &err)) {
         cli_fail(cmd, "%s: %s", image, err.msg);
-        rc = g.refusal != GS_FACE_USABLE ? CLI_REFUSED : CLI_FAIL;
+        rc = in->gate.refusal != GS_FACE_USABLE ? CLI_REFUSED : CLI_FAIL;
     }
+    const gs_io_image *img = &in->norm;
     if (!rc && mask) {
         if (gs_io_image_read(mask, NULL, &mk, &err))
             rc = cli_fail(cmd, "%s: %s", mask, err.msg);
@@ -315,7 +307,7 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool, const f
     gs_model_info info;
     gs_model_get_info(m, &info);
     const int n = fi->n;
-    gs_io_image img[GS_FIT_IMAGES_MAX];
+    gs_redirect_input img[GS_FIT_IMAGES_MAX];
     uint8_t *w[GS_FIT_IMAGES_MAX] = {0};
     gs_fit_image im[GS_FIT_IMAGES_MAX];
     gs_subject subs[GS_FIT_IMAGES_MAX];
@@ -323,7 +315,7 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool, const f
     int rc = CLI_OK;
     for (int i = 0; !rc && i < n; i++) {
         rc = read_face(cmd, &info, fi, i, gate, &img[i], &w[i]);
-        gs_fit_image_from_options(&im[i], img[i].data, img[i].stride, NULL);
+        gs_fit_image_from_options(&im[i], img[i].norm.data, img[i].norm.stride, NULL);
         im[i].mask = w[i];
         if (fi->known_gaze[i]) { /* degrees, checked by the parser */
             im[i].known_gaze = 1;
@@ -386,7 +378,7 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool, const f
     }
     for (int i = 0; i < n; i++) {
         free(w[i]);
-        gs_io_image_free(&img[i]);
+        gs_redirect_input_free(&img[i]);
     }
     return rc;
 }
@@ -464,17 +456,6 @@ static int run_fit(int argc, char **argv)
     return rc;
 }
 
-/* One target: the plain render, or with input (image_size^2 RGB, stride
- * in_stride) the detail transfer from it. */
-static int render_target(gs_model_ctx *c, gs_pool *pool, const gs_subject *sub,
-                         const uint8_t *input, size_t in_stride, const gs_view *v,
-                         uint8_t *out, size_t stride, gs_error *err)
-{
-    if (input)
-        return gs_model_render_transfer(c, pool, sub, input, in_stride, v, out, stride, err);
-    return gs_model_render(c, pool, sub, v, out, stride, err);
-}
-
 /* mkdir -p of one level: an existing directory is fine. */
 static int make_dir(const char *path)
 {
@@ -536,13 +517,13 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
     int S = info.image_size;
     const int n = fi->n, ref = fi->ref;
     gs_error err = {0, ""};
-    gs_io_image photos[GS_FIT_IMAGES_MAX], face = {S, S, 3 * (size_t)S, NULL};
-    cli_photo_face pf[GS_FIT_IMAGES_MAX];
-    memset(photos, 0, sizeof photos);
-    memset(pf, 0, sizeof pf);
+    gs_io_image face = {S, S, 3 * (size_t)S, NULL};
+    gs_redirect_input in[GS_FIT_IMAGES_MAX];
+    gs_redirect_paste_state ps;
+    memset(in, 0, sizeof in);
+    memset(&ps, 0, sizeof ps);
     gs_face_detector *det = NULL;
     gs_face_shape_model *sp = NULL;
-    uint8_t *mask_p = NULL;
     gs_model_ctx *c = NULL;
     gs_fit_image im[GS_FIT_IMAGES_MAX];
     gs_subject subs[GS_FIT_IMAGES_MAX];
@@ -551,35 +532,38 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
         rc = cli_fail(cmd, "%s", err.msg);
         goto done;
     }
+    gs_redirect_photo_opts po;
+    gs_redirect_photo_opts_default(&po);
+    po.index = index;
+    po.gate = gate;
     for (int i = 0; i < n; i++) {
         const char *path = fi->image[i];
-        if (gs_io_image_read(path, NULL, &photos[i], &err) ||
-            cli_photo_normalize(det, sp, &photos[i], index, &info, gate, &pf[i], &err)) {
+        gs_io_image photo = {0};
+        if (gs_io_image_read(path, NULL, &photo, &err) ||
+            gs_redirect_input_photo(det, sp, &info, &photo, &po, &in[i], &err)) {
+            gs_io_image_free(&photo);
             rc = cli_fail(cmd, "%s: %s", path, err.msg);
-            if (pf[i].gate.refusal != GS_FACE_USABLE)
+            if (in[i].gate.refusal != GS_FACE_USABLE)
                 rc = CLI_REFUSED;
             goto done;
         }
         gs_fit_options oi;
-        cli_photo_fit_options(&pf[i], iters, &oi);
-        gs_fit_image_from_options(&im[i], pf[i].norm.data, pf[i].norm.stride, &oi);
+        gs_redirect_fit_options(&in[i], &oi);
+        oi.max_iters = iters;
+        gs_fit_image_from_options(&im[i], in[i].norm.data, in[i].norm.stride, &oi);
         if (fi->known_gaze[i]) {
             im[i].known_gaze = 1;
             im[i].gaze_pitch = fi->gaze[i][0] * DEG;
             im[i].gaze_yaw = fi->gaze[i][1] * DEG;
         }
     }
-    const gs_io_image photo = photos[ref];
-    const gs_face_result res = pf[ref].res;
-    const gs_io_image norm = pf[ref].norm;
-    mask_p = malloc((size_t)photo.width * photo.height);
+    const gs_redirect_input *r0 = &in[ref];
     face.data = malloc(face.stride * (size_t)S);
     c = gs_model_ctx_create(m);
-    if (!mask_p || !face.data || !c) {
+    if (!face.data || !c) {
         rc = cli_fail(cmd, "out of memory");
         goto done;
     }
-    gs_face_paste_mask(&res, 0, mask_p, NULL); /* the daemon's paste-back */
     gs_fit_options o;
     gs_fit_options_default(&o);
     o.max_iters = iters;
@@ -594,7 +578,7 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
                 "rendering from photo %d (%s)\n", n, r.iters, ref, fi->image[ref]);
     fprintf(stderr, "gazesplat redirect: face %d of %d, head %.1f,%.1f deg; "
             "fit %d iterations, PSNR %.2f dB; gaze %.1f,%.1f deg\n",
-            index, res.n_faces, res.head_pitch_n / DEG, res.head_yaw_n / DEG,
+            index, r0->face.n_faces, r0->face.head_pitch_n / DEG, r0->face.head_yaw_n / DEG,
             r.iters, sub.fit_psnr, sub.gaze_pitch / DEG, sub.gaze_yaw / DEG);
     if (ft->iters > 0) { /* render with the tuned copy from here on */
         if ((rc = finetune_copy(cmd, m, pool, n, subs, im, ft, &tuned)))
@@ -610,9 +594,8 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
         v.gaze_pitch = tg[k][0];
         v.gaze_yaw = tg[k][1];
         char out[4096];
-        gs_io_image full = {0};
-        if (render_target(c, pool, &sub, transfer ? norm.data : NULL, norm.stride, &v,
-                          face.data, face.stride, &err)) {
+        if (gs_redirect_render(c, pool, &sub, transfer ? r0->norm.data : NULL, r0->norm.stride, &v,
+                               face.data, face.stride, &err)) {
             rc = cli_fail(cmd, "target %d: %s", k, err.msg);
             break;
         }
@@ -621,18 +604,10 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
             if (gs_io_image_write(out, &face, GS_IO_PNG, 0, &err))
                 rc = cli_fail(cmd, "%s: %s", out, err.msg);
         }
-        full = photo;
-        full.data = malloc(photo.stride * (size_t)photo.height);
-        if (!full.data) {
-            rc = cli_fail(cmd, "out of memory");
-            break;
-        }
-        memcpy(full.data, photo.data, photo.stride * (size_t)photo.height);
         snprintf(out, sizeof out, "%s/%03d.png", dir, k);
-        if (gs_face_paste_back(&full, &face, &res.norm, mask_p, &err) ||
-            gs_io_image_write(out, &full, GS_IO_PNG, 0, &err))
+        if (gs_redirect_paste(r0, &ps, 0, &face, &err) ||
+            gs_io_image_write(out, &ps.out, GS_IO_PNG, 0, &err))
             rc = cli_fail(cmd, "%s: %s", out, err.msg);
-        free(full.data);
     }
     if (!rc)
         printf("gazesplat redirect: %d images -> %s\n", nt, dir);
@@ -640,11 +615,9 @@ done:
     gs_model_ctx_destroy(c);
     gs_model_destroy(tuned);
     free(face.data);
-    free(mask_p);
-    for (int i = 0; i < n; i++) {
-        cli_photo_face_free(&pf[i]);
-        gs_io_image_free(&photos[i]);
-    }
+    gs_redirect_paste_free(&ps);
+    for (int i = 0; i < n; i++)
+        gs_redirect_input_free(&in[i]);
     gs_face_detector_free(det);
     gs_face_shape_model_free(sp);
     return rc;
@@ -839,7 +812,7 @@ static int run_redirect(int argc, char **argv)
         gs_error err = {0, ""};
         char path[4096];
         snprintf(path, sizeof path, "%s/%03d.png", o[4].value, k);
-        if (render_target(c, pool, &sub, transfer ? input.data : NULL, input.stride, &v,
+        if (gs_redirect_render(c, pool, &sub, transfer ? input.data : NULL, input.stride, &v,
                           img.data, img.stride, &err) ||
             gs_io_image_write(path, &img, GS_IO_PNG, 0, &err))
             rc = cli_fail(cmd, "target %d: %s", k, err.msg);

@@ -59,7 +59,7 @@ usage fit --model m.safetensors --image $A,,$B --out x.bin
 usage fit --model m.safetensors --image $A,$B --mask $A --out x.bin
 usage redirect --model m.safetensors --subject one.bin --ref 1 --gaze-deg 0,0 --out x
 set +e; "$G" fit --model m.safetensors --image $A,small/images/00000000.png --out x.bin >/dev/null 2>s.err; rc=$?; set -e
-[ $rc -eq 1 ] && grep -q "small/images/00000000.png is 64x64" s.err || { cat s.err; fail "another size: exit $rc"; }
+[ $rc -eq 1 ] && grep -q "small/images/00000000.png: normalized face is 64x64" s.err || { cat s.err; fail "another size: exit $rc"; }
 [ ! -e x.bin ] || fail "a refused fit wrote its output"
 
 # Two photos of one person (the same photo twice): the photo path.
