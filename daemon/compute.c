@@ -31,6 +31,7 @@
 #include "server.h"
 #ifdef GSD_HAVE_MODEL
 #include "gazesplat/model.h"
+#include "gazesplat/redirect.h"
 #endif
 
 #define E(x) GAZESPLAT__ERROR_CODE__##x
@@ -552,20 +553,15 @@ static int worker_bind_model(gsd_worker *w)
     return w->ctx ? 0 : -1;
 }
 
-/* A photo request keeps its photo and face analysis: the fit uses the
- * landmark head pose and face mask, paste-back the normalization. */
-typedef struct photo_input {
-    int is_photo;
-    gs_io_image photo;
-    gs_face_result face;
-    uint8_t *mask_n; /* face weights in the normalized image */
-} photo_input;
+/* A request's input (redirect.h): a photo keeps its photo and face
+ * analysis (the fit uses the landmark head pose and face mask, paste-back
+ * the normalization); the normalized face itself is moved out to the
+ * caller's image. */
+typedef gs_redirect_input photo_input;
 
 static void photo_input_free(photo_input *p)
 {
-    gs_io_image_free(&p->photo);
-    free(p->mask_n);
-    memset(p, 0, sizeof *p);
+    gs_redirect_input_free(p);
 }
 
 /* Decodes a request image (PNG, JPEG or raw) into 8-bit RGB. */
@@ -602,96 +598,64 @@ _Static_assert((int)GAZESPLAT__FACE_REFUSAL__REFUSAL_HEAD_POSE == (int)GS_FACE_R
                    (int)GAZESPLAT__FACE_REFUSAL__REFUSAL_NOISE == (int)GS_FACE_REFUSED_NOISE,
                "FaceRefusal follows gs_face_refusal");
 
-/* The face gate (face_gate) on the normalized face, with the photo's
- * analysis when there is one: ERR_FACE_REFUSED when it says no (its
- * reason in msg and the Error's refusal field), ERR_INTERNAL when it
- * cannot run; either frees *face. 0: go on. */
-static int gate_face(gsd_worker *w, gsd_job *j, const gs_face_result *photo, gs_io_image *face,
-                     char *msg, size_t cap)
+/* The library's answer for a request's input as the daemon's error:
+ * ERR_NO_FACE, ERR_FACE_REFUSED (the refusal in the Error's field),
+ * bad_image for a normalized face of another size, ERR_INTERNAL when a
+ * stage could not run. On success moves the normalized face to *face. */
+static int input_verdict(gsd_job *j, int rc, const gs_error *err, photo_input *p, gs_io_image *face,
+                         int bad_image, char *msg, size_t cap)
 {
-    if (!w->srv->cfg.face_gate)
+    if (rc == GS_OK) {
+        *face = p->norm;
+        memset(&p->norm, 0, sizeof p->norm);
         return 0;
-    gs_face_gate g;
-    gs_error err;
-    gs_error_clear(&err);
-    int rc = photo ? gs_face_gate_photo(photo, face, NULL, &g, &err)
-                   : gs_face_gate_normalized(face, NULL, &g, &err);
-    int e = 0;
-    if (rc != GS_OK) {
-        snprintf(msg, cap, "face gate: %s", err.msg);
-        e = E(ERR_INTERNAL);
-    } else if (g.refusal != GS_FACE_USABLE) {
-        j->refusal = (int)g.refusal;
-        snprintf(msg, cap, "face refused (%s): %s", gs_face_refusal_name(g.refusal), g.reason);
-        e = E(ERR_FACE_REFUSED);
     }
-    if (e)
-        gs_io_image_free(face);
-    return e;
+    snprintf(msg, cap, "%s", err->msg);
+    if (rc != GS_ERR_ARG)
+        return E(ERR_INTERNAL);
+    if (p->gate.refusal == GS_FACE_REFUSED_NO_FACE)
+        return E(ERR_NO_FACE);
+    if (p->gate.refusal != GS_FACE_USABLE) {
+        j->refusal = (int)p->gate.refusal;
+        return E(ERR_FACE_REFUSED);
+    }
+    return bad_image ? E(ERR_BAD_IMAGE) : E(ERR_INTERNAL);
 }
 
-/* Photo -> face analysis (detection, landmarks, head pose) -> the face
- * normalized to the model's camera, and its face mask, through the face
- * gate. */
-static int normalize_photo(gsd_worker *w, gsd_job *j, const Gazesplat__Intrinsics *k, photo_input *p,
-                           gs_io_image *face, char *msg, size_t cap)
+/* The request's image as the normalized face the model fits (through the
+ * face gate when face_gate is on); a photo is kept in *p for the fit
+ * options and paste-back. */
+static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, const Gazesplat__Intrinsics *k,
+                      photo_input *p, gs_io_image *face, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
     const gs_model_info *info = &w->model->info;
+    gs_io_image in = {0};
     gs_error err;
     gs_error_clear(&err);
+    memset(p, 0, sizeof *p);
+    memset(face, 0, sizeof *face);
+    int e = decode_image(j, img, &in, msg, cap);
+    if (e)
+        return e;
+    if (img->kind != GAZESPLAT__IMAGE_KIND__KIND_PHOTO)
+        return input_verdict(j, gs_redirect_input_face(info, &in, s->cfg.face_gate, p, &err), &err, p, face, 1,
+                             msg, cap);
     if (!s->face_sp || (!w->det && gs_face_detector_load(s->face_cascade, &w->det, &err) != GS_OK)) {
         snprintf(msg, cap, "photo input unavailable: %s", s->face_sp ? err.msg : "no landmark model");
+        gs_io_image_free(&in);
         return E(ERR_PHOTO_UNSUPPORTED);
     }
-    gs_face_opts o;
-    gs_face_opts_default(&o);
-    /* The head frame of the synthetic training labels (see cmd_redirect.c
-     * and docs/face.md). */
-    o.pose_model = GS_FACE_POSE_SYNTH;
-    o.norm_size = info->image_size;
-    o.norm_distance_mm = info->distance_mm;
-    o.norm_focal = info->focal;
+    gs_redirect_photo_opts o;
+    gs_redirect_photo_opts_default(&o);
+    o.gate = s->cfg.face_gate;
     if (k) {
         double kk[9] = {k->fx, 0, k->cx, 0, k->fy, k->cy, 0, 0, 1};
         o.use_k = 1;
         memcpy(o.k, kk, sizeof kk);
     }
-    int r = gs_face_analyze(w->det, s->face_sp, &p->photo, &o, &p->face, &err);
-    if (r != GS_OK) {
-        snprintf(msg, cap, "photo: %s", err.msg);
-        return r == GS_ERR_ARG ? E(ERR_NO_FACE) : E(ERR_INTERNAL);
-    }
-    int size = info->image_size;
-    p->mask_n = malloc((size_t)size * size);
-    if (!p->mask_n || gs_face_normalize_image(&p->photo, &p->face.norm, face, &err) != GS_OK ||
-        gs_face_mask(p->face.uv_n, GS_FACE_MASK_FACE, 0.0, 4.0, size, size, p->mask_n, &err) != GS_OK) {
-        snprintf(msg, cap, "photo normalization: %s", p->mask_n ? err.msg : "out of memory");
-        return E(ERR_INTERNAL);
-    }
-    p->is_photo = 1;
-    return gate_face(w, j, &p->face, face, msg, cap);
-}
-
-/* The request's image as the normalized face the model fits; a photo is
- * kept in *p for the fit options and paste-back. */
-static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, const Gazesplat__Intrinsics *k,
-                      photo_input *p, gs_io_image *face, char *msg, size_t cap)
-{
-    int size = w->model->info.image_size;
-    memset(p, 0, sizeof *p);
-    if (img->kind == GAZESPLAT__IMAGE_KIND__KIND_PHOTO) {
-        int e = decode_image(j, img, &p->photo, msg, cap);
-        return e ? e : normalize_photo(w, j, k, p, face, msg, cap);
-    }
-    int e = decode_image(j, img, face, msg, cap);
-    if (!e && (face->width != size || face->height != size)) {
-        snprintf(msg, cap, "normalized face is %dx%d, the model wants %dx%d", face->width, face->height,
-                 size, size);
-        gs_io_image_free(face);
-        return E(ERR_BAD_IMAGE);
-    }
-    return e ? e : gate_face(w, j, NULL, face, msg, cap);
+    return input_verdict(j, gs_redirect_input_photo(w->det, s->face_sp, info, &in, &o, p, &err), &err, p, face,
+                         0, msg, cap);
 }
 
 /* What a FIT (or an inline REDIRECT) asks to fine-tune. */
@@ -1161,13 +1125,8 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, i
     struct tuned_slot *sl = &w->slots[i];
     gs_error err;
     gs_error_clear(&err);
-    if (gs_model_tuned_apply(sl->m, w->model->m, NULL, 0, &err) != GS_OK) {
-        snprintf(msg, cap, "finetune: %s", err.msg);
-        return E(ERR_INTERNAL);
-    }
     gs_finetune_options fo;
-    gs_finetune_options_default(&fo);
-    fo.iters = (int)ft->steps;
+    gs_redirect_finetune_options((int)ft->steps, &fo);
     fo.parts = ft->parts;
     fo.outline_px = (int)ft->outline;
     fo.mirror = !ft->no_mirror;
@@ -1182,9 +1141,10 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, i
     gs_fit_image im[GSD_FIT_IMAGES_MAX];
     for (int q = 0; q < n; q++) {
         gs_fit_image_from_options(&im[q], face[q].data, face[q].stride, NULL);
-        im[q].mask = p[q].mask_n;
+        im[q].mask = p[q].mask;
     }
-    int r = gs_model_finetune_images(sl->m, w->pool, subj, im, n, &fo, rep, &err);
+    /* From the shared model's parameters, in the slot's clone. */
+    int r = gs_redirect_finetune(&sl->m, w->model->m, w->pool, subj, im, n, &fo, rep, &err);
     gs_model_ctx_reset(sl->ctx);
     if (r == GS_ERR_CANCELLED) {
         int why = job_stop(j);
@@ -1241,25 +1201,19 @@ typedef struct subject_ask {
 static void fit_options_of(const gsd_worker *w, const subject_ask *a, const Gazesplat__Angles *gaze,
                            const Gazesplat__Angles *head, const photo_input *p, gs_fit_options *opt)
 {
-    gs_fit_options_default(opt);
+    /* The defaults, the mask and a photo's landmark head pose (redirect.h);
+     * the request's labels over them. */
+    gs_redirect_fit_options(p, opt);
     if (gaze) {
         opt->known_gaze = 1;
         opt->gaze_pitch = gaze->pitch_deg * DEG;
         opt->gaze_yaw = gaze->yaw_deg * DEG;
     }
     if (head) {
-        opt->known_head = 1;
-        head_rotation(head, opt->head_R);
-    } else if (p->is_photo) {
-        /* The landmarks' head pose, rotated into the normalized camera. */
-        opt->known_head = 1;
-        gs_geom_norm_rot(&p->face.norm, p->face.pose.R, opt->head_R);
+        double R[9];
+        head_rotation(head, R);
+        gs_redirect_fit_head(R, w->model->info.distance_mm, opt);
     }
-    if (opt->known_head) {
-        opt->head_t[0] = opt->head_t[1] = 0.0;
-        opt->head_t[2] = w->model->info.distance_mm; /* the face centre is on the axis */
-    }
-    opt->mask = p->mask_n;
     if (a->max_iters)
         opt->max_iters = (int)a->max_iters;
 }
@@ -1584,48 +1538,23 @@ static gs_face_quality_ref *quality_ref_of(const gsd_worker *w, const Gazesplat_
     return gs_face_quality_ref_create(face, (const double(*)[2])uv, &qo, &q, NULL) == GS_OK ? q : NULL;
 }
 
-/* Paste-back state of one request: the blend masks in the photo's pixels
- * (eyes for gaze-only targets, the whole face when the head turns), made
- * when first needed, and the output buffer. */
-typedef struct paste_state {
-    uint8_t *mask[2]; /* 0: eyes, 1: face */
-    gs_io_image out;
-} paste_state;
+/* Paste-back state of one request (redirect.h): the blend masks in the
+ * photo's pixels (eyes for gaze-only targets, the whole face when the
+ * head turns), made when first needed, and the output buffer. */
+typedef gs_redirect_paste_state paste_state;
 
 static void paste_state_free(paste_state *ps)
 {
-    free(ps->mask[0]);
-    free(ps->mask[1]);
-    free(ps->out.data);
-    memset(ps, 0, sizeof *ps);
+    gs_redirect_paste_free(ps);
 }
 
 static int paste_back(const photo_input *p, paste_state *ps, int whole_face, const gs_io_image *norm,
                       char *msg, size_t cap)
 {
-    const gs_io_image *ph = &p->photo;
-    size_t bytes = ph->stride * (size_t)ph->height, px = (size_t)ph->width * ph->height;
     gs_error err;
     gs_error_clear(&err);
-    if (!ps->mask[whole_face]) {
-        ps->mask[whole_face] = malloc(px);
-        if (!ps->mask[whole_face] ||
-            gs_face_paste_mask(&p->face, whole_face, ps->mask[whole_face], &err) != GS_OK) {
-            snprintf(msg, cap, "paste-back mask: %s", ps->mask[whole_face] ? err.msg : "out of memory");
-            return E(ERR_INTERNAL);
-        }
-    }
-    if (!ps->out.data) {
-        ps->out = *ph;
-        ps->out.data = malloc(bytes);
-        if (!ps->out.data) {
-            snprintf(msg, cap, "out of memory");
-            return E(ERR_INTERNAL);
-        }
-    }
-    memcpy(ps->out.data, ph->data, bytes);
-    if (gs_face_paste_back(&ps->out, norm, &p->face.norm, ps->mask[whole_face], &err) != GS_OK) {
-        snprintf(msg, cap, "paste-back: %s", err.msg);
+    if (gs_redirect_paste(p, ps, whole_face, norm, &err) != GS_OK) {
+        snprintf(msg, cap, "%s", err.msg);
         return E(ERR_INTERNAL);
     }
     return 0;
@@ -1660,9 +1589,8 @@ static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gaz
     }
     gs_error err;
     gs_error_clear(&err);
-    int rc = input ? gs_model_render_transfer(ctx, w->pool, subj, input->data, input->stride, &view, rgb,
-                                              (size_t)size * 3, &err)
-                   : gs_model_render(ctx, w->pool, subj, &view, rgb, (size_t)size * 3, &err);
+    int rc = gs_redirect_render(ctx, w->pool, subj, input ? input->data : NULL, input ? input->stride : 0,
+                                &view, rgb, (size_t)size * 3, &err);
     if (rc != GS_OK) {
         snprintf(msg, cap, "render target %zu%s: %s", i, input ? " (transfer)" : "", err.msg);
         return rc == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
