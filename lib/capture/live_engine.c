@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "gazesplat/live.h"
+#include "gazesplat/redirect.h"
 
 typedef struct engine_ctx {
     const gs_model *model;
@@ -41,15 +42,13 @@ static int engine_fit(void *ctx, const gs_io_image *frame, const gs_live_track_s
         return gs_error_set(err, GS_ERR_NOMEM, "live fit: out of memory");
     r = gs_face_normalize_image(frame, &n, &face, err);
     if (r == GS_OK)
-        r = gs_face_mask((const double(*)[2])uv_n, GS_FACE_MASK_FACE, 0.0, 4.0, size, size, mask,
-                         err);
+        r = gs_redirect_face_mask((const double(*)[2])uv_n, size, mask, err);
     if (r == GS_OK) {
+        /* The tracker's landmarks and pose in place of a photo's analysis;
+         * the mask, the pose and the defaults every path fits with. */
         gs_fit_options o;
         gs_fit_options_default(&o);
-        o.known_head = 1; /* the landmarks' pose, rotated into the normalized camera */
-        gs_geom_norm_rot(&n, st->pose.R, o.head_R);
-        o.head_t[0] = o.head_t[1] = 0.0;
-        o.head_t[2] = e->info.distance_mm;
+        gs_redirect_fit_pose(&n, st->pose.R, &o);
         o.mask = mask;
         o.time_budget_s = e->budget_s;
         gs_fit_report rep;
@@ -73,8 +72,8 @@ static int engine_render(void *ctx, const gs_live_subject *s, double pitch, doub
     memset(&v, 0, sizeof v);
     v.gaze_pitch = pitch;
     v.gaze_yaw = yaw;
-    return gs_model_render(e->mctx, e->pool, &s->subject, &v, rgb,
-                           3 * (size_t)e->info.image_size, err);
+    return gs_redirect_render(e->mctx, e->pool, &s->subject, NULL, 0, &v, rgb,
+                              3 * (size_t)e->info.image_size, err);
 }
 
 int gs_live_engine_model(const gs_model *m, gs_pool *pool, double fit_budget_s,
