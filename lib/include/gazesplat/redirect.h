@@ -74,7 +74,8 @@ void gs_redirect_photo_opts_default(gs_redirect_photo_opts *o);
  * (its pixels are in->photo afterwards, or freed on failure). On failure
  * in holds nothing but in->gate, and err says why:
  * - GS_ERR_ARG, gate.refusal GS_FACE_REFUSED_NO_FACE: no usable face
- *   ("photo: ...": none found, index past them, too small, at the border);
+ *   ("photo: ...": none found, an index past them, a face under the
+ *   smallest box, a landmark outside the photo);
  * - GS_ERR_ARG, another refusal: the gate refused it ("face refused
  *   (NAME): reason");
  * - anything else: the analysis, normalization or gate could not run
