@@ -1054,29 +1054,6 @@ const char *gs_finetune_parts_name(unsigned parts, char *buf, size_t cap)
     return buf;
 }
 
-unsigned gs_model_tensor_part(const gs_ptensor *t)
-{
-    const char *n = t->name;
-    /* codes, fixed tensors, and the lids' share of the pitch: one image
-     * shows one pitch, and k is how the lids follow a change of it */
-    if (t->group == GS_PG_CODES || t->group == GS_PG_FIXED ||
-        !strcmp(n, "face.lid_k"))
-        return 0;
-    if (!strcmp(n, "face.colour") || !strcmp(n, "face.feat"))
-        return GS_FT_FACE;
-    if (!strcmp(n, "eye.colour") || !strcmp(n, "eye.feat"))
-        return GS_FT_EYE;
-    if (t->group == GS_PG_RENDERER)
-        return GS_FT_RENDERER;
-    if (t->group == GS_PG_MLP)
-        return GS_FT_MLP;
-    /* xyz, scales, rotations, opacities; the face stream's (lids included)
-     * belong to face-geometry too */
-    if (!strncmp(n, "face.", 5))
-        return GS_FT_GEOMETRY | GS_FT_FACE_GEOMETRY;
-    return GS_FT_GEOMETRY;
-}
-
 /* Learning-rate multipliers of the training run (train.c). */
 static double part_lr(int group)
 {

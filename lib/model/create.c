@@ -198,14 +198,6 @@ int gs_model_create(const gs_model_config *cfg_in, uint64_t seed,
     return GS_OK;
 }
 
-void gs_model_destroy(gs_model *m)
-{
-    if (!m)
-        return;
-    free(m->params);
-    free(m);
-}
-
 void gs_model_get_info(const gs_model *m, gs_model_info *info)
 {
     memset(info, 0, sizeof *info);

@@ -451,7 +451,8 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
     gs_raster_destroy(c->raster_face);
     gs_raster_destroy(c->raster_crop);
     gs_raster_destroy(c->raster_eye);
-    gs_xfer_free(c->xfer);
+    if (c->xfer)
+        c->xfer_free(c->xfer);
     free(c);
 }
 
@@ -1481,7 +1482,8 @@ static void sweep_drop(gs_model_ctx *c)
 {
     c->inc_valid = 0;
     c->eye_base_valid = 0;
-    gs_xfer_invalidate(c->xfer);
+    if (c->xfer)
+        c->xfer_invalidate(c->xfer);
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
         c->slots[i].valid = c->slots[i].eye_base_valid = 0;
 }

@@ -237,6 +237,10 @@ struct gs_model_ctx {
     gs_frame face_key;                /* the frame the face cache is for */
     uint8_t *rgb8;                    /* [S, S, 3] */
     gs_xfer *xfer;                    /* gs_model_render_transfer, lazily */
+    /* how the context drops and invalidates it: set by transfer.c with
+     * xfer, so that the frame calls no transfer code */
+    void (*xfer_free)(gs_xfer *x);
+    void (*xfer_invalidate)(gs_xfer *x);
     uint64_t n_xfer_full, n_xfer_inc; /* transfers by path of their maps */
     int last_xfer_inc;
     double xfer_px;                   /* image px redone by incremental ones */

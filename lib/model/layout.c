@@ -1,11 +1,13 @@
 /* Parameter table of a model: every tensor with its name, shape, place in
  * the one parameter array and optimizer group. The same table names the
- * tensors of the model file. */
+ * tensors of the model file. This file owns a model's memory: allocation,
+ * binding, destruction, the parameter id and the layout checks. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
 #include "model_internal.h"
+#include "hash64.h"
 
 void gs_model_config_default(gs_model_config *c)
 {
@@ -296,4 +298,74 @@ void gs_model_bind(const gs_model *m, float *base, gs_model_params *p)
                      gs_renderer_param_count(&m->rcfg), &p->rend);
     p->codes = at(m, base, "codes.train");
     p->code_mean = at(m, base, "codes.mean");
+}
+
+/* ---- destruction, parameter ids, tensor parts and layouts: owned here with
+ * allocation and binding ---- */
+
+void gs_model_destroy(gs_model *m)
+{
+    if (!m)
+        return;
+    free(m->params);
+    free(m);
+}
+
+uint64_t gs_model_param_id(const gs_model *m)
+{
+    hash64 h;
+    hash_init(&h, 0x67617a6573706c74ULL);
+    /* Per tensor a 128-byte record (whole blocks): its name (zero-padded),
+     * offset, count and the hash of its values. The alignment padding
+     * between tensors is not part of the model and not hashed. */
+    for (int i = 0; i < m->ntensors; i++) {
+        const gs_ptensor *t = &m->t[i];
+        uint8_t rec[128];
+        memset(rec, 0, sizeof rec);
+        size_t nl = 0;
+        while (nl < sizeof t->name - 1 && t->name[nl])
+            nl++;
+        memcpy(rec, t->name, nl);
+        hash64 v;
+        hash_init(&v, 0x76616c756573ULL);
+        hash_bytes(&v, m->params + t->offset, t->count * sizeof(float));
+        uint64_t f[3] = {t->offset, t->count, hash_final(&v)};
+        memcpy(rec + 64, f, sizeof f);
+        hash_bytes(&h, rec, sizeof rec);
+    }
+    return hash_final(&h);
+}
+
+unsigned gs_model_tensor_part(const gs_ptensor *t)
+{
+    const char *n = t->name;
+    /* codes, fixed tensors, and the lids' share of the pitch: one image
+     * shows one pitch, and k is how the lids follow a change of it */
+    if (t->group == GS_PG_CODES || t->group == GS_PG_FIXED ||
+        !strcmp(n, "face.lid_k"))
+        return 0;
+    if (!strcmp(n, "face.colour") || !strcmp(n, "face.feat"))
+        return GS_FT_FACE;
+    if (!strcmp(n, "eye.colour") || !strcmp(n, "eye.feat"))
+        return GS_FT_EYE;
+    if (t->group == GS_PG_RENDERER)
+        return GS_FT_RENDERER;
+    if (t->group == GS_PG_MLP)
+        return GS_FT_MLP;
+    /* xyz, scales, rotations, opacities; the face stream's (lids included)
+     * belong to face-geometry too */
+    if (!strncmp(n, "face.", 5))
+        return GS_FT_GEOMETRY | GS_FT_FACE_GEOMETRY;
+    return GS_FT_GEOMETRY;
+}
+
+int gs_model_same_layout(const gs_model *a, const gs_model *b)
+{
+    if (a->nparams != b->nparams || a->ntensors != b->ntensors)
+        return 0;
+    for (int i = 0; i < a->ntensors; i++)
+        if (a->t[i].offset != b->t[i].offset || a->t[i].count != b->t[i].count ||
+            strcmp(a->t[i].name, b->t[i].name))
+            return 0;
+    return 1;
 }

@@ -188,17 +188,6 @@ int gs_model_prune(const gs_model *m, gs_pool *pool, int keep_face,
     return GS_OK;
 }
 
-int gs_model_same_layout(const gs_model *a, const gs_model *b)
-{
-    if (a->nparams != b->nparams || a->ntensors != b->ntensors)
-        return 0;
-    for (int i = 0; i < a->ntensors; i++)
-        if (a->t[i].offset != b->t[i].offset || a->t[i].count != b->t[i].count ||
-            strcmp(a->t[i].name, b->t[i].name))
-            return 0;
-    return 1;
-}
-
 int gs_model_clone(const gs_model *m, gs_model **out, gs_error *err)
 {
     if (!m || !out)

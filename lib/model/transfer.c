@@ -309,6 +309,8 @@ static gs_xfer *xfer_get(gs_model_ctx *c)
     for (int i = 0; i < c->n; i++)
         x->feat[2 * (size_t)i + (i < c->nf ? 0 : 1)] = 1.0f;
     c->xfer = x;
+    c->xfer_free = gs_xfer_free;
+    c->xfer_invalidate = gs_xfer_invalidate;
     return x;
 }
 

@@ -14,91 +14,12 @@
 
 #include "model_internal.h"
 #include "frame.h"
+#include "hash64.h"
 
 #define TUNED_MAGIC 0x54465347u /* "GSFT" */
 #define TUNED_VERSION 1u
 #define TUNED_HEAD 24
 #define TUNED_ALL_PARTS GS_FT_ALL_PARTS
-
-static inline uint64_t rotl(uint64_t x, int r)
-{
-    return x << r | x >> (64 - r);
-}
-
-/* Four independent lanes over 32-byte blocks (a single dependent chain
- * would run at about a byte per cycle over a 30 MB model), folded at the
- * end. Not cryptographic: it tells models and corrupt blocks apart. */
-typedef struct {
-    uint64_t v[4];
-    uint64_t n;
-} hash64;
-
-static void hash_init(hash64 *h, uint64_t seed)
-{
-    for (int k = 0; k < 4; k++)
-        h->v[k] = seed + 0x9e3779b97f4a7c15ULL * (uint64_t)(k + 1);
-    h->n = 0;
-}
-
-static inline uint64_t lane(uint64_t v, uint64_t w)
-{
-    return rotl(v ^ (w * 0xbf58476d1ce4e5b9ULL), 29) * 0x94d049bb133111ebULL;
-}
-
-/* Whole blocks of 32 bytes only, except for the last call's tail. */
-static void hash_bytes(hash64 *h, const void *p, size_t n)
-{
-    const uint8_t *b = p;
-    h->n += n;
-    for (; n >= 32; n -= 32, b += 32)
-        for (int k = 0; k < 4; k++) {
-            uint64_t w;
-            memcpy(&w, b + 8 * k, 8);
-            h->v[k] = lane(h->v[k], w);
-        }
-    for (int k = 0; n > 0; k++) {
-        uint64_t w = 0;
-        size_t c = n < 8 ? n : 8;
-        memcpy(&w, b, c);
-        h->v[k] = lane(h->v[k], w ^ 0xa5);
-        b += c, n -= c;
-    }
-}
-
-static uint64_t hash_final(const hash64 *h)
-{
-    uint64_t x = h->n;
-    for (int k = 0; k < 4; k++)
-        x = lane(x, h->v[k]);
-    x ^= x >> 31;
-    x *= 0xd6e8feb86659fd93ULL;
-    return x ^ (x >> 32);
-}
-
-uint64_t gs_model_param_id(const gs_model *m)
-{
-    hash64 h;
-    hash_init(&h, 0x67617a6573706c74ULL);
-    /* Per tensor a 128-byte record (whole blocks): its name (zero-padded),
-     * offset, count and the hash of its values. The alignment padding
-     * between tensors is not part of the model and not hashed. */
-    for (int i = 0; i < m->ntensors; i++) {
-        const gs_ptensor *t = &m->t[i];
-        uint8_t rec[128];
-        memset(rec, 0, sizeof rec);
-        size_t nl = 0;
-        while (nl < sizeof t->name - 1 && t->name[nl])
-            nl++;
-        memcpy(rec, t->name, nl);
-        hash64 v;
-        hash_init(&v, 0x76616c756573ULL);
-        hash_bytes(&v, m->params + t->offset, t->count * sizeof(float));
-        uint64_t f[3] = {t->offset, t->count, hash_final(&v)};
-        memcpy(rec + 64, f, sizeof f);
-        hash_bytes(&h, rec, sizeof rec);
-    }
-    return hash_final(&h);
-}
 
 /* One part of a key: its own hash and length, as one 32-byte block. */
 static void hash_part(hash64 *h, const void *p, size_t n)
