@@ -48,7 +48,9 @@ typedef struct cli_opt {
     const char *value;  /* NULL until seen; "" for a seen flag */
 } cli_opt;
 
-enum { CLI_PARSED = 0, CLI_HELP = 3 };
+/* CLI_HELP is no exit status (every command turns it into CLI_OK); it is
+ * negative so that it can never be read as one (CLI_REFUSED is 3). */
+enum { CLI_PARSED = 0, CLI_HELP = -1 };
 
 /* Fills opts from argv[1..]. Returns CLI_PARSED, CLI_HELP for --help/-h,
  * or CLI_USAGE after printing the problem and the usage to stderr. Unknown
