@@ -29,10 +29,8 @@
 #include "gazesplat/pool.h"
 #include "log.h"
 #include "server.h"
-#ifdef GSD_HAVE_MODEL
 #include "gazesplat/model.h"
 #include "gazesplat/redirect.h"
-#endif
 
 #define E(x) GAZESPLAT__ERROR_CODE__##x
 #define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
@@ -40,10 +38,8 @@
 #define GSD_RECENT_MAX 64
 
 struct gsd_model {
-#ifdef GSD_HAVE_MODEL
     gs_model *m;
     gs_model_info info;
-#endif
     int image_size;
     char id[33];
     char path[GSD_STR_MAX];
@@ -56,7 +52,6 @@ struct gsd_worker {
     gs_pool *pool;
     gs_face_detector *det; /* loaded at the first photo (one per thread) */
     gsd_model *model; /* the model ctx was made for (a reference) */
-#ifdef GSD_HAVE_MODEL
     gs_model_ctx *ctx;
     /* the subject of the last FIT, rendered once its reply is out so that
      * the context keeps its render for incremental REDIRECTs */
@@ -80,7 +75,6 @@ struct gsd_worker {
     } slots[GSD_TUNED_SLOTS_MAX];
     int nslots;
     uint64_t tick;
-#endif
     /* keys of the subjects rendered lately (a ring, newest at recent_n - 1
      * modulo GSD_RECENT_MAX): the queue prefers giving their REDIRECTs to
      * this worker (work.c) */
@@ -88,12 +82,10 @@ struct gsd_worker {
     int recent_n, recent_cap;
 };
 
-#ifdef GSD_HAVE_MODEL
 /* Fine-tuned blocks and kept inputs on disk (below). */
 enum { STORE_TUNED, STORE_INPUT, STORE_KINDS };
 static void store_sweep_all_locked(gsd_server *s);
 static void store_restore(gsd_server *s, int kind);
-#endif
 
 /* ---- hashing: BLAKE2b-128 (libb2), for model ids and content keys --------
  * A subject key names a fit that any client may ask for by content, so
@@ -125,13 +117,10 @@ static void model_unref(gsd_model *m)
 {
     if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
         return;
-#ifdef GSD_HAVE_MODEL
     gs_model_destroy(m->m);
-#endif
     free(m);
 }
 
-#ifdef GSD_HAVE_MODEL
 static gsd_model *model_acquire(gsd_server *s)
 {
     pthread_mutex_lock(&s->model_mu);
@@ -141,18 +130,11 @@ static gsd_model *model_acquire(gsd_server *s)
     pthread_mutex_unlock(&s->model_mu);
     return m;
 }
-#endif
 
 const struct gs_model *gsd_model_get(gsd_server *s, gsd_model **ref)
 {
-#ifdef GSD_HAVE_MODEL
     *ref = model_acquire(s);
     return *ref ? (*ref)->m : NULL;
-#else
-    (void)s;
-    *ref = NULL;
-    return NULL;
-#endif
 }
 
 void gsd_model_put(gsd_model *ref)
@@ -206,7 +188,6 @@ static void *loader_main(void *p)
         snprintf(m->path, sizeof m->path, "%s", s->cfg.model);
         atomic_store(&m->refs, 1);
         if (file_id(m->path, m->id, s->load_msg, sizeof s->load_msg) == 0) {
-#ifdef GSD_HAVE_MODEL
             gs_error err;
             gs_error_clear(&err);
             if (gs_model_load(m->path, &m->m, &err) == GS_OK) {
@@ -218,9 +199,6 @@ static void *loader_main(void *p)
             } else {
                 snprintf(s->load_msg, sizeof s->load_msg, "%.500s: %.256s", m->path, err.msg);
             }
-#else
-            snprintf(s->load_msg, sizeof s->load_msg, "built without the model module");
-#endif
         }
         free(m);
     }
@@ -303,23 +281,19 @@ void gsd_model_finish_load(gsd_server *s)
         gsd_cache_clear(s->tuned);
         gsd_cache_clear(s->inputs);
         gsd_cache_persist(s);
-#ifdef GSD_HAVE_MODEL
         if (s->state_dir[0]) {
             pthread_mutex_lock(&s->persist_mu);
             store_sweep_all_locked(s); /* every block and input file goes */
             pthread_mutex_unlock(&s->persist_mu);
         }
-#endif
     }
     model_unref(old);
     snprintf(detail, sizeof detail, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
     LOG_I("ready: %s", detail);
-#ifdef GSD_HAVE_MODEL
     if (m->info.fit_code_prior > 0)
         LOG_I("fits use the model's code prior, weight %g", m->info.fit_code_prior);
     if (m->info.fit_code_rate > 0)
         LOG_I("fits use the model's code rate, %g", m->info.fit_code_rate);
-#endif
     gsd_server_set_state(s, GSD_READY, detail);
     gsd_live_model_ready(s);
 }
@@ -350,10 +324,8 @@ void gsd_cache_restore(gsd_server *s)
         LOG_I("subject cache %s: %s", s->state_dir, msg);
     else
         LOG_W("subject cache %s: %s", s->state_dir, msg);
-#ifdef GSD_HAVE_MODEL
     store_restore(s, STORE_TUNED);
     store_restore(s, STORE_INPUT);
-#endif
 }
 
 int gsd_cache_persist(gsd_server *s)
@@ -393,17 +365,14 @@ gsd_worker *gsd_worker_create(gsd_server *s, int index)
     w->recent_cap = s->cfg.sweep_subjects < 1 ? 1
                     : s->cfg.sweep_subjects > GSD_RECENT_MAX ? GSD_RECENT_MAX
                     : s->cfg.sweep_subjects;
-#ifdef GSD_HAVE_MODEL
     w->nslots = s->cfg.tuned_subjects < 1 ? 1
                 : s->cfg.tuned_subjects > GSD_TUNED_SLOTS_MAX ? GSD_TUNED_SLOTS_MAX
                 : s->cfg.tuned_subjects;
-#endif
     return w;
 }
 
 static void worker_drop_model(gsd_worker *w)
 {
-#ifdef GSD_HAVE_MODEL
     gs_model_ctx_destroy(w->ctx);
     w->ctx = NULL;
     for (int i = 0; i < GSD_TUNED_SLOTS_MAX; i++) {
@@ -411,7 +380,6 @@ static void worker_drop_model(gsd_worker *w)
         gs_model_destroy(w->slots[i].m);
         memset(&w->slots[i], 0, sizeof w->slots[i]);
     }
-#endif
     model_unref(w->model);
     w->model = NULL;
 }
@@ -521,7 +489,6 @@ static gsd_out *run_sleep(gsd_server *s, gsd_job *j, int64_t t0)
     return o;
 }
 
-#ifdef GSD_HAVE_MODEL
 /* ---- model jobs ------------------------------------------------------------ */
 
 /* Notes that this worker's context now keeps the render of `key`. */
@@ -1741,24 +1708,6 @@ static void worker_release(gsd_worker *w)
     malloc_trim(0);
 #endif
 }
-#else
-static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
-{
-    (void)w;
-    (void)t0;
-    return gsd_error_frame(j, E(ERR_NO_MODEL), "built without the model module");
-}
-
-static void worker_prime(gsd_worker *w)
-{
-    (void)w;
-}
-
-static void worker_release(gsd_worker *w)
-{
-    (void)w;
-}
-#endif
 
 void gsd_worker_run(gsd_worker *w, gsd_job *j)
 {

@@ -6,9 +6,7 @@
 #include <string.h>
 
 #include "server.h"
-#ifdef GSD_HAVE_MODEL
 #include "gazesplat/model.h"
-#endif
 
 #define E(x) GAZESPLAT__ERROR_CODE__##x
 
@@ -179,7 +177,6 @@ int gsd_check_image(const gsd_server *s, const Gazesplat__Image *img, char *msg,
 static int check_target(const Gazesplat__Angles *gaze, const Gazesplat__Angles *head,
                         const char *what, char *msg, size_t cap)
 {
-#ifdef GSD_HAVE_MODEL
     double g[2] = {gaze ? gaze->pitch_deg : 0, gaze ? gaze->yaw_deg : 0};
     double h[2] = {head ? head->pitch_deg : 0, head ? head->yaw_deg : 0};
     gs_error err;
@@ -188,9 +185,6 @@ static int check_target(const Gazesplat__Angles *gaze, const Gazesplat__Angles *
         snprintf(msg, cap, "%s%s", what, err.msg);
         return E(ERR_INVALID_ARGUMENT);
     }
-#else /* built without the model: nothing renders, FIT and REDIRECT are refused */
-    (void)gaze, (void)head, (void)what, (void)msg, (void)cap;
-#endif
     return 0;
 }
 
@@ -245,7 +239,6 @@ static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts
                  s->cfg.max_finetune_steps);
         return E(ERR_INVALID_ARGUMENT);
     }
-#ifdef GSD_HAVE_MODEL
     unsigned bits;
     gs_error err;
     gs_error_clear(&err);
@@ -253,7 +246,6 @@ static int check_finetune(const gsd_server *s, uint32_t steps, const char *parts
         snprintf(msg, cap, "%s", err.msg);
         return E(ERR_INVALID_ARGUMENT);
     }
-#endif
     return 0;
 }
 
