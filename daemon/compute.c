@@ -28,7 +28,8 @@
 #include "gazesplat/image_io.h"
 #include "gazesplat/pool.h"
 #include "log.h"
-#include "server.h"
+#include "daemon.h"
+#include "out.h"
 #include "gazesplat/model.h"
 #include "gazesplat/redirect.h"
 
@@ -214,11 +215,11 @@ static void *loader_main(void *p)
     return NULL;
 }
 
-void gsd_model_start_load(gsd_server *s)
+int gsd_model_start_load(gsd_server *s, char *detail, size_t cap)
 {
     if (s->loader_running) {
         LOG_W("a model load is already running");
-        return;
+        return -1;
     }
     if (!s->face_cascade[0])
         snprintf(s->face_cascade, sizeof s->face_cascade, "%s", s->cfg.face_cascade);
@@ -227,24 +228,24 @@ void gsd_model_start_load(gsd_server *s)
         atomic_store(&s->photo_state, -1);
     }
     if (!s->cfg.model[0]) {
-        gsd_server_set_state(s, GSD_FAILED, "no model configured (model = PATH)");
-        return;
+        snprintf(detail, cap, "no model configured (model = PATH)");
+        return GSD_FAILED;
     }
     int have = s->model != NULL;
-    char detail[GSD_STR_MAX + 32];
-    snprintf(detail, sizeof detail, "%s %s", have ? "reloading" : "loading", s->cfg.model);
+    snprintf(detail, cap, "%s %s", have ? "reloading" : "loading", s->cfg.model);
     LOG_I("%s", detail);
     s->next_extend = ev_now_ms();
     if (pthread_create(&s->loader, NULL, loader_main, s) != 0) {
-        gsd_server_set_state(s, have ? GSD_READY : GSD_FAILED, "cannot start the loader thread");
-        return;
+        snprintf(detail, cap, "cannot start the loader thread");
+        return have ? GSD_READY : GSD_FAILED;
     }
     s->loader_running = 1;
-    gsd_server_set_state(s, have ? GSD_READY : GSD_LOADING, detail);
+    return have ? GSD_READY : GSD_LOADING;
 }
 
-void gsd_model_finish_load(gsd_server *s)
+int gsd_model_finish_load(gsd_server *s, char *detail, size_t cap, int *installed)
 {
+    *installed = 0;
     if (s->ready_sent)
         gsd_notify("READY=1"); /* a reload is over, whatever its outcome */
     pthread_join(s->loader, NULL);
@@ -257,14 +258,12 @@ void gsd_model_finish_load(gsd_server *s)
         else
             LOG_W("photo input unavailable: %s", s->photo_msg);
     }
-    char detail[GSD_STR_MAX + 320];
     if (s->load_status != 0) {
         atomic_fetch_add(&s->ctr.model_load_failures, 1);
         LOG_E("model: %s", s->load_msg);
-        snprintf(detail, sizeof detail, "%s%.700s", s->model ? "reload failed, serving the previous model: " : "",
+        snprintf(detail, cap, "%s%.700s", s->model ? "reload failed, serving the previous model: " : "",
                  s->load_msg);
-        gsd_server_set_state(s, s->model ? GSD_READY : GSD_FAILED, detail);
-        return;
+        return s->model ? GSD_READY : GSD_FAILED;
     }
     gsd_model *m = s->loaded;
     s->loaded = NULL;
@@ -288,14 +287,14 @@ void gsd_model_finish_load(gsd_server *s)
         }
     }
     model_unref(old);
-    snprintf(detail, sizeof detail, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
+    snprintf(detail, cap, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
     LOG_I("ready: %s", detail);
     if (m->info.fit_code_prior > 0)
         LOG_I("fits use the model's code prior, weight %g", m->info.fit_code_prior);
     if (m->info.fit_code_rate > 0)
         LOG_I("fits use the model's code rate, %g", m->info.fit_code_rate);
-    gsd_server_set_state(s, GSD_READY, detail);
-    gsd_live_model_ready(s);
+    *installed = 1;
+    return GSD_READY;
 }
 
 void gsd_model_release_all(gsd_server *s)

@@ -15,7 +15,7 @@
 #include <unistd.h>
 
 #include "log.h"
-#include "server.h"
+#include "daemon.h"
 
 /* ---- listeners ------------------------------------------------------------ */
 

@@ -19,7 +19,7 @@
 #include "gazesplat/capture.h"
 #include "gazesplat/live.h"
 #include "log.h"
-#include "server.h"
+#include "daemon.h"
 
 #define E(x) GAZESPLAT__ERROR_CODE__##x
 #define RAD2DEG (180.0 / M_PI)

@@ -16,7 +16,8 @@
 #include <unistd.h>
 
 #include "log.h"
-#include "server.h"
+#include "daemon.h"
+#include "stats.h"
 
 #define MCONN_MAX 16
 #define MREQ_MAX 4096

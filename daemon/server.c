@@ -3,6 +3,8 @@
  * completions from workers, signals, drain. */
 #define _GNU_SOURCE
 #include "server.h"
+#include "out.h"
+#include "stats.h"
 
 #include <arpa/inet.h>
 #include <errno.h>
@@ -61,24 +63,6 @@ struct gsd_conn {
 static void conn_close(gsd_conn *c, const char *why);
 static void conn_update_interest(gsd_conn *c);
 
-/* ---- counters ------------------------------------------------------------ */
-
-#define CTR(f) {#f, offsetof(gsd_counters, f)}
-static const struct {
-    const char *name;
-    size_t off;
-} counter_names[] = {
-    CTR(conn_accepted), CTR(conn_rejected), CTR(conn_closed), CTR(frames_in), CTR(frames_out),
-    CTR(bytes_in), CTR(bytes_out), CTR(protocol_errors), CTR(request_errors), CTR(timeouts),
-    CTR(req_hello), CTR(req_health), CTR(req_stats), CTR(req_fit), CTR(req_redirect),
-    CTR(req_cancel), CTR(req_sleep), CTR(busy), CTR(cancelled), CTR(deadline_exceeded),
-    CTR(fits), CTR(fits_cached), CTR(images_out), CTR(images_dropped), CTR(jobs_done), CTR(renders_full),
-    CTR(renders_incremental), CTR(model_loads),
-    CTR(model_load_failures), CTR(reloads), CTR(cache_saves), CTR(cache_save_failures),
-    CTR(finetunes), CTR(tuned_swaps), CTR(tuned_saves), CTR(tuned_save_failures),
-    CTR(renders_transfer), CTR(input_saves), CTR(input_save_failures), CTR(output_waits),
-};
-#define NCOUNTERS (sizeof counter_names / sizeof counter_names[0])
 
 static void bump(atomic_ullong *c, unsigned long long n)
 {
@@ -87,39 +71,6 @@ static void bump(atomic_ullong *c, unsigned long long n)
 
 /* ---- frames out ---------------------------------------------------------- */
 
-/* Every output frame is counted in s->out_total from here to out_free,
- * and in its job's out_bytes while o->job is set. */
-static gsd_out *out_pack(gsd_server *s, const gs_frame_header *h, const ProtobufCMessage *msg)
-{
-    uint8_t *buf;
-    size_t len;
-    if (gs_msg_pack(h, msg, GS_FRAME_HARD_MAX_PAYLOAD, &buf, &len) != 0)
-        return NULL;
-    gsd_out *o = malloc(sizeof *o + len);
-    if (o) {
-        memset(o, 0, sizeof *o);
-        o->len = len;
-        memcpy(o->data, buf, len);
-        atomic_fetch_add(&s->out_total, len);
-    }
-    free(buf);
-    return o;
-}
-
-static void out_attach(gsd_out *o, const gsd_job *job)
-{
-    o->job = (gsd_job *)job;
-    atomic_fetch_add(&o->job->out_bytes, o->len);
-}
-
-static void out_free(gsd_server *s, gsd_out *o)
-{
-    atomic_fetch_sub(&s->out_total, o->len);
-    if (o->job)
-        atomic_fetch_sub(&o->job->out_bytes, o->len);
-    free(o);
-}
-
 /* Frames of job j (all jobs: NULL) still queued on c forget it: the job
  * is about to be freed, or cancelled with its connection. */
 static void out_detach(gsd_conn *c, const gsd_job *j)
@@ -127,78 +78,6 @@ static void out_detach(gsd_conn *c, const gsd_job *j)
     for (gsd_out *o = c->whead; o; o = o->next)
         if (o->job && (!j || o->job == j))
             o->job = NULL;
-}
-
-gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage *msg)
-{
-    gs_frame_header h;
-    memset(&h, 0, sizeof h);
-    h.version = job->version;
-    h.type = type;
-    h.request_id = job->request_id;
-    memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
-    gsd_out *o = out_pack(job->srv, &h, msg);
-    if (o)
-        out_attach(o, job);
-    return o;
-}
-
-static gsd_out *error_out(gsd_server *s, const gs_frame_header *h, int code, const char *text)
-{
-    Gazesplat__Error e = GAZESPLAT__ERROR__INIT;
-    e.code = (Gazesplat__ErrorCode)code;
-    e.message = (char *)text;
-    e.request_id = h->request_id;
-    gs_frame_header eh = *h;
-    eh.type = T(ERROR);
-    return out_pack(s, &eh, &e.base);
-}
-
-gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
-{
-    char text[512];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(text, sizeof text, fmt, ap);
-    va_end(ap);
-    gs_frame_header h;
-    memset(&h, 0, sizeof h);
-    h.version = job->version;
-    h.request_id = job->request_id;
-    memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
-    Gazesplat__Error e = GAZESPLAT__ERROR__INIT;
-    e.code = (Gazesplat__ErrorCode)code;
-    e.message = text;
-    e.request_id = h.request_id;
-    if (code == E(ERR_FACE_REFUSED))
-        e.refusal = (Gazesplat__FaceRefusal)job->refusal;
-    h.type = T(ERROR);
-    gsd_out *o = out_pack(job->srv, &h, &e.base);
-    ((gsd_job *)job)->result = code; /* for its log line */
-    if (o) {
-        out_attach(o, job);
-        o->final = 1;
-        /* Cancellations and deadlines have counters of their own. */
-        o->request_error = code != E(ERR_CANCELLED) && code != E(ERR_DEADLINE);
-    }
-    return o;
-}
-
-void gsd_post(gsd_server *s, gsd_out *o)
-{
-    if (!o) {
-        LOG_E("out of memory building a reply; a request stays unanswered");
-        return;
-    }
-    pthread_mutex_lock(&s->post_mu);
-    o->next = NULL;
-    if (s->post_tail)
-        s->post_tail->next = o;
-    else
-        s->post_head = o;
-    s->post_tail = o;
-    pthread_mutex_unlock(&s->post_mu);
-    ev_wake(s->loop);
 }
 
 static size_t output_cap(const gsd_conn *c)
@@ -227,7 +106,7 @@ static void reply(gsd_conn *c, const gs_frame_header *req, uint16_t type, const 
     gs_frame_header h = *req;
     h.version = c->version;
     h.type = type;
-    gsd_out *o = out_pack(c->srv, &h, msg);
+    gsd_out *o = gsd_out_pack(c->srv, &h, msg);
     if (!o) {
         conn_close(c, "out of memory");
         return;
@@ -249,7 +128,7 @@ static void reply_error(gsd_conn *c, const gs_frame_header *req, int code, const
     LOG_D("%s: request %u: %s: %s", c->peer, req->request_id, gs_msg_error_name(code), text);
     gs_frame_header h = *req;
     h.version = c->version;
-    gsd_out *o = error_out(c->srv, &h, code, text);
+    gsd_out *o = gsd_out_error(c->srv, &h, code, text);
     if (o)
         conn_queue(c, o);
     else
@@ -274,7 +153,7 @@ static void conn_fail(gsd_conn *c, int code, uint32_t request_id, const char *fm
     memset(&h, 0, sizeof h);
     h.request_id = request_id;
     h.version = c->version;
-    gsd_out *o = error_out(c->srv, &h, code, text);
+    gsd_out *o = gsd_out_error(c->srv, &h, code, text);
     c->closing = 1;
     c->closing_ms = ev_now_ms();
     if (o)
@@ -321,7 +200,7 @@ static void conn_free(gsd_conn *c)
 {
     for (gsd_out *o = c->whead, *n; o; o = n) {
         n = o->next;
-        out_free(c->srv, o);
+        gsd_out_free(c->srv, o);
     }
     gs_frame_parser_free(&c->parser);
     free(c);
@@ -406,7 +285,7 @@ static void conn_flush(gsd_conn *c)
             c->whead = o->next;
             if (!c->whead)
                 c->wtail = NULL;
-            out_free(c->srv, o);
+            gsd_out_free(c->srv, o);
         }
     }
     if (!c->whead && (c->closing || (c->eof && !c->inflight))) {
@@ -539,41 +418,6 @@ static void handle_health(gsd_conn *c, const gs_frame_header *h, const Gazesplat
     reply(c, h, T(HEALTH_OK), &m.base);
     free(keys);
     free(list);
-}
-
-size_t gsd_stats_collect(gsd_server *s, gsd_stat *out, size_t cap)
-{
-    size_t n = 0;
-    for (size_t i = 0; i < NCOUNTERS && n < cap; i++, n++)
-        out[n] = (gsd_stat){counter_names[i].name,
-                            atomic_load((atomic_ullong *)((char *)&s->ctr + counter_names[i].off)), 0};
-    int qlen, running;
-    gsd_work_lengths(s, &qlen, &running);
-    gsd_cache_stats cst, tst, ist;
-    gsd_cache_stats_get(s->cache, &cst);
-    gsd_cache_stats_get(s->tuned, &tst);
-    gsd_cache_stats_get(s->inputs, &ist);
-    /* gauge 1: a level now; 0: a count that only grows */
-    const gsd_stat extra[] = {
-        {"connections_open", (uint64_t)s->nconns, 1}, {"queue_length", (uint64_t)qlen, 1},
-        {"jobs_running", (uint64_t)running, 1}, {"cache_entries", cst.entries, 1},
-        {"cache_bytes", cst.bytes, 1}, {"cache_budget", cst.budget, 1}, {"cache_hits", cst.hits, 0},
-        {"cache_misses", cst.misses, 0}, {"cache_evictions", cst.evictions, 0},
-        {"tuned_entries", tst.entries, 1}, {"tuned_bytes", tst.bytes, 1},
-        {"tuned_evictions", tst.evictions, 0}, {"input_entries", ist.entries, 1},
-        {"input_bytes", ist.bytes, 1}, {"input_evictions", ist.evictions, 0},
-        {"state", (uint64_t)atomic_load(&s->state), 1},
-        {"uptime_ms", (uint64_t)(ev_now_ms() - s->started_ms), 1},
-        {"job_ms_avg", (uint64_t)s->job_ms_avg, 1},
-        {"output_bytes", (uint64_t)atomic_load(&s->out_total), 1},
-        {"output_budget", (uint64_t)atomic_load(&s->out_budget), 1},
-        {"pool_threads", (uint64_t)gsd_pool_threads(&s->cfg), 1},
-        {"blas_threads", (uint64_t)gs_nn_blas_threads(), 1},
-        {"max_connections", (uint64_t)s->cfg.max_connections, 1}, /* in force: fits the fd limit */
-    };
-    for (size_t i = 0; i < sizeof extra / sizeof extra[0] && n < cap; i++, n++)
-        out[n] = extra[i];
-    return n;
 }
 
 static void handle_stats(gsd_conn *c, const gs_frame_header *h)
@@ -934,14 +778,14 @@ static void refuse_conn(gsd_server *s, int fd, int code, const char *text)
     gs_frame_header h;
     memset(&h, 0, sizeof h);
     h.version = GS_PROTO_VERSION_MIN;
-    gsd_out *o = error_out(s, &h, code, text);
+    gsd_out *o = gsd_out_error(s, &h, code, text);
     if (o) {
         ssize_t w = send(fd, o->data, o->len, MSG_NOSIGNAL | MSG_DONTWAIT);
         if (w > 0)
             bump(&s->ctr.bytes_out, (unsigned long long)w);
         if (w == (ssize_t)o->len)
             bump(&s->ctr.frames_out, 1);
-        out_free(s, o);
+        gsd_out_free(s, o);
     }
     char junk[512];
     for (int i = 0; i < 8 && recv(fd, junk, sizeof junk, MSG_DONTWAIT) > 0; i++)
@@ -1070,6 +914,26 @@ static void job_finished(gsd_server *s, gsd_job *j, uint64_t ms, int ok)
         conn_close(c, "peer closed");
 }
 
+/* Model loads (compute.c) report the state they leave the server in; the
+ * loop sets it and attaches the live stage to a new model. */
+static void model_start(gsd_server *s)
+{
+    char detail[GSD_STR_MAX + 320];
+    int st = gsd_model_start_load(s, detail, sizeof detail);
+    if (st >= 0)
+        gsd_server_set_state(s, st, detail);
+}
+
+static void model_finish(gsd_server *s)
+{
+    char detail[GSD_STR_MAX + 320];
+    int installed = 0;
+    int st = gsd_model_finish_load(s, detail, sizeof detail, &installed);
+    gsd_server_set_state(s, st, detail);
+    if (installed)
+        gsd_live_model_ready(s);
+}
+
 static void on_wake(ev_loop *loop, void *ctx)
 {
     (void)loop;
@@ -1089,13 +953,13 @@ static void on_wake(ev_loop *loop, void *ctx)
             conn_queue(j->conn, o);
             conn_flush(j->conn);
         } else {
-            out_free(s, o);
+            gsd_out_free(s, o);
         }
         if (final && j)
             job_finished(s, j, ms, ok);
     }
     if (atomic_load(&s->load_done))
-        gsd_model_finish_load(s);
+        model_finish(s);
 }
 
 static void set_status(gsd_server *s)
@@ -1322,7 +1186,7 @@ static void on_signal(ev_loop *loop, ev_watch *w, int events)
             if (s->on_sighup)
                 s->on_sighup(s);
             if (atomic_load(&s->state) != GSD_DRAINING)
-                gsd_model_start_load(s);
+                model_start(s);
             /* systemd waits for READY=1 to end the reload; a model load
              * sends it when it finishes. */
             if (!s->loader_running)
@@ -1395,7 +1259,7 @@ int gsd_server_init(gsd_server *s, const gsd_config *cfg, char *msg, size_t cap)
 
 int gsd_server_run(gsd_server *s)
 {
-    gsd_model_start_load(s);
+    model_start(s);
     int r = ev_run(s->loop);
     if (r != 0)
         LOG_E("event loop: %s", strerror(errno));
@@ -1419,7 +1283,7 @@ void gsd_server_free(gsd_server *s)
     if (s->loader_running)
         pthread_join(s->loader, NULL);
     if (atomic_load(&s->load_done))
-        gsd_model_finish_load(s);
+        model_finish(s);
     gsd_cache_persist(s);
     gsd_live_stop(s); /* holds a model reference and borrows the landmark model */
     gsd_model_release_all(s);

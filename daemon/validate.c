@@ -5,7 +5,7 @@
 #include <stdio.h>
 #include <string.h>
 
-#include "server.h"
+#include "daemon.h"
 #include "gazesplat/model.h"
 
 #define E(x) GAZESPLAT__ERROR_CODE__##x

@@ -5,7 +5,8 @@
 #include <string.h>
 
 #include "log.h"
-#include "server.h"
+#include "daemon.h"
+#include "out.h"
 
 typedef struct worker_arg {
     gsd_server *srv;
