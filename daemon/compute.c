@@ -20,8 +20,6 @@
 #include <malloc.h>
 #endif
 
-#include <blake2.h>
-
 #include "gazesplat/clock.h"
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
@@ -29,7 +27,10 @@
 #include "gazesplat/pool.h"
 #include "log.h"
 #include "daemon.h"
+#include "hash.h"
+#include "model_ref.h"
 #include "out.h"
+#include "store.h"
 #include "gazesplat/model.h"
 #include "gazesplat/redirect.h"
 
@@ -37,15 +38,6 @@
 #define T(x) GAZESPLAT__FRAME_TYPE__FRAME_##x
 #define DEG (M_PI / 180.0)
 #define GSD_RECENT_MAX 64
-
-struct gsd_model {
-    gs_model *m;
-    gs_model_info info;
-    int image_size;
-    char id[33];
-    char path[GSD_STR_MAX];
-    atomic_int refs;
-};
 
 struct gsd_worker {
     gsd_server *srv;
@@ -82,264 +74,6 @@ struct gsd_worker {
     uint8_t recent[GSD_RECENT_MAX][GS_FRAME_KEY_SIZE];
     int recent_n, recent_cap;
 };
-
-/* Fine-tuned blocks and kept inputs on disk (below). */
-enum { STORE_TUNED, STORE_INPUT, STORE_KINDS };
-static void store_sweep_all_locked(gsd_server *s);
-static void store_restore(gsd_server *s, int kind);
-
-/* ---- hashing: BLAKE2b-128 (libb2), for model ids and content keys --------
- * A subject key names a fit that any client may ask for by content, so
- * it must not collide by accident or by design: a cryptographic hash,
- * cut to the header's 16 bytes. */
-
-typedef struct hash128 {
-    blake2b_state st;
-} hash128;
-
-static void hash_init(hash128 *h)
-{
-    blake2b_init(&h->st, 16);
-}
-
-static void hash_bytes(hash128 *h, const void *data, size_t n)
-{
-    blake2b_update(&h->st, data, n);
-}
-
-static void hash_out(hash128 *h, uint8_t out[16])
-{
-    blake2b_final(&h->st, out, 16);
-}
-
-/* ---- model references ------------------------------------------------------ */
-
-static void model_unref(gsd_model *m)
-{
-    if (!m || atomic_fetch_sub(&m->refs, 1) != 1)
-        return;
-    gs_model_destroy(m->m);
-    free(m);
-}
-
-static gsd_model *model_acquire(gsd_server *s)
-{
-    pthread_mutex_lock(&s->model_mu);
-    gsd_model *m = s->model;
-    if (m)
-        atomic_fetch_add(&m->refs, 1);
-    pthread_mutex_unlock(&s->model_mu);
-    return m;
-}
-
-const struct gs_model *gsd_model_get(gsd_server *s, gsd_model **ref)
-{
-    *ref = model_acquire(s);
-    return *ref ? (*ref)->m : NULL;
-}
-
-void gsd_model_put(gsd_model *ref)
-{
-    model_unref(ref);
-}
-
-int gsd_model_image_size(gsd_server *s, char id[33])
-{
-    pthread_mutex_lock(&s->model_mu);
-    int size = s->model ? s->model->image_size : 0;
-    snprintf(id, 33, "%s", s->model ? s->model->id : "");
-    pthread_mutex_unlock(&s->model_mu);
-    return size;
-}
-
-/* The id is a hash of the file's bytes: subjects belong to one model. */
-static int file_id(const char *path, char id[33], char *msg, size_t cap)
-{
-    int fd = open(path, O_RDONLY | O_CLOEXEC);
-    if (fd < 0) {
-        snprintf(msg, cap, "%s: %s", path, strerror(errno));
-        return -1;
-    }
-    hash128 h;
-    hash_init(&h);
-    unsigned char buf[65536];
-    ssize_t n;
-    while ((n = read(fd, buf, sizeof buf)) > 0)
-        hash_bytes(&h, buf, (size_t)n);
-    close(fd);
-    if (n < 0) {
-        snprintf(msg, cap, "%s: %s", path, strerror(errno));
-        return -1;
-    }
-    uint8_t raw[16];
-    hash_out(&h, raw);
-    gs_frame_key_hex(raw, id);
-    return 0;
-}
-
-static void *loader_main(void *p)
-{
-    gsd_server *s = p;
-    gsd_model *m = calloc(1, sizeof *m);
-    s->loaded = NULL;
-    s->load_status = -1;
-    if (!m) {
-        snprintf(s->load_msg, sizeof s->load_msg, "out of memory");
-    } else {
-        snprintf(m->path, sizeof m->path, "%s", s->cfg.model);
-        atomic_store(&m->refs, 1);
-        if (file_id(m->path, m->id, s->load_msg, sizeof s->load_msg) == 0) {
-            gs_error err;
-            gs_error_clear(&err);
-            if (gs_model_load(m->path, &m->m, &err) == GS_OK) {
-                gs_model_get_info(m->m, &m->info);
-                m->image_size = m->info.image_size;
-                s->loaded = m;
-                s->load_status = 0;
-                m = NULL;
-            } else {
-                snprintf(s->load_msg, sizeof s->load_msg, "%.500s: %.256s", m->path, err.msg);
-            }
-        }
-        free(m);
-    }
-    /* The landmark model (about 100 MB) is read once, with the first model. */
-    if (s->cfg.photo_input && !s->face_sp && atomic_load(&s->photo_state) == 0) {
-        gs_error ferr;
-        gs_error_clear(&ferr);
-        if (gs_face_shape_model_load(s->cfg.face_landmarks, &s->face_sp, &ferr) != GS_OK)
-            snprintf(s->photo_msg, sizeof s->photo_msg, "%.280s", ferr.msg);
-    }
-    atomic_store(&s->load_done, 1);
-    ev_wake(s->loop);
-    return NULL;
-}
-
-int gsd_model_start_load(gsd_server *s, char *detail, size_t cap)
-{
-    if (s->loader_running) {
-        LOG_W("a model load is already running");
-        return -1;
-    }
-    if (!s->face_cascade[0])
-        snprintf(s->face_cascade, sizeof s->face_cascade, "%s", s->cfg.face_cascade);
-    if (!s->cfg.photo_input && atomic_load(&s->photo_state) == 0) {
-        snprintf(s->photo_msg, sizeof s->photo_msg, "photo_input = no");
-        atomic_store(&s->photo_state, -1);
-    }
-    if (!s->cfg.model[0]) {
-        snprintf(detail, cap, "no model configured (model = PATH)");
-        return GSD_FAILED;
-    }
-    int have = s->model != NULL;
-    snprintf(detail, cap, "%s %s", have ? "reloading" : "loading", s->cfg.model);
-    LOG_I("%s", detail);
-    s->next_extend = ev_now_ms();
-    if (pthread_create(&s->loader, NULL, loader_main, s) != 0) {
-        snprintf(detail, cap, "cannot start the loader thread");
-        return have ? GSD_READY : GSD_FAILED;
-    }
-    s->loader_running = 1;
-    return have ? GSD_READY : GSD_LOADING;
-}
-
-int gsd_model_finish_load(gsd_server *s, char *detail, size_t cap, int *installed)
-{
-    *installed = 0;
-    if (s->ready_sent)
-        gsd_notify("READY=1"); /* a reload is over, whatever its outcome */
-    pthread_join(s->loader, NULL);
-    s->loader_running = 0;
-    atomic_store(&s->load_done, 0);
-    if (atomic_load(&s->photo_state) == 0 && s->cfg.photo_input) {
-        atomic_store(&s->photo_state, s->face_sp ? 1 : -1);
-        if (s->face_sp)
-            LOG_I("photo input: landmarks %s, cascade %s", s->cfg.face_landmarks, s->face_cascade);
-        else
-            LOG_W("photo input unavailable: %s", s->photo_msg);
-    }
-    if (s->load_status != 0) {
-        atomic_fetch_add(&s->ctr.model_load_failures, 1);
-        LOG_E("model: %s", s->load_msg);
-        snprintf(detail, cap, "%s%.700s", s->model ? "reload failed, serving the previous model: " : "",
-                 s->load_msg);
-        return s->model ? GSD_READY : GSD_FAILED;
-    }
-    gsd_model *m = s->loaded;
-    s->loaded = NULL;
-    atomic_fetch_add(&s->ctr.model_loads, 1);
-    pthread_mutex_lock(&s->model_mu);
-    gsd_model *old = s->model;
-    s->model = m;
-    pthread_mutex_unlock(&s->model_mu);
-    if (!old) {
-        gsd_cache_restore(s);
-    } else if (strcmp(old->id, m->id) != 0) {
-        LOG_I("model changed (%s -> %s): subjects dropped", old->id, m->id);
-        gsd_cache_clear(s->cache);
-        gsd_cache_clear(s->tuned);
-        gsd_cache_clear(s->inputs);
-        gsd_cache_persist(s);
-        if (s->state_dir[0]) {
-            pthread_mutex_lock(&s->persist_mu);
-            store_sweep_all_locked(s); /* every block and input file goes */
-            pthread_mutex_unlock(&s->persist_mu);
-        }
-    }
-    model_unref(old);
-    snprintf(detail, cap, "model %s (id %.16s, %d px)", m->path, m->id, m->image_size);
-    LOG_I("ready: %s", detail);
-    if (m->info.fit_code_prior > 0)
-        LOG_I("fits use the model's code prior, weight %g", m->info.fit_code_prior);
-    if (m->info.fit_code_rate > 0)
-        LOG_I("fits use the model's code rate, %g", m->info.fit_code_rate);
-    *installed = 1;
-    return GSD_READY;
-}
-
-void gsd_model_release_all(gsd_server *s)
-{
-    gs_face_shape_model_free(s->face_sp);
-    s->face_sp = NULL;
-    if (s->loaded)
-        model_unref(s->loaded);
-    s->loaded = NULL;
-    model_unref(s->model);
-    s->model = NULL;
-}
-
-/* ---- cache persistence ------------------------------------------------------ */
-
-void gsd_cache_restore(gsd_server *s)
-{
-    char id[33], msg[300];
-    gsd_model_image_size(s, id);
-    if (!s->state_dir[0]) {
-        LOG_I("no state directory: subjects are not persisted");
-        return;
-    }
-    int r = gsd_cache_load(s->cache, s->state_dir, id, msg, sizeof msg);
-    if (r == 0)
-        LOG_I("subject cache %s: %s", s->state_dir, msg);
-    else
-        LOG_W("subject cache %s: %s", s->state_dir, msg);
-    store_restore(s, STORE_TUNED);
-    store_restore(s, STORE_INPUT);
-}
-
-int gsd_cache_persist(gsd_server *s)
-{
-    char id[33], msg[300];
-    if (!s->state_dir[0] || gsd_model_image_size(s, id) == 0)
-        return 0;
-    pthread_mutex_lock(&s->persist_mu);
-    int r = gsd_cache_save(s->cache, s->state_dir, id, msg, sizeof msg);
-    pthread_mutex_unlock(&s->persist_mu);
-    atomic_fetch_add(r == 0 ? &s->ctr.cache_saves : &s->ctr.cache_save_failures, 1);
-    if (r != 0)
-        LOG_E("subject cache: %s", msg);
-    return r;
-}
 
 /* ---- workers --------------------------------------------------------------- */
 
@@ -379,7 +113,7 @@ static void worker_drop_model(gsd_worker *w)
         gs_model_destroy(w->slots[i].m);
         memset(&w->slots[i], 0, sizeof w->slots[i]);
     }
-    model_unref(w->model);
+    gsd_model_unref(w->model);
     w->model = NULL;
 }
 
@@ -502,11 +236,11 @@ static void recent_add(gsd_worker *w, const uint8_t *key)
 /* Makes sure the worker's context belongs to the current model. */
 static int worker_bind_model(gsd_worker *w)
 {
-    gsd_model *m = model_acquire(w->srv);
+    gsd_model *m = gsd_model_acquire(w->srv);
     if (!m)
         return -1;
     if (m == w->model) {
-        model_unref(m);
+        gsd_model_unref(m);
         return 0;
     }
     worker_drop_model(w);
@@ -720,270 +454,6 @@ static void content_key(const gsd_model *m, int n, const int *is_photo, const gs
 }
 
 
-/* ---- kept blobs: fine-tuned blocks and inputs ----------------------------------
- * Besides its gs_subject (the subject cache), a subject may have:
- *   a tuned block (STORE_TUNED), its fine-tuned tensors
- *     (gs_model_tuned_encode); the subject's cache blob then has "GSTR"
- *     and the block's checksum (its last 8 bytes) after the gs_subject;
- *   a kept input (STORE_INPUT), the normalized face a FIT kept
- *     (keep_image) for REDIRECT transfer: "GSFI", u32 side, side x side RGB.
- * Each kind lives in an LRU cache of its own (tuned_cache_mb,
- * input_cache_mb) and, with a state directory, one file per subject
- * (PREFIX<key hex>SUFFIX, written atomically), kept while the blob is in
- * its cache: the files only bring the blobs back at start (store_restore). */
-
-#define TUNED_REF_MAGIC 0x52545347u /* "GSTR" */
-#define INPUT_MAGIC 0x49465347u     /* "GSFI" */
-
-static const struct store_kind {
-    const char *prefix, *suffix, *what, *budget;
-} store_kinds[STORE_KINDS] = {
-    {"tuned-", ".gsft", "fine-tuned parameters", "tuned_cache_mb"},
-    {"input-", ".gsfi", "kept input", "input_cache_mb"},
-};
-
-static gsd_cache *store_cache(const gsd_server *s, int kind)
-{
-    return kind == STORE_TUNED ? s->tuned : s->inputs;
-}
-
-static int store_budget_mb(const gsd_server *s, int kind)
-{
-    return kind == STORE_TUNED ? s->cfg.tuned_cache_mb : s->cfg.input_cache_mb;
-}
-
-/* The subject's cache blob; sum non-NULL: a fine-tuned subject. */
-static size_t subject_blob(const gs_subject *subj, const uint64_t *sum, uint8_t *blob, size_t cap)
-{
-    size_t n = gs_subject_encode(subj, blob, cap);
-    if (!sum || n == 0 || n + 12 > cap)
-        return sum ? 0 : n;
-    uint32_t magic = TUNED_REF_MAGIC;
-    memcpy(blob + n, &magic, 4);
-    memcpy(blob + n + 4, sum, 8);
-    return n + 12;
-}
-
-static int cache_lookup(gsd_server *s, const uint8_t key[16], gs_subject *subj, int *tuned, uint64_t *sum)
-{
-    uint8_t blob[GS_SUBJECT_ENCODED_MAX + 12];
-    long n = gsd_cache_get(s->cache, key, blob, sizeof blob);
-    *tuned = 0;
-    if (n < 12)
-        return -1;
-    uint32_t magic;
-    size_t slen = gs_subject_encoded_len(blob, (size_t)n);
-    if (slen && (size_t)n == slen + 12) {
-        memcpy(&magic, blob + slen, 4);
-        if (magic != TUNED_REF_MAGIC)
-            return -1;
-        memcpy(sum, blob + slen + 4, 8);
-        *tuned = 1;
-    } else if ((size_t)n != slen) {
-        return -1;
-    }
-    return gs_subject_decode(blob, slen, subj, NULL) == GS_OK ? 0 : -1;
-}
-
-/* A blob file's name in the state directory, and its path. */
-static void store_name(int kind, const uint8_t key[16], char out[64])
-{
-    char hex[33];
-    gs_frame_key_hex(key, hex);
-    snprintf(out, 64, "%s%s%s", store_kinds[kind].prefix, hex, store_kinds[kind].suffix);
-}
-
-static void store_path(const gsd_server *s, int kind, const uint8_t key[16], char *out, size_t cap)
-{
-    char name[64];
-    store_name(kind, key, name);
-    snprintf(out, cap, "%s/%s", s->state_dir, name);
-}
-
-/* The key of a blob file's name of this kind, or -1 for other names. */
-static int store_file_key(int kind, const char *name, uint8_t key[16])
-{
-    const char *pre = store_kinds[kind].prefix, *suf = store_kinds[kind].suffix;
-    size_t pl = strlen(pre);
-    if (strncmp(name, pre, pl) || strlen(name) != pl + 32 + strlen(suf) || strcmp(name + pl + 32, suf))
-        return -1;
-    for (int i = 0; i < 16; i++) {
-        unsigned v;
-        char b[3] = {name[pl + 2 * i], name[pl + 2 * i + 1], 0};
-        if (!isxdigit((unsigned char)b[0]) || !isxdigit((unsigned char)b[1]) || sscanf(b, "%x", &v) != 1)
-            return -1;
-        key[i] = (uint8_t)v;
-    }
-    return 0;
-}
-
-/* Removes the kind's files whose blob is no longer in its cache (evicted,
- * or the model changed). Under persist_mu. */
-static void store_sweep_locked(gsd_server *s, int kind)
-{
-    DIR *d = opendir(s->state_dir);
-    if (!d)
-        return;
-    struct dirent *e;
-    while ((e = readdir(d)) != NULL) {
-        uint8_t key[16];
-        if (store_file_key(kind, e->d_name, key) == 0 && !gsd_cache_contains(store_cache(s, kind), key)) {
-            char path[GSD_STR_MAX + 64];
-            store_path(s, kind, key, path, sizeof path);
-            if (unlink(path) != 0 && errno != ENOENT)
-                LOG_W("%s %s: unlink: %s", store_kinds[kind].what, path, strerror(errno));
-        }
-    }
-    closedir(d);
-}
-
-static void store_sweep_all_locked(gsd_server *s)
-{
-    for (int k = 0; k < STORE_KINDS; k++)
-        store_sweep_locked(s, k);
-}
-
-/* Keeps a subject's blob: in its cache, and on disk with a state
- * directory (a failure there is logged and counted: the blob still
- * serves until evicted or a restart). */
-static int store_put(gsd_server *s, int kind, const uint8_t key[16], const uint8_t *blob, size_t len,
-                     char *msg, size_t cap)
-{
-    if (gsd_cache_put(store_cache(s, kind), key, blob, len) != 0) {
-        snprintf(msg, cap, "%s (%zu bytes) over %s (%d MiB)", store_kinds[kind].what, len,
-                 store_kinds[kind].budget, store_budget_mb(s, kind));
-        return E(ERR_INTERNAL);
-    }
-    if (!s->state_dir[0])
-        return 0;
-    char name[64], err[400];
-    store_name(kind, key, name);
-    pthread_mutex_lock(&s->persist_mu);
-    int r = gsd_file_write_atomic(s->state_dir, name, blob, len, err, sizeof err);
-    store_sweep_locked(s, kind);
-    pthread_mutex_unlock(&s->persist_mu);
-    if (kind == STORE_TUNED)
-        atomic_fetch_add(r == 0 ? &s->ctr.tuned_saves : &s->ctr.tuned_save_failures, 1);
-    else
-        atomic_fetch_add(r == 0 ? &s->ctr.input_saves : &s->ctr.input_save_failures, 1);
-    if (r != 0)
-        LOG_E("%s: %s", store_kinds[kind].what, err);
-    return 0;
-}
-
-typedef struct store_file {
-    uint8_t key[16];
-    struct timespec mtime;
-} store_file;
-
-static int by_mtime(const void *a, const void *b)
-{
-    const struct timespec *x = &((const store_file *)a)->mtime, *y = &((const store_file *)b)->mtime;
-    return x->tv_sec != y->tv_sec ? (x->tv_sec < y->tv_sec ? -1 : 1)
-                                  : (x->tv_nsec < y->tv_nsec ? -1 : x->tv_nsec > y->tv_nsec);
-}
-
-/* The kind's files of cached subjects, oldest first (so that the budget
- * keeps the newest); *n their count. NULL when none (or out of memory). */
-static store_file *store_list(gsd_server *s, int kind, size_t *n)
-{
-    DIR *d = opendir(s->state_dir);
-    *n = 0;
-    if (!d)
-        return NULL;
-    store_file *f = NULL;
-    size_t cap = 0;
-    struct dirent *e;
-    while ((e = readdir(d)) != NULL) {
-        uint8_t key[16];
-        struct stat st;
-        char path[GSD_STR_MAX + 64];
-        if (store_file_key(kind, e->d_name, key) != 0 || !gsd_cache_contains(s->cache, key))
-            continue;
-        store_path(s, kind, key, path, sizeof path);
-        if (stat(path, &st) != 0)
-            continue;
-        if (*n == cap) {
-            store_file *g = realloc(f, (cap = cap ? 2 * cap : 64) * sizeof *f);
-            if (!g)
-                break;
-            f = g;
-        }
-        memcpy(f[*n].key, key, 16);
-        f[(*n)++].mtime = st.st_mtim;
-    }
-    closedir(d);
-    if (*n)
-        qsort(f, *n, sizeof *f, by_mtime);
-    return f;
-}
-
-/* At start: the blobs of cached subjects back into their caches; every
- * other file of the kind goes. */
-static void store_restore(gsd_server *s, int kind)
-{
-    size_t n = 0;
-    store_file *f = store_list(s, kind, &n);
-    gsd_cache *c = store_cache(s, kind);
-    for (size_t i = 0; i < n; i++) {
-        char path[GSD_STR_MAX + 64];
-        size_t len = 0;
-        int missing;
-        store_path(s, kind, f[i].key, path, sizeof path);
-        uint8_t *b = gsd_file_read(path, (size_t)store_budget_mb(s, kind) << 20, &len, &missing);
-        if (b) /* a blob over the budget is refused here and its file swept below */
-            gsd_cache_put(c, f[i].key, b, len);
-        free(b);
-    }
-    free(f);
-    pthread_mutex_lock(&s->persist_mu);
-    store_sweep_locked(s, kind);
-    pthread_mutex_unlock(&s->persist_mu);
-    gsd_cache_stats st;
-    gsd_cache_stats_get(c, &st);
-    LOG_I("%s: %llu restored (%llu MiB)", store_kinds[kind].what, (unsigned long long)st.entries,
-          (unsigned long long)(st.bytes >> 20));
-}
-
-/* ---- kept inputs -------------------------------------------------------------- */
-
-/* Keeps face (the model's size) as key's input. */
-static int input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face, char *msg, size_t cap)
-{
-    size_t row = (size_t)face->width * 3, len = 8 + row * (size_t)face->height;
-    uint8_t *b = malloc(len);
-    if (!b) {
-        snprintf(msg, cap, "out of memory");
-        return E(ERR_INTERNAL);
-    }
-    uint32_t hdr[2] = {INPUT_MAGIC, (uint32_t)face->width};
-    memcpy(b, hdr, 8);
-    for (int y = 0; y < face->height; y++)
-        memcpy(b + 8 + (size_t)y * row, face->data + (size_t)y * face->stride, row);
-    int e = store_put(s, STORE_INPUT, key, b, len, msg, cap);
-    free(b);
-    return e;
-}
-
-/* key's kept input as a size x size image (out->data malloc'd); -1 when
- * none is kept, or it does not fit the model. */
-static int input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out)
-{
-    uint8_t *b = NULL;
-    long n = gsd_cache_get_alloc(s->inputs, key, &b);
-    uint32_t hdr[2] = {0, 0};
-    if (n >= 8)
-        memcpy(hdr, b, 8);
-    if (n < 8 || hdr[0] != INPUT_MAGIC || hdr[1] != (uint32_t)size ||
-        (size_t)n != 8 + 3 * (size_t)size * size) {
-        free(b);
-        return -1;
-    }
-    memmove(b, b + 8, (size_t)n - 8);
-    *out = (gs_io_image){size, size, 3 * (size_t)size, b};
-    return 0;
-}
-
 static void head_rotation(const Gazesplat__Angles *a, double R[9])
 {
     gs_geom_rot_from_pitchyaw(a->pitch_deg * DEG, a->yaw_deg * DEG, 0.0, R);
@@ -1128,7 +598,7 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, i
         return E(ERR_INTERNAL);
     }
     memcpy(sum, blk + len - 8, 8);
-    int e = store_put(w->srv, STORE_TUNED, j->key, blk, len, msg, cap);
+    int e = gsd_store_put(w->srv, STORE_TUNED, j->key, blk, len, msg, cap);
     free(blk);
     if (e)
         return e;
@@ -1237,7 +707,7 @@ static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, int n, c
         o->tuned = o->ft_ran = 1;
     }
     uint8_t blob[GS_SUBJECT_ENCODED_MAX + 12];
-    size_t bn = subject_blob(subj, o->tuned ? &o->sum : NULL, blob, sizeof blob);
+    size_t bn = gsd_subject_blob(subj, o->tuned ? &o->sum : NULL, blob, sizeof blob);
     /* Durable before the reply: a FIT_OK means the subject survives a crash. */
     if (bn == 0 || bn > sizeof blob || gsd_cache_put(s->cache, j->key, blob, bn) != 0) {
         snprintf(msg, cap, "subject cache refused %zu bytes", bn);
@@ -1307,7 +777,7 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const
     if (!e && key_zero(j->key))
         content_key(w->model, n, is_photo, face, opt, &a->ft, j->key);
     if (!e)
-        o->cached = cache_lookup(s, j->key, &o->subj, &o->tuned, &o->sum) == 0;
+        o->cached = gsd_subject_lookup(s, j->key, &o->subj, &o->tuned, &o->sum) == 0;
     if (!e && o->cached && o->tuned && !gsd_cache_contains(s->tuned, j->key)) {
         /* Its tuned tensors were evicted: the subject cannot render, so
          * this FIT runs again (the error REDIRECT gives says so). */
@@ -1316,7 +786,7 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const
     if (!e && !o->cached)
         e = fit_subject(w, j, a, n, opt, ps, face, o, msg, cap);
     if (!e && a->keep_image)
-        e = input_keep(s, j->key, &face[0], msg, cap);
+        e = gsd_input_keep(s, j->key, &face[0], msg, cap);
     if (!e && a->want_face)
         o->face = face[0];
     else
@@ -1607,9 +1077,9 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     } else {
         char hex[33];
         gs_frame_key_hex(j->key, hex);
-        if (cache_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0)
+        if (gsd_subject_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0)
             return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
-        if (input_get(s, j->key, w->model->info.image_size, &so.face) != 0 && r->transfer)
+        if (gsd_input_get(s, j->key, w->model->info.image_size, &so.face) != 0 && r->transfer)
             return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT),
                                    "subject %s: no kept input for transfer (FIT it with keep_image, or it "
                                    "was evicted: input_cache_mb); send the image inline or FIT again",

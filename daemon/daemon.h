@@ -253,7 +253,7 @@ int gsd_model_finish_load(gsd_server *s, char *detail, size_t cap, int *installe
 void gsd_model_release_all(gsd_server *s);
 /* Normalized face size of the current model, 0 when none; its id. */
 int gsd_model_image_size(gsd_server *s, char id[33]);
-/* Loads the cache file for the current model id (compute.c owns ids). */
+/* Loads the cache file for the current model id (model_ref.c owns ids). */
 void gsd_cache_restore(gsd_server *s);
 /* Saves the cache file; 0 or -1 (logged). */
 int gsd_cache_persist(gsd_server *s);
