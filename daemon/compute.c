@@ -589,7 +589,7 @@ static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, i
     }
     if (r != GS_OK) {
         snprintf(msg, cap, "finetune: %s", err.msg);
-        return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
+        return gsd_status_error(r);
     }
     uint8_t *blk = NULL;
     size_t len = 0;
@@ -696,7 +696,7 @@ static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, int n, c
     }
     if (r != GS_OK) {
         snprintf(msg, cap, "fit: %s", err.msg);
-        return r == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
+        return gsd_status_error(r);
     }
     atomic_fetch_add(&s->ctr.fits, 1);
     if (a->ft.steps) {
@@ -1029,7 +1029,7 @@ static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gaz
                                 &view, rgb, (size_t)size * 3, &err);
     if (rc != GS_OK) {
         snprintf(msg, cap, "render target %zu%s: %s", i, input ? " (transfer)" : "", err.msg);
-        return rc == GS_ERR_ARG ? E(ERR_INVALID_ARGUMENT) : E(ERR_INTERNAL);
+        return gsd_status_error(rc);
     }
     count_render(w, ctx);
     if (input)

@@ -8,6 +8,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "gazesplat/error.h"
 #include "log.h"
 
 #define E(x) GAZESPLAT__ERROR_CODE__##x
@@ -118,3 +119,20 @@ void gsd_post(gsd_server *s, gsd_out *o)
     ev_wake(s->loop);
 }
 
+/* A library status (gs_status) as the ErrorCode a computing job answers
+ * with: the one table for every step (fit, fine-tune, render). Inputs have
+ * their own answers (an image that does not decode is BAD_IMAGE, a face
+ * the gate refuses FACE_REFUSED: compute.c). */
+int gsd_status_error(int status)
+{
+    static const struct {
+        int status, code;
+    } table[] = {
+        {GS_ERR_ARG, E(ERR_INVALID_ARGUMENT)}, /* a request the model cannot take */
+        {GS_ERR_CANCELLED, E(ERR_CANCELLED)},
+    };
+    for (size_t i = 0; i < sizeof table / sizeof table[0]; i++)
+        if (table[i].status == status)
+            return table[i].code;
+    return E(ERR_INTERNAL); /* out of memory, non-finite, I/O: the server's failure */
+}

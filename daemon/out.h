@@ -22,4 +22,8 @@ gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage
 gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     __attribute__((format(printf, 3, 4)));
 
+/* The ErrorCode of a computing step that failed with library status
+ * `status` (GS_ERR_*): INVALID_ARGUMENT, CANCELLED or INTERNAL. */
+int gsd_status_error(int status);
+
 #endif
