@@ -122,7 +122,7 @@ void gsd_worker_destroy(gsd_worker *w)
     if (!w)
         return;
     worker_drop_model(w);
-    gs_face_detector_free(w->det);
+    gs_face_detector_destroy(w->det);
     gs_pool_destroy(w->pool);
     free(w);
 }

@@ -165,7 +165,7 @@ void gsd_live_stop(gsd_server *s)
     gs_cap_pipe_stop(l->pipe); /* no stage call after this */
     gs_live_stage_destroy(atomic_load(&l->stage));
     gs_live_engine_model_free(&l->engine);
-    gs_face_detector_free(l->det);
+    gs_face_detector_destroy(l->det);
     gsd_model_put(l->model);
     gs_cap_out_destroy(l->out);
     gs_cap_destroy(l->cap);

@@ -202,7 +202,7 @@ int gsd_model_finish_load(gsd_server *s, char *detail, size_t cap, int *installe
 
 void gsd_model_release_all(gsd_server *s)
 {
-    gs_face_shape_model_free(s->face_sp);
+    gs_face_shape_model_destroy(s->face_sp);
     s->face_sp = NULL;
     if (s->loaded)
         gsd_model_unref(s->loaded);

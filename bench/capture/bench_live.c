@@ -314,8 +314,8 @@ int main(int argc, char **argv)
     gs_live_stage_destroy(s.stage);
     gs_live_engine_model_free(&eng);
     gs_cap_policy_destroy(pol);
-    gs_face_detector_free(det);
-    gs_face_shape_model_free(sp);
+    gs_face_detector_destroy(det);
+    gs_face_shape_model_destroy(sp);
     gs_model_destroy(m);
     for (int i = 0; i < NPOSE; i++)
         free(s.frames[i]);

@@ -82,8 +82,8 @@ int main(int argc, char **argv)
     printf("analyze            %8.2f ms (detect + landmarks + pose + normalization)\n",
            1e3 * t_all);
     printf("normalize 512^2    %8.2f ms\n", 1e3 * t_norm);
-    gs_face_detector_free(det);
-    gs_face_shape_model_free(sp);
+    gs_face_detector_destroy(det);
+    gs_face_shape_model_destroy(sp);
     gs_io_image_free(&img);
     return 0;
 }

@@ -2007,8 +2007,8 @@ static void job_free(job *j)
     free(j->tg);
     free(j->decide);
     gs_h5_close(j->h5);
-    gs_face_detector_free(j->det);
-    gs_face_shape_model_free(j->sp);
+    gs_face_detector_destroy(j->det);
+    gs_face_shape_model_destroy(j->sp);
     gs_pool_destroy(j->pool);
     gs_model_destroy(j->model);
 }

@@ -366,7 +366,7 @@ static int run_eval_photos(int argc, char **argv)
         return cli_fail(cmd, "%s: %s", o[0].value, err.msg);
     if (gs_face_detector_load(NULL, &det, &err) || gs_face_shape_model_load(NULL, &sp, &err)) {
         gs_model_destroy(m);
-        gs_face_detector_free(det);
+        gs_face_detector_destroy(det);
         return cli_fail(cmd, "face models: %s", err.msg);
     }
     gs_model_info info;
@@ -436,8 +436,8 @@ static int run_eval_photos(int argc, char **argv)
     free(fe);
     free(list);
     gs_pool_destroy(pool);
-    gs_face_detector_free(det);
-    gs_face_shape_model_free(sp);
+    gs_face_detector_destroy(det);
+    gs_face_shape_model_destroy(sp);
     gs_model_destroy(m);
     return rc;
 }

@@ -262,8 +262,8 @@ static int analyze(const cli_opt *o, gs_face_opts *fo, face_run *r)
         rc = cli_fail(cmd, "%s", err.msg);
     if (rc == CLI_OK && gs_face_analyze(NULL, sp, &r->img, fo, &r->res, &err) != GS_OK)
         rc = cli_fail(cmd, "%s", err.msg);
-    gs_face_shape_model_free(sp);
-    gs_face_detector_free(det);
+    gs_face_shape_model_destroy(sp);
+    gs_face_detector_destroy(det);
     return rc;
 }
 

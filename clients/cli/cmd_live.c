@@ -138,8 +138,8 @@ static void eyes_free(eyes *y)
     gs_live_stage_destroy(y->stage);
     gs_live_engine_model_free(&y->engine);
     gs_cap_policy_destroy(y->policy);
-    gs_face_detector_free(y->det);
-    gs_face_shape_model_free(y->sp);
+    gs_face_detector_destroy(y->det);
+    gs_face_shape_model_destroy(y->sp);
     gs_model_destroy(y->model);
 }
 

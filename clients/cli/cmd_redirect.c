@@ -618,8 +618,8 @@ done:
     gs_redirect_paste_free(&ps);
     for (int i = 0; i < n; i++)
         gs_redirect_input_free(&in[i]);
-    gs_face_detector_free(det);
-    gs_face_shape_model_free(sp);
+    gs_face_detector_destroy(det);
+    gs_face_shape_model_destroy(sp);
     return rc;
 }
 

@@ -34,7 +34,7 @@ int gs_face_detector_load(const char *path, gs_face_detector **out, gs_error *er
     return GS_OK;
 }
 
-void gs_face_detector_free(gs_face_detector *d)
+void gs_face_detector_destroy(gs_face_detector *d)
 {
     if (!d)
         return;

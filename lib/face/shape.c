@@ -141,7 +141,7 @@ static int read_column(reader *r, size_t len, size_t max, float *dst, size_t *go
 
 /* ---- model ---- */
 
-void gs_face_shape_model_free(gs_face_shape_model *m)
+void gs_face_shape_model_destroy(gs_face_shape_model *m)
 {
     if (!m)
         return;
@@ -341,7 +341,7 @@ int gs_face_shape_model_parse(const void *buf, size_t len, gs_face_shape_model *
     reader r = {b, b, b + len, err, 0, "start"};
     int rc = parse(&r, m);
     if (rc) {
-        gs_face_shape_model_free(m);
+        gs_face_shape_model_destroy(m);
         return rc;
     }
     *out = m;

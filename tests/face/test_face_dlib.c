@@ -73,7 +73,7 @@ int main(int argc, char **argv)
     }
     printf("%d of %d faces (%d photos) identical to dlib, all 68 points\n", same, total,
            N_PHOTOS);
-    gs_face_detector_free(det);
+    gs_face_detector_destroy(det);
     for (int i = 1; i <= N_PHOTOS; i++)
         gs_io_image_free(&img[i]);
     GS_TEST_END();

@@ -138,7 +138,7 @@ int main(void)
         return GS_TEST_SKIP;
     }
     if (!photo_shape_model()) {
-        gs_face_detector_free(det);
+        gs_face_detector_destroy(det);
         return GS_TEST_SKIP;
     }
     static double px[NCH][MAXM], rel[NCH][MAXM], all_px[NCH * MAXM], all_rel[NCH * MAXM];
@@ -147,7 +147,7 @@ int main(void)
         gs_io_image img;
         int rc = photo_load(names[f], &img);
         if (rc == GS_TEST_SKIP) {
-            gs_face_detector_free(det);
+            gs_face_detector_destroy(det);
             return GS_TEST_SKIP;
         }
         CHECK(rc == 0);
@@ -218,7 +218,7 @@ int main(void)
         }
         gs_io_image_free(&img);
     }
-    gs_face_detector_free(det);
+    gs_face_detector_destroy(det);
     printf("%d faces, %d eyes, %d located (status OK) in the original photos\n\n", faces, eyes,
            located);
     printf("| change | eyes | no longer OK | median px | p90 px | max px | median / radius | "

@@ -107,7 +107,7 @@ static void small_model_tests(void)
               GS_OK);
         CHECK(gs_face_shape_predict(m, &img, (gs_face_box){8, 8, 8, 55}, pts, NULL, &err) ==
               GS_ERR_ARG);
-        gs_face_shape_model_free(m);
+        gs_face_shape_model_destroy(m);
     }
     /* Every proper prefix is refused. */
     int refused = 0;
@@ -116,7 +116,7 @@ static void small_model_tests(void)
         int rc = gs_face_shape_model_parse(b.p, n, &m, &err);
         refused += rc == GS_ERR_FORMAT && m == NULL;
         if (rc == GS_OK)
-            gs_face_shape_model_free(m);
+            gs_face_shape_model_destroy(m);
     }
     CHECK_MSG(refused == (int)b.n, "%d of %zu truncations refused", refused, b.n);
     /* Trailing bytes, a wrong version, a bad control byte. */
@@ -139,7 +139,7 @@ static void small_model_tests(void)
             gs_io_image img = {16, 16, 48, px};
             int pts[2 * 256];
             (void)gs_face_shape_predict(m, &img, (gs_face_box){0, 0, 15, 15}, pts, NULL, &err);
-            gs_face_shape_model_free(m);
+            gs_face_shape_model_destroy(m);
         }
         b.p[i] ^= 0xa5;
     }
@@ -179,7 +179,7 @@ static int real_model_tests(void)
         CHECK_EQ_INT(m->n_trees, 500);
         CHECK_EQ_INT(m->n_splits, 15);
         CHECK_EQ_INT(m->n_features, 500);
-        gs_face_shape_model_free(m);
+        gs_face_shape_model_destroy(m);
     }
     free(p);
     return 0;

@@ -207,7 +207,7 @@ int main(void)
         astronaut(&img);
         errors(&img);
     }
-    gs_face_detector_free(det);
+    gs_face_detector_destroy(det);
     gs_io_image_free(&img);
     GS_TEST_END();
 }

@@ -169,7 +169,7 @@ int main(void)
     CHECK(speck_min > 2 && speck_score_max < 0.2);
     CHECK(painted_bad == 0);
     CHECK(ste_med > 12 && st_med < 0.3);
-    gs_face_shape_model_free(sp);
+    gs_face_shape_model_destroy(sp);
     gs_synth_sample_free(&a);
     gs_synth_sample_free(&b);
     GS_TEST_END();

@@ -94,6 +94,6 @@ int main(void)
         one(0, 20, 25);
         one(-10, -15, 25);
     }
-    gs_face_detector_free(det);
+    gs_face_detector_destroy(det);
     GS_TEST_END();
 }

@@ -254,8 +254,8 @@ int main(void)
         photo_inputs(&info, det, sp, &astro);
         fit_render_paste(m, det, sp, &astro);
     }
-    gs_face_detector_free(det);
-    gs_face_shape_model_free(sp);
+    gs_face_detector_destroy(det);
+    gs_face_shape_model_destroy(sp);
     gs_io_image_free(&astro);
     gs_model_destroy(m);
     GS_TEST_END();

@@ -2,7 +2,13 @@
  *
  * Every library call that can fail returns an int: GS_OK (0) or a negative
  * gs_status. Calls that can say more take an optional gs_error*, filled with
- * the code and a one-line message for the person reading the log. */
+ * the code and a one-line message for the person reading the log.
+ *
+ * Lifetimes follow one naming rule across the library: a handle the
+ * library allocates (an opaque gs_X *) comes from gs_X_create or gs_X_load
+ * and goes with gs_X_destroy (NULL is fine); what a call filled into a
+ * struct the caller owns (an image, a sample, a list) goes with gs_X_free,
+ * which leaves the struct empty. */
 #ifndef GAZESPLAT_ERROR_H
 #define GAZESPLAT_ERROR_H
 

@@ -66,14 +66,14 @@ typedef struct gs_face_shape_model gs_face_shape_model;
  * copied). Refuses truncated, corrupt and inconsistent data with
  * GS_ERR_FORMAT, shapes this implementation does not handle (trees of
  * different depths, more than 256 parts) with GS_ERR_UNSUPPORTED, and sizes
- * over 1 GiB with GS_ERR_LIMIT. Free with gs_face_shape_model_free. */
+ * over 1 GiB with GS_ERR_LIMIT. Destroy with gs_face_shape_model_destroy. */
 int gs_face_shape_model_parse(const void *buf, size_t len,
                               gs_face_shape_model **out, gs_error *err);
 /* Same, from a file; NULL path: GS_FACE_SHAPE_MODEL_DEFAULT. The 99 MB
  * model takes a few hundred ms: load it once per process. */
 int gs_face_shape_model_load(const char *path, gs_face_shape_model **out,
                              gs_error *err);
-void gs_face_shape_model_free(gs_face_shape_model *m);
+void gs_face_shape_model_destroy(gs_face_shape_model *m);
 /* Number of landmarks the model predicts (68 for dlib's model). */
 int gs_face_shape_model_parts(const gs_face_shape_model *m);
 
@@ -94,7 +94,7 @@ typedef struct gs_face_detector gs_face_detector;
 /* Loads an OpenCV cascade XML; NULL path: GS_FACE_CASCADE_DEFAULT. */
 int gs_face_detector_load(const char *path, gs_face_detector **out,
                           gs_error *err);
-void gs_face_detector_free(gs_face_detector *d);
+void gs_face_detector_destroy(gs_face_detector *d);
 
 typedef struct gs_face_detect_opts {
     double scale_factor;  /* pyramid step, > 1 (default 1.1) */
