@@ -61,7 +61,7 @@ typedef struct gs_model_config {
  * it when gs_fit_options.bound_expression is set. */
 static const float gs_model_expr_lo[GS_MODEL_EXPR_DIM] = {0, 0, -1, 0, 0, -1};
 static const float gs_model_expr_hi[GS_MODEL_EXPR_DIM] = {1, 1, 1, 0.7f, 1, 1};
-/* The library's own checks of a view or a fit's labels (api.c) see a gaze
+/* The library's own checks of a view or a fit's labels (subject.c) see a gaze
  * in radians and a head pose as a rotation, and convert them back to
  * degrees for the target table: deg -> rad -> deg, and the head's angles
  * re-derived from R = Ry(yaw) Rx(-pitch) by asin / atan2, each round by a

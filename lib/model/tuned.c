@@ -48,7 +48,7 @@ uint64_t gs_model_fit_key(const gs_model *m, const gs_fit_options *opt,
         gs_fit_options_default(&o);
     const gs_model_config *c = &m->cfg;
     const int S = c->image_size, D = gs_model_code_dim(c);
-    /* What gs_model_fit makes of the options (api.c): the defaults that 0
+    /* What gs_model_fit makes of the options (fit.c): the defaults that 0
      * stands for, the model's prior weight for GS_FIT_CODE_PRIOR_MODEL,
      * the model's code rate for 0, the known labels only when known.
      * Every field of the configuration but fit_code_prior and
