@@ -267,6 +267,70 @@ static int ft_pair_step(ft_run *r, gs_pool *pool, ft_one *f,
     return ft_pair_backward(r, pool, f, o, masked, it, err);
 }
 
+/* The options' and pairs' checks; the steps, rate and parts they ask for. */
+static int ft_check(const gs_model *m, const gs_subject *s, const gs_fit_image *im, int k,
+                    const gs_finetune_options *o, int *iters_out, double *lr, unsigned *parts_out,
+                    gs_error *err)
+{
+    int iters = o->iters > 0 ? o->iters : 50;
+    unsigned parts = o->parts ? o->parts : GS_FT_DEFAULT;
+    *iters_out = iters;
+    *lr = o->lr > 0 ? o->lr : 1e-3;
+    *parts_out = parts;
+    if (!isfinite(o->lr) || o->lr > 1.0 || iters > 100000 || !isfinite(o->plateau_rel) ||
+        isnan(o->time_budget_s) ||
+        (parts & ~GS_FT_ALL_PARTS))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "finetune: lr %g (want <= 1), iterations %d "
+                            "(<= 100000) or parts 0x%x out of range",
+                            o->lr, o->iters, parts);
+    if (o->mirror != 0 && o->mirror != 1)
+        return gs_error_set(err, GS_ERR_ARG, "finetune: mirror %d: want 0 or 1",
+                            o->mirror);
+    if (o->outline_px < 0 || o->outline_px > 8)
+        return gs_error_set(err, GS_ERR_ARG,
+                            "finetune: outline %d px: want 0..8", o->outline_px);
+    int rc = GS_OK;
+    for (int i = 0; i < k; i++) {
+        if (!im[i].rgb)
+            return gs_error_set(err, GS_ERR_ARG, "finetune: image %d is NULL", i);
+        if ((rc = gs_model_check_subject(m, &s[i], err)))
+            return rc;
+        if ((size_t)m->cfg.image_size * 3 > im[i].stride)
+            return gs_error_set(err, GS_ERR_ARG, "finetune: stride %zu < %d",
+                                im[i].stride, 3 * m->cfg.image_size);
+    }
+    return rc;
+}
+
+/* Each pair's buffers, outline masks, fixed colour transform and frames
+ * (and their mirrors); GS_ERR_NOMEM when out of memory. */
+static int ft_ones_init(const ft_run *r, ft_one *f, const gs_subject *s, const gs_fit_image *im,
+                        int k, int mirror)
+{
+    int rc = GS_OK;
+    size_t fplane = (size_t)r->c->fs * r->c->fs;
+    for (int i = 0; !rc && i < k; i++) {
+        ft_one *p = &f[i];
+        gs_fit_image mi = im[i];
+        mi.mask = im[i].mask;
+        if (gs_fit_image_bufs(r->c, &mi, mirror, i ? &f[0].b : NULL, &p->b, &p->bm))
+            rc = GS_ERR_NOMEM;
+        p->inner = malloc(fplane * sizeof(float));
+        p->inner_m = malloc(fplane * sizeof(float));
+        if (!p->inner || !p->inner_m)
+            rc = GS_ERR_NOMEM;
+        /* The subject's colour transform, fixed: gs_fit_image_loss reads it here. */
+        for (int c3 = 0; c3 < 3; c3++) {
+            p->fs.x[V_GAIN + c3] = s[i].colour_gain[c3];
+            p->fs.x[V_BIAS + c3] = s[i].colour_bias[c3];
+        }
+        gs_model_frame_of(&s[i], NULL, &p->fr);
+        gs_frame_mirror(&p->fr, s[i].code_dim, &p->frm);
+    }
+    return rc;
+}
+
 int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
                              const gs_fit_image *im, int k,
                              const gs_finetune_options *opt,
@@ -286,32 +350,12 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
         return gs_error_set(err, GS_ERR_ARG,
                             "finetune: several images take their masks from "
                             "gs_fit_image, not from the options");
-    int iters = o.iters > 0 ? o.iters : 50;
-    double lr = o.lr > 0 ? o.lr : 1e-3;
-    unsigned parts = o.parts ? o.parts : GS_FT_DEFAULT;
-    if (!isfinite(o.lr) || o.lr > 1.0 || iters > 100000 || !isfinite(o.plateau_rel) ||
-        isnan(o.time_budget_s) ||
-        (parts & ~GS_FT_ALL_PARTS))
-        return gs_error_set(err, GS_ERR_ARG,
-                            "finetune: lr %g (want <= 1), iterations %d "
-                            "(<= 100000) or parts 0x%x out of range",
-                            o.lr, o.iters, parts);
-    if (o.mirror != 0 && o.mirror != 1)
-        return gs_error_set(err, GS_ERR_ARG, "finetune: mirror %d: want 0 or 1",
-                            o.mirror);
-    if (o.outline_px < 0 || o.outline_px > 8)
-        return gs_error_set(err, GS_ERR_ARG,
-                            "finetune: outline %d px: want 0..8", o.outline_px);
-    int rc = GS_OK;
-    for (int i = 0; i < k; i++) {
-        if (!im[i].rgb)
-            return gs_error_set(err, GS_ERR_ARG, "finetune: image %d is NULL", i);
-        if ((rc = gs_model_check_subject(m, &s[i], err)))
-            return rc;
-        if ((size_t)m->cfg.image_size * 3 > im[i].stride)
-            return gs_error_set(err, GS_ERR_ARG, "finetune: stride %zu < %d",
-                                im[i].stride, 3 * m->cfg.image_size);
-    }
+    int iters;
+    double lr;
+    unsigned parts;
+    int rc = ft_check(m, s, im, k, &o, &iters, &lr, &parts, err);
+    if (rc)
+        return rc;
     ft_run r;
     ft_one *f = calloc((size_t)k, sizeof *f);
     rc = f ? ft_init(&r, m, parts, err)
@@ -321,25 +365,7 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
         return rc;
     }
     int masked = o.outline_px > 0 && (parts & (GS_FT_FACE | GS_FT_EYE | GS_FT_MLP));
-    size_t fplane = (size_t)r.c->fs * r.c->fs;
-    for (int i = 0; !rc && i < k; i++) {
-        ft_one *p = &f[i];
-        gs_fit_image mi = im[i];
-        mi.mask = im[i].mask;
-        if (gs_fit_image_bufs(r.c, &mi, o.mirror, i ? &f[0].b : NULL, &p->b, &p->bm))
-            rc = GS_ERR_NOMEM;
-        p->inner = malloc(fplane * sizeof(float));
-        p->inner_m = malloc(fplane * sizeof(float));
-        if (!p->inner || !p->inner_m)
-            rc = GS_ERR_NOMEM;
-        /* The subject's colour transform, fixed: gs_fit_image_loss reads it here. */
-        for (int c3 = 0; c3 < 3; c3++) {
-            p->fs.x[V_GAIN + c3] = s[i].colour_gain[c3];
-            p->fs.x[V_BIAS + c3] = s[i].colour_bias[c3];
-        }
-        gs_model_frame_of(&s[i], NULL, &p->fr);
-        gs_frame_mirror(&p->fr, s[i].code_dim, &p->frm);
-    }
+    rc = ft_ones_init(&r, f, s, im, k, o.mirror);
     if (rc)
         rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
     double t0 = gs_clock_s(), best = INFINITY, first = NAN;
@@ -415,16 +441,11 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
     if (!rc)
         m->tuned |= parts;
     if (report) {
-        memset(report, 0, sizeof *report);
-        report->iters = it;
-        report->seconds = gs_clock_s() - t0;
-        report->loss_first = first;
-        report->loss_best = best;
-        report->psnr_first = psnr_first;
-        report->psnr_best = psnr_best;
-        report->params_tuned = r.tuned;
-        report->stopped_on_time = stopped_on_time;
-        report->stopped_on_plateau = plateaued;
+        *report = (gs_finetune_report){.iters = it, .seconds = gs_clock_s() - t0,
+                                       .loss_first = first, .loss_best = best,
+                                       .psnr_first = psnr_first, .psnr_best = psnr_best,
+                                       .params_tuned = r.tuned, .stopped_on_time = stopped_on_time,
+                                       .stopped_on_plateau = plateaued};
     }
     ft_free(&r);
     ft_ones_free(f, k);

@@ -490,6 +490,81 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     return gs_model_fit_images(c, pool, &im, 1, &o, out, report, err);
 }
 
+/* Each image's start: the options with the image's own labels. */
+static void fit_images_init(const gs_model_ctx *c, const gs_fit_image *im, int k,
+                            const gs_fit_options *base, fit_one *f)
+{
+    const gs_fit_options o = *base;
+    for (int i = 0; i < k; i++) {
+        gs_fit_options oi = o;
+        oi.known_gaze = im[i].known_gaze;
+        oi.gaze_pitch = im[i].gaze_pitch;
+        oi.gaze_yaw = im[i].gaze_yaw;
+        oi.known_head = im[i].known_head;
+        memcpy(oi.head_R, im[i].head_R, sizeof oi.head_R);
+        memcpy(oi.head_t, im[i].head_t, sizeof oi.head_t);
+        fit_init(c, &oi, &f[i].s);
+        if (im[i].known_head)
+            memcpy(f[i].R0, im[i].head_R, sizeof f[i].R0);
+        else
+            gs_geom_mat3_identity(f[i].R0);
+    }
+}
+
+/* One step of all k images after their losses: the last image's backward
+ * (the others took theirs at once), the gradients, the shared identity's
+ * sum, then Adam and the bounds. gid: the identity prior's gradient, or
+ * NULL. */
+static int fit_images_update(gs_model_ctx *c, gs_pool *pool, fit_one *f, int k,
+                             const gs_fit_options *o, int use_prior, int V_PRIOR,
+                             const double *gid, int it, gs_error *err)
+{
+    int rc = GS_OK;
+    const int id_dim = c->m->cfg.id_dim;
+    fit_one *last = &f[k - 1];
+    if (!o->mirror) {
+        memset(&last->fg, 0, sizeof last->fg);
+        rc = gs_frame_backward(c, pool, last->b.dpred, NULL, NULL, NULL,
+                               NULL, &last->fg, err);
+        if (rc)
+            return rc;
+    }
+    for (int i = 0; i < k; i++)
+        fit_gradient(c, &f[i], use_prior, V_PRIOR, i == 0 ? gid : NULL,
+                     o->mirror);
+    /* One identity: its gradient is the sum over the images, in their
+     * order, and every image's copy takes the same Adam step from the
+     * same start, so the copies stay equal bit for bit. */
+    for (int j = 0; k > 1 && j < id_dim; j++) {
+        double sum = f[0].s.g[V_CODE + j];
+        for (int i = 1; i < k; i++)
+            sum += f[i].s.g[V_CODE + j];
+        for (int i = 0; i < k; i++)
+            f[i].s.g[V_CODE + j] = sum;
+    }
+    for (int i = 0; i < k; i++)
+        for (int j = 0; j < f[i].s.n; j++)
+            if (!isfinite(f[i].s.g[j]))
+                return gs_error_set(err, GS_ERR_NONFINITE,
+                                    "fit: non-finite gradient at iteration "
+                                    "%d", it);
+    for (int i = 0; i < k; i++) {
+        fit_state *s = &f[i].s;
+        adam_update(s, it + 1);
+        /* bound_expression: the expression stays where training put it. */
+        for (int e = 0; o->bound_expression && e < GS_MODEL_EXPR_DIM; e++) {
+            double *v = &s->x[V_CODE + id_dim + e];
+            *v = fmax(gs_model_expr_lo[e], fmin(gs_model_expr_hi[e], *v));
+        }
+        /* The gaze stays inside the model's documented range. */
+        s->x[V_GAZE] = fmax(-GS_MODEL_MAX_GAZE_PITCH,
+                            fmin(GS_MODEL_MAX_GAZE_PITCH, s->x[V_GAZE]));
+        s->x[V_GAZE + 1] = fmax(-GS_MODEL_MAX_GAZE_YAW,
+                                fmin(GS_MODEL_MAX_GAZE_YAW, s->x[V_GAZE + 1]));
+    }
+    return rc;
+}
+
 int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
                         int k, const gs_fit_options *opt, gs_subject *out,
                         gs_fit_report *report, gs_error *err)
@@ -534,21 +609,7 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
         gs_id_prior_free(idp);
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
     }
-    for (int i = 0; i < k; i++) {
-        gs_fit_options oi = o;
-        oi.known_gaze = im[i].known_gaze;
-        oi.gaze_pitch = im[i].gaze_pitch;
-        oi.gaze_yaw = im[i].gaze_yaw;
-        oi.known_head = im[i].known_head;
-        memcpy(oi.head_R, im[i].head_R, sizeof oi.head_R);
-        memcpy(oi.head_t, im[i].head_t, sizeof oi.head_t);
-        fit_init(c, &oi, &f[i].s);
-        if (im[i].known_head)
-            memcpy(f[i].R0, im[i].head_R, sizeof f[i].R0);
-        else
-            gs_geom_mat3_identity(f[i].R0);
-    }
-    const int id_dim = c->m->cfg.id_dim;
+    fit_images_init(c, im, k, &o, f);
     double t0 = gs_clock_s(), best_loss = INFINITY, first = NAN, hist[20];
     int it = 0, plateaued = 0, halvings = 0, since = 0, on_time = 0;
     for (; it < iters; it++) {
@@ -601,51 +662,9 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
             on_time = it + 1 < iters;
             break;
         }
-        fit_one *last = &f[k - 1];
-        if (!o.mirror) {
-            memset(&last->fg, 0, sizeof last->fg);
-            rc = gs_frame_backward(c, pool, last->b.dpred, NULL, NULL, NULL,
-                                   NULL, &last->fg, err);
-            if (rc)
-                break;
-        }
-        for (int i = 0; i < k; i++)
-            fit_gradient(c, &f[i], use_prior, V_PRIOR, i == 0 && idp ? gid : NULL,
-                         o.mirror);
-        /* One identity: its gradient is the sum over the images, in their
-         * order, and every image's copy takes the same Adam step from the
-         * same start, so the copies stay equal bit for bit. */
-        for (int j = 0; k > 1 && j < id_dim; j++) {
-            double sum = f[0].s.g[V_CODE + j];
-            for (int i = 1; i < k; i++)
-                sum += f[i].s.g[V_CODE + j];
-            for (int i = 0; i < k; i++)
-                f[i].s.g[V_CODE + j] = sum;
-        }
-        for (int i = 0; !rc && i < k; i++)
-            for (int j = 0; j < f[i].s.n; j++)
-                if (!isfinite(f[i].s.g[j])) {
-                    rc = gs_error_set(err, GS_ERR_NONFINITE,
-                                      "fit: non-finite gradient at iteration "
-                                      "%d", it);
-                    break;
-                }
+        rc = fit_images_update(c, pool, f, k, &o, use_prior, V_PRIOR, idp ? gid : NULL, it, err);
         if (rc)
             break;
-        for (int i = 0; i < k; i++) {
-            fit_state *s = &f[i].s;
-            adam_update(s, it + 1);
-            /* bound_expression: the expression stays where training put it. */
-            for (int e = 0; o.bound_expression && e < GS_MODEL_EXPR_DIM; e++) {
-                double *v = &s->x[V_CODE + id_dim + e];
-                *v = fmax(gs_model_expr_lo[e], fmin(gs_model_expr_hi[e], *v));
-            }
-            /* The gaze stays inside the model's documented range. */
-            s->x[V_GAZE] = fmax(-GS_MODEL_MAX_GAZE_PITCH,
-                                fmin(GS_MODEL_MAX_GAZE_PITCH, s->x[V_GAZE]));
-            s->x[V_GAZE + 1] = fmax(-GS_MODEL_MAX_GAZE_YAW,
-                                    fmin(GS_MODEL_MAX_GAZE_YAW, s->x[V_GAZE + 1]));
-        }
     }
     for (int i = 0; !rc && i < k; i++)
         rc = fit_result(c, pool, &f[i], &res[i], err);
