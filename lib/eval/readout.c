@@ -499,26 +499,11 @@ static void rd_free(rd_ctx *c)
     free(c->memo);
 }
 
-/* Boxes, blur, buffers, the reference, the alignment and the eyeball
- * pixels of the shifted image. */
-static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
-                 double d_n_mm, double f_n, const uint8_t *rgb, size_t stride,
-                 const gs_eval_readout_options *o, gs_pool *pool,
-                 gs_error *err)
+/* The blur levels: level j blurs by sqrt(blur_px^2 + (j RD_SOFT_STEP)^2),
+ * the image's blur after a softness of j RD_SOFT_STEP (Gaussians compose
+ * so). Returns the largest kernel radius. */
+static int setup_levels(rd_ctx *c, const gs_eval_readout_options *o)
 {
-    c->scene = *scene;
-    c->size = size;
-    double smax = floor(o->max_shift_px / RD_SHIFT_STEP) * RD_SHIFT_STEP;
-    gs_synth_labels lab;
-    int rc = gs_eval_scene_camera(scene, size, d_n_mm, f_n, &c->cam, err);
-    if (!rc)
-        rc = gs_synth_labels_compute(scene, &c->cam, &lab, err);
-    if (!rc)
-        rc = make_boxes(c, &lab, smax, err);
-    if (rc)
-        return rc;
-    /* Level j blurs by sqrt(blur_px^2 + (j RD_SOFT_STEP)^2): the image's
-     * blur after a softness of j RD_SOFT_STEP (Gaussians compose so). */
     c->nsoft = 1 + (int)floor(o->soft_max_px / RD_SOFT_STEP + 1e-9);
     int Rmax = 0;
     for (int lv = 0; lv < c->nsoft; lv++) {
@@ -535,6 +520,15 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
         for (int d = 0; d <= 2 * R; d++)
             c->ker[lv][d] = (float)(c->ker[lv][d] / ks);
     }
+    return Rmax;
+}
+
+/* The rendered and image boxes, the buffers, and the image's box blurred
+ * at level 0. */
+static int setup_buffers(rd_ctx *c, int size, double smax, int Rmax, const uint8_t *rgb,
+                         size_t stride, gs_pool *pool, gs_error *err)
+{
+    int rc;
     /* Rendered: the bounding box + the largest R (+ 1 for the eyeball's
      * dilation); the image's: + its own R + the shift range + 1 more. */
     int m = Rmax + 1;
@@ -564,13 +558,17 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
                 c->bimg[3 * ((size_t)y * c->bw + x) + ch] =
                     rgb[(size_t)(c->by + y) * stride + 3 * (size_t)(c->bx + x) + ch];
     blur_rgb(c, 0, c->bimg, c->bimg + nb, c->bw, c->bh);
-    /* The reference: the scene at its own gaze, lids as they are. */
-    gs_synth_sample *s = &c->smp[0];
-    if ((rc = render_box(c, scene, s, c->ebuf, err)))
-        return rc;
-    uint8_t *eye = calloc((size_t)size * size, 1);
-    if (!eye)
-        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    return GS_OK;
+}
+
+/* eye (size^2): 1 on the reference's eyeball pixels; 2 where any gaze
+ * changes the render (the eyeballs and the lids, which follow the pitch),
+ * which the alignment leaves out. ref holds the reference's box. */
+static int mark_eye(rd_ctx *c, const gs_synth_scene *scene, gs_synth_sample *s, int size,
+                    uint8_t *eye, float *ref, gs_error *err)
+{
+    int rc = GS_OK;
+    size_t ne = 3 * (size_t)c->ew * c->eh;
     const uint8_t *ml = gs_synth_sample_mask(s, GS_SYNTH_MASK_LEFT_EYE);
     const uint8_t *mr = gs_synth_sample_mask(s, GS_SYNTH_MASK_RIGHT_EYE);
     for (int y = c->ey; y < c->ey + c->eh; y++)
@@ -581,12 +579,6 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
     /* Pixels any gaze changes (the eyeballs and the lids, which follow
      * the pitch) are no help for the alignment: probe renders at the
      * corners of the gaze range mark them (2 in eye[]). */
-    size_t ne = 3 * (size_t)c->ew * c->eh;
-    float *ref = malloc(sizeof *ref * 6 * ne);
-    if (!ref) {
-        free(eye);
-        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
-    }
     float *pb = ref + ne;
     memcpy(ref, c->ebuf, sizeof *ref * ne);
     static const double probe[4][2] = {{-30, 0}, {30, 0}, {0, -45}, {0, 45}};
@@ -607,6 +599,17 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
                     *mk = 2;
             }
     }
+    return rc;
+}
+
+/* The alignment: on the blur level whose reference the still pixels match
+ * best (a soft image aligns on a soft reference), then at RD_SHIFT_STEP.
+ * ref: 6 boxes of scratch, the reference's first. */
+static int setup_align(rd_ctx *c, const gs_synth_scene *scene, gs_synth_sample *s,
+                       const uint8_t *eye, float *ref, double smax, gs_error *err)
+{
+    int rc = GS_OK;
+    size_t ne = 3 * (size_t)c->ew * c->eh;
     double ebest = INFINITY, e;
     /* A soft image aligns on a soft reference: the level whose reference
      * the still pixels match best on a shift grid of about 1 px is aligned
@@ -635,11 +638,14 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
     }
     if (!rc)
         rc = align(c, ref, eye, smax, RD_SHIFT_STEP, &e, err);
-    free(ref);
-    if (rc) {
-        free(eye);
-        return rc;
-    }
+    return rc;
+}
+
+/* The eyeball pixels the readout compares (those the gaze alone moves),
+ * sampled from the aligned image, and the row blur their column blur
+ * reads. */
+static int setup_pixels(rd_ctx *c, const uint8_t *eye, int size, int Rmax, gs_error *err)
+{
     c->n = 0;
     for (int y = 0; y < c->h; y++)
         for (int x = 0; x < c->w; x++)
@@ -649,7 +655,6 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
                           c->img + 3 * (size_t)c->n);
                 c->idx[c->n++] = y * c->w + x;
             }
-    free(eye);
     if (!c->n)
         return gs_error_set(err, GS_ERR_ARG, "gaze readout: no eyeball "
                             "visible in the scene (closed eyes)");
@@ -675,6 +680,49 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
             c->hidx[c->nh++] = i;
     free(need);
     return GS_OK;
+}
+
+/* Boxes, blur, buffers, the reference, the alignment and the eyeball
+ * pixels of the shifted image. */
+static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
+                 double d_n_mm, double f_n, const uint8_t *rgb, size_t stride,
+                 const gs_eval_readout_options *o, gs_pool *pool,
+                 gs_error *err)
+{
+    c->scene = *scene;
+    c->size = size;
+    double smax = floor(o->max_shift_px / RD_SHIFT_STEP) * RD_SHIFT_STEP;
+    gs_synth_labels lab;
+    int rc = gs_eval_scene_camera(scene, size, d_n_mm, f_n, &c->cam, err);
+    if (!rc)
+        rc = gs_synth_labels_compute(scene, &c->cam, &lab, err);
+    if (!rc)
+        rc = make_boxes(c, &lab, smax, err);
+    if (rc)
+        return rc;
+    int Rmax = setup_levels(c, o);
+    if ((rc = setup_buffers(c, size, smax, Rmax, rgb, stride, pool, err)))
+        return rc;
+    /* The reference: the scene at its own gaze, lids as they are. */
+    gs_synth_sample *s = &c->smp[0];
+    if ((rc = render_box(c, scene, s, c->ebuf, err)))
+        return rc;
+    size_t ne = 3 * (size_t)c->ew * c->eh;
+    uint8_t *eye = calloc((size_t)size * size, 1);
+    float *ref = malloc(sizeof *ref * 6 * ne);
+    if (!eye || !ref) {
+        free(eye);
+        free(ref);
+        return gs_error_set(err, GS_ERR_NOMEM, "gaze readout: out of memory");
+    }
+    rc = mark_eye(c, scene, s, size, eye, ref, err);
+    if (!rc)
+        rc = setup_align(c, scene, s, eye, ref, smax, err);
+    free(ref);
+    if (!rc)
+        rc = setup_pixels(c, eye, size, Rmax, err);
+    free(eye);
+    return rc;
 }
 
 int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
