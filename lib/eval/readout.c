@@ -725,6 +725,34 @@ static int setup(rd_ctx *c, const gs_synth_scene *scene, int size,
     return rc;
 }
 
+/* 1 when the readout's options are in their documented ranges. */
+static int options_ok(const gs_eval_readout_options *o)
+{
+    return o->max_shift_px >= 0 && o->max_shift_px <= 8 && o->grid_deg >= 1 && o->grid_deg <= 45 &&
+           o->blur_px >= 0 && o->blur_px <= RD_MAX_R / 3.0 && o->tol_deg >= 0.01 &&
+           o->tol_deg <= o->grid_deg / 2 && o->pitch_range_deg >= 0 && o->pitch_range_deg <= 80 &&
+           o->yaw_range_deg >= 0 && o->yaw_range_deg <= 80 && o->soft_max_px >= 0 &&
+           o->soft_max_px <= 2.5 &&
+           o->blur_px * o->blur_px + o->soft_max_px * o->soft_max_px <=
+               (RD_MAX_R / 3.0) * (RD_MAX_R / 3.0);
+}
+
+/* The starts: grid[k][3] = 1 at the grid's local minima (no lower
+ * neighbour among its 8), 0 elsewhere; (2 np + 1) rows of `row`. */
+static void mark_minima(double (*grid)[5], int np, int row, int ng)
+{
+    for (int k = 0; k < ng; k++) {
+        int i = k / row, j = k % row, local = 1;
+        for (int d = 0; d < 9 && local; d++) {
+            int ii = i + d / 3 - 1, jj = j + d % 3 - 1;
+            if (d != 4 && ii >= 0 && ii <= 2 * np && jj >= 0 && jj < row &&
+                grid[ii * row + jj][2] < grid[k][2])
+                local = 0;
+        }
+        grid[k][3] = local;
+    }
+}
+
 int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
                          double f_n, const uint8_t *rgb, size_t stride,
                          const gs_eval_readout_options *opts, gs_pool *pool,
@@ -738,15 +766,7 @@ int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
     if (!scene || !rgb || !out || size < 16 || size > 8192 ||
         stride < 3 * (size_t)size)
         return gs_error_set(err, GS_ERR_ARG, "gaze readout: bad arguments");
-    if (!(o.max_shift_px >= 0 && o.max_shift_px <= 8) ||
-        !(o.grid_deg >= 1 && o.grid_deg <= 45) ||
-        !(o.blur_px >= 0 && o.blur_px <= RD_MAX_R / 3.0) ||
-        !(o.tol_deg >= 0.01 && o.tol_deg <= o.grid_deg / 2) ||
-        !(o.pitch_range_deg >= 0 && o.pitch_range_deg <= 80) ||
-        !(o.yaw_range_deg >= 0 && o.yaw_range_deg <= 80) ||
-        !(o.soft_max_px >= 0 && o.soft_max_px <= 2.5) ||
-        !(o.blur_px * o.blur_px + o.soft_max_px * o.soft_max_px <=
-          (RD_MAX_R / 3.0) * (RD_MAX_R / 3.0)))
+    if (!options_ok(&o))
         return gs_error_set(err, GS_ERR_ARG, "gaze readout: options out of "
                             "range");
     rd_ctx *c = calloc(1, sizeof *c);
@@ -777,18 +797,8 @@ int gs_eval_gaze_readout(const gs_synth_scene *scene, int size, double d_n_mm,
             grid[k0 + k][4] = l_pts[k];
         }
     }
-    /* Starts: the best few local minima of the grid (no lower neighbour
-     * among its 8). */
-    for (int k = 0; !rc && k < ng; k++) {
-        int i = k / row, j = k % row, local = 1;
-        for (int d = 0; d < 9 && local; d++) {
-            int ii = i + d / 3 - 1, jj = j + d % 3 - 1;
-            if (d != 4 && ii >= 0 && ii <= 2 * np && jj >= 0 && jj < row &&
-                grid[ii * row + jj][2] < grid[k][2])
-                local = 0;
-        }
-        grid[k][3] = local;
-    }
+    if (!rc)
+        mark_minima(grid, np, row, ng);
     /* Pattern search (8 neighbours, the step halved when none is lower)
      * from each start; the lowest energy reached wins. */
     double best_e = INFINITY, best_g[2] = {0, 0};
