@@ -479,105 +479,70 @@ static double prior_cost(const prior *pr, const double t[NGEO], double k)
     return c;
 }
 
-static void fit_model(const patch *p, const double start[NGEO], double r0, double r1,
-                      const prior *pr, double *w, double *res, fit_out *out)
+/* Huber weights at 1.345 robust sigmas of the residuals (res: n, then
+ * n of scratch); returns the robust sigma (at least 1). */
+static double huber_weights(double *res, double *w, int n)
+{
+    double *mag = res + n; /* scratch after the residuals */
+    for (int k = 0; k < n; k++)
+        mag[k] = fabs(res[k]);
+    qsort(mag, (size_t)n, sizeof *mag, cmp_double);
+    double scale = fmax(1.0, 1.4826 * mag[n / 2]);
+    double c = 1.345 * scale;
+    for (int k = 0; k < n; k++)
+        w[k] = fabs(res[k]) <= c ? 1 : c / fabs(res[k]);
+    return scale;
+}
+
+/* One Levenberg-Marquardt step from t on the normal equations (jtj, jtr)
+ * at cost `cost`, the damping adapted by the outcome: 0 when no step
+ * lowered the cost, 1 when one did, 2 when it barely moved. */
+static int lm_step(const patch *p, const double *w, double t[NGEO], const double *jtj,
+                   const double *jtr, double cost, double kp, const prior *pr, double r0,
+                   double r1, double *lambda)
+{
+    /* Levenberg-Marquardt step, the damping adapted by the outcome. */
+    int improved = 0;
+    for (int tries = 0; tries < 8 && !improved; tries++) {
+        double a[NGEO * NGEO], step[NGEO];
+        memcpy(a, jtj, sizeof a);
+        for (int i = 0; i < NGEO; i++) {
+            a[i * NGEO + i] += *lambda * (jtj[i * NGEO + i] + 1e-6);
+            step[i] = -jtr[i];
+        }
+        if (!chol_solve(a, step, NGEO)) {
+            *lambda *= 10;
+            continue;
+        }
+        double tn[NGEO];
+        for (int i = 0; i < NGEO; i++)
+            tn[i] = t[i] + step[i];
+        clamp_geo(tn, r0, r1);
+        model mn;
+        solve_levels(p, w, tn, &mn, NULL);
+        if (mn.sse + prior_cost(pr, tn, kp) < cost) {
+            double moved = fabs(tn[0] - t[0]) + fabs(tn[1] - t[1]) + fabs(tn[2] - t[2]);
+            memcpy(t, tn, sizeof tn);
+            *lambda = fmax(1e-4, *lambda * 0.3);
+            improved = 1 + (moved < 1e-4);
+        } else {
+            *lambda *= 10;
+        }
+    }
+    return improved;
+}
+
+/* The robust rms and the centre's covariance sigma^2 (J^T W J)^-1 at t,
+ * res holding t's residuals (then scratch for the Jacobian). */
+static void centre_cov(const patch *p, const double *w, const double t[NGEO], double sse,
+                       double *res, const prior *pr, fit_out *out)
 {
     static const double h[NGEO] = {0.05, 0.05, 0.05, 0.05, 0.01, 0.01};
     int n = p->n_op;
-    for (int k = 0; k < n; k++)
-        w[k] = 1;
-    double t[NGEO];
-    memcpy(t, start, sizeof t);
-    clamp_geo(t, r0, r1);
-    model cur;
-    solve_levels(p, w, t, &cur, res);
-    double lambda = 1e-2, scale = 1;
-    for (int it = 0; it < 30; it++) {
-        /* Huber weights at 1.345 robust sigmas. */
-        double *mag = res + n; /* scratch after the residuals */
-        for (int k = 0; k < n; k++)
-            mag[k] = fabs(res[k]);
-        qsort(mag, (size_t)n, sizeof *mag, cmp_double);
-        scale = fmax(1.0, 1.4826 * mag[n / 2]);
-        double c = 1.345 * scale;
-        for (int k = 0; k < n; k++)
-            w[k] = fabs(res[k]) <= c ? 1 : c / fabs(res[k]);
-        solve_levels(p, w, t, &cur, res);
-        double kp = scale * scale * PRIOR_PIXELS;
-        /* Jacobian of the residuals by forward differences. */
-        double jtj[NGEO * NGEO] = {0}, jtr[NGEO] = {0};
-        double *col = res + 2 * n;  /* NGEO columns of n */
-        for (int i = 0; i < NGEO; i++) {
-            double ti[NGEO];
-            memcpy(ti, t, sizeof ti);
-            ti[i] += h[i];
-            model mi;
-            solve_levels(p, w, ti, &mi, col + (size_t)i * n);
-            for (int k = 0; k < n; k++)
-                col[(size_t)i * n + k] = (col[(size_t)i * n + k] - res[k]) / h[i];
-        }
-        for (int k = 0; k < n; k++)
-            for (int i = 0; i < NGEO; i++) {
-                double ji = col[(size_t)i * n + k];
-                jtr[i] += w[k] * ji * res[k];
-                for (int j = 0; j <= i; j++)
-                    jtj[i * NGEO + j] += w[k] * ji * col[(size_t)j * n + k];
-            }
-        for (int i = 0; i < NGEO; i++) {
-            for (int j = i + 1; j < NGEO; j++)
-                jtj[i * NGEO + j] = jtj[j * NGEO + i];
-            jtj[i * NGEO + i] += kp * pr->inv_var[i];
-            jtr[i] += kp * pr->inv_var[i] * ((i == 2 ? major_axis(t) : t[i]) - pr->mean[i]);
-        }
-        double cost = cur.sse + prior_cost(pr, t, kp);
-        /* Levenberg-Marquardt step, the damping adapted by the outcome. */
-        int improved = 0;
-        for (int tries = 0; tries < 8 && !improved; tries++) {
-            double a[NGEO * NGEO], step[NGEO];
-            memcpy(a, jtj, sizeof a);
-            for (int i = 0; i < NGEO; i++) {
-                a[i * NGEO + i] += lambda * (jtj[i * NGEO + i] + 1e-6);
-                step[i] = -jtr[i];
-            }
-            if (!chol_solve(a, step, NGEO)) {
-                lambda *= 10;
-                continue;
-            }
-            double tn[NGEO];
-            for (int i = 0; i < NGEO; i++)
-                tn[i] = t[i] + step[i];
-            clamp_geo(tn, r0, r1);
-            model mn;
-            solve_levels(p, w, tn, &mn, NULL);
-            if (mn.sse + prior_cost(pr, tn, kp) < cost) {
-                double moved = fabs(tn[0] - t[0]) + fabs(tn[1] - t[1]) + fabs(tn[2] - t[2]);
-                memcpy(t, tn, sizeof t);
-                lambda = fmax(1e-4, lambda * 0.3);
-                improved = 1 + (moved < 1e-4);
-            } else {
-                lambda *= 10;
-            }
-        }
-        solve_levels(p, w, t, &cur, res);
-        if (!improved || improved == 2)
-            break;
-    }
-    out->m = cur;
-    {
-        /* A cost comparable between fits: Huber on the residuals at a
-         * fixed scale (the ramp's 10 grey levels), plus the priors. */
-        double cst = 0, hc = 10;
-        for (int k = 0; k < n; k++) {
-            double a = fabs(res[k]);
-            cst += a <= hc ? a * a : hc * (2 * a - hc);
-        }
-        out->cost = cst + prior_cost(pr, t, hc * hc * PRIOR_PIXELS);
-    }
-    /* Robust rms and the centre's covariance: sigma^2 (J^T W J)^-1. */
     double sw = 0;
     for (int k = 0; k < n; k++)
         sw += w[k];
-    out->rms = sw > 0 ? sqrt(cur.sse / sw) : NAN;
+    out->rms = sw > 0 ? sqrt(sse / sw) : NAN;
     double *col = res + 2 * n, jtj[NGEO * NGEO] = {0};
     for (int i = 0; i < NGEO; i++) {
         double ti[NGEO];
@@ -609,6 +574,68 @@ static void fit_model(const patch *p, const double start[NGEO], double r0, doubl
         if (c == 0)
             out->cov_c[2] = var * e[1];
     }
+}
+
+static void fit_model(const patch *p, const double start[NGEO], double r0, double r1,
+                      const prior *pr, double *w, double *res, fit_out *out)
+{
+    static const double h[NGEO] = {0.05, 0.05, 0.05, 0.05, 0.01, 0.01};
+    int n = p->n_op;
+    for (int k = 0; k < n; k++)
+        w[k] = 1;
+    double t[NGEO];
+    memcpy(t, start, sizeof t);
+    clamp_geo(t, r0, r1);
+    model cur;
+    solve_levels(p, w, t, &cur, res);
+    double lambda = 1e-2, scale = 1;
+    for (int it = 0; it < 30; it++) {
+        scale = huber_weights(res, w, n);
+        solve_levels(p, w, t, &cur, res);
+        double kp = scale * scale * PRIOR_PIXELS;
+        /* Jacobian of the residuals by forward differences. */
+        double jtj[NGEO * NGEO] = {0}, jtr[NGEO] = {0};
+        double *col = res + 2 * n;  /* NGEO columns of n */
+        for (int i = 0; i < NGEO; i++) {
+            double ti[NGEO];
+            memcpy(ti, t, sizeof ti);
+            ti[i] += h[i];
+            model mi;
+            solve_levels(p, w, ti, &mi, col + (size_t)i * n);
+            for (int k = 0; k < n; k++)
+                col[(size_t)i * n + k] = (col[(size_t)i * n + k] - res[k]) / h[i];
+        }
+        for (int k = 0; k < n; k++)
+            for (int i = 0; i < NGEO; i++) {
+                double ji = col[(size_t)i * n + k];
+                jtr[i] += w[k] * ji * res[k];
+                for (int j = 0; j <= i; j++)
+                    jtj[i * NGEO + j] += w[k] * ji * col[(size_t)j * n + k];
+            }
+        for (int i = 0; i < NGEO; i++) {
+            for (int j = i + 1; j < NGEO; j++)
+                jtj[i * NGEO + j] = jtj[j * NGEO + i];
+            jtj[i * NGEO + i] += kp * pr->inv_var[i];
+            jtr[i] += kp * pr->inv_var[i] * ((i == 2 ? major_axis(t) : t[i]) - pr->mean[i]);
+        }
+        double cost = cur.sse + prior_cost(pr, t, kp);
+        int improved = lm_step(p, w, t, jtj, jtr, cost, kp, pr, r0, r1, &lambda);
+        solve_levels(p, w, t, &cur, res);
+        if (!improved || improved == 2)
+            break;
+    }
+    out->m = cur;
+    {
+        /* A cost comparable between fits: Huber on the residuals at a
+         * fixed scale (the ramp's 10 grey levels), plus the priors. */
+        double cst = 0, hc = 10;
+        for (int k = 0; k < n; k++) {
+            double a = fabs(res[k]);
+            cst += a <= hc ? a * a : hc * (2 * a - hc);
+        }
+        out->cost = cst + prior_cost(pr, t, hc * hc * PRIOR_PIXELS);
+    }
+    centre_cov(p, w, t, cur.sse, res, pr, out);
 }
 
 /* Fraction of the circle's points inside the contour where the grey steps
@@ -875,6 +902,38 @@ static void result_empty(gs_face_iris *out, gs_face_iris_status st, const eye_ge
 }
 
 /* Start and fit on the patch; fills out (status OK or NO_EDGE). */
+/* The fit's start in patch p (s px per patch pixel): the best circle of a
+ * coarse search, centres between the lids' extremes along the corner line,
+ * then of a fine one about it; score -INFINITY when none. w: n_op weights,
+ * set to 1. */
+static circle find_start(const patch *pp, const eye_geom *g, int s, double r0, double r1,
+                         double *w)
+{
+    double inv_s = 1.0 / s, wp = g->width * inv_s;
+    double op[2] = {(g->o[0] - pp->x0) * inv_s, (g->o[1] - pp->y0) * inv_s};
+    double box[4] = {-0.45 * wp, 0.45 * wp, INFINITY, -INFINITY};
+    for (int i = 0; i < 6; i++) {
+        double a, b;
+        to_frame(g, g->poly[i][0], g->poly[i][1], &a, &b);
+        box[2] = fmin(box[2], b * inv_s - 0.05 * wp);
+        box[3] = fmax(box[3], b * inv_s + 0.05 * wp);
+    }
+    double step = fmax(0.5, wp / 40);
+    circle c = {0, 0, 0, -INFINITY};
+    for (int i = 0; i < pp->n_op; i++)
+        w[i] = 1;
+    best_start(pp, w, g, op, box, r0, r1, 2 * step, &c);
+    if (c.score > -INFINITY) {
+        double ca, cb;
+        to_frame(g, pp->x0 + s * c.u, pp->y0 + s * c.v, &ca, &cb);
+        double fine[4] = {ca * inv_s - 2 * step, ca * inv_s + 2 * step,
+                          cb * inv_s - 2 * step, cb * inv_s + 2 * step};
+        best_start(pp, w, g, op, fine, fmax(r0, c.r / 1.13), fmin(r1, c.r * 1.13),
+                   0.5 * step, &c);
+    }
+    return c;
+}
+
 static int locate(const gs_io_image *img, const eye_geom *g, const gs_face_iris_opts *o,
                   double rmin, double rmax, gs_face_iris *out)
 {
@@ -889,7 +948,7 @@ static int locate(const gs_io_image *img, const eye_geom *g, const gs_face_iris_
     patch p;
     if (patch_make(img, g->poly, lo, hi, s, &p))
         return GS_ERR_NOMEM;
-    double inv_s = 1.0 / s, wp = g->width * inv_s;
+    double inv_s = 1.0 / s;
     double r0 = rmin * inv_s, r1 = rmax * inv_s;
     int k = 2 * (int)floor(0.125 * r0) + 1;
     patch_open(&p, k < 3 ? 3 : k);
@@ -908,27 +967,8 @@ static int locate(const gs_io_image *img, const eye_geom *g, const gs_face_iris_
         res = w + n;
     }
     if (w) {
-        /* Start: centres between the lids' extremes along the corner line. */
-        double op[2] = {(g->o[0] - p.x0) * inv_s, (g->o[1] - p.y0) * inv_s};
-        double box[4] = {-0.45 * wp, 0.45 * wp, INFINITY, -INFINITY};
-        for (int i = 0; i < 6; i++) {
-            double a, b;
-            to_frame(g, g->poly[i][0], g->poly[i][1], &a, &b);
-            box[2] = fmin(box[2], b * inv_s - 0.05 * wp);
-            box[3] = fmax(box[3], b * inv_s + 0.05 * wp);
-        }
-        double step = fmax(0.5, wp / 40);
-        circle c = {0, 0, 0, -INFINITY};
-        for (int i = 0; i < n; i++)
-            w[i] = 1;
-        best_start(&p, w, g, op, box, r0, r1, 2 * step, &c);
+        circle c = find_start(&p, g, s, r0, r1, w);
         if (c.score > -INFINITY) {
-            double ca, cb;
-            to_frame(g, p.x0 + s * c.u, p.y0 + s * c.v, &ca, &cb);
-            double fine[4] = {ca * inv_s - 2 * step, ca * inv_s + 2 * step,
-                              cb * inv_s - 2 * step, cb * inv_s + 2 * step};
-            best_start(&p, w, g, op, fine, fmax(r0, c.r / 1.13), fmin(r1, c.r * 1.13),
-                       0.5 * step, &c);
             prior pr = {{0}, {0}};
             pr.mean[2] = 0.5 * (r0 + r1);
             pr.inv_var[2] = 1 / (RADIUS_SD * pr.mean[2] * RADIUS_SD * pr.mean[2]);

@@ -2293,6 +2293,10 @@ static int raster_back(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
     return gs_raster_backward(r, pool, hi, NULL, NULL, gg, NULL, err);
 }
 
+/* Long on purpose (a hot path): the backward of one forward, running the
+ * renderer, the rasterizer and the streams in the reverse of the forward
+ * order over the state that forward saved; split, the steps would pass
+ * that state around whole. */
 int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
                       const float *d_fmap, const float *d_fmap_face,
                       const float *d_fmap_eye, const gs_model_params *grads,

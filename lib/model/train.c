@@ -642,8 +642,8 @@ static int load_optimizer(trainer *t, const char *path, long *step,
     return rc;
 }
 
-int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
-             gs_train_report *rep, gs_error *err)
+/* The model and options gs_train can run with: GS_OK or GS_ERR_ARG. */
+static int train_check(const gs_model *m, const gs_train_options *o, gs_error *err)
 {
     if (!m || !o || !o->out_path)
         return gs_error_set(err, GS_ERR_ARG, "train: NULL argument");
@@ -679,8 +679,17 @@ int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
         return gs_error_set(err, GS_ERR_ARG,
                             "train: the eye-cover loss needs the eye stream "
                             "(not the single-stream ablation)");
+    return GS_OK;
+}
+
+int gs_train(gs_model *m, const gs_train_options *o, gs_pool *pool,
+             gs_train_report *rep, gs_error *err)
+{
+    int rc = train_check(m, o, err);
+    if (rc)
+        return rc;
     trainer t;
-    int rc = trainer_init(&t, m, o, err);
+    rc = trainer_init(&t, m, o, err);
     long step = 0;
     t.sched_first = 0;
     if (!rc && o->resume && o->fresh_from_step >= 0)

@@ -828,6 +828,8 @@ static void conic_vjp(const gs_raster *r, int i, float v_s[4])
     }
 }
 
+/* Long on purpose (a hot kernel, once per Gaussian): the projection
+ * Jacobian chain written out in one pass, its intermediates in registers. */
 static void project_backward_one(gs_raster *r, int i, gs_gaussian_grads *grads)
 {
     if (!(r->proj.radius[i] > 0))

@@ -602,6 +602,8 @@ write_tile(fwd_ctx *ctx, const tile_info *ti, const vf *acc, const fwd_state *st
         }
 }
 
+/* Long on purpose (the compositing loop, per pixel and Gaussian): one
+ * inlined body specialized per vector count, its state in registers. */
 static inline __attribute__((always_inline)) void
 tile_forward_nv(fwd_ctx *ctx, int t, int worker, const int nv)
 {

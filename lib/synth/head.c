@@ -637,6 +637,8 @@ SDF_INLINE int beyond_aabb(v3 p, const box3 *b, float gap)
  * when d + k away) and subtractions (no-op when k - d away) is skipped
  * only when both hold: the larger of the two gaps. C = 0 evaluates every
  * part (the reference the tests compare the culled field with). */
+/* Long on purpose (evaluated at every ray-march step): one culled pass
+ * over the part groups, inlined per gradient and culling mode. */
 SDF_INLINE sdg head_sdf_impl(const head_model *h, v3 p, const int G,
                              const int C, sdf_parts *parts)
 {
