@@ -253,17 +253,6 @@ static int worker_bind_model(gsd_worker *w)
     return w->ctx ? 0 : -1;
 }
 
-/* A request's input (redirect.h): a photo keeps its photo and face
- * analysis (the fit uses the landmark head pose and face mask, paste-back
- * the normalization); the normalized face itself is moved out to the
- * caller's image. */
-typedef gs_redirect_input photo_input;
-
-static void photo_input_free(photo_input *p)
-{
-    gs_redirect_input_free(p);
-}
-
 /* Decodes a request image (PNG, JPEG or raw) into 8-bit RGB. */
 static int decode_image(gsd_job *j, const Gazesplat__Image *img, gs_io_image *out, char *msg, size_t cap)
 {
@@ -302,7 +291,7 @@ _Static_assert((int)GAZESPLAT__FACE_REFUSAL__REFUSAL_HEAD_POSE == (int)GS_FACE_R
  * ERR_NO_FACE, ERR_FACE_REFUSED (the refusal in the Error's field),
  * bad_image for a normalized face of another size, ERR_INTERNAL when a
  * stage could not run. On success moves the normalized face to *face. */
-static int input_verdict(gsd_job *j, int rc, const gs_error *err, photo_input *p, gs_io_image *face,
+static int input_verdict(gsd_job *j, int rc, const gs_error *err, gs_redirect_input *p, gs_io_image *face,
                          int bad_image, char *msg, size_t cap)
 {
     if (rc == GS_OK) {
@@ -326,7 +315,7 @@ static int input_verdict(gsd_job *j, int rc, const gs_error *err, photo_input *p
  * face gate when face_gate is on); a photo is kept in *p for the fit
  * options and paste-back. */
 static int input_face(gsd_worker *w, gsd_job *j, const Gazesplat__Image *img, const Gazesplat__Intrinsics *k,
-                      photo_input *p, gs_io_image *face, char *msg, size_t cap)
+                      gs_redirect_input *p, gs_io_image *face, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
     const gs_model_info *info = &w->model->info;
@@ -552,7 +541,7 @@ static int worker_use_tuned(gsd_worker *w, const uint8_t key[16], uint64_t sum, 
  * fitted face and keeps the block (s->tuned, disk); the slot then holds
  * the subject. *sum: the block's checksum. */
 static int finetune_subject(gsd_worker *w, gsd_job *j, const gsd_finetune *ft, int n,
-                            const gs_subject *subj, const gs_io_image *face, const photo_input *p,
+                            const gs_subject *subj, const gs_io_image *face, const gs_redirect_input *p,
                             gs_finetune_report *rep, uint64_t *sum, char *msg, size_t cap)
 {
     int i = slot_take(w, msg, cap);
@@ -635,7 +624,7 @@ typedef struct subject_ask {
  * landmark head pose and face mask, the iterations. The subject key is
  * made from these (content_key), so they are built once, before both. */
 static void fit_options_of(const gsd_worker *w, const subject_ask *a, const Gazesplat__Angles *gaze,
-                           const Gazesplat__Angles *head, const photo_input *p, gs_fit_options *opt)
+                           const Gazesplat__Angles *head, const gs_redirect_input *p, gs_fit_options *opt)
 {
     /* The defaults, the mask and a photo's landmark head pose (redirect.h);
      * the request's labels over them. */
@@ -658,7 +647,7 @@ static void fit_options_of(const gsd_worker *w, const subject_ask *a, const Gaze
  * whole fit is cached: one stopped by CANCEL, the deadline or a stopping
  * server answers that and leaves no trace. */
 static int fit_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, int n, const gs_fit_options *fit_opt,
-                       const photo_input *p, const gs_io_image *face, subject_out *o, char *msg, size_t cap)
+                       const gs_redirect_input *p, const gs_io_image *face, subject_out *o, char *msg, size_t cap)
 {
     gsd_server *s = w->srv;
     gs_subject *subj = &o->subj;
@@ -744,13 +733,13 @@ static void image_of(const subject_ask *a, const Gazesplat__Image *img, const Ga
  * Returns 0 or an ErrorCode with msg (naming the image when there are
  * several). */
 static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const Gazesplat__Image *img,
-                          const Gazesplat__Intrinsics *k, photo_input *p, subject_out *o, char *msg,
+                          const Gazesplat__Intrinsics *k, gs_redirect_input *p, subject_out *o, char *msg,
                           size_t cap)
 {
     gsd_server *s = w->srv;
     memset(o, 0, sizeof *o);
     const int n = 1 + (a->fr ? (int)a->fr->n_more_images : 0);
-    photo_input ps[GSD_FIT_IMAGES_MAX];
+    gs_redirect_input ps[GSD_FIT_IMAGES_MAX];
     gs_io_image face[GSD_FIT_IMAGES_MAX];
     gs_fit_options opt[GSD_FIT_IMAGES_MAX];
     int is_photo[GSD_FIT_IMAGES_MAX];
@@ -794,7 +783,7 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const
     *p = ps[0];
     for (int i = 1; i < n; i++) {
         gs_io_image_free(&face[i]);
-        photo_input_free(&ps[i]);
+        gs_redirect_input_free(&ps[i]);
     }
     return e;
 }
@@ -815,13 +804,13 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     const Gazesplat__FitRequest *r = (const Gazesplat__FitRequest *)j->req;
     subject_out so;
     char msg[400];
-    photo_input photo;
+    gs_redirect_input photo;
     subject_ask a = {r, r->max_iters,
                      finetune_of(j, r->finetune_steps, r->finetune_parts, r->finetune_outline_px,
                                  r->finetune_no_mirror, r->finetune_lr),
                      r->keep_image, 0};
     int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
-    photo_input_free(&photo);
+    gs_redirect_input_free(&photo);
     if (e)
         return is_stop_code(e) ? stop_frame(s, j, e) : gsd_error_frame(j, e, "%s", msg);
     int why = job_stop(j);
@@ -955,7 +944,7 @@ static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReques
  * landmarks are not at hand, or no target is gaze-only (a head change
  * carries no quality). */
 static gs_face_quality_ref *quality_ref_of(const gsd_worker *w, const Gazesplat__RedirectRequest *r,
-                                           const gs_io_image *face, const photo_input *p)
+                                           const gs_io_image *face, const gs_redirect_input *p)
 {
     size_t i = 0;
     while (i < r->n_targets && r->targets[i]->head)
@@ -974,18 +963,8 @@ static gs_face_quality_ref *quality_ref_of(const gsd_worker *w, const Gazesplat_
     return gs_face_quality_ref_create(face, (const double(*)[2])uv, &qo, &q, NULL) == GS_OK ? q : NULL;
 }
 
-/* Paste-back state of one request (redirect.h): the blend masks in the
- * photo's pixels (eyes for gaze-only targets, the whole face when the
- * head turns), made when first needed, and the output buffer. */
-typedef gs_redirect_paste_state paste_state;
-
-static void paste_state_free(paste_state *ps)
-{
-    gs_redirect_paste_free(ps);
-}
-
-static int paste_back(const photo_input *p, paste_state *ps, int whole_face, const gs_io_image *norm,
-                      char *msg, size_t cap)
+static int paste_back(const gs_redirect_input *p, gs_redirect_paste_state *ps, int whole_face,
+                      const gs_io_image *norm, char *msg, size_t cap)
 {
     gs_error err;
     gs_error_clear(&err);
@@ -1008,8 +987,8 @@ static void count_render(gsd_worker *w, gs_model_ctx *ctx)
  * transfer from it) and posts it, pasted back into the photo when the
  * request asks for it. */
 static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gazesplat__RedirectRequest *r,
-                         size_t i, const gs_subject *subj, const gs_io_image *input, const photo_input *p,
-                         const gs_face_quality_ref *qr, paste_state *ps, uint8_t *rgb, char *msg,
+                         size_t i, const gs_subject *subj, const gs_io_image *input, const gs_redirect_input *p,
+                         const gs_face_quality_ref *qr, gs_redirect_paste_state *ps, uint8_t *rgb, char *msg,
                          size_t cap)
 {
     const Gazesplat__Target *t = r->targets[i];
@@ -1059,7 +1038,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     subject_out so;
     memset(&so, 0, sizeof so);
     char msg[400];
-    photo_input photo;
+    gs_redirect_input photo;
     memset(&photo, 0, sizeof photo);
     if (r->image) {
         subject_ask a = {NULL, r->max_iters,
@@ -1068,7 +1047,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
                          0, 1};
         int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {
-            photo_input_free(&photo);
+            gs_redirect_input_free(&photo);
             return is_stop_code(e) ? stop_frame(s, j, e) : gsd_error_frame(j, e, "%s", msg);
         }
         j->iters = so.fit.iters;
@@ -1090,7 +1069,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         int e = worker_use_tuned(w, j->key, so.sum, &slot, msg, sizeof msg);
         if (e) {
             gs_io_image_free(&so.face);
-            photo_input_free(&photo);
+            gs_redirect_input_free(&photo);
             return gsd_error_frame(j, e, "%s", msg);
         }
     }
@@ -1105,7 +1084,7 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     recent_add(w, j->key);
     int size = w->model->info.image_size;
     uint8_t *rgb = malloc((size_t)size * size * 3);
-    paste_state ps;
+    gs_redirect_paste_state ps;
     memset(&ps, 0, sizeof ps);
     gsd_out *o = rgb ? NULL : gsd_error_frame(j, E(ERR_INTERNAL), "out of memory");
     for (size_t i = 0; i < r->n_targets && !o; i++) {
@@ -1119,8 +1098,8 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     gs_face_quality_ref_destroy(qr);
     free(rgb);
     gs_io_image_free(&so.face);
-    paste_state_free(&ps);
-    photo_input_free(&photo);
+    gs_redirect_paste_free(&ps);
+    gs_redirect_input_free(&photo);
     if (o)
         return o;
     Gazesplat__Done d = GAZESPLAT__DONE__INIT;

@@ -479,6 +479,20 @@ static double prior_cost(const prior *pr, const double t[NGEO], double k)
     return c;
 }
 
+/* The residuals at t moved by h[i] along each parameter i, into column i
+ * of col (NGEO columns of n_op): the forward differences' other ends. */
+static void step_residuals(const patch *p, const double *w, const double t[NGEO],
+                           const double h[NGEO], double *col)
+{
+    for (int i = 0; i < NGEO; i++) {
+        double ti[NGEO];
+        memcpy(ti, t, sizeof ti);
+        ti[i] += h[i];
+        model mi;
+        solve_levels(p, w, ti, &mi, col + (size_t)i * p->n_op);
+    }
+}
+
 /* Huber weights at 1.345 robust sigmas of the residuals (res: n, then
  * n of scratch); returns the robust sigma (at least 1). */
 static double huber_weights(double *res, double *w, int n)
@@ -544,13 +558,7 @@ static void centre_cov(const patch *p, const double *w, const double t[NGEO], do
         sw += w[k];
     out->rms = sw > 0 ? sqrt(sse / sw) : NAN;
     double *col = res + 2 * n, jtj[NGEO * NGEO] = {0};
-    for (int i = 0; i < NGEO; i++) {
-        double ti[NGEO];
-        memcpy(ti, t, sizeof ti);
-        ti[i] += h[i];
-        model mi;
-        solve_levels(p, w, ti, &mi, col + (size_t)i * n);
-    }
+    step_residuals(p, w, t, h, col);
     for (int k = 0; k < n; k++)
         for (int i = 0; i < NGEO; i++) {
             double ji = (col[(size_t)i * n + k] - res[k]) / h[i];
@@ -596,15 +604,10 @@ static void fit_model(const patch *p, const double start[NGEO], double r0, doubl
         /* Jacobian of the residuals by forward differences. */
         double jtj[NGEO * NGEO] = {0}, jtr[NGEO] = {0};
         double *col = res + 2 * n;  /* NGEO columns of n */
-        for (int i = 0; i < NGEO; i++) {
-            double ti[NGEO];
-            memcpy(ti, t, sizeof ti);
-            ti[i] += h[i];
-            model mi;
-            solve_levels(p, w, ti, &mi, col + (size_t)i * n);
+        step_residuals(p, w, t, h, col);
+        for (int i = 0; i < NGEO; i++)
             for (int k = 0; k < n; k++)
                 col[(size_t)i * n + k] = (col[(size_t)i * n + k] - res[k]) / h[i];
-        }
         for (int k = 0; k < n; k++)
             for (int i = 0; i < NGEO; i++) {
                 double ji = col[(size_t)i * n + k];

@@ -312,9 +312,7 @@ static int ft_ones_init(const ft_run *r, ft_one *f, const gs_subject *s, const g
     size_t fplane = (size_t)r->c->fs * r->c->fs;
     for (int i = 0; !rc && i < k; i++) {
         ft_one *p = &f[i];
-        gs_fit_image mi = im[i];
-        mi.mask = im[i].mask;
-        if (gs_fit_image_bufs(r->c, &mi, mirror, i ? &f[0].b : NULL, &p->b, &p->bm))
+        if (gs_fit_image_bufs(r->c, &im[i], mirror, i ? &f[0].b : NULL, &p->b, &p->bm))
             rc = GS_ERR_NOMEM;
         p->inner = malloc(fplane * sizeof(float));
         p->inner_m = malloc(fplane * sizeof(float));

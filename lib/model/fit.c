@@ -490,19 +490,25 @@ int gs_model_fit(gs_model_ctx *c, gs_pool *pool, const uint8_t *rgb,
     return gs_model_fit_images(c, pool, &im, 1, &o, out, report, err);
 }
 
+void gs_fit_options_of_image(const gs_fit_options *base, const gs_fit_image *im,
+                             gs_fit_options *o)
+{
+    *o = *base;
+    o->known_gaze = im->known_gaze;
+    o->gaze_pitch = im->gaze_pitch;
+    o->gaze_yaw = im->gaze_yaw;
+    o->known_head = im->known_head;
+    memcpy(o->head_R, im->head_R, sizeof o->head_R);
+    memcpy(o->head_t, im->head_t, sizeof o->head_t);
+}
+
 /* Each image's start: the options with the image's own labels. */
 static void fit_images_init(const gs_model_ctx *c, const gs_fit_image *im, int k,
                             const gs_fit_options *base, fit_one *f)
 {
-    const gs_fit_options o = *base;
     for (int i = 0; i < k; i++) {
-        gs_fit_options oi = o;
-        oi.known_gaze = im[i].known_gaze;
-        oi.gaze_pitch = im[i].gaze_pitch;
-        oi.gaze_yaw = im[i].gaze_yaw;
-        oi.known_head = im[i].known_head;
-        memcpy(oi.head_R, im[i].head_R, sizeof oi.head_R);
-        memcpy(oi.head_t, im[i].head_t, sizeof oi.head_t);
+        gs_fit_options oi;
+        gs_fit_options_of_image(base, &im[i], &oi);
         fit_init(c, &oi, &f[i].s);
         if (im[i].known_head)
             memcpy(f[i].R0, im[i].head_R, sizeof f[i].R0);

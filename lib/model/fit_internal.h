@@ -39,6 +39,10 @@ double gs_fit_image_loss(gs_model_ctx *c, gs_pool *pool, fit_bufs *b, const fit_
 int gs_fit_image_bufs(const gs_model_ctx *c, const gs_fit_image *im,
                           int mirror, const fit_bufs *with, fit_bufs *b,
                           fit_bufs *bm);
+/* base with image im's labels (gaze, head pose) in place of its own; the
+ * mask is left as base has it. The inverse of gs_fit_image_from_options. */
+void gs_fit_options_of_image(const gs_fit_options *base, const gs_fit_image *im,
+                             gs_fit_options *o);
 float gs_fit_weighted_psnr(const fit_bufs *b, int S);
 void gs_fit_bufs_free(fit_bufs *b);
 

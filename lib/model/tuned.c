@@ -14,6 +14,7 @@
 
 #include "model_internal.h"
 #include "frame.h"
+#include "fit_internal.h"
 #include "hash64.h"
 
 #define TUNED_MAGIC 0x54465347u /* "GSFT" */
@@ -298,14 +299,9 @@ uint64_t gs_model_fit_images_key(const gs_model *m, const gs_fit_options *opt,
     for (int i = 0; i < k; i++) {
         if (!im[i].rgb)
             return 0;
-        gs_fit_options oi = o;
+        gs_fit_options oi;
+        gs_fit_options_of_image(&o, &im[i], &oi);
         oi.mask = im[i].mask;
-        oi.known_gaze = im[i].known_gaze;
-        oi.gaze_pitch = im[i].gaze_pitch;
-        oi.gaze_yaw = im[i].gaze_yaw;
-        oi.known_head = im[i].known_head;
-        memcpy(oi.head_R, im[i].head_R, sizeof oi.head_R);
-        memcpy(oi.head_t, im[i].head_t, sizeof oi.head_t);
         keys[2 + i] = gs_model_fit_key(m, &oi, im[i].rgb, im[i].stride);
     }
     if (k == 1)

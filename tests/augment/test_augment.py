@@ -503,23 +503,13 @@ def addr(cli, work):
         # starts again afresh with earlier kills (the test needs one).
         for scale in (1.0, 0.3, 0.1):
             shutil.rmtree(out2, ignore_errors=True)
-            kills = 0
-            for frac in (0.3, 0.6, 5.0):
-                p = subprocess.Popen(args, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                try:
-                    p.wait(timeout=frac * scale * full_s if frac < 5.0 else frac * full_s)
-                except subprocess.TimeoutExpired:
-                    p.send_signal(signal.SIGKILL)
-                    p.wait()
-                    kills += 1
-                    continue
-                break
+            rc, kills = kill_until_done(args, full_s, (0.3 * scale, 0.6 * scale, 5.0))
             if kills:
                 break
     finally:
         d.stop()
     again = tree_bytes(out2)
-    check(p.returncode == 0 and kills >= 1 and again == got, "--addr killed %d times: same bytes (%s)" % (
+    check(rc == 0 and kills >= 1 and again == got, "--addr killed %d times: same bytes (%s)" % (
         kills, [n for n in set(got) | set(again) if got.get(n) != again.get(n)][:4]))
 
 
