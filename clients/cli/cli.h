@@ -52,6 +52,10 @@ typedef struct cli_opt {
  * negative so that it can never be read as one (CLI_REFUSED is 3). */
 enum { CLI_PARSED = 0, CLI_HELP = -1 };
 
+/* A macro's value as a string literal (a default option value). */
+#define CLI_STR_(x) #x
+#define CLI_STR(x) CLI_STR_(x)
+
 /* Fills opts from argv[1..]. Returns CLI_PARSED, CLI_HELP for --help/-h,
  * or CLI_USAGE after printing the problem and the usage to stderr. Unknown
  * options, missing values, repeats and positional arguments are errors. */

@@ -2103,7 +2103,7 @@ static int run_augment(int argc, char **argv)
                                    o[O_SHARD].value, j.shard_i, j.shard_n - 1);
     }
     long seed = 0, threads = 2, size = 0;
-    j.iters = 200;
+    j.iters = GS_REDIRECT_FIT_ITERS;
     if (o[O_SEED].value && cli_parse_long(o[O_SEED].value, 0, 4294967295L, &seed))
         return cli_usage_error(cmd, "--seed: want 0..4294967295; got '%s'", o[O_SEED].value);
     if (o[O_ITERS].value && cli_parse_long(o[O_ITERS].value, 1, 100000, &j.iters))
@@ -2115,7 +2115,7 @@ static int run_augment(int argc, char **argv)
     /* The served setting (daemon/README.md, experiments/eval/README.md): the fit
      * to its plateau (at most 200 iterations), 15 fine-tuning steps at
      * 0.004 with the mirrored view, detail transfer with the eyeball warp. */
-    const char *ftn = o[O_FT].value ? o[O_FT].value : "15";
+    const char *ftn = o[O_FT].value ? o[O_FT].value : CLI_STR(GS_REDIRECT_FINETUNE_STEPS);
     if (strcmp(ftn, "0") == 0) {
         if (o[O_FTLR].value)
             return cli_usage_error(cmd, "--finetune-lr goes with --finetune N > 0");

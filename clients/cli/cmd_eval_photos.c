@@ -348,11 +348,11 @@ static int run_eval_photos(int argc, char **argv)
         return rc;
     if (!o[0].value || !o[1].value)
         return cli_usage_error(cmd, "--model and --photos are needed");
-    long iters = 200;
+    long iters = GS_REDIRECT_FIT_ITERS;
     if (o[3].value && cli_parse_long(o[3].value, 1, 100000, &iters))
         return cli_usage_error(cmd, "--iters: want 1..100000; got '%s'", o[3].value);
     gs_finetune_options ft;
-    const char *ftn = o[4].value ? o[4].value : "15";
+    const char *ftn = o[4].value ? o[4].value : CLI_STR(GS_REDIRECT_FINETUNE_STEPS);
     if (!strcmp(ftn, "0")) {
         gs_finetune_options_default(&ft);
         ft.iters = 0;

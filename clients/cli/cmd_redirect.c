@@ -403,7 +403,7 @@ static int run_fit(int argc, char **argv)
         return rc;
     if (!o[0].value || !o[1].value || !o[6].value)
         return cli_usage_error(cmd, "--model, --image and --out are needed");
-    long iters = 200;
+    long iters = GS_REDIRECT_FIT_ITERS;
     float budget = 0;
     if (o[4].value && cli_parse_long(o[4].value, 1, 100000, &iters))
         return cli_usage_error(cmd, "--iters: want 1..100000");
@@ -708,7 +708,7 @@ static int run_redirect(int argc, char **argv)
         return rc;
     }
     gs_pool *pool = gs_pool_create(2);
-    long index = 0, iters = 200;
+    long index = 0, iters = GS_REDIRECT_FIT_ITERS;
     if ((o[6].value && cli_parse_long(o[6].value, 0, 1000, &index)) ||
         (o[8].value && cli_parse_long(o[8].value, 1, 100000, &iters))) {
         gs_pool_destroy(pool);
