@@ -30,6 +30,7 @@
 #include "hash.h"
 #include "model_ref.h"
 #include "out.h"
+#include "sink.h"
 #include "store.h"
 #include "gazesplat/model.h"
 #include "gazesplat/redirect.h"
@@ -190,36 +191,46 @@ static int job_cancelled(void *arg)
     return job_stop(arg) != 0;
 }
 
-/* 1 for the codes a stopped job answers with (stop_frame). */
+/* 1 for the codes a stopped job answers with (emit_stop). */
 static int is_stop_code(int e)
 {
     return e == E(ERR_CANCELLED) || e == E(ERR_DEADLINE) || e == E(ERR_SHUTTING_DOWN);
 }
 
-static gsd_out *stop_frame(gsd_server *s, gsd_job *j, int why)
+/* Ends a stopped job: its final error, counted in STATS. */
+static void emit_stop(gsd_server *s, gsd_job *j, int why)
 {
     atomic_fetch_add(why == E(ERR_DEADLINE) ? &s->ctr.deadline_exceeded : &s->ctr.cancelled, 1);
-    return gsd_error_frame(j, why, why == E(ERR_DEADLINE) ? "deadline passed"
-                                   : why == E(ERR_CANCELLED) ? "cancelled" : "server stopping");
+    gsd_emit_error(j, why, why == E(ERR_DEADLINE) ? "deadline passed"
+                           : why == E(ERR_CANCELLED) ? "cancelled" : "server stopping");
 }
 
-static gsd_out *run_sleep(gsd_server *s, gsd_job *j, int64_t t0)
+/* Ends a job that failed with ErrorCode e (text msg): a stop code the way
+ * emit_stop says it, any other with msg. */
+static void emit_failure(gsd_server *s, gsd_job *j, int e, const char *msg)
+{
+    if (is_stop_code(e))
+        emit_stop(s, j, e);
+    else
+        gsd_emit_error(j, e, "%s", msg);
+}
+
+static void run_sleep(gsd_server *s, gsd_job *j, int64_t t0)
 {
     const Gazesplat__Sleep *r = (const Gazesplat__Sleep *)j->req;
     int64_t end = t0 + r->ms;
     while (gs_clock_ms() < end) {
         int why = job_stop(j);
-        if (why)
-            return stop_frame(s, j, why);
+        if (why) {
+            emit_stop(s, j, why);
+            return;
+        }
         struct timespec ts = {0, 5 * 1000000L};
         nanosleep(&ts, NULL);
     }
     Gazesplat__Done d = GAZESPLAT__DONE__INIT;
     d.seconds = (double)(gs_clock_ms() - t0) / 1000.0;
-    gsd_out *o = gsd_frame_new(j, T(SLEEP_OK), &d.base);
-    if (o)
-        o->final = 1;
-    return o;
+    gsd_emit_done(j, T(SLEEP_OK), &d.base);
 }
 
 /* ---- model jobs ------------------------------------------------------------ */
@@ -367,8 +378,14 @@ static gsd_finetune finetune_of(const gsd_job *j, uint32_t steps, const char *pa
 }
 
 /* What the subject key of a FIT without a chosen key covers; bump it
- * when that changes (keys of another version never meet). */
-#define SUBJECT_KEY_VERSION 2u
+ * when that changes (keys of another version never meet, so subjects
+ * cached under an older one are fitted again).
+ * Version 1 hashed the fine-tuning fields only when they were set.
+ * Version 2 hashed every field in one fixed layout, and the image count
+ * (after a tag) only for a FIT of several images.
+ * Version 3 hashes the image count after the model id always, with no
+ * tag: one layout for one image or several. */
+#define SUBJECT_KEY_VERSION 3u
 
 static void key_u32(hash128 *h, uint32_t v)
 {
@@ -414,23 +431,20 @@ static void key_image(hash128 *hp, int is_photo, const gs_io_image *face, const 
         key_f64(hp, opt->head_t[k]);
 }
 
-/* One image's record as above; several images (a multi-image FIT) add
- * their count after the model and then each image's record in order, so
- * their keys never meet a one-image key. */
+/* The record: the version, the model, the image count (1 but for a
+ * multi-image FIT), each image's record as above in order, then the
+ * iterations and the fine-tuning; so keys of different counts never
+ * meet. */
 static void content_key(const gsd_model *m, int n, const int *is_photo, const gs_io_image *face,
                         const gs_fit_options *opt, const gsd_finetune *ft, uint8_t key[16])
 {
     static const char tag[] = "gazesplatd subject";
-    static const char tag_n[] = "images";
     hash128 h;
     hash_init(&h);
     hash_bytes(&h, tag, sizeof tag);
     key_u32(&h, SUBJECT_KEY_VERSION);
     hash_bytes(&h, m->id, 32);
-    if (n > 1) {
-        hash_bytes(&h, tag_n, sizeof tag_n);
-        key_u32(&h, (uint32_t)n);
-    }
+    key_u32(&h, (uint32_t)n);
     for (int i = 0; i < n; i++)
         key_image(&h, is_photo[i], &face[i], &opt[i]);
     key_u32(&h, (uint32_t)opt[0].max_iters);
@@ -798,7 +812,7 @@ static void subject_angles(const gs_subject *subj, Gazesplat__Angles *gaze, Gaze
     head->yaw_deg = y / DEG;
 }
 
-static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
+static void run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
 {
     gsd_server *s = w->srv;
     const Gazesplat__FitRequest *r = (const Gazesplat__FitRequest *)j->req;
@@ -811,11 +825,12 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
                      r->keep_image, 0};
     int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
     gs_redirect_input_free(&photo);
-    if (e)
-        return is_stop_code(e) ? stop_frame(s, j, e) : gsd_error_frame(j, e, "%s", msg);
-    int why = job_stop(j);
-    if (why)
-        return stop_frame(s, j, why);
+    if (!e)
+        e = job_stop(j);
+    if (e) {
+        emit_failure(s, j, e, msg);
+        return;
+    }
     if (so.cached)
         atomic_fetch_add(&s->ctr.fits_cached, 1);
     j->iters = so.fit.iters;
@@ -864,11 +879,11 @@ static gsd_out *run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     }
     m.n_image_results = (size_t)so.n_all;
     m.image_results = so.n_all ? resp : NULL;
-    return gsd_frame_new(j, T(FIT_OK), &m.base);
+    gsd_emit_done(j, T(FIT_OK), &m.base);
 }
 
-/* Encodes img as the request asks and posts it as target i's IMAGE frame. */
-static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
+/* Encodes img as the request asks and emits it as target i's image. */
+static int emit_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectRequest *r, size_t i,
                       const gs_io_image *img, const gs_face_quality *q, char *msg, size_t cap)
 {
     Gazesplat__Image out = GAZESPLAT__IMAGE__INIT;
@@ -921,13 +936,12 @@ static int post_image(gsd_worker *w, gsd_job *j, const Gazesplat__RedirectReques
     m.target = r->targets[i];
     m.quality = q ? &qm : NULL;
     m.dropped = drop;
-    gsd_out *o = gsd_frame_new(j, T(IMAGE), &m.base);
+    int taken = gsd_emit_image(j, &m);
     free(enc);
-    if (!o) {
+    if (taken != 0) {
         snprintf(msg, cap, "out of memory");
         return E(ERR_INTERNAL);
     }
-    gsd_post(w->srv, o);
     if (drop) {
         atomic_fetch_add(&w->srv->ctr.images_dropped, 1);
         return 0;
@@ -984,7 +998,7 @@ static void count_render(gsd_worker *w, gs_model_ctx *ctx)
 }
 
 /* Renders target i into rgb (the normalized face; with input, by detail
- * transfer from it) and posts it, pasted back into the photo when the
+ * transfer from it) and emits it, pasted back into the photo when the
  * request asks for it. */
 static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gazesplat__RedirectRequest *r,
                          size_t i, const gs_subject *subj, const gs_io_image *input, const gs_redirect_input *p,
@@ -1026,12 +1040,12 @@ static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gaz
         qp = &q;
     }
     if (r->output_mode != GAZESPLAT__OUTPUT_MODE__OUTPUT_PASTE_BACK)
-        return post_image(w, j, r, i, &norm, qp, msg, cap);
+        return emit_image(w, j, r, i, &norm, qp, msg, cap);
     int e = paste_back(p, ps, t->head != NULL, &norm, msg, cap);
-    return e ? e : post_image(w, j, r, i, &ps->out, qp, msg, cap);
+    return e ? e : emit_image(w, j, r, i, &ps->out, qp, msg, cap);
 }
 
-static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
+static void run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
 {
     gsd_server *s = w->srv;
     const Gazesplat__RedirectRequest *r = (const Gazesplat__RedirectRequest *)j->req;
@@ -1048,7 +1062,8 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         int e = obtain_subject(w, j, &a, r->image, r->intrinsics, &photo, &so, msg, sizeof msg);
         if (e) {
             gs_redirect_input_free(&photo);
-            return is_stop_code(e) ? stop_frame(s, j, e) : gsd_error_frame(j, e, "%s", msg);
+            emit_failure(s, j, e, msg);
+            return;
         }
         j->iters = so.fit.iters;
         j->ft_steps = so.ft_ran ? so.ft.iters : 0;
@@ -1056,13 +1071,17 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     } else {
         char hex[33];
         gs_frame_key_hex(j->key, hex);
-        if (gsd_subject_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0)
-            return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
-        if (gsd_input_get(s, j->key, w->model->info.image_size, &so.face) != 0 && r->transfer)
-            return gsd_error_frame(j, E(ERR_UNKNOWN_SUBJECT),
-                                   "subject %s: no kept input for transfer (FIT it with keep_image, or it "
-                                   "was evicted: input_cache_mb); send the image inline or FIT again",
-                                   hex);
+        if (gsd_subject_lookup(s, j->key, &so.subj, &so.tuned, &so.sum) != 0) {
+            gsd_emit_error(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
+            return;
+        }
+        if (gsd_input_get(s, j->key, w->model->info.image_size, &so.face) != 0 && r->transfer) {
+            gsd_emit_error(j, E(ERR_UNKNOWN_SUBJECT),
+                           "subject %s: no kept input for transfer (FIT it with keep_image, or it "
+                           "was evicted: input_cache_mb); send the image inline or FIT again",
+                           hex);
+            return;
+        }
     }
     int slot = -1;
     if (so.tuned) {
@@ -1070,7 +1089,8 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         if (e) {
             gs_io_image_free(&so.face);
             gs_redirect_input_free(&photo);
-            return gsd_error_frame(j, e, "%s", msg);
+            gsd_emit_error(j, e, "%s", msg);
+            return;
         }
     }
     gs_model_ctx *ctx = slot >= 0 ? w->slots[slot].ctx : w->ctx;
@@ -1086,33 +1106,45 @@ static gsd_out *run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
     uint8_t *rgb = malloc((size_t)size * size * 3);
     gs_redirect_paste_state ps;
     memset(&ps, 0, sizeof ps);
-    gsd_out *o = rgb ? NULL : gsd_error_frame(j, E(ERR_INTERNAL), "out of memory");
-    for (size_t i = 0; i < r->n_targets && !o; i++) {
-        int why = i > 0 ? wait_output(s, j) : job_stop(j);
-        if (why)
-            o = stop_frame(s, j, why);
-        else if ((why = render_target(w, ctx, j, r, i, &subj, r->transfer ? &so.face : NULL, &photo, qr,
-                                      &ps, rgb, msg, sizeof msg)) != 0)
-            o = gsd_error_frame(j, why, "%s", msg);
+    /* The first failure ends the targets: a stop (stopped), or an error
+     * with msg. The final result goes out after the clean-up. */
+    int e = 0, stopped = 0;
+    if (!rgb) {
+        e = E(ERR_INTERNAL);
+        snprintf(msg, sizeof msg, "out of memory");
+    }
+    for (size_t i = 0; i < r->n_targets && !e; i++) {
+        e = i > 0 ? wait_output(s, j) : job_stop(j);
+        stopped = e != 0;
+        if (!e)
+            e = render_target(w, ctx, j, r, i, &subj, r->transfer ? &so.face : NULL, &photo, qr, &ps, rgb,
+                              msg, sizeof msg);
     }
     gs_face_quality_ref_destroy(qr);
     free(rgb);
     gs_io_image_free(&so.face);
     gs_redirect_paste_free(&ps);
     gs_redirect_input_free(&photo);
-    if (o)
-        return o;
-    Gazesplat__Done d = GAZESPLAT__DONE__INIT;
-    d.count = (uint32_t)r->n_targets;
-    d.seconds = (double)(gs_clock_ms() - t0) / 1000.0;
-    return gsd_frame_new(j, T(DONE), &d.base);
+    if (stopped) {
+        emit_stop(s, j, e);
+    } else if (e) {
+        gsd_emit_error(j, e, "%s", msg);
+    } else {
+        Gazesplat__Done d = GAZESPLAT__DONE__INIT;
+        d.count = (uint32_t)r->n_targets;
+        d.seconds = (double)(gs_clock_ms() - t0) / 1000.0;
+        gsd_emit_done(j, T(DONE), &d.base);
+    }
 }
 
-static gsd_out *run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
+static void run_model_job(gsd_worker *w, gsd_job *j, int64_t t0)
 {
     if (worker_bind_model(w) != 0)
-        return gsd_error_frame(j, E(ERR_NO_MODEL), "no model loaded");
-    return j->type == T(FIT) ? run_fit(w, j, t0) : run_redirect(w, j, t0);
+        gsd_emit_error(j, E(ERR_NO_MODEL), "no model loaded");
+    else if (j->type == T(FIT))
+        run_fit(w, j, t0);
+    else
+        run_redirect(w, j, t0);
 }
 
 /* Renders the last FIT's subject at its own gaze and pose (the image is
@@ -1161,19 +1193,14 @@ void gsd_worker_run(gsd_worker *w, gsd_job *j)
 {
     gsd_server *s = w->srv;
     int64_t t0 = gs_clock_ms();
+    j->started_ms = t0; /* the sink's run time */
     int why = job_stop(j);
-    gsd_out *o;
     if (why)
-        o = stop_frame(s, j, why);
+        emit_stop(s, j, why);
     else if (j->type == T(SLEEP))
-        o = run_sleep(s, j, t0);
+        run_sleep(s, j, t0);
     else
-        o = run_model_job(w, j, t0);
-    if (o) {
-        o->final = 1;
-        o->job_ms = (uint64_t)(gs_clock_ms() - t0);
-    }
-    gsd_post(s, o);
-    worker_prime(w); /* the job is the loop's now; only w is used */
+        run_model_job(w, j, t0);
+    worker_prime(w); /* the job is its sink's now; only w is used */
     worker_release(w);
 }

@@ -1,11 +1,12 @@
 /* gazesplatd internals shared by its files: the server's, connections',
  * jobs' and frames' types, and what each file offers the others (server.c,
- * the event loop side, and out.c, frames out, have headers of their own:
- * server.h and out.h).
+ * the event loop side, out.c, frames out, and sink.c, a job's results,
+ * have headers of their own: server.h, out.h and sink.h).
  *
  * Threads: one loop thread owns connections, listeners and every
  * gsd_conn / gsd_job field marked (loop). Workers own a job while running
- * it and talk back only through gsd_post (a locked list + ev_wake). A job
+ * it and talk back only through its sink (sink.h); the server's sink hands
+ * frames to the loop through its post queue (a locked list + ev_wake). A job
  * is created and freed by the loop thread, which frees it when its final
  * frame comes back, so a worker never races with a closing connection. */
 #ifndef GSD_DAEMON_H
@@ -21,6 +22,7 @@
 #include "ev.h"
 #include "gs_msg.h"
 #include "sd.h"
+#include "sink.h"
 
 #ifndef GSD_VERSION /* the project's version (CMakeLists.txt) */
 #define GSD_VERSION "0.1.0"
@@ -59,6 +61,7 @@ typedef struct gsd_job {
     uint8_t key[GS_FRAME_KEY_SIZE];
     int64_t deadline_ms;         /* monotonic */
     int64_t enqueued_ms;
+    int64_t started_ms;          /* monotonic, when a worker took it; 0 before */
     int skips;                   /* times a later job was taken first (queue lock) */
     atomic_int stop;             /* 0, or ERR_CANCELLED / ERR_DEADLINE / ERR_SHUTTING_DOWN */
     gsd_server *srv;
@@ -81,6 +84,7 @@ typedef struct gsd_job {
     size_t max_pixels;
     double finetune_lr;          /* the server's finetune_lr when the job was accepted */
     ProtobufCMessage *req;       /* unpacked request, owned */
+    gsd_sink sink;               /* where its results go (set when it is made) */
 } gsd_job;
 
 /* A frame on its way out; a connection's output queue is a list of these. */
@@ -234,7 +238,8 @@ gsd_worker *gsd_worker_create(gsd_server *s, int index);
 /* Threads of each worker's pool: `threads`, or the CPUs over the workers. */
 int gsd_pool_threads(const gsd_config *cfg);
 void gsd_worker_destroy(gsd_worker *w);
-/* Runs a job, posting its frames; the last one is final. */
+/* Runs a job, emitting its results through job->sink; the last one is
+ * final. */
 void gsd_worker_run(gsd_worker *w, gsd_job *job);
 /* 1 when the worker rendered the job's subject lately (its renders are
  * kept: REDIRECT renders incrementally there). Called under the queue

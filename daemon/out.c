@@ -1,13 +1,14 @@
-/* What a job sends back (out.h): frames packed for its connection and the
- * post queue that hands them to the loop thread. Jobs and workers call
- * only this; the loop (server.c) drains the queue into connections. */
+/* What a job sends back (out.h): the frame sink (sink.h), frames packed
+ * for the job's connection, and the post queue that hands them to the
+ * loop thread. Jobs and workers reach it only through their sink; the
+ * loop (server.c) drains the queue into connections. */
 #include "out.h"
 
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
+#include "gazesplat/clock.h"
 #include "gazesplat/error.h"
 #include "log.h"
 
@@ -47,7 +48,7 @@ void gsd_out_free(gsd_server *s, gsd_out *o)
     free(o);
 }
 
-gsd_out *gsd_frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage *msg)
+static gsd_out *frame_new(const gsd_job *job, uint16_t type, const ProtobufCMessage *msg)
 {
     gs_frame_header h;
     memset(&h, 0, sizeof h);
@@ -72,13 +73,8 @@ gsd_out *gsd_out_error(gsd_server *s, const gs_frame_header *h, int code, const 
     return gsd_out_pack(s, &eh, &e.base);
 }
 
-gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
+static gsd_out *error_frame(const gsd_job *job, int code, const char *text)
 {
-    char text[512];
-    va_list ap;
-    va_start(ap, fmt);
-    vsnprintf(text, sizeof text, fmt, ap);
-    va_end(ap);
     gs_frame_header h;
     memset(&h, 0, sizeof h);
     h.version = job->version;
@@ -86,23 +82,21 @@ gsd_out *gsd_error_frame(const gsd_job *job, int code, const char *fmt, ...)
     memcpy(h.key, job->key, GS_FRAME_KEY_SIZE);
     Gazesplat__Error e = GAZESPLAT__ERROR__INIT;
     e.code = (Gazesplat__ErrorCode)code;
-    e.message = text;
+    e.message = (char *)text;
     e.request_id = h.request_id;
     if (code == E(ERR_FACE_REFUSED))
         e.refusal = (Gazesplat__FaceRefusal)job->refusal;
     h.type = T(ERROR);
     gsd_out *o = gsd_out_pack(job->srv, &h, &e.base);
-    ((gsd_job *)job)->result = code; /* for its log line */
     if (o) {
         out_attach(o, job);
-        o->final = 1;
         /* Cancellations and deadlines have counters of their own. */
         o->request_error = code != E(ERR_CANCELLED) && code != E(ERR_DEADLINE);
     }
     return o;
 }
 
-void gsd_post(gsd_server *s, gsd_out *o)
+static void post(gsd_server *s, gsd_out *o)
 {
     if (!o) {
         LOG_E("out of memory building a reply; a request stays unanswered");
@@ -117,6 +111,42 @@ void gsd_post(gsd_server *s, gsd_out *o)
     s->post_tail = o;
     pthread_mutex_unlock(&s->post_mu);
     ev_wake(s->loop);
+}
+
+/* The job's last frame: the loop frees the job once it has it; job_ms is
+ * its run time from when a worker took it (0 when none did). */
+static void post_final(gsd_server *s, const gsd_job *job, gsd_out *o)
+{
+    if (o) {
+        o->final = 1;
+        o->job_ms = job->started_ms ? (uint64_t)(gs_clock_ms() - job->started_ms) : 0;
+    }
+    post(s, o);
+}
+
+static int sink_image(void *ctx, gsd_job *job, const Gazesplat__ImageResult *m)
+{
+    gsd_out *o = frame_new(job, T(IMAGE), &m->base);
+    if (!o)
+        return -1;
+    post(ctx, o);
+    return 0;
+}
+
+static void sink_done(void *ctx, gsd_job *job, uint16_t type, const ProtobufCMessage *m)
+{
+    post_final(ctx, job, frame_new(job, type, m));
+}
+
+static void sink_error(void *ctx, gsd_job *job, int code, const char *text)
+{
+    post_final(ctx, job, error_frame(job, code, text));
+}
+
+gsd_sink gsd_frame_sink(gsd_server *s)
+{
+    gsd_sink k = {sink_image, sink_done, sink_error, s};
+    return k;
 }
 
 /* A library status (gs_status) as the ErrorCode a computing job answers

@@ -554,6 +554,7 @@ static int submit(gsd_conn *c, const gs_frame_header *h, ProtobufCMessage *m)
     }
     j->conn = c;
     j->srv = s;
+    j->sink = gsd_frame_sink(s);
     snprintf(j->peer, sizeof j->peer, "%s", c->peer);
     j->type = h->type;
     j->est_ms = job_estimate_ms(s, h->type, m);

@@ -6,7 +6,7 @@
 
 #include "log.h"
 #include "daemon.h"
-#include "out.h"
+#include "sink.h"
 
 typedef struct worker_arg {
     gsd_server *srv;
@@ -71,7 +71,7 @@ static void *worker_main(void *p)
         if (wk)
             gsd_worker_run(wk, j);
         else
-            gsd_post(a.srv, gsd_error_frame(j, GAZESPLAT__ERROR_CODE__ERR_INTERNAL, "worker failed to start"));
+            gsd_emit_error(j, GAZESPLAT__ERROR_CODE__ERR_INTERNAL, "worker failed to start");
         pthread_mutex_lock(&w->mu);
         w->running--;
         w->run_start[a.index] = 0;
@@ -174,7 +174,7 @@ void gsd_work_stop(gsd_server *s)
     /* Queued jobs are answered here; running ones see their stop flag. */
     while (w->head) {
         gsd_job *j = pop(w);
-        gsd_post(s, gsd_error_frame(j, GAZESPLAT__ERROR_CODE__ERR_SHUTTING_DOWN, "server stopped"));
+        gsd_emit_error(j, GAZESPLAT__ERROR_CODE__ERR_SHUTTING_DOWN, "server stopped");
     }
     pthread_cond_broadcast(&w->cv);
     pthread_mutex_unlock(&w->mu);
