@@ -95,381 +95,6 @@ static void mat_to_quat(const double r[9], double q[4])
     }
 }
 
-/* ---- context ---- */
-
-/* A render's scratch ("a render's scratch" below). */
-struct gs_ctx_scratch {
-    int refs;                /* contexts using it */
-    float *act, *face;
-    size_t act_len, face_len; /* floats */
-};
-
-static float *falloc(size_t n, int *fail)
-{
-    float *p = calloc(n ? n : 1, sizeof(float));
-    if (!p)
-        *fail = 1;
-    return p;
-}
-
-static void sweep_slot_free(gs_sweep_slot *s);
-static void sweep_drop(gs_model_ctx *c);
-static void sweep_stash(gs_model_ctx *c);
-
-/* ---- the face stream in blocks ----
- *
- * The face Gaussians go through the MLPs in fixed blocks of rows, one pool
- * task each, from the inputs to the camera-frame Gaussians (forward) and
- * from their gradients back to the parameters (backward). The blocks
- * depend only on the face count (at least GS_FACE_BLOCK_MIN rows, at most
- * GS_FACE_BLOCKS_MAX blocks), so the bytes do not depend on the thread
- * count. A block's MLP activations lie at its first row's offset in
- * fe_act / fp_act (block-major: gs_mlp_act_size(m, 1) floats a row), its
- * MLP scratch at 2 r0 widest floats in the MLP part of c->scratch. Sums
- * over Gaussians (the MLP weights' gradients, the code's, the gaze
- * encoding's) are taken per block and then added block by block. */
-#define GS_FACE_BLOCK_MIN 1024
-#define GS_FACE_BLOCKS_MAX 16
-
-static int face_block_rows(int nf)
-{
-    int r = (nf + GS_FACE_BLOCKS_MAX - 1) / GS_FACE_BLOCKS_MAX;
-    return r > GS_FACE_BLOCK_MIN ? r : GS_FACE_BLOCK_MIN;
-}
-
-static size_t mlp_param_count(const gs_mlp *m)
-{
-    size_t n = 0;
-    for (int l = 0; l < m->nl; l++)
-        n += (size_t)m->dims[l] * m->dims[l + 1] + (size_t)m->dims[l + 1];
-    return n;
-}
-
-int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
-{
-    const gs_model_config *k = &m->cfg;
-    const gs_model_params *p = &m->p;
-    int fail = 0;
-    c->m = m;
-    c->nf = k->n_face;
-    c->ne = k->two_stream ? 2 * k->n_eye_each : 0;
-    c->n = c->nf + c->ne;
-    c->nl = gs_model_n_lid(k);
-    c->nl0 = k->n_lid0;
-    c->nm = c->nf - c->nl;
-    c->F = k->feat_dim;
-    c->D = gs_model_code_dim(k);
-    c->C = k->channels;
-    c->fs = k->feat_size;
-    c->S = k->image_size;
-    size_t nf = (size_t)c->nf, ne = (size_t)(c->ne ? c->ne : 1),
-           n = (size_t)c->n;
-    c->fe_out = falloc(nf * GS_FACE_OUT(c->C), &fail);
-    c->fp_out = falloc(nf * GS_FACE_OUT(c->C), &fail);
-    c->fblk = face_block_rows(c->nf);
-    c->nfblk = c->nf > 0 ? (c->nf + c->fblk - 1) / c->fblk : 0;
-    c->e_in = falloc(ne * p->eye.dims[0], &fail);
-    c->e_act = falloc(gs_mlp_act_size(&p->eye, (int)ne), &fail);
-    c->e_out = falloc(ne * GS_EYE_OUT(c->C), &fail);
-    for (int e = 0; e < 2; e++)
-        c->er_act[e] = falloc(gs_mlp_act_size(&p->eye_rot[e], 1), &fail);
-    c->g_mean = falloc(n * 3, &fail);
-    c->g_scale = falloc(n * 3, &fail);
-    c->g_quat = falloc(n * 4, &fail);
-    c->g_opac = falloc(n, &fail);
-    c->g_feat = falloc(n * c->C, &fail);
-    c->x_head = falloc(n * 3, &fail);
-    c->q_head = falloc(nf * 4, &fail);
-    size_t fsz = (size_t)c->fs * c->fs, isz = (size_t)c->S * c->S;
-    c->bg = falloc(fsz * c->C, &fail);
-    c->fmap = falloc(fsz * c->C, &fail);
-    c->v_fmap = falloc(fsz * c->C, &fail);
-    c->alpha = falloc(fsz, &fail);
-    c->rgb = falloc(isz * 3, &fail);
-    c->v_rgb = falloc(isz * 3, &fail);
-    c->scr = calloc(1, sizeof *c->scr);
-    if (c->scr)
-        c->scr->refs = 1;
-    else
-        fail = 1;
-    c->fmap_face = falloc(fsz * c->C, &fail);
-    c->v_fmap_face = falloc(fsz * c->C, &fail);
-    c->alpha_face = falloc(fsz, &fail);
-    c->bg_crop = falloc(fsz * c->C, &fail);
-    c->gvec = falloc((size_t)c->C, &fail);
-    c->rgb8 = malloc(isz * 3);
-    c->fbox = calloc(nf ? nf : 1, 4 * sizeof(int16_t));
-    c->k_mean = falloc(n * 3, &fail);
-    c->k_scale = falloc(n * 3, &fail);
-    c->k_quat = falloc(n * 4, &fail);
-    c->k_opac = falloc(n, &fail);
-    c->k_feat = falloc(n * c->C, &fail);
-    c->sweep_n = GS_MODEL_SWEEP_CACHE_DEFAULT;
-    c->ss = m->cfg.supersample > 1 ? m->cfg.supersample : 1;
-    c->render_fs = c->face_map_fs = c->ss * c->fs;
-    c->xfer_head_w = GS_XFER_HEAD_WEIGHT_DEFAULT;
-    c->xfer_eye_w = GS_XFER_EYE_WEIGHT_DEFAULT;
-    c->xfer_warp_deg = GS_XFER_EYE_WARP_DEG_DEFAULT;
-    c->xfer_warp_head = GS_XFER_EYE_WARP_HEAD_DEFAULT;
-    int h0 = p->eye.dims[1], fd = c->F + c->D;
-    c->eye_w0 = falloc((size_t)h0 * fd, &fail);
-    c->eye_base = falloc(ne * h0, &fail);
-    c->eye_v = falloc((size_t)h0, &fail);
-    for (int o = 0; c->eye_w0 && o < h0; o++) /* W0's [f | tau] columns */
-        memcpy(c->eye_w0 + (size_t)o * fd, p->eye.w[0] + (size_t)o * p->eye.dims[0],
-               (size_t)fd * sizeof(float));
-    c->raster = gs_raster_create();
-    c->raster_face = gs_raster_create();
-    c->raster_crop = gs_raster_create();
-    c->raster_eye = gs_raster_create();
-    if (fail || !c->rgb8 || !c->fbox || !c->raster || !c->raster_face || !c->raster_crop ||
-        !c->raster_eye)
-        return GS_ERR_NOMEM;
-    const gs_renderer_config *rc = &m->rcfg;
-    c->src_mode = c->ne > 0 && rc->guidance != GS_GUIDE_NONE &&
-                  rc->guide_source == GS_GUIDE_SRC_SOURCE;
-    /* the incremental path rasterizes crops at fs: point-sampled maps only */
-    c->eye_direct = c->ne > 0 && m->cfg.eye_direct;
-    c->inc_ok = c->ne > 0 && (rc->guidance == GS_GUIDE_NONE || c->src_mode) &&
-                c->ss == 1;
-    /* White RGB background, zero for the other channels. */
-    for (size_t i = 0; i < 3 * fsz; i++)
-        c->bg[i] = 1.0f;
-    c->face_valid = 0;
-    return GS_OK;
-}
-
-/* ---- what only fitting and training use ----
- *
- * A context renders with the buffers gs_frame_ctx_init makes. A backward
- * needs more: the face MLPs' inputs and activations of every row (a render
- * runs each block through a scratch of its pool thread instead), the
- * Gaussians' and the blocks' gradients, the backward's scratch, the
- * eye-only map and the renderer's full activation buffer (a render's
- * forward keeps nothing: gs_renderer_fwd_size). train_alloc makes them at
- * the first training forward; gs_model_ctx_trim frees them. Either way a
- * render computes the same bytes. */
-static void train_free(gs_model_ctx *c)
-{
-    float **b[] = {&c->fe_in, &c->fe_act, &c->fp_in, &c->fp_act,
-                   &c->v_mean, &c->v_scale, &c->v_quat, &c->v_opac,
-                   &c->v_feat, &c->r_grad, &c->blk_grad, &c->blk_red,
-                   &c->scratch, &c->fmap_eye, &c->v_fmap_eye, &c->alpha_eye,
-                   &c->lid_save, &c->r_act};
-    for (size_t i = 0; i < sizeof b / sizeof b[0]; i++) {
-        free(*b[i]);
-        *b[i] = NULL;
-    }
-    c->r_act_len = 0;
-    c->train_ready = 0;
-    c->train_bytes = 0;
-}
-
-/* falloc, counting the floats into *tb */
-static float *talloc(size_t n, size_t *tb, int *fail)
-{
-    *tb += n;
-    return falloc(n, fail);
-}
-
-static int train_alloc(gs_model_ctx *c)
-{
-    if (c->train_ready)
-        return GS_OK;
-    const gs_model *m = c->m;
-    const gs_model_params *p = &m->p;
-    size_t nf = (size_t)c->nf, ne = (size_t)(c->ne ? c->ne : 1),
-           n = (size_t)c->n, fsz = (size_t)c->fs * c->fs;
-    int fail = 0;
-    size_t tb = 0; /* floats */
-    c->fe_in = talloc(nf * p->face_e.dims[0], &tb, &fail);
-    c->fe_act = talloc(gs_mlp_act_size(&p->face_e, c->nf), &tb, &fail);
-    c->fp_in = talloc(nf * p->face_p.dims[0], &tb, &fail);
-    c->fp_act = talloc(gs_mlp_act_size(&p->face_p, c->nf), &tb, &fail);
-    size_t pe = mlp_param_count(&p->face_e), pp = mlp_param_count(&p->face_p);
-    c->blk_grad_len = pe > pp ? pe : pp;
-    c->blk_grad = talloc((size_t)c->nfblk * c->blk_grad_len, &tb, &fail);
-    c->blk_red = talloc((size_t)c->nfblk * (size_t)(c->D + GS_PE_DIM(2)), &tb, &fail);
-    c->v_mean = talloc(n * 3, &tb, &fail);
-    c->v_scale = talloc(n * 3, &tb, &fail);
-    c->v_quat = talloc(n * 4, &tb, &fail);
-    c->v_opac = talloc(n, &tb, &fail);
-    c->v_feat = talloc(n * c->C, &tb, &fail);
-    size_t rn = gs_renderer_param_count(&m->rcfg);
-    c->r_grad = talloc(rn, &tb, &fail);
-    if (c->r_grad)
-        gs_renderer_bind(&m->rcfg, c->r_grad, rn, &c->r_grad_p);
-    size_t sc = gs_mlp_scratch_size(&p->face_e, c->nf);
-    size_t s2 = gs_mlp_scratch_size(&p->face_p, c->nf);
-    size_t s3 = gs_mlp_scratch_size(&p->eye, (int)ne);
-    sc = sc > s2 ? sc : s2;
-    sc = sc > s3 ? sc : s3;
-    size_t blk = nf * (size_t)p->face_e.dims[0];
-    size_t cand[] = {nf * (size_t)p->face_p.dims[0],
-                     ne * (size_t)p->eye.dims[0],
-                     nf * (size_t)GS_FACE_OUT(c->C),
-                     ne * (size_t)GS_EYE_OUT(c->C)};
-    for (int i = 0; i < 4; i++)
-        blk = cand[i] > blk ? cand[i] : blk;
-    c->scratch_blk = blk;
-    c->scratch_len = sc + 2 * blk;
-    c->scratch = talloc(c->scratch_len, &tb, &fail);
-    c->fmap_eye = talloc(fsz * c->C, &tb, &fail);
-    c->v_fmap_eye = talloc(fsz * c->C, &tb, &fail);
-    c->alpha_eye = talloc(fsz, &tb, &fail);
-    c->lid_save = talloc((size_t)(c->nl ? c->nl : 1) * 7, &tb, &fail);
-    c->r_act_len = gs_renderer_act_size(&m->rcfg, c->fs, c->fs);
-    c->r_act = talloc(c->r_act_len, &tb, &fail);
-    if (fail) {
-        train_free(c);
-        return GS_ERR_NOMEM;
-    }
-    c->train_ready = 1;
-    c->train_bytes = tb * sizeof(float);
-    return GS_OK;
-}
-
-int gs_model_ctx_trim(gs_model_ctx *c)
-{
-    if (!c)
-        return GS_OK;
-    train_free(c);
-    /* the records training forwards kept for their backwards */
-    gs_raster *r[] = {c->raster, c->raster_face, c->raster_eye, c->raster_crop,
-                      c->raster_cov, c->raster_dir};
-    for (size_t i = 0; i < sizeof r / sizeof r[0]; i++)
-        gs_raster_trim(r[i]);
-    return GS_OK;
-}
-
-/* ---- a render's scratch ----
- * A render (no backward follows) needs the renderer's forward-only buffer
- * and, for the face stream, each pool thread's scratch for one block's MLP
- * inputs and activations; nothing in them outlives the call, so contexts
- * that are never used at the same time can share them
- * (gs_model_ctx_share_scratch). Made, or grown, at first need. */
-static int scratch_grow(float **buf, size_t *len, size_t need)
-{
-    if (*len >= need)
-        return GS_OK;
-    float *b = calloc(need ? need : 1, sizeof(float));
-    if (!b)
-        return GS_ERR_NOMEM;
-    free(*buf);
-    *buf = b;
-    *len = need;
-    return GS_OK;
-}
-
-static void scratch_release(gs_ctx_scratch *s)
-{
-    if (s && --s->refs == 0) {
-        free(s->act);
-        free(s->face);
-        free(s);
-    }
-}
-
-/* The renderer's buffer of a forward: the training one when the context
- * has it (it also serves renders), else the scratch's forward-only one. */
-static int render_acts(gs_model_ctx *c, float **acts, size_t *len)
-{
-    if (c->r_act) {
-        *acts = c->r_act, *len = c->r_act_len;
-        return GS_OK;
-    }
-    gs_ctx_scratch *s = c->scr;
-    if (scratch_grow(&s->act, &s->act_len, gs_renderer_fwd_size(&c->m->rcfg, c->fs, c->fs)))
-        return GS_ERR_NOMEM;
-    *acts = s->act, *len = s->act_len;
-    return GS_OK;
-}
-
-int gs_model_ctx_share_scratch(gs_model_ctx *c, gs_model_ctx *with)
-{
-    if (!c || !with)
-        return GS_ERR_ARG;
-    if (c->scr == with->scr)
-        return GS_OK;
-    scratch_release(c->scr);
-    c->scr = with->scr;
-    c->scr->refs++;
-    return GS_OK;
-}
-
-/* A render's face stream: each pool thread's scratch for one block's MLP
- * inputs and activations (the context keeps no rows for a backward). */
-static size_t face_scratch_each(const gs_model_ctx *c)
-{
-    const gs_model_params *p = &c->m->p;
-    return (size_t)c->fblk * (size_t)(p->face_e.dims[0] + p->face_p.dims[0]) +
-           gs_mlp_act_size(&p->face_e, c->fblk) +
-           gs_mlp_act_size(&p->face_p, c->fblk);
-}
-
-static int face_scratch(gs_model_ctx *c, int threads)
-{
-    gs_ctx_scratch *s = c->scr;
-    return scratch_grow(&s->face, &s->face_len, (size_t)threads * face_scratch_each(c));
-}
-
-void gs_model_ctx_destroy(gs_model_ctx *c)
-{
-    if (!c)
-        return;
-    train_free(c);
-    float **bufs[] = {&c->fe_in, &c->fe_act, &c->fe_out, &c->fp_in,
-                      &c->fp_act, &c->fp_out, &c->e_in, &c->e_act, &c->e_out,
-                      &c->er_act[0], &c->er_act[1], &c->g_mean, &c->g_scale,
-                      &c->g_quat, &c->g_opac, &c->g_feat, &c->x_head,
-                      &c->q_head, &c->v_mean, &c->v_scale, &c->v_quat,
-                      &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
-                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_grad,
-                      &c->scratch, &c->fmap_face, &c->v_fmap_face,
-                      &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
-                      &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,
-                      &c->k_scale, &c->k_quat, &c->k_opac, &c->k_feat,
-                      &c->eye_w0, &c->eye_base, &c->eye_v,
-                      &c->v_fmap_m, &c->v_fmap_face_m, &c->v_feat_keep,
-                      &c->blk_grad, &c->blk_red};
-    for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
-        free(*bufs[i]);
-    free(c->rgb8);
-    free(c->fbox);
-    scratch_release(c->scr);
-    free(c->cov_ind), free(c->cov_bg), free(c->cover), free(c->v_ind);
-    free(c->ss_buf);
-    free(c->dir_feat), free(c->dir_vfeat), free(c->dir_out), free(c->dir_alpha);
-    free(c->dir_bg), free(c->rgb_main), free(c->dir_dmain), free(c->dir_d);
-    free(c->anc_fmap), free(c->anc_rgb);
-    gs_raster_destroy(c->raster_dir);
-    gs_raster_destroy(c->raster_cov);
-    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
-        sweep_slot_free(&c->slots[i]);
-    free(c->slots);
-    gs_raster_destroy(c->raster);
-    gs_raster_destroy(c->raster_face);
-    gs_raster_destroy(c->raster_crop);
-    gs_raster_destroy(c->raster_eye);
-    if (c->xfer)
-        c->xfer_free(c->xfer);
-    free(c);
-}
-
-gs_model_ctx *gs_model_ctx_create(const gs_model *m)
-{
-    if (!m)
-        return NULL;
-    gs_model_ctx *c = calloc(1, sizeof *c);
-    if (!c)
-        return NULL;
-    if (gs_frame_ctx_init(c, m) != GS_OK) {
-        gs_model_ctx_destroy(c);
-        return NULL;
-    }
-    return c;
-}
-
 void gs_frame_camera(const gs_model *m, const double head_t[3],
                      gs_camera *cam)
 {
@@ -503,7 +128,6 @@ static void face_assemble(gs_model_ctx *c, const double qR[4], int from,
 static void to_camera(gs_model_ctx *c, const gs_frame *fr, int from, int to,
                       const double qR[4]);
 
-static size_t face_scratch_each(const gs_model_ctx *c);
 static void face_fwd_task(void *ctx, int b, int worker)
 {
     const face_fwd_job *j = ctx;
@@ -520,7 +144,7 @@ static void face_fwd_task(void *ctx, int b, int worker)
         eact = c->fe_act + gs_mlp_act_size(&p->face_e, r0);
         pact = c->fp_act + gs_mlp_act_size(&p->face_p, r0);
     } else {
-        ein = c->scr->face + (size_t)worker * face_scratch_each(c);
+        ein = c->scr->face + (size_t)worker * gs_ctx_face_scratch_each(c);
         pin = ein + (size_t)c->fblk * de;
         eact = pin + (size_t)c->fblk * dp;
         pact = eact + gs_mlp_act_size(&p->face_e, c->fblk);
@@ -542,7 +166,7 @@ static void face_fwd_task(void *ctx, int b, int worker)
 static int face_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                         const double qR[4])
 {
-    if (!c->fe_act && face_scratch(c, gs_pool_threads(pool)))
+    if (!c->fe_act && gs_ctx_face_scratch(c, gs_pool_threads(pool)))
         return GS_ERR_NOMEM;
     double rvec[3];
     float pe[GS_PE_DIM(3) + GS_PE_DIM(2)];
@@ -805,7 +429,7 @@ static int streams_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 int gs_frame_forward_streams(gs_model_ctx *c, gs_pool *pool,
                              const gs_frame *fr, int force_face)
 {
-    if (train_alloc(c))
+    if (gs_ctx_train_alloc(c))
         return GS_ERR_NOMEM;
     return streams_forward(c, pool, fr, force_face);
 }
@@ -1038,14 +662,14 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
                       gs_error *err)
 {
     if (force_face) /* training: the parameters change between calls */
-        sweep_drop(c);
+        gs_sweep_drop(c);
     else /* fmap, rgb and g_* are overwritten: keep the render elsewhere */
-        sweep_stash(c);
+        gs_sweep_stash(c);
     c->inc_valid = 0;
     c->rgb8_valid = 0;
     c->cover_valid = 0;
     c->dir_valid = 0;
-    if (!render && train_alloc(c))
+    if (!render && gs_ctx_train_alloc(c))
         return gs_error_set(err, GS_ERR_NOMEM,
                             "model: out of memory for the training buffers");
     if (streams_forward(c, pool, fr, force_face))
@@ -1083,7 +707,7 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     }
     float *acts;
     size_t alen;
-    if (render_acts(c, &acts, &alen))
+    if (gs_ctx_render_acts(c, &acts, &alen))
         return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
     rc = gs_renderer_forward_src(&c->m->rcfg, &c->m->p.rend, c->fmap,
                                  fr->code, c->used_src ? c->fmap_face : NULL,
@@ -1360,7 +984,7 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
                    (size_t)w * sizeof(float));
     float *acts;
     size_t alen;
-    int rc = render_acts(c, &acts, &alen);
+    int rc = gs_ctx_render_acts(c, &acts, &alen);
     if (rc)
         return rc;
     rc = gs_renderer_forward_vec(&c->m->rcfg, &c->m->p.rend, x, c->gvec, h, w,
@@ -1378,254 +1002,6 @@ static int render_box(gs_model_ctx *c, gs_pool *pool, const int d[4])
     if (c->anc_valid)
         gs_frame_box_union(c->anc_rbox, keep);
     return GS_OK;
-}
-
-static int same_subject_pose(const gs_frame *a, const gs_frame *b)
-{
-    return !memcmp(a->code, b->code, sizeof a->code) &&
-           !memcmp(a->head_R, b->head_R, sizeof a->head_R) &&
-           !memcmp(a->head_t, b->head_t, sizeof a->head_t);
-}
-
-/* ---- other subjects' renders (the sweep cache) ---- */
-
-static void swap_f(float **a, float **b)
-{
-    float *t = *a;
-    *a = *b, *b = t;
-}
-
-/* Exchanges the live render state with slot s's. */
-static void sweep_swap(gs_model_ctx *c, gs_sweep_slot *s)
-{
-    swap_f(&c->g_mean, &s->g_mean), swap_f(&c->g_scale, &s->g_scale);
-    swap_f(&c->g_quat, &s->g_quat), swap_f(&c->g_opac, &s->g_opac);
-    swap_f(&c->g_feat, &s->g_feat), swap_f(&c->fmap, &s->fmap);
-    swap_f(&c->rgb, &s->rgb), swap_f(&c->gvec, &s->gvec);
-    swap_f(&c->eye_base, &s->eye_base);
-    swap_f(&c->x_head, &s->x_head), swap_f(&c->q_head, &s->q_head);
-    swap_f(&c->rgb_main, &s->rgb_main);
-    float code[GS_MODEL_MAX_CODE];
-    memcpy(code, c->eye_base_code, sizeof code);
-    memcpy(c->eye_base_code, s->eye_base_code, sizeof code);
-    memcpy(s->eye_base_code, code, sizeof code);
-    int16_t *fb = c->fbox;
-    c->fbox = s->fbox, s->fbox = fb;
-    uint8_t *r8 = c->rgb8;
-    c->rgb8 = s->rgb8, s->rgb8 = r8;
-    gs_frame key = c->inc_key;
-    c->inc_key = s->key, s->key = key;
-    int t = c->inc_valid, r[4];
-    c->inc_valid = s->valid, s->valid = t;
-    memcpy(r, c->inc_rect, sizeof r), memcpy(c->inc_rect, s->rect, sizeof r);
-    memcpy(s->rect, r, sizeof r);
-    t = c->rgb8_valid, c->rgb8_valid = s->rgb8_valid, s->rgb8_valid = t;
-    t = c->eye_base_valid, c->eye_base_valid = s->eye_base_valid;
-    s->eye_base_valid = t;
-    float tf[6];
-    memcpy(tf, c->rgb8_tf, sizeof tf), memcpy(c->rgb8_tf, s->rgb8_tf, sizeof tf);
-    memcpy(s->rgb8_tf, tf, sizeof tf);
-    memcpy(r, c->rgb_dirty, sizeof r), memcpy(c->rgb_dirty, s->rgb_dirty, sizeof r);
-    memcpy(s->rgb_dirty, r, sizeof r);
-    memcpy(r, c->dir_box, sizeof r), memcpy(c->dir_box, s->dir_box, sizeof r);
-    memcpy(s->dir_box, r, sizeof r);
-    swap_f(&c->anc_fmap, &s->anc_fmap), swap_f(&c->anc_rgb, &s->anc_rgb);
-    t = c->anc_valid, c->anc_valid = s->anc_valid, s->anc_valid = t;
-    int *cb[] = {c->anc_rect, c->anc_fbox, c->anc_rbox}, *sb[] = {s->anc_rect, s->anc_fbox, s->anc_rbox};
-    for (int i = 0; i < 3; i++)
-        memcpy(r, cb[i], sizeof r), memcpy(cb[i], sb[i], sizeof r), memcpy(sb[i], r, sizeof r);
-    /* the face cache's outputs are not what g_* now holds */
-    c->face_valid = 0;
-    c->face_map_valid = 0;
-}
-
-static void sweep_slot_free(gs_sweep_slot *s)
-{
-    float *f[] = {s->g_mean, s->g_scale, s->g_quat, s->g_opac,
-                  s->g_feat, s->fmap, s->rgb, s->gvec, s->eye_base,
-                  s->x_head, s->q_head, s->rgb_main, s->anc_fmap, s->anc_rgb};
-    for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
-        free(f[i]);
-    free(s->fbox);
-    free(s->rgb8);
-    memset(s, 0, sizeof *s);
-}
-
-/* Buffers of the live state's sizes for slot s. */
-static int sweep_slot_alloc(const gs_model_ctx *c, gs_sweep_slot *s)
-{
-    size_t n = (size_t)c->n, fsz = (size_t)c->fs * c->fs,
-           isz = (size_t)c->S * c->S;
-    int fail = 0;
-    s->g_mean = falloc(n * 3, &fail), s->g_scale = falloc(n * 3, &fail);
-    s->g_quat = falloc(n * 4, &fail), s->g_opac = falloc(n, &fail);
-    s->g_feat = falloc(n * c->C, &fail);
-    s->fmap = falloc(fsz * c->C, &fail), s->rgb = falloc(isz * 3, &fail);
-    s->gvec = falloc((size_t)c->C, &fail);
-    s->eye_base = falloc((size_t)(c->ne ? c->ne : 1) * c->m->p.eye.dims[1], &fail);
-    /* the lids turn the face stream's head-frame ones (lid_forward) */
-    s->x_head = falloc(n * 3, &fail);
-    s->q_head = falloc((size_t)(c->nf ? c->nf : 1) * 4, &fail);
-    s->fbox = calloc((size_t)(c->nf ? c->nf : 1), 4 * sizeof(int16_t));
-    s->rgb8 = malloc(isz * 3);
-    if (c->eye_direct) /* the renderer's image under the eye stream's */
-        s->rgb_main = falloc(isz * 3, &fail);
-    if (fail || !s->fbox || !s->rgb8) {
-        sweep_slot_free(s);
-        return GS_ERR_NOMEM;
-    }
-    return GS_OK;
-}
-
-/* Forgets every kept render (the parameters may change: training). */
-static void sweep_drop(gs_model_ctx *c)
-{
-    c->inc_valid = 0;
-    c->eye_base_valid = 0;
-    if (c->xfer)
-        c->xfer_invalidate(c->xfer);
-    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
-        c->slots[i].valid = c->slots[i].eye_base_valid = 0;
-}
-
-/* Puts the live render (if any) into a free or the least recently used
- * slot before something overwrites it; with no slot to spare it is lost.
- * Afterwards the live state is not valid. */
-static void sweep_stash(gs_model_ctx *c)
-{
-    if (!c->inc_valid || c->sweep_n < 2)
-        return;
-    if (!c->slots) {
-        c->slots = calloc((size_t)c->sweep_n - 1, sizeof *c->slots);
-        if (!c->slots)
-            return;
-    }
-    gs_sweep_slot *v = NULL;
-    for (int i = 0; i < c->sweep_n - 1; i++) {
-        gs_sweep_slot *s = &c->slots[i];
-        if (!s->valid) {
-            v = s;
-            break;
-        }
-        if (!v || s->used < v->used)
-            v = s;
-    }
-    if (!v || (!v->g_mean && sweep_slot_alloc(c, v) != GS_OK))
-        return;
-    sweep_swap(c, v);
-    v->used = ++c->sweep_clock;
-    c->inc_valid = 0;
-}
-
-/* Makes fr's subject and pose the live render state when a slot has it;
- * otherwise stashes the live one. */
-static void sweep_select(gs_model_ctx *c, const gs_frame *fr)
-{
-    for (int i = 0; c->slots && i < c->sweep_n - 1; i++) {
-        gs_sweep_slot *s = &c->slots[i];
-        if (s->valid && same_subject_pose(&s->key, fr)) {
-            sweep_swap(c, s);
-            s->used = ++c->sweep_clock;
-            return;
-        }
-    }
-    sweep_stash(c);
-}
-
-int gs_model_ctx_set_sweep_cache(gs_model_ctx *c, int n, gs_error *err)
-{
-    if (!c || n < 1 || n > GS_MODEL_MAX_SWEEP_CACHE)
-        return gs_error_set(err, GS_ERR_ARG,
-                            "sweep cache of %d subjects outside 1..%d", n,
-                            GS_MODEL_MAX_SWEEP_CACHE);
-    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
-        sweep_slot_free(&c->slots[i]);
-    free(c->slots);
-    c->slots = NULL;
-    c->sweep_n = n;
-    c->inc_valid = 0;
-    return GS_OK;
-}
-
-void gs_model_render_options_default(gs_model_render_options *o)
-{
-    memset(o, 0, sizeof *o);
-    o->feature_scale = 1.0;
-    o->transfer_head_weight = GS_XFER_HEAD_WEIGHT_DEFAULT;
-    o->transfer_eye_weight = GS_XFER_EYE_WEIGHT_DEFAULT;
-    o->transfer_eye_warp_deg = GS_XFER_EYE_WARP_DEG_DEFAULT;
-    o->transfer_eye_warp_head = GS_XFER_EYE_WARP_HEAD_DEFAULT;
-}
-
-int gs_model_ctx_set_render_options(gs_model_ctx *c,
-                                    const gs_model_render_options *o,
-                                    gs_error *err)
-{
-    if (!c || !o)
-        return gs_error_set(err, GS_ERR_ARG, "render options: NULL argument");
-    double s = o->feature_scale;
-    long fsr = s > 0 && s <= 1 ? lround(s * c->fs) : 0;
-    if (s == 1) /* the model's own sampling */
-        fsr = (long)c->ss * c->fs;
-    if (s == 2 || s == 3 || s == 4) /* supersampled: s x s per pixel */
-        fsr = (long)s * c->fs;
-    if (fsr < 4 || (s < 1 && fsr > c->fs))
-        return gs_error_set(err, GS_ERR_ARG,
-                            "feature scale %g: want (0, 1] and at least 4 "
-                            "of the %d feature pixels, or 2, 3 or 4 "
-                            "(supersampled)", s, c->fs);
-    double hw = o->transfer_head_weight;
-    if (!(hw >= 0 && hw <= 1))
-        return gs_error_set(err, GS_ERR_ARG,
-                            "transfer head weight %g: want [0, 1]", hw);
-    double ew = o->transfer_eye_weight;
-    if (!(ew >= 0 && ew <= 1))
-        return gs_error_set(err, GS_ERR_ARG,
-                            "transfer eye weight %g: want [0, 1]", ew);
-    double wd = o->transfer_eye_warp_deg;
-    if (!(wd >= 0 && wd <= 90))
-        return gs_error_set(err, GS_ERR_ARG,
-                            "transfer eye warp %g deg: want [0, 90] (0: off)",
-                            wd);
-    if (o->transfer_eye_warp_head != 0 && o->transfer_eye_warp_head != 1)
-        return gs_error_set(err, GS_ERR_ARG,
-                            "transfer eye warp at a head change %d: want 0 "
-                            "or 1", o->transfer_eye_warp_head);
-    sweep_drop(c); /* kept renders were made with the old settings */
-    c->render_fs = (int)fsr;
-    c->xfer_head_w = (float)hw;
-    c->xfer_eye_w = (float)ew;
-    c->xfer_warp_deg = wd;
-    c->xfer_warp_head = o->transfer_eye_warp_head;
-    c->render_full = o->full != 0;
-    return GS_OK;
-}
-
-void gs_model_ctx_reset(gs_model_ctx *c)
-{
-    if (!c)
-        return;
-    sweep_drop(c);
-    c->face_valid = 0;
-    c->face_map_valid = 0;
-    c->rgb8_valid = 0;
-}
-
-void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st)
-{
-    memset(st, 0, sizeof *st);
-    if (!c)
-        return;
-    st->renders_full = c->n_full;
-    st->renders_incremental = c->n_inc;
-    st->last_incremental = c->last_inc;
-    st->transfers_full = c->n_xfer_full;
-    st->transfers_incremental = c->n_xfer_inc;
-    st->last_transfer_incremental = c->last_xfer_inc;
-    for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
-        st->sweep_kept += c->slots[i].valid;
-    st->sweep_kept += c->inc_valid;
-    st->train_bytes = c->train_bytes;
 }
 
 /* ---- rendering for display ---- */
@@ -1699,7 +1075,7 @@ static int render_full(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     if (c->src_mode) {
         float *acts;
         size_t alen;
-        if (render_acts(c, &acts, &alen))
+        if (gs_ctx_render_acts(c, &acts, &alen))
             return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
         rc = gs_renderer_guide_vector(&c->m->rcfg, &c->m->p.rend,
                                       c->fmap_face, fr->code, c->fs, c->fs,
@@ -1764,10 +1140,10 @@ int gs_frame_wants_anchor(const gs_model_ctx *c, const gs_frame *fr)
 {
     if (!c->inc_ok || c->render_fs != c->fs || c->render_full || c->eye_direct)
         return 0;
-    if (c->inc_valid && same_subject_pose(&c->inc_key, fr))
+    if (c->inc_valid && gs_frame_same_subject_pose(&c->inc_key, fr))
         return 0;
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)
-        if (c->slots[i].valid && same_subject_pose(&c->slots[i].key, fr))
+        if (c->slots[i].valid && gs_frame_same_subject_pose(&c->slots[i].key, fr))
             return 0;
     return 1;
 }
@@ -1788,9 +1164,9 @@ int gs_frame_render(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         c->n_full += rc == GS_OK;
         return rc;
     }
-    if (!c->inc_valid || !same_subject_pose(&c->inc_key, fr))
-        sweep_select(c, fr);
-    inc = c->inc_valid && same_subject_pose(&c->inc_key, fr);
+    if (!c->inc_valid || !gs_frame_same_subject_pose(&c->inc_key, fr))
+        gs_sweep_select(c, fr);
+    inc = c->inc_valid && gs_frame_same_subject_pose(&c->inc_key, fr);
     rc = inc ? render_inc(c, pool, fr, err) : render_full(c, pool, fr, err);
     if (rc)
         return rc;
@@ -1890,7 +1266,7 @@ static void face_bwd_task(void *ctx, int b, int worker)
     memset(&gb, 0, sizeof gb);
     if (j->weights) {
         memset(c->blk_grad + (size_t)b * c->blk_grad_len, 0,
-               mlp_param_count(mlp) * sizeof(float));
+               gs_mlp_param_count(mlp) * sizeof(float));
         block_grads(c, mlp, b, &gb);
     }
     float *din = j->need_din ? dinp + (size_t)r0 * dw : NULL;
@@ -2241,25 +1617,6 @@ void gs_frame_mirror_code(float *code, int code_dim)
         l[3 * k] = -l[3 * k];
 }
 
-int gs_frame_set_feature_mask(gs_model_ctx *c, const float *mask,
-                              gs_error *err)
-{
-    c->feat_mask = NULL;
-    if (!mask)
-        return GS_OK;
-    size_t fsz = (size_t)c->fs * c->fs * c->C;
-    int fail = 0;
-    if (!c->v_fmap_m)
-        c->v_fmap_m = falloc(fsz, &fail);
-    if (!c->v_fmap_face_m)
-        c->v_fmap_face_m = falloc(fsz, &fail);
-    if (!c->v_feat_keep)
-        c->v_feat_keep = falloc((size_t)c->n * c->C, &fail);
-    if (fail)
-        return gs_error_set(err, GS_ERR_NOMEM, "model: out of memory");
-    c->feat_mask = mask;
-    return GS_OK;
-}
 
 /* dst = src with every channel's pixels outside the mask zeroed. */
 static void mask_map(const float *src, const float *mask, int C, size_t plane,
@@ -2310,7 +1667,7 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
         return gs_error_set(err, GS_ERR_ARG,
                             "model: a feature mask with the eye-only map");
     if (grads) /* parameter gradients: training, the parameters change */
-        sweep_drop(c);
+        gs_sweep_drop(c);
     if (d_fmap)
         memcpy(c->v_fmap, d_fmap, fsz * sizeof(float));
     else

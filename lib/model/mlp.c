@@ -154,3 +154,11 @@ void gs_model_pe_backward(const double *x, int n, const float *dout,
         d += 2 * n;
     }
 }
+
+size_t gs_mlp_param_count(const gs_mlp *m)
+{
+    size_t n = 0;
+    for (int l = 0; l < m->nl; l++)
+        n += (size_t)m->dims[l] * m->dims[l + 1] + (size_t)m->dims[l + 1];
+    return n;
+}

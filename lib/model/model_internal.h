@@ -267,6 +267,8 @@ void gs_model_light_to_view(float *code, int code_dim, const double R_s[9],
 /* Activation floats an MLP needs for a batch of n (pre-activations of the
  * hidden layers, post-activations, output). */
 size_t gs_mlp_act_size(const gs_mlp *m, int n);
+/* The MLP's weights and biases, floats. */
+size_t gs_mlp_param_count(const gs_mlp *m);
 /* out[n, dims[nl]] from in[n, dims[0]]; LeakyReLU 0.01 after hidden
  * layers. acts: gs_mlp_act_size floats, kept for the backward. */
 void gs_mlp_forward(const gs_mlp *m, const float *in, int n, float *acts,

@@ -3,7 +3,7 @@
  * a scene's light and full code (gs_model_light_code, gs_model_scene_code)
  * and a training identity's subject. The fit's code prior (prior.c) and
  * the evaluation read these; serving them needs none of the training loop
- * (train.c), so a program that fits and renders links no training code. */
+ * (lib/train), so a program that fits and renders links no training code. */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
 #include <stdio.h>

@@ -9,6 +9,9 @@
   components of more than one file (Tarjan's algorithm).
 - long functions: every function over 120 lines in lib/ and daemon/ must
   be named in LONG_OK with the reason it stays long (a hot kernel).
+- the serving path and training: no file of SERVING calls a function that
+  the training module (lib/train) defines, so gazesplatd and the live
+  engine link no training code.
 
 usage: test_structure.py ROOT          check the tree, exit 1 on a finding
        test_structure.py --self-test   the checker finds a made-up circle
@@ -22,6 +25,8 @@ import sys
 import tempfile
 
 CHECKED = ["lib/model", "daemon"]
+TRAINING = "lib/train"
+SERVING = ["lib/model", "lib/redirect", "lib/face", "lib/capture", "daemon"]
 LIMIT = 120
 # Hot kernels that stay whole: splitting them would cost a call per
 # Gaussian or per pixel, or break the one pass the code is built around.
@@ -125,8 +130,26 @@ def long_functions(root, folders=("lib", "daemon")):
     return out
 
 
+def training_calls(root):
+    """[(file, names)] of SERVING's files that call functions lib/train defines."""
+    defs = set()
+    for f in sorted(glob.glob(os.path.join(root, TRAINING, "*.c"))):
+        defs.update(m.group(1) for m in DEF_RE.finditer(strip_comments(open(f).read())))
+    out = []
+    for folder in SERVING:
+        for f in sorted(glob.glob(os.path.join(root, folder, "*.c"))):
+            src = strip_comments(open(f).read())
+            names = sorted(n for n in defs if re.search(r"\b" + n + r"\s*\(", src))
+            if names:
+                out.append((os.path.relpath(f, root), names))
+    return out
+
+
 def check(root, verbose=False):
     bad = 0
+    for f, names in training_calls(root):
+        bad += 1
+        print("%s calls the training module (%s): %s" % (f, TRAINING, ", ".join(names)))
     for folder in CHECKED:
         e = arrows(os.path.join(root, folder))
         if verbose:
@@ -162,12 +185,16 @@ def self_test():
         body = "".join("    x += %d;\n" % i for i in range(130))
         open(os.path.join(t, "daemon", "long.c"), "w").write("int gsd_long(int x)\n{\n%s    return x;\n}\n"
                                                              % body)
+        os.makedirs(os.path.join(t, "lib", "train"))
+        open(os.path.join(t, "lib", "train", "train.c"), "w").write("int gs_train_x(void)\n{\n    return 0;\n}\n")
+        open(os.path.join(t, "daemon", "serve.c"), "w").write("int gsd_serve(void)\n{\n    return gs_train_x();\n}\n")
         e = arrows(d)
-        ok = circles(e) == [[os.path.join(d, "a.c"), os.path.join(d, "b.c")]]
+        ok = training_calls(t) == [("daemon/serve.c", ["gs_train_x"])]
+        ok = ok and circles(e) == [[os.path.join(d, "a.c"), os.path.join(d, "b.c")]]
         ok = ok and (os.path.join(d, "c.c"), os.path.join(d, "a.c")) not in e
         lf = long_functions(t)
         ok = ok and [w for _, w in lf] == ["daemon/long.c:gsd_long"]
-        ok = ok and check(t) == 2
+        ok = ok and check(t) == 3
         print("self-test:", "ok" if ok else "FAILED")
         return 0 if ok else 1
 

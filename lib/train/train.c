@@ -23,7 +23,7 @@
 #include <time.h>
 
 #include "gazesplat/clock.h"
-#include "frame.h"
+#include "../model/frame.h"
 #include "gazesplat/gaze.h"
 #include "gazesplat/nn.h"
 #include "gazesplat/safetensors.h"
