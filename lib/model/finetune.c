@@ -366,9 +366,9 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
     rc = ft_ones_init(&r, f, s, im, k, o.mirror);
     if (rc)
         rc = gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
-    double t0 = gs_clock_s(), best = INFINITY, first = NAN;
+    gs_opt_watch w;
+    gs_opt_watch_start(&w, o.plateau_rel, o.time_budget_s, gs_clock_s());
     float psnr_first = NAN, psnr_best = NAN;
-    double hist[20];
     int it = 0, stopped_on_time = 0, plateaued = 0;
     for (; !rc && it <= iters; it++) {
         if (o.cancel && o.cancel(o.cancel_arg)) {
@@ -394,27 +394,23 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "finetune diverged at step %d (loss %g, "
-                              "first %g)", it, loss, first);
+                              "first %g)", it, loss, w.first);
             break;
         }
-        if (it == 0) {
-            first = loss;
+        if (it == 0)
             psnr_first = psnr_now;
-        }
-        if (loss < best) {
-            best = loss;
+        if (gs_opt_watch_best(&w, it, loss)) {
             psnr_best = psnr_now;
             if (it > 0)
                 ft_pack(&r, r.best, 0);
         }
         if (it == iters)
             break; /* the last step's result is measured, not stepped from */
-        hist[it % 20] = loss;
-        if (o.plateau_rel > 0 && it >= 20 && hist[(it + 1) % 20] - loss < o.plateau_rel * loss) {
+        if (gs_opt_watch_plateau(&w, it, loss)) {
             plateaued = 1;
             break;
         }
-        if (o.time_budget_s > 0 && gs_clock_s() - t0 > o.time_budget_s) {
+        if (gs_opt_watch_over_time(&w, gs_clock_s())) {
             stopped_on_time = 1;
             break;
         }
@@ -439,8 +435,8 @@ int gs_model_finetune_images(gs_model *m, gs_pool *pool, const gs_subject *s,
     if (!rc)
         m->tuned |= parts;
     if (report) {
-        *report = (gs_finetune_report){.iters = it, .seconds = gs_clock_s() - t0,
-                                       .loss_first = first, .loss_best = best,
+        *report = (gs_finetune_report){.iters = it, .seconds = gs_clock_s() - w.t0,
+                                       .loss_first = w.first, .loss_best = w.best,
                                        .psnr_first = psnr_first, .psnr_best = psnr_best,
                                        .params_tuned = r.tuned, .stopped_on_time = stopped_on_time,
                                        .stopped_on_plateau = plateaued};

@@ -616,8 +616,9 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
         return gs_error_set(err, GS_ERR_NOMEM, "fit: out of memory");
     }
     fit_images_init(c, im, k, &o, f);
-    double t0 = gs_clock_s(), best_loss = INFINITY, first = NAN, hist[20];
-    int it = 0, plateaued = 0, halvings = 0, since = 0, on_time = 0;
+    gs_opt_watch w;
+    gs_opt_watch_start(&w, plateau, o.time_budget_s, gs_clock_s());
+    int it = 0, plateaued = 0, halvings = 0, on_time = 0;
     for (; it < iters; it++) {
         if (o.cancel && o.cancel(o.cancel_arg)) {
             rc = gs_error_set(err, GS_ERR_CANCELLED,
@@ -640,31 +641,25 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
         if (!isfinite(loss)) {
             rc = gs_error_set(err, GS_ERR_NONFINITE,
                               "fit diverged at iteration %d (loss %g, first "
-                              "%g)", it, loss, first);
+                              "%g)", it, loss, w.first);
             break;
         }
-        if (it == 0)
-            first = loss;
-        if (loss < best_loss) {
-            best_loss = loss;
+        if (gs_opt_watch_best(&w, it, loss))
             for (int i = 0; i < k; i++)
                 f[i].best = f[i].s;
-        }
-        hist[it % 20] = loss;
-        if (it >= 20 && it - since >= 20 &&
-            hist[(it + 1) % 20] - loss < plateau * loss) {
+        if (gs_opt_watch_plateau(&w, it, loss)) {
             if (halvings == o.anneal) {
                 plateaued = 1;
                 break;
             }
             /* anneal: the steps shrink and the fit goes on from here */
             halvings++;
-            since = it;
+            gs_opt_watch_restart(&w, it);
             for (int i = 0; i < k; i++)
                 for (int j = 0; j < f[i].s.n; j++)
                     f[i].s.lr[j] *= 0.5;
         }
-        if (o.time_budget_s > 0 && gs_clock_s() - t0 > o.time_budget_s) {
+        if (gs_opt_watch_over_time(&w, gs_clock_s())) {
             on_time = it + 1 < iters;
             break;
         }
@@ -679,9 +674,9 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
     if (report) {
         memset(report, 0, sizeof *report);
         report->iters = it;
-        report->seconds = gs_clock_s() - t0;
-        report->loss_first = first;
-        report->loss_last = best_loss;
+        report->seconds = gs_clock_s() - w.t0;
+        report->loss_first = w.first;
+        report->loss_last = w.best;
         report->stopped_on_plateau = plateaued;
         report->stopped_on_time = on_time;
         report->halvings = halvings;
