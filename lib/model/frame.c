@@ -405,12 +405,20 @@ static int streams_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
 {
     double qR[4];
     mat_to_quat(fr->head_R, qR);
-    if (force_face || !c->face_valid || !same_face_key(c, fr)) {
+    /* A cached face stream serves a training forward only when its
+     * activations went into the training buffers: one a render computed
+     * without them (each block through a thread's scratch), or one from
+     * before gs_model_ctx_trim freed them, would leave the backward other
+     * activations (every fit's first step is at the same frame: a fit
+     * stopped there and run again got another gradient). */
+    int saved = !c->fe_act || c->face_saved;
+    if (force_face || !c->face_valid || !saved || !same_face_key(c, fr)) {
         c->face_valid = 0;
         if (face_forward(c, pool, fr, qR))
             return GS_ERR_NOMEM;
         c->face_key = *fr;
         c->face_valid = 1;
+        c->face_saved = c->fe_act != NULL;
         c->face_fresh = 1;
         c->face_map_valid = 0;
         c->inc_valid = 0; /* g_* no longer holds inc_key's face */

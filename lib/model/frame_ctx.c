@@ -153,6 +153,7 @@ static void train_free(gs_model_ctx *c)
     c->r_act_len = 0;
     c->train_ready = 0;
     c->train_bytes = 0;
+    c->face_saved = 0; /* the face cache's activations went with them */
 }
 
 /* falloc, counting the floats into *tb */

@@ -219,6 +219,9 @@ struct gs_model_ctx {
     gs_frame fr;
     int stream;
     int face_valid;                   /* fe/fp outputs match fr */
+    int face_saved;                   /* and its MLP activations are in the
+                                         training buffers (fe_act, fp_act),
+                                         which a backward reads */
     gs_frame face_key;                /* the frame the face cache is for */
     uint8_t *rgb8;                    /* [S, S, 3] */
     gs_xfer *xfer;                    /* gs_model_render_transfer, lazily */

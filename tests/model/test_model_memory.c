@@ -3,7 +3,9 @@
  * or inline) never holds the buffers only fitting and training use; a fit
  * makes them, gs_model_ctx_trim frees them, and the renders, the fits and
  * the fine-tunes are the same bytes whatever a context held before; a
- * backward without a training forward is refused. */
+ * backward without a training forward is refused; a training forward
+ * whose face stream the context has cached from a render, or from before
+ * a trim, has the gradients of a fresh context. */
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -201,6 +203,70 @@ static void check_shared(gs_model *m)
     free(ra), free(rb), free(got);
 }
 
+/* The frame's code, pose and gaze gradients after a training forward in
+ * c, from one fixed image gradient. */
+static void frame_grads(gs_model_ctx *c, const gs_frame *fr, const float *drgb, gs_frame_grad *fg)
+{
+    gs_error err = {0, ""};
+    memset(fg, 0, sizeof *fg);
+    CHECK_MSG(gs_frame_forward(c, NULL, fr, GS_STREAM_BOTH, 0, &err) == GS_OK, "%s", err.msg);
+    CHECK_MSG(gs_frame_backward(c, NULL, drgb, NULL, NULL, NULL, NULL, fg, &err) == GS_OK, "%s",
+              err.msg);
+}
+
+static void same_grads(const gs_frame_grad *a, const gs_frame_grad *b, const char *what)
+{
+    CHECK_MSG(!memcmp(a, b, sizeof *a), "%s: the frame's gradients differ (code[0] %.9g against %.9g)",
+              what, (double)a->code[0], (double)b->code[0]);
+}
+
+/* The face stream is cached by (code, head pose); a training forward's
+ * backward reads the face MLPs' activations, which only a forward with the
+ * training buffers saves. Hard cases: the same frame after the buffers were
+ * trimmed (a fit stopped after its first step, then fitted again: every
+ * fit starts at the same frame), and after a render of that frame with no
+ * training buffers (a fit that starts at a rendered subject). */
+static void check_face_cache(gs_model *m)
+{
+    int S = m->cfg.image_size;
+    gs_frame fr;
+    frame_default(m, &fr);
+    float *drgb = malloc(sizeof(float) * 3 * (size_t)S * S);
+    uint8_t *rgb = malloc(3 * (size_t)S * S);
+    CHECK(drgb && rgb);
+    for (size_t i = 0; i < 3 * (size_t)S * S; i++)
+        drgb[i] = 0.01f * (float)((int)(i % 13) - 6);
+    gs_frame_grad ref, got;
+    gs_model_ctx *c = gs_model_ctx_create(m);
+    frame_grads(c, &fr, drgb, &ref);
+    gs_model_ctx_destroy(c);
+    c = gs_model_ctx_create(m);
+    gs_frame other = fr;
+    other.code[0] += 0.3f;
+    frame_grads(c, &other, drgb, &got);
+    frame_grads(c, &fr, drgb, &got);
+    same_grads(&ref, &got, "after another frame");
+    gs_model_ctx_trim(c);
+    frame_grads(c, &fr, drgb, &got);
+    same_grads(&ref, &got, "the same frame after a trim");
+    gs_model_ctx_trim(c);
+    /* one kept render: nothing is stashed before the training forward */
+    CHECK_EQ_INT(gs_model_ctx_set_sweep_cache(c, 1, NULL), GS_OK);
+    gs_subject s = frame_subject(m);
+    gs_view v;
+    memset(&v, 0, sizeof v);
+    v.gaze_pitch = fr.gaze[0];
+    v.gaze_yaw = fr.gaze[1];
+    gs_error err = {0, ""};
+    CHECK_MSG(gs_model_render(c, NULL, &s, &v, rgb, 3 * (size_t)S, &err) == GS_OK, "%s", err.msg);
+    CHECK_EQ_INT(train_bytes(c), 0);
+    frame_grads(c, &fr, drgb, &got);
+    same_grads(&ref, &got, "the frame of a render made without training buffers");
+    printf("  a cached face stream: the gradients of a fresh context after a trim and a render\n");
+    gs_model_ctx_destroy(c);
+    free(drgb), free(rgb);
+}
+
 int main(void)
 {
     gs_nn_blas_set_threads(1);
@@ -210,11 +276,15 @@ int main(void)
         check_model(m, "two streams, SOURCE guidance");
     if (m)
         check_shared(m);
+    if (m)
+        check_face_cache(m);
     gs_model_destroy(m);
     m = with_lids(tiny_model(GS_GUIDE_MULTIPLICATIVE, 8));
     CHECK(m != NULL);
     if (m)
         check_model(m, "with lids, multiplicative guidance");
+    if (m)
+        check_face_cache(m);
     gs_model_destroy(m);
     GS_TEST_END();
 }
