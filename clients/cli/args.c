@@ -82,6 +82,40 @@ int cli_parse(const cli_command *cmd, int argc, char **argv, cli_opt *opts, int 
     return CLI_PARSED;
 }
 
+/* cli_run's argv, for cli_command_line: the one command a process runs. */
+static int run_argc;
+static char **run_argv;
+
+void cli_command_line(char *buf, size_t cap)
+{
+    size_t n = (size_t)snprintf(buf, cap, "gazesplat");
+    for (int i = 0; i < run_argc && n < cap; i++)
+        n += (size_t)snprintf(buf + n, cap - n, " %s", run_argv[i]);
+}
+
+int cli_run(const cli_command *cmd, int argc, char **argv)
+{
+    run_argc = argc;
+    run_argv = argv;
+    if (!cmd->run_opts)
+        return cmd->run(argc, argv);
+    cli_opt o[CLI_OPTS_MAX];
+    if (cmd->nopts < 0 || cmd->nopts > CLI_OPTS_MAX) {
+        fprintf(stderr, "gazesplat %s: %d options, more than the %d a command may have\n",
+                cmd->name, cmd->nopts, CLI_OPTS_MAX);
+        return CLI_FAIL;
+    }
+    memcpy(o, cmd->opts, (size_t)cmd->nopts * sizeof o[0]);
+    int rc = cli_parse(cmd, argc, argv, o, cmd->nopts);
+    if (rc == CLI_HELP) {
+        fputs(cmd->usage, stdout);
+        return CLI_OK;
+    }
+    if (rc != CLI_PARSED)
+        return rc;
+    return cmd->run_opts(cmd, o);
+}
+
 /* One float from s up to a comma or the end; *end is set past it. */
 static int parse_one_float(const char *s, float *out, const char **end)
 {

@@ -12,13 +12,43 @@
  * CLI_OUTLIERS, check-labels found more outliers than allowed. */
 enum { CLI_OK = 0, CLI_FAIL = 1, CLI_USAGE = 2, CLI_REFUSED = 3, CLI_OUTLIERS = 4 };
 
-/* One subcommand. run gets argv[0] = the command name. */
-typedef struct cli_command {
+/* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */
+typedef struct cli_opt {
+    const char *name;   /* with the dashes */
+    int takes_value;
+    const char *value;  /* NULL until seen; "" for a seen flag */
+} cli_opt;
+
+/* One subcommand. Most name their options (opts, nopts) and a run_opts:
+ * cli_run parses argv against a copy of opts, answers --help/-h with the
+ * usage on stdout (exit 0) and a bad option with a usage error (exit 2),
+ * and hands run_opts the filled copy. A command that reads its own argv
+ * (client: a verb first) gives run instead, which gets argv[0] = the
+ * command name. */
+typedef struct cli_command cli_command;
+struct cli_command {
     const char *name;
     const char *summary; /* one line for the command list */
     const char *usage;   /* full help text, first line "usage: gazesplat ..." */
     int (*run)(int argc, char **argv);
-} cli_command;
+    const cli_opt *opts;
+    int nopts;
+    int (*run_opts)(const cli_command *cmd, cli_opt *o);
+};
+
+/* The entries of an option table (an array, not a pointer). */
+#define CLI_NOPTS(t) ((int)(sizeof(t) / sizeof((t)[0])))
+
+/* The most options one command takes (augment: 29). */
+enum { CLI_OPTS_MAX = 64 };
+
+/* Runs cmd on argv (argv[0] = the command name) as its definition says
+ * (above); returns the exit status. */
+int cli_run(const cli_command *cmd, int argc, char **argv);
+
+/* The command line cli_run ran ("gazesplat NAME ARG..." as given, cut at
+ * cap), for a command's report; "gazesplat" outside cli_run. */
+void cli_command_line(char *buf, size_t cap);
 
 /* The subcommands, defined in their own files. */
 extern const cli_command cli_face_command;
@@ -40,13 +70,6 @@ extern const cli_command cli_model_command;
 extern const cli_command cli_augment_command;
 extern const cli_command cli_eval_photos_command;
 extern const cli_command cli_check_labels_command;
-
-/* An option of a command: "--name VALUE", "--name=VALUE", or a flag. */
-typedef struct cli_opt {
-    const char *name;   /* with the dashes */
-    int takes_value;
-    const char *value;  /* NULL until seen; "" for a seen flag */
-} cli_opt;
 
 /* CLI_HELP is no exit status (every command turns it into CLI_OK); it is
  * negative so that it can never be read as one (CLI_REFUSED is 3). */

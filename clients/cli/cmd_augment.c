@@ -42,7 +42,18 @@
 #include "gazesplat/nn.h"
 #include "gazesplat/xgaze_h5.h"
 
-static int run_augment(int argc, char **argv);
+static int run_augment(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt augment_opts[] = {
+    {"--model", 1, NULL}, {"--input", 1, NULL}, {"--out", 1, NULL}, {"--grid", 1, NULL},
+    {"--gaze-deg", 1, NULL}, {"--uniform", 1, NULL}, {"--per-image", 1, NULL},
+    {"--targets", 1, NULL}, {"--head-deg", 1, NULL}, {"--head-uniform", 1, NULL},
+    {"--labels", 1, NULL}, {"--format", 1, NULL}, {"--shard", 1, NULL}, {"--seed", 1, NULL},
+    {"--iters", 1, NULL}, {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL},
+    {"--no-transfer", 0, NULL}, {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},
+    {"--threads", 1, NULL}, {"--size", 1, NULL}, {"--addr", 1, NULL}, {"--token", 1, NULL},
+    {"--merge", 1, NULL}, {"--no-gate", 0, NULL}, {"--quality", 0, NULL}, {"--retries", 1, NULL},
+    {"--min-quality", 1, NULL}};
 
 const cli_command cli_augment_command = {
     "augment",
@@ -147,7 +158,9 @@ const cli_command cli_augment_command = {
     "\n"
     "Exit status: 0 done, 1 a failure (named with its file and line or row;\n"
     "the sources done are kept), 2 bad usage, 3 a source the gate refused.\n",
-    run_augment,
+    .opts = augment_opts,
+    .nopts = CLI_NOPTS(augment_opts),
+    .run_opts = run_augment,
 };
 
 #define DEG (3.14159265358979323846 / 180.0)
@@ -2013,27 +2026,11 @@ static void job_free(job *j)
     gs_model_destroy(j->model);
 }
 
-static int run_augment(int argc, char **argv)
+_Static_assert(CLI_NOPTS(augment_opts) == O_N, "augment_opts: one entry per option index");
+
+static int run_augment(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_augment_command;
-    cli_opt o[O_N] = {
-        {"--model", 1, NULL},   {"--input", 1, NULL},        {"--out", 1, NULL},
-        {"--grid", 1, NULL},    {"--gaze-deg", 1, NULL},     {"--uniform", 1, NULL},
-        {"--per-image", 1, NULL}, {"--targets", 1, NULL},    {"--head-deg", 1, NULL},
-        {"--head-uniform", 1, NULL}, {"--labels", 1, NULL},  {"--format", 1, NULL},
-        {"--shard", 1, NULL},   {"--seed", 1, NULL},         {"--iters", 1, NULL},
-        {"--finetune", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--no-transfer", 0, NULL},
-        {"--fit-labels", 0, NULL}, {"--h5-rgb", 0, NULL},    {"--threads", 1, NULL},
-        {"--size", 1, NULL},    {"--addr", 1, NULL},         {"--token", 1, NULL},
-        {"--merge", 1, NULL},   {"--no-gate", 0, NULL},      {"--quality", 0, NULL},
-        {"--retries", 1, NULL}, {"--min-quality", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (o[O_MERGE].value) {
         long n;
         for (int i = 0; i < O_N; i++)

@@ -19,7 +19,13 @@
 #define DEG 57.29577951308232
 #define MAX_LABELS_BYTES ((size_t)4 << 30)
 
-static int run_check(int argc, char **argv);
+static int run_check(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt check_opts[] = {
+    {"--dir", 1, NULL}, {"--labels", 1, NULL}, {"--h5", 1, NULL}, {"--h5-rgb", 0, NULL},
+    {"--estimator", 1, NULL}, {"--readout", 1, NULL}, {"--threshold", 1, NULL},
+    {"--max-outliers", 1, NULL}, {"--json", 1, NULL}, {"--list", 1, NULL}, {"--limit", 1, NULL},
+    {"--threads", 1, NULL}};
 
 const cli_command cli_check_labels_command = {
     "check-labels",
@@ -57,7 +63,9 @@ const cli_command cli_check_labels_command = {
     "gaze_norm_*, augment's gaze_cam_* (its camera is the normalized one),\n"
     "the HDF5's face_gaze. Errors are angles between 3D directions, degrees.\n"
     "Exit 0, 1 on bad input (file and line or row named), 4 over --max-outliers.\n",
-    run_check,
+    .opts = check_opts,
+    .nopts = CLI_NOPTS(check_opts),
+    .run_opts = run_check,
 };
 
 enum {
@@ -730,21 +738,14 @@ static int setup(checker *c, const cli_opt *o, double *thresh, double *maxout, l
     return CLI_PARSED;
 }
 
-static int run_check(int argc, char **argv)
+_Static_assert(CLI_NOPTS(check_opts) == O_N, "check_opts: one entry per option index");
+
+static int run_check(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[O_N] = {{"--dir", 1, NULL},      {"--labels", 1, NULL},    {"--h5", 1, NULL},
-                      {"--h5-rgb", 0, NULL},   {"--estimator", 1, NULL}, {"--readout", 1, NULL},
-                      {"--threshold", 1, NULL}, {"--max-outliers", 1, NULL},
-                      {"--json", 1, NULL},     {"--list", 1, NULL},      {"--limit", 1, NULL},
-                      {"--threads", 1, NULL}};
     checker c;
     memset(&c, 0, sizeof c);
-    c.cmd = &cli_check_labels_command;
-    int rc = cli_parse(c.cmd, argc, argv, o, O_N);
-    if (rc == CLI_HELP)
-        return fputs(c.cmd->usage, stdout), CLI_OK;
-    if (rc != CLI_PARSED)
-        return rc;
+    c.cmd = cmd;
+    int rc = CLI_OK;
     double thresh = 20.0, maxout = 1.0;
     long list = 20, limit = 0;
     const char *est_path = NULL;

@@ -74,7 +74,7 @@ const cli_command cli_client_command = {
     "  --deadline-ms N      per-request deadline\n"
     "\n"
     "Exit status: 0 success, 1 failure (a server ERROR included), 2 bad usage.\n",
-    run_client,
+    .run = run_client, /* a verb comes first: it reads its own argv */
 };
 
 enum {

@@ -15,7 +15,15 @@
 #include "gazesplat/eval.h"
 #include "gazesplat/nn.h"
 
-static int run_downstream(int argc, char **argv);
+static int run_downstream(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt downstream_opts[] = {
+    {"--model", 1, NULL}, {"--out", 1, NULL}, {"--estimator", 1, NULL}, {"--identities", 1, NULL},
+    {"--test-images", 1, NULL}, {"--set-size", 1, NULL}, {"--max-k", 1, NULL},
+    {"--steps", 1, NULL}, {"--batch", 1, NULL}, {"--lr", 1, NULL}, {"--real-fraction", 1, NULL},
+    {"--iters", 1, NULL}, {"--fit-lr", 1, NULL}, {"--seed", 1, NULL}, {"--threads", 1, NULL},
+    {"--reuse-fits", 0, NULL}, {"--first-identity", 1, NULL}, {"--kappa", 1, NULL},
+    {"--subject-from-k", 0, NULL}, {"--calibrate", 0, NULL}, {"--ks", 1, NULL}};
 
 const cli_command cli_eval_downstream_command = {
     "eval-downstream",
@@ -72,7 +80,9 @@ const cli_command cli_eval_downstream_command = {
     "                      labelled gaze over the fitted images, labelled the\n"
     "                      target; DIR/subjects.csv lists the offsets\n"
     "  --ks LIST           only these k, e.g. 1,3,9 (default 1..--max-k)\n",
-    run_downstream,
+    .opts = downstream_opts,
+    .nopts = CLI_NOPTS(downstream_opts),
+    .run_opts = run_downstream,
 };
 
 enum {
@@ -438,26 +448,12 @@ static int run_checked(ds_cli *d)
     return rc;
 }
 
-static int run_downstream(int argc, char **argv)
+_Static_assert(CLI_NOPTS(downstream_opts) == O_N, "downstream_opts: one entry per option index");
+
+static int run_downstream(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_eval_downstream_command;
-    cli_opt o[O_N] = {
-        {"--model", 1, NULL}, {"--out", 1, NULL}, {"--estimator", 1, NULL},
-        {"--identities", 1, NULL}, {"--test-images", 1, NULL},
-        {"--set-size", 1, NULL}, {"--max-k", 1, NULL},
-        {"--steps", 1, NULL}, {"--batch", 1, NULL}, {"--lr", 1, NULL},
-        {"--real-fraction", 1, NULL}, {"--iters", 1, NULL},
-        {"--fit-lr", 1, NULL}, {"--seed", 1, NULL}, {"--threads", 1, NULL},
-        {"--reuse-fits", 0, NULL}, {"--first-identity", 1, NULL},
-        {"--kappa", 1, NULL}, {"--subject-from-k", 0, NULL},
-        {"--calibrate", 0, NULL}, {"--ks", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    (void)cmd; /* parse and run_checked report as cli_eval_downstream_command */
+    int rc = CLI_OK;
     ds_cli d;
     memset(&d, 0, sizeof d);
     gs_eval_ds_options_default(&d.o);
@@ -467,8 +463,6 @@ static int run_downstream(int argc, char **argv)
     rc = parse(o, &d);
     if (rc)
         return rc;
-    size_t n = (size_t)snprintf(d.line, sizeof d.line, "gazesplat");
-    for (int i = 0; i < argc && n < sizeof d.line; i++)
-        n += (size_t)snprintf(d.line + n, sizeof d.line - n, " %s", argv[i]);
+    cli_command_line(d.line, sizeof d.line);
     return run_checked(&d);
 }

@@ -21,7 +21,24 @@
 
 #define RAD_TO_DEG (180.0 / 3.14159265358979323846)
 
-static int run_eval(int argc, char **argv);
+static int run_eval(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt eval_opts[] = {
+    {"--model", 1, NULL}, {"--pairs", 1, NULL}, {"--out", 1, NULL}, {"--estimator", 1, NULL},
+    {"--method", 1, NULL}, {"--limit-inputs", 1, NULL}, {"--iters", 1, NULL},
+    {"--fit-lr", 1, NULL}, {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
+    {"--save-images", 1, NULL}, {"--prune", 1, NULL}, {"--feature-scale", 1, NULL},
+    {"--full-render", 0, NULL}, {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
+    {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
+    {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
+    {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
+    {"--transfer-eye-warp-head", 1, NULL}, {"--finetune-outline", 1, NULL},
+    {"--finetune-mirror", 1, NULL}, {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
+    {"--readout-soft", 1, NULL}, {"--true-code", 1, NULL}, {"--true-code-start", 0, NULL},
+    {"--bound-expression", 0, NULL}, {"--code-prior", 1, NULL}, {"--id-prior", 1, NULL},
+    {"--fit-anneal", 1, NULL}, {"--fit-mirror", 1, NULL}, {"--fit-eye-weight", 1, NULL},
+    {"--make-pairs", 1, NULL}, {"--identities", 1, NULL}, {"--inputs", 1, NULL},
+    {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
 
 const cli_command cli_eval_command = {
     "eval",
@@ -165,7 +182,9 @@ const cli_command cli_eval_command = {
     "                    first identities the model was trained on, a\n"
     "                    diagnostic (what it draws for faces it has seen),\n"
     "                    never a held-out figure\n",
-    run_eval,
+    .opts = eval_opts,
+    .nopts = CLI_NOPTS(eval_opts),
+    .run_opts = run_eval,
 };
 
 enum {
@@ -723,14 +742,6 @@ static int make_dir(const char *path)
            (stat(path, &st) == 0 && S_ISDIR(st.st_mode));
 }
 
-/* The command line as run, for the summary. */
-static void command_line(int argc, char **argv, char *buf, size_t cap)
-{
-    size_t n = (size_t)snprintf(buf, cap, "gazesplat");
-    for (int i = 0; i < argc && n < cap; i++)
-        n += (size_t)snprintf(buf + n, cap - n, " %s", argv[i]);
-}
-
 /* Number of inputs to run and the pair count they cover. */
 static int count_inputs(const gs_eval_pairs *ps, long limit, int *npairs)
 {
@@ -944,40 +955,11 @@ static int run_checked(const cli_opt *o, evaluator *ev, long limit,
     return rc;
 }
 
-static int run_eval(int argc, char **argv)
+_Static_assert(CLI_NOPTS(eval_opts) == O_N, "eval_opts: one entry per option index");
+
+static int run_eval(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_eval_command;
-    cli_opt o[O_N] = {
-        {"--model", 1, NULL},   {"--pairs", 1, NULL},  {"--out", 1, NULL},
-        {"--estimator", 1, NULL}, {"--method", 1, NULL},
-        {"--limit-inputs", 1, NULL}, {"--iters", 1, NULL},
-        {"--fit-lr", 1, NULL},
-        {"--threads", 1, NULL}, {"--reuse-fits", 0, NULL},
-        {"--save-images", 1, NULL}, {"--prune", 1, NULL},
-        {"--feature-scale", 1, NULL}, {"--full-render", 0, NULL},
-        {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
-        {"--finetune-lr", 1, NULL}, {"--finetune-eye-weight", 1, NULL},
-        {"--transfer-head-weight", 1, NULL}, {"--light-on-head", 0, NULL},
-        {"--transfer-eye-weight", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
-        {"--transfer-eye-warp-head", 1, NULL},
-        {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL},
-        {"--readout", 0, NULL}, {"--readout-shift", 1, NULL},
-        {"--readout-soft", 1, NULL},
-        {"--true-code", 1, NULL}, {"--true-code-start", 0, NULL},
-        {"--bound-expression", 0, NULL},
-        {"--code-prior", 1, NULL}, {"--id-prior", 1, NULL},
-        {"--fit-anneal", 1, NULL}, {"--fit-mirror", 1, NULL},
-        {"--fit-eye-weight", 1, NULL},
-        {"--make-pairs", 1, NULL},
-        {"--identities", 1, NULL}, {"--inputs", 1, NULL},
-        {"--targets", 1, NULL}, {"--seed", 1, NULL}, {"--split", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (o[O_MAKE].value) {
         for (int k = 0; k < O_MAKE; k++)
             if (o[k].value)
@@ -1118,7 +1100,7 @@ static int run_eval(int argc, char **argv)
                               &ev.read_opts.soft_max_px)))
         return rc;
     char line[2048];
-    command_line(argc, argv, line, sizeof line);
+    cli_command_line(line, sizeof line);
     eval_run_info info;
     memset(&info, 0, sizeof info);
     info.model = o[O_MODEL].value;

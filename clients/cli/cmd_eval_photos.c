@@ -25,7 +25,11 @@
 static const double grid_pitch[5] = {20, 10, 0, -10, -20};
 static const double grid_yaw[5] = {25, 15, 0, -15, -25};
 
-static int run_eval_photos(int argc, char **argv);
+static int run_eval_photos(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt eval_photos_opts[] = {
+    {"--model", 1, NULL}, {"--photos", 1, NULL}, {"--out-json", 1, NULL}, {"--iters", 1, NULL},
+    {"--finetune", 1, NULL}, {"--no-gate", 0, NULL}};
 
 const cli_command cli_eval_photos_command = {
     "eval-photos",
@@ -50,7 +54,9 @@ const cli_command cli_eval_photos_command = {
     "and more, iris delta E, speckle over the input's, the share of images\n"
     "the detector still finds a face in, and the mean and lowest quality\n"
     "score (docs/face.md, \"Redirect quality\").\n",
-    run_eval_photos,
+    .opts = eval_photos_opts,
+    .nopts = CLI_NOPTS(eval_photos_opts),
+    .run_opts = run_eval_photos,
 };
 
 typedef struct mode_stats {
@@ -334,18 +340,11 @@ static void json_face(FILE *f, const face_eval *fe, int first)
     fprintf(f, "}");
 }
 
-static int run_eval_photos(int argc, char **argv)
+_Static_assert(CLI_NOPTS(eval_photos_opts) == 6, "eval_photos_opts: one entry per option index");
+
+static int run_eval_photos(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_eval_photos_command;
-    cli_opt o[6] = {{"--model", 1, NULL},    {"--photos", 1, NULL},   {"--out-json", 1, NULL},
-                    {"--iters", 1, NULL},    {"--finetune", 1, NULL}, {"--no-gate", 0, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 6);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[0].value || !o[1].value)
         return cli_usage_error(cmd, "--model and --photos are needed");
     long iters = GS_REDIRECT_FIT_ITERS;

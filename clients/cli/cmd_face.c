@@ -9,7 +9,13 @@
 #include "gazesplat/face.h"
 #include "gazesplat/image_io.h"
 
-static int run_face(int argc, char **argv);
+static int run_face(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt face_opts[] = {
+    {"--image", 1, NULL}, {"--index", 1, NULL}, {"--box", 1, NULL}, {"--out-norm", 1, NULL},
+    {"--out-mask", 1, NULL}, {"--size", 1, NULL}, {"--focal", 1, NULL}, {"--cascade", 1, NULL},
+    {"--model", 1, NULL}, {"--min-size", 1, NULL}, {"--min-neighbors", 1, NULL},
+    {"--list", 0, NULL}, {"--json", 0, NULL}, {"--pose-model", 1, NULL}};
 
 const cli_command cli_face_command = {
     "face",
@@ -42,7 +48,9 @@ const cli_command cli_face_command = {
     "Angles are degrees in the ETH-XGaze convention (pitch > 0 up, yaw > 0\n"
     "toward image-left); the head translation is the face centre, mm.\n"
     "The landmark model was trained on iBUG 300-W: no commercial use.\n",
-    run_face,
+    .opts = face_opts,
+    .nopts = CLI_NOPTS(face_opts),
+    .run_opts = run_face,
 };
 
 enum {
@@ -267,37 +275,27 @@ static int analyze(const cli_opt *o, gs_face_opts *fo, face_run *r)
     return rc;
 }
 
-static int run_face(int argc, char **argv)
+_Static_assert(CLI_NOPTS(face_opts) == O_N, "face_opts: one entry per option index");
+
+static int run_face(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[O_N] = {{"--image", 1, NULL},   {"--index", 1, NULL},  {"--box", 1, NULL},
-                      {"--out-norm", 1, NULL}, {"--out-mask", 1, NULL}, {"--size", 1, NULL},
-                      {"--focal", 1, NULL},   {"--cascade", 1, NULL}, {"--model", 1, NULL},
-                      {"--min-size", 1, NULL}, {"--min-neighbors", 1, NULL},
-                      {"--list", 0, NULL}, {"--json", 0, NULL},
-                      {"--pose-model", 1, NULL}};
-    int rc = cli_parse(&cli_face_command, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cli_face_command.usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     gs_face_opts fo;
     rc = parse_opts(o, &fo);
     if (rc != CLI_PARSED)
         return rc;
     face_run *r = calloc(1, sizeof *r);
     if (!r)
-        return cli_fail(&cli_face_command, "out of memory");
+        return cli_fail(cmd, "out of memory");
     gs_error err = {0, ""};
     if (gs_io_image_read(o[O_IMAGE].value, NULL, &r->img, &err) != GS_OK) {
         free(r);
-        return cli_fail(&cli_face_command, "%s", err.msg);
+        return cli_fail(cmd, "%s", err.msg);
     }
     if (o[O_LIST].value && fo.use_box) {
         gs_io_image_free(&r->img);
         free(r);
-        return cli_usage_error(&cli_face_command, "--list needs the detector, not --box");
+        return cli_usage_error(cmd, "--list needs the detector, not --box");
     }
     rc = analyze(o, &fo, r);
     if (rc == CLI_LIST) {

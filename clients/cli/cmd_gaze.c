@@ -15,9 +15,17 @@
 
 #define DEG 57.29577951308232
 
-static int run_train_est(int argc, char **argv);
-static int run_estimate(int argc, char **argv);
-static int run_eval_est(int argc, char **argv);
+static int run_train_est(const cli_command *cmd, cli_opt *o);
+static int run_estimate(const cli_command *cmd, cli_opt *o);
+static int run_eval_est(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt train_est_opts[] = {
+    {"--arch", 1, NULL}, {"--out", 1, NULL}, {"--seed", 1, NULL}, {"--steps", 1, NULL},
+    {"--batch", 1, NULL}, {"--lr", 1, NULL}, {"--input", 1, NULL}, {"--cache", 1, NULL},
+    {"--fresh", 1, NULL}, {"--identities", 1, NULL}, {"--threads", 1, NULL},
+    {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL}, {"--resume", 0, NULL},
+    {"--widths", 1, NULL}, {"--hidden", 1, NULL}, {"--render-size", 1, NULL}, {"--white", 1, NULL},
+    {"--shift", 1, NULL}, {"--blur", 1, NULL}};
 
 const cli_command cli_train_estimator_command = {
     "train-estimator",
@@ -48,8 +56,13 @@ const cli_command cli_train_estimator_command = {
     "  --checkpoint N      save every N steps (500)\n"
     "  --log-every N       progress line every N steps (50)\n"
     "  --resume            continue the run saved in FILE and FILE.opt\n",
-    run_train_est,
+    .opts = train_est_opts,
+    .nopts = CLI_NOPTS(train_est_opts),
+    .run_opts = run_train_est,
 };
+
+static const cli_opt estimate_opts[] = {
+    {"--model", 1, NULL}, {"--image", 1, NULL}};
 
 const cli_command cli_estimate_command = {
     "estimate",
@@ -58,8 +71,14 @@ const cli_command cli_estimate_command = {
     "\n"
     "Prints gaze pitch, gaze yaw, head pitch, head yaw in degrees\n"
     "(normalized camera; pitch > 0 up, yaw > 0 toward image left).\n",
-    run_estimate,
+    .opts = estimate_opts,
+    .nopts = CLI_NOPTS(estimate_opts),
+    .run_opts = run_estimate,
 };
+
+static const cli_opt eval_est_opts[] = {
+    {"--model", 1, NULL}, {"--split", 1, NULL}, {"--count", 1, NULL}, {"--size", 1, NULL},
+    {"--seed", 1, NULL}, {"--threads", 1, NULL}, {"--csv", 1, NULL}, {"--white", 0, NULL}};
 
 const cli_command cli_eval_estimator_command = {
     "eval-estimator",
@@ -78,7 +97,9 @@ const cli_command cli_eval_estimator_command = {
     "\n"
     "Prints mean, median and 90th percentile of the angular gaze and head\n"
     "errors in degrees (angle between the 3D directions).\n",
-    run_eval_est,
+    .opts = eval_est_opts,
+    .nopts = CLI_NOPTS(eval_est_opts),
+    .run_opts = run_eval_est,
 };
 
 static void log_line(void *ctx, const char *fmt, ...)
@@ -106,22 +127,11 @@ static int opt_long(const cli_command *cmd, const cli_opt *o, long lo, long hi, 
     return 0;
 }
 
-static int run_train_est(int argc, char **argv)
+_Static_assert(CLI_NOPTS(train_est_opts) == T_N, "train_est_opts: one entry per option index");
+
+static int run_train_est(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[T_N] = {{"--arch", 1, NULL},    {"--out", 1, NULL},     {"--seed", 1, NULL},
-                      {"--steps", 1, NULL},   {"--batch", 1, NULL},   {"--lr", 1, NULL},
-                      {"--input", 1, NULL},   {"--cache", 1, NULL},   {"--fresh", 1, NULL},
-                      {"--identities", 1, NULL}, {"--threads", 1, NULL},
-                      {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
-                      {"--resume", 0, NULL}, {"--widths", 1, NULL}, {"--hidden", 1, NULL},
-                      {"--render-size", 1, NULL}, {"--white", 1, NULL}, {"--shift", 1, NULL},
-                      {"--blur", 1, NULL}};
-    const cli_command *cmd = &cli_train_estimator_command;
-    int rc = cli_parse(cmd, argc, argv, o, T_N);
-    if (rc == CLI_HELP)
-        return fputs(cmd->usage, stdout), CLI_OK;
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[T_OUT].value)
         return cli_usage_error(cmd, "missing --out");
     int arch = gs_gaze_arch_from_name(o[T_ARCH].value);
@@ -210,15 +220,11 @@ static int run_train_est(int argc, char **argv)
     return CLI_OK;
 }
 
-static int run_estimate(int argc, char **argv)
+_Static_assert(CLI_NOPTS(estimate_opts) == 2, "estimate_opts: one entry per option index");
+
+static int run_estimate(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[2] = {{"--model", 1, NULL}, {"--image", 1, NULL}};
-    const cli_command *cmd = &cli_estimate_command;
-    int rc = cli_parse(cmd, argc, argv, o, 2);
-    if (rc == CLI_HELP)
-        return fputs(cmd->usage, stdout), CLI_OK;
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[0].value || !o[1].value)
         return cli_usage_error(cmd, "need --model and --image");
     gs_error err = {0, ""};
@@ -385,17 +391,11 @@ static int eval_run(const cli_command *cmd, eval_set *es, const gs_synth_gen_con
     return CLI_OK;
 }
 
-static int run_eval_est(int argc, char **argv)
+_Static_assert(CLI_NOPTS(eval_est_opts) == E_N, "eval_est_opts: one entry per option index");
+
+static int run_eval_est(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[E_N] = {{"--model", 1, NULL}, {"--split", 1, NULL}, {"--count", 1, NULL},
-                      {"--size", 1, NULL},  {"--seed", 1, NULL},  {"--threads", 1, NULL},
-                      {"--csv", 1, NULL},   {"--white", 0, NULL}};
-    const cli_command *cmd = &cli_eval_estimator_command;
-    int rc = cli_parse(cmd, argc, argv, o, E_N);
-    if (rc == CLI_HELP)
-        return fputs(cmd->usage, stdout), CLI_OK;
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     static eval_set es;
     memset(&es, 0, sizeof es);
     if (!o[E_MODEL].value || split_models(o[E_MODEL].value, &es))

@@ -42,9 +42,15 @@ static const char usage[] =
     "Events and statistics go to stderr, one line each, prefixed with the\n"
     "monotonic time in seconds.\n";
 
-static int run_live(int argc, char **argv);
+static int run_live(const cli_command *cmd, cli_opt *o);
+static const cli_opt live_opts[] = {
+    {"--in", 1, NULL}, {"--out", 1, NULL}, {"--size", 1, NULL}, {"--fps", 1, NULL},
+    {"--format", 1, NULL}, {"--seconds", 1, NULL}, {"--stats", 1, NULL}, {"--no-hotplug", 0, NULL},
+    {"--hotplug-any", 0, NULL}, {"--sysfs", 1, NULL}, {"--model", 1, NULL}, {"--policy", 1, NULL}};
+
 const cli_command cli_live_command = {"live", "stream a camera to a v4l2loopback device",
-                                      usage, run_live};
+                                      usage, .opts = live_opts, .nopts = CLI_NOPTS(live_opts),
+                                      .run_opts = run_live};
 
 static volatile sig_atomic_t stop_flag;
 
@@ -196,21 +202,11 @@ static void loop(gs_cap_pipe *p, gs_live_stage *st, long seconds, long stats_eve
     print_live(st);
 }
 
-static int run_live(int argc, char **argv)
+_Static_assert(CLI_NOPTS(live_opts) == O_COUNT, "live_opts: one entry per option index");
+
+static int run_live(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_live_command;
-    cli_opt o[O_COUNT] = {{"--in", 1, NULL},      {"--out", 1, NULL},     {"--size", 1, NULL},
-                          {"--fps", 1, NULL},     {"--format", 1, NULL},  {"--seconds", 1, NULL},
-                          {"--stats", 1, NULL},   {"--no-hotplug", 0, NULL},
-                          {"--hotplug-any", 0, NULL}, {"--sysfs", 1, NULL},
-                          {"--model", 1, NULL},   {"--policy", 1, NULL}};
-    int r = cli_parse(cmd, argc, argv, o, O_COUNT);
-    if (r == CLI_HELP) {
-        fputs(usage, stdout);
-        return CLI_OK;
-    }
-    if (r != CLI_PARSED)
-        return r;
+    int r = CLI_OK;
     if (!o[O_IN].value)
         return cli_usage_error(cmd, "--in is required");
     gs_cap_config c = gs_cap_config_default(NULL);

@@ -10,7 +10,11 @@
 #include "gazesplat/model.h"
 #include "gazesplat/train.h"
 
-static int run_model(int argc, char **argv);
+static int run_model(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt model_opts[] = {
+    {"--model", 1, NULL}, {"--fit-code-prior", 1, NULL}, {"--fit-code-rate", 1, NULL},
+    {"--out", 1, NULL}};
 
 const cli_command cli_model_command = {
     "model",
@@ -34,7 +38,9 @@ const cli_command cli_model_command = {
     "                      (its colour rate stays 0.02)\n"
     "  --out OUT           where the copy goes (written atomically; may be\n"
     "                      FILE itself); the parameters are the same bytes\n",
-    run_model,
+    .opts = model_opts,
+    .nopts = CLI_NOPTS(model_opts),
+    .run_opts = run_model,
 };
 
 enum { O_MODEL, O_PRIOR, O_RATE, O_OUT, O_N };
@@ -77,18 +83,11 @@ static int parse_rate(const cli_command *cmd, const char *v, double *out)
     return CLI_OK;
 }
 
-static int run_model(int argc, char **argv)
+_Static_assert(CLI_NOPTS(model_opts) == O_N, "model_opts: one entry per option index");
+
+static int run_model(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[O_N] = {{"--model", 1, NULL}, {"--fit-code-prior", 1, NULL},
-                      {"--fit-code-rate", 1, NULL}, {"--out", 1, NULL}};
-    const cli_command *cmd = &cli_model_command;
-    int rc = cli_parse(cmd, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[O_MODEL].value)
         return cli_usage_error(cmd, "missing --model");
     const int set = o[O_PRIOR].value || o[O_RATE].value;

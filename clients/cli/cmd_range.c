@@ -14,7 +14,13 @@
 #include "cli.h"
 #include "gazesplat/eval.h"
 
-static int run_range(int argc, char **argv);
+static int run_range(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt range_opts[] = {
+    {"--model", 1, NULL}, {"--out", 1, NULL}, {"--sources", 1, NULL}, {"--per-source", 1, NULL},
+    {"--targets", 1, NULL}, {"--tests", 1, NULL}, {"--per-test", 1, NULL}, {"--steps", 1, NULL},
+    {"--batch", 1, NULL}, {"--lr", 1, NULL}, {"--iters", 1, NULL}, {"--seed", 1, NULL},
+    {"--threads", 1, NULL}, {"--save-estimators", 0, NULL}};
 
 const cli_command cli_eval_range_command = {
     "eval-range",
@@ -48,7 +54,9 @@ const cli_command cli_eval_range_command = {
     "  --threads N         worker threads (2); the numbers are the same for\n"
     "                      any count\n"
     "  --save-estimators   keep the four trained estimators\n",
-    run_range,
+    .opts = range_opts,
+    .nopts = CLI_NOPTS(range_opts),
+    .run_opts = run_range,
 };
 
 enum {
@@ -239,22 +247,11 @@ static int write_outputs(const char *out, const char *line, const char *model,
     return CLI_OK;
 }
 
-static int run_range(int argc, char **argv)
+_Static_assert(CLI_NOPTS(range_opts) == O_N, "range_opts: one entry per option index");
+
+static int run_range(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_eval_range_command;
-    cli_opt o[O_N] = {
-        {"--model", 1, NULL},  {"--out", 1, NULL},     {"--sources", 1, NULL},
-        {"--per-source", 1, NULL}, {"--targets", 1, NULL}, {"--tests", 1, NULL},
-        {"--per-test", 1, NULL}, {"--steps", 1, NULL}, {"--batch", 1, NULL},
-        {"--lr", 1, NULL},     {"--iters", 1, NULL},   {"--seed", 1, NULL},
-        {"--threads", 1, NULL}, {"--save-estimators", 0, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[O_MODEL].value || !o[O_OUT].value)
         return cli_usage_error(cmd, "--model and --out are needed");
     gs_eval_range_options opt;
@@ -268,9 +265,7 @@ static int run_range(int argc, char **argv)
     if (mkdir(out, 0777) != 0 && !(stat(out, &st) == 0 && S_ISDIR(st.st_mode)))
         return cli_fail(cmd, "cannot create %s", out);
     char line[2048];
-    size_t n = (size_t)snprintf(line, sizeof line, "gazesplat");
-    for (int i = 0; i < argc && n < sizeof line; i++)
-        n += (size_t)snprintf(line + n, sizeof line - n, " %s", argv[i]);
+    cli_command_line(line, sizeof line);
     gs_error err = {0, ""};
     gs_model *m = NULL;
     if (gs_model_load(model, &m, &err))

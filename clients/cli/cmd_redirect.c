@@ -15,8 +15,15 @@
 #include "gazesplat/nn.h"
 #include "gazesplat/model.h"
 
-static int run_fit(int argc, char **argv);
-static int run_redirect(int argc, char **argv);
+static int run_fit(const cli_command *cmd, cli_opt *o);
+static int run_redirect(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt fit_opts[] = {
+    {"--model", 1, NULL}, {"--image", 1, NULL}, {"--mask", 1, NULL}, {"--gaze-deg", 1, NULL},
+    {"--iters", 1, NULL}, {"--time", 1, NULL}, {"--out", 1, NULL}, {"--finetune", 1, NULL},
+    {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL}, {"--finetune-plateau", 1, NULL},
+    {"--finetune-outline", 1, NULL}, {"--finetune-mirror", 1, NULL}, {"--no-gate", 0, NULL},
+    {"--head-deg", 1, NULL}, {"--ref", 1, NULL}};
 
 const cli_command cli_fit_command = {
     "fit",
@@ -74,8 +81,20 @@ const cli_command cli_fit_command = {
     "                   (gs_model_tuned_encode; 3.4 MB for the default parts at cpu)\n"
     "Prints the fit quality and the estimated labels. The fit's code prior\n"
     "is the one the model file names (gazesplat model; docs/model.md).\n",
-    run_fit,
+    .opts = fit_opts,
+    .nopts = CLI_NOPTS(fit_opts),
+    .run_opts = run_fit,
 };
+
+static const cli_opt redirect_opts[] = {
+    {"--model", 1, NULL}, {"--subject", 1, NULL}, {"--image", 1, NULL}, {"--gaze-deg", 1, NULL},
+    {"--out", 1, NULL}, {"--head-deg", 1, NULL}, {"--index", 1, NULL}, {"--out-norm", 0, NULL},
+    {"--iters", 1, NULL}, {"--finetune", 1, NULL}, {"--finetune-parts", 1, NULL},
+    {"--finetune-lr", 1, NULL}, {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
+    {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
+    {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
+    {"--finetune-mirror", 1, NULL}, {"--transfer-eye-warp", 1, NULL}, {"--no-gate", 0, NULL},
+    {"--ref", 1, NULL}, {"--image-gaze-deg", 1, NULL}, {"--image-head-deg", 1, NULL}};
 
 const cli_command cli_redirect_command = {
     "redirect",
@@ -145,7 +164,9 @@ const cli_command cli_redirect_command = {
     "                   trained range (yaw 60, pitch 40 deg), the face cut\n"
     "                   by the border, a flat or noise image (docs/face.md)\n"
     "  --out DIR        writes DIR/000.png, 001.png, ... (created if needed)\n",
-    run_redirect,
+    .opts = redirect_opts,
+    .nopts = CLI_NOPTS(redirect_opts),
+    .run_opts = run_redirect,
 };
 
 #define DEG (3.14159265358979323846 / 180.0)
@@ -383,24 +404,11 @@ static int fit_image(const cli_command *cmd, gs_model *m, gs_pool *pool, const f
     return rc;
 }
 
-static int run_fit(int argc, char **argv)
+_Static_assert(CLI_NOPTS(fit_opts) == 16, "fit_opts: one entry per option index");
+
+static int run_fit(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_fit_command;
-    cli_opt o[16] = {{"--model", 1, NULL},    {"--image", 1, NULL},
-                     {"--mask", 1, NULL},     {"--gaze-deg", 1, NULL},
-                     {"--iters", 1, NULL},    {"--time", 1, NULL},
-                     {"--out", 1, NULL},      {"--finetune", 1, NULL},
-                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
-                     {"--finetune-plateau", 1, NULL}, {"--finetune-outline", 1, NULL},
-                     {"--finetune-mirror", 1, NULL}, {"--no-gate", 0, NULL},
-                     {"--head-deg", 1, NULL}, {"--ref", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 16);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[0].value || !o[1].value || !o[6].value)
         return cli_usage_error(cmd, "--model, --image and --out are needed");
     long iters = GS_REDIRECT_FIT_ITERS;
@@ -623,28 +631,11 @@ done:
     return rc;
 }
 
-static int run_redirect(int argc, char **argv)
+_Static_assert(CLI_NOPTS(redirect_opts) == 24, "redirect_opts: one entry per option index");
+
+static int run_redirect(const cli_command *cmd, cli_opt *o)
 {
-    const cli_command *cmd = &cli_redirect_command;
-    cli_opt o[24] = {{"--model", 1, NULL},    {"--subject", 1, NULL},
-                     {"--image", 1, NULL},    {"--gaze-deg", 1, NULL},
-                     {"--out", 1, NULL},      {"--head-deg", 1, NULL},
-                     {"--index", 1, NULL},    {"--out-norm", 0, NULL},
-                     {"--iters", 1, NULL},    {"--finetune", 1, NULL},
-                     {"--finetune-parts", 1, NULL}, {"--finetune-lr", 1, NULL},
-                     {"--finetune-plateau", 1, NULL}, {"--transfer", 0, NULL},
-                     {"--light-on-head", 0, NULL}, {"--transfer-head-weight", 1, NULL},
-                     {"--transfer-eye-weight", 1, NULL}, {"--finetune-outline", 1, NULL},
-                     {"--finetune-mirror", 1, NULL}, {"--transfer-eye-warp", 1, NULL},
-                     {"--no-gate", 0, NULL}, {"--ref", 1, NULL},
-                     {"--image-gaze-deg", 1, NULL}, {"--image-head-deg", 1, NULL}};
-    int rc = cli_parse(cmd, argc, argv, o, 24);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     int transfer = o[13].value != NULL;
     if (!o[0].value || !o[3].value || !o[4].value || (!o[1].value && !o[2].value) ||
         (o[1].value && o[2].value && !transfer))

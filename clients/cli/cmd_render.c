@@ -16,7 +16,12 @@
 #include "gazesplat/pool.h"
 #include "gazesplat/raster.h"
 
-static int run_render(int argc, char **argv);
+static int run_render(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt render_opts[] = {
+    {"--ply", 1, NULL}, {"--intrinsics", 1, NULL}, {"--size", 1, NULL}, {"--view", 1, NULL},
+    {"--out", 1, NULL}, {"--threads", 1, NULL}, {"--scalar", 0, NULL}, {"--antialiased", 0, NULL},
+    {"--background", 1, NULL}};
 
 const cli_command cli_render_command = {
     "render",
@@ -41,7 +46,9 @@ const cli_command cli_render_command = {
     "\n"
     "Colours are the degree-0 SH colour (0.2821 f_dc + 0.5); for feature\n"
     "scenes, channels 0..2.\n",
-    run_render,
+    .opts = render_opts,
+    .nopts = CLI_NOPTS(render_opts),
+    .run_opts = run_render,
 };
 
 enum { OUT_NPY = 1, OUT_PNG, OUT_JPEG };
@@ -195,32 +202,23 @@ static int render_scene(const render_args *a, const gs_ply_scene *scene, gs_erro
     return CLI_OK;
 }
 
-static int run_render(int argc, char **argv)
+_Static_assert(CLI_NOPTS(render_opts) == O_COUNT, "render_opts: one entry per option index");
+
+static int run_render(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[O_COUNT] = {
-        {"--ply", 1, NULL},     {"--intrinsics", 1, NULL}, {"--size", 1, NULL},
-        {"--view", 1, NULL},    {"--out", 1, NULL},        {"--threads", 1, NULL},
-        {"--scalar", 0, NULL},  {"--antialiased", 0, NULL}, {"--background", 1, NULL},
-    };
     render_args a;
     gs_ply_scene scene;
     gs_error err = {0, ""};
     memset(&a, 0, sizeof a);
-    int rc = cli_parse(&cli_render_command, argc, argv, o, O_COUNT);
-    if (rc == CLI_HELP) {
-        fputs(cli_render_command.usage, stdout);
-        return CLI_OK;
-    }
-    if (rc == CLI_PARSED)
-        rc = convert_args(o, &a);
+    int rc = convert_args(o, &a);
     if (rc != CLI_PARSED)
         return rc;
     if (gs_ply_read(a.ply, NULL, &scene, &err) != GS_OK)
-        return cli_fail(&cli_render_command, "%s", err.msg);
+        return cli_fail(cmd, "%s", err.msg);
     if (scene.channels < 3) {
         int channels = scene.channels;
         gs_ply_free(&scene);
-        return cli_fail(&cli_render_command, "%s has %d feature channels; RGB needs 3", a.ply,
+        return cli_fail(cmd, "%s has %d feature channels; RGB needs 3", a.ply,
                         channels);
     }
     rc = render_scene(&a, &scene, &err);

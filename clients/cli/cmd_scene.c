@@ -5,7 +5,10 @@
 #include "cli.h"
 #include "gazesplat/ply.h"
 
-static int run_scene(int argc, char **argv);
+static int run_scene(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt scene_opts[] = {
+    {"--out", 1, NULL}, {"--seed", 1, NULL}};
 
 const cli_command cli_scene_command = {
     "scene",
@@ -21,32 +24,29 @@ const cli_command cli_scene_command = {
     "of the demo sits 4 units in front of it, looking down +z:\n"
     "  gazesplat render --ply FILE --intrinsics 300,300,128,128 --size 256x256 \\\n"
     "      --view 1,0,0,0,0,1,0,0,0,0,1,4 --out head.png\n",
-    run_scene,
+    .opts = scene_opts,
+    .nopts = CLI_NOPTS(scene_opts),
+    .run_opts = run_scene,
 };
 
-static int run_scene(int argc, char **argv)
+_Static_assert(CLI_NOPTS(scene_opts) == 2, "scene_opts: one entry per option index");
+
+static int run_scene(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[2] = {{"--out", 1, NULL}, {"--seed", 1, NULL}};
     long seed = 1;
     gs_ply_scene scene;
     gs_error err = {0, ""};
-    int rc = cli_parse(&cli_scene_command, argc, argv, o, 2);
-    if (rc == CLI_HELP) {
-        fputs(cli_scene_command.usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[0].value)
-        return cli_usage_error(&cli_scene_command, "missing --out");
+        return cli_usage_error(cmd, "missing --out");
     if (o[1].value && cli_parse_long(o[1].value, 0, 4294967295L, &seed))
-        return cli_usage_error(&cli_scene_command, "--seed: want 0..4294967295; got '%s'",
+        return cli_usage_error(cmd, "--seed: want 0..4294967295; got '%s'",
                                o[1].value);
     if (cli_demo_head((unsigned long)seed, &scene) != GS_OK)
-        return cli_fail(&cli_scene_command, "out of memory");
+        return cli_fail(cmd, "out of memory");
     rc = gs_ply_write(o[0].value, &scene, &err);
     if (rc == GS_OK)
         printf("gazesplat scene: %d Gaussians -> %s\n", scene.n, o[0].value);
     gs_ply_free(&scene);
-    return rc == GS_OK ? CLI_OK : cli_fail(&cli_scene_command, "%s", err.msg);
+    return rc == GS_OK ? CLI_OK : cli_fail(cmd, "%s", err.msg);
 }

@@ -10,7 +10,14 @@
 #include "gazesplat/image_io.h"
 #include "gazesplat/synth.h"
 
-static int run_synth(int argc, char **argv);
+static int run_synth(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt synth_opts[] = {
+    {"--out", 1, NULL}, {"--count", 1, NULL}, {"--first", 1, NULL}, {"--seed-split", 1, NULL},
+    {"--identities", 1, NULL}, {"--seed", 1, NULL}, {"--size", 1, NULL}, {"--rig", 1, NULL},
+    {"--supersample", 1, NULL}, {"--no-masks", 0, NULL}, {"--threads", 1, NULL},
+    {"--sheet", 1, NULL}, {"--rows", 1, NULL}, {"--template", 1, NULL}, {"--spacing", 1, NULL},
+    {"--face-model6", 0, NULL}, {"--kappa", 1, NULL}};
 
 const cli_command cli_synth_command = {
     "synth",
@@ -55,7 +62,9 @@ const cli_command cli_synth_command = {
     "                        gs_geom_face_model6_synth and _nose7_synth\n"
     "\n"
     "Everything is deterministic: the same options give the same bytes.\n",
-    run_synth,
+    .opts = synth_opts,
+    .nopts = CLI_NOPTS(synth_opts),
+    .run_opts = run_synth,
 };
 
 enum {
@@ -246,24 +255,13 @@ static int do_face_model6(gs_pool *pool)
     return CLI_OK;
 }
 
-static int run_synth(int argc, char **argv)
+_Static_assert(CLI_NOPTS(synth_opts) == O_N, "synth_opts: one entry per option index");
+
+static int run_synth(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[O_N] = {
-        {"--out", 1, NULL},        {"--count", 1, NULL},   {"--first", 1, NULL},
-        {"--seed-split", 1, NULL}, {"--identities", 1, NULL}, {"--seed", 1, NULL},
-        {"--size", 1, NULL},       {"--rig", 1, NULL},     {"--supersample", 1, NULL},
-        {"--no-masks", 0, NULL},   {"--threads", 1, NULL}, {"--sheet", 1, NULL},
-        {"--rows", 1, NULL},       {"--template", 1, NULL}, {"--spacing", 1, NULL},
-        {"--face-model6", 0, NULL}, {"--kappa", 1, NULL}};
-    int rc = cli_parse(&cli_synth_command, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cli_synth_command.usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[O_OUT].value && !o[O_SHEET].value && !o[O_TEMPLATE].value && !o[O_MODEL6].value)
-        return cli_usage_error(&cli_synth_command, "nothing to do: give --out, --sheet, "
+        return cli_usage_error(cmd, "nothing to do: give --out, --sheet, "
                                "--template or --face-model6");
     gs_synth_gen_config c;
     long count = 100, first = 0, threads = 0, rows = 4;
@@ -273,7 +271,7 @@ static int run_synth(int argc, char **argv)
         return rc;
     gs_pool *pool = gs_pool_create((int)threads);
     if (!pool)
-        return cli_fail(&cli_synth_command, "cannot start threads");
+        return cli_fail(cmd, "cannot start threads");
     if (o[O_OUT].value) {
         cli_progress_t prog;
         cli_progress_start(&prog);
@@ -281,7 +279,7 @@ static int run_synth(int argc, char **argv)
                                    !o[O_NOMASKS].value, progress, &prog};
         gs_error err = {0, ""};
         if (gs_synth_dataset_write(o[O_OUT].value, &c, &d, pool, &err) != GS_OK)
-            rc = cli_fail(&cli_synth_command, "%s", err.msg);
+            rc = cli_fail(cmd, "%s", err.msg);
         else
             printf("gazesplat synth: %ld images -> %s\n", count, o[O_OUT].value);
     }

@@ -9,7 +9,18 @@
 #include "gazesplat/nn.h"
 #include "gazesplat/train.h"
 
-static int run_train(int argc, char **argv);
+static int run_train(const cli_command *cmd, cli_opt *o);
+
+static const cli_opt train_opts[] = {
+    {"--out", 1, NULL}, {"--preset", 1, NULL}, {"--steps", 1, NULL}, {"--identities", 1, NULL},
+    {"--lr", 1, NULL}, {"--seed", 1, NULL}, {"--threads", 1, NULL}, {"--resume", 0, NULL},
+    {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL}, {"--guidance", 1, NULL},
+    {"--single-stream", 0, NULL}, {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL},
+    {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL}, {"--fresh-optimizer", 1, NULL},
+    {"--cosine", 0, NULL}, {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
+    {"--supersample", 1, NULL}, {"--eye-weight", 1, NULL}, {"--head-range", 1, NULL},
+    {"--eye-direct", 1, NULL}, {"--sync-samples", 0, NULL}, {"--clip-grad-norm", 1, NULL},
+    {"--sample-threads", 1, NULL}};
 
 const cli_command cli_train_command = {
     "train",
@@ -76,7 +87,9 @@ const cli_command cli_train_command = {
     "                      1, point-sampled, is the default); with --resume,\n"
     "                      switches a model's sampling (not with\n"
     "                      --eye-cover-loss)\n",
-    run_train,
+    .opts = train_opts,
+    .nopts = CLI_NOPTS(train_opts),
+    .run_opts = run_train,
 };
 
 static void log_line(void *ctx, const char *fmt, ...)
@@ -95,30 +108,11 @@ enum { O_OUT, O_PRESET, O_STEPS, O_IDS, O_LR, O_SEED, O_THREADS, O_RESUME,
        O_FRESH, O_COS, O_LIDS, O_COVER, O_SS, O_EYEW, O_HEAD, O_EDIR, O_SYNC,
        O_CLIP, O_STHREADS, O_N };
 
-static int run_train(int argc, char **argv)
+_Static_assert(CLI_NOPTS(train_opts) == O_N, "train_opts: one entry per option index");
+
+static int run_train(const cli_command *cmd, cli_opt *o)
 {
-    cli_opt o[O_N] = {
-        {"--out", 1, NULL}, {"--preset", 1, NULL}, {"--steps", 1, NULL},
-        {"--identities", 1, NULL}, {"--lr", 1, NULL}, {"--seed", 1, NULL},
-        {"--threads", 1, NULL}, {"--resume", 0, NULL},
-        {"--checkpoint", 1, NULL}, {"--log-every", 1, NULL},
-        {"--guidance", 1, NULL}, {"--single-stream", 0, NULL},
-        {"--no-eye-rotation", 0, NULL}, {"--guide-source", 1, NULL},
-        {"--gaze-loss", 1, NULL}, {"--gaze-weight", 1, NULL},
-        {"--fresh-optimizer", 1, NULL}, {"--cosine", 0, NULL},
-        {"--lids", 0, NULL}, {"--eye-cover-loss", 1, NULL},
-        {"--supersample", 1, NULL}, {"--eye-weight", 1, NULL},
-        {"--head-range", 1, NULL}, {"--eye-direct", 1, NULL},
-        {"--sync-samples", 0, NULL}, {"--clip-grad-norm", 1, NULL},
-        {"--sample-threads", 1, NULL}};
-    const cli_command *cmd = &cli_train_command;
-    int rc = cli_parse(cmd, argc, argv, o, O_N);
-    if (rc == CLI_HELP) {
-        fputs(cmd->usage, stdout);
-        return CLI_OK;
-    }
-    if (rc != CLI_PARSED)
-        return rc;
+    int rc = CLI_OK;
     if (!o[O_OUT].value)
         return cli_usage_error(cmd, "missing --out");
     gs_model_spec spec;

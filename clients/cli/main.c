@@ -91,5 +91,5 @@ int main(int argc, char **argv)
         overview(stderr);
         return CLI_USAGE;
     }
-    return c->run(argc - 1, argv + 1);
+    return cli_run(c, argc - 1, argv + 1);
 }

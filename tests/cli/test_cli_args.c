@@ -1,4 +1,5 @@
-/* The CLI's option and number parsers, in-process, value by value. */
+/* The CLI's option and number parsers and its command scaffold
+ * (cli_run), in-process, value by value. */
 #include <float.h>
 #include <stdio.h>
 #include <string.h>
@@ -7,8 +8,8 @@
 #include "gs_test.h"
 
 /* cli.h declares these; the test links args.c alone. */
-const cli_command cli_render_command = {"render", "", "usage: test\n", NULL};
-const cli_command cli_scene_command = {"scene", "", "usage: test\n", NULL};
+const cli_command cli_render_command = {"render", "", "usage: test\n", .run = NULL};
+const cli_command cli_scene_command = {"scene", "", "usage: test\n", .run = NULL};
 int cli_demo_head(unsigned long seed, struct gs_ply_scene *out)
 {
     (void)seed, (void)out;
@@ -169,6 +170,57 @@ static void test_image_lists(void)
     }
 }
 
+/* cli_run: the table's copy parsed and handed over, help and bad usage
+ * answered without running the command, the table left as it was; a raw
+ * command gets argv as given; the command line as run. */
+static int ran, ran_raw;
+static const cli_opt *ran_opts;
+static char ran_size[16], ran_line[64];
+
+static int run_test(const cli_command *cmd, cli_opt *o)
+{
+    ran++;
+    ran_opts = o;
+    snprintf(ran_size, sizeof ran_size, "%s", o[0].value ? o[0].value : "-");
+    cli_command_line(ran_line, sizeof ran_line);
+    return o[1].value ? CLI_OUTLIERS : (cmd->nopts == 2 ? CLI_OK : CLI_FAIL);
+}
+
+static int run_raw(int argc, char **argv)
+{
+    ran_raw++;
+    return argc == 3 && !strcmp(argv[1], "verb") && !strcmp(argv[2], "--x") ? CLI_OK : CLI_FAIL;
+}
+
+static const cli_opt test_opts[] = {{"--size", 1, NULL}, {"--flag", 0, NULL}};
+static const cli_command test_cmd = {"test", "", "usage: gazesplat test\n", .opts = test_opts,
+                                     .nopts = CLI_NOPTS(test_opts), .run_opts = run_test};
+static const cli_command raw_cmd = {"raw", "", "usage: gazesplat raw\n", .run = run_raw};
+
+static void test_run(void)
+{
+    char *ok[] = {"test", "--size", "5x5"};
+    CHECK_EQ_INT(cli_run(&test_cmd, 3, ok), CLI_OK);
+    CHECK(ran == 1 && ran_opts != test_opts && !strcmp(ran_size, "5x5"));
+    CHECK_MSG(!strcmp(ran_line, "gazesplat test --size 5x5"), "command line '%s'", ran_line);
+    CHECK(!test_opts[0].value && !test_opts[1].value);
+    char *flag[] = {"test", "--flag"};
+    CHECK_EQ_INT(cli_run(&test_cmd, 2, flag), CLI_OUTLIERS); /* its own status */
+    CHECK(ran == 2 && !strcmp(ran_size, "-"));
+    char *help[] = {"test", "--size", "1", "--help"};
+    CHECK_EQ_INT(cli_run(&test_cmd, 4, help), CLI_OK);
+    char *bad[] = {"test", "--bogus"};
+    CHECK_EQ_INT(cli_run(&test_cmd, 2, bad), CLI_USAGE);
+    char *twice[] = {"test", "--flag", "--flag"};
+    CHECK_EQ_INT(cli_run(&test_cmd, 3, twice), CLI_USAGE);
+    CHECK_MSG(ran == 2, "help and bad usage ran the command (%d runs)", ran);
+    char *raw[] = {"raw", "verb", "--x"};
+    CHECK_EQ_INT(cli_run(&raw_cmd, 3, raw), CLI_OK);
+    CHECK(ran_raw == 1);
+    cli_command_line(ran_line, 10);
+    CHECK_MSG(!strcmp(ran_line, "gazesplat"), "cut at 10 bytes: '%s'", ran_line);
+}
+
 int main(void)
 {
     test_floats();
@@ -177,5 +229,6 @@ int main(void)
     test_size_and_long();
     test_rate();
     test_options();
+    test_run();
     GS_TEST_END();
 }
