@@ -5,17 +5,12 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "gazesplat/train.h"
 #include "model_internal.h"
-
-/* Scenes drawn for the statistics: enough that the covariance's smallest
- * kept directions are stable, few enough to cost a few milliseconds. */
-#define PRIOR_DRAWS 4096
 
 /* In-place Cholesky of the symmetric positive definite n x n matrix a
  * (lower triangle), then its inverse into inv, exactly symmetric; y: n
  * doubles of scratch. 0, or -1 when a is not positive definite. */
-static int spd_inverse(double *a, int n, double *inv, double *y)
+int gs_spd_inverse(double *a, int n, double *inv, double *y)
 {
     for (int j = 0; j < n; j++) {
         double d = a[j * n + j];
@@ -56,49 +51,9 @@ static int spd_inverse(double *a, int n, double *inv, double *y)
 
 int gs_code_prior_make(const gs_model *m, gs_code_prior *p, gs_error *err)
 {
-    enum { N = GS_CODE_PRIOR_DIM };
-    gs_train_options to;
-    gs_train_options_default(&to);
-    gs_synth_gen_config gen;
-    gs_train_sample_config(m, &to, &gen);
-    double sum[N] = {0}, cov[N * N] = {0};
-    for (int s = 0; s < PRIOR_DRAWS; s++) {
-        gs_synth_scene sc;
-        gs_synth_camera cam;
-        int rc = gs_synth_gen_scene(&gen, (uint64_t)s, &sc, &cam, err);
-        if (rc)
-            return rc;
-        float v[N];
-        gs_synth_expression_to_array(&sc.expr, v);
-        gs_model_light_code(&sc, v + GS_MODEL_EXPR_DIM);
-        for (int i = 0; i < N; i++) {
-            sum[i] += v[i];
-            for (int j = 0; j <= i; j++)
-                cov[i * N + j] += (double)v[i] * v[j];
-        }
-    }
-    double tr = 0;
-    for (int i = 0; i < N; i++)
-        p->mean[i] = sum[i] / PRIOR_DRAWS;
-    for (int i = 0; i < N; i++)
-        for (int j = 0; j <= i; j++) {
-            double c = cov[i * N + j] / PRIOR_DRAWS - p->mean[i] * p->mean[j];
-            cov[i * N + j] = cov[j * N + i] = c;
-            if (i == j)
-                tr += c;
-        }
-    /* The light code's three colours of one direction move almost
-     * together (a light's tint is within +-15 %): the covariance is
-     * nearly singular there. A ridge of 1 % of the mean variance keeps
-     * the precision finite: a code off that subspace is unlikely, not
-     * impossible. */
-    for (int i = 0; i < N; i++)
-        cov[i * N + i] += 0.01 * tr / N;
-    double y[N];
-    if (spd_inverse(cov, N, p->prec, y))
-        return gs_error_set(err, GS_ERR_STATE,
-                            "code prior: the sampler's covariance is not "
-                            "positive definite");
+    (void)m, (void)err; /* one sampler for every model (lib/train/prior.c) */
+    memcpy(p->mean, gs_code_prior_table_mean, sizeof p->mean);
+    memcpy(p->prec, gs_code_prior_table_prec, sizeof p->prec);
     return GS_OK;
 }
 
@@ -158,7 +113,7 @@ int gs_id_prior_make(const gs_model *m, gs_id_prior **out, gs_error *err)
      * ridge of 1 % of the mean variance keeps the precision finite */
     for (int i = 0; i < n; i++)
         cov[i * n + i] += 0.01 * tr / n + 1e-12;
-    int bad = spd_inverse(cov, n, p->prec, y);
+    int bad = gs_spd_inverse(cov, n, p->prec, y);
     free(cov);
     free(y);
     if (bad) {

@@ -10,7 +10,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include "frame.h"
+#include "../model/frame.h"
 #include "gazesplat/synth.h"
 #include "gazesplat/train.h"
 
