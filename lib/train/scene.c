@@ -1,9 +1,9 @@
 /* The training sampler's scenes and the codes they stand for: how a sample
  * is drawn (gs_train_sample_config, the options' defaults, the head range),
  * a scene's light and full code (gs_model_light_code, gs_model_scene_code)
- * and a training identity's subject. The fit's code prior (prior.c) and
- * the evaluation read these; serving them needs none of the training loop
- * (lib/train), so a program that fits and renders links no training code. */
+ * and a training identity's subject. Training, the code prior's
+ * computation (prior.c) and the evaluation read these; a program that
+ * only fits and renders never does. */
 #define _POSIX_C_SOURCE 200809L
 #include <math.h>
 #include <stdio.h>
