@@ -9,10 +9,11 @@
 #include <string.h>
 #include <sys/socket.h>
 #include <sys/un.h>
-#include <time.h>
 #include <unistd.h>
 
 #include <blake2.h>
+
+#include "gazesplat/clock.h"
 
 struct gs_client {
     int fd;
@@ -24,13 +25,6 @@ struct gs_client {
 static int reply_type_ok(uint16_t type)
 {
     return gs_msg_is_reply(type);
-}
-
-static long long now_ms(void)
-{
-    struct timespec ts;
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return (long long)ts.tv_sec * 1000 + ts.tv_nsec / 1000000;
 }
 
 static int connect_unix(const char *path, gs_error *err)
@@ -178,7 +172,7 @@ static int read_frame(gs_client *c, long long deadline, gs_error *err)
         gs_frame_parser_want(&c->parser, &dst, &want);
         if (want == 0)
             break;
-        int left = (int)(deadline - now_ms());
+        int left = (int)(deadline - gs_clock_ms());
         struct pollfd pfd = {c->fd, POLLIN, 0};
         int pr = left > 0 ? poll(&pfd, 1, left) : 0;
         if (pr < 0 && errno == EINTR)
@@ -204,7 +198,7 @@ static int read_frame(gs_client *c, long long deadline, gs_error *err)
 int gs_client_recv(gs_client *c, int timeout_ms, gs_client_frame *f, gs_error *err)
 {
     f->msg = NULL;
-    int r = read_frame(c, now_ms() + timeout_ms, err);
+    int r = read_frame(c, gs_clock_ms() + timeout_ms, err);
     if (r != GS_OK)
         return r;
     f->header = *gs_frame_parser_header(&c->parser);
