@@ -589,13 +589,10 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
     int rc = fit_check_images(c, im, k, err);
     if (!rc)
         rc = fit_check_options(c, &o, err);
-    /* the prior (weight > 0): on the stack, made before anything is
-     * allocated; its slots are [expression | lights] after the identity */
-    gs_code_prior prior;
-    const int use_prior = o.code_prior > 0;
+    /* the prior (weight > 0): its slots are [expression | lights] after
+     * the identity */
+    const gs_code_prior *prior = o.code_prior > 0 ? &gs_code_prior_table : NULL;
     const int V_PRIOR = V_CODE + c->m->cfg.id_dim;
-    if (!rc && use_prior)
-        rc = gs_code_prior_make(c->m, &prior, err);
     if (rc)
         return rc;
     gs_id_prior *idp = NULL; /* the identity prior (weight > 0) */
@@ -631,7 +628,7 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
         double loss = 0, gid[GS_MODEL_MAX_CODE] = {0};
         for (int i = 0; !rc && i < k && isfinite(loss); i++) {
             double li = 0;
-            rc = fit_image_step(c, pool, &f[i], &o, use_prior ? &prior : NULL,
+            rc = fit_image_step(c, pool, &f[i], &o, prior,
                                 V_PRIOR, i == 0 ? idp : NULL, gid, i < k - 1,
                                 &li, err);
             loss += li;
@@ -663,7 +660,7 @@ int gs_model_fit_images(gs_model_ctx *c, gs_pool *pool, const gs_fit_image *im,
             on_time = it + 1 < iters;
             break;
         }
-        rc = fit_images_update(c, pool, f, k, &o, use_prior, V_PRIOR, idp ? gid : NULL, it, err);
+        rc = fit_images_update(c, pool, f, k, &o, prior != NULL, V_PRIOR, idp ? gid : NULL, it, err);
         if (rc)
             break;
     }

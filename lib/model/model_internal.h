@@ -240,12 +240,10 @@ typedef struct gs_code_prior {
     double mean[GS_CODE_PRIOR_DIM];
     double prec[GS_CODE_PRIOR_DIM * GS_CODE_PRIOR_DIM];
 } gs_code_prior;
-int gs_code_prior_make(const struct gs_model *m, gs_code_prior *p,
-                       gs_error *err);
-/* Its values (prior_table.c, written by test_code_prior --print from
- * gs_train_code_prior, which draws the sampler's scenes: lib/train). */
-extern const double gs_code_prior_table_mean[GS_CODE_PRIOR_DIM];
-extern const double gs_code_prior_table_prec[GS_CODE_PRIOR_DIM * GS_CODE_PRIOR_DIM];
+/* Its values, one for every model (prior_table.c, written by
+ * test_code_prior --print from gs_train_code_prior, which draws the
+ * sampler's scenes: lib/train). */
+extern const gs_code_prior gs_code_prior_table;
 int gs_train_code_prior(const struct gs_model *m, gs_code_prior *p, gs_error *err);
 /* In-place Cholesky of the symmetric positive definite n x n matrix a
  * (lower triangle), then its inverse into inv, exactly symmetric; y: n

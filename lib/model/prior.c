@@ -49,14 +49,6 @@ int gs_spd_inverse(double *a, int n, double *inv, double *y)
     return 0;
 }
 
-int gs_code_prior_make(const gs_model *m, gs_code_prior *p, gs_error *err)
-{
-    (void)m, (void)err; /* one sampler for every model (lib/train/prior.c) */
-    memcpy(p->mean, gs_code_prior_table_mean, sizeof p->mean);
-    memcpy(p->prec, gs_code_prior_table_prec, sizeof p->prec);
-    return GS_OK;
-}
-
 /* The identity codes' Gaussian: n = id_dim, mean[n], prec[n * n]. */
 struct gs_id_prior {
     int n;
