@@ -121,6 +121,7 @@ typedef struct face_fwd_job {
     const double *qR;
     const float *pe;   /* PE(rvec) [| PE(gaze)], npe floats */
     int npe;
+    int keep_e;        /* fe_out already holds the expression MLP's rows */
 } face_fwd_job;
 
 static void face_assemble(gs_model_ctx *c, const double qR[4], int from,
@@ -151,12 +152,16 @@ static void face_fwd_task(void *ctx, int b, int worker)
     }
     for (int i = r0; i < r1; i++) {
         float *a = ein + (size_t)(i - r0) * de, *bb = pin + (size_t)(i - r0) * dp;
-        memcpy(a, p->f_feat + (size_t)i * F, F * sizeof(float));
-        memcpy(a + F, j->fr->code, D * sizeof(float));
+        if (!j->keep_e) {
+            memcpy(a, p->f_feat + (size_t)i * F, F * sizeof(float));
+            memcpy(a + F, j->fr->code, D * sizeof(float));
+        }
         memcpy(bb, p->f_feat + (size_t)i * F, F * sizeof(float));
         memcpy(bb + F, j->pe, j->npe * sizeof(float));
     }
-    gs_mlp_forward(&p->face_e, ein, r1 - r0, eact, c->fe_out + (size_t)r0 * O);
+    if (!j->keep_e)
+        gs_mlp_forward(&p->face_e, ein, r1 - r0, eact,
+                       c->fe_out + (size_t)r0 * O);
     gs_mlp_forward(&p->face_p, pin, r1 - r0, pact, c->fp_out + (size_t)r0 * O);
     face_assemble(c, j->qR, r0, r1);
     to_camera(c, j->fr, r0, r1, j->qR);
@@ -164,7 +169,7 @@ static void face_fwd_task(void *ctx, int b, int worker)
 
 /* The face stream: MLPs, head-frame Gaussians, into the camera. */
 static int face_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
-                        const double qR[4])
+                        const double qR[4], int force)
 {
     if (!c->fe_act && gs_ctx_face_scratch(c, gs_pool_threads(pool)))
         return GS_ERR_NOMEM;
@@ -177,8 +182,22 @@ static int face_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         gs_model_pe(fr->gaze, 2, pe + npe);
         npe += GS_PE_DIM(2);
     }
-    face_fwd_job j = {c, fr, qR, pe, npe};
+    /* The expression MLP sees [f_i, code] only: a render at another head
+     * pose with the same code and parameters keeps its rows (the same
+     * bytes: each block's rows are a function of its inputs). Only a
+     * context without training buffers keeps them, since a backward reads
+     * the activations, which a render puts in a thread's scratch. */
+    int D = c->D;
+    int keep = !force && !c->fe_act && c->fe_valid &&
+               !memcmp(c->fe_code, fr->code, (size_t)D * sizeof(float));
+    face_fwd_job j = {c, fr, qR, pe, npe, keep};
+    c->fe_valid = 0;
+    c->n_fe_kept += (uint64_t)keep;
     gs_pool_for(pool, c->nfblk, face_fwd_task, &j);
+    if (!force && !c->fe_act) {
+        memcpy(c->fe_code, fr->code, (size_t)D * sizeof(float));
+        c->fe_valid = 1;
+    }
     return GS_OK;
 }
 
@@ -414,7 +433,7 @@ static int streams_forward(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
     int saved = !c->fe_act || c->face_saved;
     if (force_face || !c->face_valid || !saved || !same_face_key(c, fr)) {
         c->face_valid = 0;
-        if (face_forward(c, pool, fr, qR))
+        if (face_forward(c, pool, fr, qR, force_face))
             return GS_ERR_NOMEM;
         c->face_key = *fr;
         c->face_valid = 1;

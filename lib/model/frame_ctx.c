@@ -126,6 +126,7 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     for (size_t i = 0; i < 3 * fsz; i++)
         c->bg[i] = 1.0f;
     c->face_valid = 0;
+    c->fe_valid = 0;
     return GS_OK;
 }
 
@@ -441,6 +442,7 @@ void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st)
         st->sweep_kept += c->slots[i].valid;
     st->sweep_kept += c->inc_valid;
     st->train_bytes = c->train_bytes;
+    st->face_expr_kept = c->n_fe_kept;
 }
 
 int gs_frame_set_feature_mask(gs_model_ctx *c, const float *mask,

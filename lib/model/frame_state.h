@@ -223,6 +223,13 @@ struct gs_model_ctx {
                                          training buffers (fe_act, fp_act),
                                          which a backward reads */
     gs_frame face_key;                /* the frame the face cache is for */
+    /* fe_out holds the expression MLP's outputs at fe_code under the
+     * current parameters (a render's head change keeps the code: only the
+     * pose MLP and what follows run again). Set by a render-only face
+     * forward, dropped by gs_sweep_drop (training, new parameters). */
+    int fe_valid;
+    float fe_code[GS_MODEL_MAX_CODE];
+    uint64_t n_fe_kept;               /* face forwards that kept them */
     uint8_t *rgb8;                    /* [S, S, 3] */
     gs_xfer *xfer;                    /* gs_model_render_transfer, lazily */
     /* how the context drops and invalidates it: set by transfer.c with

@@ -108,6 +108,7 @@ void gs_sweep_drop(gs_model_ctx *c)
 {
     c->inc_valid = 0;
     c->eye_base_valid = 0;
+    c->fe_valid = 0;
     if (c->xfer)
         c->xfer_invalidate(c->xfer);
     for (int i = 0; c->slots && i < c->sweep_n - 1; i++)

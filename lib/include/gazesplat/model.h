@@ -256,6 +256,10 @@ typedef struct gs_model_ctx_stats {
      * the context's first fit or training step, and after
      * gs_model_ctx_trim; a context that only renders never has them) */
     size_t train_bytes;
+    /* full renders that kept the face stream's expression MLP rows: a
+     * head change with the same code and parameters runs only the pose
+     * MLP and what follows (docs/model.md, "Rendering") */
+    uint64_t face_expr_kept;
 } gs_model_ctx_stats;
 void gs_model_ctx_get_stats(const gs_model_ctx *c, gs_model_ctx_stats *st);
 
