@@ -162,7 +162,7 @@ static int config_rep(config *c, const problem *pb, int k)
     size_t n = pb->n;
     gs_gaussian_grads G = {c->grad, c->grad + 3 * n, c->grad + 6 * n, c->grad + 10 * n,
                            c->grad + 11 * n};
-    gs_raster_options opt = {0, c->path};
+    gs_raster_options opt = {.antialiased = 0, .path = c->path};
     gs_error err;
     double t0 = now_ms();
     int rc = gs_raster_forward(c->r, c->pool, &pb->cam, &pb->g, NULL, &opt, c->F, c->A, NULL,

@@ -533,15 +533,19 @@ static int raster_super(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
  * directly; below, through a camera of the same view at fsr pixels into
  * lo [C, fsr, fsr] (scratch), resampled bilinearly to fs. Only renders
  * (no backward follows) ask for fsr < fs. render: no backward follows, so
- * the rasterizer keeps no records for one. */
-static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
-                     const gs_gaussians *g, int fsr, int render, float *out,
-                     float *alpha, float *lo, gs_error *err)
+ * the rasterizer keeps no records for one. from > 0 (a render at fs
+ * only): out and alpha hold the map of g's first `from` Gaussians, and
+ * only the tiles the rest reach are composited
+ * (gs_raster_options.changed_from). */
+static int raster_at_from(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
+                          const gs_gaussians *g, int fsr, int render, int from,
+                          float *out, float *alpha, float *lo, gs_error *err)
 {
     gs_raster_set_records(r, !render);
     gs_camera cam;
     gs_frame_camera(c->m, c->fr.head_t, &cam);
-    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST};
+    gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST,
+                            .changed_from = render && fsr == c->fs ? from : 0};
     if (fsr == c->fs)
         return gs_raster_forward(r, pool, &cam, g, c->bg, &ro, out, alpha,
                                  NULL, err);
@@ -558,6 +562,13 @@ static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
                                              c->fs))
         rc = gs_error_set(err, GS_ERR_STATE, "model: feature resampling");
     return rc;
+}
+
+static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
+                     const gs_gaussians *g, int fsr, int render, float *out,
+                     float *alpha, float *lo, gs_error *err)
+{
+    return raster_at_from(c, r, pool, g, fsr, render, 0, out, alpha, lo, err);
 }
 
 /* The face stream alone into c->fmap_face (the guidance source and the
@@ -710,19 +721,29 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
         count = c->ne;
     }
     gs_gaussians g = gaussians_of(c, first, count);
-    int rc = raster_at(c, c->raster, pool, &g, fsr, render, c->fmap, c->alpha,
-                       c->v_fmap, err);
-    if (rc)
-        return rc;
     /* the face-only map: the guidance source, or a training loss term */
     c->used_src = c->src_mode && stream == GS_STREAM_BOTH;
     c->used_face_map = c->ne > 0 && stream == GS_STREAM_BOTH &&
                        (c->used_src || c->face_loss);
+    int rc = GS_OK, from = 0;
     if (c->used_face_map) {
         rc = face_map(c, pool, fsr, render, err);
         if (rc)
             return rc;
+        /* A render's merged map is the face-only map except where the
+         * lids and the eyes reach: start from it and composite only the
+         * tiles they are binned to (the same bits as all of them). */
+        if (render && fsr == c->fs) {
+            size_t px = (size_t)c->fs * c->fs;
+            memcpy(c->fmap, c->fmap_face, px * (size_t)c->C * sizeof(float));
+            memcpy(c->alpha, c->alpha_face, px * sizeof(float));
+            from = c->nm;
+        }
     }
+    rc = raster_at_from(c, c->raster, pool, &g, fsr, render, from, c->fmap,
+                        c->alpha, c->v_fmap, err);
+    if (rc)
+        return rc;
     c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss &&
                       c->fmap_eye;
     if (c->used_eye_map) { /* the eye stream alone, for its training loss */

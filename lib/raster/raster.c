@@ -716,9 +716,12 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
                           opt && opt->path == GS_RASTER_SCALAR ? NULL : pool, err);
     if (rc)
         return rc;
-    static const gs_raster_options defaults = {0, GS_RASTER_FAST};
+    static const gs_raster_options defaults = {0, GS_RASTER_FAST, 0};
     if (opt && opt->path != GS_RASTER_FAST && opt->path != GS_RASTER_SCALAR)
         return gs_error_set(err, GS_ERR_ARG, "raster: unknown path %d", (int)opt->path);
+    if (opt && (opt->changed_from < 0 || opt->changed_from > g->n))
+        return gs_error_set(err, GS_ERR_ARG, "raster: changed_from %d outside [0, %d]",
+                            opt->changed_from, g->n);
     r->cam = *cam;
     clamp_limits(r->has_frustum ? &r->frustum : cam, r->clamp_lim);
     r->g = *g;
@@ -789,7 +792,8 @@ int gs_raster_forward(gs_raster *r, gs_pool *pool, const gs_camera *cam,
     double t4 = (1e3 * gs_clock_s());
     r->ms_phase[0] = t1 - t0, r->ms_phase[1] = t2 - t1;
     r->ms_phase[2] = t3 - t2, r->ms_phase[3] = t4 - t3;
-    r->have_forward = 1;
+    /* a forward of some tiles leaves the others' saved state stale */
+    r->have_forward = !(fast && r->opt.changed_from > 0);
     return GS_OK;
 }
 

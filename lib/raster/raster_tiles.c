@@ -794,7 +794,7 @@ static int cmp_u64(const void *a, const void *b)
 /* Tiles [t0, t1) into r->tile_order, longest list first (ties by index), so
  * the pool's workers take the heavy tiles early and finish together. Which
  * worker composites a tile never changes its result. */
-static int order_tiles(gs_raster *r, int t0, int t1)
+static int order_tiles(gs_raster *r, int t0, int t1, uint32_t from, int *count)
 {
     size_t n = (size_t)(t1 - t0);
     if (gs_raster_reserve((void **)&r->tile_order, &r->cap_tile_order, n ? n : 1,
@@ -805,10 +805,18 @@ static int order_tiles(gs_raster *r, int t0, int t1)
     /* Keys (UINT32_MAX - length, tile) sort ascending into that order. */
     uint64_t *key = r->tile_keys;
     const uint32_t *off = r->tile_off;
+    size_t kept = 0;
     for (size_t a = 0; a < n; a++) {
         uint32_t t = (uint32_t)t0 + (uint32_t)a;
-        key[a] = ((uint64_t)(UINT32_MAX - (off[t + 1] - off[t])) << 32) | t;
+        int take = from == 0;
+        for (uint32_t k = off[t]; !take && k < off[t + 1]; k++)
+            take = r->isect[k] >= from;
+        if (take)
+            key[kept++] = ((uint64_t)(UINT32_MAX - (off[t + 1] - off[t])) << 32) | t;
     }
+    n = kept;
+    if (count)
+        *count = (int)n;
     qsort(key, n, sizeof *key, cmp_u64);
     for (size_t a = 0; a < n; a++)
         r->tile_order[a] = (uint32_t)key[a];
@@ -843,14 +851,16 @@ static int fast_forward(gs_raster *r, gs_pool *pool, const float *bg, float *out
     if (reserve_scratch(r, pool, per))
         return GS_ERR_NOMEM;
     int ntiles = r->tiles_x * r->tiles_y;
-    if (order_tiles(r, 0, ntiles) || reserve_records(r, pool, ntiles))
+    int composite = ntiles; /* tiles in tile_order (gs_raster_options.changed_from) */
+    if (order_tiles(r, 0, ntiles, (uint32_t)r->opt.changed_from, &composite) ||
+        reserve_records(r, pool, ntiles))
         return GS_ERR_NOMEM;
     int threads = gs_pool_threads(pool);
     size_t budget = r->rec_budget ? r->rec_budget : GS_RASTER_REC_BUDGET;
     size_t rec_cap = r->no_records ? 0
                      : budget / (sizeof(uint32_t) + L * sizeof(float)) / (size_t)threads;
     fwd_ctx ctx = {r, bg, out_f, out_alpha, out_depth, per, rec_cap, 0};
-    gs_pool_for(pool, ntiles, tile_forward, &ctx);
+    gs_pool_for(pool, composite, tile_forward, &ctx);
     r->contributions = atomic_load(&ctx.contributions);
     return GS_OK;
 }
@@ -1200,7 +1210,7 @@ static int fast_backward(gs_raster *r, gs_pool *pool, int t0, int t1, size_t slo
     size_t per = scratch_per_worker(r->g.channels);
     if (reserve_scratch(r, pool, per)) /* the pool may differ from the forward's */
         return GS_ERR_NOMEM;
-    if (order_tiles(r, t0, t1))
+    if (order_tiles(r, t0, t1, 0, NULL))
         return GS_ERR_NOMEM;
     bwd_ctx ctx = {r, slot0, per, v_f, v_alpha, v_depth, v_bg};
     gs_pool_for(pool, t1 - t0, tile_backward, &ctx);

@@ -466,6 +466,16 @@ static void head_change(gs_pool *pool, int lids)
     }
     CHECK_MSG(bad < 0, "head change%s: render %d differs from a fresh context's",
               lids ? " (lids)" : "", bad);
+    /* a render's merged map starts from the face-only map and composites
+     * the tiles the eyes and lids reach: a training forward composites
+     * every tile, and the map is the same bits */
+    gs_model_ctx *t = gs_model_ctx_create(m);
+    CHECK(t && gs_frame_forward(t, pool, &fr, GS_STREAM_BOTH, 0, &err) == GS_OK);
+    CHECK_MSG(t && !memcmp(a->fmap, t->fmap, nmap * sizeof(float)) &&
+                  !memcmp(a->rgb, t->rgb, nrgb * sizeof(float)),
+              "head change%s: a render's map is not a training forward's (%.3g)",
+              lids ? " (lids)" : "", t ? max_diff(a->fmap, t->fmap, nmap) : -1.0);
+    gs_model_ctx_destroy(t);
     gs_model_ctx_stats st;
     gs_model_ctx_get_stats(a, &st);
     CHECK_MSG(st.face_expr_kept == 3, "head change: %llu renders kept the rows, want 3",

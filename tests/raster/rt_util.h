@@ -320,7 +320,7 @@ static inline void rt_run_with(gs_raster *r, const rt_scene *s,
     o->g_opacity = rt_alloc((size_t)n, sizeof(float));
     o->g_features = rt_alloc((size_t)n * (size_t)C, sizeof(float));
     o->g_background = rt_alloc(np * (size_t)C, sizeof(float));
-    gs_raster_options opt = {s->antialiased, path};
+    gs_raster_options opt = {.antialiased = s->antialiased, .path = path};
     gs_error err;
     o->fwd_status = gs_raster_forward(r, pool, &s->cam, &s->g, s->background,
                                       &opt, o->features, o->alpha, o->depth,

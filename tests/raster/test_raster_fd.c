@@ -24,7 +24,7 @@ static double loss(const rt_scene *s, gs_raster_path path, gs_pool *pool,
                    const rt_upstream *u, gs_raster *r, float *f, float *a, float *d)
 {
     size_t np = (size_t)s->cam.width * s->cam.height, nf = np * s->g.channels;
-    gs_raster_options opt = {s->antialiased, path};
+    gs_raster_options opt = {.antialiased = s->antialiased, .path = path};
     gs_error err;
     int st = gs_raster_forward(r, pool, &s->cam, &s->g, s->background, &opt, f, a, d, &err);
     if (st != GS_OK) {

@@ -535,7 +535,7 @@ static void expect_refused(const char *what, const rt_scene *s, const rt_scene *
     for (size_t i = 0; i < np; i++)
         a[i] = d[i] = SENTINEL;
     gs_raster *r = gs_raster_create();
-    gs_raster_options opt = {s->antialiased, g_path};
+    gs_raster_options opt = {.antialiased = s->antialiased, .path = g_path};
     gs_error err = {0, {0}};
     float *f0 = rt_alloc(nf, sizeof(float)), *a0 = rt_alloc(np, sizeof(float));
     int st = gs_raster_forward(r, g_pool, &ok->cam, &ok->g, ok->background, &opt, f0, a0,
@@ -650,7 +650,7 @@ static void nonfinite_blocks(void)
     s.features[nf - 1] = INFINITY;
     s.background[0] = NAN;
     gs_raster *r = gs_raster_create();
-    gs_raster_options opt = {s.antialiased, g_path};
+    gs_raster_options opt = {.antialiased = s.antialiased, .path = g_path};
     size_t np = 16 * 16;
     float *f = rt_alloc(np * 64, sizeof(float)), *a = rt_alloc(np, sizeof(float));
     gs_error err = {0, {0}};
@@ -735,7 +735,7 @@ static void bad_arguments(void)
     rt_random_scene(&s, 111, 4, 3, 16, 16);
     float f[3 * 256], a[256], d[256], vf[3 * 256] = {0};
     gs_raster *r = gs_raster_create();
-    gs_raster_options opt = {0, g_path};
+    gs_raster_options opt = {.antialiased = 0, .path = g_path};
     gs_error err;
     int st;
 #define EXPECT(call, want)                                                            \
@@ -828,7 +828,7 @@ static void api_contracts(void)
     CHECK(base.fwd_status == GS_OK && base.bwd_status == GS_OK);
 
     gs_raster *r = gs_raster_create();
-    gs_raster_options opt = {0, g_path};
+    gs_raster_options opt = {.antialiased = 0, .path = g_path};
     float *f = rt_alloc(nf, sizeof(float)), *a = rt_alloc(np, sizeof(float));
     float *gm = rt_alloc(150, sizeof(float)), *gf = rt_alloc(150, sizeof(float));
     float *gb = rt_alloc(nf, sizeof(float));

@@ -103,6 +103,15 @@ typedef enum gs_raster_path {
 typedef struct gs_raster_options {
     int antialiased;      /* 1: opacity compensation for the 0.3 px blur */
     gs_raster_path path;
+    /* > 0: the outputs already hold this forward's result for Gaussians
+     * [0, changed_from) of g alone (same camera, background and options):
+     * the fast path then composites only the tiles that one of
+     * [changed_from, n) is binned to, and leaves the others' pixels as they
+     * are. A tile none of them reaches has the same list, in the same
+     * (depth, index) order, as that forward's, so the result is the bits
+     * of a whole forward. No backward follows such a forward, and depth is
+     * not written for the tiles left. 0: every tile. */
+    int changed_from;
 } gs_raster_options;
 
 /* Workspace and saved forward state. Reused across calls: buffers grow as
