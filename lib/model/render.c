@@ -21,14 +21,15 @@ static float srgb_byte(float v)
     return floorf(v * 255.0f + 0.5f);
 }
 
-/* rgb8 over the image box b from the float image under the colour
- * transform tf (gain, bias); refuses a non-finite pixel. */
-static int convert_box(gs_model_ctx *c, const float tf[6], const int b[4],
-                       gs_error *err)
+/* rgb8 over rows [y0, y1) of the image box b from the float image under
+ * the colour transform tf (gain, bias); the first row with a non-finite
+ * pixel, or -1. */
+static int convert_rows(gs_model_ctx *c, const float tf[6], const int b[4],
+                        int y0, int y1)
 {
     int S = c->S;
     size_t plane = (size_t)S * S;
-    for (int y = b[1]; y < b[3]; y++) {
+    for (int y = y0; y < y1; y++) {
         uint8_t *row = c->rgb8 + (size_t)y * 3 * S;
         for (int k = 0; k < 3; k++) {
             const float *src = c->rgb + k * plane + (size_t)y * S;
@@ -39,18 +40,53 @@ static int convert_box(gs_model_ctx *c, const float tf[6], const int b[4],
                 row[3 * x + k] = (uint8_t)srgb_byte(bad ? 0.0f : v);
             }
             if (bad)
-                return gs_error_set(err, GS_ERR_NONFINITE,
-                                    "render: non-finite pixel in row %d", y);
+                return y;
         }
     }
+    return -1;
+}
+
+enum { CONVERT_ROWS = 16, CONVERT_TASKS = 64 }; /* rows per task at least, tasks at most */
+
+typedef struct convert_job {
+    gs_model_ctx *c;
+    const float *tf;
+    const int *b;
+    int rows;                /* per task */
+    int bad[CONVERT_TASKS];  /* per task: its first bad row, or -1 */
+} convert_job;
+
+static void convert_task(void *ctx, int t, int worker)
+{
+    (void)worker;
+    convert_job *j = ctx;
+    int y0 = j->b[1] + t * j->rows;
+    int y1 = y0 + j->rows < j->b[3] ? y0 + j->rows : j->b[3];
+    j->bad[t] = convert_rows(j->c, j->tf, j->b, y0, y1);
+}
+
+/* rgb8 over the image box b, rows split over the pool; refuses a
+ * non-finite pixel (naming the first such row). */
+static int convert_box(gs_model_ctx *c, gs_pool *pool, const float tf[6],
+                       const int b[4], gs_error *err)
+{
+    int h = b[3] - b[1];
+    convert_job j = {c, tf, b, (h + CONVERT_TASKS - 1) / CONVERT_TASKS, {0}};
+    j.rows = j.rows < CONVERT_ROWS ? CONVERT_ROWS : j.rows;
+    int tasks = (h + j.rows - 1) / j.rows;
+    gs_pool_for(pool, tasks, convert_task, &j);
+    for (int t = 0; t < tasks; t++)
+        if (j.bad[t] >= 0)
+            return gs_error_set(err, GS_ERR_NONFINITE,
+                                "render: non-finite pixel in row %d", j.bad[t]);
     return GS_OK;
 }
 
 /* Writes the frame's image with the subject's colour transform; refuses a
  * non-finite pixel. The context keeps its 8-bit image: when the transform
  * is the last one, only what the render changed is converted again. */
-static int write_image(gs_model_ctx *c, const gs_subject *s, uint8_t *rgb,
-                       size_t stride, gs_error *err)
+static int write_image(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
+                       uint8_t *rgb, size_t stride, gs_error *err)
 {
     int S = c->S, all[4] = {0, 0, S, S};
     float tf[6];
@@ -61,7 +97,7 @@ static int write_image(gs_model_ctx *c, const gs_subject *s, uint8_t *rgb,
         box = c->rgb_dirty;
     c->rgb8_valid = 0;
     if (box[0] < box[2] && box[1] < box[3]) {
-        int rc = convert_box(c, tf, box, err);
+        int rc = convert_box(c, pool, tf, box, err);
         if (rc)
             return rc;
     }
@@ -141,5 +177,5 @@ int gs_model_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *s,
     rc = gs_frame_render(c, pool, &fr, NULL, err);
     if (rc)
         return rc;
-    return write_image(c, s, rgb, stride, err);
+    return write_image(c, pool, s, rgb, stride, err);
 }

@@ -491,13 +491,14 @@ static void block_backward(const gs_renderer_config *cfg, const act_layout *L,
 
 /* ---- Forward and backward ------------------------------------------------ */
 
-/* dst[3,HW] += conv_rgb(g): the 3-channel projection into a temporary. */
+/* dst[3,HW] += conv_rgb(g): the 3-channel projection into a temporary;
+ * then, when out is not NULL, out = sigmoid(dst) and copy = out. */
 static void rgb_add(const gs_rop_ctx *x, float *dst, float *tmp,
                     const gs_renderer_conv *conv, const float *g, int C,
-                    size_t hw)
+                    size_t hw, float *out, float *copy)
 {
     gs_rop_conv_forward(x, tmp, g, conv->w, conv->b, C, 3, (int)hw, 0);
-    add_into(dst, tmp, 3 * hw);
+    gs_rop_add_sigmoid(x, dst, tmp, out, copy, 3 * hw);
 }
 
 /* The passes after the guidance vector (if any) is in place. */
@@ -508,23 +509,17 @@ static int forward_core(const gs_renderer_config *cfg, const act_layout *L,
     int C = L->C, H = L->H, W = L->W, H1 = 2 * H, W1 = 2 * W;
     /* rgb = blur(up2x(conv_rgb0(x))) in rgb1a */
     gs_rop_conv_forward(ox, L->rgb0, x, p->rgb0.w, p->rgb0.b, C, 3, (int)L->hw0, 0);
-    int rc = gs_nn_upsample2x_forward(L->rgb1b, L->rgb0, 3, H, W);
-    if (rc)
-        return rc;
+    gs_rop_upsample2x_forward(ox, L->rgb1b, L->rgb0, 3, H, W);
     gs_rop_blur_forward(ox, L->rgb1a, L->rgb1b, 3, H1, W1);
     block_forward(cfg, L, ox, 0, p, x, tau, H, W);
-    rgb_add(ox, L->rgb1a, L->rgb1b, &p->block[0].rgb, L->blk[0].g, C, L->hw1);
+    rgb_add(ox, L->rgb1a, L->rgb1b, &p->block[0].rgb, L->blk[0].g, C, L->hw1,
+            NULL, NULL);
     /* rgb = blur(up2x(rgb)) in rgb2a */
-    rc = gs_nn_upsample2x_forward(L->rgb2b, L->rgb1a, 3, H1, W1);
-    if (rc)
-        return rc;
+    gs_rop_upsample2x_forward(ox, L->rgb2b, L->rgb1a, 3, H1, W1);
     gs_rop_blur_forward(ox, L->rgb2a, L->rgb2b, 3, 2 * H1, 2 * W1);
     block_forward(cfg, L, ox, 1, p, L->blk[0].g, tau, H1, W1);
-    rgb_add(ox, L->rgb2a, L->rgb2b, &p->block[1].rgb, L->blk[1].g, C, L->hw2);
-    rc = gs_nn_sigmoid_forward(L->out, L->rgb2a, 3 * L->hw2);
-    if (rc)
-        return rc;
-    memcpy(out_rgb, L->out, 3 * L->hw2 * sizeof *out_rgb);
+    rgb_add(ox, L->rgb2a, L->rgb2b, &p->block[1].rgb, L->blk[1].g, C, L->hw2,
+            L->out, out_rgb);
     return GS_OK;
 }
 

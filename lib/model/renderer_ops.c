@@ -18,6 +18,7 @@
 
 enum {
     BAND_MIN = 2048, /* pixels per band at least (sgemm stays efficient) */
+    FWD_BAND_FLOATS = 16384, /* a forward band's output floats at most */
     MAX_BANDS = 64,  /* bands per map at most (bounds the partials) */
     CHUNK = 65536,   /* elements per task of the elementwise passes */
     /* Elementwise loops run in blocks of VEC_BLOCK elements through
@@ -43,6 +44,15 @@ static int band_count(size_t hw)
 {
     size_t b = band_len(hw);
     return (int)((hw + b - 1) / b);
+}
+
+/* A forward band: its output (OC x band floats) small enough to stay in
+ * the core's L2 cache between the sgemm and the bias pass. */
+static size_t fwd_band_len(size_t hw, int OC)
+{
+    size_t b = FWD_BAND_FLOATS / (size_t)(OC > 0 ? OC : 1);
+    b = b < 64 ? 64 : b / 64 * 64;
+    return b < hw ? b : hw;
 }
 
 static int chunk_count(size_t n)
@@ -145,9 +155,10 @@ void gs_rop_conv_forward(const gs_rop_ctx *x, float *out, const float *in,
                          const float *w, const float *b, int IC, int OC,
                          int HW, int lrelu)
 {
+    size_t band = fwd_band_len((size_t)HW, OC);
     conv_job j = {.out = out, .in = in, .w = w, .b = b, .IC = IC, .OC = OC,
-                  .HW = HW, .lrelu = lrelu, .band = band_len((size_t)HW)};
-    gs_pool_for(x->pool, band_count((size_t)HW), conv_forward_task, &j);
+                  .HW = HW, .lrelu = lrelu, .band = band};
+    gs_pool_for(x->pool, (int)(((size_t)HW + band - 1) / band), conv_forward_task, &j);
 }
 
 /* Band t: dinp[:, band] (= or +=) w^T dout[:, band]; the band's weight and
@@ -428,6 +439,61 @@ void gs_rop_zero(const gs_rop_ctx *x, float *d, size_t n)
 {
     ew_job j = {d, NULL, n};
     gs_pool_for(x->pool, chunk_count(n), zero_task, &j);
+}
+
+typedef struct {
+    float *out;
+    const float *in;
+    int C, H, W, per; /* per: row chunks per channel */
+} up_job;
+
+enum { UP_ROWS = 32 }; /* output rows per task of the x2 upsampling */
+
+static void upsample_task(void *ctx, int t, int worker)
+{
+    (void)worker;
+    const up_job *j = ctx;
+    int c = t / j->per, oy0 = t % j->per * UP_ROWS, H2 = 2 * j->H;
+    int oy1 = oy0 + UP_ROWS < H2 ? oy0 + UP_ROWS : H2;
+    size_t hw = (size_t)j->H * (size_t)j->W;
+    gs_nn_upsample2x_forward_rows(j->out + (size_t)c * 4 * hw, j->in + (size_t)c * hw, 1,
+                                  j->H, j->W, oy0, oy1);
+}
+
+void gs_rop_upsample2x_forward(const gs_rop_ctx *x, float *out, const float *in,
+                               int C, int H, int W)
+{
+    up_job j = {out, in, C, H, W, (2 * H + UP_ROWS - 1) / UP_ROWS};
+    gs_pool_for(x->pool, C * j.per, upsample_task, &j);
+}
+
+typedef struct {
+    float *acc, *out, *copy;
+    const float *add;
+    size_t n;
+} addsig_job;
+
+static void add_sigmoid_task(void *ctx, int t, int worker)
+{
+    (void)worker;
+    const addsig_job *j = ctx;
+    size_t i0 = (size_t)t * CHUNK, i1 = i0 + CHUNK < j->n ? i0 + CHUNK : j->n;
+    float *restrict a = j->acc;
+    const float *restrict b = j->add;
+    for (size_t i = i0; i < i1; i++)
+        a[i] += b[i];
+    if (!j->out)
+        return;
+    gs_nn_sigmoid_forward(j->out + i0, a + i0, i1 - i0);
+    if (j->copy)
+        memcpy(j->copy + i0, j->out + i0, (i1 - i0) * sizeof *j->copy);
+}
+
+void gs_rop_add_sigmoid(const gs_rop_ctx *x, float *acc, const float *add,
+                        float *out, float *copy, size_t n)
+{
+    addsig_job j = {acc, out, copy, add, n};
+    gs_pool_for(x->pool, chunk_count(n), add_sigmoid_task, &j);
 }
 
 /* ---- Guidance ------------------------------------------------------------

@@ -65,6 +65,15 @@ void gs_rop_lrelu_backward(const gs_rop_ctx *x, float *d, const float *y,
                            size_t n);
 void gs_rop_zero(const gs_rop_ctx *x, float *d, size_t n);
 
+/* out[C,2H,2W] = bilinear x2 of in[C,H,W] (gs_nn_upsample2x_forward's
+ * values, split by channel and rows). */
+void gs_rop_upsample2x_forward(const gs_rop_ctx *x, float *out, const float *in,
+                               int C, int H, int W);
+/* acc[n] += add; then, when out is not NULL, out = sigmoid(acc)
+ * (gs_nn_sigmoid_forward's values) and, when copy is not NULL, copy = out. */
+void gs_rop_add_sigmoid(const gs_rop_ctx *x, float *acc, const float *add,
+                        float *out, float *copy, size_t n);
+
 /* Guidance of tau [D] (renderer.h, renderer_ops.c for the maths):
  *   vector: s = wk^T tau / temp, att = softmax_p(src_p . s),
  *           a = wv (sum_p att_p src_p) + bv                   [C]

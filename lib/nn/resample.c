@@ -78,16 +78,22 @@ static taps taps2x(int o, int n)
 /* out[C,2H,2W] = bilinear x2 of in[C,H,W], align_corners=False */
 int gs_nn_upsample2x_forward(float *out, const float *in, int C, int H, int W)
 {
+    return gs_nn_upsample2x_forward_rows(out, in, C, H, W, 0, 2 * H);
+}
+
+int gs_nn_upsample2x_forward_rows(float *out, const float *in, int C, int H,
+                                  int W, int oy0, int oy1)
+{
     int hw, rc = check2x(C, H, W, &hw);
     if (rc)
         return rc;
-    if (!out || !in)
+    if (!out || !in || oy0 < 0 || oy1 > 2 * H || oy0 > oy1)
         return GS_ERR_ARG;
-    int H2 = 2 * H, W2 = 2 * W;
+    int W2 = 2 * W;
     for (int c = 0; c < C; c++) {
         const float *src = in + (size_t)c * (size_t)hw;
         float *dst = out + (size_t)c * 4 * (size_t)hw;
-        for (int oy = 0; oy < H2; oy++) {
+        for (int oy = oy0; oy < oy1; oy++) {
             taps ty = taps2x(oy, H);
             const float *r0 = src + (size_t)ty.i0 * (size_t)W;
             const float *r1 = src + (size_t)ty.i1 * (size_t)W;

@@ -140,6 +140,10 @@ int gs_nn_pixel_shuffle_backward(float *dinp, const float *dout, int C, int H,
  * below at 0; i0 = floor(src), i1 = min(i0 + 1, n - 1), weights
  * (1 - (src - i0), src - i0). */
 int gs_nn_upsample2x_forward(float *out, const float *in, int C, int H, int W);
+/* Output rows [oy0, oy1) of every channel only (the same values: a pool
+ * splits the rows). */
+int gs_nn_upsample2x_forward_rows(float *out, const float *in, int C, int H,
+                                  int W, int oy0, int oy1);
 int gs_nn_upsample2x_backward(float *dinp, const float *dout, int C, int H,
                               int W);
 /* Bilinear resize to any size, PyTorch interpolate(size=(OH, OW),
