@@ -268,7 +268,7 @@ static int source_guided(const gs_renderer_config *cfg)
  * one (lean) keeps none: each block's maps go to two ping-pong buffers A
  * and B of [C, HW2] floats (the largest block map), with block 0's output
  * g0 [C, HW1] in a third (block 1 reads it twice); conv_a A, conv_b B,
- * shuffle A, blur B, conv_c A, guidance B (block 0: g0). Every pass reads
+ * shuffle and blur A, conv_c B, guidance A (block 0: g0). Every pass reads
  * and writes what it does in the full layout, so the output is the same
  * bytes; no pass runs in place. */
 static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
@@ -286,16 +286,15 @@ static void layout_make(act_layout *L, const gs_renderer_config *cfg, int H,
         float *att = guided && !src ? carve(L, base, L->hw2) : NULL;
         for (int b = 0; b < GS_RENDERER_BLOCKS; b++) {
             block_acts *a = &L->blk[b];
-            a->ya = A, a->yb = B, a->z = B, a->att = att;
+            a->ya = A, a->yb = B, a->z = A, a->att = att;
             if (b == 0) {
-                a->u = guided ? A : g0;
+                a->u = guided ? B : g0;
                 a->g = g0;
             } else {
-                a->u = A;
-                a->g = guided ? B : A;
+                a->u = B;
+                a->g = guided ? A : B;
             }
         }
-        L->bufP = A;
     }
     for (int b = 0; !lean && b < GS_RENDERER_BLOCKS; b++) {
         size_t hwi = b == 0 ? L->hw0 : L->hw1, hwo = 4 * hwi;
@@ -419,7 +418,7 @@ static void add_into(float *dst, const float *src, size_t n)
 
 /* ---- Blocks -------------------------------------------------------------- */
 
-/* Block b: xin [C,Hi,Wi] -> a->g [C,2Hi,2Wi]; bufP is the temporary. */
+/* Block b: xin [C,Hi,Wi] -> a->g [C,2Hi,2Wi]. */
 static void block_forward(const gs_renderer_config *cfg, const act_layout *L,
                           const gs_rop_ctx *x, int b,
                           const gs_renderer_params *p, const float *xin,
@@ -431,8 +430,7 @@ static void block_forward(const gs_renderer_config *cfg, const act_layout *L,
                         2 * C, hwi, 1);
     gs_rop_conv_forward(x, a->yb, a->ya, p->block[b].b.w, p->block[b].b.b,
                         2 * C, 4 * C, hwi, 1);
-    gs_rop_shuffle_tile_forward(x, L->bufP, a->yb, xin, C, Hi, Wi);
-    gs_rop_blur_forward(x, a->z, L->bufP, C, 2 * Hi, 2 * Wi);
+    gs_rop_shuffle_tile_blur_forward(x, a->z, a->yb, xin, C, Hi, Wi);
     gs_rop_conv_forward(x, a->u, a->z, p->block[b].c.w, p->block[b].c.b, C, C,
                         hwo, 1);
     if (cfg->guidance == GS_GUIDE_NONE)

@@ -69,7 +69,7 @@ size_t gs_rop_part_size(int C)
 size_t gs_rop_rows_size(int C, size_t widest)
 {
     size_t tasks = (size_t)(C > 3 ? C : 3);
-    return tasks * 2 * widest;
+    return tasks * 4 * widest;
 }
 
 /* ---- Small helpers ------------------------------------------------------ */
@@ -258,7 +258,7 @@ static void blur_forward_task(void *ctx, int c, int worker)
     int H = j->H, W = j->W;
     size_t hw = (size_t)H * (size_t)W, Ws = (size_t)W;
     const float *src = j->in + (size_t)c * hw;
-    float *v = j->x->rows + (size_t)c * 2 * j->x->widest;
+    float *v = j->x->rows + (size_t)c * 4 * j->x->widest;
     for (int y = 0; y < H; y++) {
         const float *a = src + (size_t)reflect(y - 1, H) * Ws;
         const float *b = src + (size_t)y * Ws;
@@ -286,7 +286,7 @@ static void blur_backward_task(void *ctx, int c, int worker)
     int H = j->H, W = j->W;
     size_t hw = (size_t)H * (size_t)W, Ws = (size_t)W;
     float *d = j->out + (size_t)c * hw;
-    float *prev = j->x->rows + (size_t)c * 2 * j->x->widest, *cur = prev + Ws;
+    float *prev = j->x->rows + (size_t)c * 4 * j->x->widest, *cur = prev + Ws;
     for (int y = 0; y < H; y++)
         row_blur_adjoint(d + (size_t)y * Ws, j->in + (size_t)c * hw + (size_t)y * Ws, W);
     memset(prev, 0, Ws * sizeof *prev); /* row -1: weight 0, but finite */
@@ -313,38 +313,69 @@ void gs_rop_blur_backward(const gs_rop_ctx *x, float *din, const float *dout,
 /* ---- Pixel shuffle with the tiled skip ---------------------------------- */
 
 typedef struct {
+    const gs_rop_ctx *x;
     float *out, *dx;
     const float *y, *xin;
     int C, H, W;
 } shuffle_job;
 
-/* Source plane k of output channel c: y channel 4c+k lands on the pixels
- * (2h + k/2, 2w + k%2) of the output plane. */
-static void shuffle_forward_task(void *ctx, int c, int worker)
+/* Row Y of output channel c of the shuffle with the tiled skip, into
+ * dst[2W]: y channel 4c+k lands on the pixels (2h + k/2, 2w + k%2) of the
+ * output plane, plus the skip's channel (4c+k) mod C. */
+static void shuffle_row(float *dst, const shuffle_job *j, int c, int Y)
 {
-    (void)worker;
-    const shuffle_job *j = ctx;
-    size_t hw = (size_t)j->H * (size_t)j->W, W2 = 2 * (size_t)j->W;
-    for (int k = 0; k < 4; k++) {
-        const float *src = j->y + (size_t)(4 * c + k) * hw;
-        const float *skip = j->xin + (size_t)((4 * c + k) % j->C) * hw;
-        float *dst = j->out + (size_t)c * 4 * hw + (size_t)(k >> 1) * W2 + (size_t)(k & 1);
-        for (int h = 0; h < j->H; h++) {
-            const float *s = src + (size_t)h * (size_t)j->W;
-            const float *t = skip + (size_t)h * (size_t)j->W;
-            float *d = dst + (size_t)h * 2 * W2;
-            for (int w = 0; w < j->W; w++)
-                d[2 * (size_t)w] = s[w] + t[w];
-        }
+    size_t hw = (size_t)j->H * (size_t)j->W;
+    int i = Y & 1, h = Y >> 1;
+    for (int k = 2 * i; k < 2 * i + 2; k++) {
+        const float *s = j->y + (size_t)(4 * c + k) * hw + (size_t)h * (size_t)j->W;
+        const float *t = j->xin + (size_t)((4 * c + k) % j->C) * hw + (size_t)h * (size_t)j->W;
+        float *d = dst + (k & 1);
+        for (int w = 0; w < j->W; w++)
+            d[2 * (size_t)w] = s[w] + t[w];
     }
 }
 
-void gs_rop_shuffle_tile_forward(const gs_rop_ctx *x, float *out,
-                                 const float *y, const float *xin, int C,
-                                 int H, int W)
+/* Channel c: the blur of the shuffled plane, each of its rows made once
+ * into one of three row buffers (kept by row index) as the vertical taps
+ * need it; the arithmetic of shuffle then blur, so the same values. */
+static void shuffle_blur_task(void *ctx, int c, int worker)
 {
-    shuffle_job j = {.out = out, .y = y, .xin = xin, .C = C, .H = H, .W = W};
-    gs_pool_for(x->pool, C, shuffle_forward_task, &j);
+    (void)worker;
+    const shuffle_job *j = ctx;
+    int H2 = 2 * j->H, W2 = 2 * j->W;
+    size_t Ws = (size_t)W2;
+    float *base = j->x->rows + (size_t)c * 4 * j->x->widest;
+    float *slot[3] = {base, base + Ws, base + 2 * Ws}, *v = base + 3 * Ws;
+    int have[3] = {-1, -1, -1};
+    for (int y = 0; y < H2; y++) {
+        int want[3] = {reflect(y - 1, H2), y, reflect(y + 1, H2)};
+        const float *r[3];
+        for (int q = 0; q < 3; q++) {
+            int s = -1;
+            for (int u = 0; u < 3; u++)
+                if (have[u] == want[q])
+                    s = u;
+            if (s < 0) { /* the slot no tap of this row needs */
+                for (int u = 0; u < 3 && s < 0; u++)
+                    if (have[u] != want[0] && have[u] != want[1] && have[u] != want[2])
+                        s = u;
+                shuffle_row(slot[s], j, c, want[q]);
+                have[s] = want[q];
+            }
+            r[q] = slot[s];
+        }
+        for (int i = 0; i < W2; i++)
+            v[i] = r[0][i] + 2.0f * r[1][i] + r[2][i];
+        row_blur(j->out + (size_t)c * (size_t)H2 * Ws + (size_t)y * Ws, v, W2, 1.0f / 16.0f);
+    }
+}
+
+void gs_rop_shuffle_tile_blur_forward(const gs_rop_ctx *x, float *out,
+                                      const float *y, const float *xin, int C,
+                                      int H, int W)
+{
+    shuffle_job j = {.x = x, .out = out, .y = y, .xin = xin, .C = C, .H = H, .W = W};
+    gs_pool_for(x->pool, C, shuffle_blur_task, &j);
 }
 
 /* Gathers dout's plane k of channel c into dst[H,W] (= or +=). */

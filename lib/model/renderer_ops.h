@@ -24,7 +24,7 @@
 typedef struct gs_rop_ctx {
     gs_pool *pool;  /* may be NULL */
     float *part;    /* gs_rop_part_size(C) floats: conv weight-gradient partials */
-    float *rows;    /* gs_rop_rows_size(C, widest) floats: blur rows */
+    float *rows;    /* gs_rop_rows_size(C, widest) floats: blur rows (4 per task) */
     size_t widest;  /* widest map row (W) any blur of the call will see */
     float *r;       /* [HW] of the largest map: guidance backward */
 } gs_rop_ctx;
@@ -50,14 +50,16 @@ void gs_rop_blur_forward(const gs_rop_ctx *x, float *out, const float *in,
 void gs_rop_blur_backward(const gs_rop_ctx *x, float *din, const float *dout,
                           int C, int H, int W);
 
-/* out[C,2H,2W][c, 2h+i, 2w+j] = y[4C,H,W][4c+2i+j, h, w]
+/* shuffle_tile(y, xin)[C,2H,2W][c, 2h+i, 2w+j] = y[4C,H,W][4c+2i+j, h, w]
  *                              + xin[C,H,W][(4c+2i+j) mod C, h, w].
  * Backward: dy = the inverse permutation of dout; dx += (dx may be NULL). */
-void gs_rop_shuffle_tile_forward(const gs_rop_ctx *x, float *out,
-                                 const float *y, const float *xin, int C,
-                                 int H, int W);
 void gs_rop_shuffle_tile_backward(const gs_rop_ctx *x, float *dy, float *dx,
                                   const float *dout, int C, int H, int W);
+/* out[C,2H,2W] = blur(shuffle_tile(y, xin)) as gs_rop_blur_forward would
+ * blur it, without the shuffled map in memory (2W <= x->widest). */
+void gs_rop_shuffle_tile_blur_forward(const gs_rop_ctx *x, float *out,
+                                      const float *y, const float *xin, int C,
+                                      int H, int W);
 
 /* d[n] *= lrelu'(in), from the saved OUTPUT y = lrelu(in): with a positive
  * slope, y > 0 exactly when in > 0. */
