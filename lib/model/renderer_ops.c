@@ -221,16 +221,30 @@ static int reflect(int i, int n)
     return i < 0 ? -i : (i >= n ? 2 * n - 2 - i : i);
 }
 
-/* o[W] = [1,2,1] * v[W] with reflected ends, times scale (W >= 2). */
-static void row_blur(float *o, const float *v, int W, float scale)
+/* o[W] = ([1,2,1] vertically of rows a, b, d, then horizontally) / 16,
+ * with reflected ends (W >= 2); v[W] is scratch. As blur_forward_task's
+ * vertical pass and row_blur, element by element. */
+static void blur_row3(float *restrict o, float *restrict v, const float *restrict a,
+                      const float *restrict b, const float *restrict d, size_t W)
 {
+    size_t i = 0;
+    for (; i + VEC_BLOCK <= W; i += VEC_BLOCK)
+        for (size_t q = i; q < i + VEC_BLOCK; q++)
+            v[q] = a[q] + 2.0f * b[q] + d[q];
+    for (; i < W; i++)
+        v[i] = a[i] + 2.0f * b[i] + d[i];
+    const float scale = 1.0f / 16.0f;
     o[0] = (2.0f * v[1] + 2.0f * v[0]) * scale;
-    for (int x = 1; x < W - 1; x++)
+    size_t x = 1;
+    for (; x + VEC_BLOCK <= W - 1; x += VEC_BLOCK)
+        for (size_t q = x; q < x + VEC_BLOCK; q++)
+            o[q] = (v[q - 1] + 2.0f * v[q] + v[q + 1]) * scale;
+    for (; x < W - 1; x++)
         o[x] = (v[x - 1] + 2.0f * v[x] + v[x + 1]) * scale;
     o[W - 1] = (2.0f * v[W - 2] + 2.0f * v[W - 1]) * scale;
 }
 
-/* The adjoint of row_blur without the scale: e[W] from g[W] (W >= 2). The
+/* The adjoint of blur_row3's horizontal pass without the scale: e[W] from g[W] (W >= 2). The
  * reflected taps y[0] <- x[1] and y[W-1] <- x[W-2] send g[0] to e[1] and
  * g[W-1] to e[W-2]. */
 static void row_blur_adjoint(float *e, const float *g, int W)
@@ -263,9 +277,7 @@ static void blur_forward_task(void *ctx, int c, int worker)
         const float *a = src + (size_t)reflect(y - 1, H) * Ws;
         const float *b = src + (size_t)y * Ws;
         const float *d = src + (size_t)reflect(y + 1, H) * Ws;
-        for (int i = 0; i < W; i++)
-            v[i] = a[i] + 2.0f * b[i] + d[i];
-        row_blur(j->out + (size_t)c * hw + (size_t)y * Ws, v, W, 1.0f / 16.0f);
+        blur_row3(j->out + (size_t)c * hw + (size_t)y * Ws, v, a, b, d, Ws);
     }
 }
 
@@ -324,14 +336,22 @@ typedef struct {
  * output plane, plus the skip's channel (4c+k) mod C. */
 static void shuffle_row(float *dst, const shuffle_job *j, int c, int Y)
 {
-    size_t hw = (size_t)j->H * (size_t)j->W;
-    int i = Y & 1, h = Y >> 1;
-    for (int k = 2 * i; k < 2 * i + 2; k++) {
-        const float *s = j->y + (size_t)(4 * c + k) * hw + (size_t)h * (size_t)j->W;
-        const float *t = j->xin + (size_t)((4 * c + k) % j->C) * hw + (size_t)h * (size_t)j->W;
-        float *d = dst + (k & 1);
-        for (int w = 0; w < j->W; w++)
-            d[2 * (size_t)w] = s[w] + t[w];
+    size_t hw = (size_t)j->H * (size_t)j->W, row = (size_t)(Y >> 1) * (size_t)j->W;
+    int k = 2 * (Y & 1);
+    const float *restrict s0 = j->y + (size_t)(4 * c + k) * hw + row;
+    const float *restrict s1 = s0 + hw;
+    const float *restrict t0 = j->xin + (size_t)((4 * c + k) % j->C) * hw + row;
+    const float *restrict t1 = j->xin + (size_t)((4 * c + k + 1) % j->C) * hw + row;
+    float *restrict d = dst;
+    size_t W = (size_t)j->W, w = 0;
+    for (; w + VEC_BLOCK <= W; w += VEC_BLOCK)
+        for (size_t q = w; q < w + VEC_BLOCK; q++) {
+            d[2 * q] = s0[q] + t0[q];
+            d[2 * q + 1] = s1[q] + t1[q];
+        }
+    for (; w < W; w++) {
+        d[2 * w] = s0[w] + t0[w];
+        d[2 * w + 1] = s1[w] + t1[w];
     }
 }
 
@@ -364,9 +384,7 @@ static void shuffle_blur_task(void *ctx, int c, int worker)
             }
             r[q] = slot[s];
         }
-        for (int i = 0; i < W2; i++)
-            v[i] = r[0][i] + 2.0f * r[1][i] + r[2][i];
-        row_blur(j->out + (size_t)c * (size_t)H2 * Ws + (size_t)y * Ws, v, W2, 1.0f / 16.0f);
+        blur_row3(j->out + (size_t)c * (size_t)H2 * Ws + (size_t)y * Ws, v, r[0], r[1], r[2], Ws);
     }
 }
 
