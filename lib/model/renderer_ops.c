@@ -139,15 +139,26 @@ static void conv_forward_task(void *ctx, int t, int worker)
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasNoTrans, j->OC, n, j->IC,
                 1.0f, j->w, j->IC, j->in + p0, j->HW, 0.0f, j->out + p0, j->HW);
     for (int o = 0; o < j->OC; o++) {
-        float *row = j->out + (size_t)o * HW + p0, bias = j->b[o];
-        if (j->lrelu)
-            for (int p = 0; p < n; p++) {
+        float *restrict row = j->out + (size_t)o * HW + p0;
+        const float bias = j->b[o];
+        int p = 0;
+        if (j->lrelu) {
+            for (; p + VEC_BLOCK <= n; p += VEC_BLOCK)
+                for (int q = p; q < p + VEC_BLOCK; q++) {
+                    float v = row[q] + bias;
+                    row[q] = select_pos(v, v, GS_ROP_LRELU_SLOPE * v);
+                }
+            for (; p < n; p++) {
                 float v = row[p] + bias;
                 row[p] = select_pos(v, v, GS_ROP_LRELU_SLOPE * v);
             }
-        else
-            for (int p = 0; p < n; p++)
+        } else {
+            for (; p + VEC_BLOCK <= n; p += VEC_BLOCK)
+                for (int q = p; q < p + VEC_BLOCK; q++)
+                    row[q] += bias;
+            for (; p < n; p++)
                 row[p] += bias;
+        }
     }
 }
 
