@@ -412,6 +412,9 @@ static int run_eval_photos(const cli_command *cmd, cli_opt *o)
                 pf.gate = fe->gate;
             }
             nfaces++;
+            if (!r && pf.red_eye_px > 0)
+                fprintf(stderr, "gazesplat %s: %s face %d: red-eye repaired (%d px)\n",
+                        cmd->name, path, i, pf.red_eye_px);
             if (!r) {
                 passed += fe->gate.refusal == GS_FACE_USABLE;
                 rc = eval_face(cmd, m, pool, det, &pf, iters, &ft, fe);

@@ -99,6 +99,11 @@ int gs_redirect_input_photo(gs_face_detector *det, const gs_face_shape_model *sp
         rc = gs_error_set(err, GS_ERR_NOMEM, "photo normalization: out of memory");
     if (rc == GS_OK && (rc = gs_face_normalize_image(&in->photo, &in->face.norm, &in->norm, err)) == GS_OK)
         rc = gs_redirect_face_mask((const double(*)[2])in->face.uv_n, S, in->mask, err);
+    /* A red-eye pupil would stay where it was in the fit and the transfer
+     * (a ghost beside the redirected iris): repaired before either. */
+    if (rc == GS_OK && !o->keep_red_eye)
+        rc = gs_face_red_eye_fix(&in->norm, (const double(*)[2])in->face.uv_n,
+                                 info->focal / info->distance_mm, &in->red_eye_px, err);
     if (rc != GS_OK && rc != GS_ERR_NOMEM)
         prefixed(err, rc, "photo normalization");
     if (rc == GS_OK && o->gate)

@@ -381,6 +381,106 @@ static void test_gaze(void)
     CHECK_MSG(worst <= 1.5, "gaze change off by %.3f deg", worst);
 }
 
+/* Red-eye repair (gs_face_red_eye_fix) on located synthetic eyes: a clean
+ * eye, a white pupil, an amber iris ring and an iris as red as its pupil
+ * keep their bytes; a red pupil
+ * (a dark red disc with a pink highlight, as flash photos show) loses its
+ * red: no red pixel is left in it, only R changed and only inside the
+ * eye's contour, and the located centre moves by at most 0.5 px against
+ * the clean eye's. */
+static void test_red_eye(void)
+{
+    static const uint8_t red[3] = {160, 40, 35}, pink[3] = {235, 165, 155},
+                         white[3] = {235, 225, 225}, amber[3] = {140, 95, 70};
+    int tested = 0, repaired = 0, left_red = 0, false_fix = 0, other = 0;
+    double moved = 0;
+    uint8_t *orig = malloc(smp.stride * S), *want = malloc(smp.stride * S);
+    CHECK(orig && want);
+    for (int k = 0; k < 6 && orig && want; k++) {
+        gs_synth_scene sc;
+        gs_synth_scene_default(&sc, 600);
+        gs_synth_identity_from_seed(gs_synth_split_seed(GS_SYNTH_TEST, 80 + (uint64_t)k),
+                                    &sc.identity);
+        sc.gaze_yaw = (k - 2.5) * 5 * DEG;
+        sc.gaze_pitch = (k % 2 ? 4 : -4) * DEG;
+        render(&sc);
+        memcpy(orig, smp.rgb, smp.stride * S);
+        gs_io_image img = image();
+        const double(*uv)[2] = (const double(*)[2])smp.labels.lm2d;
+        gs_face_iris_opts o;
+        opts(&o);
+        int fixed = -1;
+        CHECK(gs_face_red_eye_fix(&img, uv, 800.0 / 680.0, &fixed, NULL) == GS_OK);
+        false_fix += fixed != 0 || memcmp(orig, smp.rgb, smp.stride * S) != 0;
+        for (int eye = 0; eye < 2; eye++) {
+            memcpy(smp.rgb, orig, smp.stride * S);
+            gs_face_iris r0;
+            CHECK(gs_face_iris_locate(&img, contour(eye), &o, &r0, NULL) == GS_OK);
+            if (r0.status != GS_FACE_IRIS_OK)
+                continue;
+            tested++;
+            const gs_synth_labels *l = &smp.labels;
+            double rp = l->K[0] * l->pupil_radius_mm / l->pupil_centre[eye][2];
+            double ri = l->K[0] * l->iris_radius_mm / l->pupil_centre[eye][2];
+            /* not red-eye: a white pupil, an amber ring around a dark pupil */
+            paint_disc(l->pupil_uv[eye], rp, white);
+            memcpy(want, smp.rgb, smp.stride * S);
+            CHECK(gs_face_red_eye_fix(&img, uv, 800.0 / 680.0, &fixed, NULL) == GS_OK);
+            false_fix += fixed != 0 || memcmp(want, smp.rgb, smp.stride * S) != 0;
+            memcpy(smp.rgb, orig, smp.stride * S);
+            paint_disc(l->pupil_uv[eye], 0.9 * ri, amber);
+            paint_disc(l->pupil_uv[eye], rp, (const uint8_t[3]){25, 20, 18});
+            memcpy(want, smp.rgb, smp.stride * S);
+            CHECK(gs_face_red_eye_fix(&img, uv, 800.0 / 680.0, &fixed, NULL) == GS_OK);
+            false_fix += fixed != 0 || memcmp(want, smp.rgb, smp.stride * S) != 0;
+            /* the whole iris as red as the pupil (warm light, a red cast):
+             * nothing stands out, nothing is repaired */
+            memcpy(smp.rgb, orig, smp.stride * S);
+            paint_disc(l->pupil_uv[eye], 0.95 * ri, (const uint8_t[3]){150, 97, 83});
+            paint_disc(l->pupil_uv[eye], rp, red);
+            memcpy(want, smp.rgb, smp.stride * S);
+            CHECK(gs_face_red_eye_fix(&img, uv, 800.0 / 680.0, &fixed, NULL) == GS_OK);
+            false_fix += fixed != 0 || memcmp(want, smp.rgb, smp.stride * S) != 0;
+            /* red-eye */
+            memcpy(smp.rgb, orig, smp.stride * S);
+            paint_disc(l->pupil_uv[eye], rp, red);
+            double h[2] = {l->pupil_uv[eye][0] - 0.3 * rp, l->pupil_uv[eye][1] - 0.3 * rp};
+            paint_disc(h, 0.35 * rp, pink);
+            memcpy(want, smp.rgb, smp.stride * S);
+            CHECK(gs_face_red_eye_fix(&img, uv, 800.0 / 680.0, &fixed, NULL) == GS_OK);
+            repaired += fixed > 0;
+            for (int y = 0; y < S; y++)
+                for (int x = 0; x < S; x++) {
+                    const uint8_t *a = want + (size_t)y * smp.stride + 3 * (size_t)x;
+                    const uint8_t *b = smp.rgb + (size_t)y * smp.stride + 3 * (size_t)x;
+                    double d = hypot(x + 0.5 - l->pupil_uv[eye][0], y + 0.5 - l->pupil_uv[eye][1]);
+                    int m = b[1] > b[2] ? b[1] : b[2];
+                    left_red += d <= rp - 0.5 && b[0] > 1.35 * m && b[0] - m > 40;
+                    other += a[1] != b[1] || a[2] != b[2] || (a[0] != b[0] && d > 1.5 * ri);
+                }
+            gs_face_iris r;
+            CHECK(gs_face_iris_locate(&img, contour(eye), &o, &r, NULL) == GS_OK);
+            moved = fmax(moved, r.status == GS_FACE_IRIS_OK || r.status == GS_FACE_IRIS_PARTIAL
+                                    ? hypot(r.centre[0] - r0.centre[0], r.centre[1] - r0.centre[1])
+                                    : INFINITY);
+        }
+    }
+    printf("red-eye: %d eyes, %d repaired, %d red pixels left, %d other pixels changed, "
+           "%d false repairs, centre moved %.2f px at most\n",
+           tested, repaired, left_red, other, false_fix, moved);
+    CHECK(tested >= 4);
+    CHECK_EQ_INT(repaired, tested);
+    CHECK_EQ_INT(left_red, 0);
+    CHECK_EQ_INT(other, 0);
+    CHECK_EQ_INT(false_fix, 0);
+    CHECK_MSG(moved <= 0.5, "red-eye repair moved the centre by %.2f px", moved);
+    gs_io_image bad = {0, 0, 0, NULL};
+    CHECK(gs_face_red_eye_fix(&bad, (const double(*)[2])smp.labels.lm2d, 0, NULL, NULL) ==
+          GS_ERR_ARG);
+    free(orig);
+    free(want);
+}
+
 int main(void)
 {
     if (gs_synth_sample_alloc(&smp, S, S, NULL) != GS_OK)
@@ -388,6 +488,7 @@ int main(void)
     test_errors();
     test_gaze();
     test_painted();
+    test_red_eye();
     test_narrowed_closed();
     test_open();
     gs_synth_sample_free(&smp);

@@ -58,6 +58,8 @@ typedef struct gs_redirect_input {
     uint8_t *mask;        /* is_photo: face weights over norm (image_size^2), owned */
     gs_face_gate gate;    /* the gate's measures when it ran; gate.refusal
                              says why an input was refused */
+    int red_eye_px;       /* is_photo: pixels of norm whose red-eye was
+                             repaired (gs_face_red_eye_fix), 0 if none */
 } gs_redirect_input;
 
 typedef struct gs_redirect_photo_opts {
@@ -65,6 +67,9 @@ typedef struct gs_redirect_photo_opts {
     int gate;             /* 1: through the face gate (face.h) */
     int use_k;            /* 1: the photo's intrinsics k; 0: assumed (face.h) */
     double k[9];
+    int keep_red_eye;     /* 1: leave red-eye pupils as they are; 0 (the
+                             default): repair them in the normalized face
+                             before the gate, the fit and the transfer */
 } gs_redirect_photo_opts;
 void gs_redirect_photo_opts_default(gs_redirect_photo_opts *o);
 
