@@ -5,11 +5,11 @@
  *
  * Per eye: the iris localizer (iris.c) finds the iris and, where one
  * stands out, the pupil; its grey, (2G + B) / 3, reads a red-eye pupil as
- * dark, so the eye is located like any other. A pixel is red-eye when its
- * red stands well above both other channels (R > RATIO max(G, B) and
- * R - max(G, B) > MARGIN): a brown or hazel iris (R over max(G, B) by at
- * most about 1.4), skin, a glint (white) and a bright white pupil are not.
- * The eye has red-eye when at least MIN_SHARE of the pixels of its pupil
+ * dark, so the eye is located like any other. A pixel is red when its red
+ * stands well above both other channels (R > RATIO max(G, B) and
+ * R - max(G, B) > MARGIN): a glint (white), a bright white pupil and most
+ * skin are not, but a brown iris or lid under warm light can be, so the
+ * decision is the eye's, not the pixel's. The eye has red-eye when at least MIN_SHARE of the pixels of its pupil
  * disc (the pupil's, or 0.45 of the iris radius when no pupil stands out)
  * are, and a smaller share of the iris ring around it (from REACH pupil
  * radii out to the limbus), under RING_SHARE: under warm light, or with a
@@ -17,8 +17,8 @@
  * nothing stands out. (On the test photos: the red-eye pupils of sample6
  * face 0, 95 % and 40 % of the disc against 5 % and 28 % of the ring; the
  * warm-lit brown eye of sample5 face 2, 47 % against 61 %.) Then every red
- * pixel inside the eye's contour and within REACH
- * pupil radii of the centre gets R = (G + B) / 2, the usual repair: the
+ * pixel inside the eye's contour and within REACH pupil radii of the
+ * centre gets R = (G + B) / 2, the usual repair: the
  * pupil's own dark is kept and its red goes. Nothing else is touched, so
  * an eye without red-eye keeps its bytes. */
 #include <math.h>

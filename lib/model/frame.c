@@ -533,19 +533,19 @@ static int raster_super(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
  * directly; below, through a camera of the same view at fsr pixels into
  * lo [C, fsr, fsr] (scratch), resampled bilinearly to fs. Only renders
  * (no backward follows) ask for fsr < fs. render: no backward follows, so
- * the rasterizer keeps no records for one. from > 0 (a render at fs
- * only): out and alpha hold the map of g's first `from` Gaussians, and
+ * the rasterizer keeps no records for one. from > 0 (only for a render
+ * at fs): out and alpha hold the map of g's first `from` Gaussians, and
  * only the tiles the rest reach are composited
  * (gs_raster_options.changed_from). */
-static int raster_at_from(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
-                          const gs_gaussians *g, int fsr, int render, int from,
-                          float *out, float *alpha, float *lo, gs_error *err)
+static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
+                     const gs_gaussians *g, int fsr, int render, int from,
+                     float *out, float *alpha, float *lo, gs_error *err)
 {
     gs_raster_set_records(r, !render);
     gs_camera cam;
     gs_frame_camera(c->m, c->fr.head_t, &cam);
     gs_raster_options ro = {.antialiased = 0, .path = GS_RASTER_FAST,
-                            .changed_from = render && fsr == c->fs ? from : 0};
+                            .changed_from = from};
     if (fsr == c->fs)
         return gs_raster_forward(r, pool, &cam, g, c->bg, &ro, out, alpha,
                                  NULL, err);
@@ -564,13 +564,6 @@ static int raster_at_from(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
     return rc;
 }
 
-static int raster_at(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
-                     const gs_gaussians *g, int fsr, int render, float *out,
-                     float *alpha, float *lo, gs_error *err)
-{
-    return raster_at_from(c, r, pool, g, fsr, render, 0, out, alpha, lo, err);
-}
-
 /* The face stream alone into c->fmap_face (the guidance source and the
  * face-only training render) at feature size fsr, unless it is current. */
 static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, int render,
@@ -580,7 +573,7 @@ static int face_map(gs_model_ctx *c, gs_pool *pool, int fsr, int render,
         return GS_OK;
     c->face_map_valid = 0;
     gs_gaussians g = gaussians_of(c, 0, c->nm); /* the lids move: not */
-    int rc = raster_at(c, c->raster_face, pool, &g, fsr, render, c->fmap_face,
+    int rc = raster_at(c, c->raster_face, pool, &g, fsr, render, 0, c->fmap_face,
                        c->alpha_face, c->v_fmap_face, err);
     if (!rc) {
         c->face_map_valid = 1;
@@ -740,15 +733,15 @@ static int forward_at(gs_model_ctx *c, gs_pool *pool, const gs_frame *fr,
             from = c->nm;
         }
     }
-    rc = raster_at_from(c, c->raster, pool, &g, fsr, render, from, c->fmap,
-                        c->alpha, c->v_fmap, err);
+    rc = raster_at(c, c->raster, pool, &g, fsr, render, from, c->fmap,
+                   c->alpha, c->v_fmap, err);
     if (rc)
         return rc;
     c->used_eye_map = c->ne > 0 && stream == GS_STREAM_BOTH && c->eye_loss &&
                       c->fmap_eye;
     if (c->used_eye_map) { /* the eye stream alone, for its training loss */
         gs_gaussians ge = gaussians_of(c, c->nf, c->ne);
-        rc = raster_at(c, c->raster_eye, pool, &ge, fsr, render, c->fmap_eye,
+        rc = raster_at(c, c->raster_eye, pool, &ge, fsr, render, 0, c->fmap_eye,
                        c->alpha_eye, c->v_fmap_eye, err);
         if (rc)
             return rc;

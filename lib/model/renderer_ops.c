@@ -60,6 +60,13 @@ static int chunk_count(size_t n)
     return (int)((n + CHUNK - 1) / CHUNK);
 }
 
+/* Elements [*i0, *i1) of chunk t of n. */
+static void chunk_range(int t, size_t n, size_t *i0, size_t *i1)
+{
+    *i0 = (size_t)t * CHUNK;
+    *i1 = *i0 + CHUNK < n ? *i0 + CHUNK : n;
+}
+
 size_t gs_rop_part_size(int C)
 {
     size_t Cs = (size_t)C;
@@ -366,36 +373,24 @@ static void shuffle_row(float *dst, const shuffle_job *j, int c, int Y)
     }
 }
 
-/* Channel c: the blur of the shuffled plane, each of its rows made once
- * into one of three row buffers (kept by row index) as the vertical taps
- * need it; the arithmetic of shuffle then blur, so the same values. */
+/* Channel c: the blur of the shuffled plane, each of its rows made once,
+ * into row buffer r % 3, one row ahead of the blur: the taps of row y are
+ * rows y - 1, y and y + 1 (reflected at the ends, 1 and H2 - 2, rows made
+ * already). The arithmetic of shuffle then blur, so the same values. */
 static void shuffle_blur_task(void *ctx, int c, int worker)
 {
     (void)worker;
     const shuffle_job *j = ctx;
-    int H2 = 2 * j->H, W2 = 2 * j->W;
-    size_t Ws = (size_t)W2;
+    int H2 = 2 * j->H;
+    size_t Ws = 2 * (size_t)j->W;
     float *base = j->x->rows + (size_t)c * 4 * j->x->widest;
     float *slot[3] = {base, base + Ws, base + 2 * Ws}, *v = base + 3 * Ws;
-    int have[3] = {-1, -1, -1};
+    shuffle_row(slot[0], j, c, 0);
     for (int y = 0; y < H2; y++) {
-        int want[3] = {reflect(y - 1, H2), y, reflect(y + 1, H2)};
-        const float *r[3];
-        for (int q = 0; q < 3; q++) {
-            int s = -1;
-            for (int u = 0; u < 3; u++)
-                if (have[u] == want[q])
-                    s = u;
-            if (s < 0) { /* the slot no tap of this row needs */
-                for (int u = 0; u < 3 && s < 0; u++)
-                    if (have[u] != want[0] && have[u] != want[1] && have[u] != want[2])
-                        s = u;
-                shuffle_row(slot[s], j, c, want[q]);
-                have[s] = want[q];
-            }
-            r[q] = slot[s];
-        }
-        blur_row3(j->out + (size_t)c * (size_t)H2 * Ws + (size_t)y * Ws, v, r[0], r[1], r[2], Ws);
+        if (y + 1 < H2)
+            shuffle_row(slot[(y + 1) % 3], j, c, y + 1);
+        blur_row3(j->out + (size_t)c * (size_t)H2 * Ws + (size_t)y * Ws, v,
+                  slot[reflect(y - 1, H2) % 3], slot[y % 3], slot[reflect(y + 1, H2) % 3], Ws);
     }
 }
 
@@ -469,7 +464,8 @@ static void lrelu_backward_task(void *ctx, int t, int worker)
 {
     (void)worker;
     const ew_job *j = ctx;
-    size_t i0 = (size_t)t * CHUNK, i1 = i0 + CHUNK < j->n ? i0 + CHUNK : j->n;
+    size_t i0, i1;
+    chunk_range(t, j->n, &i0, &i1);
     float *restrict d = j->d;
     const float *restrict y = j->y;
     size_t i = i0;
@@ -491,7 +487,8 @@ static void zero_task(void *ctx, int t, int worker)
 {
     (void)worker;
     const ew_job *j = ctx;
-    size_t i0 = (size_t)t * CHUNK, i1 = i0 + CHUNK < j->n ? i0 + CHUNK : j->n;
+    size_t i0, i1;
+    chunk_range(t, j->n, &i0, &i1);
     memset(j->d + i0, 0, (i1 - i0) * sizeof *j->d);
 }
 
@@ -537,7 +534,8 @@ static void add_sigmoid_task(void *ctx, int t, int worker)
 {
     (void)worker;
     const addsig_job *j = ctx;
-    size_t i0 = (size_t)t * CHUNK, i1 = i0 + CHUNK < j->n ? i0 + CHUNK : j->n;
+    size_t i0, i1;
+    chunk_range(t, j->n, &i0, &i1);
     float *restrict a = j->acc;
     const float *restrict b = j->add;
     for (size_t i = i0; i < i1; i++)

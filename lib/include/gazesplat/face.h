@@ -446,9 +446,10 @@ int gs_face_iris_locate(const gs_io_image *img, const double eye_uv[6][2],
 /* Repairs red-eye in img (RGB, changed in place) at the 68 landmarks uv
  * (geom.h pixels): in each eye the iris localizer finds (px_per_mm as in
  * gs_face_iris_opts_scale; 0: the default radius range), when at least 30 %
- * of the pupil disc is red (R over 1.6 times and 45 levels above both G
- * and B), every red pixel in the eye's contour within 1.35 pupil radii
- * gets R = (G + B) / 2. Other pixels, and eyes without red-eye, keep their
+ * of the pupil disc is red (R over 1.35 times and 40 levels above both G
+ * and B) and a smaller share, under 50 %, of the iris ring around it,
+ * every red pixel in the eye's contour within 1.35 pupil radii gets
+ * R = (G + B) / 2. Other pixels, and eyes without red-eye, keep their
  * bytes. *fixed_px (may be NULL): the pixels changed. Errors: GS_ERR_ARG
  * for a bad image or landmarks, as gs_face_iris_locate. docs/face.md,
  * "Red-eye". */
