@@ -117,6 +117,25 @@ static void ft_free(ft_run *r)
     free(r->best);
 }
 
+/* Unbinds from g the gradients a fine-tune of `parts` never reads and the
+ * backward knows to skip: the renderer's weights (gs_frame_backward
+ * computes the renderer's input gradients alone) and the MLPs' (the face
+ * stream's blocks, the eye MLPs and the eyeball shift). What is left
+ * unbound stays zero in the gradient array, which is what Adam saw of it
+ * before; the tuned parts' gradients are the same bits. */
+static void ft_unbind_untuned(gs_model_params *g, unsigned parts)
+{
+    if (!(parts & GS_FT_RENDERER))
+        memset(&g->rend, 0, sizeof g->rend);
+    if (!(parts & GS_FT_MLP)) {
+        memset(&g->face_e, 0, sizeof g->face_e);
+        memset(&g->face_p, 0, sizeof g->face_p);
+        memset(&g->eye, 0, sizeof g->eye);
+        memset(g->eye_rot, 0, sizeof g->eye_rot);
+        g->eye_centre_w = NULL;
+    }
+}
+
 static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
 {
     memset(r, 0, sizeof *r);
@@ -137,6 +156,7 @@ static int ft_init(ft_run *r, gs_model *m, unsigned parts, gs_error *err)
     if (!r->c || !r->grad || !r->orig || !r->best)
         return gs_error_set(err, GS_ERR_NOMEM, "finetune: out of memory");
     gs_model_bind(m, r->grad, &r->g);
+    ft_unbind_untuned(&r->g, parts);
     for (int i = 0; i < r->n; i++) {
         const gs_ptensor *t = &m->t[r->idx[i]];
         groups[i].param = m->params + t->offset;

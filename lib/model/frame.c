@@ -1389,7 +1389,7 @@ static void centre_backward(const gs_model_ctx *c, const gs_model_params *gp,
     for (int e = 0; e < 2; e++)
         for (int k = 0; k < 3; k++) {
             const float *w = W + (size_t)(3 * e + k) * D;
-            if (gp) {
+            if (gp && gp->eye_centre_w) {
                 float *dw = gp->eye_centre_w + (size_t)(3 * e + k) * D;
                 for (int j = 0; j < D; j++)
                     dw[j] += (float)(dce[e][k] * c->fr.code[j]);
@@ -1691,6 +1691,15 @@ static int raster_back(gs_model_ctx *c, gs_raster *r, gs_pool *pool,
     return gs_raster_backward(r, pool, hi, NULL, NULL, gg, NULL, err);
 }
 
+/* The renderer's weight gradients a backward is asked for: none for a fit
+ * (grads NULL) or for a fine-tune that leaves the renderer as it is (its
+ * part of grads unbound, as finetune.c does). The renderer's
+ * input gradients are the same bits either way. */
+static const gs_renderer_params *rend_grads(const gs_model_params *grads)
+{
+    return grads && grads->rend.rgb0.w ? &grads->rend : NULL;
+}
+
 /* Long on purpose (a hot path): the backward of one forward, running the
  * renderer, the rasterizer and the streams in the reverse of the forward
  * order over the state that forward saved; split, the steps would pass
@@ -1743,14 +1752,11 @@ int gs_frame_backward(gs_model_ctx *c, gs_pool *pool, const float *d_rgb,
             }
     }
     if (d_rgb) {
-        if (!grads)
-            memset(c->r_grad, 0,
-                   gs_renderer_param_count(&c->m->rcfg) * sizeof(float));
         int rc = gs_renderer_backward_src(
             &c->m->rcfg, &c->m->p.rend, c->r_act, c->r_act_len, c->fmap,
             c->fr.code, c->used_src ? c->fmap_face : NULL,
             direct ? c->dir_dmain : d_rgb, c->fs, c->fs,
-            grads ? &grads->rend : &c->r_grad_p, c->v_fmap,
+            rend_grads(grads), c->v_fmap,
             c->used_src ? c->v_fmap_face : NULL, fg ? fg->code : NULL, pool);
         if (rc)
             return gs_error_set(err, rc, "model: renderer backward failed");

@@ -144,7 +144,7 @@ static void train_free(gs_model_ctx *c)
 {
     float **b[] = {&c->fe_in, &c->fe_act, &c->fp_in, &c->fp_act,
                    &c->v_mean, &c->v_scale, &c->v_quat, &c->v_opac,
-                   &c->v_feat, &c->r_grad, &c->blk_grad, &c->blk_red,
+                   &c->v_feat, &c->blk_grad, &c->blk_red,
                    &c->scratch, &c->fmap_eye, &c->v_fmap_eye, &c->alpha_eye,
                    &c->lid_save, &c->r_act};
     for (size_t i = 0; i < sizeof b / sizeof b[0]; i++) {
@@ -187,10 +187,6 @@ int gs_ctx_train_alloc(gs_model_ctx *c)
     c->v_quat = talloc(n * 4, &tb, &fail);
     c->v_opac = talloc(n, &tb, &fail);
     c->v_feat = talloc(n * c->C, &tb, &fail);
-    size_t rn = gs_renderer_param_count(&m->rcfg);
-    c->r_grad = talloc(rn, &tb, &fail);
-    if (c->r_grad)
-        gs_renderer_bind(&m->rcfg, c->r_grad, rn, &c->r_grad_p);
     size_t sc = gs_mlp_scratch_size(&p->face_e, c->nf);
     size_t s2 = gs_mlp_scratch_size(&p->face_p, c->nf);
     size_t s3 = gs_mlp_scratch_size(&p->eye, (int)ne);
@@ -316,7 +312,7 @@ void gs_model_ctx_destroy(gs_model_ctx *c)
                       &c->g_quat, &c->g_opac, &c->g_feat, &c->x_head,
                       &c->q_head, &c->v_mean, &c->v_scale, &c->v_quat,
                       &c->v_opac, &c->v_feat, &c->bg, &c->fmap, &c->v_fmap,
-                      &c->alpha, &c->rgb, &c->v_rgb, &c->r_grad,
+                      &c->alpha, &c->rgb, &c->v_rgb,
                       &c->scratch, &c->fmap_face, &c->v_fmap_face,
                       &c->alpha_face, &c->bg_crop, &c->gvec, &c->fmap_eye,
                       &c->v_fmap_eye, &c->alpha_eye, &c->k_mean,

@@ -211,8 +211,6 @@ struct gs_model_ctx {
     float *v_fmap, *v_rgb;
     float *r_act;           /* the renderer's full buffer (training) */
     size_t r_act_len;
-    float *r_grad;          /* renderer weight gradients nobody asked for */
-    gs_renderer_params r_grad_p;
     float *scratch;
     size_t scratch_len, scratch_blk;
     /* last frame */

@@ -443,6 +443,11 @@ static void block_forward(const gs_renderer_config *cfg, const act_layout *L,
                              L->gscr);
 }
 
+/* A conv's weight and bias gradients in dp, or NULL when dp is NULL (the
+ * input gradients alone). */
+#define DW(dp, conv) ((dp) ? (dp)->conv.w : NULL)
+#define DB(dp, conv) ((dp) ? (dp)->conv.b : NULL)
+
 /* Block b backward. dg [C,HWo] (consumed) and work [>= C HWo] are two
  * ping-pong buffers; adds into dxin [C,HWi] (may be NULL), dp, dtau. */
 static void block_backward(const gs_renderer_config *cfg, const act_layout *L,
@@ -470,7 +475,7 @@ static void block_backward(const gs_renderer_config *cfg, const act_layout *L,
         t = cur, cur = other, other = t;
     }
     gs_rop_lrelu_backward(x, cur, a->u, Cs * no); /* d(conv_c out) */
-    gs_rop_conv_backward(x, other, 0, dp->block[b].c.w, dp->block[b].c.b, cur,
+    gs_rop_conv_backward(x, other, 0, DW(dp, block[b].c), DB(dp, block[b].c), cur,
                          a->z, p->block[b].c.w, C, C, hwo); /* dz */
     t = cur, cur = other, other = t;
     gs_rop_blur_backward(x, other, cur, C, 2 * Hi, 2 * Wi); /* d(shuffle+tile) */
@@ -478,12 +483,12 @@ static void block_backward(const gs_renderer_config *cfg, const act_layout *L,
     gs_rop_shuffle_tile_backward(x, other, dxin, cur, C, Hi, Wi); /* dyb */
     t = cur, cur = other, other = t;
     gs_rop_lrelu_backward(x, cur, a->yb, 4 * Cs * ni);
-    gs_rop_conv_backward(x, other, 0, dp->block[b].b.w, dp->block[b].b.b, cur,
+    gs_rop_conv_backward(x, other, 0, DW(dp, block[b].b), DB(dp, block[b].b), cur,
                          a->ya, p->block[b].b.w, 2 * C, 4 * C, hwi); /* dya */
     t = cur, cur = other, other = t;
     gs_rop_lrelu_backward(x, cur, a->ya, 2 * Cs * ni);
     /* dxin accumulates: the caller's dx, or the skip term added above */
-    gs_rop_conv_backward(x, dxin, 1, dp->block[b].a.w, dp->block[b].a.b, cur,
+    gs_rop_conv_backward(x, dxin, 1, DW(dp, block[b].a), DB(dp, block[b].a), cur,
                          xin, p->block[b].a.w, C, 2 * C, hwi);
 }
 
@@ -603,7 +608,7 @@ int gs_renderer_backward_src(const gs_renderer_config *cfg,
     int rc = check_call(cfg, p, x, tau, H, W, acts, acts_len, 0, &L);
     if (rc)
         return rc;
-    if (!dout_rgb || !params_ok(cfg, dparams))
+    if (!dout_rgb || (dparams && !params_ok(cfg, dparams)))
         return GS_ERR_ARG;
     gs_rop_ctx ox = rop_ctx(&L, pool);
     int C = L.C, H1 = 2 * H, W1 = 2 * W;
@@ -615,7 +620,7 @@ int gs_renderer_backward_src(const gs_renderer_config *cfg,
     rc = gs_nn_sigmoid_backward(L.rgb2a, dout_rgb, L.out, 3 * L.hw2);
     if (rc)
         return rc;
-    gs_rop_conv_backward(&ox, L.bufP, 0, dp->block[1].rgb.w, dp->block[1].rgb.b,
+    gs_rop_conv_backward(&ox, L.bufP, 0, DW(dp, block[1].rgb), DB(dp, block[1].rgb),
                          L.rgb2a, L.blk[1].g, p->block[1].rgb.w, C, 3,
                          (int)L.hw2);
     /* through rgb = blur(up2x(rgb)): d(rgb after block 0) in rgb1a */
@@ -628,7 +633,7 @@ int gs_renderer_backward_src(const gs_renderer_config *cfg,
     gs_rop_zero(&ox, L.bufX, (size_t)C * L.hw1);
     block_backward(cfg, &L, &ox, 1, p, dp, L.blk[0].g, tau, H1, W1, L.bufP,
                    L.bufQ, L.bufX, dtau);
-    gs_rop_conv_backward(&ox, L.bufX, 1, dp->block[0].rgb.w, dp->block[0].rgb.b,
+    gs_rop_conv_backward(&ox, L.bufX, 1, DW(dp, block[0].rgb), DB(dp, block[0].rgb),
                          L.rgb1a, L.blk[0].g, p->block[0].rgb.w, C, 3,
                          (int)L.hw1);
     /* the first rgb: blur(up2x(conv_rgb0(x))) */
@@ -637,7 +642,7 @@ int gs_renderer_backward_src(const gs_renderer_config *cfg,
     rc = gs_nn_upsample2x_backward(L.rgb0, L.rgb1b, 3, H, W);
     if (rc)
         return rc;
-    gs_rop_conv_backward(&ox, dx, 1, dp->rgb0.w, dp->rgb0.b, L.rgb0, x,
+    gs_rop_conv_backward(&ox, dx, 1, DW(dp, rgb0), DB(dp, rgb0), L.rgb0, x,
                          p->rgb0.w, C, 3, (int)L.hw0);
     block_backward(cfg, &L, &ox, 0, p, dp, x, tau, H, W, L.bufX, L.bufP, dx,
                    dtau);

@@ -191,8 +191,9 @@ int gs_renderer_forward_vec(const gs_renderer_config *cfg,
 /* Gradients from dout_rgb[3, 4H, 4W], with acts as left by the forward of
  * the same x, tau, H, W (its scratch part is overwritten; the saved part is
  * not, so backward may run again). ADDS into dparams (bound to a gradient
- * array with gs_renderer_bind; required), dx[C, H, W] and dtau[D] (both may
- * be NULL). */
+ * array with gs_renderer_bind; NULL: no weight gradients, the input
+ * gradients alone, the same bits), dx[C, H, W]
+ * and dtau[D] (both may be NULL). */
 int gs_renderer_backward(const gs_renderer_config *cfg,
                          const gs_renderer_params *p, float *acts,
                          size_t acts_len, const float *x, const float *tau,

@@ -192,6 +192,8 @@ static void conv_backward_task(void *ctx, int t, int worker)
         cblas_sgemm(CblasRowMajor, CblasTrans, CblasNoTrans, j->IC, n, j->OC,
                     1.0f, j->w, j->IC, g, j->HW, j->add_dinp ? 1.0f : 0.0f,
                     j->dinp + p0, j->HW);
+    if (!j->dw)
+        return;
     float *pw = j->part + (size_t)t * ((size_t)j->OC * (size_t)j->IC + (size_t)j->OC);
     float *pb = pw + (size_t)j->OC * (size_t)j->IC;
     cblas_sgemm(CblasRowMajor, CblasNoTrans, CblasTrans, j->OC, j->IC, n, 1.0f,
@@ -228,7 +230,8 @@ void gs_rop_conv_backward(const gs_rop_ctx *x, float *dinp, int add_dinp,
                   .in = in, .w = w, .dout = dout, .IC = IC, .OC = OC, .HW = HW,
                   .add_dinp = add_dinp, .band = band_len((size_t)HW)};
     gs_pool_for(x->pool, band_count((size_t)HW), conv_backward_task, &j);
-    gs_pool_for(x->pool, OC, conv_reduce_task, &j);
+    if (dw)
+        gs_pool_for(x->pool, OC, conv_reduce_task, &j);
 }
 
 /* ---- Blur (one task per channel) ---------------------------------------- */
@@ -748,7 +751,7 @@ void gs_rop_guide_vector_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
                    .band = band_len(hw)};
     guide_query(s, gd, tau);
     gs_pool_for(x->pool, C, pool_task, &j); /* xbar from the saved att */
-    for (int c = 0; c < C; c++) {
+    for (int c = 0; gd->dbv && c < C; c++) {
         gd->dbv[c] += da[c];
         for (int k = 0; k < C; k++)
             gd->dwv[(size_t)c * (size_t)C + (size_t)k] += da[c] * xbar[k];
@@ -766,10 +769,12 @@ void gs_rop_guide_vector_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
     gs_pool_for(x->pool, C, dsrc_task, &j);
     for (int d = 0; d < gd->D; d++) {
         const float *row = gd->wk + (size_t)d * (size_t)C;
-        float *drow = gd->dwk + (size_t)d * (size_t)C, acc = 0.0f;
+        float *drow = gd->dwk ? gd->dwk + (size_t)d * (size_t)C : NULL;
+        float acc = 0.0f;
         for (int c = 0; c < C; c++) {
             float dq = ds[c] / gd->temp;
-            drow[c] += tau[d] * dq;
+            if (drow)
+                drow[c] += tau[d] * dq;
             acc += row[c] * dq;
         }
         if (dtau)

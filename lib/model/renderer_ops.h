@@ -37,7 +37,8 @@ void gs_rop_conv_forward(const gs_rop_ctx *x, float *out, const float *in,
                          const float *w, const float *b, int IC, int OC,
                          int HW, int lrelu);
 /* dinp[IC,HW] = w^T dout (or += when add_dinp; skipped when NULL);
- * dw[OC,IC] += dout in^T; db[OC] += sum_p dout. */
+ * dw[OC,IC] += dout in^T; db[OC] += sum_p dout (dw and db both NULL:
+ * skipped). */
 void gs_rop_conv_backward(const gs_rop_ctx *x, float *dinp, int add_dinp,
                           float *dw, float *db, const float *dout,
                           const float *in, const float *w, int IC, int OC,
@@ -83,7 +84,7 @@ void gs_rop_add_sigmoid(const gs_rop_ctx *x, float *acc, const float *add,
  * att [HW] is saved for the backward. */
 typedef struct gs_rop_guide {
     const float *wk, *wv, *bv; /* [D,C], [C,C], [C] */
-    float *dwk, *dwv, *dbv;    /* gradients (backward), added to */
+    float *dwk, *dwv, *dbv;    /* gradients (backward), added to; NULL: none */
     int C, D, mult;
     float temp;
 } gs_rop_guide;
