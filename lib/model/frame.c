@@ -1350,6 +1350,11 @@ static void face_backward(gs_model_ctx *c, gs_pool *pool,
         j.code = pass == 0 && fg;
         j.gz = pass == 1 && fg && !c->m->cfg.two_stream;
         j.need_din = gp || j.code || j.gz;
+        /* Nothing asked of this pass (the pose MLP in a fit: no parameter
+         * gradients, rvec(R) a stop-gradient): its backward would only
+         * fill scratch. */
+        if (!j.weights && !j.need_din)
+            continue;
         gs_pool_for(pool, c->nfblk, face_bwd_task, &j);
         /* the blocks' sums, block by block */
         const gs_mlp *mlp = pass == 0 ? &p->face_e : &p->face_p;
