@@ -27,4 +27,8 @@ struct gs_face_shape_model {
     float *delta;            /* [cascade][feature][2] */
 };
 
+/* Signed distance from (qx, qy) to the closed polygon pg (an eye's 6
+ * contour points, geom.h pixels), negative inside (even-odd rule). */
+double gs_face_contour_dist(const double pg[6][2], double qx, double qy);
+
 #endif

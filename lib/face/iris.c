@@ -29,6 +29,8 @@
 #include "gazesplat/face.h"
 #include "gazesplat/geom.h"
 
+#include "face_internal.h"
+
 #define PI 3.14159265358979323846
 #define MAX_EYE_PX 96.0     /* eye width in the patch, after downsampling */
 #define MAX_OPENING 1200    /* opening pixels the fit uses (subsampled past) */
@@ -96,8 +98,8 @@ static void to_frame(const eye_geom *g, double x, double y, double *a, double *b
     *b = dx * g->ey[0] + dy * g->ey[1];
 }
 
-/* Signed distance to the contour polygon, negative inside (even-odd). */
-static double poly_dist(const double pg[6][2], double qx, double qy)
+/* face_internal.h */
+double gs_face_contour_dist(const double pg[6][2], double qx, double qy)
 {
     double best = INFINITY;
     int inside = 0;
@@ -143,8 +145,6 @@ static float grey_at(const gs_io_image *img, int x, int y)
     return (2.0f * p[1] + p[2]) / 3.0f;
 }
 
-static double poly_dist(const double pg[6][2], double qx, double qy);
-
 static int patch_make(const gs_io_image *img, const double poly[6][2], const double lo[2],
                       const double hi[2], int s, patch *p)
 {
@@ -166,7 +166,7 @@ static int patch_make(const gs_io_image *img, const double poly[6][2], const dou
         for (int i = 0; i < p->w; i++) {
             int x = p->x0 + s * i, y = p->y0 + s * j;
             float *d = p->g + (size_t)j * p->w + i;
-            p->in[(size_t)j * p->w + i] = poly_dist(poly, x + 0.5 * s, y + 0.5 * s) <= 0;
+            p->in[(size_t)j * p->w + i] = gs_face_contour_dist(poly, x + 0.5 * s, y + 0.5 * s) <= 0;
             if (x < 0 || y < 0 || x + s > img->width || y + s > img->height) {
                 *d = NAN;
                 continue;
@@ -220,7 +220,7 @@ static void patch_opening(patch *p, const eye_geom *g, double shrink)
             for (int i = 0; i < p->w; i += stride) {
                 float v = p->g[(size_t)j * p->w + i];
                 double x = p->x0 + p->s * (i + 0.5), y = p->y0 + p->s * (j + 0.5);
-                if (isnan(v) || poly_dist(g->poly, x, y) > -shrink)
+                if (isnan(v) || gs_face_contour_dist(g->poly, x, y) > -shrink)
                     continue;
                 if (n < MAX_OPENING) {
                     double a, b;
@@ -662,7 +662,7 @@ static double limbus_visible(const patch *p, const eye_geom *g, const model *m, 
         double na = (1 + el) * qa, nb = (1 - el) * qb, nl = hypot(na, nb);
         double du = (na * au - nb * av) / nl, dv = (na * av + nb * au) / nl;
         double x = p->x0 + p->s * u, y = p->y0 + p->s * v;
-        if (poly_dist(g->poly, x, y) > 0)
+        if (gs_face_contour_dist(g->poly, x, y) > 0)
             continue;
         double in, outv, a, b;
         if (!sample(p, u - du, v - dv, &in) || !sample(p, u + du, v + dv, &outv))
@@ -835,7 +835,7 @@ static void iris_lab(const gs_io_image *img, const eye_geom *g, double cx, doubl
         for (int y = y0; y <= y1; y++)
             for (int x = x0; x <= x1; x++) {
                 double dx = x + 0.5 - cx, dy = y + 0.5 - cy, d = sqrt(dx * dx + dy * dy);
-                if (d < inner || d > outer || poly_dist(g->poly, x + 0.5, y + 0.5) > 0)
+                if (d < inner || d > outer || gs_face_contour_dist(g->poly, x + 0.5, y + 0.5) > 0)
                     continue;
                 double lab[3];
                 rgb_to_lab(img->data + (size_t)y * img->stride + 3 * (size_t)x, lab);
@@ -1020,7 +1020,7 @@ static int locate(const gs_io_image *img, const eye_geom *g, const gs_face_iris_
                 out->pupil_centre[1] = p.y0 + s * pf.v;
             }
             if (isfinite(m->sse) && contrast >= o->min_contrast && visible >= o->min_visible &&
-                poly_dist(g->poly, cx, cy) <= 0.1 * g->width) {
+                gs_face_contour_dist(g->poly, cx, cy) <= 0.1 * g->width) {
                 /* Without a pupil the limbus has to be seen on both sides
                  * (the horizontal position) and over a vertical span of
                  * its arc (sin of elevation, top minus bottom, >= 0.8:

@@ -9,22 +9,23 @@
  * stands well above both other channels (R > RATIO max(G, B) and
  * R - max(G, B) > MARGIN): a glint (white), a bright white pupil and most
  * skin are not, but a brown iris or lid under warm light can be, so the
- * decision is the eye's, not the pixel's. The eye has red-eye when at least MIN_SHARE of the pixels of its pupil
- * disc (the pupil's, or 0.45 of the iris radius when no pupil stands out)
- * are, and a smaller share of the iris ring around it (from REACH pupil
+ * decision is the eye's, not the pixel's. The eye has red-eye when at
+ * least MIN_SHARE of the pixels of its pupil disc (the pupil's, or 0.45
+ * of the iris radius when no pupil stands out) are, and a smaller share of the iris ring around it (from REACH pupil
  * radii out to the limbus), under RING_SHARE: under warm light, or with a
  * camera's red cast, lids, skin and iris are as red as such a pupil, and
  * nothing stands out. (On the test photos: the red-eye pupils of sample6
  * face 0, 95 % and 40 % of the disc against 5 % and 28 % of the ring; the
  * warm-lit brown eye of sample5 face 2, 47 % against 61 %.) Then every red
  * pixel inside the eye's contour and within REACH pupil radii of the
- * centre gets R = (G + B) / 2, the usual repair: the
- * pupil's own dark is kept and its red goes. Nothing else is touched, so
+ * centre gets R = (G + B) / 2, the usual repair: the pupil's own dark is
+ * kept and its red goes. Nothing else is touched, so
  * an eye without red-eye keeps its bytes. */
 #include <math.h>
 #include <string.h>
 
 #include "gazesplat/face.h"
+#include "face_internal.h"
 
 #define RATIO 1.35
 #define MARGIN 40
@@ -37,19 +38,6 @@ static int is_red(const uint8_t *p)
 {
     int m = p[1] > p[2] ? p[1] : p[2];
     return p[0] > RATIO * m && p[0] - m > MARGIN;
-}
-
-/* Pixel centre (x + 0.5, y + 0.5) inside the closed contour (geom.h
- * pixels), by the even-odd rule. */
-
-static int inside(const double c[6][2], double x, double y)
-{
-    int in = 0;
-    for (int i = 0, j = 5; i < 6; j = i++)
-        if ((c[i][1] > y) != (c[j][1] > y) &&
-            x < (c[j][0] - c[i][0]) * (y - c[i][1]) / (c[j][1] - c[i][1]) + c[i][0])
-            in = !in;
-    return in;
 }
 
 /* Counts (and with fix, repairs) the red pixels at distances in
@@ -66,7 +54,7 @@ static int red_ring(gs_io_image *img, const double c[6][2], double cx, double cy
     for (int y = y0; y < y1; y++)
         for (int x = x0; x < x1; x++) {
             double dx = x + 0.5 - cx, dy = y + 0.5 - cy, d2 = dx * dx + dy * dy;
-            if (d2 > r1 * r1 || d2 < r0 * r0 || !inside(c, x + 0.5, y + 0.5))
+            if (d2 > r1 * r1 || d2 < r0 * r0 || gs_face_contour_dist(c, x + 0.5, y + 0.5) > 0)
                 continue;
             n++;
             uint8_t *p = img->data + (size_t)y * img->stride + 3 * (size_t)x;

@@ -751,7 +751,7 @@ void gs_rop_guide_vector_backward(const gs_rop_ctx *x, const gs_rop_guide *gd,
                    .band = band_len(hw)};
     guide_query(s, gd, tau);
     gs_pool_for(x->pool, C, pool_task, &j); /* xbar from the saved att */
-    for (int c = 0; gd->dbv && c < C; c++) {
+    for (int c = 0; gd->dbv && c < C; c++) { /* NULL: no weight gradients */
         gd->dbv[c] += da[c];
         for (int k = 0; k < C; k++)
             gd->dwv[(size_t)c * (size_t)C + (size_t)k] += da[c] * xbar[k];

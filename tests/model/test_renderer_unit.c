@@ -160,6 +160,16 @@ static void net_make(net *n, int guidance, int D, int H, int W, uint64_t seed)
     fill(n->dout, n->nout, 3);
 }
 
+/* A live guidance (the init's value projection is zero) for a guided
+ * net: value_w and value_b drawn from seeds seed and seed + 1. */
+static void live_guidance(net *n, uint32_t seed)
+{
+    if (n->cfg.guidance == GS_GUIDE_NONE)
+        return;
+    fill(n->p.value_w, 32 * 32, seed);
+    fill(n->p.value_b, 32, seed + 1);
+}
+
 static void net_free(net *n)
 {
     free(n->params); free(n->grads); free(n->acts); free(n->x); free(n->tau);
@@ -220,10 +230,7 @@ static void t_determinism(int guidance)
 {
     net n;
     net_make(&n, guidance, 144, 6, 9, 5);
-    if (guidance != GS_GUIDE_NONE) { /* a live guidance */
-        fill(n.p.value_w, 32 * 32, 11);
-        fill(n.p.value_b, 32, 12);
-    }
+    live_guidance(&n, 11);
     CHECK_EQ_INT(net_forward(&n), GS_OK);
     CHECK_EQ_INT(net_backward(&n), GS_OK);
     float *out1 = xcalloc(n.nout), *g1 = xcalloc(n.np), *dx1 = xcalloc(n.nx);
@@ -268,10 +275,7 @@ static void t_threads(int guidance)
 {
     net n;
     net_make(&n, guidance, 144, 24, 24, 8);
-    if (guidance != GS_GUIDE_NONE) {
-        fill(n.p.value_w, 32 * 32, 13);
-        fill(n.p.value_b, 32, 14);
-    }
+    live_guidance(&n, 13);
     CHECK_EQ_INT(net_forward(&n), GS_OK);
     CHECK_EQ_INT(net_backward(&n), GS_OK);
     float *out1 = xcalloc(n.nout), *g1 = xcalloc(n.np), *dx1 = xcalloc(n.nx);
@@ -316,10 +320,7 @@ static void t_input_grads_only(int guidance, int source)
     net n;
     net_make(&n, guidance, 144, 24, 20, 10);
     n.cfg.guide_source = source;
-    if (guidance != GS_GUIDE_NONE) {
-        fill(n.p.value_w, 32 * 32, 17);
-        fill(n.p.value_b, 32, 18);
-    }
+    live_guidance(&n, 17);
     float *src = xcalloc(n.nx), *ds1 = xcalloc(n.nx), *ds2 = xcalloc(n.nx);
     float *dx1 = xcalloc(n.nx), *dt1 = xcalloc(144);
     fill(src, n.nx, 22);
@@ -633,10 +634,7 @@ static void t_lean(int guidance, int source)
     net n;
     net_make(&n, guidance, 144, 24, 20, 9);
     n.cfg.guide_source = source;
-    if (guidance != GS_GUIDE_NONE) {
-        fill(n.p.value_w, 32 * 32, 15);
-        fill(n.p.value_b, 32, 16);
-    }
+    live_guidance(&n, 15);
     size_t nl = gs_renderer_fwd_size(&n.cfg, n.H, n.W);
     CHECK_MSG(nl > 0 && nl < n.na, "lean %zu floats, full %zu", nl, n.na);
     float *lean = xcalloc(nl), *o1 = xcalloc(n.nout), *o2 = xcalloc(n.nout);
