@@ -246,9 +246,11 @@ void gsd_store_restore(gsd_server *s, int kind)
 /* ---- kept inputs -------------------------------------------------------------- */
 
 /* Keeps face (the model's size) as key's input. */
-int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face, char *msg, size_t cap)
+int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face,
+                   const uint8_t *opening, char *msg, size_t cap)
 {
-    size_t row = (size_t)face->width * 3, len = 8 + row * (size_t)face->height;
+    size_t row = (size_t)face->width * 3, img = row * (size_t)face->height;
+    size_t px = (size_t)face->width * face->height, len = 8 + img + (opening ? px : 0);
     uint8_t *b = malloc(len);
     if (!b) {
         snprintf(msg, cap, "out of memory");
@@ -258,6 +260,8 @@ int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face
     memcpy(b, hdr, 8);
     for (int y = 0; y < face->height; y++)
         memcpy(b + 8 + (size_t)y * row, face->data + (size_t)y * face->stride, row);
+    if (opening) /* after the image: a blob without it is still an input */
+        memcpy(b + 8 + img, opening, px);
     int e = gsd_store_put(s, STORE_INPUT, key, b, len, msg, cap);
     free(b);
     return e;
@@ -265,19 +269,29 @@ int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face
 
 /* key's kept input as a size x size image (out->data malloc'd); -1 when
  * none is kept, or it does not fit the model. */
-int gsd_input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out)
+int gsd_input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out,
+                  uint8_t **opening)
 {
     uint8_t *b = NULL;
     long n = gsd_cache_get_alloc(s->inputs, key, &b);
     uint32_t hdr[2] = {0, 0};
+    size_t px = (size_t)size * size, img = 3 * px;
     if (n >= 8)
         memcpy(hdr, b, 8);
+    *opening = NULL;
     if (n < 8 || hdr[0] != INPUT_MAGIC || hdr[1] != (uint32_t)size ||
-        (size_t)n != 8 + 3 * (size_t)size * size) {
+        ((size_t)n != 8 + img && (size_t)n != 8 + img + px)) {
         free(b);
         return -1;
     }
-    memmove(b, b + 8, (size_t)n - 8);
+    if ((size_t)n == 8 + img + px) {
+        if (!(*opening = malloc(px))) {
+            free(b);
+            return -1;
+        }
+        memcpy(*opening, b + 8 + img, px);
+    }
+    memmove(b, b + 8, img);
     *out = (gs_io_image){size, size, 3 * (size_t)size, b};
     return 0;
 }

@@ -27,10 +27,14 @@ int gsd_store_put(gsd_server *s, int kind, const uint8_t key[16], const uint8_t 
 void gsd_store_restore(gsd_server *s, int kind);
 /* Removes every kind's files whose blob left its cache (persist_mu held). */
 void gsd_store_sweep_all_locked(gsd_server *s);
-/* Keeps face (the model's size) as key's input; 0 or an ErrorCode. */
-int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face, char *msg, size_t cap);
-/* key's kept input as a size x size image (out->data malloc'd); -1 when
- * there is none. */
-int gsd_input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out);
+/* Keeps face (the model's size) as key's input, with a photo's eye
+ * opening (its size^2 bytes, or NULL); 0 or an ErrorCode. */
+int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face,
+                   const uint8_t *opening, char *msg, size_t cap);
+/* key's kept input as a size x size image (out->data malloc'd) and its
+ * opening (*opening malloc'd, NULL when it had none); -1 when there is
+ * none. */
+int gsd_input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out,
+                  uint8_t **opening);
 
 #endif

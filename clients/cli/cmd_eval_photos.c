@@ -243,7 +243,7 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
             double dp = grid_pitch[t / 5] * DEG, dy = grid_yaw[t % 5] * DEG;
             v.gaze_pitch = fmax(-50 * DEG, fmin(50 * DEG, sub.gaze_pitch + dp));
             v.gaze_yaw = fmax(-60 * DEG, fmin(60 * DEG, sub.gaze_yaw + dy));
-            int r = gs_redirect_render(c, pool, &sub, mode ? pf->norm.data : NULL, pf->norm.stride,
+            int r = gs_redirect_render(c, pool, &sub, mode ? pf->norm.data : NULL, pf->norm.stride, pf->opening,
                                        &v, out, oi.stride, &err);
             if (!r)
                 r = gs_face_quality_measure(qref, &oi, sub.head_R, v.gaze_pitch - sub.gaze_pitch,

@@ -602,7 +602,8 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
         v.gaze_pitch = tg[k][0];
         v.gaze_yaw = tg[k][1];
         char out[4096];
-        if (gs_redirect_render(c, pool, &sub, transfer ? r0->norm.data : NULL, r0->norm.stride, &v,
+        if (gs_redirect_render(c, pool, &sub, transfer ? r0->norm.data : NULL, r0->norm.stride,
+                               r0->opening, &v,
                                face.data, face.stride, &err)) {
             rc = cli_fail(cmd, "target %d: %s", k, err.msg);
             break;
@@ -803,7 +804,7 @@ static int run_redirect(const cli_command *cmd, cli_opt *o)
         gs_error err = {0, ""};
         char path[4096];
         snprintf(path, sizeof path, "%s/%03d.png", o[4].value, k);
-        if (gs_redirect_render(c, pool, &sub, transfer ? input.data : NULL, input.stride, &v,
+        if (gs_redirect_render(c, pool, &sub, transfer ? input.data : NULL, input.stride, NULL, &v,
                           img.data, img.stride, &err) ||
             gs_io_image_write(path, &img, GS_IO_PNG, 0, &err))
             rc = cli_fail(cmd, "target %d: %s", k, err.msg);

@@ -72,7 +72,7 @@ static int engine_render(void *ctx, const gs_live_subject *s, double pitch, doub
     memset(&v, 0, sizeof v);
     v.gaze_pitch = pitch;
     v.gaze_yaw = yaw;
-    return gs_redirect_render(e->mctx, e->pool, &s->subject, NULL, 0, &v, rgb,
+    return gs_redirect_render(e->mctx, e->pool, &s->subject, NULL, 0, NULL, &v, rgb,
                               3 * (size_t)e->info.image_size, err);
 }
 

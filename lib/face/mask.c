@@ -127,13 +127,14 @@ static double eye_poly(const double (*uv)[2], int first, poly *out)
 static void eyes(const double (*uv)[2], int which, double dilate, double feather, int w, int h,
                  uint8_t *mask)
 {
+    double grow = which & 4 ? 0.0 : 0.3; /* 4: the openings, not grown */
     static const int first[2] = {36, 42};
     for (int e = 0; e < 2; e++) {
         if (!(which & (1 << e)))
             continue;
         poly pg;
         double ew = eye_poly(uv, first[e], &pg);
-        raster_max(&pg, dilate + 0.3 * ew, feather, w, h, mask);
+        raster_max(&pg, dilate + grow * ew, feather, w, h, mask);
     }
 }
 
@@ -175,6 +176,9 @@ int gs_face_mask(const double uv[][2], gs_face_mask_kind kind, double dilate, do
         return GS_OK;
     case GS_FACE_MASK_LEFT_EYE:
         eyes(uv, 2, dilate, feather, width, height, mask);
+        return GS_OK;
+    case GS_FACE_MASK_EYE_OPENINGS:
+        eyes(uv, 3 | 4, dilate, feather, width, height, mask);
         return GS_OK;
     }
     return gs_error_set(err, GS_ERR_ARG, "mask: unknown kind %d", (int)kind);

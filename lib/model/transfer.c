@@ -116,8 +116,11 @@ typedef struct xfer_subj {
     double src_eR[2][9], src_ec[2][3]; /* its eyeball rotations, centres */
     double src_Rg[9];              /* its gaze's rotation (the warp's) */
     double src_er[2];              /* its proxy eyeballs' radii */
-    int ap_valid;                  /* src_ap is this own view's */
+    int ap_valid;                  /* src_ap is this own view's, from
+                                      open8 when ap_given, else probed */
     float *src_ap;                 /* [S*S] eye opening, 0..1 */
+    int ap_given;
+    uint8_t *open8;                /* [S*S] the opening it was given */
     /* the eye opening at another head pose (the warp there): tgt_ap is
      * for head pose tap_R, tap_t when tap_valid */
     int tap_valid;
@@ -176,6 +179,7 @@ static void subj_free(xfer_subj *u)
         free(bufs[i]);
     free(u->src8);
     free(u->in8);
+    free(u->open8);
     free(u->fbox);
     memset(u, 0, sizeof *u);
 }
@@ -194,6 +198,7 @@ static int subj_alloc(xfer_subj *u, int S, int nf)
     fail |= !(u->res_smooth = malloc(3 * px * sizeof(float)));
     fail |= !(u->warped = malloc(3 * px * sizeof(float)));
     fail |= !(u->src8 = malloc(3 * px)) || !(u->in8 = malloc(3 * px));
+    fail |= !(u->open8 = malloc(px));
     fail |= !(u->fbox = malloc((size_t)(nf ? nf : 1) * 4 * sizeof(int16_t)));
     if (fail)
         subj_free(u);
@@ -510,6 +515,9 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
                       const double Rs[9], const double ts[3],
                       const double Rt[9], const double tt[3], int same_pose)
 {
+    /* the falloff: the given opening's at the input's pose (a head change
+     * warps inside the probed target opening) */
+    double wdeg = same_pose && x->cur.ap_given ? c->xfer_warp_given_deg : c->xfer_warp_deg;
     image_camera(c, tt, &g->ct);
     image_camera(c, ts, &g->cs);
     g->Rt = Rt, g->tt = tt, g->Rs = Rs, g->ts = ts;
@@ -524,7 +532,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
     gs_geom_mat3_transpose(x->tgt_Rg, tT);
     gs_geom_mat3_mul(x->cur.src_Rg, tT, g->gM);
     int warp = warp_on(c, g->same_pose);
-    double r = turn_deg(g->gM) / (warp ? c->xfer_warp_deg : 1.0);
+    double r = turn_deg(g->gM) / (warp ? wdeg : 1.0);
     g->warp_w = warp ? (float)exp(-r * r) : 0.0f;
     double mt[3] = {-tt[0], -tt[1], -tt[2]};
     gs_geom_mat3_tvec(Rt, mt, g->ray_o);
@@ -846,14 +854,30 @@ static int opening_probes(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     return GS_OK;
 }
 
-/* The live subject's eye opening in its own view (src_ap). Renders, so it
- * runs before the target's render (whose Gaussians the target's maps
- * read). */
+/* The live subject's eye opening in its own view (src_ap): the given one
+ * (opening, S x S bytes, 255 = open), or probed. The kept target's warped
+ * residual may stay when it changes: the warp acts only inside the eye
+ * stream's tiles, which an incremental target redoes at both gazes.
+ * Probing renders, so it runs before the target's render (whose Gaussians
+ * the target's maps read). */
 static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
-                       const gs_subject *s, gs_error *err)
+                       const gs_subject *s, const uint8_t *opening,
+                       gs_error *err)
 {
-    if (x->cur.ap_valid)
+    size_t px = (size_t)x->S * x->S;
+    if (opening) {
+        if (x->cur.ap_valid && x->cur.ap_given &&
+            !memcmp(x->cur.open8, opening, px))
+            return GS_OK;
+        memcpy(x->cur.open8, opening, px);
+        for (size_t i = 0; i < px; i++)
+            x->cur.src_ap[i] = opening[i] * (1.0f / 255.0f);
+        x->cur.ap_valid = x->cur.ap_given = 1;
         return GS_OK;
+    }
+    if (x->cur.ap_valid && !x->cur.ap_given)
+        return GS_OK;
+    x->cur.ap_given = 0;
     gs_view own = {s->gaze_pitch, s->gaze_yaw, 0, {0}, {0}, 0};
     int rc = opening_probes(c, x, pool, s, &own, x->cur.src8, x->cur.src_ap, err);
     x->cur.ap_valid = !rc;
@@ -1091,6 +1115,16 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
                              size_t in_stride, const gs_view *view,
                              uint8_t *rgb, size_t stride, gs_error *err)
 {
+    return gs_model_render_transfer_opening(c, pool, s, input, in_stride, NULL,
+                                            view, rgb, stride, err);
+}
+
+int gs_model_render_transfer_opening(gs_model_ctx *c, gs_pool *pool,
+                                     const gs_subject *s, const uint8_t *input,
+                                     size_t in_stride, const uint8_t *opening,
+                                     const gs_view *view, uint8_t *rgb,
+                                     size_t stride, gs_error *err)
+{
     if (!c || !s || !view)
         return gs_error_set(err, GS_ERR_ARG, "transfer: NULL argument");
     int S = c->S, rc;
@@ -1112,7 +1146,7 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
         return rc;
     int same_pose = !memcmp(Rs, Rt, 9 * sizeof(double)) &&
                     !memcmp(ts, tt, 3 * sizeof(double));
-    if (warp_on(c, same_pose) && (rc = eye_opening(c, x, pool, s, err)))
+    if (warp_on(c, same_pose) && (rc = eye_opening(c, x, pool, s, opening, err)))
         return rc;
     if (warp_on(c, same_pose) && !same_pose &&
         (rc = target_opening(c, x, pool, s, view, Rt, tt, err)))

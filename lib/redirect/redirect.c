@@ -25,6 +25,13 @@ int gs_redirect_face_mask(const double uv_n[][2], int size, uint8_t *mask, gs_er
     return gs_face_mask(uv_n, GS_FACE_MASK_FACE, 0.0, 4.0, size, size, mask, err);
 }
 
+int gs_redirect_eye_opening(const double uv_n[][2], int size, uint8_t *mask, gs_error *err)
+{
+    double k = size / 256.0;
+    return gs_face_mask(uv_n, GS_FACE_MASK_EYE_OPENINGS, GS_REDIRECT_OPENING_GROW * k,
+                        GS_REDIRECT_OPENING_FEATHER * k, size, size, mask, err);
+}
+
 /* Puts "what: " before err's message (err may be NULL); returns rc. */
 static int prefixed(gs_error *err, int rc, const char *what)
 {
@@ -95,10 +102,12 @@ int gs_redirect_input_photo(gs_face_detector *det, const gs_face_shape_model *sp
         input_drop(in);
         return rc;
     }
-    if (!(in->mask = malloc((size_t)S * S)))
+    if (!(in->mask = malloc((size_t)S * S)) || !(in->opening = malloc((size_t)S * S)))
         rc = gs_error_set(err, GS_ERR_NOMEM, "photo normalization: out of memory");
     if (rc == GS_OK && (rc = gs_face_normalize_image(&in->photo, &in->face.norm, &in->norm, err)) == GS_OK)
         rc = gs_redirect_face_mask((const double(*)[2])in->face.uv_n, S, in->mask, err);
+    if (rc == GS_OK)
+        rc = gs_redirect_eye_opening((const double(*)[2])in->face.uv_n, S, in->opening, err);
     /* A red-eye pupil would stay where it was in the fit and the transfer
      * (a ghost beside the redirected iris): repaired before either. */
     if (rc == GS_OK && !o->keep_red_eye)
@@ -135,6 +144,7 @@ void gs_redirect_input_free(gs_redirect_input *in)
     gs_io_image_free(&in->norm);
     gs_io_image_free(&in->photo);
     free(in->mask);
+    free(in->opening);
     memset(in, 0, sizeof *in);
 }
 
@@ -187,11 +197,12 @@ int gs_redirect_finetune(gs_model **tuned, const gs_model *shared, gs_pool *pool
 }
 
 int gs_redirect_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *sub,
-                       const uint8_t *input, size_t in_stride, const gs_view *v, uint8_t *out,
-                       size_t stride, gs_error *err)
+                       const uint8_t *input, size_t in_stride, const uint8_t *opening,
+                       const gs_view *v, uint8_t *out, size_t stride, gs_error *err)
 {
     if (input)
-        return gs_model_render_transfer(c, pool, sub, input, in_stride, v, out, stride, err);
+        return gs_model_render_transfer_opening(c, pool, sub, input, in_stride, opening, v,
+                                                out, stride, err);
     return gs_model_render(c, pool, sub, v, out, stride, err);
 }
 

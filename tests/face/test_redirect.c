@@ -160,16 +160,28 @@ static void fit_render_paste(gs_model *m, gs_face_detector *det, const gs_face_s
     v.gaze_pitch = sub.gaze_pitch + 0.1;
     v.gaze_yaw = sub.gaze_yaw - 0.15;
     gs_model_ctx *c1 = gs_model_ctx_create(m), *c2 = gs_model_ctx_create(m);
-    CHECK(gs_redirect_render(c1, NULL, &sub, NULL, 0, &v, a, (size_t)S * 3, &err) == GS_OK);
+    CHECK(gs_redirect_render(c1, NULL, &sub, NULL, 0, NULL, &v, a, (size_t)S * 3, &err) == GS_OK);
     CHECK(gs_model_render(c2, NULL, &sub, &v, b, (size_t)S * 3, &err) == GS_OK);
     CHECK(!memcmp(a, b, n));
     gs_model_ctx_reset(c1);
     gs_model_ctx_reset(c2);
-    CHECK(gs_redirect_render(c1, NULL, &sub, in.norm.data, in.norm.stride, &v, a, (size_t)S * 3, &err) ==
+    CHECK(gs_redirect_render(c1, NULL, &sub, in.norm.data, in.norm.stride, in.opening, &v, a, (size_t)S * 3, &err) ==
           GS_OK);
-    CHECK(gs_model_render_transfer(c2, NULL, &sub, in.norm.data, in.norm.stride, &v, b, (size_t)S * 3,
-                                   &err) == GS_OK);
+    CHECK(gs_model_render_transfer_opening(c2, NULL, &sub, in.norm.data, in.norm.stride, in.opening, &v,
+                                           b, (size_t)S * 3, &err) == GS_OK);
     CHECK(!memcmp(a, b, n));
+    /* a photo's opening is its landmarks' eye contours */
+    {
+        uint8_t *op = malloc((size_t)S * S);
+        CHECK(in.opening && op &&
+              gs_redirect_eye_opening((const double(*)[2])in.face.uv_n, S, op, &err) == GS_OK &&
+              !memcmp(op, in.opening, (size_t)S * S));
+        size_t open = 0;
+        for (size_t i = 0; in.opening && i < (size_t)S * S; i++)
+            open += in.opening[i] > 0;
+        CHECK_MSG(open > 0 && open < (size_t)S * S / 20, "opening of %zu px", open);
+        free(op);
+    }
 
     /* Paste-back: the input's own normalized face back into the photo. */
     gs_redirect_paste_state ps;
@@ -177,6 +189,7 @@ static void fit_render_paste(gs_model *m, gs_face_detector *det, const gs_face_s
     gs_redirect_input plain;
     gs_io_image g = grey(S, S, 100);
     CHECK(gs_redirect_input_face(&info, &g, 0, &plain, &err) == GS_OK);
+    CHECK(plain.opening == NULL); /* a face as given has no landmarks */
     CHECK(gs_redirect_paste(&plain, &ps, 0, &plain.norm, &err) == GS_ERR_ARG);
     gs_redirect_input_free(&plain);
     CHECK_MSG(gs_redirect_paste(&in, &ps, 0, &in.norm, &err) == GS_OK, "%s", err.msg);

@@ -717,6 +717,101 @@ static void warp_head_checks(const gs_model *m, const gs_subject *s, const uint8
     free(o0), free(o1), free(ramp);
 }
 
+static void transfer_open(gs_model_ctx *c, const gs_subject *s, const uint8_t *in,
+                          const uint8_t *opening, const gs_view *v, uint8_t *out, int S)
+{
+    gs_error err = {0, ""};
+    CHECK_MSG(gs_model_render_transfer_opening(c, NULL, s, in, 3 * (size_t)S, opening, v, out,
+                                               3 * (size_t)S, &err) == GS_OK,
+              "%s", err.msg);
+}
+
+/* A given eye opening (gs_model_render_transfer_opening, a photo's eye
+ * contours): all shut is the warp off to the byte; one open half changes
+ * nothing outside it and something inside after a turn, and a
+ * changed opening gives a fresh context's bytes (the warp acts only in
+ * the eye stream's tiles, which the incremental path redoes), and so does
+ * going back to the probed opening (NULL). */
+static void opening_checks(const gs_model *m, const gs_subject *s, const uint8_t *in, int S)
+{
+    size_t isz = 3 * (size_t)S * S, px = (size_t)S * S;
+    uint8_t *o0 = malloc(isz), *o1 = malloc(isz), *o2 = malloc(isz);
+    uint8_t *shut = calloc(px, 1), *half = malloc(px);
+    gs_model_ctx *c0 = warp_ctx(m, 0.0, 0), *cw = warp_ctx(m, 90.0, 0);
+    gs_view vt = own_view(s);
+    vt.gaze_pitch += 0.2;
+    vt.gaze_yaw -= 0.35;
+    for (size_t i = 0; i < px; i++) { /* open on the left, a ramp 4 px wide */
+        int x = (int)(i % (size_t)S), e = S / 2 - x;
+        half[i] = (uint8_t)(e >= 4 ? 255 : e <= 0 ? 0 : 64 * e - 1);
+    }
+    transfer(c0, NULL, s, in, &vt, o0, S);
+    transfer_open(cw, s, in, shut, &vt, o1, S);
+    CHECK_MSG(max_diff(o0, o1, isz) == 0, "opening shut: not the warp off (%d)",
+              max_diff(o0, o1, isz));
+    transfer_open(cw, s, in, half, &vt, o1, S);
+    size_t outside = 0, inside = 0, edge = 0;
+    for (size_t i = 0; i < px; i++)
+        for (int k = 0; k < 3; k++) {
+            int ch = o1[3 * i + k] != o0[3 * i + k];
+            outside += half[i] == 0 && ch;
+            inside += half[i] == 255 && ch;
+            edge += half[i] > 0 && half[i] < 255 && ch;
+        }
+    CHECK_MSG(outside == 0, "opening: %zu samples changed outside it", outside);
+    CHECK_MSG(inside > 0, "opening: nothing changed inside it");
+    /* the same subject and view, the opening changed: a fresh context's bytes */
+    transfer_open(cw, s, in, shut, &vt, o2, S);
+    CHECK_MSG(max_diff(o0, o2, isz) == 0, "opening changed to shut: kept target used (%d)",
+              max_diff(o0, o2, isz));
+    gs_model_ctx *cf = warp_ctx(m, 90.0, 0);
+    transfer_open(cw, s, in, half, &vt, o2, S);
+    transfer_open(cf, s, in, half, &vt, o0, S);
+    CHECK_MSG(max_diff(o0, o2, isz) == 0, "opening changed back: not a fresh context's (%d)",
+              max_diff(o0, o2, isz));
+    gs_model_ctx *cn = warp_ctx(m, 90.0, 0);
+    transfer(cw, NULL, s, in, &vt, o2, S);
+    transfer(cn, NULL, s, in, &vt, o0, S);
+    CHECK_MSG(max_diff(o0, o2, isz) == 0, "given, then probed: not a fresh context's (%d)",
+              max_diff(o0, o2, isz));
+    /* its falloff is transfer_eye_warp_given_deg, not the probed opening's */
+    {
+        gs_model_render_options o;
+        gs_model_render_options_default(&o);
+        CHECK(o.transfer_eye_warp_given_deg == GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT);
+        gs_error err = {0, ""};
+        gs_model_ctx *cg = gs_model_ctx_create(m);
+        o.transfer_eye_warp_given_deg = 0.0;
+        CHECK(gs_model_ctx_set_render_options(cg, &o, &err) == GS_ERR_ARG);
+        o.transfer_eye_warp_given_deg = 91.0;
+        CHECK(gs_model_ctx_set_render_options(cg, &o, &err) == GS_ERR_ARG);
+        o.transfer_eye_warp_given_deg = 10.0;
+        CHECK_MSG(gs_model_ctx_set_render_options(cg, &o, &err) == GS_OK, "%s", err.msg);
+        gs_model_ctx *cd = warp_ctx(m, GS_XFER_EYE_WARP_DEG_DEFAULT, 0);
+        transfer_open(cg, s, in, half, &vt, o0, S); /* given 10, probed 20 */
+        transfer_open(cd, s, in, half, &vt, o2, S); /* given 90, probed 20 */
+        size_t diff = 0, out_diff = 0;
+        for (size_t i = 0; i < px; i++)
+            for (int k = 0; k < 3; k++) {
+                int ch = o0[3 * i + k] != o2[3 * i + k];
+                diff += half[i] == 255 && ch;
+                out_diff += half[i] == 0 && ch;
+            }
+        CHECK_MSG(diff > 0 && out_diff == 0,
+                  "given falloff: %zu samples differ inside, %zu outside", diff, out_diff);
+        gs_model_ctx_destroy(cg);
+        gs_model_ctx_destroy(cd);
+    }
+    printf("given opening: shut = warp off; half open: %zu samples changed inside, %zu on "
+           "its edge, none outside; changed openings give a fresh context's bytes\n",
+           inside, edge);
+    gs_model_ctx_destroy(c0);
+    gs_model_ctx_destroy(cw);
+    gs_model_ctx_destroy(cf);
+    gs_model_ctx_destroy(cn);
+    free(o0), free(o1), free(o2), free(shut), free(half);
+}
+
 /* A gaze sweep at view v's head pose (a new one for c), each target
  * against a fresh context; outs (may be NULL) gets each step's bytes. */
 static void sweep(gs_model_ctx *c, gs_pool *pool, const gs_subject *s, const uint8_t *in,
@@ -1049,6 +1144,7 @@ int main(void)
     incremental(m, sub, in, noise, pool, S, "whole eyeballs");
     warp_checks(m, &sub[0], in, S);
     warp_head_checks(m, &sub[0], in, S);
+    opening_checks(m, &sub[0], in, S);
 
     /* Bad arguments. */
     memset(out, 0x5a, isz);

@@ -245,7 +245,10 @@ typedef enum gs_face_mask_kind {
     GS_FACE_MASK_FACE_NO_EYES = 1, /* FACE minus both eye masks */
     GS_FACE_MASK_EYES = 2,       /* both eye polygons (36-41, 42-47) */
     GS_FACE_MASK_RIGHT_EYE = 3,  /* 36-41, the subject's right (image left) */
-    GS_FACE_MASK_LEFT_EYE = 4    /* 42-47 */
+    GS_FACE_MASK_LEFT_EYE = 4,   /* 42-47 */
+    GS_FACE_MASK_EYE_OPENINGS = 5 /* both eye polygons as the landmarks
+                                     draw them (not grown): where the
+                                     eyeball shows between the lids */
 } gs_face_mask_kind;
 
 /* Rasterizes a mask into `mask` (width x height bytes, row-major): the

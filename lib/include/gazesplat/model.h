@@ -218,6 +218,19 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
                              size_t in_stride, const gs_view *view,
                              uint8_t *rgb, size_t stride, gs_error *err);
 
+/* The same with the input's eye opening given: opening (image_size^2
+ * bytes, 0 closed .. 255 open, e.g. the eye contours of a photo's
+ * landmarks) is where the eyeball warp at the input's head pose may take
+ * and put the input's own eye pixels, in place of the opening the model's
+ * probe renders find (NULL: those; docs/model.md "Detail transfer"). A
+ * photo's eyes are where its landmarks put them; the model's drawing of
+ * them, and so its probes, can be off or broken on a real face. */
+int gs_model_render_transfer_opening(gs_model_ctx *c, gs_pool *pool,
+                                     const gs_subject *s, const uint8_t *input,
+                                     size_t in_stride, const uint8_t *opening,
+                                     const gs_view *view, uint8_t *rgb,
+                                     size_t stride, gs_error *err);
+
 /* The bytes of a render. gs_model_render's depend on the model, the
  * subject and the view alone: each gaze of a subject renders from the
  * subject's render at its own gaze (docs/model.md, "Gaze sweeps"), never
@@ -310,11 +323,21 @@ typedef struct gs_model_render_options {
      * "The eyeball warp at a head change"). 0: only at the input's head
      * pose. Default GS_XFER_EYE_WARP_HEAD_DEFAULT. */
     int transfer_eye_warp_head;
+    /* The warp's falloff where the input's eye opening is given
+     * (gs_model_render_transfer_opening: a photo's eye contours), degrees,
+     * (0, 90] (default GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT). The narrower
+     * transfer_eye_warp_deg hands large turns back to the model's own
+     * eyeball, which is the better one on the synthetic heads it learned;
+     * on a real photo the model draws the eyes far worse than the photo
+     * shows them, and the given opening already keeps the warp from taking
+     * what the lids hide (docs/model.md, "The eyeball warp on photos"). */
+    double transfer_eye_warp_given_deg;
 } gs_model_render_options;
 #define GS_XFER_HEAD_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WARP_DEG_DEFAULT 20.0
 #define GS_XFER_EYE_WARP_HEAD_DEFAULT 0
+#define GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT 90.0
 void gs_model_render_options_default(gs_model_render_options *o);
 /* Takes effect from the next render; drops the context's kept renders.
  * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */

@@ -56,6 +56,10 @@ typedef struct gs_redirect_input {
     gs_io_image photo;    /* is_photo: the photo, owned */
     gs_face_result face;  /* is_photo: its analysis */
     uint8_t *mask;        /* is_photo: face weights over norm (image_size^2), owned */
+    uint8_t *opening;     /* is_photo: the eye openings over norm
+                             (gs_redirect_eye_opening), owned: where the
+                             transfer's eyeball warp takes the photo's own
+                             eye pixels */
     gs_face_gate gate;    /* the gate's measures when it ran; gate.refusal
                              says why an input was refused */
     int red_eye_px;       /* is_photo: pixels of norm whose red-eye was
@@ -103,6 +107,14 @@ void gs_redirect_input_free(gs_redirect_input *in);
  * feathered 4 px), from its landmarks in the normalized image. */
 int gs_redirect_face_mask(const double uv_n[][2], int size, uint8_t *mask, gs_error *err);
 
+/* The eye openings a photo's transfer warps inside (face.h's
+ * EYE_OPENINGS mask grown GS_REDIRECT_OPENING_GROW px and feathered
+ * GS_REDIRECT_OPENING_FEATHER px, both at 256 px and scaled to size),
+ * from its landmarks in the normalized image. */
+#define GS_REDIRECT_OPENING_GROW 1.0
+#define GS_REDIRECT_OPENING_FEATHER 2.0
+int gs_redirect_eye_opening(const double uv_n[][2], int size, uint8_t *mask, gs_error *err);
+
 /* ---- the fit ---- */
 
 /* The fit's options for an input: gs_fit_options_default, max_iters
@@ -137,10 +149,12 @@ int gs_redirect_finetune(gs_model **tuned, const gs_model *shared, gs_pool *pool
 
 /* One target into out (image_size^2 RGB rows of stride): the plain render
  * of the subject, or with input (the face it was fitted to, image_size^2
- * RGB rows of in_stride) the detail transfer from it. */
+ * RGB rows of in_stride) the detail transfer from it; opening (a photo
+ * input's, or NULL: the model's own) is where its eyeball warp works
+ * (gs_model_render_transfer_opening). */
 int gs_redirect_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *sub,
-                       const uint8_t *input, size_t in_stride, const gs_view *v, uint8_t *out,
-                       size_t stride, gs_error *err);
+                       const uint8_t *input, size_t in_stride, const uint8_t *opening,
+                       const gs_view *v, uint8_t *out, size_t stride, gs_error *err);
 
 /* Pasting renders back into the photo: the blend masks (the eyes for a
  * gaze change, the whole face when the head turns), made once, and the
