@@ -124,10 +124,15 @@ static double eye_poly(const double (*uv)[2], int first, poly *out)
     return hypot(uv[first + 3][0] - uv[first][0], uv[first + 3][1] - uv[first][1]);
 }
 
-static void eyes(const double (*uv)[2], int which, double dilate, double feather, int w, int h,
-                 uint8_t *mask)
+/* Eye masks are grown by this share of the eye width so lids and a margin
+ * of skin move with the eye; the openings are not. */
+#define EYE_GROW 0.3
+
+/* The eyes in `which` (bit 0 right, bit 1 left), each polygon grown by
+ * dilate plus `grow` of its width. */
+static void eyes(const double (*uv)[2], int which, double dilate, double grow, double feather,
+                 int w, int h, uint8_t *mask)
 {
-    double grow = which & 4 ? 0.0 : 0.3; /* 4: the openings, not grown */
     static const int first[2] = {36, 42};
     for (int e = 0; e < 2; e++) {
         if (!(which & (1 << e)))
@@ -162,23 +167,23 @@ int gs_face_mask(const double uv[][2], gs_face_mask_kind kind, double dilate, do
         uint8_t *eye = calloc(npx, 1);
         if (!eye)
             return gs_error_set(err, GS_ERR_NOMEM, "mask: out of memory");
-        eyes(uv, 3, 0, feather, width, height, eye);
+        eyes(uv, 3, 0, EYE_GROW, feather, width, height, eye);
         for (size_t i = 0; i < npx; i++)
             mask[i] = (uint8_t)((mask[i] * (255 - eye[i]) + 127) / 255);
         free(eye);
         return GS_OK;
     }
     case GS_FACE_MASK_EYES:
-        eyes(uv, 3, dilate, feather, width, height, mask);
+        eyes(uv, 3, dilate, EYE_GROW, feather, width, height, mask);
         return GS_OK;
     case GS_FACE_MASK_RIGHT_EYE:
-        eyes(uv, 1, dilate, feather, width, height, mask);
+        eyes(uv, 1, dilate, EYE_GROW, feather, width, height, mask);
         return GS_OK;
     case GS_FACE_MASK_LEFT_EYE:
-        eyes(uv, 2, dilate, feather, width, height, mask);
+        eyes(uv, 2, dilate, EYE_GROW, feather, width, height, mask);
         return GS_OK;
     case GS_FACE_MASK_EYE_OPENINGS:
-        eyes(uv, 3 | 4, dilate, feather, width, height, mask);
+        eyes(uv, 3, dilate, 0.0, feather, width, height, mask);
         return GS_OK;
     }
     return gs_error_set(err, GS_ERR_ARG, "mask: unknown kind %d", (int)kind);

@@ -180,6 +180,16 @@ static void fit_render_paste(gs_model *m, gs_face_detector *det, const gs_face_s
         for (size_t i = 0; in.opening && i < (size_t)S * S; i++)
             open += in.opening[i] > 0;
         CHECK_MSG(open > 0 && open < (size_t)S * S / 20, "opening of %zu px", open);
+        /* not grown like the eye masks: inside them and smaller */
+        size_t eyes = 0, outside = 0;
+        CHECK(op && gs_face_mask((const double(*)[2])in.face.uv_n, GS_FACE_MASK_EYES, 1.0, 2.0, S, S,
+                                 op, &err) == GS_OK);
+        for (size_t i = 0; op && in.opening && i < (size_t)S * S; i++) {
+            eyes += op[i] > 0;
+            outside += in.opening[i] > op[i];
+        }
+        CHECK_MSG(outside == 0 && open < eyes, "opening %zu px, eye masks %zu, %zu above them", open,
+                  eyes, outside);
         free(op);
     }
 

@@ -252,7 +252,7 @@ typedef enum gs_face_mask_kind {
 } gs_face_mask_kind;
 
 /* Rasterizes a mask into `mask` (width x height bytes, row-major): the
- * polygon grown by `dilate` pixels (eye polygons are also grown by 30% of
+ * polygon grown by `dilate` pixels (eye polygons but EYE_OPENINGS also by 30% of
  * the eye width so lids and a margin of skin move with the eye), with a
  * linear ramp `feather` pixels wide centred on its edge (0: hard edge).
  * Values 0..255. uv: the 68 landmarks in the mask's own pixels (geom.h;
