@@ -623,6 +623,7 @@ typedef struct subject_out {
     uint64_t sum;          /* tuned: the block's checksum */
     gs_io_image face;      /* the normalized input, when the caller asked for it */
     uint8_t *opening;      /* a kept input's eye opening (gsd_input_get), or NULL */
+    gs_xfer_eyes eyes;     /* a kept input's eyes: that opening and its irises */
 } subject_out;
 
 /* How obtain_subject fits: the request's labels (FIT only), iterations,
@@ -789,8 +790,10 @@ static int obtain_subject(gsd_worker *w, gsd_job *j, const subject_ask *a, const
     }
     if (!e && !o->cached)
         e = fit_subject(w, j, a, n, opt, ps, face, o, msg, cap);
-    if (!e && a->keep_image)
-        e = gsd_input_keep(s, j->key, &face[0], ps[0].opening, msg, cap);
+    if (!e && a->keep_image) {
+        gs_xfer_eyes pe = gs_redirect_eyes(&ps[0]);
+        e = gsd_input_keep(s, j->key, &face[0], &pe, msg, cap);
+    }
     if (!e && a->want_face)
         o->face = face[0];
     else
@@ -818,6 +821,7 @@ static void run_fit(gsd_worker *w, gsd_job *j, int64_t t0)
     gsd_server *s = w->srv;
     const Gazesplat__FitRequest *r = (const Gazesplat__FitRequest *)j->req;
     subject_out so;
+    memset(&so, 0, sizeof so);
     char msg[400];
     gs_redirect_input photo;
     subject_ask a = {r, r->max_iters,
@@ -1003,7 +1007,7 @@ static void count_render(gsd_worker *w, gs_model_ctx *ctx)
  * request asks for it. */
 static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gazesplat__RedirectRequest *r,
                          size_t i, const gs_subject *subj, const gs_io_image *input,
-                         const uint8_t *opening, const gs_redirect_input *p,
+                         const gs_xfer_eyes *eyes, const gs_redirect_input *p,
                          const gs_face_quality_ref *qr, gs_redirect_paste_state *ps, uint8_t *rgb, char *msg,
                          size_t cap)
 {
@@ -1021,7 +1025,7 @@ static int render_target(gsd_worker *w, gs_model_ctx *ctx, gsd_job *j, const Gaz
     gs_error err;
     gs_error_clear(&err);
     int rc = gs_redirect_render(ctx, w->pool, subj, input ? input->data : NULL, input ? input->stride : 0,
-                                opening, &view, rgb, (size_t)size * 3, &err);
+                                eyes, &view, rgb, (size_t)size * 3, &err);
     if (rc != GS_OK) {
         snprintf(msg, cap, "render target %zu%s: %s", i, input ? " (transfer)" : "", err.msg);
         return gsd_status_error(rc);
@@ -1077,7 +1081,8 @@ static void run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
             gsd_emit_error(j, E(ERR_UNKNOWN_SUBJECT), "no subject %s (never fitted or evicted)", hex);
             return;
         }
-        if (gsd_input_get(s, j->key, w->model->info.image_size, &so.face, &so.opening) != 0 && r->transfer) {
+        if (gsd_input_get(s, j->key, w->model->info.image_size, &so.face, &so.opening, &so.eyes) != 0 &&
+            r->transfer) {
             gsd_emit_error(j, E(ERR_UNKNOWN_SUBJECT),
                            "subject %s: no kept input for transfer (FIT it with keep_image, or it "
                            "was evicted: input_cache_mb); send the image inline or FIT again",
@@ -1116,13 +1121,13 @@ static void run_redirect(gsd_worker *w, gsd_job *j, int64_t t0)
         e = E(ERR_INTERNAL);
         snprintf(msg, sizeof msg, "out of memory");
     }
+    gs_xfer_eyes eyes = photo.opening ? gs_redirect_eyes(&photo) : so.eyes;
     for (size_t i = 0; i < r->n_targets && !e; i++) {
         e = i > 0 ? wait_output(s, j) : job_stop(j);
         stopped = e != 0;
         if (!e)
-            e = render_target(w, ctx, j, r, i, &subj, r->transfer ? &so.face : NULL,
-                              photo.opening ? photo.opening : so.opening, &photo, qr, &ps, rgb,
-                              msg, sizeof msg);
+            e = render_target(w, ctx, j, r, i, &subj, r->transfer ? &so.face : NULL, &eyes, &photo,
+                              qr, &ps, rgb, msg, sizeof msg);
     }
     gs_face_quality_ref_destroy(qr);
     free(rgb);

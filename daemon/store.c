@@ -32,6 +32,9 @@
 
 #define TUNED_REF_MAGIC 0x52545347u /* "GSTR" */
 #define INPUT_MAGIC 0x49465347u     /* "GSFI" */
+/* A kept input's irises, after its opening: magic, count, 2 x 3 doubles. */
+#define INPUT_IRIS_MAGIC 0x52495347u /* "GSIR" */
+#define INPUT_IRIS_LEN (8 + 6 * sizeof(double))
 
 static const struct store_kind {
     const char *prefix, *suffix, *what, *budget;
@@ -247,10 +250,12 @@ void gsd_store_restore(gsd_server *s, int kind)
 
 /* Keeps face (the model's size) as key's input. */
 int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face,
-                   const uint8_t *opening, char *msg, size_t cap)
+                   const gs_xfer_eyes *eyes, char *msg, size_t cap)
 {
+    const uint8_t *opening = eyes ? eyes->opening : NULL;
     size_t row = (size_t)face->width * 3, img = row * (size_t)face->height;
-    size_t px = (size_t)face->width * face->height, len = 8 + img + (opening ? px : 0);
+    size_t px = (size_t)face->width * face->height;
+    size_t len = 8 + img + (opening ? px + INPUT_IRIS_LEN : 0);
     uint8_t *b = malloc(len);
     if (!b) {
         snprintf(msg, cap, "out of memory");
@@ -260,8 +265,12 @@ int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face
     memcpy(b, hdr, 8);
     for (int y = 0; y < face->height; y++)
         memcpy(b + 8 + (size_t)y * row, face->data + (size_t)y * face->stride, row);
-    if (opening) /* after the image: a blob without it is still an input */
+    if (opening) { /* after the image: a blob without them is still an input */
         memcpy(b + 8 + img, opening, px);
+        uint32_t ih[2] = {INPUT_IRIS_MAGIC, (uint32_t)eyes->n_iris};
+        memcpy(b + 8 + img + px, ih, 8);
+        memcpy(b + 8 + img + px + 8, eyes->iris, sizeof eyes->iris);
+    }
     int e = gsd_store_put(s, STORE_INPUT, key, b, len, msg, cap);
     free(b);
     return e;
@@ -270,7 +279,7 @@ int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face
 /* key's kept input as a size x size image (out->data malloc'd); -1 when
  * none is kept, or it does not fit the model. */
 int gsd_input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out,
-                  uint8_t **opening)
+                  uint8_t **opening, gs_xfer_eyes *eyes)
 {
     uint8_t *b = NULL;
     long n = gsd_cache_get_alloc(s->inputs, key, &b);
@@ -279,17 +288,28 @@ int gsd_input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *o
     if (n >= 8)
         memcpy(hdr, b, 8);
     *opening = NULL;
+    memset(eyes, 0, sizeof *eyes);
+    size_t with_iris = 8 + img + px + INPUT_IRIS_LEN;
+    uint32_t ih[2] = {0, 0};
+    if ((size_t)n == with_iris)
+        memcpy(ih, b + 8 + img + px, 8);
     if (n < 8 || hdr[0] != INPUT_MAGIC || hdr[1] != (uint32_t)size ||
-        ((size_t)n != 8 + img && (size_t)n != 8 + img + px)) {
+        ((size_t)n != 8 + img && (size_t)n != 8 + img + px && (size_t)n != with_iris) ||
+        ((size_t)n == with_iris && (ih[0] != INPUT_IRIS_MAGIC || ih[1] > 2))) {
         free(b);
         return -1;
     }
-    if ((size_t)n == 8 + img + px) {
+    if ((size_t)n >= 8 + img + px) {
         if (!(*opening = malloc(px))) {
             free(b);
             return -1;
         }
         memcpy(*opening, b + 8 + img, px);
+        eyes->opening = *opening;
+    }
+    if ((size_t)n == with_iris) {
+        eyes->n_iris = (int)ih[1];
+        memcpy(eyes->iris, b + 8 + img + px + 8, sizeof eyes->iris);
     }
     memmove(b, b + 8, img);
     *out = (gs_io_image){size, size, 3 * (size_t)size, b};

@@ -27,14 +27,16 @@ int gsd_store_put(gsd_server *s, int kind, const uint8_t key[16], const uint8_t 
 void gsd_store_restore(gsd_server *s, int kind);
 /* Removes every kind's files whose blob left its cache (persist_mu held). */
 void gsd_store_sweep_all_locked(gsd_server *s);
-/* Keeps face (the model's size) as key's input, with a photo's eye
- * opening (its size^2 bytes, or NULL); 0 or an ErrorCode. */
+/* Keeps face (the model's size) as key's input, with what a photo says of
+ * its eyes (eyes NULL, or its opening NULL: nothing; else the opening,
+ * size^2 bytes, and its irises); 0 or an ErrorCode. */
 int gsd_input_keep(gsd_server *s, const uint8_t key[16], const gs_io_image *face,
-                   const uint8_t *opening, char *msg, size_t cap);
-/* key's kept input as a size x size image (out->data malloc'd) and its
- * opening (*opening malloc'd, NULL when it had none); -1 when there is
- * none. */
+                   const gs_xfer_eyes *eyes, char *msg, size_t cap);
+/* key's kept input as a size x size image (out->data malloc'd), and its
+ * eyes: *opening malloc'd (NULL when it had none), *eyes with that opening
+ * and the irises (none when it had none); -1 when there is none. Blobs kept
+ * before the irises were, or before the opening was, still load. */
 int gsd_input_get(gsd_server *s, const uint8_t key[16], int size, gs_io_image *out,
-                  uint8_t **opening);
+                  uint8_t **opening, gs_xfer_eyes *eyes);
 
 #endif

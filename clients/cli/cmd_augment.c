@@ -1579,7 +1579,7 @@ static int emit_sample(job *j, size_t k, size_t t, const fitted *fi, const doubl
  * daemon's renders in remote), measures the quality where asked and keeps
  * or drops each sample (--min-quality) into *so. */
 static int render_source(job *j, size_t k, const fitted *fi, gs_model_ctx *c,
-                         const gs_io_image *face, const uint8_t *opening, const uint8_t *remote,
+                         const gs_io_image *face, const gs_xfer_eyes *eyes, const uint8_t *remote,
                          const gs_face_quality *rquals, const gs_face_quality_ref *qref,
                          source_out *so, const char *what)
 {
@@ -1614,7 +1614,7 @@ static int render_source(job *j, size_t k, const fitted *fi, gs_model_ctx *c,
             memcpy(dst, remote + t * (size_t)S * S * 3, (size_t)S * S * 3);
         else
             r = gs_redirect_render(c, j->pool, &fi->sub, j->transfer ? face->data : NULL,
-                                   face->stride, opening, &v, dst, (size_t)S * 3, &err);
+                                   face->stride, eyes, &v, dst, (size_t)S * 3, &err);
         if (r) {
             rc = cli_fail(j->cmd, "%s: target %zu: %s", what, t, err.msg);
             break;
@@ -1787,7 +1787,8 @@ static int do_source(job *j, size_t k, double *psnr_out)
     }
 render:
     *psnr_out = fi.sub.fit_psnr;
-    if (!(rc = render_source(j, k, &fi, c, face, in.opening, remote, rquals, qref, &so, what)))
+    gs_xfer_eyes eyes = gs_redirect_eyes(&in);
+    if (!(rc = render_source(j, k, &fi, c, face, &eyes, remote, rquals, qref, &so, what)))
         rc = commit_source(j, k, &so);
 done:
     free(so.labels.p);

@@ -235,6 +235,7 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
         goto done;
     }
     gs_io_image oi = {S, S, 3 * (size_t)S, out};
+    gs_xfer_eyes eyes = gs_redirect_eyes(pf);
     for (int mode = 0; mode < 2 && !rc; mode++) {
         int dets[NT];
         for (int t = 0; t < NT; t++) {
@@ -243,7 +244,7 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
             double dp = grid_pitch[t / 5] * DEG, dy = grid_yaw[t % 5] * DEG;
             v.gaze_pitch = fmax(-50 * DEG, fmin(50 * DEG, sub.gaze_pitch + dp));
             v.gaze_yaw = fmax(-60 * DEG, fmin(60 * DEG, sub.gaze_yaw + dy));
-            int r = gs_redirect_render(c, pool, &sub, mode ? pf->norm.data : NULL, pf->norm.stride, pf->opening,
+            int r = gs_redirect_render(c, pool, &sub, mode ? pf->norm.data : NULL, pf->norm.stride, &eyes,
                                        &v, out, oi.stride, &err);
             if (!r)
                 r = gs_face_quality_measure(qref, &oi, sub.head_R, v.gaze_pitch - sub.gaze_pitch,

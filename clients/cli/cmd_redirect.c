@@ -597,13 +597,14 @@ static int redirect_photo(const cli_command *cmd, gs_model *m, gs_pool *pool,
             goto done;
         }
     }
+    gs_xfer_eyes eyes = gs_redirect_eyes(r0);
     for (int k = 0; k < nt && !rc; k++) {
         gs_view v = {0};
         v.gaze_pitch = tg[k][0];
         v.gaze_yaw = tg[k][1];
         char out[4096];
         if (gs_redirect_render(c, pool, &sub, transfer ? r0->norm.data : NULL, r0->norm.stride,
-                               r0->opening, &v,
+                               &eyes, &v,
                                face.data, face.stride, &err)) {
             rc = cli_fail(cmd, "target %d: %s", k, err.msg);
             break;

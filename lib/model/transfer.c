@@ -61,6 +61,15 @@
  * which the input never showed. At the input's own gaze q = p and the
  * input comes back.
  *
+ * A photo's input may say more of its eyes (gs_xfer_eyes): its opening
+ * (then the falloff is transfer_eye_warp_given_deg) and its irises. An
+ * iris anchors the proxy whose own iris shows nearest to it at the input's
+ * gaze: the proxy is scaled so its iris has that radius, and moved across
+ * the input's view (at its iris's depth) so that it shows there. The warp
+ * then turns the photo's iris where the photo has it, not where the
+ * model's eye stream is; the model's eyeballs (eye_source, the maps) stay
+ * as they are.
+ *
  * At another head pose the model's geometry places the input's detail a
  * pixel or two off, and the input's shading was lit at the old pose: a
  * head change carries only the skin residual's smooth part (Gaussian,
@@ -156,6 +165,10 @@ struct gs_xfer {
     uint64_t clock;
     double tgt_eR[2][9], tgt_ec[2][3]; /* this call's target's eyeballs */
     double tgt_Rg[9];                  /* its gaze's rotation */
+    /* this call's proxy eyeballs (the warp's): radii, and shifts from the
+     * eye centres (head frame); the own view's radii and no shift unless
+     * given irises anchor them (eye_anchor) */
+    double pr[2], pd[2][3];
     /* scratch */
     gs_raster *raster, *raster_crop; /* whole images; crops of the target */
     gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
@@ -656,9 +669,9 @@ static int proxy_hit(const gs_xfer *x, const xfer_geom *g, int px, int py,
     double best = INFINITY, A = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
     int e = -1;
     for (int k = 0; k < 2; k++) {
-        double r = x->cur.src_er[k], oc[3], B = 0, C = -r * r;
+        double r = x->pr[k], oc[3], B = 0, C = -r * r;
         for (int j = 0; j < 3; j++) {
-            oc[j] = o[j] - x->tgt_ec[k][j];
+            oc[j] = o[j] - x->tgt_ec[k][j] - x->pd[k][j];
             B += d[j] * oc[j];
             C += oc[j] * oc[j];
         }
@@ -669,8 +682,9 @@ static int proxy_hit(const gs_xfer *x, const xfer_geom *g, int px, int py,
     }
     if (e < 0)
         return -1;
-    const double *c = x->tgt_ec[e];
-    double r = x->cur.src_er[e], ax[3], ca = 0;
+    double c[3], r = x->pr[e], ax[3], ca = 0;
+    for (int k = 0; k < 3; k++)
+        c[k] = x->tgt_ec[e][k] + x->pd[e][k];
     eye_axis(x->tgt_Rg, ax);
     for (int k = 0; k < 3; k++) {
         h[k] = o[k] + best * d[k];
@@ -704,14 +718,14 @@ static float warp_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
     if (e < 0)
         return 0.0f;
     for (int k = 0; k < 3; k++)
-        r[k] = h[k] - x->tgt_ec[e][k];
+        r[k] = h[k] - x->tgt_ec[e][k] - x->pd[e][k];
     gs_geom_mat3_vec(g->gM, r, hs);
     if (iris)
         eye_axis(x->cur.src_Rg, n);
     else
         memcpy(n, hs, sizeof n);
     for (int k = 0; k < 3; k++)
-        hs[k] += x->cur.src_ec[e][k];
+        hs[k] += x->cur.src_ec[e][k] + x->pd[e][k];
     input_point(g, hs, Xs);
     gs_geom_mat3_vec(g->Rs, n, nc);
     if (!(Xs[2] > 1.0) || nc[0] * Xs[0] + nc[1] * Xs[1] + nc[2] * Xs[2] >= 0)
@@ -909,6 +923,88 @@ static int target_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     memcpy(x->cur.tap_R, Rt, sizeof x->cur.tap_R);
     memcpy(x->cur.tap_t, tt, sizeof x->cur.tap_t);
     x->cur.tap_valid = 1;
+    return GS_OK;
+}
+
+/* Where proxy eyeball e of radius r (mm) shows its iris in the input's
+ * image at the input's gaze: its centre uv (image px), its camera point X;
+ * returns its radius there (px). */
+static double proxy_iris_px(const gs_xfer *x, const gs_subject *s,
+                            const gs_camera *cs, int e, double r, double uv[2],
+                            double X[3])
+{
+    double ax[3], h[3];
+    double limbus = sqrt(1.0 - GS_XFER_IRIS_RATIO * GS_XFER_IRIS_RATIO);
+    eye_axis(x->cur.src_Rg, ax);
+    for (int k = 0; k < 3; k++)
+        h[k] = x->cur.src_ec[e][k] + r * (limbus - GS_XFER_IRIS_INSET) * ax[k];
+    gs_geom_mat3_vec(s->head_R, h, X);
+    for (int k = 0; k < 3; k++)
+        X[k] += s->head_t[k];
+    uv[0] = cs->fx * X[0] / X[2] + cs->cx;
+    uv[1] = cs->fy * X[1] / X[2] + cs->cy;
+    return GS_XFER_IRIS_RATIO * r * cs->fx / X[2];
+}
+
+/* This call's proxy eyeballs (x->pr, x->pd): the own view's, anchored to
+ * the given irises at the input's head pose (model.h, gs_xfer_eyes). Each
+ * proxy takes the iris that shows nearest to its own; a proxy two irises
+ * would anchor keeps the nearer. Cheap, so redone every call and never
+ * kept: the warp acts only inside the eye stream's tiles, which every
+ * call redoes. */
+static void eye_anchor(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s,
+                       const gs_xfer_eyes *eyes, int same_pose)
+{
+    memcpy(x->pr, x->cur.src_er, sizeof x->pr);
+    memset(x->pd, 0, sizeof x->pd);
+    int n = eyes && same_pose ? eyes->n_iris : 0;
+    if (n == 0)
+        return;
+    gs_camera cs;
+    image_camera(c, s->head_t, &cs);
+    int pick[2] = {-1, -1};
+    double dist[2] = {INFINITY, INFINITY};
+    for (int e = 0; e < 2; e++) {
+        double uv[2], X[3];
+        proxy_iris_px(x, s, &cs, e, x->pr[e], uv, X);
+        for (int j = 0; j < n; j++) {
+            const double *ir = eyes->iris[j];
+            double d = hypot(ir[0] - uv[0], ir[1] - uv[1]);
+            if (d <= GS_XFER_IRIS_ANCHOR_MAX * ir[2] && d < dist[e])
+                dist[e] = d, pick[e] = j;
+        }
+    }
+    if (pick[0] >= 0 && pick[0] == pick[1])
+        pick[dist[0] <= dist[1] ? 1 : 0] = -1;
+    for (int e = 0; e < 2; e++) {
+        if (pick[e] < 0)
+            continue;
+        const double *ir = eyes->iris[pick[e]];
+        double uv[2], X[3];
+        double sc = ir[2] / proxy_iris_px(x, s, &cs, e, x->pr[e], uv, X);
+        x->pr[e] *= sc < 0.5 ? 0.5 : sc > 2.0 ? 2.0 : sc;
+        proxy_iris_px(x, s, &cs, e, x->pr[e], uv, X);
+        /* across the view at the iris's depth: it then shows at ir */
+        double dc[3] = {(ir[0] - uv[0]) * X[2] / cs.fx,
+                        (ir[1] - uv[1]) * X[2] / cs.fy, 0.0};
+        gs_geom_mat3_tvec(s->head_R, dc, x->pd[e]);
+    }
+}
+
+static int check_eyes(const gs_xfer_eyes *eyes, gs_error *err)
+{
+    if (!eyes)
+        return GS_OK;
+    if (eyes->n_iris < 0 || eyes->n_iris > 2)
+        return gs_error_set(err, GS_ERR_ARG, "transfer: %d irises given (0 to 2)",
+                            eyes->n_iris);
+    for (int j = 0; j < eyes->n_iris; j++) {
+        const double *ir = eyes->iris[j];
+        if (!isfinite(ir[0]) || !isfinite(ir[1]) || !isfinite(ir[2]) || !(ir[2] > 0))
+            return gs_error_set(err, GS_ERR_ARG,
+                                "transfer: iris %d is not a circle (centre %g, %g, "
+                                "radius %g px)", j, ir[0], ir[1], ir[2]);
+    }
     return GS_OK;
 }
 
@@ -1115,22 +1211,24 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
                              size_t in_stride, const gs_view *view,
                              uint8_t *rgb, size_t stride, gs_error *err)
 {
-    return gs_model_render_transfer_opening(c, pool, s, input, in_stride, NULL,
-                                            view, rgb, stride, err);
+    return gs_model_render_transfer_eyes(c, pool, s, input, in_stride, NULL,
+                                         view, rgb, stride, err);
 }
 
-int gs_model_render_transfer_opening(gs_model_ctx *c, gs_pool *pool,
-                                     const gs_subject *s, const uint8_t *input,
-                                     size_t in_stride, const uint8_t *opening,
-                                     const gs_view *view, uint8_t *rgb,
-                                     size_t stride, gs_error *err)
+int gs_model_render_transfer_eyes(gs_model_ctx *c, gs_pool *pool,
+                                  const gs_subject *s, const uint8_t *input,
+                                  size_t in_stride, const gs_xfer_eyes *eyes,
+                                  const gs_view *view, uint8_t *rgb,
+                                  size_t stride, gs_error *err)
 {
     if (!c || !s || !view)
         return gs_error_set(err, GS_ERR_ARG, "transfer: NULL argument");
     int S = c->S, rc;
     if ((rc = check_image(input, in_stride, S, "input", err)) ||
-        (rc = check_image(rgb, stride, S, "output", err)))
+        (rc = check_image(rgb, stride, S, "output", err)) ||
+        (rc = check_eyes(eyes, err)))
         return rc;
+    const uint8_t *opening = eyes ? eyes->opening : NULL;
     if (c->ne == 0)
         return gs_error_set(err, GS_ERR_ARG,
                             "transfer: the model has no eye stream (the "
@@ -1148,6 +1246,7 @@ int gs_model_render_transfer_opening(gs_model_ctx *c, gs_pool *pool,
                     !memcmp(ts, tt, 3 * sizeof(double));
     if (warp_on(c, same_pose) && (rc = eye_opening(c, x, pool, s, opening, err)))
         return rc;
+    eye_anchor(c, x, s, eyes, same_pose);
     if (warp_on(c, same_pose) && !same_pose &&
         (rc = target_opening(c, x, pool, s, view, Rt, tt, err)))
         return rc;

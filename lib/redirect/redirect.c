@@ -43,6 +43,30 @@ static int prefixed(gs_error *err, int rc, const char *what)
     return gs_error_set(err, rc, "%s: %s", what, m);
 }
 
+/* The irises of a photo's normalized face (px_per_mm its scale at the
+ * eyes), after its red-eye repair: those the localizer finds (status OK;
+ * a partial one rests on the radius prior, so it anchors nothing) anchor
+ * the transfer's proxy eyeballs (model.h, gs_xfer_eyes). */
+static int photo_irises(gs_redirect_input *in, double px_per_mm, gs_error *err)
+{
+    gs_face_iris_opts io;
+    gs_face_iris_opts_default(&io);
+    gs_face_iris_opts_scale(&io, px_per_mm);
+    in->n_iris = 0;
+    for (int e = 0; e < 2; e++) {
+        gs_face_iris ir;
+        int rc = gs_face_iris_locate(&in->norm, (const double(*)[2])in->face.uv_n[36 + 6 * e], &io,
+                                     &ir, err);
+        if (rc != GS_OK)
+            return rc;
+        if (ir.status != GS_FACE_IRIS_OK)
+            continue;
+        double *d = in->iris[in->n_iris++];
+        d[0] = ir.centre[0], d[1] = ir.centre[1], d[2] = ir.radius;
+    }
+    return GS_OK;
+}
+
 /* The gate's answer as an error: GS_OK, GS_ERR_ARG "face refused (NAME):
  * reason", or the gate's own failure ("face gate: ...", refusal reset to
  * usable so that callers do not report a refusal). */
@@ -113,6 +137,8 @@ int gs_redirect_input_photo(gs_face_detector *det, const gs_face_shape_model *sp
     if (rc == GS_OK && !o->keep_red_eye)
         rc = gs_face_red_eye_fix(&in->norm, (const double(*)[2])in->face.uv_n,
                                  info->focal / info->distance_mm, &in->red_eye_px, err);
+    if (rc == GS_OK)
+        rc = photo_irises(in, info->focal / info->distance_mm, err);
     if (rc != GS_OK && rc != GS_ERR_NOMEM)
         prefixed(err, rc, "photo normalization");
     if (rc == GS_OK && o->gate)
@@ -196,13 +222,25 @@ int gs_redirect_finetune(gs_model **tuned, const gs_model *shared, gs_pool *pool
     return rc;
 }
 
+gs_xfer_eyes gs_redirect_eyes(const gs_redirect_input *in)
+{
+    gs_xfer_eyes e;
+    memset(&e, 0, sizeof e);
+    if (!in || !in->is_photo)
+        return e;
+    e.opening = in->opening;
+    e.n_iris = in->n_iris;
+    memcpy(e.iris, in->iris, sizeof e.iris);
+    return e;
+}
+
 int gs_redirect_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *sub,
-                       const uint8_t *input, size_t in_stride, const uint8_t *opening,
+                       const uint8_t *input, size_t in_stride, const gs_xfer_eyes *eyes,
                        const gs_view *v, uint8_t *out, size_t stride, gs_error *err)
 {
     if (input)
-        return gs_model_render_transfer_opening(c, pool, sub, input, in_stride, opening, v,
-                                                out, stride, err);
+        return gs_model_render_transfer_eyes(c, pool, sub, input, in_stride, eyes, v, out,
+                                             stride, err);
     return gs_model_render(c, pool, sub, v, out, stride, err);
 }
 

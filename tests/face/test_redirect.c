@@ -165,11 +165,28 @@ static void fit_render_paste(gs_model *m, gs_face_detector *det, const gs_face_s
     CHECK(!memcmp(a, b, n));
     gs_model_ctx_reset(c1);
     gs_model_ctx_reset(c2);
-    CHECK(gs_redirect_render(c1, NULL, &sub, in.norm.data, in.norm.stride, in.opening, &v, a, (size_t)S * 3, &err) ==
+    gs_xfer_eyes xe = gs_redirect_eyes(&in);
+    CHECK(xe.opening == in.opening && xe.n_iris == in.n_iris && !memcmp(xe.iris, in.iris, sizeof xe.iris));
+    CHECK(gs_redirect_render(c1, NULL, &sub, in.norm.data, in.norm.stride, &xe, &v, a, (size_t)S * 3, &err) ==
           GS_OK);
-    CHECK(gs_model_render_transfer_opening(c2, NULL, &sub, in.norm.data, in.norm.stride, in.opening, &v,
-                                           b, (size_t)S * 3, &err) == GS_OK);
+    CHECK(gs_model_render_transfer_eyes(c2, NULL, &sub, in.norm.data, in.norm.stride, &xe, &v, b,
+                                        (size_t)S * 3, &err) == GS_OK);
     CHECK(!memcmp(a, b, n));
+    /* a photo's irises are the localizer's on its normalized face, both
+     * found here (status OK) */
+    CHECK_MSG(in.n_iris == 2, "%d irises", in.n_iris);
+    for (int e = 0; e < 2; e++) {
+        gs_face_iris_opts io;
+        gs_face_iris_opts_default(&io);
+        gs_face_iris_opts_scale(&io, info.focal / info.distance_mm);
+        gs_face_iris ir;
+        CHECK(gs_face_iris_locate(&in.norm, (const double(*)[2])in.face.uv_n[36 + 6 * e], &io, &ir, &err) ==
+              GS_OK);
+        CHECK_MSG(ir.status == GS_FACE_IRIS_OK && in.iris[e][0] == ir.centre[0] &&
+                      in.iris[e][1] == ir.centre[1] && in.iris[e][2] == ir.radius,
+                  "iris %d: (%g, %g, %g) against the localizer's (%g, %g, %g)", e, in.iris[e][0],
+                  in.iris[e][1], in.iris[e][2], ir.centre[0], ir.centre[1], ir.radius);
+    }
     /* a photo's opening is its landmarks' eye contours */
     {
         uint8_t *op = malloc((size_t)S * S);
@@ -200,6 +217,10 @@ static void fit_render_paste(gs_model *m, gs_face_detector *det, const gs_face_s
     gs_io_image g = grey(S, S, 100);
     CHECK(gs_redirect_input_face(&info, &g, 0, &plain, &err) == GS_OK);
     CHECK(plain.opening == NULL); /* a face as given has no landmarks */
+    {
+        gs_xfer_eyes pe = gs_redirect_eyes(&plain);
+        CHECK(pe.opening == NULL && pe.n_iris == 0);
+    }
     CHECK(gs_redirect_paste(&plain, &ps, 0, &plain.norm, &err) == GS_ERR_ARG);
     gs_redirect_input_free(&plain);
     CHECK_MSG(gs_redirect_paste(&in, &ps, 0, &in.norm, &err) == GS_OK, "%s", err.msg);

@@ -21,6 +21,7 @@ from client_checks import finish, refused, start_ready, wait_ready  # noqa: E402
 import gazesplat_client as gc  # noqa: E402
 
 FAST = 3  # fit iterations
+PHOTO = os.path.join(HERE, "..", "..", "samples", "astronaut.jpg")
 
 
 def pixels(res):
@@ -177,6 +178,32 @@ def main():
             t.check(len(render(c, [(0, 0)], subject=keys[-1], transfer=True)) == 1, "the newest transfers")
             t.check(len(input_files(state)) == 21, "files pruned to the kept inputs: %d"
                     % len(input_files(state)))
+        t.check(d.stop() == 0, "clean exit")
+
+        # A photo's kept input keeps what it says of its eyes (the eye
+        # opening, the localized irises) with the face: a transfer by key
+        # gives the inline transfer's bytes, and again after a restart,
+        # from the file.
+        with open(PHOTO, "rb") as f:
+            photo = f.read()
+        pbase = ["--model", model, "--state-dir", state, "--set", "workers=1"]
+        d, addr = start_ready(t, Daemon, daemon, pbase)
+        with gc.Client(addr) as c:
+            kept = c.fit(photo, max_iters=FAST, keep_image=True, photo=True)
+            t.check(kept.image_kept, "a photo's input kept: %s" % kept)
+            own = (kept.gaze.pitch_deg, kept.gaze.yaw_deg)
+            ptargets = [(own[0] + 10, own[1] - 15), (own[0] - 8, own[1] + 20)]
+            inline = render(c, ptargets, image=photo, photo=True, max_iters=FAST, transfer=True)
+            bykey = render(c, ptargets, subject=kept.subject_key, transfer=True)
+            t.check(all(np.array_equal(a, b) for a, b in zip(bykey, inline)),
+                    "a photo's transfer by key == inline (max %d)"
+                    % max(int(np.abs(a - b).max()) for a, b in zip(bykey, inline)))
+        t.check(d.stop() == 0, "clean exit")
+        d, addr = start_ready(t, Daemon, daemon, pbase)
+        with gc.Client(addr) as c:
+            again = render(c, ptargets, subject=kept.subject_key, transfer=True)
+            t.check(all(np.array_equal(a, b) for a, b in zip(again, inline)),
+                    "a photo's transfer by key after a restart: same bytes")
         t.check(d.stop() == 0, "clean exit")
 
         # Another model: no input applies; the files go.

@@ -717,16 +717,23 @@ static void warp_head_checks(const gs_model *m, const gs_subject *s, const uint8
     free(o0), free(o1), free(ramp);
 }
 
-static void transfer_open(gs_model_ctx *c, const gs_subject *s, const uint8_t *in,
-                          const uint8_t *opening, const gs_view *v, uint8_t *out, int S)
+static void transfer_eyes(gs_model_ctx *c, const gs_subject *s, const uint8_t *in,
+                          const gs_xfer_eyes *eyes, const gs_view *v, uint8_t *out, int S)
 {
     gs_error err = {0, ""};
-    CHECK_MSG(gs_model_render_transfer_opening(c, NULL, s, in, 3 * (size_t)S, opening, v, out,
-                                               3 * (size_t)S, &err) == GS_OK,
+    CHECK_MSG(gs_model_render_transfer_eyes(c, NULL, s, in, 3 * (size_t)S, eyes, v, out,
+                                            3 * (size_t)S, &err) == GS_OK,
               "%s", err.msg);
 }
 
-/* A given eye opening (gs_model_render_transfer_opening, a photo's eye
+static void transfer_open(gs_model_ctx *c, const gs_subject *s, const uint8_t *in,
+                          const uint8_t *opening, const gs_view *v, uint8_t *out, int S)
+{
+    gs_xfer_eyes e = {opening, 0, {{0}}};
+    transfer_eyes(c, s, in, &e, v, out, S);
+}
+
+/* A given eye opening (gs_xfer_eyes.opening, a photo's eye
  * contours): all shut is the warp off to the byte; one open half changes
  * nothing outside it and something inside after a turn, and a
  * changed opening gives a fresh context's bytes (the warp acts only in
@@ -808,6 +815,180 @@ static void opening_checks(const gs_model *m, const gs_subject *s, const uint8_t
     gs_model_ctx_destroy(cf);
     gs_model_ctx_destroy(cn);
     free(o0), free(o1), free(o2), free(shut), free(half);
+}
+
+/* Where w's proxy eyeball e shows its iris in the input at the input's
+ * gaze (w->Rs), with radius r: centre uv; returns its radius (px), *z its
+ * depth. */
+static double ref_iris(const warp_ref *w, int e, double r, double uv[2], double *z)
+{
+    double lim = sqrt(1 - GS_XFER_IRIS_RATIO * GS_XFER_IRIS_RATIO), h[3], X[3];
+    for (int k = 0; k < 3; k++)
+        h[k] = w->c[e][k] - r * (lim - GS_XFER_IRIS_INSET) * w->Rs[e][3 * k + 2];
+    gs_geom_mat3_vec(w->Ri, h, X);
+    for (int k = 0; k < 3; k++)
+        X[k] += w->ti[k];
+    uv[0] = w->cam.fx * X[0] / X[2] + w->cam.cx;
+    uv[1] = w->cam.fy * X[1] / X[2] + w->cam.cy;
+    *z = X[2];
+    return GS_XFER_IRIS_RATIO * r * w->cam.fx / X[2];
+}
+
+/* Given irises (gs_xfer_eyes.iris, a photo's localized irises) anchor the
+ * warp's proxy eyeballs. With the opening given open everywhere and the
+ * ramp input, every target pixel shows where it was taken from: with one
+ * iris given per eye, a few pixels off each proxy's own and 1.25 times
+ * its radius, that is where the proxy scaled to that radius and moved
+ * across the input's view to show its iris there puts it, to a pixel, and
+ * not where the unanchored proxy does. Irises farther than
+ * GS_XFER_IRIS_ANCHOR_MAX radii change nothing; the order they come in
+ * does not matter; two near one proxy anchor it to the nearer; a context
+ * that had irises gives a fresh one's bytes without them; bad circles are
+ * refused. */
+static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
+{
+    size_t isz = 3 * (size_t)S * S, px = (size_t)S * S;
+    uint8_t *o0 = malloc(isz), *o1 = malloc(isz), *o2 = malloc(isz), *ramp = malloc(isz);
+    uint8_t *open = malloc(px);
+    memset(open, 255, px);
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
+            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
+        }
+    gs_view vo = own_view(s), vt = vo;
+    vt.gaze_pitch += 0.2;
+    vt.gaze_yaw -= 0.35;
+    gs_model_ctx *c0 = warp_ctx(m, 0.0, 0), *cw = gs_model_ctx_create(m);
+    transfer(c0, NULL, s, ramp, &vt, o0, S);
+
+    /* the reference proxies, unanchored (w) and anchored (wa) */
+    warp_ref w, wa;
+    double Re[2][9], c2[2][3], r2[2];
+    gs_model_ctx *cr = gs_model_ctx_create(m);
+    render(cr, NULL, s, &vo, o2, S);
+    eye_state(cr, vo.gaze_pitch, vo.gaze_yaw, w.Rs, Re, w.c, w.r);
+    render(cr, NULL, s, &vt, o2, S);
+    eye_state(cr, vt.gaze_pitch, vt.gaze_yaw, w.Rt, Re, c2, r2);
+    float sc = (float)S / (float)cr->fs;
+    gs_model_ctx_destroy(cr);
+    gs_frame_camera(m, s->head_t, &w.cam);
+    w.cam.fx *= sc, w.cam.fy *= sc;
+    w.cam.cx = w.cam.cy = 0.5f * (float)S;
+    memcpy(w.R, s->head_R, sizeof w.R), memcpy(w.t, s->head_t, sizeof w.t);
+    memcpy(w.Ri, s->head_R, sizeof w.Ri), memcpy(w.ti, s->head_t, sizeof w.ti);
+    wa = w;
+    gs_xfer_eyes eyes = {open, 2, {{0}}}, swapped, far, none = {open, 0, {{0}}};
+    const double shift[2][2] = {{3.0, -2.0}, {-2.5, 1.5}};
+    for (int e = 0; e < 2; e++) {
+        double uv[2], z, uv2[2];
+        double rp = ref_iris(&w, e, w.r[e], uv, &z);
+        double *ir = eyes.iris[1 - e]; /* the other eye's slot: order is free */
+        ir[0] = uv[0] + shift[e][0], ir[1] = uv[1] + shift[e][1], ir[2] = 1.25 * rp;
+        wa.r[e] = 1.25 * w.r[e];
+        ref_iris(&wa, e, wa.r[e], uv2, &z);
+        double dc[3] = {(ir[0] - uv2[0]) * z / w.cam.fx, (ir[1] - uv2[1]) * z / w.cam.fy, 0}, dh[3];
+        gs_geom_mat3_tvec(s->head_R, dc, dh);
+        for (int k = 0; k < 3; k++)
+            wa.c[e][k] += dh[k];
+    }
+    transfer_eyes(cw, s, ramp, &eyes, &vt, o1, S);
+    double turn = turn_deg_of(w.Rs[0], w.Rt[0]), rg = turn / GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT;
+    warp_stats sa = warp_compare(&wa, o0, o1, S, exp(-rg * rg));
+    warp_stats su = warp_compare(&w, o0, o1, S, exp(-rg * rg));
+    printf("anchored proxies, ramp input, a %.1f degree turn: %zu pixels taken from where the "
+           "anchored proxy puts them (mean error %.2f px, %.1f %% within 1 px; %.2f px from "
+           "where the unanchored one would)\n",
+           turn, sa.n, sa.err, sa.n ? 100.0 * sa.near / sa.n : 0.0, su.err);
+    CHECK_MSG(sa.n >= 40, "anchor: only %zu pixels to check", sa.n);
+    CHECK_MSG(sa.err <= 0.5 && sa.near >= 0.95 * sa.n,
+              "anchor: taken %.2f px from the anchored proxy's place on average, %zu of %zu "
+              "within 1 px", sa.err, sa.near, sa.n);
+    CHECK_MSG(su.err > 2 * sa.err, "anchor: the unanchored proxy fits as well (%.2f px)", su.err);
+
+    /* order, distance, two near one, back to none */
+    swapped = eyes;
+    memcpy(swapped.iris[0], eyes.iris[1], sizeof swapped.iris[0]);
+    memcpy(swapped.iris[1], eyes.iris[0], sizeof swapped.iris[1]);
+    transfer_eyes(cw, s, ramp, &swapped, &vt, o2, S);
+    CHECK_MSG(max_diff(o1, o2, isz) == 0, "anchor: the irises' order matters (%d)",
+              max_diff(o1, o2, isz));
+    transfer_eyes(cw, s, ramp, &none, &vt, o1, S);
+    far = eyes;
+    for (int j = 0; j < 2; j++) /* above the eyes, past reach of both proxies */
+        far.iris[j][1] -= (GS_XFER_IRIS_ANCHOR_MAX + 0.5) * far.iris[j][2] + 3.0;
+    transfer_eyes(cw, s, ramp, &far, &vt, o2, S);
+    CHECK_MSG(max_diff(o1, o2, isz) == 0, "anchor: irises beyond reach changed the output (%d)",
+              max_diff(o1, o2, isz));
+    gs_model_ctx *cf = gs_model_ctx_create(m);
+    transfer_eyes(cf, s, ramp, &none, &vt, o2, S);
+    CHECK_MSG(max_diff(o1, o2, isz) == 0, "anchor: irises, then none: not a fresh context's (%d)",
+              max_diff(o1, o2, isz));
+    gs_xfer_eyes one = {open, 1, {{0}}}, two = {open, 2, {{0}}};
+    memcpy(one.iris[0], eyes.iris[1], sizeof one.iris[0]); /* eye 0's */
+    memcpy(two.iris[0], eyes.iris[1], sizeof two.iris[0]);
+    memcpy(two.iris[1], eyes.iris[1], sizeof two.iris[1]);
+    two.iris[1][0] += 2.0; /* farther from eye 0's proxy than the first */
+    transfer_eyes(cw, s, ramp, &one, &vt, o1, S);
+    transfer_eyes(cw, s, ramp, &two, &vt, o2, S);
+    CHECK_MSG(max_diff(o1, o2, isz) == 0, "anchor: two irises near one proxy: not the nearer (%d)",
+              max_diff(o1, o2, isz));
+
+    /* one iris in reach of both proxies (wide: its radius puts both within
+     * GS_XFER_IRIS_ANCHOR_MAX radii) anchors only the nearer, eye 0's:
+     * where eye 1's proxy is the one a ray meets, the output is the
+     * unanchored one's */
+    {
+        double uv0[2], uv1[2], z;
+        ref_iris(&w, 0, w.r[0], uv0, &z);
+        ref_iris(&w, 1, w.r[1], uv1, &z);
+        double sep = hypot(uv1[0] - uv0[0], uv1[1] - uv0[1]);
+        gs_xfer_eyes wide = {open, 1, {{uv0[0] + 1.0, uv0[1], sep / 2.0}}};
+        warp_ref wb = w;
+        wb.r[0] = 2.0 * w.r[0]; /* the scale's clamp: sep / 2 is far wider than an iris */
+        double uv2[2];
+        ref_iris(&wb, 0, wb.r[0], uv2, &z);
+        double dc[3] = {(uv0[0] + 1.0 - uv2[0]) * z / w.cam.fx, (uv0[1] - uv2[1]) * z / w.cam.fy, 0},
+               dh[3];
+        gs_geom_mat3_tvec(s->head_R, dc, dh);
+        for (int k = 0; k < 3; k++)
+            wb.c[0][k] += dh[k];
+        transfer_eyes(cw, s, ramp, &none, &vt, o1, S);
+        transfer_eyes(cw, s, ramp, &wide, &vt, o2, S);
+        size_t eye1 = 0, moved = 0;
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++) {
+                double q[2];
+                if (warp_expect(&wb, x, y, q) != 1 || warp_expect(&w, x, y, q) != 1)
+                    continue;
+                size_t i = 3 * ((size_t)y * S + x);
+                eye1++;
+                moved += o1[i] != o2[i] || o1[i + 1] != o2[i + 1];
+            }
+        CHECK_MSG(eye1 >= 40 && moved == 0,
+                  "anchor: one iris in reach of both moved %zu of eye 1's %zu pixels", moved, eye1);
+        CHECK_MSG(max_diff(o1, o2, isz) > 0, "anchor: a wide iris anchored nothing");
+    }
+
+    /* bad circles */
+    gs_error err = {0, ""};
+    gs_xfer_eyes bad = eyes;
+    bad.n_iris = 3;
+    CHECK(gs_model_render_transfer_eyes(cw, NULL, s, ramp, 3 * (size_t)S, &bad, &vt, o2,
+                                        3 * (size_t)S, &err) == GS_ERR_ARG);
+    bad = eyes;
+    bad.iris[1][2] = 0.0;
+    CHECK(gs_model_render_transfer_eyes(cw, NULL, s, ramp, 3 * (size_t)S, &bad, &vt, o2,
+                                        3 * (size_t)S, &err) == GS_ERR_ARG);
+    bad = eyes;
+    bad.iris[0][1] = NAN;
+    CHECK(gs_model_render_transfer_eyes(cw, NULL, s, ramp, 3 * (size_t)S, &bad, &vt, o2,
+                                        3 * (size_t)S, &err) == GS_ERR_ARG);
+    printf("refused (an iris of NaN): %s\n", err.msg);
+    gs_model_ctx_destroy(c0);
+    gs_model_ctx_destroy(cw);
+    gs_model_ctx_destroy(cf);
+    free(o0), free(o1), free(o2), free(ramp), free(open);
 }
 
 /* A gaze sweep at view v's head pose (a new one for c), each target
@@ -1143,6 +1324,7 @@ int main(void)
     warp_checks(m, &sub[0], in, S);
     warp_head_checks(m, &sub[0], in, S);
     opening_checks(m, &sub[0], in, S);
+    anchor_checks(m, &sub[0], S);
 
     /* Bad arguments. */
     memset(out, 0x5a, isz);

@@ -218,18 +218,39 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
                              size_t in_stride, const gs_view *view,
                              uint8_t *rgb, size_t stride, gs_error *err);
 
-/* The same with the input's eye opening given: opening (image_size^2
- * bytes, 0 closed .. 255 open, e.g. the eye contours of a photo's
- * landmarks) is where the eyeball warp at the input's head pose may take
- * and put the input's own eye pixels, in place of the opening the model's
- * probe renders find (NULL: those; docs/model.md "Detail transfer"). A
- * photo's eyes are where its landmarks put them; the model's drawing of
- * them, and so its probes, can be off or broken on a real face. */
-int gs_model_render_transfer_opening(gs_model_ctx *c, gs_pool *pool,
-                                     const gs_subject *s, const uint8_t *input,
-                                     size_t in_stride, const uint8_t *opening,
-                                     const gs_view *view, uint8_t *rgb,
-                                     size_t stride, gs_error *err);
+/* What a photo says of the input's eyes, for the eyeball warp at the
+ * input's head pose (docs/model.md, "The eyeball warp on photos"). A
+ * photo's eyes are where its landmarks and its own pixels put them; the
+ * model's drawing of them, and so its probes and its eyeball's place, can
+ * be off or broken on a real face.
+ *   opening: image_size^2 bytes, 0 closed .. 255 open (the landmarks' eye
+ *     contours): where the warp may take and put the input's own eye
+ *     pixels, in place of the opening the model's probe renders find;
+ *     NULL: those.
+ *   iris[0..n_iris): iris circles seen in the input (centre u, v and
+ *     limbus radius, image pixels, geom.h's +0.5 convention; any order, at
+ *     most 2). Each anchors the warp's proxy eyeball whose iris, at the
+ *     input's gaze, shows nearest to it (within GS_XFER_IRIS_ANCHOR_MAX of
+ *     that iris's radius; farther ones are ignored): the proxy is scaled so
+ *     its iris has that radius (by a factor clamped to [1/2, 2]) and moved
+ *     across the input's view so that it shows at that centre. The model's
+ *     own eyeballs and the rest of the transfer are untouched. */
+#define GS_XFER_IRIS_ANCHOR_MAX 3.0
+typedef struct gs_xfer_eyes {
+    const uint8_t *opening;
+    int n_iris;
+    double iris[2][3];
+} gs_xfer_eyes;
+
+/* gs_model_render_transfer with what a photo says of the input's eyes
+ * (eyes; NULL or all empty: the same bytes as gs_model_render_transfer).
+ * GS_ERR_ARG for n_iris outside 0..2 or a circle that is not finite with
+ * a positive radius. */
+int gs_model_render_transfer_eyes(gs_model_ctx *c, gs_pool *pool,
+                                  const gs_subject *s, const uint8_t *input,
+                                  size_t in_stride, const gs_xfer_eyes *eyes,
+                                  const gs_view *view, uint8_t *rgb,
+                                  size_t stride, gs_error *err);
 
 /* The bytes of a render. gs_model_render's depend on the model, the
  * subject and the view alone: each gaze of a subject renders from the
@@ -324,7 +345,7 @@ typedef struct gs_model_render_options {
      * pose. Default GS_XFER_EYE_WARP_HEAD_DEFAULT. */
     int transfer_eye_warp_head;
     /* The warp's falloff where the input's eye opening is given
-     * (gs_model_render_transfer_opening: a photo's eye contours), degrees,
+     * (gs_xfer_eyes.opening: a photo's eye contours), degrees,
      * (0, 90] (default GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT). The narrower
      * transfer_eye_warp_deg hands large turns back to the model's own
      * eyeball, which is the better one on the synthetic heads it learned;

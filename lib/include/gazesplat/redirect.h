@@ -60,6 +60,10 @@ typedef struct gs_redirect_input {
                              (gs_redirect_eye_opening), owned: where the
                              transfer's eyeball warp takes the photo's own
                              eye pixels */
+    int n_iris;           /* is_photo: the irises found in norm (face.h's */
+    double iris[2][3];    /*   localizer, status OK: centre u, v, radius,
+                             px), which anchor that warp's proxy eyeballs
+                             (model.h, gs_xfer_eyes) */
     gs_face_gate gate;    /* the gate's measures when it ran; gate.refusal
                              says why an input was refused */
     int red_eye_px;       /* is_photo: pixels of norm whose red-eye was
@@ -147,13 +151,18 @@ int gs_redirect_finetune(gs_model **tuned, const gs_model *shared, gs_pool *pool
 
 /* ---- rendering ---- */
 
+/* What a photo input says of its eyes for the transfer (its opening and
+ * irises; all empty for an input that is not a photo). */
+gs_xfer_eyes gs_redirect_eyes(const gs_redirect_input *in);
+
 /* One target into out (image_size^2 RGB rows of stride): the plain render
  * of the subject, or with input (the face it was fitted to, image_size^2
- * RGB rows of in_stride) the detail transfer from it; opening (a photo
- * input's, or NULL: the model's own) is where its eyeball warp works
- * (gs_model_render_transfer_opening). */
+ * RGB rows of in_stride) the detail transfer from it; eyes (a photo
+ * input's, gs_redirect_eyes, or NULL: the model's own) is where its eyeball
+ * warp works and where the input's irises are
+ * (gs_model_render_transfer_eyes). */
 int gs_redirect_render(gs_model_ctx *c, gs_pool *pool, const gs_subject *sub,
-                       const uint8_t *input, size_t in_stride, const uint8_t *opening,
+                       const uint8_t *input, size_t in_stride, const gs_xfer_eyes *eyes,
                        const gs_view *v, uint8_t *out, size_t stride, gs_error *err);
 
 /* Pasting renders back into the photo: the blend masks (the eyes for a
