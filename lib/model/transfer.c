@@ -68,7 +68,14 @@
  * the input's view (at its iris's depth) so that it shows there. The warp
  * then turns the photo's iris where the photo has it, not where the
  * model's eye stream is; the model's eyeballs (eye_source, the maps) stay
- * as they are.
+ * as they are. With a given opening at the input's head pose, a point the
+ * turn brings from where the input does not show it (its opening there
+ * under 1: under a lid) takes the rest of its weight from the input's
+ * pixel mirrored about its proxy's iris row, q' = (u, 2 v_i - v), where
+ * the input shows that: the iris, and the sclera above and below it, are
+ * much alike across that row, and the lids hide an eye's top or bottom.
+ * Without it such a point keeps the input's own pixel in place, which
+ * left the photo's iris where it was after a pitch change.
  *
  * At another head pose the model's geometry places the input's detail a
  * pixel or two off, and the input's shading was lit at the old pose: a
@@ -169,6 +176,8 @@ struct gs_xfer {
      * eye centres (head frame); the own view's radii and no shift unless
      * given irises anchor them (eye_anchor) */
     double pr[2], pd[2][3];
+    double ic[2][2];                   /* where their irises show in the
+                                          input (image px) */
     /* scratch */
     gs_raster *raster, *raster_crop; /* whole images; crops of the target */
     gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
@@ -497,6 +506,8 @@ typedef struct {
     float eye_w[2];       /* weight of each eyeball's residual */
     double gM[9];         /* the gaze's own turn R_g,s R_g,t^T (the warp) */
     float warp_w;         /* the eyeball warp's falloff; 0: off */
+    int fill;             /* the given opening's fill (the header): hidden
+                             points mirrored about the iris's row */
     double ray_o[3];      /* the target camera's centre, head frame */
     float head_w;         /* weight of the smoothed residual (head change) */
 } xfer_geom;
@@ -547,6 +558,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
     int warp = warp_on(c, g->same_pose);
     double r = turn_deg(g->gM) / (warp ? wdeg : 1.0);
     g->warp_w = warp ? (float)exp(-r * r) : 0.0f;
+    g->fill = same_pose && x->cur.ap_given;
     double mt[3] = {-tt[0], -tt[1], -tt[2]};
     gs_geom_mat3_tvec(Rt, mt, g->ray_o);
 }
@@ -709,12 +721,16 @@ static int proxy_hit(const gs_xfer *x, const xfer_geom *g, int px, int py,
 
 /* Where the input shows target pixel (px, py)'s proxy eyeball point, at
  * (u, v), and the warp's weight for it there without the target's
- * opening (the header): 0 unless it faces the input's camera. */
+ * opening (the header): 0 unless it faces the input's camera. *eye is the
+ * proxy it meets (-1: none), *aq the input's opening at (u, v), or -1
+ * where the input cannot show the point at all. */
 static float warp_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
-                         double *u, double *v)
+                         double *u, double *v, int *eye, float *aq)
 {
     double h[3], r[3], hs[3], n[3], nc[3], Xs[3];
     int iris, e = proxy_hit(x, g, px, py, h, &iris);
+    *eye = e;
+    *aq = -1.0f;
     if (e < 0)
         return 0.0f;
     for (int k = 0; k < 3; k++)
@@ -735,7 +751,8 @@ static float warp_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
     *v = g->cs.fy * Xs[1] / Xs[2] + g->cs.cy;
     if (!(*u >= 0 && *v >= 0 && *u <= S && *v <= S))
         return 0.0f;
-    return g->warp_w * bilinear(x->cur.src_ap, S, *u, *v);
+    *aq = bilinear(x->cur.src_ap, S, *u, *v);
+    return g->warp_w * *aq;
 }
 
 /* An interleaved 8-bit S x S RGB image at (u, v), bilinear (taps_at). */
@@ -957,11 +974,15 @@ static void eye_anchor(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s,
 {
     memcpy(x->pr, x->cur.src_er, sizeof x->pr);
     memset(x->pd, 0, sizeof x->pd);
+    gs_camera cs;
+    image_camera(c, s->head_t, &cs);
+    for (int e = 0; e < 2; e++) {
+        double X[3];
+        proxy_iris_px(x, s, &cs, e, x->pr[e], x->ic[e], X);
+    }
     int n = eyes && same_pose ? eyes->n_iris : 0;
     if (n == 0)
         return;
-    gs_camera cs;
-    image_camera(c, s->head_t, &cs);
     int pick[2] = {-1, -1};
     double dist[2] = {INFINITY, INFINITY};
     for (int e = 0; e < 2; e++) {
@@ -988,6 +1009,7 @@ static void eye_anchor(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s,
         double dc[3] = {(ir[0] - uv[0]) * X[2] / cs.fx,
                         (ir[1] - uv[1]) * X[2] / cs.fy, 0.0};
         gs_geom_mat3_tvec(s->head_R, dc, x->pd[e]);
+        x->ic[e][0] = ir[0], x->ic[e][1] = ir[1];
     }
 }
 
@@ -1137,11 +1159,29 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
     const float *ap = g->same_pose ? x->cur.src_ap : x->cur.tgt_ap;
     if (g->warp_w > 0.0f && ap[i] > 0.0f &&
         px >= tr[0] && px < tr[2] && py >= tr[1] && py < tr[3]) {
-        ww = ap[i] * warp_source(x, g, px, py, &uw, &vw);
+        int e;
+        float aq, wq = warp_source(x, g, px, py, &uw, &vw, &e, &aq);
+        ww = ap[i] * wq;
+        /* hidden in the input: mirrored about its iris's row (the fill) */
+        float m = 0.0f;
+        double vm = 0.0;
+        if (g->fill && aq >= 0.0f && aq < 1.0f) {
+            vm = 2.0 * x->ic[e][1] - vw;
+            if (vm >= 0 && vm <= x->S)
+                m = (1.0f - aq) * bilinear(x->cur.src_ap, x->S, uw, vm);
+        }
+        if (m > 0.0f)
+            ww = ap[i] * (g->warp_w * (aq + m));
         wh *= 1.0f - ww;
         we *= 1.0f - ww;
         if (ww > 0.0f)
             bilinear_rgb8(x->cur.in8, x->S, uw, vw, src);
+        if (ww > 0.0f && m > 0.0f) {
+            float sm[3];
+            bilinear_rgb8(x->cur.in8, x->S, uw, vm, sm);
+            for (int k = 0; k < 3; k++)
+                src[k] = (aq * src[k] + m * sm[k]) / (aq + m);
+        }
     }
     for (int k = 0; k < 3; k++) {
         const float *rk = res + k * n;

@@ -906,6 +906,63 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
               "within 1 px", sa.err, sa.near, sa.n);
     CHECK_MSG(su.err > 2 * sa.err, "anchor: the unanchored proxy fits as well (%.2f px)", su.err);
 
+    /* The fill: the given opening shut below a line (a lower lid) a pixel
+     * below each iris's centre. After a turn up, a target pixel above the
+     * line whose point comes from below it, where the input is shut, takes
+     * the pixel mirrored about its proxy's iris row, where that is open:
+     * the ramp shows where. */
+    {
+        gs_view vu = vo;
+        vu.gaze_pitch += 0.45;
+        warp_ref wu = wa;
+        gs_model_ctx *cu = gs_model_ctx_create(m);
+        render(cu, NULL, s, &vu, o2, S);
+        eye_state(cu, vu.gaze_pitch, vu.gaze_yaw, wu.Rt, Re, c2, r2);
+        gs_model_ctx_destroy(cu);
+        double icy[2], mid = 0.5 * (eyes.iris[0][0] + eyes.iris[1][0]);
+        int left = eyes.iris[0][0] < mid ? 0 : 1; /* the slot of the left eye's iris */
+        icy[0] = eyes.iris[left][1], icy[1] = eyes.iris[1 - left][1];
+        uint8_t *lid = malloc(px), *o3 = malloc(isz);
+        for (size_t i = 0; i < px; i++) {
+            double x = (double)(i % (size_t)S) + 0.5, y = (double)(i / (size_t)S) + 0.5;
+            lid[i] = y > icy[x < mid ? 0 : 1] + 1.0 ? 0 : 255;
+        }
+        gs_xfer_eyes le = eyes;
+        le.opening = lid;
+        transfer(c0, NULL, s, ramp, &vu, o2, S);
+        transfer_eyes(cw, s, ramp, &le, &vu, o3, S);
+        double tu = turn_deg_of(wu.Rs[0], wu.Rt[0]) / GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT;
+        double wt = exp(-tu * tu);
+        size_t n = 0, near = 0, unwarped = 0;
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++) {
+                double q[2];
+                int e = warp_expect(&wu, x, y, q);
+                if (e < 0)
+                    continue;
+                double L = icy[x + 0.5 < mid ? 0 : 1] + 1.0, vm = 2.0 * (L - 1.0) - q[1];
+                if (!(y + 1.5 < L && q[1] > L + 1.0 && vm < L - 1.0))
+                    continue; /* not open here, not hidden there, or its mirror not shown */
+                size_t i = 3 * ((size_t)y * S + x);
+                if (o2[i] == 0 || o2[i] == 255 || o2[i + 1] == 0 || o2[i + 1] == 255)
+                    continue;
+                if (o3[i] == o2[i] && o3[i + 1] == o2[i + 1]) {
+                    unwarped++;
+                    continue;
+                }
+                double u = 0.5 * (o2[i] + (o3[i] - o2[i]) / wt) + 0.5;
+                double v = 0.5 * (o2[i + 1] + (o3[i + 1] - o2[i + 1]) / wt) + 0.5;
+                n++;
+                near += fabs(u - q[0]) <= 1.0 && fabs(v - vm) <= 1.0;
+            }
+        printf("fill: lower lids a pixel below the irises, a turn up: %zu hidden points taken "
+               "from their mirror about the iris row, %zu within 1 px (%zu unwarped)\n", n, near,
+               unwarped);
+        CHECK_MSG(n >= 10 && near >= 0.9 * n && unwarped <= n / 10,
+                  "fill: %zu of %zu hidden points from their mirror, %zu unwarped", near, n, unwarped);
+        free(lid), free(o3);
+    }
+
     /* order, distance, two near one, back to none */
     swapped = eyes;
     memcpy(swapped.iris[0], eyes.iris[1], sizeof swapped.iris[0]);
