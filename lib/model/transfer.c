@@ -74,8 +74,11 @@
  * pixel mirrored about its proxy's iris row, q' = (u, 2 v_i - v), where
  * the input shows that: the iris, and the sclera above and below it, are
  * much alike across that row, and the lids hide an eye's top or bottom.
- * Without it such a point keeps the input's own pixel in place, which
- * left the photo's iris where it was after a pitch change.
+ * Where that is hidden too, a point of the proxy's sclera takes the
+ * input's sclera colour (sclera_colours), so that what the iris uncovers
+ * reads as white of the eye. Without the fill such a point keeps the
+ * input's own pixel in place, which left the photo's iris where it was
+ * after a pitch change.
  *
  * At another head pose the model's geometry places the input's detail a
  * pixel or two off, and the input's shading was lit at the old pose: a
@@ -119,6 +122,11 @@
 #define GS_XFER_PROBE_PITCH 0.3
 #define GS_XFER_AP_LO 20.0f
 #define GS_XFER_AP_HI 80.0f
+/* The fill's sclera colour (sclera_colours): open pixels this many iris
+ * radii from the iris centre, and how many an eye needs. */
+#define GS_XFER_SCLERA_IN 1.15
+#define GS_XFER_SCLERA_OUT 4.0
+#define GS_XFER_SCLERA_MIN 8
 
 /* What is kept per subject: its own view (while subject and settings are
  * the same), the residual of its input, and its last target's maps and
@@ -137,6 +145,15 @@ typedef struct xfer_subj {
     float *src_ap;                 /* [S*S] eye opening, 0..1 */
     int ap_given;
     uint8_t *open8;                /* [S*S] the opening it was given */
+    unsigned ap_gen;               /* counts the openings given */
+    /* the sclera's colour per eye (sclera_colours), for the input res
+     * came from, the given opening of generation scl_gen and the irises
+     * scl_at (centre, radius px) */
+    int scl_valid;
+    unsigned scl_gen;
+    double scl_at[2][3];
+    int scl_ok[2];
+    float scl[2][3];
     /* the eye opening at another head pose (the warp there): tgt_ap is
      * for head pose tap_R, tap_t when tap_valid */
     int tap_valid;
@@ -176,8 +193,8 @@ struct gs_xfer {
      * eye centres (head frame); the own view's radii and no shift unless
      * given irises anchor them (eye_anchor) */
     double pr[2], pd[2][3];
-    double ic[2][2];                   /* where their irises show in the
-                                          input (image px) */
+    double ic[2][3];                   /* where their irises show in the
+                                          input: centre, radius (image px) */
     /* scratch */
     gs_raster *raster, *raster_crop; /* whole images; crops of the target */
     gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
@@ -190,6 +207,7 @@ struct gs_xfer {
 static void subj_invalidate(xfer_subj *u)
 {
     u->valid = u->res_valid = u->tgt_valid = u->ap_valid = u->tap_valid = 0;
+    u->scl_valid = 0;
 }
 
 static void subj_free(xfer_subj *u)
@@ -722,14 +740,15 @@ static int proxy_hit(const gs_xfer *x, const xfer_geom *g, int px, int py,
 /* Where the input shows target pixel (px, py)'s proxy eyeball point, at
  * (u, v), and the warp's weight for it there without the target's
  * opening (the header): 0 unless it faces the input's camera. *eye is the
- * proxy it meets (-1: none), *aq the input's opening at (u, v), or -1
- * where the input cannot show the point at all. */
+ * proxy it meets (-1: none), *on_iris whether on its iris, *aq the input's
+ * opening at (u, v), or -1 where the input cannot show the point at all. */
 static float warp_source(const gs_xfer *x, const xfer_geom *g, int px, int py,
-                         double *u, double *v, int *eye, float *aq)
+                         double *u, double *v, int *eye, float *aq, int *on_iris)
 {
     double h[3], r[3], hs[3], n[3], nc[3], Xs[3];
-    int iris, e = proxy_hit(x, g, px, py, h, &iris);
+    int iris = 0, e = proxy_hit(x, g, px, py, h, &iris);
     *eye = e;
+    *on_iris = iris;
     *aq = -1.0f;
     if (e < 0)
         return 0.0f;
@@ -901,6 +920,7 @@ static int eye_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
             !memcmp(x->cur.open8, opening, px))
             return GS_OK;
         memcpy(x->cur.open8, opening, px);
+        x->cur.ap_gen++;
         for (size_t i = 0; i < px; i++)
             x->cur.src_ap[i] = opening[i] * (1.0f / 255.0f);
         x->cur.ap_valid = x->cur.ap_given = 1;
@@ -978,7 +998,7 @@ static void eye_anchor(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s,
     image_camera(c, s->head_t, &cs);
     for (int e = 0; e < 2; e++) {
         double X[3];
-        proxy_iris_px(x, s, &cs, e, x->pr[e], x->ic[e], X);
+        x->ic[e][2] = proxy_iris_px(x, s, &cs, e, x->pr[e], x->ic[e], X);
     }
     int n = eyes && same_pose ? eyes->n_iris : 0;
     if (n == 0)
@@ -1009,8 +1029,60 @@ static void eye_anchor(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s,
         double dc[3] = {(ir[0] - uv[0]) * X[2] / cs.fx,
                         (ir[1] - uv[1]) * X[2] / cs.fy, 0.0};
         gs_geom_mat3_tvec(s->head_R, dc, x->pd[e]);
-        x->ic[e][0] = ir[0], x->ic[e][1] = ir[1];
+        memcpy(x->ic[e], ir, sizeof x->ic[e]);
     }
+}
+
+/* The sclera's colour of each eye in the input (the fill's last resort,
+ * the header): the mean of the open pixels of the given opening (>= 0.99)
+ * between 1.15 and 4 iris radii from the eye's iris centre (the nearer
+ * eye's) that are at least as bright as those pixels' mean grey (lashes
+ * and lid shadow are darker). None for an eye with fewer than
+ * GS_XFER_SCLERA_MIN of them. Kept while the input, the given opening and
+ * the irises are the same. */
+static void sclera_colours(gs_xfer *x)
+{
+    xfer_subj *u = &x->cur;
+    if (u->scl_valid && u->scl_gen == u->ap_gen && !memcmp(u->scl_at, x->ic, sizeof u->scl_at))
+        return;
+    int S = x->S;
+    double grey[2] = {0, 0};
+    for (int pass = 0; pass < 2; pass++) {
+        double sum[2][4] = {{0}};
+        for (int y = 0; y < S; y++)
+            for (int xx = 0; xx < S; xx++) {
+                size_t i = (size_t)y * S + xx;
+                if (u->src_ap[i] < 0.99f)
+                    continue;
+                double d0 = hypot(xx + 0.5 - x->ic[0][0], y + 0.5 - x->ic[0][1]);
+                double d1 = hypot(xx + 0.5 - x->ic[1][0], y + 0.5 - x->ic[1][1]);
+                int e = d0 <= d1 ? 0 : 1;
+                double d = e ? d1 : d0, r = x->ic[e][2];
+                if (d < GS_XFER_SCLERA_IN * r || d > GS_XFER_SCLERA_OUT * r)
+                    continue;
+                const uint8_t *p = u->in8 + 3 * i;
+                double l = (p[0] + p[1] + p[2]) / 3.0;
+                if (pass && l < grey[e])
+                    continue;
+                for (int k = 0; k < 3; k++)
+                    sum[e][k] += p[k];
+                sum[e][3] += 1.0;
+                if (!pass)
+                    grey[e] += l;
+            }
+        for (int e = 0; e < 2; e++) {
+            if (!pass) {
+                u->scl_ok[e] = sum[e][3] >= GS_XFER_SCLERA_MIN;
+                grey[e] = u->scl_ok[e] ? grey[e] / sum[e][3] : 0.0;
+                continue;
+            }
+            for (int k = 0; k < 3; k++) /* pass 1 has at least the brightest */
+                u->scl[e][k] = u->scl_ok[e] ? (float)(sum[e][k] / sum[e][3]) : 0.0f;
+        }
+    }
+    memcpy(u->scl_at, x->ic, sizeof u->scl_at);
+    u->scl_gen = u->ap_gen;
+    u->scl_valid = 1;
 }
 
 static int check_eyes(const gs_xfer_eyes *eyes, gs_error *err)
@@ -1077,6 +1149,7 @@ static int residual(gs_xfer *x, const uint8_t *input, size_t in_stride)
                                  (float)x->cur.src8[3 * i + k];
     x->cur.res_valid = 1;
     x->cur.smooth_valid = 0;
+    x->cur.scl_valid = 0;
     return 0;
 }
 
@@ -1159,28 +1232,32 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
     const float *ap = g->same_pose ? x->cur.src_ap : x->cur.tgt_ap;
     if (g->warp_w > 0.0f && ap[i] > 0.0f &&
         px >= tr[0] && px < tr[2] && py >= tr[1] && py < tr[3]) {
-        int e;
-        float aq, wq = warp_source(x, g, px, py, &uw, &vw, &e, &aq);
+        int e, on_iris;
+        float aq, wq = warp_source(x, g, px, py, &uw, &vw, &e, &aq, &on_iris);
         ww = ap[i] * wq;
-        /* hidden in the input: mirrored about its iris's row (the fill) */
-        float m = 0.0f;
+        /* hidden in the input: mirrored about its iris's row, then, on the
+         * sclera, the sclera's colour (the fill) */
+        float m = 0.0f, ms = 0.0f;
         double vm = 0.0;
         if (g->fill && aq >= 0.0f && aq < 1.0f) {
             vm = 2.0 * x->ic[e][1] - vw;
             if (vm >= 0 && vm <= x->S)
                 m = (1.0f - aq) * bilinear(x->cur.src_ap, x->S, uw, vm);
+            if (!on_iris && x->cur.scl_ok[e])
+                ms = 1.0f - aq - m;
         }
-        if (m > 0.0f)
-            ww = ap[i] * (g->warp_w * (aq + m));
+        if (m > 0.0f || ms > 0.0f)
+            ww = ap[i] * (g->warp_w * (aq + m + ms));
         wh *= 1.0f - ww;
         we *= 1.0f - ww;
         if (ww > 0.0f)
             bilinear_rgb8(x->cur.in8, x->S, uw, vw, src);
-        if (ww > 0.0f && m > 0.0f) {
-            float sm[3];
-            bilinear_rgb8(x->cur.in8, x->S, uw, vm, sm);
+        if (ww > 0.0f && (m > 0.0f || ms > 0.0f)) {
+            float sm[3] = {0, 0, 0};
+            if (m > 0.0f)
+                bilinear_rgb8(x->cur.in8, x->S, uw, vm, sm);
             for (int k = 0; k < 3; k++)
-                src[k] = (aq * src[k] + m * sm[k]) / (aq + m);
+                src[k] = (aq * src[k] + m * sm[k] + ms * x->cur.scl[e][k]) / (aq + m + ms);
         }
     }
     for (int k = 0; k < 3; k++) {
@@ -1304,6 +1381,8 @@ int gs_model_render_transfer_eyes(gs_model_ctx *c, gs_pool *pool,
         return rc;
     if (!residual(x, input, in_stride)) /* a new input: warp everything */
         d[0] = d[1] = 0, d[2] = d[3] = S;
+    if (same_pose && x->cur.ap_given && warp_on(c, same_pose))
+        sclera_colours(x);
 
     /* Outside d the maps are the kept target's, with no eye coverage at
      * either gaze (b = 0): head_source depends on the head poses and those

@@ -236,7 +236,16 @@ static void eye_state(const gs_model_ctx *c, double gp, double gy, double Rg[2][
 /* Target pixel (px, py) -> input position q; returns the eye, -1 where
  * the warp takes nothing (no eyeball, or its point faces away from the
  * input's camera). */
+static int warp_expect_on(const warp_ref *w, int px, int py, double q[2], int *on_iris);
+
 static int warp_expect(const warp_ref *w, int px, int py, double q[2])
+{
+    int on_iris;
+    return warp_expect_on(w, px, py, q, &on_iris);
+}
+
+/* The same, with *on_iris whether the point is on the iris plane. */
+static int warp_expect_on(const warp_ref *w, int px, int py, double q[2], int *on_iris)
 {
     double dc[3] = {(px + 0.5 - w->cam.cx) / w->cam.fx, (py + 0.5 - w->cam.cy) / w->cam.fy, 1};
     double o[3], d[3], mt[3] = {-w->t[0], -w->t[1], -w->t[2]};
@@ -282,6 +291,7 @@ static int warp_expect(const warp_ref *w, int px, int py, double q[2])
             for (int k = 0; k < 3; k++)
                 h[k] = o[k] + best * d[k];
     }
+    *on_iris = iris;
     if (eye < 0)
         return -1;
     double M[9], RtT[9], rel[3], hs[3], n[3], X[3], nc[3];
@@ -960,6 +970,70 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
                unwarped);
         CHECK_MSG(n >= 10 && near >= 0.9 * n && unwarped <= n / 10,
                   "fill: %zu of %zu hidden points from their mirror, %zu unwarped", near, n, unwarped);
+        /* Its last resort: lids a pixel above and below each iris's
+         * centre (a slit). A sclera point hidden there and at its mirror
+         * takes the sclera's colour: the mean of the open pixels 1.15 to 4
+         * iris radii from the centre at least as bright as their mean. */
+        double col[2][3], gsum[2] = {0, 0}, cnt[2] = {0, 0};
+        for (size_t i = 0; i < px; i++) {
+            double x = (double)(i % (size_t)S) + 0.5, y = (double)(i / (size_t)S) + 0.5;
+            lid[i] = fabs(y - icy[x < mid ? 0 : 1]) <= 1.0 ? 255 : 0;
+        }
+        for (int pass = 0; pass < 2; pass++) {
+            double sum[2][4] = {{0}};
+            for (size_t i = 0; i < px; i++) {
+                double x = (double)(i % (size_t)S) + 0.5, y = (double)(i / (size_t)S) + 0.5;
+                if (lid[i] != 255)
+                    continue;
+                double d[2];
+                for (int j = 0; j < 2; j++)
+                    d[j] = hypot(x - eyes.iris[j][0], y - eyes.iris[j][1]);
+                int j = d[0] <= d[1] ? 0 : 1;
+                if (d[j] < 1.15 * eyes.iris[j][2] || d[j] > 4.0 * eyes.iris[j][2])
+                    continue;
+                const uint8_t *pp = ramp + 3 * i;
+                double g = (pp[0] + pp[1] + pp[2]) / 3.0;
+                if (pass && g < gsum[j] / cnt[j])
+                    continue;
+                for (int k = 0; k < 3; k++)
+                    sum[j][k] += pp[k];
+                sum[j][3] += 1;
+                if (!pass)
+                    gsum[j] += g, cnt[j] += 1;
+            }
+            for (int j = 0; pass && j < 2; j++)
+                for (int k = 0; k < 3; k++)
+                    col[j][k] = sum[j][k] / sum[j][3];
+        }
+        CHECK(cnt[0] >= 8 && cnt[1] >= 8);
+        transfer_eyes(cw, s, ramp, &le, &vu, o3, S);
+        size_t ns = 0, good = 0;
+        double worst = 0;
+        for (int y = 0; y < S; y++)
+            for (int x = 0; x < S; x++) {
+                double q[2];
+                int on_iris, e = warp_expect_on(&wu, x, y, q, &on_iris);
+                if (e < 0 || on_iris)
+                    continue;
+                int side = x + 0.5 < mid ? 0 : 1;
+                double c = icy[side], vm = 2.0 * c - q[1];
+                if (!(fabs(y + 0.5 - c) < 0.5 && fabs(q[1] - c) > 2.0 && fabs(vm - c) > 2.0))
+                    continue; /* not open here, or shown there or at its mirror */
+                size_t i = 3 * ((size_t)y * S + x);
+                int slot = (eyes.iris[0][0] < mid) == (side == 0) ? 0 : 1; /* the iris slot of this side */
+                double got[3], err = 0;
+                for (int k = 0; k < 3; k++) {
+                    got[k] = o2[i + k] + (o3[i + k] - o2[i + k]) / wt;
+                    err = fmax(err, fabs(got[k] - col[slot][k]));
+                }
+                ns++;
+                good += err <= 2.0;
+                worst = fmax(worst, err);
+            }
+        printf("fill, sclera: slits a pixel either side of the irises, a turn up: %zu hidden sclera "
+               "points take the sclera's colour, %zu within 2 levels (worst %.1f)\n", ns, good, worst);
+        CHECK_MSG(ns >= 10 && good >= 0.9 * ns, "fill, sclera: %zu of %zu within 2 levels (worst %.1f)",
+                  good, ns, worst);
         free(lid), free(o3);
     }
 

@@ -228,7 +228,8 @@ int gs_model_render_transfer(gs_model_ctx *c, gs_pool *pool,
  *     pixels, in place of the opening the model's probe renders find;
  *     NULL: those. A point the warp would take from where this opening
  *     is shut (under a lid) takes the pixel mirrored about its proxy's
- *     iris row instead, where the opening shows that.
+ *     iris row instead, where the opening shows that, or else, on the
+ *     sclera, the input's sclera colour.
  *   iris[0..n_iris): iris circles seen in the input (centre u, v and
  *     limbus radius, image pixels, geom.h's +0.5 convention; any order, at
  *     most 2). Each anchors the warp's proxy eyeball whose iris, at the
