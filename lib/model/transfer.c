@@ -576,7 +576,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
     int warp = warp_on(c, g->same_pose);
     double r = turn_deg(g->gM) / (warp ? wdeg : 1.0);
     g->warp_w = warp ? (float)exp(-r * r) : 0.0f;
-    g->fill = same_pose && x->cur.ap_given;
+    g->fill = warp && same_pose && x->cur.ap_given;
     double mt[3] = {-tt[0], -tt[1], -tt[2]};
     gs_geom_mat3_tvec(Rt, mt, g->ray_o);
 }
@@ -1005,24 +1005,20 @@ static void eye_anchor(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s,
         return;
     int pick[2] = {-1, -1};
     double dist[2] = {INFINITY, INFINITY};
-    for (int e = 0; e < 2; e++) {
-        double uv[2], X[3];
-        proxy_iris_px(x, s, &cs, e, x->pr[e], uv, X);
+    for (int e = 0; e < 2; e++)
         for (int j = 0; j < n; j++) {
             const double *ir = eyes->iris[j];
-            double d = hypot(ir[0] - uv[0], ir[1] - uv[1]);
+            double d = hypot(ir[0] - x->ic[e][0], ir[1] - x->ic[e][1]);
             if (d <= GS_XFER_IRIS_ANCHOR_MAX * ir[2] && d < dist[e])
                 dist[e] = d, pick[e] = j;
         }
-    }
     if (pick[0] >= 0 && pick[0] == pick[1])
         pick[dist[0] <= dist[1] ? 1 : 0] = -1;
     for (int e = 0; e < 2; e++) {
         if (pick[e] < 0)
             continue;
         const double *ir = eyes->iris[pick[e]];
-        double uv[2], X[3];
-        double sc = ir[2] / proxy_iris_px(x, s, &cs, e, x->pr[e], uv, X);
+        double uv[2], X[3], sc = ir[2] / x->ic[e][2];
         x->pr[e] *= sc < 0.5 ? 0.5 : sc > 2.0 ? 2.0 : sc;
         proxy_iris_px(x, s, &cs, e, x->pr[e], uv, X);
         /* across the view at the iris's depth: it then shows at ir */
@@ -1381,14 +1377,14 @@ int gs_model_render_transfer_eyes(gs_model_ctx *c, gs_pool *pool,
         return rc;
     if (!residual(x, input, in_stride)) /* a new input: warp everything */
         d[0] = d[1] = 0, d[2] = d[3] = S;
-    if (same_pose && x->cur.ap_given && warp_on(c, same_pose))
-        sclera_colours(x);
 
     /* Outside d the maps are the kept target's, with no eye coverage at
      * either gaze (b = 0): head_source depends on the head poses and those
      * maps only, so the kept warped residual stands there. */
     xfer_geom g;
     geom_init(c, x, &g, Rs, ts, Rt, tt, same_pose);
+    if (g.fill)
+        sclera_colours(x);
     g.head_w = c->xfer_head_w;
     if (!g.same_pose && g.head_w > 0.0f && smooth_residual(x))
         return gs_error_set(err, GS_ERR_NOMEM, "transfer: out of memory");

@@ -233,6 +233,59 @@ static void eye_state(const gs_model_ctx *c, double gp, double gy, double Rg[2][
     }
 }
 
+/* The reference for a warp from the own view vo to view vt: both gazes'
+ * eyeballs (rotations the gaze's in w, the eye stream's in Re_s, Re_t;
+ * NULL: not wanted), the S x S camera, the target's head pose (vt's, or
+ * the subject's) and the input's (the subject's). out (S x S RGB) is
+ * scratch. */
+static void ref_views(const gs_model *m, const gs_subject *s, const gs_view *vo,
+                      const gs_view *vt, int S, uint8_t *out, warp_ref *w,
+                      double Re_s[2][9], double Re_t[2][9])
+{
+    double re[2][9], c2[2][3], r2[2];
+    gs_model_ctx *cr = gs_model_ctx_create(m);
+    render(cr, NULL, s, vo, out, S);
+    eye_state(cr, vo->gaze_pitch, vo->gaze_yaw, w->Rs, Re_s ? Re_s : re, w->c, w->r);
+    render(cr, NULL, s, vt, out, S);
+    eye_state(cr, vt->gaze_pitch, vt->gaze_yaw, w->Rt, Re_t ? Re_t : re, c2, r2);
+    float sc = (float)S / (float)cr->fs;
+    gs_model_ctx_destroy(cr);
+    gs_frame_camera(m, s->head_t, &w->cam);
+    w->cam.fx *= sc, w->cam.fy *= sc;
+    w->cam.cx = w->cam.cy = 0.5f * (float)S;
+    memcpy(w->R, vt->use_head ? vt->head_R : s->head_R, sizeof w->R);
+    memcpy(w->t, vt->use_head ? vt->head_t : s->head_t, sizeof w->t);
+    memcpy(w->Ri, s->head_R, sizeof w->Ri);
+    memcpy(w->ti, s->head_t, sizeof w->ti);
+}
+
+/* An input that is a ramp of its own pixel coordinates: R = 2 x, G = 2 y,
+ * B = 128, so an output shows where each pixel was taken from
+ * (ramp_source). */
+static void fill_ramp(uint8_t *ramp, int S)
+{
+    for (int y = 0; y < S; y++)
+        for (int x = 0; x < S; x++) {
+            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
+            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
+        }
+}
+
+/* Where sample i (a byte offset) of o1, warped from the ramp with weight
+ * wt, was taken from (u, v), against o0 the same without the warp; and
+ * channel k's source value. */
+static double ramp_value(const uint8_t *o0, const uint8_t *o1, size_t i, int k, double wt)
+{
+    return o0[i + k] + (o1[i + k] - o0[i + k]) / wt;
+}
+
+static void ramp_source(const uint8_t *o0, const uint8_t *o1, size_t i, double wt, double *u,
+                        double *v)
+{
+    *u = 0.5 * ramp_value(o0, o1, i, 0, wt) + 0.5;
+    *v = 0.5 * ramp_value(o0, o1, i, 1, wt) + 0.5;
+}
+
 /* Target pixel (px, py) -> input position q; returns the eye, -1 where
  * the warp takes nothing (no eyeball, or its point faces away from the
  * input's camera). */
@@ -350,8 +403,8 @@ static warp_stats warp_compare(const warp_ref *w, const uint8_t *o0, const uint8
             }
             if (same || o0[i] == 0 || o0[i] == 255 || o0[i + 1] == 0 || o0[i + 1] == 255)
                 continue; /* outside the eye stream's tiles, or clamped */
-            double u = 0.5 * (o0[i] + (o1[i] - o0[i]) / wt) + 0.5;
-            double v = 0.5 * (o0[i + 1] + (o1[i + 1] - o0[i + 1]) / wt) + 0.5;
+            double u, v;
+            ramp_source(o0, o1, i, wt, &u, &v);
             st.n++;
             st.near += fabs(u - q[0]) <= 1.0 && fabs(v - q[1]) <= 1.0;
             st.err += hypot(u - q[0], v - q[1]);
@@ -426,12 +479,8 @@ static void warp_checks(gs_model *m, const gs_subject *s, const uint8_t *in, int
            "(%zu px of this model's; pinned to the left half: %zu samples there, none "
            "elsewhere)\n", open, inside);
 
-    /* pinned opening, ramp input: R = 2 x, G = 2 y, B = 128 */
-    for (int y = 0; y < S; y++)
-        for (int x = 0; x < S; x++) {
-            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
-            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
-        }
+    /* pinned opening, ramp input */
+    fill_ramp(ramp, S);
     set_warp(cw, 90.0);
     transfer(cw, NULL, s, ramp, &vt, o1, S); /* makes the opening */
     float *pin = gs_xfer_eye_opening(cw->xfer);
@@ -440,21 +489,7 @@ static void warp_checks(gs_model *m, const gs_subject *s, const uint8_t *in, int
     transfer(cw, NULL, s, ramp, &vt, o1, S);
     transfer(c0, NULL, s, ramp, &vt, o0, S);
     warp_ref w, we;
-    gs_model_ctx *cr = gs_model_ctx_create(m);
-    double c2[2][3], r2[2];
-    render(cr, NULL, s, &vo, ramp, S); /* cr's eyeballs: the own gaze's */
-    eye_state(cr, vo.gaze_pitch, vo.gaze_yaw, w.Rs, we.Rs, w.c, w.r);
-    render(cr, NULL, s, &vt, ramp, S);
-    eye_state(cr, vt.gaze_pitch, vt.gaze_yaw, w.Rt, we.Rt, c2, r2);
-    gs_frame_camera(m, s->head_t, &w.cam);
-    float sc = (float)S / (float)cr->fs;
-    w.cam.fx *= sc, w.cam.fy *= sc;
-    w.cam.cx = w.cam.cy = 0.5f * (float)S;
-    gs_model_ctx_destroy(cr);
-    memcpy(w.R, s->head_R, sizeof w.R);
-    memcpy(w.t, s->head_t, sizeof w.t);
-    memcpy(w.Ri, s->head_R, sizeof w.Ri);
-    memcpy(w.ti, s->head_t, sizeof w.ti);
+    ref_views(m, s, &vo, &vt, S, ramp, &w, we.Rs, we.Rt);
     memcpy(we.c, w.c, sizeof w.c), memcpy(we.r, w.r, sizeof w.r);
     we.cam = w.cam;
     memcpy(we.R, w.R, sizeof w.R), memcpy(we.t, w.t, sizeof w.t);
@@ -614,34 +649,16 @@ static void warp_head_checks(const gs_model *m, const gs_subject *s, const uint8
               "changed outside the opening, %zu by one level", outside, rounding);
     CHECK_MSG(open < px / 10, "warp at a head change: opening of %zu of %zu pixels", open, px);
 
-    /* pinned openings, ramp input (R = 2 x, G = 2 y) */
-    for (int y = 0; y < S; y++)
-        for (int x = 0; x < S; x++) {
-            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
-            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
-        }
+    /* pinned openings, ramp input */
+    fill_ramp(ramp, S);
     gs_model_ctx *cw = warp_ctx(m, 90.0, 1), *cn = warp_ctx(m, 90.0, 0);
     transfer(cw, NULL, s, ramp, &vh, o1, S); /* makes both openings */
     pin_openings(cw, S);
     transfer(cw, NULL, s, ramp, &vh, o1, S);
     transfer(cn, NULL, s, ramp, &vh, o0, S);
     warp_ref w;
-    double Re[2][9], c2[2][3], r2[2];
-    gs_model_ctx *cr = gs_model_ctx_create(m);
     gs_view vo = own_view(s);
-    render(cr, NULL, s, &vo, ramp, S);
-    eye_state(cr, vo.gaze_pitch, vo.gaze_yaw, w.Rs, Re, w.c, w.r);
-    render(cr, NULL, s, &vh, ramp, S);
-    eye_state(cr, vh.gaze_pitch, vh.gaze_yaw, w.Rt, Re, c2, r2);
-    gs_frame_camera(m, s->head_t, &w.cam);
-    float sc = (float)S / (float)cr->fs;
-    w.cam.fx *= sc, w.cam.fy *= sc;
-    w.cam.cx = w.cam.cy = 0.5f * (float)S;
-    gs_model_ctx_destroy(cr);
-    memcpy(w.R, vh.head_R, sizeof w.R);
-    memcpy(w.t, vh.head_t, sizeof w.t);
-    memcpy(w.Ri, s->head_R, sizeof w.Ri);
-    memcpy(w.ti, s->head_t, sizeof w.ti);
+    ref_views(m, s, &vo, &vh, S, ramp, &w, NULL, NULL);
     double turn = turn_deg_of(w.Rs[0], w.Rt[0]), r90 = turn / 90.0;
     warp_stats st = warp_compare(&w, o0, o1, S, exp(-r90 * r90));
     /* the same check with the target's pose for the input's: it must not
@@ -743,6 +760,20 @@ static void transfer_open(gs_model_ctx *c, const gs_subject *s, const uint8_t *i
     transfer_eyes(c, s, in, &e, v, out, S);
 }
 
+/* The samples of RGB images a and b (px pixels) that differ where mask
+ * is 255 (*inside) and where it is 0 (*outside). */
+static void changed_by_mask(const uint8_t *a, const uint8_t *b, const uint8_t *mask, size_t px,
+                            size_t *inside, size_t *outside)
+{
+    *inside = *outside = 0;
+    for (size_t i = 0; i < px; i++)
+        for (int k = 0; k < 3; k++) {
+            int ch = a[3 * i + k] != b[3 * i + k];
+            *outside += mask[i] == 0 && ch;
+            *inside += mask[i] == 255 && ch;
+        }
+}
+
 /* A given eye opening (gs_xfer_eyes.opening, a photo's eye
  * contours): all shut is the warp off to the byte; one open half changes
  * nothing outside it and something inside after a turn, and a
@@ -767,13 +798,8 @@ static void opening_checks(const gs_model *m, const gs_subject *s, const uint8_t
     CHECK_MSG(max_diff(o0, o1, isz) == 0, "opening shut: not the warp off (%d)",
               max_diff(o0, o1, isz));
     transfer_open(cw, s, in, half, &vt, o1, S);
-    size_t outside = 0, inside = 0;
-    for (size_t i = 0; i < px; i++)
-        for (int k = 0; k < 3; k++) {
-            int ch = o1[3 * i + k] != o0[3 * i + k];
-            outside += half[i] == 0 && ch;
-            inside += half[i] == 255 && ch;
-        }
+    size_t outside, inside;
+    changed_by_mask(o1, o0, half, px, &inside, &outside);
     CHECK_MSG(outside == 0, "opening: %zu samples changed outside it", outside);
     CHECK_MSG(inside > 0, "opening: nothing changed inside it");
     /* the same subject and view, the opening changed: a fresh context's bytes */
@@ -806,13 +832,8 @@ static void opening_checks(const gs_model *m, const gs_subject *s, const uint8_t
         gs_model_ctx *cd = warp_ctx(m, GS_XFER_EYE_WARP_DEG_DEFAULT, 0);
         transfer_open(cg, s, in, half, &vt, o0, S); /* given 10, probed 20 */
         transfer_open(cd, s, in, half, &vt, o2, S); /* given 90, probed 20 */
-        size_t diff = 0, out_diff = 0;
-        for (size_t i = 0; i < px; i++)
-            for (int k = 0; k < 3; k++) {
-                int ch = o0[3 * i + k] != o2[3 * i + k];
-                diff += half[i] == 255 && ch;
-                out_diff += half[i] == 0 && ch;
-            }
+        size_t diff, out_diff;
+        changed_by_mask(o0, o2, half, px, &diff, &out_diff);
         CHECK_MSG(diff > 0 && out_diff == 0,
                   "given falloff: %zu samples differ inside, %zu outside", diff, out_diff);
         gs_model_ctx_destroy(cg);
@@ -861,11 +882,7 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
     uint8_t *o0 = malloc(isz), *o1 = malloc(isz), *o2 = malloc(isz), *ramp = malloc(isz);
     uint8_t *open = malloc(px);
     memset(open, 255, px);
-    for (int y = 0; y < S; y++)
-        for (int x = 0; x < S; x++) {
-            uint8_t *p = ramp + 3 * ((size_t)y * S + x);
-            p[0] = (uint8_t)(2 * x), p[1] = (uint8_t)(2 * y), p[2] = 128;
-        }
+    fill_ramp(ramp, S);
     gs_view vo = own_view(s), vt = vo;
     vt.gaze_pitch += 0.2;
     vt.gaze_yaw -= 0.35;
@@ -874,19 +891,7 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
 
     /* the reference proxies, unanchored (w) and anchored (wa) */
     warp_ref w, wa;
-    double Re[2][9], c2[2][3], r2[2];
-    gs_model_ctx *cr = gs_model_ctx_create(m);
-    render(cr, NULL, s, &vo, o2, S);
-    eye_state(cr, vo.gaze_pitch, vo.gaze_yaw, w.Rs, Re, w.c, w.r);
-    render(cr, NULL, s, &vt, o2, S);
-    eye_state(cr, vt.gaze_pitch, vt.gaze_yaw, w.Rt, Re, c2, r2);
-    float sc = (float)S / (float)cr->fs;
-    gs_model_ctx_destroy(cr);
-    gs_frame_camera(m, s->head_t, &w.cam);
-    w.cam.fx *= sc, w.cam.fy *= sc;
-    w.cam.cx = w.cam.cy = 0.5f * (float)S;
-    memcpy(w.R, s->head_R, sizeof w.R), memcpy(w.t, s->head_t, sizeof w.t);
-    memcpy(w.Ri, s->head_R, sizeof w.Ri), memcpy(w.ti, s->head_t, sizeof w.ti);
+    ref_views(m, s, &vo, &vt, S, o2, &w, NULL, NULL);
     wa = w;
     gs_xfer_eyes eyes = {open, 2, {{0}}}, swapped, far, none = {open, 0, {{0}}};
     const double shift[2][2] = {{3.0, -2.0}, {-2.5, 1.5}};
@@ -924,11 +929,9 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
     {
         gs_view vu = vo;
         vu.gaze_pitch += 0.45;
-        warp_ref wu = wa;
-        gs_model_ctx *cu = gs_model_ctx_create(m);
-        render(cu, NULL, s, &vu, o2, S);
-        eye_state(cu, vu.gaze_pitch, vu.gaze_yaw, wu.Rt, Re, c2, r2);
-        gs_model_ctx_destroy(cu);
+        warp_ref wu = wa, wt_u;
+        ref_views(m, s, &vo, &vu, S, o2, &wt_u, NULL, NULL);
+        memcpy(wu.Rt, wt_u.Rt, sizeof wu.Rt); /* the anchored proxies, turned up */
         double icy[2], mid = 0.5 * (eyes.iris[0][0] + eyes.iris[1][0]);
         int left = eyes.iris[0][0] < mid ? 0 : 1; /* the slot of the left eye's iris */
         icy[0] = eyes.iris[left][1], icy[1] = eyes.iris[1 - left][1];
@@ -960,8 +963,8 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
                     unwarped++;
                     continue;
                 }
-                double u = 0.5 * (o2[i] + (o3[i] - o2[i]) / wt) + 0.5;
-                double v = 0.5 * (o2[i + 1] + (o3[i + 1] - o2[i + 1]) / wt) + 0.5;
+                double u, v;
+                ramp_source(o2, o3, i, wt, &u, &v);
                 n++;
                 near += fabs(u - q[0]) <= 1.0 && fabs(v - vm) <= 1.0;
             }
@@ -1023,7 +1026,7 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
                 int slot = (eyes.iris[0][0] < mid) == (side == 0) ? 0 : 1; /* the iris slot of this side */
                 double got[3], err = 0;
                 for (int k = 0; k < 3; k++) {
-                    got[k] = o2[i + k] + (o3[i + k] - o2[i + k]) / wt;
+                    got[k] = ramp_value(o2, o3, i, k, wt);
                     err = fmax(err, fabs(got[k] - col[slot][k]));
                 }
                 ns++;
