@@ -978,6 +978,7 @@ static gs_face_quality_ref *quality_ref_of(const gsd_worker *w, const Gazesplat_
     gs_face_quality_opts qo;
     gs_face_quality_opts_default(&qo);
     qo.px_per_mm = w->model->info.focal / w->model->info.distance_mm;
+    qo.shape = w->srv->face_sp;
     gs_face_quality_ref *q = NULL;
     return gs_face_quality_ref_create(face, (const double(*)[2])uv, &qo, &q, NULL) == GS_OK ? q : NULL;
 }

@@ -1780,6 +1780,7 @@ static int do_source(job *j, size_t k, double *psnr_out)
         gs_face_quality_opts qo;
         gs_face_quality_opts_default(&qo);
         qo.px_per_mm = j->info.focal / j->info.distance_mm;
+        qo.shape = j->sp;
         if (gs_face_quality_ref_create(face, (const double(*)[2])quv, &qo, &qref, &err)) {
             rc = cli_fail(cmd, "%s: quality: %s", what, err.msg);
             goto done;

@@ -183,6 +183,7 @@ static int photo_input(gs_face_detector *det, const gs_face_shape_model *sp,
 
 /* The face's fit and both modes' 25 images, measured. */
 static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face_detector *det,
+                     const gs_face_shape_model *sp,
                      const gs_redirect_input *pf, long iters, const gs_finetune_options *ft,
                      face_eval *fe)
 {
@@ -230,6 +231,7 @@ static int eval_face(const cli_command *cmd, gs_model *m, gs_pool *pool, gs_face
     gs_face_quality_opts qo;
     gs_face_quality_opts_default(&qo);
     qo.px_per_mm = info.focal / info.distance_mm;
+    qo.shape = sp;
     if (gs_face_quality_ref_create(&pf->norm, (const double(*)[2])pf->face.uv_n, &qo, &qref, &err)) {
         rc = cli_fail(cmd, "%s face %d: quality: %s", fe->photo, fe->index, err.msg);
         goto done;
@@ -418,7 +420,7 @@ static int run_eval_photos(const cli_command *cmd, cli_opt *o)
                         cmd->name, path, i, pf.red_eye_px);
             if (!r) {
                 passed += fe->gate.refusal == GS_FACE_USABLE;
-                rc = eval_face(cmd, m, pool, det, &pf, iters, &ft, fe);
+                rc = eval_face(cmd, m, pool, det, sp, &pf, iters, &ft, fe);
                 gs_redirect_input_free(&pf);
             } else if (fe->gate.refusal == GS_FACE_USABLE) {
                 rc = cli_fail(cmd, "%s face %d: %s", path, i, err.msg);

@@ -21,6 +21,7 @@ void gs_face_quality_opts_default(gs_face_quality_opts *o)
     o->max_delta_e = 15;
     o->max_artifact = 1.6;
     o->px_per_mm = 0;
+    o->shape = NULL;
 }
 
 /* Fine-scale energy of the eye regions: the mean absolute difference of
@@ -58,8 +59,7 @@ int gs_face_normalized_landmarks(const gs_face_shape_model *sp, const gs_io_imag
         return gs_error_set(err, GS_ERR_ARG, "normalized landmarks: no model or image");
     int w = img->width, h = img->height;
     gs_face_box box = {(int)(0.16 * w), (int)(0.19 * h), (int)(0.84 * w), (int)(0.86 * h)};
-    int pts[GS_FACE_LANDMARKS][2];
-    return gs_face_shape_predict(sp, img, box, &pts[0][0], &uv[0][0], err);
+    return gs_face_shape_predict(sp, img, box, NULL, &uv[0][0], err);
 }
 
 static double sq(double v)
@@ -68,11 +68,13 @@ static double sq(double v)
 }
 
 /* What every image of one input is measured against: the input's irises,
- * its eye mask and the mask's fine-scale energy, found once. */
+ * its eye mask and the mask's fine-scale energy, found once; with the
+ * landmark model, also what it predicts for the input (pred). */
 struct gs_face_quality_ref {
     gs_face_quality_opts opts;
     gs_face_iris_opts iris_opts;
     double uv[GS_FACE_LANDMARKS][2];
+    double pred[GS_FACE_LANDMARKS][2];
     gs_face_iris iris[2];
     int width, height, in_found;
     uint8_t *mask;
@@ -114,6 +116,8 @@ int gs_face_quality_ref_create(const gs_io_image *input, const double uv[][2],
     }
     if (!rc)
         rc = gs_face_mask(uv, GS_FACE_MASK_EYES, 0, 0, r->width, r->height, r->mask, err);
+    if (!rc && r->opts.shape)
+        rc = gs_face_normalized_landmarks(r->opts.shape, input, r->pred, err);
     if (rc) {
         gs_face_quality_ref_destroy(r);
         return rc;
@@ -148,11 +152,25 @@ int gs_face_quality_measure(const gs_face_quality_ref *r, const gs_io_image *out
     q.commanded[0] = cmd_pitch;
     q.commanded[1] = cmd_yaw;
     double meas[2] = {0, 0}, de = 0;
+    /* The output's eye contours: the input's, moved by the change the
+     * landmark model sees (its own bias cancels), or the input's. */
+    double moved[12][2];
+    if (opts->shape) {
+        double pb[GS_FACE_LANDMARKS][2];
+        int rc = gs_face_normalized_landmarks(opts->shape, output, pb, err);
+        if (rc)
+            return rc;
+        for (int i = 0; i < 12; i++)
+            for (int j = 0; j < 2; j++)
+                moved[i][j] = r->uv[36 + i][j] + pb[36 + i][j] - r->pred[36 + i][j];
+    } else {
+        memcpy(moved, r->uv[36], sizeof moved);
+    }
     for (int e = 0; e < 2; e++) {
         const double(*eye)[2] = (const double(*)[2])r->uv[36 + 6 * e];
         const gs_face_iris *a = &r->iris[e];
         gs_face_iris b;
-        int rc = gs_face_iris_locate(output, eye, &r->iris_opts, &b, err);
+        int rc = gs_face_iris_locate(output, (const double(*)[2])moved[6 * e], &r->iris_opts, &b, err);
         if (rc)
             return rc;
         q.iris[e][0] = *a;

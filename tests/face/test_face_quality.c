@@ -80,7 +80,8 @@ int main(void)
     double errs[HEADS * 4], des[HEADS * 4], scores[HEADS * 4], still[HEADS * 4], still_err[HEADS * 4];
     double art_max = 0, lm_err = 0;
     int n = 0, ns = 0, nse = 0, lm_n = 0, painted_bad = 0;
-    double speck_min = 1e9, speck_score_max = 0;
+    double speck_min = 1e9, speck_score_max = 0, pxx = 0, pxy[2] = {0, 0};
+    int np = 0;
     gs_face_shape_model *sp = NULL;
     int have_sp = gs_face_shape_model_load(NULL, &sp, NULL) == GS_OK;
     for (int k = 0; k < HEADS; k++) {
@@ -116,6 +117,22 @@ int main(void)
             if (q.eyes) {
                 errs[n] = q.gaze_error_deg;
                 des[n++] = q.delta_e;
+            }
+            /* The same with the landmark model: the output's contours move
+             * with its lids (the synthetic lids follow the gaze). The pitch
+             * read both ways on the pairs both measure. */
+            if (have_sp && dp != 0) {
+                gs_face_quality qs;
+                gs_face_quality_opts qos = qo;
+                qos.shape = sp;
+                CHECK_MSG(gs_face_redirect_quality(&in, &out, (const double(*)[2])uv, hR, dp, dy, &qos,
+                                                   &qs, &err) == GS_OK, "%s", err.msg);
+                if (q.eyes && qs.eyes) {
+                    pxx += dp * dp;
+                    pxy[0] += dp * q.measured[0];
+                    pxy[1] += dp * qs.measured[0];
+                    np++;
+                }
             }
             scores[pairs] = q.score;
             art_max = fmax(art_max, q.artifact);
@@ -164,6 +181,13 @@ int main(void)
     if (lm_n)
         printf("eye landmarks from the canonical box: %.2f px from the exact ones on average\n",
                lm_err / lm_n);
+    if (np) {
+        printf("pitch gain on %d exact pairs (lids that follow the gaze): %.2f inside the input's "
+               "contours, %.2f inside them moved by the landmark model's change\n",
+               np, pxy[0] / pxx, pxy[1] / pxx);
+        CHECK(np >= 6);
+        CHECK(fabs(pxy[1] / pxx - 1.0) < 0.15 && pxy[1] / pxx > pxy[0] / pxx + 0.1);
+    }
     CHECK(n >= HEADS * 4 / 4);
     CHECK(e_med < 8 && de_med < 12 && art_max < 1.6 && s_med > 0.6);
     CHECK(speck_min > 2 && speck_score_max < 0.2);

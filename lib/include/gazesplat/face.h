@@ -490,7 +490,8 @@ int gs_face_iris_gaze_change(int eye, const double eye_uv0[6][2],
  * How well one redirected image carries the gaze it was asked for,
  * measured against its input without the model (docs/face.md, "Redirect
  * quality"): both images' irises (gs_face_iris_locate inside the input's
- * eye contours) give the measured gaze change (gs_face_iris_gaze_change),
+ * eye contours, the output's moved with its lids when the options carry
+ * the landmark model) give the measured gaze change (gs_face_iris_gaze_change),
  * compared with the commanded one; the iris colour (CIELAB delta E of the
  * two irises); and the eye regions' fine-scale energy (the mean absolute
  * difference of the luma from its 3 x 3 mean over both eye masks) over the
@@ -505,6 +506,16 @@ typedef struct gs_face_quality_opts {
     double max_artifact;   /* eye speckle over the input's allowed (1.6) */
     double px_per_mm;      /* the scale at the eyes for the iris search
                               (gs_face_iris_opts_scale); 0: unknown */
+    /* The landmark model, for normalized faces (NULL: none). With it the
+     * output's iris is searched inside the input's eye contours moved by
+     * the change the model sees between the two images (both from the box
+     * of gs_face_normalized_landmarks), so that lids which follow the gaze
+     * are read as the output has them; the gaze change is still read in
+     * the input's eye frame. Without it, inside the input's contours:
+     * that reads the pitch of exact synthetic redirects, whose lids
+     * follow the gaze, with a gain of 0.67 (docs/face.md). Not kept past
+     * gs_face_quality_ref_create's ref; it must outlive the ref. */
+    const gs_face_shape_model *shape;
 } gs_face_quality_opts;
 void gs_face_quality_opts_default(gs_face_quality_opts *o);
 
