@@ -37,6 +37,11 @@ float *gs_xfer_target_opening(gs_xfer *x);
  * limbus, as a share of the eyeball's radius. */
 #define GS_XFER_IRIS_RATIO 0.5
 #define GS_XFER_IRIS_INSET 0.03
+/* Lids that follow the gaze on a photo (transfer.c): the lid skin that
+ * moves with a margin, in iris radii above the upper one and below the
+ * lower one. */
+#define GS_XFER_LID_SKIN_UP 2.0
+#define GS_XFER_LID_SKIN_DOWN 1.5
 
 
 /* Runs the frame: fills c->fmap and c->rgb (3 x S x S, in [0,1]). The face

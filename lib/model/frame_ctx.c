@@ -101,6 +101,7 @@ int gs_frame_ctx_init(gs_model_ctx *c, const gs_model *m)
     c->xfer_eye_w = GS_XFER_EYE_WEIGHT_DEFAULT;
     c->xfer_warp_deg = GS_XFER_EYE_WARP_DEG_DEFAULT;
     c->xfer_warp_given_deg = GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT;
+    c->xfer_lid = GS_XFER_LID_FOLLOW_DEFAULT;
     c->xfer_warp_head = GS_XFER_EYE_WARP_HEAD_DEFAULT;
     int h0 = p->eye.dims[1], fd = c->F + c->D;
     c->eye_w0 = gs_ctx_falloc((size_t)h0 * fd, &fail);
@@ -368,6 +369,7 @@ void gs_model_render_options_default(gs_model_render_options *o)
     o->transfer_eye_weight = GS_XFER_EYE_WEIGHT_DEFAULT;
     o->transfer_eye_warp_deg = GS_XFER_EYE_WARP_DEG_DEFAULT;
     o->transfer_eye_warp_given_deg = GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT;
+    o->transfer_lid_follow = GS_XFER_LID_FOLLOW_DEFAULT;
     o->transfer_eye_warp_head = GS_XFER_EYE_WARP_HEAD_DEFAULT;
 }
 
@@ -406,6 +408,10 @@ int gs_model_ctx_set_render_options(gs_model_ctx *c,
         return gs_error_set(err, GS_ERR_ARG,
                             "transfer eye warp with a given opening %g deg: want (0, 90]",
                             gd);
+    double lf = o->transfer_lid_follow;
+    if (!(lf >= 0 && lf <= 1.5))
+        return gs_error_set(err, GS_ERR_ARG,
+                            "transfer lid follow %g: want [0, 1.5] (0: lids stay)", lf);
     if (o->transfer_eye_warp_head != 0 && o->transfer_eye_warp_head != 1)
         return gs_error_set(err, GS_ERR_ARG,
                             "transfer eye warp at a head change %d: want 0 "
@@ -416,6 +422,7 @@ int gs_model_ctx_set_render_options(gs_model_ctx *c,
     c->xfer_eye_w = (float)ew;
     c->xfer_warp_deg = wd;
     c->xfer_warp_given_deg = gd;
+    c->xfer_lid = lf;
     c->xfer_warp_head = o->transfer_eye_warp_head;
     c->render_full = o->full != 0;
     return GS_OK;

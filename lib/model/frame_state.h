@@ -205,6 +205,7 @@ struct gs_model_ctx {
     float xfer_eye_w;  /* transfer_eye_weight (render options) */
     double xfer_warp_deg; /* transfer_eye_warp_deg (render options) */
     double xfer_warp_given_deg; /* transfer_eye_warp_given_deg */
+    double xfer_lid; /* transfer_lid_follow */
     int xfer_warp_head;   /* transfer_eye_warp_head (render options) */
     int face_map_fs;                  /* the size fmap_face was made at */
     int last_inc;

@@ -80,6 +80,29 @@
  * input's own pixel in place, which left the photo's iris where it was
  * after a pitch change.
  *
+ * Lids that follow the gaze (the context's transfer_lid_follow f > 0; a
+ * given opening at the input's head pose). A real upper lid rises and
+ * falls with the eye, the lower one a little; a photo's stay where they
+ * were, so a look up slid the iris under the upper lid and a look down
+ * bared a strip of sclera above it. Per eye: the given opening's upper and
+ * lower margins per column near its iris (where the opening crosses 1/2;
+ * a margin past the search does not move) and the vertical move dv of
+ * the iris centre in the input's view from the input's gaze to the
+ * target's. The upper margin moves by f dv, the lower by
+ * GS_XFER_LID_LOWER f dv, times the hinge 1 - ((u - u_c) / w)^2 across the
+ * opening's columns (the corners stay), the opening keeping at least
+ * GS_XFER_LID_KEEP of its height. A target pixel of the column shows the
+ * input's row v - s(v): s falls off linearly from a margin's move to 0
+ * over the lid skin beside it (GS_XFER_LID_SKIN_UP radii above the upper,
+ * _DOWN below the lower) and goes linearly from one margin's move to the
+ * other's between them. The target's opening is the given one at
+ * (u, v - s); inside the lids' box, where that is shut, the pixel is the
+ * input's at (u, v - s), handing over to the rest over GS_XFER_LID_EDGE px
+ * at the box's edge, so the photo's own lids show there, not the model's
+ * eyeball or its renderer's spread of it. The boxes follow the opening
+ * and the irises: a sweep redoes them, the kept target's and this one's,
+ * with the eye stream's tiles.
+ *
  * At another head pose the model's geometry places the input's detail a
  * pixel or two off, and the input's shading was lit at the old pose: a
  * head change carries only the skin residual's smooth part (Gaussian,
@@ -127,6 +150,16 @@
 #define GS_XFER_SCLERA_IN 1.15
 #define GS_XFER_SCLERA_OUT 4.0
 #define GS_XFER_SCLERA_MIN 8
+/* Lids that follow the gaze on a photo (the header): the given opening's
+ * margins are searched GS_XFER_LID_REACH_U iris radii either side of an
+ * iris centre and GS_XFER_LID_REACH_V above and below it (the lid skin
+ * that moves: frame.h); an opening keeps at least
+ * GS_XFER_LID_KEEP of its height; the lids' own pixels hand over to the
+ * rest of the transfer over GS_XFER_LID_EDGE px at their box's edge. */
+#define GS_XFER_LID_REACH_U 4.0
+#define GS_XFER_LID_REACH_V 3.0
+#define GS_XFER_LID_KEEP 0.3
+#define GS_XFER_LID_EDGE 3
 
 /* What is kept per subject: its own view (while subject and settings are
  * the same), the residual of its input, and its last target's maps and
@@ -172,6 +205,7 @@ typedef struct xfer_subj {
     int tgt_valid;
     double tgt_R[9], tgt_t[3];     /* its head pose */
     int tgt_rect[4];               /* its eye stream's tiles, image px */
+    int lid_rect[4];               /* the pixels its lids could change */
     int16_t *fbox;                 /* [nf, 4] its face Gaussians' boxes */
     float *tgt_z, *tgt_a, *tgt_e;  /* [S*S] */
     float *warped;                 /* [3, S*S] residual, target's view */
@@ -195,6 +229,20 @@ struct gs_xfer {
     double pr[2], pd[2][3];
     double ic[2][3];                   /* where their irises show in the
                                           input: centre, radius (image px) */
+    /* this call's lids that follow the gaze (lid_frame), per eye */
+    struct {
+        int on;
+        double uc, hw;                 /* hinge: centre column, half width */
+        double su, sl;                 /* margin moves at uc (px, + down) */
+        double hu, hl;                 /* lid skin moving above, below (px) */
+        int box[4];                    /* the pixels it may change */
+        float *top, *bot;              /* [S] the given opening's margins
+                                          per column (NAN: none) */
+        uint8_t *mu, *ml;              /* [S] whether each moves: not where
+                                          the opening runs past the search */
+    } lid[2];
+    float *lid_m;                      /* [4, S]: the tops and bottoms */
+    uint8_t *lid_f;                    /* [4, S]: mu and ml */
     /* scratch */
     gs_raster *raster, *raster_crop; /* whole images; crops of the target */
     gs_frame_soa k;                /* a crop's Gaussians, [n x ...] */
@@ -259,13 +307,14 @@ void gs_xfer_free(gs_xfer *x)
     if (!x)
         return;
     float *bufs[] = {x->feat, x->af, x->aa, x->ad, x->k.mean, x->k.scale,
-                     x->k.quat, x->k.opac, x->k.feat};
+                     x->k.quat, x->k.opac, x->k.feat, x->lid_m};
     for (size_t i = 0; i < sizeof bufs / sizeof bufs[0]; i++)
         free(bufs[i]);
     subj_free(&x->cur);
     slots_free(x);
     free(x->tgt8);
     free(x->probe8);
+    free(x->lid_f);
     gs_raster_destroy(x->raster);
     gs_raster_destroy(x->raster_crop);
     free(x);
@@ -327,11 +376,20 @@ static int scratch_alloc(gs_xfer *x, int S, size_t n)
     x->ad = malloc(px * sizeof(float));
     x->tgt8 = malloc(3 * px);
     x->probe8 = malloc(3 * px);
+    x->lid_m = malloc(4 * (size_t)S * sizeof(float));
+    x->lid_f = malloc(4 * (size_t)S);
+    for (int e = 0; x->lid_m && x->lid_f && e < 2; e++) {
+        x->lid[e].top = x->lid_m + (size_t)(2 * e) * S;
+        x->lid[e].bot = x->lid_m + (size_t)(2 * e + 1) * S;
+        x->lid[e].mu = x->lid_f + (size_t)(2 * e) * S;
+        x->lid[e].ml = x->lid_f + (size_t)(2 * e + 1) * S;
+    }
     float **f[] = {&x->k.mean, &x->k.scale, &x->k.quat, &x->k.opac,
                    &x->k.feat};
     size_t per[] = {3, 3, 4, 1, 2};
     int fail = !x->raster || !x->raster_crop || !x->feat || !x->af ||
-               !x->aa || !x->ad || !x->tgt8 || !x->probe8;
+               !x->aa || !x->ad || !x->tgt8 || !x->probe8 || !x->lid_m ||
+               !x->lid_f;
     for (size_t i = 0; i < sizeof f / sizeof f[0]; i++)
         fail |= !(*f[i] = malloc(n * per[i] * sizeof(float)));
     return fail;
@@ -526,6 +584,7 @@ typedef struct {
     float warp_w;         /* the eyeball warp's falloff; 0: off */
     int fill;             /* the given opening's fill (the header): hidden
                              points mirrored about the iris's row */
+    int lid;              /* lids that follow the gaze (lid_frame) */
     double ray_o[3];      /* the target camera's centre, head frame */
     float head_w;         /* weight of the smoothed residual (head change) */
 } xfer_geom;
@@ -577,6 +636,7 @@ static void geom_init(const gs_model_ctx *c, const gs_xfer *x, xfer_geom *g,
     double r = turn_deg(g->gM) / (warp ? wdeg : 1.0);
     g->warp_w = warp ? (float)exp(-r * r) : 0.0f;
     g->fill = warp && same_pose && x->cur.ap_given;
+    g->lid = g->fill && c->xfer_lid > 0;
     double mt[3] = {-tt[0], -tt[1], -tt[2]};
     gs_geom_mat3_tvec(Rt, mt, g->ray_o);
 }
@@ -963,24 +1023,33 @@ static int target_opening(gs_model_ctx *c, gs_xfer *x, gs_pool *pool,
     return GS_OK;
 }
 
-/* Where proxy eyeball e of radius r (mm) shows its iris in the input's
- * image at the input's gaze: its centre uv (image px), its camera point X;
- * returns its radius there (px). */
-static double proxy_iris_px(const gs_xfer *x, const gs_subject *s,
-                            const gs_camera *cs, int e, double r, double uv[2],
-                            double X[3])
+/* Where proxy eyeball e of radius r (mm), moved by d (head frame; NULL:
+ * not moved), shows its iris in the input's image at the gaze of rotation
+ * Rg: its centre uv (image px), its camera point X; returns its radius
+ * there (px). proxy_iris_px: at the input's gaze, not moved. */
+static double iris_view(const gs_xfer *x, const gs_subject *s,
+                        const gs_camera *cs, int e, double r, const double Rg[9],
+                        const double d[3], double uv[2], double X[3])
 {
     double ax[3], h[3];
     double limbus = sqrt(1.0 - GS_XFER_IRIS_RATIO * GS_XFER_IRIS_RATIO);
-    eye_axis(x->cur.src_Rg, ax);
+    eye_axis(Rg, ax);
     for (int k = 0; k < 3; k++)
-        h[k] = x->cur.src_ec[e][k] + r * (limbus - GS_XFER_IRIS_INSET) * ax[k];
+        h[k] = x->cur.src_ec[e][k] + (d ? d[k] : 0.0) +
+               r * (limbus - GS_XFER_IRIS_INSET) * ax[k];
     gs_geom_mat3_vec(s->head_R, h, X);
     for (int k = 0; k < 3; k++)
         X[k] += s->head_t[k];
     uv[0] = cs->fx * X[0] / X[2] + cs->cx;
     uv[1] = cs->fy * X[1] / X[2] + cs->cy;
     return GS_XFER_IRIS_RATIO * r * cs->fx / X[2];
+}
+
+static double proxy_iris_px(const gs_xfer *x, const gs_subject *s,
+                            const gs_camera *cs, int e, double r, double uv[2],
+                            double X[3])
+{
+    return iris_view(x, s, cs, e, r, x->cur.src_Rg, NULL, uv, X);
 }
 
 /* This call's proxy eyeballs (x->pr, x->pd): the own view's, anchored to
@@ -1079,6 +1148,147 @@ static void sclera_colours(gs_xfer *x)
     memcpy(u->scl_at, x->ic, sizeof u->scl_at);
     u->scl_gen = u->ap_gen;
     u->scl_valid = 1;
+}
+
+/* Whether pixel (u, v) (centres at +0.5) is nearer iris e's centre than
+ * the other's. */
+static int nearer_iris(const gs_xfer *x, int e, double u, double v)
+{
+    const double *a = x->ic[e], *b = x->ic[1 - e];
+    return (u - a[0]) * (u - a[0]) + (v - a[1]) * (v - a[1]) <=
+           (u - b[0]) * (u - b[0]) + (v - b[1]) * (v - b[1]);
+}
+
+/* This call's lids that follow the gaze (the header; g->lid): per eye the
+ * given opening's upper and lower margins per column near its iris (where
+ * the opening crosses 1/2, sub-pixel), the hinge across the columns that
+ * have them, and the moves of the margins at the hinge's centre: the
+ * iris's centre moves v_t - v_s in the input's view from the input's gaze
+ * to the target's; the upper margin by follow times that, the lower by
+ * GS_XFER_LID_LOWER of it, each held to 0.8 of the lid skin it pushes. */
+static void lid_frame(const gs_model_ctx *c, gs_xfer *x, const gs_subject *s,
+                      const xfer_geom *g)
+{
+    int S = x->S;
+    const float *ap = x->cur.src_ap;
+    gs_camera cs;
+    image_camera(c, s->head_t, &cs);
+    for (int e = 0; e < 2; e++) {
+        x->lid[e].on = 0;
+        memset(x->lid[e].box, 0, sizeof x->lid[e].box);
+        if (!g->lid)
+            continue;
+        double r = x->ic[e][2];
+        int u0 = (int)floor(x->ic[e][0] - GS_XFER_LID_REACH_U * r);
+        int u1 = (int)ceil(x->ic[e][0] + GS_XFER_LID_REACH_U * r);
+        int v0 = (int)floor(x->ic[e][1] - GS_XFER_LID_REACH_V * r);
+        int v1 = (int)ceil(x->ic[e][1] + GS_XFER_LID_REACH_V * r);
+        u0 = u0 < 0 ? 0 : u0, v0 = v0 < 0 ? 0 : v0;
+        u1 = u1 > S ? S : u1, v1 = v1 > S ? S : v1;
+        int c0 = S, c1 = -1;
+        double lo = INFINITY, hi = -INFINITY;
+        for (int u = 0; u < S; u++)
+            x->lid[e].top[u] = x->lid[e].bot[u] = NAN;
+        for (int u = u0; u < u1; u++) {
+            int t = -1, b = -1;
+            for (int v = v0; v < v1; v++)
+                if (ap[(size_t)v * S + u] >= 0.5f && nearer_iris(x, e, u + 0.5, v + 0.5)) {
+                    if (t < 0)
+                        t = v;
+                    b = v;
+                }
+            if (t < 0)
+                continue;
+            double top = t, bot = b + 1.0; /* pixel edges; sub-pixel below */
+            if (t > v0 && ap[(size_t)(t - 1) * S + u] < 0.5f) {
+                float a0 = ap[(size_t)(t - 1) * S + u], a1 = ap[(size_t)t * S + u];
+                top = t - 0.5 + (0.5 - a0) / (a1 - a0);
+            }
+            if (b + 1 < v1 && ap[(size_t)(b + 1) * S + u] < 0.5f) {
+                float a1 = ap[(size_t)b * S + u], a2 = ap[(size_t)(b + 1) * S + u];
+                bot = b + 0.5 + (a1 - 0.5) / (a1 - a2);
+            }
+            x->lid[e].top[u] = (float)top;
+            x->lid[e].bot[u] = (float)bot;
+            x->lid[e].mu[u] = t > v0;  /* a margin inside the search */
+            x->lid[e].ml[u] = b + 1 < v1;
+            c0 = u < c0 ? u : c0, c1 = u > c1 ? u : c1;
+            lo = top < lo ? top : lo, hi = bot > hi ? bot : hi;
+        }
+        if (c1 - c0 < 2)
+            continue;
+        double uv_s[2], uv_t[2], X[3];
+        iris_view(x, s, &cs, e, x->pr[e], x->cur.src_Rg, x->pd[e], uv_s, X);
+        iris_view(x, s, &cs, e, x->pr[e], x->tgt_Rg, x->pd[e], uv_t, X);
+        double dv = uv_t[1] - uv_s[1];
+        double hu = GS_XFER_LID_SKIN_UP * r, hl = GS_XFER_LID_SKIN_DOWN * r;
+        double su = c->xfer_lid * dv, sl = GS_XFER_LID_LOWER * su;
+        su = clamp_abs(su, 0.8 * hu);
+        sl = clamp_abs(sl, 0.8 * hl);
+        x->lid[e].on = 1;
+        x->lid[e].uc = 0.5 * (c0 + c1 + 1);
+        x->lid[e].hw = 0.5 * (c1 + 1 - c0);
+        x->lid[e].su = su, x->lid[e].sl = sl;
+        x->lid[e].hu = hu, x->lid[e].hl = hl;
+        int *bx = x->lid[e].box;
+        bx[0] = c0 - GS_XFER_LID_EDGE;
+        bx[2] = c1 + 1 + GS_XFER_LID_EDGE;
+        bx[1] = (int)floor(lo + (su < 0 ? su : 0) - hu) - GS_XFER_LID_EDGE;
+        bx[3] = (int)ceil(hi + (sl > 0 ? sl : 0) + hl) + GS_XFER_LID_EDGE;
+        bx[0] = bx[0] < 0 ? 0 : bx[0], bx[1] = bx[1] < 0 ? 0 : bx[1];
+        bx[2] = bx[2] > S ? S : bx[2], bx[3] = bx[3] > S ? S : bx[3];
+    }
+}
+
+/* Target pixel (px, py) under lids that follow the gaze (lid_frame): the
+ * row *vs of the input it shows (the same column), the share *lw in
+ * [0, 1] the lids' own pixels have there (1 inside their box, down to 0
+ * over its edge) and, returned, the target's opening there: the given
+ * opening at (u, vs). Outside every box: the pixel itself, share 0.
+ * Above the upper margin the move falls off linearly over the lid skin
+ * hu, below the lower over hl, between the margins it goes linearly
+ * from one to the other; across, each is the hinge's share
+ * 1 - ((u - uc) / hw)^2 of the move at its centre, so the corners stay. */
+static float lid_at(const gs_xfer *x, int px, int py, double *vs, float *lw)
+{
+    int S = x->S, e = -1;
+    double u = px + 0.5, v = py + 0.5;
+    *vs = v;
+    *lw = 0.0f;
+    for (int k = 0; k < 2; k++) {
+        const int *b = x->lid[k].box;
+        if (x->lid[k].on && px >= b[0] && px < b[2] && py >= b[1] && py < b[3] &&
+            (e < 0 || nearer_iris(x, k, u, v)))
+            e = k;
+    }
+    if (e < 0)
+        return x->cur.src_ap[(size_t)py * S + px];
+    const int *b = x->lid[e].box;
+    int m = px - b[0] + 1, t;
+    t = b[2] - px, m = t < m ? t : m;
+    t = py - b[1] + 1, m = t < m ? t : m;
+    t = b[3] - py, m = t < m ? t : m;
+    *lw = m >= GS_XFER_LID_EDGE ? 1.0f : (float)m / GS_XFER_LID_EDGE;
+    double top = x->lid[e].top[px], bot = x->lid[e].bot[px];
+    double q = (u - x->lid[e].uc) / x->lid[e].hw, a = 1.0 - q * q;
+    if (a > 0.0 && !isnan(top)) {
+        double su = x->lid[e].mu[px] ? a * x->lid[e].su : 0.0;
+        double sl = x->lid[e].ml[px] ? a * x->lid[e].sl : 0.0;
+        double h = bot - top, close = su - sl;
+        if (close > (1.0 - GS_XFER_LID_KEEP) * h) { /* keep some opening */
+            double k = (1.0 - GS_XFER_LID_KEEP) * h / close;
+            su *= k, sl *= k;
+        }
+        double tt = top + su, bt = bot + sl, hu = x->lid[e].hu, hl = x->lid[e].hl, sh = 0.0;
+        if (v > tt - hu && v <= tt)
+            sh = su * (v - (tt - hu)) / hu;
+        else if (v > tt && v < bt)
+            sh = su + (sl - su) * (v - tt) / (bt - tt);
+        else if (v >= bt && v < bt + hl)
+            sh = sl * (1.0 - (v - bt) / hl);
+        *vs = v - sh;
+    }
+    return bilinear(x->cur.src_ap, S, u, *vs);
 }
 
 static int check_eyes(const gs_xfer_eyes *eyes, gs_error *err)
@@ -1226,11 +1436,21 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
     double uw = 0, vw = 0;
     float ww = 0.0f, src[3] = {0, 0, 0};
     const float *ap = g->same_pose ? x->cur.src_ap : x->cur.tgt_ap;
-    if (g->warp_w > 0.0f && ap[i] > 0.0f &&
+    /* lids that follow the gaze: the target's opening, and the share the
+     * lids' own pixels (input(u, vl)) take where it is shut */
+    float apt = 0.0f, lw = 0.0f, wl = 0.0f;
+    double vl = py + 0.5;
+    if (g->lid) {
+        apt = lid_at(x, px, py, &vl, &lw);
+        wl = (1.0f - apt) * lw;
+    } else if (g->warp_w > 0.0f) {
+        apt = ap[i];
+    }
+    if (g->warp_w > 0.0f && apt > 0.0f &&
         px >= tr[0] && px < tr[2] && py >= tr[1] && py < tr[3]) {
         int e, on_iris;
         float aq, wq = warp_source(x, g, px, py, &uw, &vw, &e, &aq, &on_iris);
-        ww = ap[i] * wq;
+        ww = apt * wq;
         /* hidden in the input: mirrored about its iris's row, then, on the
          * sclera, the sclera's colour (the fill) */
         float m = 0.0f, ms = 0.0f;
@@ -1243,9 +1463,7 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
                 ms = 1.0f - aq - m;
         }
         if (m > 0.0f || ms > 0.0f)
-            ww = ap[i] * (g->warp_w * (aq + m + ms));
-        wh *= 1.0f - ww;
-        we *= 1.0f - ww;
+            ww = apt * (g->warp_w * (aq + m + ms));
         if (ww > 0.0f)
             bilinear_rgb8(x->cur.in8, x->S, uw, vw, src);
         if (ww > 0.0f && (m > 0.0f || ms > 0.0f)) {
@@ -1256,6 +1474,11 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
                 src[k] = (aq * src[k] + m * sm[k] + ms * x->cur.scl[e][k]) / (aq + m + ms);
         }
     }
+    wh *= 1.0f - ww - wl;
+    we *= 1.0f - ww - wl;
+    float lid[3] = {0, 0, 0};
+    if (wl > 0.0f)
+        bilinear_rgb8(x->cur.in8, x->S, px + 0.5, vl, lid);
     for (int k = 0; k < 3; k++) {
         const float *rk = res + k * n;
         float v = 0.0f;
@@ -1265,6 +1488,8 @@ static void warp_pixel(gs_xfer *x, const xfer_geom *g, int px, int py)
             v += we * bilinear(rk, x->S, ue, ve);
         if (ww > 0.0f)
             v += ww * (src[k] - (float)x->tgt8[3 * i + k]);
+        if (wl > 0.0f)
+            v += wl * (lid[k] - (float)x->tgt8[3 * i + k]);
         x->cur.warped[k * n + i] = v;
     }
 }
@@ -1385,6 +1610,17 @@ int gs_model_render_transfer_eyes(gs_model_ctx *c, gs_pool *pool,
     geom_init(c, x, &g, Rs, ts, Rt, tt, same_pose);
     if (g.fill)
         sclera_colours(x);
+    /* the lids move with the gaze: their boxes, now and at the kept
+     * target, are redone with the eye stream's tiles */
+    lid_frame(c, x, s, &g);
+    int lids[4] = {0, 0, 0, 0};
+    for (int e = 0; e < 2; e++)
+        gs_frame_box_union(lids, x->lid[e].box);
+    if (keep) {
+        gs_frame_box_union(d, lids);
+        gs_frame_box_union(d, x->cur.lid_rect);
+    }
+    memcpy(x->cur.lid_rect, lids, sizeof lids);
     g.head_w = c->xfer_head_w;
     if (!g.same_pose && g.head_w > 0.0f && smooth_residual(x))
         return gs_error_set(err, GS_ERR_NOMEM, "transfer: out of memory");

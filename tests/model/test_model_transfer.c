@@ -188,6 +188,15 @@ static const double sweep_gz[][2] = {{5, -10}, {7, -9}, {-5, 10}, {30, -40}, {-3
 
 /* ---- The eyeball warp ---- */
 
+static void set_lids(gs_model_ctx *c, double follow)
+{
+    gs_model_render_options o;
+    gs_model_render_options_default(&o);
+    o.transfer_lid_follow = follow;
+    gs_error err = {0, ""};
+    CHECK_MSG(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK, "%s", err.msg);
+}
+
 static void set_warp(gs_model_ctx *c, double deg)
 {
     gs_model_render_options o;
@@ -848,14 +857,15 @@ static void opening_checks(const gs_model *m, const gs_subject *s, const uint8_t
     free(o0), free(o1), free(o2), free(shut), free(half);
 }
 
-/* Where w's proxy eyeball e shows its iris in the input at the input's
- * gaze (w->Rs), with radius r: centre uv; returns its radius (px), *z its
- * depth. */
-static double ref_iris(const warp_ref *w, int e, double r, double uv[2], double *z)
+/* Where w's proxy eyeball e shows its iris in the input at the gaze of
+ * rotation R, with radius r: centre uv; returns its radius (px), *z its
+ * depth. ref_iris: at the input's gaze (w->Rs). */
+static double ref_iris_at(const warp_ref *w, int e, double r, const double R[9], double uv[2],
+                          double *z)
 {
     double lim = sqrt(1 - GS_XFER_IRIS_RATIO * GS_XFER_IRIS_RATIO), h[3], X[3];
     for (int k = 0; k < 3; k++)
-        h[k] = w->c[e][k] - r * (lim - GS_XFER_IRIS_INSET) * w->Rs[e][3 * k + 2];
+        h[k] = w->c[e][k] - r * (lim - GS_XFER_IRIS_INSET) * R[3 * k + 2];
     gs_geom_mat3_vec(w->Ri, h, X);
     for (int k = 0; k < 3; k++)
         X[k] += w->ti[k];
@@ -863,6 +873,11 @@ static double ref_iris(const warp_ref *w, int e, double r, double uv[2], double 
     uv[1] = w->cam.fy * X[1] / X[2] + w->cam.cy;
     *z = X[2];
     return GS_XFER_IRIS_RATIO * r * w->cam.fx / X[2];
+}
+
+static double ref_iris(const warp_ref *w, int e, double r, double uv[2], double *z)
+{
+    return ref_iris_at(w, e, r, w->Rs[e], uv, z);
 }
 
 /* Given irises (gs_xfer_eyes.iris, a photo's localized irises) anchor the
@@ -927,6 +942,7 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
      * the pixel mirrored about its proxy's iris row, where that is open:
      * the ramp shows where. */
     {
+        set_lids(cw, 0.0); /* the fill alone: the lids stay (lid_checks) */
         gs_view vu = vo;
         vu.gaze_pitch += 0.45;
         warp_ref wu = wa, wt_u;
@@ -1038,6 +1054,7 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
         CHECK_MSG(ns >= 10 && good >= 0.9 * ns, "fill, sclera: %zu of %zu within 2 levels (worst %.1f)",
                   good, ns, worst);
         free(lid), free(o3);
+        set_lids(cw, GS_XFER_LID_FOLLOW_DEFAULT);
     }
 
     /* order, distance, two near one, back to none */
@@ -1123,6 +1140,155 @@ static void anchor_checks(const gs_model *m, const gs_subject *s, int S)
     gs_model_ctx_destroy(cw);
     gs_model_ctx_destroy(cf);
     free(o0), free(o1), free(o2), free(ramp), free(open);
+}
+
+/* Lids that follow the gaze (transfer_lid_follow) on a given opening: a
+ * lens per eye about its iris (3 radii either side, 1.3 above and below,
+ * shut outside; the irises given where the proxies show theirs). With the
+ * ramp input a pixel of lid skin shows where it was taken from. After a
+ * turn up and a turn down each pixel of the skin beside the margins, near
+ * the lens's middle, comes from the row the field of docs/model.md gives:
+ * the upper margin moved by follow times the iris centre's vertical move
+ * in the input's view, the lower by GS_XFER_LID_LOWER of that, each
+ * fading linearly over GS_XFER_LID_SKIN_UP radii above and _DOWN below,
+ * and across as 1 - (dx / half width)^2. With the follow 0 those pixels
+ * stay put. The input's own gaze gives the input back, a sweep agrees
+ * with fresh transfers to the byte, and a follow outside [0, 1.5] is
+ * refused. */
+typedef struct {
+    double top[2], bot[2]; /* a column's margins, per eye (NAN: none) */
+} lid_col;
+
+static void lid_checks(const gs_model *m, const gs_subject *s, int S)
+{
+    size_t isz = 3 * (size_t)S * S, px = (size_t)S * S;
+    uint8_t *ramp = malloc(isz), *lens = calloc(px, 1), *o1 = malloc(isz), *o2 = malloc(isz);
+    lid_col *col = malloc((size_t)S * sizeof *col);
+    fill_ramp(ramp, S);
+    gs_view vo = own_view(s);
+    warp_ref w;
+    ref_views(m, s, &vo, &vo, S, o1, &w, NULL, NULL);
+    gs_xfer_eyes eyes = {lens, 2, {{0}}};
+    for (int e = 0; e < 2; e++) {
+        double z;
+        eyes.iris[e][2] = ref_iris(&w, e, w.r[e], eyes.iris[e], &z);
+    }
+    const double *ic[2] = {eyes.iris[0], eyes.iris[1]};
+    double sep = hypot(ic[1][0] - ic[0][0], ic[1][1] - ic[0][1]);
+    CHECK_MSG(sep > 6.5 * fmax(ic[0][2], ic[1][2]), "lids: the eyes are %.1f px apart", sep);
+    int c0[2] = {S, S}, c1[2] = {-1, -1};
+    for (int x = 0; x < S; x++) {
+        for (int e = 0; e < 2; e++) {
+            col[x].top[e] = col[x].bot[e] = NAN;
+            double r = ic[e][2], dx = (x + 0.5 - ic[e][0]) / (3.0 * r);
+            if (fabs(dx) >= 1.0)
+                continue;
+            double hh = 1.3 * r * sqrt(1.0 - dx * dx);
+            for (int y = 0; y < S; y++)
+                if (fabs(y + 0.5 - ic[e][1]) <= hh) {
+                    lens[(size_t)y * S + x] = 255;
+                    if (isnan(col[x].top[e]))
+                        col[x].top[e] = y; /* shut above: the row's top edge */
+                    col[x].bot[e] = y + 1.0;
+                }
+            if (!isnan(col[x].top[e])) {
+                c0[e] = x < c0[e] ? x : c0[e];
+                c1[e] = x > c1[e] ? x : c1[e];
+            }
+        }
+    }
+    gs_model_ctx *cw = gs_model_ctx_create(m), *cs = gs_model_ctx_create(m);
+    set_lids(cs, 0.0);
+    /* the own gaze: the input back */
+    transfer_eyes(cw, s, ramp, &eyes, &vo, o1, S);
+    CHECK_MSG(max_diff(o1, ramp, isz) <= 1, "lids: the own gaze is not the input (%d)",
+              max_diff(o1, ramp, isz));
+    const double turns[2] = {0.45, -0.45};
+    for (int t = 0; t < 2; t++) {
+        gs_view vt = vo;
+        vt.gaze_pitch += turns[t];
+        warp_ref wt;
+        ref_views(m, s, &vo, &vt, S, o2, &wt, NULL, NULL);
+        transfer_eyes(cw, s, ramp, &eyes, &vt, o1, S);
+        transfer_eyes(cs, s, ramp, &eyes, &vt, o2, S);
+        size_t n = 0, moved = 0, near = 0;
+        double worst = 0, still = 0;
+        for (int e = 0; e < 2; e++) {
+            double us[2], ut[2], z, r = ic[e][2];
+            ref_iris_at(&w, e, w.r[e], w.Rs[e], us, &z);
+            ref_iris_at(&wt, e, w.r[e], wt.Rt[e], ut, &z);
+            double dv = ut[1] - us[1], uc = 0.5 * (c0[e] + c1[e] + 1),
+                   hw = 0.5 * (c1[e] + 1 - c0[e]);
+            double hu = GS_XFER_LID_SKIN_UP * r, hl = GS_XFER_LID_SKIN_DOWN * r;
+            for (int x = c0[e]; x <= c1[e]; x++) {
+                double q = (x + 0.5 - uc) / hw, a = 1.0 - q * q;
+                if (a < 0.5)
+                    continue;
+                double su = a * GS_XFER_LID_FOLLOW_DEFAULT * dv, sl = GS_XFER_LID_LOWER * su;
+                double tt = col[x].top[e] + su, bt = col[x].bot[e] + sl;
+                for (int y = 0; y < S; y++) {
+                    double v = y + 0.5, sh;
+                    if (v >= tt - hu + 1.0 && v <= tt - 1.0)
+                        sh = su * (v - (tt - hu)) / hu;
+                    else if (v >= bt + 1.0 && v <= bt + hl - 1.0)
+                        sh = sl * (1.0 - (v - bt) / hl);
+                    else
+                        continue;
+                    size_t i = 3 * ((size_t)y * S + x);
+                    double gu, gv, ou, ov;
+                    ramp_source(o1, o1, i, 1.0, &gu, &gv);
+                    ramp_source(o2, o2, i, 1.0, &ou, &ov);
+                    double err = fmax(fabs(gu - (x + 0.5)), fabs(gv - (v - sh)));
+                    n++;
+                    near += err <= 0.5;
+                    worst = fmax(worst, err);
+                    if (fabs(sh) >= 1.0) {
+                        moved++;
+                        still += fabs(ov - (v - sh)) >= 0.75;
+                    }
+                }
+            }
+        }
+        printf("lids, a turn %s (%.2f rad): %zu pixels of lid skin, %zu within 0.5 px of "
+               "where the field takes them (worst %.2f), %zu moved 1 px or more, of which "
+               "%.0f are 0.75 px or more off with the lids left still\n",
+               turns[t] > 0 ? "up" : "down", turns[t], n, near, worst, moved, still);
+        CHECK_MSG(n >= 60 && near == n, "lids: %zu of %zu lid pixels where the field puts them "
+                  "(worst %.2f px)", near, n, worst);
+        CHECK_MSG(moved >= 20 && still >= 0.9 * (double)moved,
+                  "lids: %zu moved, %.0f of them off with the lids still", moved, still);
+    }
+    /* a sweep: incremental, the bytes of fresh transfers */
+    const double gz[][2] = {{0.45, 0}, {-0.3, 0.2}, {0.2, -0.35}, {0, 0}, {-0.3, 0}};
+    int incs = 0, worst = 0;
+    for (int k = 0; k < (int)(sizeof gz / sizeof gz[0]); k++) {
+        gs_view vt = vo;
+        vt.gaze_pitch += gz[k][0];
+        vt.gaze_yaw += gz[k][1];
+        transfer_eyes(cw, s, ramp, &eyes, &vt, o1, S);
+        incs += last_incremental(cw);
+        gs_model_ctx *cf = gs_model_ctx_create(m);
+        transfer_eyes(cf, s, ramp, &eyes, &vt, o2, S);
+        gs_model_ctx_destroy(cf);
+        int d = max_diff(o1, o2, isz);
+        worst = d > worst ? d : worst;
+    }
+    printf("lids: a sweep of 5 gazes, %d incremental, agrees with fresh transfers (bytes "
+           "within %d)\n", incs, worst);
+    CHECK_MSG(incs == 5 && worst == 0, "lids: sweep %d incremental, bytes within %d", incs, worst);
+    gs_model_render_options o;
+    gs_model_render_options_default(&o);
+    CHECK(o.transfer_lid_follow == GS_XFER_LID_FOLLOW_DEFAULT);
+    gs_error err = {0, ""};
+    const double bad[3] = {-0.1, 1.6, NAN};
+    for (int k = 0; k < 3; k++) {
+        o.transfer_lid_follow = bad[k];
+        CHECK(gs_model_ctx_set_render_options(cs, &o, &err) == GS_ERR_ARG);
+    }
+    printf("refused (lid follow nan): %s\n", err.msg);
+    gs_model_ctx_destroy(cw);
+    gs_model_ctx_destroy(cs);
+    free(ramp), free(lens), free(o1), free(o2), free(col);
 }
 
 /* A gaze sweep at view v's head pose (a new one for c), each target
@@ -1459,6 +1625,7 @@ int main(void)
     warp_head_checks(m, &sub[0], in, S);
     opening_checks(m, &sub[0], in, S);
     anchor_checks(m, &sub[0], S);
+    lid_checks(m, &sub[0], S);
 
     /* Bad arguments. */
     memset(out, 0x5a, isz);

@@ -356,12 +356,22 @@ typedef struct gs_model_render_options {
      * shows them, and the given opening already keeps the warp from taking
      * what the lids hide (docs/model.md, "The eyeball warp on photos"). */
     double transfer_eye_warp_given_deg;
+    /* Lids that follow the gaze on a photo (a given opening at the input's
+     * head pose): the upper lid's margin moves by this share of the
+     * vertical move of the iris's centre, the lower lid's by
+     * GS_XFER_LID_LOWER of that, and the lid skin beside each margin with
+     * it, fading out (docs/model.md, "The eyeball warp on photos"). [0, 1.5]
+     * (default GS_XFER_LID_FOLLOW_DEFAULT); 0 keeps the photo's lids where
+     * they are. */
+    double transfer_lid_follow;
 } gs_model_render_options;
 #define GS_XFER_HEAD_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WEIGHT_DEFAULT 0.5
 #define GS_XFER_EYE_WARP_DEG_DEFAULT 20.0
 #define GS_XFER_EYE_WARP_HEAD_DEFAULT 0
 #define GS_XFER_EYE_WARP_GIVEN_DEG_DEFAULT 90.0
+#define GS_XFER_LID_FOLLOW_DEFAULT 0.8
+#define GS_XFER_LID_LOWER 0.35
 void gs_model_render_options_default(gs_model_render_options *o);
 /* Takes effect from the next render; drops the context's kept renders.
  * A scale outside (0, 1] (or giving a map under 4 pixels): GS_ERR_ARG. */
