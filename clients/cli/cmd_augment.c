@@ -794,9 +794,10 @@ static int make_targets(job *j, const cli_opt *o, uint64_t seed)
                                    MAX_TARGETS_PER_SOURCE);
         for (size_t i = 0; i < nh; i++)
             if (!head_in_range(heads[i][0], heads[i][1])) {
+                int rc = cli_usage_error(cmd, "--head-deg: %g,%g outside the model's range "
+                                         "(|70| deg)", heads[i][0] / DEG, heads[i][1] / DEG);
                 free(heads);
-                return cli_usage_error(cmd, "--head-deg: %g,%g outside the model's range (|70| "
-                                       "deg)", heads[i][0] / DEG, heads[i][1] / DEG);
+                return rc;
             }
     }
     float hu[4] = {0, 0, 0, 0};

@@ -785,10 +785,11 @@ int gs_ply_write(const char *path, const gs_ply_scene *s, gs_error *err)
     unsigned char *chunk = malloc(per_chunk * stride);
     FILE *f = chunk ? fopen(path, "wb") : NULL;
     if (!f) {
+        rc = chunk ? gs_error_set(err, GS_ERR_IO, "ply: cannot create %s: %s", path,
+                                  strerror(errno))
+                   : gs_error_set(err, GS_ERR_NOMEM, "ply: out of memory");
         free(chunk);
-        return chunk ? gs_error_set(err, GS_ERR_IO, "ply: cannot create %s: %s", path,
-                                    strerror(errno))
-                     : gs_error_set(err, GS_ERR_NOMEM, "ply: out of memory");
+        return rc;
     }
     int ok = fwrite(head, 1, hlen, f) == hlen;
     for (size_t v = 0; ok && v < (size_t)s->n; v += per_chunk) {
