@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Sets everything up on a fresh Debian 12 machine and runs every test tier:
 #   1. cppcheck over the sources
-#   2. an ASan+UBSan build running the unit, numeric, hard and fuzz tiers
-#      and the cheap daemon integration tests (label daemon)
+#   2. an ASan+UBSan build running the unit, numeric, hard and fuzz tiers,
+#      the cheap daemon integration tests (label daemon) and the CLI's
+#      bad-input runs (label cli_errors: augment, targets, fit, model)
 #   3. short libFuzzer runs (clang) over each fuzz target
 #   4. the release build (-O2, -Werror)
 #   5. the VM tier (ctest -L vm): qemu TCG boots Debian 12's kernel with
@@ -22,9 +23,9 @@ cppcheck --quiet --error-exitcode=1 --std=c11 --inline-suppr \
   --suppress=missingIncludeSystem \
   -I lib/include -I proto lib clients daemon proto
 
-echo "== ASan+UBSan build: unit, numeric, hard, fuzz and daemon tiers"
+echo "== ASan+UBSan build: unit, numeric, hard, fuzz, daemon and cli_errors tiers"
 scripts/build.sh build-asan -DCMAKE_BUILD_TYPE=Debug -DGS_SANITIZE=ON
-(cd build-asan && ctest --output-on-failure -j2 -L 'unit|numeric|hard|fuzz|daemon')
+(cd build-asan && ctest --output-on-failure -j2 -L 'unit|numeric|hard|fuzz|daemon|cli_errors')
 
 if [ -x scripts/fuzz.sh ]; then
   echo "== libFuzzer runs"
