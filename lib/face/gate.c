@@ -18,6 +18,7 @@ void gs_face_gate_opts_default(gs_face_gate_opts *o)
     o->max_outside = 0.05;
     o->min_contrast = 5;
     o->max_roughness = 0.5;
+    o->min_iris_contrast = 15;
 }
 
 const char *gs_face_refusal_name(gs_face_refusal r)
@@ -29,9 +30,9 @@ const char *gs_face_refusal_name(gs_face_refusal r)
 
 static int check_opts(const gs_face_gate_opts *o, gs_error *err)
 {
-    const double v[7] = {o->min_eye_px,  o->min_eye_open,  o->max_head_yaw_deg, o->max_head_pitch_deg,
-                         o->max_outside, o->min_contrast, o->max_roughness};
-    for (int i = 0; i < 7; i++)
+    const double v[8] = {o->min_eye_px,  o->min_eye_open,  o->max_head_yaw_deg, o->max_head_pitch_deg,
+                         o->max_outside, o->min_contrast, o->max_roughness, o->min_iris_contrast};
+    for (int i = 0; i < 8; i++)
         if (!isfinite(v[i]) || v[i] < 0)
             return gs_error_set(err, GS_ERR_ARG, "face gate: thresholds must be finite and >= 0");
     return GS_OK;
@@ -120,6 +121,7 @@ int gs_face_gate_normalized(const gs_io_image *norm_face, const gs_face_gate_opt
     if (rc)
         return rc;
     memset(out, 0, sizeof *out);
+    out->iris_contrast = NAN;
     image_checks(norm_face, opts, out);
     return GS_OK;
 }
@@ -188,6 +190,35 @@ static void landmark_checks(const gs_face_gate_opts *opts, gs_face_gate *g)
         snprintf(g->reason, sizeof g->reason,
                  "eyes closed: opening %.2f and %.2f (height over width; need %.2f)",
                  g->eye_open[0], g->eye_open[1], opts->min_eye_open);
+    } else if (opts->min_iris_contrast > 0 && !g->irises &&
+               g->iris_contrast < opts->min_iris_contrast) {
+        /* NaN (no fit in either eye) compares false: an eye looking far
+         * aside may give no fit at all, and so does a closed one */
+        g->refusal = GS_FACE_REFUSED_EYES_CLOSED;
+        snprintf(g->reason, sizeof g->reason,
+                 "eyes closed or hidden: no iris in either eye, sclera-iris contrast at most "
+                 "%.1f (need %.0f)", g->iris_contrast, opts->min_iris_contrast);
+    }
+}
+
+/* The irises of the normalized face (g->irises, g->iris_contrast), at
+ * its scale; an eye the localizer refuses to search counts as no fit. */
+static void iris_checks(const gs_face_result *r, const gs_io_image *norm_face, gs_face_gate *g)
+{
+    gs_face_iris_opts io;
+    gs_face_iris_opts_default(&io);
+    if (r->norm.d_n_mm > 0 && r->norm.f_n > 0)
+        gs_face_iris_opts_scale(&io, r->norm.f_n / r->norm.d_n_mm);
+    g->irises = 0;
+    g->iris_contrast = NAN;
+    for (int e = 0; e < 2; e++) {
+        gs_face_iris ir;
+        if (gs_face_iris_locate(norm_face, (const double(*)[2])r->uv_n[36 + 6 * e], &io, &ir,
+                                NULL) != GS_OK)
+            continue;
+        g->irises += ir.status == GS_FACE_IRIS_OK;
+        if (isfinite(ir.contrast) && !(ir.contrast <= g->iris_contrast))
+            g->iris_contrast = ir.contrast;
     }
 }
 
@@ -221,6 +252,7 @@ int gs_face_gate_photo(const gs_face_result *r, const gs_io_image *norm_face,
     g.head_yaw_deg = r->head_yaw_n * RAD2DEG;
     if ((rc = outside_fraction(r, &g.outside, err)))
         return rc;
+    iris_checks(r, norm_face, &g);
     /* Image checks first: on a frame that is no face the landmarks are
      * noise too, and "small eyes" would name the wrong cause. */
     if (!image_checks(norm_face, opts, &g))

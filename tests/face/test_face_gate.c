@@ -94,9 +94,11 @@ static void synthetic_faces(void)
 
 /* One photo case: the mean head at `dist` mm, turned by (pitch, yaw),
  * with `blink`, seen by a 512-px camera whose width spans `field` mm at
- * 600 mm, its principal point moved by (dx, dy) px. */
-static gs_face_gate photo(double dist, double field, double pitch, double yaw, float blink,
-                          double dx, double dy)
+ * 600 mm, its principal point moved by (dx, dy) px; the landmarks those of
+ * the same head with blink `lm_blink` (< 0: its own), as a landmark model
+ * that draws open contours on closed eyes gives; opts may be NULL. */
+static gs_face_gate photo_lm(double dist, double field, double pitch, double yaw, float blink,
+                             double dx, double dy, float lm_blink, const gs_face_gate_opts *opts)
 {
     gs_synth_scene sc;
     gs_synth_scene_default(&sc, dist);
@@ -112,7 +114,16 @@ static gs_face_gate photo(double dist, double field, double pitch, double yaw, f
     memset(&g, 0, sizeof g);
     g.refusal = (gs_face_refusal)-1;
     CHECK(gs_synth_sample_alloc(&smp, 512, 512, &err) == GS_OK);
+    double lm[68][2];
+    if (lm_blink >= 0) {
+        sc.expr.blink = lm_blink;
+        CHECK_MSG(gs_synth_render(&sc, &cam, NULL, NULL, &smp, &err) == GS_OK, "%s", err.msg);
+        memcpy(lm, smp.labels.lm2d, sizeof lm);
+        sc.expr.blink = blink;
+    }
     CHECK_MSG(gs_synth_render(&sc, &cam, NULL, NULL, &smp, &err) == GS_OK, "%s", err.msg);
+    if (lm_blink < 0)
+        memcpy(lm, smp.labels.lm2d, sizeof lm);
     gs_face_opts o;
     gs_face_opts_default(&o);
     o.pose_model = GS_FACE_POSE_SYNTH;
@@ -121,21 +132,26 @@ static gs_face_gate photo(double dist, double field, double pitch, double yaw, f
     memcpy(o.k, cam.K, sizeof o.k);
     gs_face_result r;
     gs_io_image img = {smp.width, smp.height, smp.stride, smp.rgb}, norm = {0};
-    int rc = gs_face_analyze_landmarks((const double(*)[2])smp.labels.lm2d, 512, 512, &o, &r,
-                                       &err);
+    int rc = gs_face_analyze_landmarks((const double(*)[2])lm, 512, 512, &o, &r, &err);
     CHECK_MSG(rc == GS_OK, "analyze: %s", err.msg);
     if (rc == GS_OK && gs_face_normalize_image(&img, &r.norm, &norm, &err) == GS_OK) {
-        CHECK_MSG(gs_face_gate_photo(&r, &norm, NULL, &g, &err) == GS_OK, "%s", err.msg);
+        CHECK_MSG(gs_face_gate_photo(&r, &norm, opts, &g, &err) == GS_OK, "%s", err.msg);
         printf("  dist %4.0f field %4.0f pitch %+3.0f yaw %+3.0f blink %.1f shift %+4.0f,%+4.0f: "
-               "%-11s eyes %.1f/%.1f px open %.2f/%.2f head %+.1f,%+.1f outside %.3f "
-               "contrast %.1f rough %.3f %s\n",
+               "%-11s eyes %.1f/%.1f px open %.2f/%.2f irises %d (contrast %.1f) head %+.1f,%+.1f "
+               "outside %.3f contrast %.1f rough %.3f %s\n",
                dist, field, pitch, yaw, blink, dx, dy, gs_face_refusal_name(g.refusal),
-               g.eye_px[0], g.eye_px[1], g.eye_open[0], g.eye_open[1], g.head_pitch_deg,
-               g.head_yaw_deg, g.outside, g.contrast, g.roughness, g.reason);
+               g.eye_px[0], g.eye_px[1], g.eye_open[0], g.eye_open[1], g.irises, g.iris_contrast,
+               g.head_pitch_deg, g.head_yaw_deg, g.outside, g.contrast, g.roughness, g.reason);
     }
     gs_io_image_free(&norm);
     gs_synth_sample_free(&smp);
     return g;
+}
+
+static gs_face_gate photo(double dist, double field, double pitch, double yaw, float blink,
+                          double dx, double dy)
+{
+    return photo_lm(dist, field, pitch, yaw, blink, dx, dy, -1.0f, NULL);
 }
 
 static void photos(void)
@@ -144,6 +160,20 @@ static void photos(void)
     gs_face_gate g = photo(600, 300, 0, 0, 0, 0, 0);
     CHECK_MSG(g.refusal == GS_FACE_USABLE, "frontal open face: %s", g.reason);
     CHECK(g.eye_px[0] > 30 && g.eye_open[0] > 0.2 && fabs(g.head_yaw_deg) < 3);
+    CHECK_MSG(g.irises == 2 && g.iris_contrast > 40, "frontal open face: %d irises, contrast %.1f",
+              g.irises, g.iris_contrast);
+    /* Closed eyes inside open contours: no iris, and what the fits find is
+     * no sclera against an iris. */
+    g = photo_lm(600, 300, 0, 0, 1.0f, 0, 0, 0.0f, NULL);
+    CHECK_MSG(g.refusal == GS_FACE_REFUSED_EYES_CLOSED && g.irises == 0 &&
+                  strstr(g.reason, "no iris"),
+              "closed eyes in open contours: %s (%s)", gs_face_refusal_name(g.refusal), g.reason);
+    gs_face_gate_opts off;
+    gs_face_gate_opts_default(&off);
+    CHECK(off.min_iris_contrast == 15);
+    off.min_iris_contrast = 0;
+    g = photo_lm(600, 300, 0, 0, 1.0f, 0, 0, 0.0f, &off);
+    CHECK_MSG(g.refusal == GS_FACE_USABLE, "the iris check off: %s", gs_face_refusal_name(g.refusal));
     g = photo(600, 300, 15, -25, 0, 0, 0);
     CHECK_MSG(g.refusal == GS_FACE_USABLE, "turned face within range: %s", g.reason);
     g = photo(600, 300, 0, 0, 1.0f, 0, 0);

@@ -295,7 +295,11 @@ int gs_face_paste_mask(const gs_face_result *r, int whole_face, uint8_t *mask,
  *                 the photo): its iris is a few pixels and the fit cannot
  *                 see where it looks
  *   eyes closed   an eye's opening (eye aspect ratio: the two lid
- *                 distances over twice the width) under min_eye_open
+ *                 distances over twice the width) under min_eye_open; or
+ *                 no iris located in either eye (gs_face_iris_locate in
+ *                 the normalized face) where the fits that ran found a
+ *                 sclera-iris contrast under min_iris_contrast: the
+ *                 landmark model draws open contours on some closed eyes
  *   flat          the face region's luma has no contrast (black, white or
  *                 grey frames)
  *   noise         the face region is pixel noise: its mean neighbour
@@ -326,6 +330,7 @@ typedef struct gs_face_gate_opts {
     double max_outside;         /* default 0.05 */
     double min_contrast;        /* luma standard deviation, default 5 */
     double max_roughness;       /* default 0.5 */
+    double min_iris_contrast;   /* grey levels, default 15; 0: off */
 } gs_face_gate_opts;
 void gs_face_gate_opts_default(gs_face_gate_opts *o);
 
@@ -336,6 +341,11 @@ typedef struct gs_face_gate {
     double eye_px[2];           /* eye widths in the photo (36-39, 42-45);
                                    0 for a normalized face */
     double eye_open[2];         /* eye aspect ratios; 0 likewise */
+    int irises;                 /* eyes whose iris is located (status OK)
+                                   in the normalized face; 0 likewise */
+    double iris_contrast;       /* the larger sclera-iris contrast of the
+                                   two eyes' fits; NaN when neither fitted
+                                   (and for a normalized face) */
     double head_pitch_deg, head_yaw_deg; /* normalized camera; 0 likewise */
     double outside;             /* fraction of the face outside the photo */
     double contrast, roughness; /* of the normalized face's centre */
