@@ -202,8 +202,10 @@ static void landmark_checks(const gs_face_gate_opts *opts, gs_face_gate *g)
 }
 
 /* The irises of the normalized face (g->irises, g->iris_contrast), at
- * its scale; an eye the localizer refuses to search counts as no fit. */
-static void iris_checks(const gs_face_result *r, const gs_io_image *norm_face, gs_face_gate *g)
+ * its scale, or those the caller located (given); an eye the localizer
+ * refuses to search counts as no fit. */
+static void iris_checks(const gs_face_result *r, const gs_io_image *norm_face,
+                        const gs_face_iris *given, gs_face_gate *g)
 {
     gs_face_iris_opts io;
     gs_face_iris_opts_default(&io);
@@ -213,8 +215,10 @@ static void iris_checks(const gs_face_result *r, const gs_io_image *norm_face, g
     g->iris_contrast = NAN;
     for (int e = 0; e < 2; e++) {
         gs_face_iris ir;
-        if (gs_face_iris_locate(norm_face, (const double(*)[2])r->uv_n[36 + 6 * e], &io, &ir,
-                                NULL) != GS_OK)
+        if (given)
+            ir = given[e];
+        else if (gs_face_iris_locate(norm_face, (const double(*)[2])r->uv_n[36 + 6 * e], &io,
+                                     &ir, NULL) != GS_OK)
             continue;
         g->irises += ir.status == GS_FACE_IRIS_OK;
         if (isfinite(ir.contrast) && !(ir.contrast <= g->iris_contrast))
@@ -224,6 +228,13 @@ static void iris_checks(const gs_face_result *r, const gs_io_image *norm_face, g
 
 int gs_face_gate_photo(const gs_face_result *r, const gs_io_image *norm_face,
                        const gs_face_gate_opts *opts, gs_face_gate *out, gs_error *err)
+{
+    return gs_face_gate_photo_irises(r, norm_face, NULL, opts, out, err);
+}
+
+int gs_face_gate_photo_irises(const gs_face_result *r, const gs_io_image *norm_face,
+                              const gs_face_iris *iris, const gs_face_gate_opts *opts,
+                              gs_face_gate *out, gs_error *err)
 {
     gs_face_gate_opts def;
     if (!opts) {
@@ -252,7 +263,7 @@ int gs_face_gate_photo(const gs_face_result *r, const gs_io_image *norm_face,
     g.head_yaw_deg = r->head_yaw_n * RAD2DEG;
     if ((rc = outside_fraction(r, &g.outside, err)))
         return rc;
-    iris_checks(r, norm_face, &g);
+    iris_checks(r, norm_face, iris, &g);
     /* Image checks first: on a frame that is no face the landmarks are
      * noise too, and "small eyes" would name the wrong cause. */
     if (!image_checks(norm_face, opts, &g))

@@ -47,22 +47,23 @@ static int prefixed(gs_error *err, int rc, const char *what)
  * eyes), after its red-eye repair: those the localizer finds (status OK;
  * a partial one rests on the radius prior, so it anchors nothing) anchor
  * the transfer's proxy eyeballs (model.h, gs_xfer_eyes). */
-static int photo_irises(gs_redirect_input *in, double px_per_mm, gs_error *err)
+static int photo_irises(gs_redirect_input *in, double px_per_mm, gs_face_iris found[2],
+                        gs_error *err)
 {
     gs_face_iris_opts io;
     gs_face_iris_opts_default(&io);
     gs_face_iris_opts_scale(&io, px_per_mm);
     in->n_iris = 0;
     for (int e = 0; e < 2; e++) {
-        gs_face_iris ir;
+        const gs_face_iris *ir = &found[e];
         int rc = gs_face_iris_locate(&in->norm, (const double(*)[2])in->face.uv_n[36 + 6 * e], &io,
-                                     &ir, err);
+                                     &found[e], err);
         if (rc != GS_OK)
             return rc;
-        if (ir.status != GS_FACE_IRIS_OK)
+        if (ir->status != GS_FACE_IRIS_OK)
             continue;
         double *d = in->iris[in->n_iris++];
-        d[0] = ir.centre[0], d[1] = ir.centre[1], d[2] = ir.radius;
+        d[0] = ir->centre[0], d[1] = ir->centre[1], d[2] = ir->radius;
     }
     return GS_OK;
 }
@@ -137,12 +138,14 @@ int gs_redirect_input_photo(gs_face_detector *det, const gs_face_shape_model *sp
     if (rc == GS_OK && !o->keep_red_eye)
         rc = gs_face_red_eye_fix(&in->norm, (const double(*)[2])in->face.uv_n,
                                  info->focal / info->distance_mm, &in->red_eye_px, err);
+    gs_face_iris found[2]; /* the gate's too: the same image, contours and scale */
     if (rc == GS_OK)
-        rc = photo_irises(in, info->focal / info->distance_mm, err);
+        rc = photo_irises(in, info->focal / info->distance_mm, found, err);
     if (rc != GS_OK && rc != GS_ERR_NOMEM)
         prefixed(err, rc, "photo normalization");
     if (rc == GS_OK && o->gate)
-        rc = gate_verdict(gs_face_gate_photo(&in->face, &in->norm, NULL, &in->gate, err), &in->gate, err);
+        rc = gate_verdict(gs_face_gate_photo_irises(&in->face, &in->norm, found, NULL, &in->gate, err),
+                          &in->gate, err);
     if (rc != GS_OK)
         input_drop(in);
     return rc;

@@ -136,6 +136,38 @@ static gs_face_gate photo_lm(double dist, double field, double pitch, double yaw
     CHECK_MSG(rc == GS_OK, "analyze: %s", err.msg);
     if (rc == GS_OK && gs_face_normalize_image(&img, &r.norm, &norm, &err) == GS_OK) {
         CHECK_MSG(gs_face_gate_photo(&r, &norm, opts, &g, &err) == GS_OK, "%s", err.msg);
+        /* the irises located by the caller give the same verdict */
+        gs_face_iris_opts io;
+        gs_face_iris_opts_default(&io);
+        gs_face_iris_opts_scale(&io, r.norm.f_n / r.norm.d_n_mm);
+        gs_face_iris ir[2];
+        int located = 1;
+        for (int e = 0; e < 2; e++) {
+            double eye[6][2];
+            memcpy(eye, r.uv_n[36 + 6 * e], sizeof eye);
+            located &= gs_face_iris_locate(&norm, (const double(*)[2])eye, &io, &ir[e], NULL) ==
+                       GS_OK;
+        }
+        if (located) {
+            gs_face_gate gi;
+            CHECK_MSG(gs_face_gate_photo_irises(&r, &norm, ir, opts, &gi, &err) == GS_OK, "%s",
+                      err.msg);
+            CHECK_MSG(gi.refusal == g.refusal && gi.irises == g.irises &&
+                          !memcmp(&gi.iris_contrast, &g.iris_contrast, sizeof g.iris_contrast),
+                      "given irises: %s, %d irises, contrast %g; located by the gate: %s, %d, %g",
+                      gs_face_refusal_name(gi.refusal), gi.irises, gi.iris_contrast,
+                      gs_face_refusal_name(g.refusal), g.irises, g.iris_contrast);
+            /* and the gate reads them: a usable face whose irises are said
+             * to be unseen, at contrast 5, is refused for closed eyes */
+            if (g.refusal == GS_FACE_USABLE && !opts) {
+                for (int e = 0; e < 2; e++)
+                    ir[e].status = GS_FACE_IRIS_NO_EDGE, ir[e].contrast = 5.0;
+                CHECK(gs_face_gate_photo_irises(&r, &norm, ir, NULL, &gi, &err) == GS_OK);
+                CHECK_MSG(gi.refusal == GS_FACE_REFUSED_EYES_CLOSED && gi.iris_contrast == 5.0,
+                          "given unseen irises: %s, contrast %g", gs_face_refusal_name(gi.refusal),
+                          gi.iris_contrast);
+            }
+        }
         printf("  dist %4.0f field %4.0f pitch %+3.0f yaw %+3.0f blink %.1f shift %+4.0f,%+4.0f: "
                "%-11s eyes %.1f/%.1f px open %.2f/%.2f irises %d (contrast %.1f) head %+.1f,%+.1f "
                "outside %.3f contrast %.1f rough %.3f %s\n",

@@ -188,22 +188,25 @@ static const double sweep_gz[][2] = {{5, -10}, {7, -9}, {-5, 10}, {30, -40}, {-3
 
 /* ---- The eyeball warp ---- */
 
-static void set_lids(gs_model_ctx *c, double follow)
+/* The default render options but the warp's falloff and the lids' follow. */
+static void set_xfer(gs_model_ctx *c, double warp_deg, double lid_follow)
 {
     gs_model_render_options o;
     gs_model_render_options_default(&o);
-    o.transfer_lid_follow = follow;
+    o.transfer_eye_warp_deg = warp_deg;
+    o.transfer_lid_follow = lid_follow;
     gs_error err = {0, ""};
     CHECK_MSG(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK, "%s", err.msg);
 }
 
+static void set_lids(gs_model_ctx *c, double follow)
+{
+    set_xfer(c, GS_XFER_EYE_WARP_DEG_DEFAULT, follow);
+}
+
 static void set_warp(gs_model_ctx *c, double deg)
 {
-    gs_model_render_options o;
-    gs_model_render_options_default(&o);
-    o.transfer_eye_warp_deg = deg;
-    gs_error err = {0, ""};
-    CHECK_MSG(gs_model_ctx_set_render_options(c, &o, &err) == GS_OK, "%s", err.msg);
+    set_xfer(c, deg, GS_XFER_LID_FOLLOW_DEFAULT);
 }
 
 /* What the warp should do, worked out here on its own terms: the ray of

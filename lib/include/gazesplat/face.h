@@ -362,6 +362,16 @@ const char *gs_face_refusal_name(gs_face_refusal r);
 int gs_face_gate_photo(const gs_face_result *r, const gs_io_image *norm_face,
                        const gs_face_gate_opts *opts, gs_face_gate *out,
                        gs_error *err);
+/* The same with the two eyes' irises already located by the caller
+ * (gs_face_iris_locate on norm_face inside r->uv_n's eye contours, 36-41
+ * then 42-47, at the normalized camera's scale: what the gate would find
+ * itself), so that they are not located twice; NULL: the gate locates
+ * them. */
+struct gs_face_iris;
+int gs_face_gate_photo_irises(const gs_face_result *r, const gs_io_image *norm_face,
+                              const struct gs_face_iris *iris,
+                              const gs_face_gate_opts *opts, gs_face_gate *out,
+                              gs_error *err);
 /* A normalized face given as such (flat and noise only). */
 int gs_face_gate_normalized(const gs_io_image *norm_face,
                             const gs_face_gate_opts *opts, gs_face_gate *out,
@@ -523,8 +533,8 @@ typedef struct gs_face_quality_opts {
      * are read as the output has them; the gaze change is still read in
      * the input's eye frame. Without it, inside the input's contours:
      * that reads the pitch of exact synthetic redirects, whose lids
-     * follow the gaze, with a gain of 0.67 (docs/face.md). Not kept past
-     * gs_face_quality_ref_create's ref; it must outlive the ref. */
+     * follow the gaze, with a gain of 0.67 (docs/face.md). A reference
+     * keeps the pointer: the model must outlive it. */
     const gs_face_shape_model *shape;
 } gs_face_quality_opts;
 void gs_face_quality_opts_default(gs_face_quality_opts *o);
